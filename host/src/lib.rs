@@ -1,0 +1,1 @@
+//! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.

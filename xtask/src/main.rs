@@ -1,0 +1,2 @@
+//! catmodel automation (in progress).
+fn main() {}
