@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 /// Path of a file under `host-tests/reference/`.
 pub fn reference_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("reference").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("reference")
+        .join(name)
 }
 
 /// Parsed JSON of a committed reference file.

@@ -1,0 +1,3 @@
+//! (in progress on branch fw)
+#![no_std]
+#![no_main]

@@ -1,0 +1,185 @@
+//! A dynamic (linear-tyre) single-track model: lateral velocity and yaw rate driven by the front
+//! wheel angle, for a longitudinal speed held over each step.
+//!
+//! ```text
+//! vy' = -(Cf + Cr)/(m vx) vy + (-vx - (Cf lf - Cr lr)/(m vx)) r + Cf/m delta
+//! r'  = -(Cf lf - Cr lr)/(Iz vx) vy - (Cf lf^2 + Cr lr^2)/(Iz vx) r + Cf lf/Iz delta
+//! ```
+//!
+//! vy is positive to the right and r positive clockwise (a right turn), the catmodel convention.
+//! Its steady state is `r = vx delta / (L + K_us vx^2)` with the understeer gradient
+//! `K_us = m (Cr lr - Cf lf) / (Cf Cr L)`: for the CAT Vehicle figures of facts.md this is the
+//! `0.0015 v^2` term of eq 2 (see [`DynamicParams::understeer_s2_per_m2`]).
+//!
+//! The model is stiff at low speed (poles ~ -(Cf + Cr)/(m vx)), so each step uses the
+//! trapezoidal rule (Tustin), which is A-stable: a 2x2 solve, no exponential, no loss of
+//! stability at any speed. Below [`DynamicParams::min_speed_mps`] the 1/vx terms are
+//! meaningless and the model falls back to the kinematic steady state (the hybrid switch keeps
+//! it out of that range anyway).
+
+/// Mass, geometry and tyre stiffness. Immutable configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DynamicParams {
+    /// Mass m, kg.
+    pub mass_kg: f32,
+    /// Yaw moment of inertia Iz, kg m^2.
+    pub yaw_inertia_kg_m2: f32,
+    /// Distance from the centre of gravity to the front axle lf, m.
+    pub cg_to_front_m: f32,
+    /// Distance from the centre of gravity to the rear axle lr, m.
+    pub cg_to_rear_m: f32,
+    /// Front axle cornering stiffness Cf, N/rad.
+    pub cornering_front_n_per_rad: f32,
+    /// Rear axle cornering stiffness Cr, N/rad.
+    pub cornering_rear_n_per_rad: f32,
+    /// Below this speed the model is replaced by its kinematic limit, m/s.
+    pub min_speed_mps: f32,
+}
+
+/// The CAT Vehicle (facts.md): 1741 kg, lf 1.142 m, lr 1.478 m, Iz ~2500 kg m^2, Cf ~80 kN/rad,
+/// Cr ~91 kN/rad (a pair consistent with the 0.0015 understeer term of eq 2).
+pub const CAT_VEHICLE_DYNAMICS: DynamicParams = DynamicParams {
+    mass_kg: 1741.0,
+    yaw_inertia_kg_m2: 2500.0,
+    cg_to_front_m: 1.142,
+    cg_to_rear_m: 1.478,
+    cornering_front_n_per_rad: 80_000.0,
+    cornering_rear_n_per_rad: 91_000.0,
+    min_speed_mps: 1.0,
+};
+
+/// Lateral state.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LateralState {
+    /// Lateral velocity, positive to the right, m/s.
+    pub vy_mps: f32,
+    /// Yaw rate, positive clockwise (right turn), rad/s.
+    pub yaw_rate_rps: f32,
+}
+
+impl DynamicParams {
+    /// Wheelbase lf + lr, m.
+    pub fn wheelbase_m(&self) -> f32 {
+        self.cg_to_front_m + self.cg_to_rear_m
+    }
+
+    /// Understeer gradient expressed as eq 2's K: steady-state curvature is
+    /// `delta / (L (1 + K vx^2))`, K = m (Cr lr - Cf lf) / (Cf Cr L^2), s^2/m^2.
+    pub fn understeer_s2_per_m2(&self) -> f32 {
+        let l = self.wheelbase_m();
+        self.mass_kg
+            * (self.cornering_rear_n_per_rad * self.cg_to_rear_m
+                - self.cornering_front_n_per_rad * self.cg_to_front_m)
+            / (self.cornering_front_n_per_rad * self.cornering_rear_n_per_rad * l * l)
+    }
+
+    /// Steady state for a speed and front wheel angle (the initial condition after a switch
+    /// from the kinematic model).
+    pub fn steady_state(&self, vx_mps: f32, delta_rad: f32) -> LateralState {
+        let l = self.wheelbase_m();
+        let k = self.understeer_s2_per_m2();
+        let r = vx_mps * delta_rad / (l * (1.0 + k * vx_mps * vx_mps));
+        if vx_mps < self.min_speed_mps {
+            return LateralState {
+                vy_mps: r * self.cg_to_rear_m,
+                yaw_rate_rps: r,
+            };
+        }
+        // From the r' = 0 row: vy = (Cf lf delta vx - (Cf lf^2 + Cr lr^2) r) / (Cf lf - Cr lr).
+        let cf = self.cornering_front_n_per_rad;
+        let cr = self.cornering_rear_n_per_rad;
+        let (lf, lr) = (self.cg_to_front_m, self.cg_to_rear_m);
+        let denom = cf * lf - cr * lr;
+        let vy = if denom != 0.0 {
+            (cf * lf * delta_rad * vx_mps - (cf * lf * lf + cr * lr * lr) * r) / denom
+        } else {
+            0.0
+        };
+        LateralState {
+            vy_mps: vy,
+            yaw_rate_rps: r,
+        }
+    }
+
+    /// One trapezoidal step of length `dt_s` with speed `vx_mps` and front wheel angle
+    /// `delta_rad` held. Below `min_speed_mps` the state is set to the kinematic steady state.
+    pub fn step(&self, state: &mut LateralState, vx_mps: f32, delta_rad: f32, dt_s: f32) {
+        if vx_mps < self.min_speed_mps {
+            *state = self.steady_state(vx_mps, delta_rad);
+            return;
+        }
+        let cf = self.cornering_front_n_per_rad;
+        let cr = self.cornering_rear_n_per_rad;
+        let (lf, lr) = (self.cg_to_front_m, self.cg_to_rear_m);
+        let m = self.mass_kg;
+        let iz = self.yaw_inertia_kg_m2;
+        let a11 = -(cf + cr) / (m * vx_mps);
+        let a12 = -vx_mps - (cf * lf - cr * lr) / (m * vx_mps);
+        let a21 = -(cf * lf - cr * lr) / (iz * vx_mps);
+        let a22 = -(cf * lf * lf + cr * lr * lr) / (iz * vx_mps);
+        let b1 = cf / m * delta_rad;
+        let b2 = cf * lf / iz * delta_rad;
+        let h = 0.5 * dt_s;
+        // (I - hA) x+ = (I + hA) x + dt b
+        let (x1, x2) = (state.vy_mps, state.yaw_rate_rps);
+        let r1 = x1 + h * (a11 * x1 + a12 * x2) + dt_s * b1;
+        let r2 = x2 + h * (a21 * x1 + a22 * x2) + dt_s * b2;
+        let m11 = 1.0 - h * a11;
+        let m12 = -h * a12;
+        let m21 = -h * a21;
+        let m22 = 1.0 - h * a22;
+        let det = m11 * m22 - m12 * m21;
+        // det > 1 for a stable A (trace < 0, det(A) > 0), so this division is safe; the guard
+        // is for non-finite inputs only.
+        if det.is_finite() && det != 0.0 {
+            state.vy_mps = (m22 * r1 - m12 * r2) / det;
+            state.yaw_rate_rps = (m11 * r2 - m21 * r1) / det;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn understeer_of_the_cat_vehicle_figures_is_eq2s() {
+        let k = CAT_VEHICLE_DYNAMICS.understeer_s2_per_m2();
+        assert!((k - 0.0015).abs() < 0.0002, "{k}");
+    }
+
+    /// Held steering at 10 m/s converges to the analytic steady state.
+    #[test]
+    fn converges_to_the_steady_state() {
+        let p = CAT_VEHICLE_DYNAMICS;
+        let mut s = LateralState::default();
+        for _ in 0..500 {
+            p.step(&mut s, 10.0, 0.05, 0.02);
+        }
+        let ss = p.steady_state(10.0, 0.05);
+        assert!(
+            (s.yaw_rate_rps - ss.yaw_rate_rps).abs() < 1e-5,
+            "{s:?} vs {ss:?}"
+        );
+        assert!((s.vy_mps - ss.vy_mps).abs() < 1e-4, "{s:?} vs {ss:?}");
+        // r = v delta / (L (1 + K v^2))
+        let k = p.understeer_s2_per_m2();
+        let expected = 10.0 * 0.05 / (2.62 * (1.0 + k * 100.0));
+        assert!((s.yaw_rate_rps - expected).abs() < 1e-5);
+    }
+
+    #[test]
+    fn stays_stable_at_low_speed_with_large_steps() {
+        let p = CAT_VEHICLE_DYNAMICS;
+        let mut s = LateralState::default();
+        for _ in 0..1000 {
+            p.step(&mut s, 1.2, 0.6, 0.02);
+            assert!(
+                s.yaw_rate_rps.is_finite() && s.yaw_rate_rps.abs() < 1.0,
+                "{s:?}"
+            );
+        }
+    }
+}
