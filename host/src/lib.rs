@@ -1,1 +1,2 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
+pub mod evaluate;

@@ -1,0 +1,434 @@
+//! `catmodel evaluate`: prediction error at every horizon against ground truth, beside a
+//! kinematic-only baseline computed from the same bus inputs (raw GNSS, measured speed and
+//! steering, eq 8 with constant inputs), and the filtered current position (horizon 0) beside
+//! the raw GNSS error.
+//!
+//! Ground truth is only ever read here, never by the node.
+use catmodel::math::wrap_pi;
+use catmodel::model::kinematic::{self, Pose};
+use catmodel::vehicle::VehicleParams;
+use serde::Serialize;
+
+/// One row of the predictions CSV (`t,step,horizon_s,x,y,heading,speed,mode`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prediction {
+    /// Tick time, s.
+    pub t: f64,
+    /// Tick index.
+    pub step: u64,
+    /// Time ahead, s (0 = the filtered current state).
+    pub horizon_s: f64,
+    /// East, m.
+    pub x: f64,
+    /// North, m.
+    pub y: f64,
+    /// Heading clockwise from north, rad.
+    pub heading: f64,
+    /// Speed, m/s.
+    pub speed: f64,
+    /// `kinematic` or `dynamic`.
+    pub mode: String,
+}
+
+/// Ground truth sample (`t,x,y,heading,yaw_rate,speed`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TruthSample {
+    /// s.
+    pub t: f64,
+    /// East, m.
+    pub x: f64,
+    /// North, m.
+    pub y: f64,
+    /// Heading clockwise from north, rad.
+    pub heading: f64,
+    /// rad/s.
+    pub yaw_rate: f64,
+    /// m/s.
+    pub speed: f64,
+}
+
+/// The bus inputs the baseline is computed from, in local metres on the predictions' frame.
+#[derive(Clone, Debug, Default)]
+pub struct BaselineInputs {
+    /// Raw GNSS fixes `(t, east, north)`.
+    pub gnss: Vec<(f64, f64, f64)>,
+    /// Measured speed `(t, m/s)`.
+    pub speed: Vec<(f64, f64)>,
+    /// Measured steering `(t, %)`.
+    pub steer: Vec<(f64, f64)>,
+}
+
+/// Truth interpolated in time, heading unwrapped before interpolation.
+pub struct Truth {
+    samples: Vec<TruthSample>,
+    unwrapped_heading: Vec<f64>,
+}
+
+impl Truth {
+    /// Wraps samples sorted by time.
+    pub fn new(samples: Vec<TruthSample>) -> Self {
+        let mut unwrapped_heading = Vec::with_capacity(samples.len());
+        let mut prev: Option<(f64, f64)> = None;
+        for s in &samples {
+            let h = match prev {
+                None => s.heading,
+                Some((raw_prev, unwrapped_prev)) => {
+                    unwrapped_prev + wrap_pi_f64(s.heading - raw_prev)
+                }
+            };
+            unwrapped_heading.push(h);
+            prev = Some((s.heading, h));
+        }
+        Self {
+            samples,
+            unwrapped_heading,
+        }
+    }
+
+    /// `(x, y, heading, speed)` at time `t`, linearly interpolated; `None` outside the record.
+    pub fn at(&self, t: f64) -> Option<(f64, f64, f64, f64)> {
+        let s = &self.samples;
+        let first = s.first()?;
+        let last = s.last()?;
+        if t < first.t || t > last.t {
+            return None;
+        }
+        let i = s.partition_point(|p| p.t <= t).clamp(1, s.len().max(2) - 1);
+        let (a, b) = (&s[i - 1], &s.get(i).unwrap_or(&s[i - 1]));
+        let span = b.t - a.t;
+        let w = if span > 0.0 { (t - a.t) / span } else { 0.0 };
+        let lerp = |p: f64, q: f64| p + (q - p) * w;
+        let ha = self.unwrapped_heading[i - 1];
+        let hb = *self.unwrapped_heading.get(i).unwrap_or(&ha);
+        Some((
+            lerp(a.x, b.x),
+            lerp(a.y, b.y),
+            wrap_pi_f64(lerp(ha, hb)),
+            lerp(a.speed, b.speed),
+        ))
+    }
+}
+
+fn wrap_pi_f64(a: f64) -> f64 {
+    let tau = std::f64::consts::TAU;
+    a - tau * ((a + std::f64::consts::PI) / tau).floor()
+}
+
+/// Error statistics of one horizon.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct ErrorStats {
+    /// Samples compared.
+    pub count: usize,
+    /// Mean Euclidean position error, m.
+    pub pos_mean_m: f64,
+    /// RMS position error, m.
+    pub pos_rms_m: f64,
+    /// 95th percentile position error, m.
+    pub pos_p95_m: f64,
+    /// RMS heading error, rad.
+    pub heading_rms_rad: f64,
+    /// RMS speed error, m/s.
+    pub speed_rms_mps: f64,
+}
+
+impl ErrorStats {
+    fn from_errors(pos: &mut [f64], heading: &[f64], speed: &[f64]) -> Self {
+        let n = pos.len();
+        if n == 0 {
+            return Self::default();
+        }
+        let rms = |v: &[f64]| (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt();
+        let mean = pos.iter().sum::<f64>() / n as f64;
+        let pos_rms_m = rms(pos);
+        pos.sort_by(f64::total_cmp);
+        let p95 = pos[((n as f64 * 0.95).ceil() as usize).clamp(1, n) - 1];
+        Self {
+            count: n,
+            pos_mean_m: mean,
+            pos_rms_m,
+            pos_p95_m: p95,
+            heading_rms_rad: rms(heading),
+            speed_rms_mps: rms(speed),
+        }
+    }
+}
+
+/// One line of the report: a horizon, catmodel's errors and the baseline's.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct HorizonRow {
+    /// Time ahead, s.
+    pub horizon_s: f64,
+    /// catmodel's node.
+    pub node: ErrorStats,
+    /// Kinematic model (eq 8) fed with raw GNSS, measured speed and steering.
+    pub baseline: ErrorStats,
+}
+
+/// The whole evaluation.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Evaluation {
+    /// Per horizon, ascending.
+    pub horizons: Vec<HorizonRow>,
+    /// Raw GNSS fixes against truth at their own timestamps.
+    pub raw_gnss: ErrorStats,
+    /// Ticks whose horizon-0 position was compared.
+    pub ticks: usize,
+}
+
+fn accumulate(
+    truth: &Truth,
+    t: f64,
+    horizon_s: f64,
+    (x, y, heading, speed): (f64, f64, f64, f64),
+    buckets: &mut Vec<(f64, Vec<f64>, Vec<f64>, Vec<f64>)>,
+) {
+    let Some((tx, ty, th, tv)) = truth.at(t + horizon_s) else {
+        return;
+    };
+    let key = (horizon_s * 1000.0).round() / 1000.0;
+    let idx = match buckets.iter().position(|b| b.0 == key) {
+        Some(i) => i,
+        None => {
+            buckets.push((key, Vec::new(), Vec::new(), Vec::new()));
+            buckets.len() - 1
+        }
+    };
+    let b = &mut buckets[idx];
+    b.1.push(((x - tx).powi(2) + (y - ty).powi(2)).sqrt());
+    b.2.push(wrap_pi_f64(heading - th).abs());
+    b.3.push((speed - tv).abs());
+}
+
+/// Latest sample of a series at or before `t`.
+fn latest(series: &[(f64, f64)], t: f64) -> Option<f64> {
+    let i = series.partition_point(|s| s.0 <= t);
+    (i > 0).then(|| series[i - 1].1)
+}
+
+/// Heading from the raw GNSS track: direction of the displacement over the last
+/// `baseline_s`, if it is at least `min_dist_m` long.
+fn raw_track_heading(gnss: &[(f64, f64, f64)], t: f64) -> Option<f64> {
+    const BASELINE_S: f64 = 0.5;
+    const MIN_DIST_M: f64 = 1.0;
+    let i = gnss.partition_point(|g| g.0 <= t);
+    let now = gnss.get(i.checked_sub(1)?)?;
+    let j = gnss.partition_point(|g| g.0 <= now.0 - BASELINE_S);
+    let then = gnss.get(j.checked_sub(1)?)?;
+    let (dx, dy) = (now.1 - then.1, now.2 - then.2);
+    ((dx * dx + dy * dy).sqrt() >= MIN_DIST_M).then(|| dx.atan2(dy))
+}
+
+/// The kinematic-only baseline's predictions at the node's ticks and horizons.
+pub fn baseline_predictions(
+    inputs: &BaselineInputs,
+    vehicle: &VehicleParams,
+    ticks: &[(f64, Vec<f64>)],
+) -> Vec<(f64, f64, (f64, f64, f64, f64))> {
+    let mut out = Vec::new();
+    let mut heading = None;
+    for (t, horizons) in ticks {
+        let i = inputs.gnss.partition_point(|g| g.0 <= *t);
+        let Some(fix) = i.checked_sub(1).and_then(|i| inputs.gnss.get(i)) else {
+            continue;
+        };
+        if let Some(h) = raw_track_heading(&inputs.gnss, *t) {
+            heading = Some(h);
+        }
+        let (Some(h0), Some(v), Some(steer)) = (
+            heading,
+            latest(&inputs.speed, *t),
+            latest(&inputs.steer, *t),
+        ) else {
+            continue;
+        };
+        // Eq 8 exactly as the paper's kinematic model: tan(delta) / L, no understeer term.
+        let delta = vehicle.steer_pct_to_center_rad(steer as f32);
+        let curvature = catmodel::math::tan(delta) / vehicle.wheelbase_m;
+        let mut pose = Pose::new(fix.1 as f32, fix.2 as f32, h0 as f32);
+        let mut elapsed = 0.0f64;
+        let mut sorted = horizons.clone();
+        sorted.sort_by(f64::total_cmp);
+        for h in sorted {
+            while elapsed + 1e-9 < h {
+                kinematic::step(&mut pose, v as f32, curvature, catmodel::SAMPLE_PERIOD_S);
+                elapsed += f64::from(catmodel::SAMPLE_PERIOD_S);
+            }
+            out.push((
+                *t,
+                h,
+                (
+                    f64::from(pose.x_m),
+                    f64::from(pose.y_m),
+                    f64::from(wrap_pi(pose.heading_rad)),
+                    v,
+                ),
+            ));
+        }
+    }
+    out
+}
+
+/// Scores predictions and the baseline against truth.
+pub fn evaluate(
+    predictions: &[Prediction],
+    truth: &Truth,
+    inputs: &BaselineInputs,
+    vehicle: &VehicleParams,
+) -> Evaluation {
+    let mut node_buckets = Vec::new();
+    let mut ticks: Vec<(f64, Vec<f64>)> = Vec::new();
+    for p in predictions {
+        accumulate(
+            truth,
+            p.t,
+            p.horizon_s,
+            (p.x, p.y, p.heading, p.speed),
+            &mut node_buckets,
+        );
+        match ticks.last_mut() {
+            Some((t, hs)) if *t == p.t => hs.push(p.horizon_s),
+            _ => ticks.push((p.t, vec![p.horizon_s])),
+        }
+    }
+    let mut base_buckets = Vec::new();
+    for (t, h, state) in baseline_predictions(inputs, vehicle, &ticks) {
+        accumulate(truth, t, h, state, &mut base_buckets);
+    }
+    node_buckets.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut horizons = Vec::new();
+    let mut tick_count = 0;
+    for (h, mut pos, head, speed) in node_buckets {
+        if h == 0.0 {
+            tick_count = pos.len();
+        }
+        let baseline = match base_buckets.iter_mut().find(|b| b.0 == h) {
+            Some(b) => ErrorStats::from_errors(&mut b.1, &b.2, &b.3),
+            None => ErrorStats::default(),
+        };
+        horizons.push(HorizonRow {
+            horizon_s: h,
+            node: ErrorStats::from_errors(&mut pos, &head, &speed),
+            baseline,
+        });
+    }
+    let mut raw_pos = Vec::new();
+    for (t, x, y) in &inputs.gnss {
+        if let Some((tx, ty, _, _)) = truth.at(*t) {
+            raw_pos.push(((x - tx).powi(2) + (y - ty).powi(2)).sqrt());
+        }
+    }
+    let zeros = vec![0.0; raw_pos.len()];
+    let raw_gnss = ErrorStats::from_errors(&mut raw_pos, &zeros, &zeros);
+    Evaluation {
+        horizons,
+        raw_gnss,
+        ticks: tick_count,
+    }
+}
+
+/// The report as a fixed-width table.
+pub fn format_table(e: &Evaluation) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "raw GNSS position error: mean {:.3} m, RMS {:.3} m, p95 {:.3} m ({} fixes)\n",
+        e.raw_gnss.pos_mean_m, e.raw_gnss.pos_rms_m, e.raw_gnss.pos_p95_m, e.raw_gnss.count
+    ));
+    s.push_str(
+        "horizon_s | node pos mean  RMS    p95 m | heading RMS rad | speed RMS m/s | baseline pos mean  RMS    p95 m | heading RMS rad\n",
+    );
+    for r in &e.horizons {
+        s.push_str(&format!(
+            "{:9.2} | {:13.3} {:6.3} {:6.3} | {:15.4} | {:13.3} | {:17.3} {:6.3} {:6.3} | {:15.4}\n",
+            r.horizon_s,
+            r.node.pos_mean_m,
+            r.node.pos_rms_m,
+            r.node.pos_p95_m,
+            r.node.heading_rms_rad,
+            r.node.speed_rms_mps,
+            r.baseline.pos_mean_m,
+            r.baseline.pos_rms_m,
+            r.baseline.pos_p95_m,
+            r.baseline.heading_rms_rad,
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn truth_line() -> Truth {
+        // 10 m/s due north for 10 s.
+        Truth::new(
+            (0..=1000)
+                .map(|i| {
+                    let t = i as f64 * 0.01;
+                    TruthSample {
+                        t,
+                        x: 0.0,
+                        y: 10.0 * t,
+                        heading: 0.0,
+                        yaw_rate: 0.0,
+                        speed: 10.0,
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn perfect_predictions_score_zero_and_offsets_score_their_size() {
+        let truth = truth_line();
+        let mut preds = Vec::new();
+        for k in 0..100 {
+            let t = 1.0 + k as f64 * 0.02;
+            for h in [0.0, 1.0] {
+                preds.push(Prediction {
+                    t,
+                    step: k,
+                    horizon_s: h,
+                    x: if h == 1.0 { 0.3 } else { 0.0 },
+                    y: 10.0 * (t + h),
+                    heading: 0.0,
+                    speed: 10.0,
+                    mode: "kinematic".into(),
+                });
+            }
+        }
+        let e = evaluate(
+            &preds,
+            &truth,
+            &BaselineInputs::default(),
+            &catmodel::vehicle::CAT_VEHICLE,
+        );
+        assert_eq!(e.horizons.len(), 2);
+        assert!(e.horizons[0].node.pos_rms_m < 1e-9);
+        assert!((e.horizons[1].node.pos_rms_m - 0.3).abs() < 1e-9);
+        assert_eq!(e.ticks, 100);
+    }
+
+    #[test]
+    fn heading_interpolation_crosses_the_wrap() {
+        let truth = Truth::new(vec![
+            TruthSample {
+                t: 0.0,
+                x: 0.0,
+                y: 0.0,
+                heading: 3.1,
+                yaw_rate: 0.0,
+                speed: 0.0,
+            },
+            TruthSample {
+                t: 1.0,
+                x: 0.0,
+                y: 0.0,
+                heading: -3.1,
+                yaw_rate: 0.0,
+                speed: 0.0,
+            },
+        ]);
+        let (_, _, h, _) = truth.at(0.5).unwrap();
+        assert!((h.abs() - std::f64::consts::PI).abs() < 1e-9, "{h}");
+    }
+}
