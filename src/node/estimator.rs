@@ -1,0 +1,250 @@
+//! The node's current-state estimate: GNSS fixes through the paper's lowpass (streaming
+//! 20th-order FIR + moving average, at the GNSS rate, paper II-A and II-C), with the filters'
+//! group delay compensated by dead reckoning, and a heading estimate.
+//!
+//! A plain causal lowpass lags: at 10 m/s its ~0.145 s group delay puts the filtered position
+//! ~1.5 m behind the car, worse than raw GNSS. So every fix also records where dead reckoning
+//! (measured speed, estimated heading) had the car at that instant; the filter output, which
+//! describes the car `group_delay` fixes ago, is moved forward by the dead-reckoned
+//! displacement since then. Dead reckoning only has to be right over ~0.15 s, where its drift is
+//! millimetres, and GNSS keeps it anchored.
+//!
+//! Heading: propagated with the kinematic yaw rate (eq 8 with eq 2's understeer) every tick,
+//! and pulled towards the course of the filtered GNSS track (or the receiver's COG, PGN 129026,
+//! when it is fresh) while the car moves, by a complementary filter.
+use crate::math;
+use crate::signal::fir::{Fir, FirState};
+use crate::signal::moving_average::{MovingAverage, MovingAverageState};
+
+/// GNSS lowpass length: 20th order (paper II-C).
+pub const GNSS_FIR_TAPS: usize = 21;
+/// Moving-average span (the paper's "span of 10 elements").
+pub const GNSS_MA_SPAN: usize = 10;
+/// Fixes of filtered track kept for the course estimate: 0.64 s at 100 Hz.
+const TRACK_LEN: usize = 64;
+/// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
+const ODO_LEN: usize = 32;
+
+/// Estimator tuning. Immutable configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EstimatorConfig {
+    /// The paper's lowpass, designed for the GNSS rate.
+    pub fir: Fir<GNSS_FIR_TAPS>,
+    /// The moving average after it.
+    pub ma: MovingAverage<GNSS_MA_SPAN>,
+    /// FIR + MA group delay, in fixes.
+    pub group_delay_fixes: f32,
+    /// Course from the filtered track needs at least this displacement, m.
+    pub course_min_baseline_m: f32,
+    /// Complementary-filter gain towards the GNSS course, per tick (0..1).
+    pub course_gain: f32,
+    /// Heading is only corrected above this speed, m/s.
+    pub course_min_speed_mps: f32,
+}
+
+/// Planar position, m (east, north).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Xy {
+    /// East, m.
+    pub x_m: f32,
+    /// North, m.
+    pub y_m: f32,
+}
+
+/// Estimator state.
+#[derive(Clone, Debug, Default)]
+pub struct EstimatorState {
+    fir_x: FirState<GNSS_FIR_TAPS>,
+    fir_y: FirState<GNSS_FIR_TAPS>,
+    ma_x: MovingAverageState<GNSS_MA_SPAN>,
+    ma_y: MovingAverageState<GNSS_MA_SPAN>,
+    /// Filter output of the latest fix (describes the car `group_delay` fixes earlier).
+    filtered: Option<Xy>,
+    /// Dead-reckoned position at each of the last fixes (ring, newest at `odo_head`).
+    odo_at_fix: [Xy; ODO_LEN],
+    odo_head: usize,
+    fixes: u32,
+    /// Filtered track for the course estimate (ring).
+    track: [Xy; TRACK_LEN],
+    track_head: usize,
+    /// Dead-reckoned position now (arbitrary origin: only differences are used).
+    odo_now: Xy,
+    /// Heading estimate, rad clockwise from north; `None` until a course was seen.
+    heading_rad: Option<f32>,
+}
+
+impl EstimatorConfig {
+    /// The paper's filter for a GNSS rate `gnss_hz`: 21-tap Hamming lowpass at `cutoff_hz`,
+    /// then a 10-sample moving average. `None` if the design is impossible (cutoff >= Nyquist).
+    pub fn paper(gnss_hz: f64, cutoff_hz: f64) -> Option<Self> {
+        let fir = Fir::lowpass(cutoff_hz, gnss_hz).ok()?;
+        let ma = MovingAverage::default();
+        let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
+        Some(Self {
+            fir,
+            ma,
+            group_delay_fixes,
+            course_min_baseline_m: 1.5,
+            course_gain: 0.05,
+            course_min_speed_mps: 1.5,
+        })
+    }
+}
+
+impl EstimatorState {
+    /// Forgets everything (e.g. after a GNSS outage or a position jump).
+    pub fn reset(&mut self) {
+        let heading = self.heading_rad;
+        *self = Self::default();
+        // The heading survives a position reset: it is still the car's.
+        self.heading_rad = heading;
+    }
+
+    /// Current heading estimate, rad.
+    pub fn heading_rad(&self) -> Option<f32> {
+        self.heading_rad
+    }
+
+    /// Fixes filtered since the last reset.
+    pub fn fixes(&self) -> u32 {
+        self.fixes
+    }
+
+    /// Dead reckoning: the car moved `dt_s` at `speed_mps` while turning at `yaw_rate_rps`.
+    /// Call once per tick, before the tick's fixes are applied with their time offsets.
+    pub fn propagate(&mut self, speed_mps: f32, yaw_rate_rps: f32, dt_s: f32) {
+        let heading = self.heading_rad.unwrap_or(0.0);
+        let mid = heading + 0.5 * yaw_rate_rps * dt_s;
+        let (s, c) = math::sin_cos(mid);
+        self.odo_now.x_m += speed_mps * dt_s * s;
+        self.odo_now.y_m += speed_mps * dt_s * c;
+        if let Some(h) = self.heading_rad.as_mut() {
+            *h = math::wrap_pi(*h + yaw_rate_rps * dt_s);
+        }
+    }
+
+    /// One GNSS fix in local metres, `age_s` before the current dead-reckoning instant
+    /// (fixes arrive between ticks), with the car's speed then.
+    pub fn add_fix(&mut self, cfg: &EstimatorConfig, fix: Xy, age_s: f32, speed_mps: f32) {
+        if self.fixes == 0 {
+            self.fir_x.prime(fix.x_m);
+            self.fir_y.prime(fix.y_m);
+            self.ma_x.prime(fix.x_m);
+            self.ma_y.prime(fix.y_m);
+        }
+        let fx = cfg.ma.process(&mut self.ma_x, cfg.fir.process(&mut self.fir_x, fix.x_m));
+        let fy = cfg.ma.process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
+        let filtered = Xy { x_m: fx, y_m: fy };
+        self.filtered = Some(filtered);
+        // Where dead reckoning had the car when the fix was taken.
+        let heading = self.heading_rad.unwrap_or(0.0);
+        let (s, c) = math::sin_cos(heading);
+        let back_m = speed_mps * age_s;
+        let odo_fix = Xy {
+            x_m: self.odo_now.x_m - back_m * s,
+            y_m: self.odo_now.y_m - back_m * c,
+        };
+        self.odo_head = (self.odo_head + 1) % ODO_LEN;
+        if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
+            *slot = odo_fix;
+        }
+        self.track_head = (self.track_head + 1) % TRACK_LEN;
+        if let Some(slot) = self.track.get_mut(self.track_head) {
+            *slot = filtered;
+        }
+        self.fixes = self.fixes.saturating_add(1);
+    }
+
+    /// Dead-reckoned position `k` fixes ago (0 = the latest fix); `None` if not recorded yet.
+    fn odo_fixes_ago(&self, k: usize) -> Option<Xy> {
+        if k >= ODO_LEN || (k as u32) >= self.fixes {
+            return None;
+        }
+        self.odo_at_fix.get((self.odo_head + ODO_LEN - k) % ODO_LEN).copied()
+    }
+
+    /// The filtered position moved forward to now: `filtered + (odo_now - odo(delayed fix))`.
+    /// `None` until the filters have seen enough fixes to be past their start-up transient.
+    pub fn position(&self, cfg: &EstimatorConfig) -> Option<Xy> {
+        let filtered = self.filtered?;
+        if (self.fixes as f32) < cfg.group_delay_fixes * 2.0 {
+            return None;
+        }
+        let d = cfg.group_delay_fixes.max(0.0);
+        let k0 = d as usize; // floor: d >= 0
+        let w = d - k0 as f32;
+        let a = self.odo_fixes_ago(k0)?;
+        let b = self.odo_fixes_ago(k0 + 1).unwrap_or(a);
+        let odo_then = Xy {
+            x_m: a.x_m + (b.x_m - a.x_m) * w,
+            y_m: a.y_m + (b.y_m - a.y_m) * w,
+        };
+        Some(Xy {
+            x_m: filtered.x_m + (self.odo_now.x_m - odo_then.x_m),
+            y_m: filtered.y_m + (self.odo_now.y_m - odo_then.y_m),
+        })
+    }
+
+    /// Pulls the heading towards a course (rad, clockwise from north) measured `age_s` ago,
+    /// given the current yaw rate. The first course initialises the heading.
+    pub fn correct_heading(
+        &mut self,
+        cfg: &EstimatorConfig,
+        course_rad: f32,
+        age_s: f32,
+        yaw_rate_rps: f32,
+    ) {
+        let course_now = math::wrap_pi(course_rad + yaw_rate_rps * age_s);
+        self.heading_rad = Some(match self.heading_rad {
+            None => course_now,
+            Some(h) => math::wrap_pi(h + cfg.course_gain * math::wrap_pi(course_now - h)),
+        });
+    }
+
+    /// Course of the filtered track over the last `TRACK_LEN - 1` fixes, with its age in fixes
+    /// (the chord's midpoint plus the filter delay); `None` if the car moved too little.
+    pub fn track_course(&self, cfg: &EstimatorConfig) -> Option<(f32, f32)> {
+        let span = TRACK_LEN - 1;
+        if (self.fixes as usize) < span + (cfg.group_delay_fixes as usize) * 2 {
+            return None;
+        }
+        let now = self.track.get(self.track_head)?;
+        let then = self.track.get((self.track_head + 1) % TRACK_LEN)?;
+        let (dx, dy) = (now.x_m - then.x_m, now.y_m - then.y_m);
+        if dx * dx + dy * dy < cfg.course_min_baseline_m * cfg.course_min_baseline_m {
+            return None;
+        }
+        let age_fixes = span as f32 * 0.5 + cfg.group_delay_fixes;
+        Some((math::atan2(dx, dy), age_fixes))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A car at 10 m/s due east, exact GNSS at 100 Hz, ticks at 50 Hz: the compensated filter
+    /// output is on the car (the uncompensated one trails by ~1.45 m).
+    #[test]
+    fn compensation_removes_the_filter_lag() {
+        let cfg = EstimatorConfig::paper(100.0, 2.0).unwrap();
+        let mut st = EstimatorState::default();
+        st.correct_heading(&cfg, core::f32::consts::FRAC_PI_2, 0.0, 0.0);
+        let v = 10.0;
+        let mut t = 0.0f32;
+        for _tick in 0..200 {
+            st.propagate(v, 0.0, 0.02);
+            t += 0.02;
+            // two fixes per tick, at t - 0.01 and t
+            for age in [0.01f32, 0.0] {
+                let fix = Xy { x_m: v * (t - age), y_m: 0.0 };
+                st.add_fix(&cfg, fix, age, v);
+            }
+        }
+        let p = st.position(&cfg).unwrap();
+        assert!((p.x_m - v * t).abs() < 0.02, "{p:?} vs {}", v * t);
+        let lag = v * t - st.filtered.unwrap().x_m;
+        assert!((lag - v * cfg.group_delay_fixes * 0.01).abs() < 0.05, "{lag}");
+    }
+}

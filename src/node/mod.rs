@@ -1,0 +1,680 @@
+//! `Node`: one pure 20 ms step that takes the frames received since the last tick and the tick
+//! time, and returns the frames to send. The board, QEMU and host replay run exactly this code,
+//! so `catmodel replay --tx-out` and the QEMU run produce byte-identical frames.
+//!
+//! Each tick: decode and validate the received frames (CRC, rolling counter, DLC, range; GNSS
+//! range and a plausibility gate), every rejection counted; update freshness; feed GNSS fixes
+//! through the paper's lowpass with its group delay compensated ([`estimator`]); estimate the
+//! heading; step the velocity model (eq 5), the dx/dt model (eq 7) and the active lateral model
+//! (hybrid switch); roll the horizon forward; encode the output frames.
+//!
+//! Never panics on bus data, never allocates, never reads a clock; every output value is
+//! checked finite before it is encoded (non-finite values go out as "not available" and are
+//! counted, health bit `nonfinite_guard`).
+pub mod estimator;
+
+use crate::can::codec::{
+    decode_input, DecodeError, EncodeReport, HealthFlags, InputMessage, ModelMode, NodeStatus,
+    Prediction, PredictionPoint, StateModel, StateMotion, StatePosition,
+};
+use crate::can::{CanFrame, TimedFrame};
+use crate::geodesy::LocalFrame;
+use crate::model::block::{MisoBlock, MisoBlockState, SsBlock, SsBlockState};
+use crate::model::dynamic::{DynamicParams, LateralState, CAT_VEHICLE_DYNAMICS};
+use crate::model::hybrid::{HybridConfig, HybridState, Mode, DEFAULT_HYBRID};
+use crate::model::kinematic::Pose;
+use crate::model::paper;
+use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStart};
+use crate::model::tf::ModelError;
+use crate::vehicle::{VehicleParams, CAT_VEHICLE};
+use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
+use estimator::{EstimatorConfig, EstimatorState, Xy};
+
+/// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.
+pub const MAX_TX_FRAMES: usize = 16;
+/// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
+pub const PREDICTION_POINTS: usize = 10;
+/// Status pages, one per tick, cycling.
+const STATUS_PAGES: u32 = 5;
+
+/// The frames one tick sends, in transmit order.
+pub type TxFrames = heapless::Vec<CanFrame, MAX_TX_FRAMES>;
+
+/// What only the platform can know; `None` where it cannot measure (sent as "not available").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PlatformStats {
+    /// Ticks that started late (missed their 20 ms slot) since boot.
+    pub overruns: u32,
+    /// Frames dropped because the receive queue was full, since boot.
+    pub rx_queue_drops: u32,
+    /// Duration of the previous step in microseconds, where a cycle counter exists (board).
+    pub last_step_us: Option<u32>,
+    /// Deepest stack use seen so far, bytes, where the stack is painted.
+    pub stack_high_water_bytes: Option<u32>,
+    /// The last reset was caused by the watchdog.
+    pub watchdog_reset: bool,
+}
+
+/// The input of one tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tick {
+    /// The tick's scheduled time, us on the input's time base.
+    pub now_us: u64,
+    /// Platform counters.
+    pub platform: PlatformStats,
+}
+
+/// The first tick's time for a stream whose first frame arrived at `first_frame_us`: rounded up
+/// to a whole multiple of the 20 ms period (docs/architecture.md, "Tick schedule").
+pub const fn first_tick_us(first_frame_us: u64) -> u64 {
+    first_frame_us.div_ceil(SAMPLE_PERIOD_US) * SAMPLE_PERIOD_US
+}
+
+/// Input timeouts, us (PX4-style `is_timed_out`; Dataspeed: 100 ms for 50 Hz reports).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Timeouts {
+    /// Steering report.
+    pub steer_us: u64,
+    /// Speed report.
+    pub speed_us: u64,
+    /// Pedal report.
+    pub pedal_us: u64,
+    /// GNSS position: after this the position is dead-reckoned and flagged.
+    pub gnss_us: u64,
+    /// GNSS silent this long: the position is no longer trusted (invalid, filters restart).
+    pub gnss_lost_us: u64,
+}
+
+/// 100 ms for the 50 Hz reports (5 missed frames), 200 ms for 100 Hz GNSS, 2 s of dead
+/// reckoning at most.
+pub const DEFAULT_TIMEOUTS: Timeouts = Timeouts {
+    steer_us: 100_000,
+    speed_us: 100_000,
+    pedal_us: 100_000,
+    gnss_us: 200_000,
+    gnss_lost_us: 2_000_000,
+};
+
+/// Everything the node is configured with. Immutable.
+#[derive(Clone, Debug)]
+pub struct NodeConfig {
+    /// Geometry and steering conversion (eq 2-4).
+    pub vehicle: VehicleParams,
+    /// Dynamic bicycle model.
+    pub dynamics: DynamicParams,
+    /// Hybrid switching thresholds.
+    pub hybrid: HybridConfig,
+    /// Horizon shape.
+    pub horizon: HorizonConfig,
+    /// GNSS lowpass, delay compensation, heading.
+    pub estimator: EstimatorConfig,
+    /// GNSS fix period, s (the rate the lowpass was designed for).
+    pub gnss_period_s: f32,
+    /// Internal-controller model, commanded speed -> speed (eq 5), with its input delay.
+    pub velocity: SsBlock<2>,
+    /// dx/dt model with inputs [v_m, x, y, phi] (eq 7).
+    pub dxdt: MisoBlock<2, 4>,
+    /// NMEA 2000 source address of the GNSS receiver.
+    pub gnss_source: u8,
+    /// Local frame origin (lat, lon in 1e-7 deg); `None` = the first valid fix.
+    pub origin_e7: Option<(i32, i32)>,
+    /// Input timeouts.
+    pub timeouts: Timeouts,
+    /// A fix farther than this from the predicted position is rejected, m.
+    pub gnss_gate_m: f32,
+    /// After this many consecutive gate rejections the fixes win: the filters restart there.
+    pub gnss_reacquire_fixes: u16,
+    /// Speeds are clamped to [0, this], m/s.
+    pub max_speed_mps: f32,
+}
+
+impl NodeConfig {
+    /// The published models (eq 5, eq 7) on the CAT Vehicle, the paper's GNSS lowpass (20th
+    /// order FIR, cutoff 2 Hz at the receiver's 100 Hz, then a 10-sample moving average).
+    pub fn paper() -> Result<Self, ModelError> {
+        let ts = f64::from(SAMPLE_PERIOD_S);
+        let velocity = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, ts)?;
+        let dxdt = MisoBlock::from_tfs(&paper::EQ7_DX_DT, ts)?;
+        let estimator =
+            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ).ok_or(ModelError::NotFinite)?;
+        Ok(Self {
+            vehicle: CAT_VEHICLE,
+            dynamics: CAT_VEHICLE_DYNAMICS,
+            hybrid: DEFAULT_HYBRID,
+            horizon: predictor::DEFAULT_HORIZON,
+            estimator,
+            gnss_period_s: (1.0 / GNSS_RATE_HZ) as f32,
+            velocity,
+            dxdt,
+            gnss_source: crate::can::spec::GNSS_SOURCE_DEFAULT,
+            origin_e7: None,
+            timeouts: DEFAULT_TIMEOUTS,
+            gnss_gate_m: 10.0,
+            gnss_reacquire_fixes: 100,
+            max_speed_mps: 60.0,
+        })
+    }
+}
+
+/// GNSS rate of the paper's receiver (NovAtel, "every 0.01 seconds", paper II-B), Hz.
+pub const GNSS_RATE_HZ: f64 = 100.0;
+/// Lowpass cutoff for GNSS, Hz: passes the car's motion (manoeuvres < 1 Hz), removes the
+/// receiver's white noise.
+pub const GNSS_CUTOFF_HZ: f64 = 2.0;
+
+/// Rejection and event counters since boot (saturating: they never wrap).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Counters {
+    /// Frames with a bad CRC.
+    pub crc_errors: u32,
+    /// Stuck (rejected) or jumping (counted, accepted) rolling counters.
+    pub counter_errors: u32,
+    /// Known identifiers with the wrong DLC.
+    pub dlc_errors: u32,
+    /// Values outside their DBC range or carrying an invalid sentinel.
+    pub range_errors: u32,
+    /// GNSS fixes rejected by the plausibility gate or the geodesy range.
+    pub gnss_gate_rejects: u32,
+    /// Identifiers the node does not know (or GNSS from another source).
+    pub unknown_ids: u32,
+    /// Frames stamped after the tick that received them (clock mismatch), rejected.
+    pub time_errors: u32,
+    /// Output values replaced because they were not finite.
+    pub nonfinite: u32,
+    /// Output values saturated to their field's range.
+    pub saturated: u32,
+}
+
+fn bump(c: &mut u32) {
+    *c = c.saturating_add(1);
+}
+
+/// Latest value of a 50 Hz input with its time and rolling counter.
+#[derive(Clone, Copy, Debug, Default)]
+struct Latest<T> {
+    value: Option<T>,
+    t_us: Option<u64>,
+    counter: Option<u8>,
+}
+
+impl<T: Copy> Latest<T> {
+    /// Accepts a report unless its counter did not change (a stuck sender repeating itself);
+    /// a jump (missed frames) is counted but the value is used. Returns false if rejected.
+    fn accept(&mut self, value: T, counter: u8, t_us: u64, counters: &mut Counters) -> bool {
+        if let Some(prev) = self.counter {
+            if prev == counter {
+                bump(&mut counters.counter_errors);
+                return false;
+            }
+            if (prev + 1) & 0x0F != counter {
+                bump(&mut counters.counter_errors);
+            }
+        }
+        self.counter = Some(counter);
+        self.value = Some(value);
+        self.t_us = Some(t_us);
+        true
+    }
+
+    fn fresh(&self, now_us: u64, timeout_us: u64) -> Option<T> {
+        match self.t_us {
+            Some(t) if now_us.saturating_sub(t) <= timeout_us => self.value,
+            _ => None,
+        }
+    }
+}
+
+/// Age in 10 ms units for the status page: 254 = saturated, 255 = never received.
+fn age_10ms(now_us: u64, t_us: Option<u64>) -> u8 {
+    match t_us {
+        None => 255,
+        Some(t) => (now_us.saturating_sub(t) / 10_000).min(254) as u8,
+    }
+}
+
+/// The node's mutable state.
+#[derive(Clone, Debug)]
+pub struct Node {
+    config: NodeConfig,
+    frame: Option<LocalFrame>,
+    estimator: EstimatorState,
+    velocity: Option<SsBlockState<2>>,
+    dxdt: MisoBlockState<2, 4>,
+    lateral: LateralState,
+    hybrid: HybridState,
+    steer_pct: Latest<f32>,
+    speed: Latest<(f32, f32)>,
+    pedal: Latest<(f32, f32)>,
+    gnss_t_us: Option<u64>,
+    cog: Option<(f32, u64)>,
+    gnss_rejects_in_row: u16,
+    last_gnss_reject_us: Option<u64>,
+    yaw_rate_rps: f32,
+    speed_mps: f32,
+    last_tick_us: Option<u64>,
+    tick_count: u32,
+    counters: Counters,
+    last_report: EncodeReport,
+}
+
+/// What one tick estimated, for the host tools (replay writes it next to the frames).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickEstimate {
+    /// Filtered, delay-compensated position and heading; `None` while invalid.
+    pub pose: Option<Pose>,
+    /// Speed used, m/s.
+    pub speed_mps: f32,
+    /// Lateral model in use.
+    pub mode: Mode,
+}
+
+impl Node {
+    /// A node with fresh state.
+    pub fn new(config: NodeConfig) -> Self {
+        let dxdt = config.dxdt.zero_state();
+        Self {
+            config,
+            frame: None,
+            estimator: EstimatorState::default(),
+            velocity: None,
+            dxdt,
+            lateral: LateralState::default(),
+            hybrid: HybridState::default(),
+            steer_pct: Latest::default(),
+            speed: Latest::default(),
+            pedal: Latest::default(),
+            gnss_t_us: None,
+            cog: None,
+            gnss_rejects_in_row: 0,
+            last_gnss_reject_us: None,
+            yaw_rate_rps: 0.0,
+            speed_mps: 0.0,
+            last_tick_us: None,
+            tick_count: 0,
+            counters: Counters::default(),
+            last_report: EncodeReport::default(),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &NodeConfig {
+        &self.config
+    }
+
+    /// Rejection counters since start.
+    pub fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// Ticks run.
+    pub fn tick_count(&self) -> u32 {
+        self.tick_count
+    }
+
+    /// The local frame's origin once known (lat, lon in 1e-7 deg).
+    pub fn origin_e7(&self) -> Option<(i32, i32)> {
+        self.frame.map(|f| (f.origin_lat_e7(), f.origin_lon_e7()))
+    }
+
+    /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order) and
+    /// appends this tick's frames to `tx`. Returns what the tick estimated.
+    pub fn step(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
+        let now = tick.now_us;
+        let dt_s = match self.last_tick_us {
+            // Missed ticks (overruns) are propagated over the real elapsed time, at most 0.1 s.
+            Some(prev) if now > prev => (now - prev).min(100_000) as f32 * 1e-6,
+            _ => SAMPLE_PERIOD_S,
+        };
+        self.last_tick_us = Some(now);
+        self.estimator
+            .propagate(self.speed_mps, self.yaw_rate_rps, dt_s);
+
+        for f in rx {
+            self.receive(now, f);
+        }
+
+        let cfg = &self.config;
+        let to = cfg.timeouts;
+        let steer_pct = self.steer_pct.fresh(now, to.steer_us);
+        let speeds = self.speed.fresh(now, to.speed_us);
+        let center_steer_rad = cfg.vehicle.steer_pct_to_center_rad(steer_pct.unwrap_or(0.0));
+
+        // Velocity model (eq 5): started at equilibrium on the first measured speed, then driven
+        // by the commanded speed (or, without a command, by the measured speed: hold).
+        if self.velocity.is_none() {
+            if let Some((v, _)) = speeds {
+                self.velocity = cfg.velocity.steady_state_for_output(v).ok();
+            }
+        }
+        let speed_cmd = speeds.map(|(_, c)| c);
+        let mut speed_model = None;
+        if let Some(state) = self.velocity.as_mut() {
+            let u = speed_cmd.or(speeds.map(|(v, _)| v)).unwrap_or(self.speed_mps);
+            speed_model = Some(cfg.velocity.step(state, u));
+        }
+        let speed_mps = clamp_finite(
+            speeds.map(|(v, _)| v).or(speed_model).unwrap_or(0.0),
+            0.0,
+            cfg.max_speed_mps,
+        );
+        self.speed_mps = speed_mps;
+
+        // Lateral model and hybrid switch.
+        let yaw_kin = speed_mps * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
+        let mode = cfg
+            .hybrid
+            .update(&mut self.hybrid, speed_mps, speed_mps * self.yaw_rate_rps);
+        match mode {
+            Mode::Kinematic => {
+                self.lateral = cfg.dynamics.steady_state(speed_mps, center_steer_rad);
+                self.yaw_rate_rps = yaw_kin;
+            }
+            Mode::Dynamic => {
+                cfg.dynamics
+                    .step(&mut self.lateral, speed_mps, center_steer_rad, dt_s);
+                self.yaw_rate_rps = self.lateral.yaw_rate_rps;
+            }
+        }
+        if !self.yaw_rate_rps.is_finite() {
+            self.yaw_rate_rps = 0.0;
+            bump(&mut self.counters.nonfinite);
+        }
+
+        // Heading: receiver COG when fresh and moving, else the filtered track's course.
+        let moving = speed_mps >= cfg.estimator.course_min_speed_mps;
+        match self.cog {
+            Some((cog, t)) if moving && now.saturating_sub(t) <= to.gnss_us => {
+                let age_s = now.saturating_sub(t) as f32 * 1e-6;
+                self.estimator
+                    .correct_heading(&cfg.estimator, cog, age_s, self.yaw_rate_rps);
+            }
+            _ if moving => {
+                if let Some((course, age_fixes)) = self.estimator.track_course(&cfg.estimator) {
+                    let age_s = age_fixes * cfg.gnss_period_s;
+                    self.estimator.correct_heading(
+                        &cfg.estimator,
+                        course,
+                        age_s,
+                        self.yaw_rate_rps,
+                    );
+                }
+            }
+            _ => {}
+        }
+
+        // Position: filtered and delay-compensated; dead-reckoned through short GNSS gaps.
+        let gnss_age = self.gnss_t_us.map(|t| now.saturating_sub(t));
+        let gnss_fresh = matches!(gnss_age, Some(a) if a <= to.gnss_us);
+        if matches!(gnss_age, Some(a) if a > to.gnss_lost_us) && self.estimator.fixes() > 0 {
+            self.estimator.reset();
+        }
+        let pose = match (self.estimator.position(&cfg.estimator), self.estimator.heading_rad()) {
+            (Some(p), Some(h)) if p.x_m.is_finite() && p.y_m.is_finite() && h.is_finite() => {
+                Some(Pose::new(p.x_m, p.y_m, h))
+            }
+            _ => None,
+        };
+
+        // dx/dt model (eq 7): inputs [v_m, x, y, phi] with phi the steering angle, rad.
+        let dxdt = pose.map(|p| {
+            cfg.dxdt.step(
+                &mut self.dxdt,
+                &[speed_mps, p.x_m, p.y_m, center_steer_rad],
+            )
+        });
+
+        // Horizon.
+        let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
+        let mut n_points = 0;
+        if let (Some(p), Some(vel_state), Some(v_model)) = (pose, self.velocity, speed_model) {
+            let mut rollout_state = vel_state;
+            let start = PredictorStart {
+                pose: p,
+                speed_mps,
+                speed_bias_mps: speed_mps - v_model,
+                speed_cmd_mps: speed_cmd.unwrap_or(speed_mps),
+                center_steer_rad,
+                lateral: self.lateral,
+                mode,
+            };
+            let velocity = &cfg.velocity;
+            n_points = predictor::rollout(
+                &cfg.horizon,
+                &cfg.vehicle,
+                &cfg.dynamics,
+                &start,
+                |u| velocity.step(&mut rollout_state, u),
+                &mut points,
+            );
+        }
+
+        // Outputs.
+        let counter = (self.tick_count & 0x0F) as u8;
+        let mut report = EncodeReport::default();
+        let gnss_rejected = matches!(self.last_gnss_reject_us, Some(t) if now.saturating_sub(t) <= 1_000_000);
+        let model_mode = match mode {
+            Mode::Kinematic => ModelMode::Kinematic,
+            Mode::Dynamic => ModelMode::Dynamic,
+        };
+        let mut push = |(frame, r): (CanFrame, EncodeReport), report: &mut EncodeReport| {
+            report.merge(&r);
+            // Note: capacity 16 >= 3 + 10 + 1 frames; a full buffer would only lose frames
+            // already counted in `MAX_TX_FRAMES`'s derivation.
+            let _ = tx.push(frame);
+        };
+        push(
+            StatePosition {
+                position_valid: pose.is_some(),
+                gnss_fresh,
+                gnss_rejected,
+                east_m: pose.map(|p| p.x_m),
+                north_m: pose.map(|p| p.y_m),
+            }
+            .encode_with_report(counter),
+            &mut report,
+        );
+        push(
+            StateMotion {
+                mode: model_mode,
+                heading_rad: pose.map(|p| p.heading_rad),
+                speed_mps: Some(speed_mps),
+                yaw_rate_radps: Some(self.yaw_rate_rps),
+            }
+            .encode_with_report(counter),
+            &mut report,
+        );
+        push(
+            StateModel {
+                speed_model_mps: speed_model,
+                dxdt_model_mps: dxdt,
+                lat_accel_mps2: Some(speed_mps * self.yaw_rate_rps),
+            }
+            .encode_with_report(counter),
+            &mut report,
+        );
+        for (i, point) in PredictionPoint::all().enumerate() {
+            let predicted = match (pose, points.get(i)) {
+                (Some(p), Some(q)) if i < n_points => Some((p, q)),
+                _ => None,
+            };
+            push(
+                Prediction {
+                    point,
+                    dx_m: predicted.map(|(p, q)| q.x_m - p.x_m),
+                    dy_m: predicted.map(|(p, q)| q.y_m - p.y_m),
+                    dheading_rad: predicted.map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
+                    speed_mps: predicted.map(|(_, q)| q.speed_mps),
+                }
+                .encode_with_report(counter),
+                &mut report,
+            );
+        }
+        let c = self.counters;
+        let ages = [
+            age_10ms(now, self.steer_pct.t_us),
+            age_10ms(now, self.speed.t_us),
+            age_10ms(now, self.pedal.t_us),
+            age_10ms(now, self.gnss_t_us),
+        ];
+        let status = match self.tick_count % STATUS_PAGES {
+            0 => NodeStatus::Health {
+                mode: model_mode,
+                health: HealthFlags {
+                    steer_stale: steer_pct.is_none(),
+                    speed_stale: speeds.is_none(),
+                    pedal_stale: self.pedal.fresh(now, to.pedal_us).is_none(),
+                    gnss_stale: !gnss_fresh,
+                    gnss_rejected_recently: gnss_rejected,
+                    position_invalid: pose.is_none(),
+                    prediction_saturated: self.last_report.saturated > 0,
+                    nonfinite_guard: self.last_report.non_finite > 0 || c.nonfinite > 0,
+                    watchdog_reset: tick.platform.watchdog_reset,
+                    overrun_recently: tick.platform.overruns > 0,
+                    input_invalid: c.range_errors > 0,
+                },
+                overrun_count: tick.platform.overruns,
+                last_step_us: tick.platform.last_step_us,
+            },
+            1 => NodeStatus::RxErrors {
+                crc_errors: c.crc_errors,
+                counter_errors: c.counter_errors,
+                dlc_errors: c.dlc_errors,
+            },
+            2 => NodeStatus::RxRejects {
+                range_errors: c.range_errors,
+                gnss_gate_rejects: c.gnss_gate_rejects,
+                unknown_ids: c.unknown_ids,
+            },
+            3 => NodeStatus::Platform {
+                tick_count: self.tick_count,
+                rx_queue_drops: tick.platform.rx_queue_drops,
+            },
+            _ => NodeStatus::Ages {
+                ages_10ms: ages,
+                stack_high_water_bytes: tick.platform.stack_high_water_bytes,
+            },
+        };
+        push(status.encode_with_report(counter), &mut report);
+        self.counters.nonfinite = self
+            .counters
+            .nonfinite
+            .saturating_add(u32::from(report.non_finite));
+        self.counters.saturated = self
+            .counters
+            .saturated
+            .saturating_add(u32::from(report.saturated));
+        self.last_report = report;
+        self.tick_count = self.tick_count.wrapping_add(1);
+        TickEstimate {
+            pose,
+            speed_mps,
+            mode,
+        }
+    }
+
+    /// Decodes and applies one received frame; every rejection is counted.
+    fn receive(&mut self, now_us: u64, f: &TimedFrame) {
+        if f.t_us > now_us {
+            bump(&mut self.counters.time_errors);
+            return;
+        }
+        let msg = match decode_input(&f.frame, self.config.gnss_source) {
+            Ok(m) => m,
+            Err(e) => {
+                let c = &mut self.counters;
+                bump(match e {
+                    DecodeError::Crc { .. } => &mut c.crc_errors,
+                    DecodeError::Dlc { .. } => &mut c.dlc_errors,
+                    DecodeError::OutOfRange { .. } | DecodeError::Invalid { .. } => {
+                        &mut c.range_errors
+                    }
+                    DecodeError::UnknownId
+                    | DecodeError::WrongId
+                    | DecodeError::WrongSource { .. } => &mut c.unknown_ids,
+                });
+                return;
+            }
+        };
+        match msg {
+            InputMessage::Steering(m, counter) => match m.steer_pct {
+                Some(p) => {
+                    self.steer_pct.accept(p, counter, f.t_us, &mut self.counters);
+                }
+                None => bump(&mut self.counters.range_errors),
+            },
+            InputMessage::Speed(m, counter) => match (m.speed_mps, m.speed_cmd_mps) {
+                (Some(v), cmd) => {
+                    let cmd = cmd.unwrap_or(v);
+                    self.speed.accept((v, cmd), counter, f.t_us, &mut self.counters);
+                }
+                _ => bump(&mut self.counters.range_errors),
+            },
+            InputMessage::Pedal(m, counter) => {
+                let value = (m.accel_pct.unwrap_or(0.0), m.brake_pct.unwrap_or(0.0));
+                self.pedal.accept(value, counter, f.t_us, &mut self.counters);
+            }
+            InputMessage::GnssPosition(p) => self.receive_fix(now_us, f.t_us, p.lat_e7, p.lon_e7),
+            InputMessage::GnssCogSog(c) => {
+                if let (Some(cog), Some(sog)) = (c.cog_rad, c.sog_mps) {
+                    // COG is meaningless when standing still.
+                    if sog >= self.config.estimator.course_min_speed_mps && c.cog_reference == 0
+                    {
+                        self.cog = Some((math::wrap_pi(cog), f.t_us));
+                    }
+                }
+            }
+        }
+    }
+
+    fn receive_fix(&mut self, now_us: u64, t_us: u64, lat_e7: i32, lon_e7: i32) {
+        if self.frame.is_none() {
+            let origin = self.config.origin_e7.unwrap_or((lat_e7, lon_e7));
+            match LocalFrame::new(origin.0, origin.1) {
+                Ok(frame) => self.frame = Some(frame),
+                Err(_) => {
+                    bump(&mut self.counters.gnss_gate_rejects);
+                    return;
+                }
+            }
+        }
+        let Some(enu) = self.frame.and_then(|fr| fr.to_local(lat_e7, lon_e7).ok()) else {
+            bump(&mut self.counters.gnss_gate_rejects);
+            self.last_gnss_reject_us = Some(t_us);
+            return;
+        };
+        let fix = Xy {
+            x_m: enu.east_m,
+            y_m: enu.north_m,
+        };
+        let cfg = &self.config;
+        // Plausibility gate against where the car should be; repeated rejections mean the car
+        // really is there (e.g. after a long gap): restart the filters on the fixes.
+        if let Some(p) = self.estimator.position(&cfg.estimator) {
+            let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
+            if dx * dx + dy * dy > cfg.gnss_gate_m * cfg.gnss_gate_m {
+                self.gnss_rejects_in_row = self.gnss_rejects_in_row.saturating_add(1);
+                bump(&mut self.counters.gnss_gate_rejects);
+                self.last_gnss_reject_us = Some(t_us);
+                if self.gnss_rejects_in_row < cfg.gnss_reacquire_fixes {
+                    return;
+                }
+                self.estimator.reset();
+            }
+        }
+        self.gnss_rejects_in_row = 0;
+        let age_s = now_us.saturating_sub(t_us) as f32 * 1e-6;
+        self.estimator
+            .add_fix(&cfg.estimator, fix, age_s, self.speed_mps);
+        self.gnss_t_us = Some(t_us);
+    }
+}
+
+fn clamp_finite(v: f32, lo: f32, hi: f32) -> f32 {
+    if v.is_finite() {
+        v.clamp(lo, hi)
+    } else {
+        lo
+    }
+}
