@@ -1,0 +1,148 @@
+//! Causal moving average for the node: the mean of the last N samples (paper II-C smooths with
+//! a moving average; this is its causal, streaming counterpart).
+//!
+//! No drift, by construction: the mean is recomputed from the stored window on every sample
+//! (N adds and one multiply), instead of keeping a running sum that adds the new sample and
+//! subtracts the oldest, whose rounding errors would accumulate without bound in `f32`.
+//! For the small N the node uses (about 10) this is as cheap as the running-sum bookkeeping,
+//! and the output depends only on the last N inputs, bit for bit.
+
+/// Configuration of a causal moving average over N samples (N >= 1). Holds 1/N.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MovingAverage<const N: usize> {
+    inv_n: f32,
+}
+
+impl<const N: usize> Default for MovingAverage<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> MovingAverage<N> {
+    /// A moving average over N samples. N = 0 is a degenerate filter whose output is
+    /// always 0.
+    pub const fn new() -> Self {
+        Self {
+            inv_n: if N == 0 { 0.0 } else { 1.0 / N as f32 },
+        }
+    }
+
+    /// Window length in samples.
+    pub const fn len(&self) -> usize {
+        N
+    }
+
+    /// True for the degenerate N = 0.
+    pub const fn is_empty(&self) -> bool {
+        N == 0
+    }
+
+    /// Group delay in samples: (N - 1) / 2.
+    pub fn group_delay_samples(&self) -> f32 {
+        (N as f32 - 1.0) * 0.5
+    }
+
+    /// Pushes `x` and returns the mean of the last N samples (of the `count` samples seen so
+    /// far while fewer than N have arrived since a reset, so an unprimed filter does not ramp
+    /// up from 0). Same units as `x`. A NaN input poisons the output for N samples.
+    pub fn process(&self, state: &mut MovingAverageState<N>, x: f32) -> f32 {
+        if let Some(slot) = state.window.get_mut(state.next) {
+            *slot = x;
+        }
+        state.next += 1;
+        if state.next >= N {
+            state.next = 0;
+        }
+        if state.count < N {
+            state.count += 1;
+        }
+        let sum: f32 = state.window.iter().sum();
+        if state.count == N {
+            sum * self.inv_n
+        } else {
+            // Unfilled slots are 0 after a reset, so `sum` is the sum of the `count` samples.
+            sum / state.count as f32
+        }
+    }
+}
+
+/// The last N inputs of a [`MovingAverage<N>`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovingAverageState<const N: usize> {
+    window: [f32; N],
+    /// Slot the next sample goes to.
+    next: usize,
+    /// Samples seen since the last reset, saturating at N.
+    count: usize,
+}
+
+impl<const N: usize> Default for MovingAverageState<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> MovingAverageState<N> {
+    /// Empty: the first outputs average the samples seen so far.
+    pub const fn new() -> Self {
+        Self {
+            window: [0.0; N],
+            next: 0,
+            count: 0,
+        }
+    }
+
+    /// Full window of `value`, as if the input had been `value` forever.
+    pub const fn primed(value: f32) -> Self {
+        Self {
+            window: [value; N],
+            next: 0,
+            count: N,
+        }
+    }
+
+    /// Refills the window with `value` (see [`MovingAverageState::primed`]).
+    pub fn prime(&mut self, value: f32) {
+        *self = Self::primed(value);
+    }
+
+    /// Back to empty.
+    pub fn reset(&mut self) {
+        *self = Self::new();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_of_last_n() {
+        let ma = MovingAverage::<3>::new();
+        let mut s = MovingAverageState::new();
+        let out: Vec<f32> = [3.0, 6.0, 9.0, 12.0, 0.0]
+            .iter()
+            .map(|&x| ma.process(&mut s, x))
+            .collect();
+        // 3/1, (3+6)/2, (3+6+9)/3, (6+9+12)/3, (9+12+0)/3
+        assert_eq!(out, vec![3.0, 4.5, 6.0, 9.0, 7.0]);
+    }
+
+    #[test]
+    fn primed_and_no_drift() {
+        let ma = MovingAverage::<10>::new();
+        let mut s = MovingAverageState::primed(5.0);
+        assert_eq!(ma.process(&mut s, 5.0), 5.0);
+        // After a million noisy samples, a constant input must give the constant again: a
+        // running sum would have drifted.
+        for k in 0..1_000_000u32 {
+            ma.process(&mut s, (k as f32 * 0.618_034).sin() * 1.0e3 + 1.0e3);
+        }
+        let mut y = 0.0;
+        for _ in 0..10 {
+            y = ma.process(&mut s, 0.1);
+        }
+        assert!((y - 0.1).abs() <= 1e-7, "{y}");
+    }
+}
