@@ -254,3 +254,36 @@ impl<const N: usize, const M: usize, const DELAY_CAP: usize> MisoBlock<N, M, DEL
         Some(y)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_order_block_by_hand() {
+        // 2/(s + 1) at Ts = ln 2: Ad = 1/2, Bd = 1 - 1/2 = 1/2, C = 2, D = 0; delay 1 sample.
+        let ts = core::f64::consts::LN_2;
+        let tf = TransferFunction::new(&[2.0], &[1.0, 1.0], ts).unwrap();
+        let block = SsBlock::<1, 4>::from_tf(&tf, ts).unwrap();
+        let mut st = block.zero_state();
+        let y: Vec<f32> = (0..4).map(|_| block.step(&mut st, 1.0)).collect();
+        // u_d = 0, 1, 1, 1; x = 0, 0, 0.5, 0.75; y = 2x.
+        let expect = [0.0, 0.0, 1.0, 1.5];
+        for (a, b) in y.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-6, "{y:?}");
+        }
+        assert!((block.dc_gain().unwrap() - 2.0).abs() < 1e-6);
+        let mut st = block.steady_state_for_output(3.0).unwrap();
+        assert!((block.step(&mut st, 1.5) - 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn zeroed_miso_outputs_zero() {
+        let miso = MisoBlock::<2, 3, 0> {
+            blocks: [SsBlock::zeroed(); 3],
+        };
+        let mut st = miso.zero_state();
+        assert_eq!(miso.step(&mut st, &[1.0, -2.0, 3.0]), 0.0);
+        assert_eq!(miso.steady_output_for(&[1.0, 1.0, 1.0]), Some(0.0));
+    }
+}

@@ -10,6 +10,11 @@
 
 use super::tf::TransferFunction;
 
+/// Sample period of the published models, s, in f64 for the offline discretization.
+/// Use this, not `f64::from(crate::SAMPLE_PERIOD_S)`: the f32 0.02 widens to
+/// 0.019999999552965164, and 0.42 s / that is not a whole number of samples within 1e-9.
+pub const PAPER_TS_S: f64 = 0.02;
+
 /// Eq 5 numerator, descending powers of s (dimensionless: m/s of speed per m/s of command).
 pub const EQ5_NUM: [f64; 3] = [0.03679, -0.1981, 0.7647];
 /// Eq 5 denominator, descending powers of s.
@@ -86,7 +91,7 @@ mod tests {
             "f32 0.02 widened to f64 is not 0.02: callers must use an f64 sample period"
         );
         assert_eq!(
-            crate::model::zoh::delay_samples(EQ5_DELAY_S, 0.02),
+            crate::model::zoh::delay_samples(EQ5_DELAY_S, PAPER_TS_S),
             Ok(EQ5_DELAY_SAMPLES)
         );
     }
