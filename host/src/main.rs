@@ -1,4 +1,143 @@
-//! `catmodel`: the host command-line tool (see README).
-fn main() {
-    println!("catmodel {}", env!("CARGO_PKG_VERSION"));
+//! `catmodel`: the host command-line tool (see README, "The CLI").
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Result};
+use catmodel::node::NodeConfig;
+use catmodel_host::{evaluate, replay};
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "catmodel",
+    version,
+    about = "Identified vehicle models (CAT Vehicle paper) on a 20 ms CAN node: host tools"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the very same Node as the firmware over a candump log.
+    Replay {
+        /// candump log of the node's input frames.
+        log: PathBuf,
+        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+        #[arg(long, value_parser = parse_origin)]
+        origin: Option<(f64, f64)>,
+        /// Predictions CSV to write (`t,step,horizon_s,x,y,heading,speed,mode`).
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write the frames the node sends, candump, stamped with the tick time.
+        #[arg(long)]
+        tx_out: Option<PathBuf>,
+    },
+    /// Score predictions against ground truth, beside a kinematic raw-GNSS baseline.
+    Evaluate {
+        /// Predictions CSV from `replay`.
+        predictions: PathBuf,
+        /// Ground truth CSV (`t,x,y,heading,yaw_rate,speed`).
+        #[arg(long)]
+        truth: PathBuf,
+        /// The candump the predictions came from (for the baseline and raw GNSS); default:
+        /// NAME.can.log beside NAME.truth.csv.
+        #[arg(long)]
+        inputs: Option<PathBuf>,
+        /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
+        #[arg(long, value_parser = parse_origin)]
+        origin: Option<(f64, f64)>,
+        /// Also write the evaluation as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+}
+
+fn parse_origin(s: &str) -> Result<(f64, f64), String> {
+    let (lat, lon) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected LAT,LON, got {s:?}"))?;
+    let lat: f64 = lat.trim().parse().map_err(|e| format!("latitude {lat:?}: {e}"))?;
+    let lon: f64 = lon.trim().parse().map_err(|e| format!("longitude {lon:?}: {e}"))?;
+    if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
+        return Err(format!("origin {lat},{lon} is not a WGS-84 position"));
+    }
+    Ok((lat, lon))
+}
+
+fn to_e7((lat, lon): (f64, f64)) -> (i32, i32) {
+    ((lat * 1e7).round() as i32, (lon * 1e7).round() as i32)
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("catmodel: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Replay {
+            log,
+            origin,
+            out,
+            tx_out,
+        } => {
+            let frames = replay::read_candump(&log)?;
+            let mut config = NodeConfig::paper()
+                .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"))?;
+            config.origin_e7 = origin.map(to_e7);
+            let result = replay::replay(&frames, config);
+            replay::write_file(&out, &result.predictions_csv)?;
+            if let Some(tx) = tx_out {
+                replay::write_file(&tx, &result.tx_log)?;
+            }
+            let c = result.counters;
+            eprintln!(
+                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
+                frames.len(), result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
+                c.range_errors, c.gnss_gate_rejects, c.unknown_ids, c.time_errors
+            );
+            Ok(())
+        }
+        Command::Evaluate {
+            predictions,
+            truth,
+            inputs,
+            origin,
+            json,
+        } => {
+            let inputs = match inputs {
+                Some(p) => p,
+                None => sibling_candump(&truth)?,
+            };
+            let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
+            let e = catmodel_host::evaluate_files(&predictions, &truth, &inputs, origin)?;
+            print!("{}", evaluate::format_table(&e));
+            if let Some(path) = json {
+                replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
+            }
+            Ok(())
+        }
+    }
+}
+
+/// `NAME.truth.csv` -> `NAME.can.log`.
+fn sibling_candump(truth: &Path) -> Result<PathBuf> {
+    let name = truth
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default();
+    let Some(stem) = name.strip_suffix(".truth.csv") else {
+        bail!(
+            "{}: cannot guess the candump of this truth file; pass --inputs FILE.can.log",
+            truth.display()
+        );
+    };
+    Ok(truth.with_file_name(format!("{stem}.can.log")))
 }

@@ -53,7 +53,7 @@ pub struct Xy {
 }
 
 /// Estimator state.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct EstimatorState {
     fir_x: FirState<GNSS_FIR_TAPS>,
     fir_y: FirState<GNSS_FIR_TAPS>,
@@ -72,6 +72,25 @@ pub struct EstimatorState {
     odo_now: Xy,
     /// Heading estimate, rad clockwise from north; `None` until a course was seen.
     heading_rad: Option<f32>,
+}
+
+impl Default for EstimatorState {
+    fn default() -> Self {
+        Self {
+            fir_x: FirState::default(),
+            fir_y: FirState::default(),
+            ma_x: MovingAverageState::default(),
+            ma_y: MovingAverageState::default(),
+            filtered: None,
+            odo_at_fix: [Xy::default(); ODO_LEN],
+            odo_head: 0,
+            fixes: 0,
+            track: [Xy::default(); TRACK_LEN],
+            track_head: 0,
+            odo_now: Xy::default(),
+            heading_rad: None,
+        }
+    }
 }
 
 impl EstimatorConfig {

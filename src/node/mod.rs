@@ -34,6 +34,9 @@ use estimator::{EstimatorConfig, EstimatorState, Xy};
 pub const MAX_TX_FRAMES: usize = 16;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
+/// Longest velocity-model input delay a model file may have: 32 samples = 0.64 s (eq 5 has
+/// 21); the predictor copies this buffer every tick, so it is kept small.
+pub const VELOCITY_DELAY_CAP: usize = 32;
 /// Status pages, one per tick, cycling.
 const STATUS_PAGES: u32 = 5;
 
@@ -112,9 +115,9 @@ pub struct NodeConfig {
     /// GNSS fix period, s (the rate the lowpass was designed for).
     pub gnss_period_s: f32,
     /// Internal-controller model, commanded speed -> speed (eq 5), with its input delay.
-    pub velocity: SsBlock<2>,
+    pub velocity: SsBlock<2, VELOCITY_DELAY_CAP>,
     /// dx/dt model with inputs [v_m, x, y, phi] (eq 7).
-    pub dxdt: MisoBlock<2, 4>,
+    pub dxdt: MisoBlock<2, 4, 1>,
     /// NMEA 2000 source address of the GNSS receiver.
     pub gnss_source: u8,
     /// Local frame origin (lat, lon in 1e-7 deg); `None` = the first valid fix.
@@ -133,7 +136,8 @@ impl NodeConfig {
     /// The published models (eq 5, eq 7) on the CAT Vehicle, the paper's GNSS lowpass (20th
     /// order FIR, cutoff 2 Hz at the receiver's 100 Hz, then a 10-sample moving average).
     pub fn paper() -> Result<Self, ModelError> {
-        let ts = f64::from(SAMPLE_PERIOD_S);
+        // f64 0.02 exactly: f64::from(0.02f32) would make 0.42 s a fractional delay.
+        let ts = paper::PAPER_TS_S;
         let velocity = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, ts)?;
         let dxdt = MisoBlock::from_tfs(&paper::EQ7_DX_DT, ts)?;
         let estimator =
@@ -147,7 +151,7 @@ impl NodeConfig {
             gnss_period_s: (1.0 / GNSS_RATE_HZ) as f32,
             velocity,
             dxdt,
-            gnss_source: crate::can::spec::GNSS_SOURCE_DEFAULT,
+            gnss_source: crate::can::spec::N2K_DEFAULT_SOURCE,
             origin_e7: None,
             timeouts: DEFAULT_TIMEOUTS,
             gnss_gate_m: 10.0,
@@ -240,8 +244,8 @@ pub struct Node {
     config: NodeConfig,
     frame: Option<LocalFrame>,
     estimator: EstimatorState,
-    velocity: Option<SsBlockState<2>>,
-    dxdt: MisoBlockState<2, 4>,
+    velocity: Option<SsBlockState<2, VELOCITY_DELAY_CAP>>,
+    dxdt: MisoBlockState<2, 4, 1>,
     lateral: LateralState,
     hybrid: HybridState,
     steer_pct: Latest<f32>,

@@ -1,0 +1,171 @@
+//! `catmodel replay`: the very same [`Node`] as the firmware, stepped every 20 ms of log time
+//! over a candump file, with the tick schedule of docs/architecture.md (so that its frames are
+//! byte-identical to the QEMU run's `target/qemu/tx.log`).
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use catmodel::can::candump;
+use catmodel::can::codec::{ModelMode, Prediction, StateMotion, StatePosition};
+use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::node::{first_tick_us, Counters, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::SAMPLE_PERIOD_US;
+
+/// Interface name written into candump output.
+pub const IFACE: &str = "can0";
+
+/// Reads a candump log. Errors name the file, the line and the reason; time going backwards
+/// is an error with the line.
+pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut frames = Vec::new();
+    let mut last_t = None;
+    for (i, line) in BufReader::new(file).lines().enumerate() {
+        let lineno = i + 1;
+        let line = line.with_context(|| format!("{}:{lineno}: reading", path.display()))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let frame = candump::parse_line(&line)
+            .map_err(|e| anyhow::anyhow!("{}:{lineno}: {e:?}: {line:?}", path.display()))?;
+        if let Some(prev) = last_t {
+            if frame.t_us < prev {
+                bail!(
+                    "{}:{lineno}: time goes backwards ({} us after {} us)",
+                    path.display(),
+                    frame.t_us,
+                    prev
+                );
+            }
+        }
+        last_t = Some(frame.t_us);
+        frames.push(frame);
+    }
+    Ok(frames)
+}
+
+/// One candump line (`(secs.micros) can0 ID#DATA`).
+pub fn candump_line(t_us: u64, frame: &CanFrame) -> String {
+    let mut s = String::new();
+    // Note: writing to a String cannot fail.
+    let _ = candump::format_line(&TimedFrame { t_us, frame: *frame }, IFACE, &mut s);
+    s
+}
+
+/// What a replay produced.
+pub struct ReplayOutput {
+    /// Predictions CSV rows: `t,step,horizon_s,x,y,heading,speed,mode`.
+    pub predictions_csv: String,
+    /// The node's frames, candump, stamped with the tick time.
+    pub tx_log: String,
+    /// Ticks run.
+    pub ticks: u64,
+    /// The node's rejection counters at the end.
+    pub counters: Counters,
+    /// Origin used, 1e-7 deg.
+    pub origin_e7: Option<(i32, i32)>,
+}
+
+/// Runs the node over `frames` (sorted by time).
+pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
+    let mut node = Node::new(config);
+    let mut csv = String::from("t,step,horizon_s,x,y,heading,speed,mode\n");
+    let mut tx_log = String::new();
+    let Some(first) = frames.first() else {
+        return ReplayOutput {
+            predictions_csv: csv,
+            tx_log,
+            ticks: 0,
+            counters: *node.counters(),
+            origin_e7: None,
+        };
+    };
+    let last_us = frames.last().map_or(first.t_us, |f| f.t_us);
+    let mut now = first_tick_us(first.t_us);
+    let mut next = 0usize;
+    let mut step = 0u64;
+    let mut tx = TxFrames::new();
+    while now <= last_us + SAMPLE_PERIOD_US {
+        let start = next;
+        while next < frames.len() && frames[next].t_us <= now {
+            next += 1;
+        }
+        tx.clear();
+        let tick = Tick {
+            now_us: now,
+            platform: PlatformStats::default(),
+        };
+        node.step(&tick, &frames[start..next], &mut tx);
+        for f in &tx {
+            tx_log.push_str(&candump_line(now, f));
+            tx_log.push('\n');
+        }
+        append_prediction_rows(&mut csv, now, step, &tx);
+        step += 1;
+        now += SAMPLE_PERIOD_US;
+    }
+    ReplayOutput {
+        predictions_csv: csv,
+        tx_log,
+        ticks: step,
+        counters: *node.counters(),
+        origin_e7: node.origin_e7(),
+    }
+}
+
+/// Decodes one tick's frames (what the planner receives, with its 1 cm / 1 mrad resolution)
+/// into CSV rows: horizon 0 from STATE_POSITION + STATE_MOTION, then each prediction point.
+fn append_prediction_rows(csv: &mut String, now_us: u64, step: u64, tx: &TxFrames) {
+    let mut pos = None;
+    let mut motion = None;
+    let mut preds = Vec::new();
+    for f in tx {
+        if let Ok((p, _)) = StatePosition::decode(f) {
+            pos = Some(p);
+        } else if let Ok((m, _)) = StateMotion::decode(f) {
+            motion = Some(m);
+        } else if let Ok((p, _)) = Prediction::decode(f) {
+            preds.push(p);
+        }
+    }
+    let (Some(p), Some(m)) = (pos, motion) else {
+        return;
+    };
+    let (Some(x), Some(y), Some(h), Some(v)) = (p.east_m, p.north_m, m.heading_rad, m.speed_mps)
+    else {
+        return;
+    };
+    let mode = match m.mode {
+        ModelMode::Kinematic => "kinematic",
+        ModelMode::Dynamic => "dynamic",
+    };
+    let t = now_us as f64 * 1e-6;
+    let _ = writeln!(csv, "{t:.6},{step},0.00,{x:.2},{y:.2},{h:.3},{v:.2},{mode}");
+    for q in preds {
+        let (Some(dx), Some(dy), Some(dh), Some(speed)) =
+            (q.dx_m, q.dy_m, q.dheading_rad, q.speed_mps)
+        else {
+            continue;
+        };
+        let horizon_s = q.point.horizon_us() as f64 * 1e-6;
+        let heading = catmodel::math::wrap_pi(h + dh);
+        let _ = writeln!(
+            csv,
+            "{t:.6},{step},{horizon_s:.2},{:.2},{:.2},{heading:.3},{speed:.2},{mode}",
+            x + dx,
+            y + dy
+        );
+    }
+}
+
+/// Writes `text` to `path`, creating parent directories.
+pub fn write_file(path: &Path, text: &str) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut f =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    f.write_all(text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
+}
