@@ -80,7 +80,13 @@ fn filtfilt_equals_scipy() {
         let mut y = vec![0.0; x.len()];
         let mut scratch = vec![f64::NAN; filtfilt_scratch_len(b.len(), x.len())];
         filtfilt(&b, &x, &mut y, &mut scratch).unwrap();
-        assert_allclose(&y, &floats(&c["y"]), 1e-12, 1e-12, &format!("filtfilt case {i}"));
+        assert_allclose(
+            &y,
+            &floats(&c["y"]),
+            1e-12,
+            1e-12,
+            &format!("filtfilt case {i}"),
+        );
     }
     // scipy: "The length of the input vector x must be greater than padlen" (63 for 21 taps).
     let b = [1.0 / 21.0; 21];
@@ -133,7 +139,12 @@ fn eq1_grid_equals_reference() {
     let e = &r["eq1"];
     let n = e["n"].as_u64().unwrap() as usize;
     let mut g = vec![0.0; n];
-    uniform_grid_eq1(e["t_s"].as_f64().unwrap(), e["t_e"].as_f64().unwrap(), &mut g).unwrap();
+    uniform_grid_eq1(
+        e["t_s"].as_f64().unwrap(),
+        e["t_e"].as_f64().unwrap(),
+        &mut g,
+    )
+    .unwrap();
     assert_allclose(&g, &floats(&e["grid"]), 1e-15, 1e-13, "eq1");
 }
 
@@ -200,13 +211,13 @@ fn smooth_matches_matlab_by_hand() {
     let mut out = [0.0; 7];
     smooth(&y, 5, &mut out).unwrap();
     let by_hand = [
-        1.0,                            // window y(1)
-        (1.0 + 2.0 + 4.0) / 3.0,        // y(1:3)
-        (1.0 + 2.0 + 4.0 + 8.0 + 16.0) / 5.0, // y(1:5) = 31/5
-        (2.0 + 4.0 + 8.0 + 16.0 + 32.0) / 5.0, // 62/5
+        1.0,                                    // window y(1)
+        (1.0 + 2.0 + 4.0) / 3.0,                // y(1:3)
+        (1.0 + 2.0 + 4.0 + 8.0 + 16.0) / 5.0,   // y(1:5) = 31/5
+        (2.0 + 4.0 + 8.0 + 16.0 + 32.0) / 5.0,  // 62/5
         (4.0 + 8.0 + 16.0 + 32.0 + 64.0) / 5.0, // 124/5
-        (16.0 + 32.0 + 64.0) / 3.0,     // y(5:7) = 112/3
-        64.0,                           // y(7)
+        (16.0 + 32.0 + 64.0) / 3.0,             // y(5:7) = 112/3
+        64.0,                                   // y(7)
     ];
     assert_allclose(&out, &by_hand, 1e-15, 0.0, "smooth(y, 5)");
 

@@ -175,12 +175,17 @@ pub struct Evaluation {
     pub ticks: usize,
 }
 
+/// Per-horizon error lists: (horizon, position, heading, speed errors).
+type Bucket = (f64, Vec<f64>, Vec<f64>, Vec<f64>);
+/// A predicted state `(x, y, heading, speed)`.
+type State = (f64, f64, f64, f64);
+
 fn accumulate(
     truth: &Truth,
     t: f64,
     horizon_s: f64,
-    (x, y, heading, speed): (f64, f64, f64, f64),
-    buckets: &mut Vec<(f64, Vec<f64>, Vec<f64>, Vec<f64>)>,
+    (x, y, heading, speed): State,
+    buckets: &mut Vec<Bucket>,
 ) {
     let Some((tx, ty, th, tv)) = truth.at(t + horizon_s) else {
         return;
@@ -223,7 +228,7 @@ pub fn baseline_predictions(
     inputs: &BaselineInputs,
     vehicle: &VehicleParams,
     ticks: &[(f64, Vec<f64>)],
-) -> Vec<(f64, f64, (f64, f64, f64, f64))> {
+) -> Vec<(f64, f64, State)> {
     let mut out = Vec::new();
     let mut heading = None;
     for (t, horizons) in ticks {

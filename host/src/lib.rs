@@ -15,8 +15,11 @@ use evaluate::{BaselineInputs, Evaluation, Prediction, Truth, TruthSample};
 /// Arizona area in Tucson, where the CAT Vehicle drove, degrees.
 pub const SIM_ORIGIN_DEG: (f64, f64) = (32.2319, -110.9501);
 
-/// Splits a CSV text into (line number, header index map, rows of cells).
-fn csv_table(path: &Path) -> Result<(Vec<String>, Vec<(usize, Vec<String>)>)> {
+/// Rows of a CSV file with their line numbers.
+type Rows = Vec<(usize, Vec<String>)>;
+
+/// Splits a CSV file into its header and its non-empty rows.
+fn csv_table(path: &Path) -> Result<(Vec<String>, Rows)> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut lines = text.lines().enumerate();
@@ -38,16 +41,28 @@ fn column(path: &Path, header: &[String], name: &str) -> Result<usize> {
         .with_context(|| format!("{}:1: missing column `{name}`", path.display()))
 }
 
-fn cell_f64(path: &Path, line: usize, header: &[String], row: &[String], col: usize) -> Result<f64> {
+fn cell_f64(
+    path: &Path,
+    line: usize,
+    header: &[String],
+    row: &[String],
+    col: usize,
+) -> Result<f64> {
     let name = header.get(col).map_or("?", String::as_str);
     let cell = row
         .get(col)
         .with_context(|| format!("{}:{line}: column `{name}`: missing cell", path.display()))?;
     let v: f64 = cell.parse().with_context(|| {
-        format!("{}:{line}: column `{name}`: {cell:?} is not a number", path.display())
+        format!(
+            "{}:{line}: column `{name}`: {cell:?} is not a number",
+            path.display()
+        )
     })?;
     if !v.is_finite() {
-        bail!("{}:{line}: column `{name}`: {cell:?} is not finite", path.display());
+        bail!(
+            "{}:{line}: column `{name}`: {cell:?} is not finite",
+            path.display()
+        );
     }
     Ok(v)
 }
@@ -55,10 +70,19 @@ fn cell_f64(path: &Path, line: usize, header: &[String], row: &[String], col: us
 /// Reads a predictions CSV (`t,step,horizon_s,x,y,heading,speed,mode`).
 pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     let (header, rows) = csv_table(path)?;
-    let cols: Vec<usize> = ["t", "step", "horizon_s", "x", "y", "heading", "speed", "mode"]
-        .iter()
-        .map(|n| column(path, &header, n))
-        .collect::<Result<_>>()?;
+    let cols: Vec<usize> = [
+        "t",
+        "step",
+        "horizon_s",
+        "x",
+        "y",
+        "heading",
+        "speed",
+        "mode",
+    ]
+    .iter()
+    .map(|n| column(path, &header, n))
+    .collect::<Result<_>>()?;
     let mut out = Vec::with_capacity(rows.len());
     for (line, row) in rows {
         let f = |i: usize| cell_f64(path, line, &header, &row, cols[i]);

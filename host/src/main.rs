@@ -58,8 +58,14 @@ fn parse_origin(s: &str) -> Result<(f64, f64), String> {
     let (lat, lon) = s
         .split_once(',')
         .ok_or_else(|| format!("expected LAT,LON, got {s:?}"))?;
-    let lat: f64 = lat.trim().parse().map_err(|e| format!("latitude {lat:?}: {e}"))?;
-    let lon: f64 = lon.trim().parse().map_err(|e| format!("longitude {lon:?}: {e}"))?;
+    let lat: f64 = lat
+        .trim()
+        .parse()
+        .map_err(|e| format!("latitude {lat:?}: {e}"))?;
+    let lon: f64 = lon
+        .trim()
+        .parse()
+        .map_err(|e| format!("longitude {lon:?}: {e}"))?;
     if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) {
         return Err(format!("origin {lat},{lon} is not a WGS-84 position"));
     }

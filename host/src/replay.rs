@@ -49,7 +49,14 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
 pub fn candump_line(t_us: u64, frame: &CanFrame) -> String {
     let mut s = String::new();
     // Note: writing to a String cannot fail.
-    let _ = candump::format_line(&TimedFrame { t_us, frame: *frame }, IFACE, &mut s);
+    let _ = candump::format_line(
+        &TimedFrame {
+            t_us,
+            frame: *frame,
+        },
+        IFACE,
+        &mut s,
+    );
     s
 }
 

@@ -41,11 +41,7 @@ pub const DEFAULT_HORIZON: HorizonConfig = HorizonConfig {
 impl HorizonConfig {
     /// Number of points a roll-out emits.
     pub fn points(&self) -> usize {
-        if self.output_every == 0 {
-            0
-        } else {
-            usize::from(self.steps / self.output_every)
-        }
+        usize::from(self.steps.checked_div(self.output_every).unwrap_or(0))
     }
 }
 

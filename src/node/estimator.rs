@@ -152,8 +152,12 @@ impl EstimatorState {
             self.ma_x.prime(fix.x_m);
             self.ma_y.prime(fix.y_m);
         }
-        let fx = cfg.ma.process(&mut self.ma_x, cfg.fir.process(&mut self.fir_x, fix.x_m));
-        let fy = cfg.ma.process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
+        let fx = cfg
+            .ma
+            .process(&mut self.ma_x, cfg.fir.process(&mut self.fir_x, fix.x_m));
+        let fy = cfg
+            .ma
+            .process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
         let filtered = Xy { x_m: fx, y_m: fy };
         self.filtered = Some(filtered);
         // Where dead reckoning had the car when the fix was taken.
@@ -180,7 +184,9 @@ impl EstimatorState {
         if k >= ODO_LEN || (k as u32) >= self.fixes {
             return None;
         }
-        self.odo_at_fix.get((self.odo_head + ODO_LEN - k) % ODO_LEN).copied()
+        self.odo_at_fix
+            .get((self.odo_head + ODO_LEN - k) % ODO_LEN)
+            .copied()
     }
 
     /// The filtered position moved forward to now: `filtered + (odo_now - odo(delayed fix))`.
@@ -257,13 +263,19 @@ mod tests {
             t += 0.02;
             // two fixes per tick, at t - 0.01 and t
             for age in [0.01f32, 0.0] {
-                let fix = Xy { x_m: v * (t - age), y_m: 0.0 };
+                let fix = Xy {
+                    x_m: v * (t - age),
+                    y_m: 0.0,
+                };
                 st.add_fix(&cfg, fix, age, v);
             }
         }
         let p = st.position(&cfg).unwrap();
         assert!((p.x_m - v * t).abs() < 0.02, "{p:?} vs {}", v * t);
         let lag = v * t - st.filtered.unwrap().x_m;
-        assert!((lag - v * cfg.group_delay_fixes * 0.01).abs() < 0.05, "{lag}");
+        assert!(
+            (lag - v * cfg.group_delay_fixes * 0.01).abs() < 0.05,
+            "{lag}"
+        );
     }
 }

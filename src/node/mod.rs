@@ -343,7 +343,9 @@ impl Node {
         let to = cfg.timeouts;
         let steer_pct = self.steer_pct.fresh(now, to.steer_us);
         let speeds = self.speed.fresh(now, to.speed_us);
-        let center_steer_rad = cfg.vehicle.steer_pct_to_center_rad(steer_pct.unwrap_or(0.0));
+        let center_steer_rad = cfg
+            .vehicle
+            .steer_pct_to_center_rad(steer_pct.unwrap_or(0.0));
 
         // Velocity model (eq 5): started at equilibrium on the first measured speed, then driven
         // by the commanded speed (or, without a command, by the measured speed: hold).
@@ -355,7 +357,9 @@ impl Node {
         let speed_cmd = speeds.map(|(_, c)| c);
         let mut speed_model = None;
         if let Some(state) = self.velocity.as_mut() {
-            let u = speed_cmd.or(speeds.map(|(v, _)| v)).unwrap_or(self.speed_mps);
+            let u = speed_cmd
+                .or(speeds.map(|(v, _)| v))
+                .unwrap_or(self.speed_mps);
             speed_model = Some(cfg.velocity.step(state, u));
         }
         let speed_mps = clamp_finite(
@@ -414,7 +418,10 @@ impl Node {
         if matches!(gnss_age, Some(a) if a > to.gnss_lost_us) && self.estimator.fixes() > 0 {
             self.estimator.reset();
         }
-        let pose = match (self.estimator.position(&cfg.estimator), self.estimator.heading_rad()) {
+        let pose = match (
+            self.estimator.position(&cfg.estimator),
+            self.estimator.heading_rad(),
+        ) {
             (Some(p), Some(h)) if p.x_m.is_finite() && p.y_m.is_finite() && h.is_finite() => {
                 Some(Pose::new(p.x_m, p.y_m, h))
             }
@@ -423,10 +430,8 @@ impl Node {
 
         // dx/dt model (eq 7): inputs [v_m, x, y, phi] with phi the steering angle, rad.
         let dxdt = pose.map(|p| {
-            cfg.dxdt.step(
-                &mut self.dxdt,
-                &[speed_mps, p.x_m, p.y_m, center_steer_rad],
-            )
+            cfg.dxdt
+                .step(&mut self.dxdt, &[speed_mps, p.x_m, p.y_m, center_steer_rad])
         });
 
         // Horizon.
@@ -457,7 +462,8 @@ impl Node {
         // Outputs.
         let counter = (self.tick_count & 0x0F) as u8;
         let mut report = EncodeReport::default();
-        let gnss_rejected = matches!(self.last_gnss_reject_us, Some(t) if now.saturating_sub(t) <= 1_000_000);
+        let gnss_rejected =
+            matches!(self.last_gnss_reject_us, Some(t) if now.saturating_sub(t) <= 1_000_000);
         let model_mode = match mode {
             Mode::Kinematic => ModelMode::Kinematic,
             Mode::Dynamic => ModelMode::Dynamic,
@@ -508,7 +514,8 @@ impl Node {
                     point,
                     dx_m: predicted.map(|(p, q)| q.x_m - p.x_m),
                     dy_m: predicted.map(|(p, q)| q.y_m - p.y_m),
-                    dheading_rad: predicted.map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
+                    dheading_rad: predicted
+                        .map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
                     speed_mps: predicted.map(|(_, q)| q.speed_mps),
                 }
                 .encode_with_report(counter),
@@ -604,27 +611,29 @@ impl Node {
         match msg {
             InputMessage::Steering(m, counter) => match m.steer_pct {
                 Some(p) => {
-                    self.steer_pct.accept(p, counter, f.t_us, &mut self.counters);
+                    self.steer_pct
+                        .accept(p, counter, f.t_us, &mut self.counters);
                 }
                 None => bump(&mut self.counters.range_errors),
             },
             InputMessage::Speed(m, counter) => match (m.speed_mps, m.speed_cmd_mps) {
                 (Some(v), cmd) => {
                     let cmd = cmd.unwrap_or(v);
-                    self.speed.accept((v, cmd), counter, f.t_us, &mut self.counters);
+                    self.speed
+                        .accept((v, cmd), counter, f.t_us, &mut self.counters);
                 }
                 _ => bump(&mut self.counters.range_errors),
             },
             InputMessage::Pedal(m, counter) => {
                 let value = (m.accel_pct.unwrap_or(0.0), m.brake_pct.unwrap_or(0.0));
-                self.pedal.accept(value, counter, f.t_us, &mut self.counters);
+                self.pedal
+                    .accept(value, counter, f.t_us, &mut self.counters);
             }
             InputMessage::GnssPosition(p) => self.receive_fix(now_us, f.t_us, p.lat_e7, p.lon_e7),
             InputMessage::GnssCogSog(c) => {
                 if let (Some(cog), Some(sog)) = (c.cog_rad, c.sog_mps) {
                     // COG is meaningless when standing still.
-                    if sog >= self.config.estimator.course_min_speed_mps && c.cog_reference == 0
-                    {
+                    if sog >= self.config.estimator.course_min_speed_mps && c.cog_reference == 0 {
                         self.cog = Some((math::wrap_pi(cog), f.t_us));
                     }
                 }
