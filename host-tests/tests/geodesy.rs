@@ -31,13 +31,21 @@ fn to_local_matches_pymap3d() {
         }
         // from_local inverts to_local to f32 rounding of the coordinates.
         let (lat, lon) = frame.from_local(enu);
-        let back = geodetic_to_enu(lat_e7 as f64 / 1e7, lon_e7 as f64 / 1e7, 0.0, &Geodetic {
-            lat_deg: lat,
-            lon_deg: lon,
-            height_m: 0.0,
-        });
+        let back = geodetic_to_enu(
+            lat_e7 as f64 / 1e7,
+            lon_e7 as f64 / 1e7,
+            0.0,
+            &Geodetic {
+                lat_deg: lat,
+                lon_deg: lon,
+                height_m: 0.0,
+            },
+        );
         let round_trip_m = back.east_m.hypot(back.north_m);
-        assert!(round_trip_m < 2e-3, "round trip {round_trip_m} m at {lat_e7},{lon_e7}");
+        assert!(
+            round_trip_m < 2e-3,
+            "round trip {round_trip_m} m at {lat_e7},{lon_e7}"
+        );
     }
     println!("to_local worst error vs pymap3d: {worst:?}");
     let bound = |tag: &str| match tag {
@@ -81,7 +89,9 @@ fn to_local_rejections() {
         Err(GeodesyError::BeyondValidityRadius)
     );
     // 19 km north is accepted.
-    assert!(frame.to_local(322_319_000 + 1_713_000, -1_109_501_000).is_ok());
+    assert!(frame
+        .to_local(322_319_000 + 1_713_000, -1_109_501_000)
+        .is_ok());
     // Far away (other hemisphere) is rejected, not wrapped into range.
     assert_eq!(
         frame.to_local(-322_319_000, 691_000_000),
@@ -115,21 +125,41 @@ fn exact_functions_match_pymap3d() {
             p["lon_deg"].as_f64().unwrap(),
             p["h_m"].as_f64().unwrap(),
         );
-        let ecef: Vec<f64> = p["ecef"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let enu_ref: Vec<f64> = p["enu"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let ecef: Vec<f64> = p["ecef"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let enu_ref: Vec<f64> = p["enu"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         let e = geodetic_to_ecef(lat, lon, h);
         let d = [e.x_m - ecef[0], e.y_m - ecef[1], e.z_m - ecef[2]];
         worst_ecef = worst_ecef.max(d.iter().map(|v| v.abs()).fold(0.0, f64::max));
         let enu = geodetic_to_enu(lat, lon, h, &origin);
-        let d = [enu.east_m - enu_ref[0], enu.north_m - enu_ref[1], enu.up_m - enu_ref[2]];
+        let d = [
+            enu.east_m - enu_ref[0],
+            enu.north_m - enu_ref[1],
+            enu.up_m - enu_ref[2],
+        ];
         worst_enu = worst_enu.max(d.iter().map(|v| v.abs()).fold(0.0, f64::max));
 
         // Round trips: ECEF -> geodetic, ENU -> geodetic.
         let g = ecef_to_geodetic(e);
         let back = geodetic_to_ecef(g.lat_deg, g.lon_deg, g.height_m);
-        let rt = (back.x_m - e.x_m).hypot(back.y_m - e.y_m).hypot(back.z_m - e.z_m);
+        let rt = (back.x_m - e.x_m)
+            .hypot(back.y_m - e.y_m)
+            .hypot(back.z_m - e.z_m);
         assert!(rt < 1e-6, "ecef round trip {rt} m at {lat},{lon},{h}");
-        assert!((g.height_m - h).abs() < 1e-6, "height {} vs {h}", g.height_m);
+        assert!(
+            (g.height_m - h).abs() < 1e-6,
+            "height {} vs {h}",
+            g.height_m
+        );
         let g2 = enu_to_geodetic(
             &EnuExact {
                 east_m: enu_ref[0],

@@ -9,6 +9,13 @@ use catmodel_host_tests::{assert_allclose, load_reference};
 use proptest::prelude::*;
 use serde_json::Value;
 
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 /// JSON array of numbers (null = NaN, a missing sample).
 fn floats(v: &Value) -> Vec<f64> {
     v.as_array()
@@ -29,6 +36,10 @@ fn design_lowpass_equals_firwin() {
         let fs = c["fs_hz"].as_f64().unwrap();
         let mut taps = vec![0.0; numtaps];
         design_lowpass(&mut taps, cutoff, fs).unwrap();
+        println!(
+            "firwin({numtaps}, {cutoff}, fs={fs}): max |diff| {:.1e}",
+            max_abs_diff(&taps, &floats(&c["taps"]))
+        );
         // Taps are O(0.1); scipy evaluates the window as general_cosine (linspace of angles),
         // we as 0.54 - 0.46 cos: rounding differences ~1e-17.
         assert_allclose(
@@ -60,6 +71,10 @@ fn streaming_fir_equals_lfilter() {
             .iter()
             .map(|&v| fir.process(&mut state, v as f32) as f64)
             .collect();
+        println!(
+            "{key}: max |diff| {:.1e}",
+            max_abs_diff(&y, &floats(&r[key]))
+        );
         assert_allclose(&y, &floats(&r[key]), 0.0, 3e-6, key);
     }
     // Reset then prime gives the same as a fresh primed state.
@@ -80,7 +95,17 @@ fn filtfilt_equals_scipy() {
         let mut y = vec![0.0; x.len()];
         let mut scratch = vec![f64::NAN; filtfilt_scratch_len(b.len(), x.len())];
         filtfilt(&b, &x, &mut y, &mut scratch).unwrap();
-        assert_allclose(&y, &floats(&c["y"]), 1e-12, 1e-12, &format!("filtfilt case {i}"));
+        println!(
+            "filtfilt case {i}: max |diff| {:.1e}",
+            max_abs_diff(&y, &floats(&c["y"]))
+        );
+        assert_allclose(
+            &y,
+            &floats(&c["y"]),
+            1e-12,
+            1e-12,
+            &format!("filtfilt case {i}"),
+        );
     }
     // scipy: "The length of the input vector x must be greater than padlen" (63 for 21 taps).
     let b = [1.0 / 21.0; 21];
@@ -111,6 +136,10 @@ fn interp_equals_numpy_interp_per_signal() {
         assert!(y.iter().any(|v| v.is_nan()), "{sig} must have gaps");
         let mut out = vec![0.0; grid.len()];
         interp_linear(&t, &y, &grid, &mut out).unwrap();
+        println!(
+            "interp {sig}: max |diff| {:.1e}",
+            max_abs_diff(&out, &floats(&r[expected]))
+        );
         assert_allclose(&out, &floats(&r[expected]), 1e-13, 1e-13, sig);
     }
     // Extrapolation is refused: the speed column starts with three NaN rows.
@@ -133,7 +162,12 @@ fn eq1_grid_equals_reference() {
     let e = &r["eq1"];
     let n = e["n"].as_u64().unwrap() as usize;
     let mut g = vec![0.0; n];
-    uniform_grid_eq1(e["t_s"].as_f64().unwrap(), e["t_e"].as_f64().unwrap(), &mut g).unwrap();
+    uniform_grid_eq1(
+        e["t_s"].as_f64().unwrap(),
+        e["t_e"].as_f64().unwrap(),
+        &mut g,
+    )
+    .unwrap();
     assert_allclose(&g, &floats(&e["grid"]), 1e-15, 1e-13, "eq1");
 }
 
@@ -200,13 +234,13 @@ fn smooth_matches_matlab_by_hand() {
     let mut out = [0.0; 7];
     smooth(&y, 5, &mut out).unwrap();
     let by_hand = [
-        1.0,                            // window y(1)
-        (1.0 + 2.0 + 4.0) / 3.0,        // y(1:3)
-        (1.0 + 2.0 + 4.0 + 8.0 + 16.0) / 5.0, // y(1:5) = 31/5
-        (2.0 + 4.0 + 8.0 + 16.0 + 32.0) / 5.0, // 62/5
+        1.0,                                    // window y(1)
+        (1.0 + 2.0 + 4.0) / 3.0,                // y(1:3)
+        (1.0 + 2.0 + 4.0 + 8.0 + 16.0) / 5.0,   // y(1:5) = 31/5
+        (2.0 + 4.0 + 8.0 + 16.0 + 32.0) / 5.0,  // 62/5
         (4.0 + 8.0 + 16.0 + 32.0 + 64.0) / 5.0, // 124/5
-        (16.0 + 32.0 + 64.0) / 3.0,     // y(5:7) = 112/3
-        64.0,                           // y(7)
+        (16.0 + 32.0 + 64.0) / 3.0,             // y(5:7) = 112/3
+        64.0,                                   // y(7)
     ];
     assert_allclose(&out, &by_hand, 1e-15, 0.0, "smooth(y, 5)");
 

@@ -245,10 +245,22 @@ mod tests {
     fn design_rejects_bad_input() {
         let mut t = [0.0; 5];
         assert_eq!(design_lowpass(&mut [], 1.0, 10.0), Err(FilterError::NoTaps));
-        assert_eq!(design_lowpass(&mut t, 5.0, 10.0), Err(FilterError::CutoffOutOfRange));
-        assert_eq!(design_lowpass(&mut t, 0.0, 10.0), Err(FilterError::CutoffOutOfRange));
-        assert_eq!(design_lowpass(&mut t, 1.0, 0.0), Err(FilterError::InvalidSampleRate));
-        assert_eq!(design_lowpass(&mut t, f64::NAN, 10.0), Err(FilterError::CutoffOutOfRange));
+        assert_eq!(
+            design_lowpass(&mut t, 5.0, 10.0),
+            Err(FilterError::CutoffOutOfRange)
+        );
+        assert_eq!(
+            design_lowpass(&mut t, 0.0, 10.0),
+            Err(FilterError::CutoffOutOfRange)
+        );
+        assert_eq!(
+            design_lowpass(&mut t, 1.0, 0.0),
+            Err(FilterError::InvalidSampleRate)
+        );
+        assert_eq!(
+            design_lowpass(&mut t, f64::NAN, 10.0),
+            Err(FilterError::CutoffOutOfRange)
+        );
         assert!(Fir::<0>::from_taps([]).is_err());
         assert_eq!(
             Fir::<2>::from_taps_f64(&[1.0, f64::NAN]),

@@ -19,7 +19,7 @@ pub mod resample;
 pub mod smooth;
 
 pub use filtfilt::{filtfilt, filtfilt_scratch_len, FiltfiltError};
-pub use fir::{design_lowpass, Fir, FirState, FilterError};
+pub use fir::{design_lowpass, FilterError, Fir, FirState};
 pub use moving_average::{MovingAverage, MovingAverageState};
 pub use resample::{
     fixed_period_grid, fixed_period_len, interp_linear, uniform_grid_eq1, ResampleError,
