@@ -9,6 +9,13 @@ use catmodel_host_tests::{assert_allclose, load_reference};
 use proptest::prelude::*;
 use serde_json::Value;
 
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 /// JSON array of numbers (null = NaN, a missing sample).
 fn floats(v: &Value) -> Vec<f64> {
     v.as_array()
@@ -29,6 +36,10 @@ fn design_lowpass_equals_firwin() {
         let fs = c["fs_hz"].as_f64().unwrap();
         let mut taps = vec![0.0; numtaps];
         design_lowpass(&mut taps, cutoff, fs).unwrap();
+        println!(
+            "firwin({numtaps}, {cutoff}, fs={fs}): max |diff| {:.1e}",
+            max_abs_diff(&taps, &floats(&c["taps"]))
+        );
         // Taps are O(0.1); scipy evaluates the window as general_cosine (linspace of angles),
         // we as 0.54 - 0.46 cos: rounding differences ~1e-17.
         assert_allclose(
@@ -60,6 +71,10 @@ fn streaming_fir_equals_lfilter() {
             .iter()
             .map(|&v| fir.process(&mut state, v as f32) as f64)
             .collect();
+        println!(
+            "{key}: max |diff| {:.1e}",
+            max_abs_diff(&y, &floats(&r[key]))
+        );
         assert_allclose(&y, &floats(&r[key]), 0.0, 3e-6, key);
     }
     // Reset then prime gives the same as a fresh primed state.
@@ -80,6 +95,10 @@ fn filtfilt_equals_scipy() {
         let mut y = vec![0.0; x.len()];
         let mut scratch = vec![f64::NAN; filtfilt_scratch_len(b.len(), x.len())];
         filtfilt(&b, &x, &mut y, &mut scratch).unwrap();
+        println!(
+            "filtfilt case {i}: max |diff| {:.1e}",
+            max_abs_diff(&y, &floats(&c["y"]))
+        );
         assert_allclose(
             &y,
             &floats(&c["y"]),
@@ -117,6 +136,10 @@ fn interp_equals_numpy_interp_per_signal() {
         assert!(y.iter().any(|v| v.is_nan()), "{sig} must have gaps");
         let mut out = vec![0.0; grid.len()];
         interp_linear(&t, &y, &grid, &mut out).unwrap();
+        println!(
+            "interp {sig}: max |diff| {:.1e}",
+            max_abs_diff(&out, &floats(&r[expected]))
+        );
         assert_allclose(&out, &floats(&r[expected]), 1e-13, 1e-13, sig);
     }
     // Extrapolation is refused: the speed column starts with three NaN rows.

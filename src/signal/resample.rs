@@ -71,7 +71,7 @@ pub fn fixed_period_len(t_s: f64, t_e: f64, period_s: f64) -> Result<usize, Resa
     check_bounds(t_s, t_e)?;
     check_period(period_s)?;
     let steps = libm::floor((t_e - t_s) / period_s + 1e-9);
-    // Also rejects NaN (comparisons with NaN are false).
+    // NaN cannot occur (finite, ordered bounds and a positive period), but fails this test too.
     if steps.is_nan() || steps >= 4_294_967_295.0 {
         return Err(ResampleError::GridTooLong);
     }

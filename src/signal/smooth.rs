@@ -44,7 +44,11 @@ pub fn smooth(y: &[f64], span: usize, out: &mut [f64]) -> Result<(), SmoothError
         return Err(SmoothError::NonFinite { index });
     }
     let span = span.min(n);
-    let width = if span.is_multiple_of(2) { span - 1 } else { span };
+    let width = if span.is_multiple_of(2) {
+        span - 1
+    } else {
+        span
+    };
     let half = (width - 1) / 2;
     for (i, o) in out.iter_mut().enumerate() {
         let w = half.min(i).min(n - 1 - i);
