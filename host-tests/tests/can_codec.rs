@@ -1,4 +1,6 @@
 //! The bus codecs against independent references: CRC check values, hand-packed frames, a
+// The COG round trips use raw values next to pi and 2 pi on purpose (the field's range ends).
+#![allow(clippy::approx_constant)]
 //! published NMEA 2000 frame (canboatjs README), round trips of every message at its limits,
 //! every error kind, the counter checker, freshness, the bus-load budget and candump text.
 use catmodel::can::candump::{format_line, parse_line, CandumpError};
