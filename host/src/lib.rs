@@ -1,7 +1,10 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
 //! Links the same `catmodel` core for everything the node does.
+pub mod csv2can;
 pub mod evaluate;
+pub mod logcsv;
 pub mod replay;
+pub mod sim;
 
 use std::path::Path;
 

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use catmodel::node::NodeConfig;
-use catmodel_host::{evaluate, replay};
+use catmodel_host::{csv2can, evaluate, logcsv, replay, sim};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -20,6 +20,33 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
+    SimulateDrive {
+        /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
+        /// circle-left, circle-right, validation, smoke.
+        #[arg(long)]
+        scenario: String,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        /// Repetition (noise and small command variations).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Vehicle parameters (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Inject sensor faults (GNSS dropouts and outliers, lost reports).
+        #[arg(long)]
+        faults: bool,
+    },
+    /// Encode a log (CSV schema) as the node's input frames, candump format.
+    Csv2can {
+        /// Log CSV.
+        log: PathBuf,
+        /// candump file to write.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Run the very same Node as the firmware over a candump log.
     Replay {
         /// candump log of the node's input frames.
@@ -88,6 +115,40 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::SimulateDrive {
+            scenario,
+            out,
+            seed,
+            vehicle,
+            faults,
+        } => {
+            let options = sim::SimOptions {
+                seed,
+                faults,
+                ..sim::SimOptions::default()
+            };
+            let output = sim::run_named(&scenario, vehicle.as_deref(), &options)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let (log_path, truth_path) = sim::write_outputs(&out, &scenario, &output)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let can_path = out.join(format!("{scenario}.can.log"));
+            let frames = csv2can::encode_log(&output.log);
+            replay::write_file(&can_path, &csv2can::to_candump(&frames))?;
+            eprintln!(
+                "wrote {}, {}, {}",
+                log_path.display(),
+                can_path.display(),
+                truth_path.display()
+            );
+            Ok(())
+        }
+        Command::Csv2can { log, out } => {
+            let rows = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let frames = csv2can::encode_log(&rows);
+            replay::write_file(&out, &csv2can::to_candump(&frames))?;
+            eprintln!("wrote {} frames to {}", frames.len(), out.display());
+            Ok(())
+        }
         Command::Replay {
             log,
             origin,

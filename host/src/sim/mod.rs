@@ -1,0 +1,221 @@
+//! The plant simulator behind `catmodel simulate-drive`: every log the project is tested on
+//! comes from here, since there is no real car.
+//!
+//! ```text
+//! scenario commands (speed m/s, steering %)
+//!   -> car internals: speed command -> transport delay -> PI loop -> accel limits -> powertrain lag
+//!                     steering command -> rate limit -> actuator lag
+//!   -> plant: nonlinear single-track model, magic-formula tyres, load transfer (RK4, 1 ms)
+//!   -> sensors on their own clocks: speed / steering / pedal reports at 50 Hz, GNSS at 100 Hz
+//!   -> log rows (DESIGN.md log schema) + ground truth at 100 Hz
+//! ```
+//! Deterministic for a given seed on every platform: ChaCha8 streams, and only IEEE arithmetic
+//! and the pure-Rust `libm` (never std's platform-dependent transcendental functions).
+//!
+//! Owns: the simulation. Never: reads files other than a vehicle file it is given, or the clock.
+pub mod config;
+pub mod controller;
+pub mod geo;
+pub mod plant;
+pub mod rng;
+pub mod scenario;
+pub mod sensors;
+
+use crate::logcsv::{self, LogError, LogRow, TruthRow};
+use config::VehicleConfig;
+use controller::{SpeedController, SteeringActuator};
+use plant::{Plant, PlantInput, PlantState};
+use rng::{SimRng, Stream};
+use scenario::Scenario;
+use sensors::{Held, SensorSuite, Snapshot};
+use std::path::{Path, PathBuf};
+
+/// Plant and actuator integration step, s (1 ms).
+pub const PLANT_STEP_S: f64 = 0.001;
+/// Ground-truth rows every this many plant steps (100 Hz).
+pub const TRUTH_EVERY_STEPS: usize = 10;
+
+/// How to run a scenario.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimOptions {
+    /// Repetition number: noise, clocks and command variations.
+    pub seed: u64,
+    /// Inject sensor faults (GNSS outages and outliers, lost bus reports).
+    pub faults: bool,
+    /// Apply the seed's small variations to the scenario's commands (a repetition by a human).
+    /// Off for tests that need the exact commands.
+    pub vary_commands: bool,
+    /// Origin of the local frame (latitude, longitude), degrees.
+    pub origin_deg: (f64, f64),
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        Self { seed: 0, faults: false, vary_commands: true, origin_deg: (geo::ORIGIN_LAT_DEG, geo::ORIGIN_LON_DEG) }
+    }
+}
+
+/// Everything a run produces.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimOutput {
+    /// The commands actually driven (after the seed's variations).
+    pub scenario: Scenario,
+    /// Log rows, strictly increasing in time, each sensor on its own clock.
+    pub log: Vec<LogRow>,
+    /// Ground truth at 100 Hz (rear-axle centre, heading, yaw rate, speed).
+    pub truth: Vec<TruthRow>,
+}
+
+/// Why a run could not start.
+#[derive(Debug)]
+pub enum SimError {
+    /// No built-in scenario has this name.
+    UnknownScenario(String),
+    /// The vehicle file is unusable.
+    Config(config::ConfigError),
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SimError::UnknownScenario(n) => write!(
+                f,
+                "unknown scenario `{n}`; known: {}",
+                scenario::SCENARIO_NAMES.join(", ")
+            ),
+            SimError::Config(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// Runs the built-in scenario `name`, with the vehicle file `vehicle` or the CAT Vehicle.
+/// This is what `catmodel simulate-drive` calls.
+pub fn run_named(name: &str, vehicle: Option<&Path>, options: &SimOptions) -> Result<SimOutput, SimError> {
+    let base = Scenario::builtin(name).ok_or_else(|| SimError::UnknownScenario(name.to_string()))?;
+    let cfg = match vehicle {
+        Some(p) => VehicleConfig::load(p).map_err(SimError::Config)?,
+        None => VehicleConfig::default(),
+    };
+    Ok(simulate(&base, &cfg, options))
+}
+
+/// Writes `DIR/NAME.csv` (log) and `DIR/NAME.truth.csv`, creating `dir`; returns both paths.
+pub fn write_outputs(dir: &Path, name: &str, output: &SimOutput) -> Result<(PathBuf, PathBuf), LogError> {
+    std::fs::create_dir_all(dir).map_err(|e| LogError {
+        path: dir.to_path_buf(),
+        line: 0,
+        char_column: 0,
+        column: None,
+        kind: logcsv::LogErrorKind::Io(e),
+    })?;
+    let log_path = dir.join(format!("{name}.csv"));
+    let truth_path = dir.join(format!("{name}.truth.csv"));
+    logcsv::write_log(&log_path, &output.log)?;
+    logcsv::write_truth(&truth_path, &output.truth)?;
+    Ok((log_path, truth_path))
+}
+
+fn wrap_pi(a: f64) -> f64 {
+    let two_pi = 2.0 * core::f64::consts::PI;
+    let w = a - two_pi * libm::floor((a + core::f64::consts::PI) / two_pi);
+    // w in [-pi, pi); report pi rather than -pi.
+    if w <= -core::f64::consts::PI {
+        w + two_pi
+    } else {
+        w
+    }
+}
+
+fn round_to(x: f64, inv_resolution: f64) -> f64 {
+    libm::round(x * inv_resolution) / inv_resolution
+}
+
+/// Runs `base` (varied by the seed unless `options.vary_commands` is false) on the car `cfg`.
+/// `cfg` should have passed [`VehicleConfig::validate`] (what [`VehicleConfig::load`] does).
+pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> SimOutput {
+    let scenario = if options.vary_commands {
+        base.varied(&mut SimRng::new(options.seed, Stream::Commands))
+    } else {
+        base.clone()
+    };
+    let dt = PLANT_STEP_S;
+    let plant = Plant::new(cfg);
+    let b = plant.cg_to_rear_m();
+    let antenna_ahead = cfg.sensors.gnss.antenna_ahead_of_rear_axle_m;
+    let max_steer_rad = cfg.chassis.max_steer_deg.to_radians();
+    let mut state = PlantState { heading_rad: scenario.initial_heading_rad, ..Default::default() };
+    let first = scenario.command_at(0.0);
+    let mut steering = SteeringActuator::new(&cfg.steering, dt, first.steer_pct);
+    let mut speed_ctl = SpeedController::new(&cfg.speed_controller, cfg.chassis.mass_kg, dt);
+    let mut sensors = SensorSuite::new(
+        &cfg.sensors.bus,
+        &cfg.sensors.gnss,
+        options.faults.then_some(&cfg.faults),
+        options.seed,
+        options.origin_deg,
+    );
+    let n_steps = libm::round(scenario.duration_s() / dt) as usize;
+    let mut truth = Vec::with_capacity(n_steps / TRUTH_EVERY_STEPS + 1);
+    let mut ax_mps2 = 0.0;
+    let mut steer_pct = first.steer_pct;
+
+    let snapshot = |s: &PlantState, steer_pct: f64| {
+        let (sin_h, cos_h) = (libm::sin(s.heading_rad), libm::cos(s.heading_rad));
+        let ahead = antenna_ahead - b;
+        Snapshot {
+            speed_mps: s.vx_mps,
+            steer_pct,
+            antenna_east_m: s.x_m + ahead * sin_h,
+            antenna_north_m: s.y_m + ahead * cos_h,
+        }
+    };
+
+    for k in 0..n_steps {
+        let t0 = k as f64 * dt;
+        if k % TRUTH_EVERY_STEPS == 0 {
+            let (sin_h, cos_h) = (libm::sin(state.heading_rad), libm::cos(state.heading_rad));
+            let v_lat_rear = state.vy_mps - b * state.yaw_rate_rps;
+            let micro = 1e6;
+            truth.push(TruthRow {
+                t: round_to(t0, micro),
+                x: round_to(state.x_m - b * sin_h, micro),
+                y: round_to(state.y_m - b * cos_h, micro),
+                heading: round_to(wrap_pi(state.heading_rad), micro),
+                yaw_rate: round_to(state.yaw_rate_rps, micro),
+                speed: round_to(libm::sqrt(state.vx_mps * state.vx_mps + v_lat_rear * v_lat_rear), micro),
+            });
+        }
+        let command = scenario.command_at(t0);
+        let s0 = snapshot(&state, steer_pct);
+        steer_pct = steering.step(command.steer_pct);
+        let drive = speed_ctl.step(command.speed_mps, state.vx_mps);
+        let input = PlantInput {
+            steer_rad: steer_pct / 100.0 * max_steer_rad,
+            drive_force_n: drive.drive_force_n,
+            brake_force_n: drive.brake_force_n,
+        };
+        ax_mps2 = plant.step(&mut state, &input, ax_mps2, dt);
+        let s1 = snapshot(&state, steer_pct);
+        let held = Held { command_mps: command.speed_mps, accel_pct: drive.accel_pct, brake_pct: drive.brake_pct };
+        sensors.observe(t0, t0 + dt, &s0, &s1, &held);
+    }
+
+    SimOutput { scenario, log: merge_rows(sensors.rows), truth }
+}
+
+/// Sorts the reports by log time and merges reports logged in the same microsecond into one row.
+fn merge_rows(mut rows: Vec<(i64, LogRow)>) -> Vec<LogRow> {
+    rows.sort_by_key(|(t, _)| *t);
+    let mut out: Vec<LogRow> = Vec::with_capacity(rows.len());
+    let mut last_t: Option<i64> = None;
+    for (t, row) in rows {
+        match out.last_mut() {
+            Some(prev) if last_t == Some(t) => prev.merge(&row),
+            _ => out.push(row),
+        }
+        last_t = Some(t);
+    }
+    out
+}
