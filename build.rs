@@ -9,7 +9,13 @@ const BUNDLED: &str = "data/bundled.can.log";
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=memory.x");
-    println!("cargo:rerun-if-changed={BUNDLED}");
+    // Watch the drive, or the folder it will appear in (a path that does not exist would
+    // re-run this script on every build).
+    if std::path::Path::new(BUNDLED).exists() {
+        println!("cargo:rerun-if-changed={BUNDLED}");
+    } else if std::path::Path::new("data").exists() {
+        println!("cargo:rerun-if-changed=data");
+    }
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
     }

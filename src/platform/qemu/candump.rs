@@ -75,8 +75,8 @@ pub fn parse(line: &str) -> Result<TimedFrame, LineError> {
         *byte = u8::from_str_radix(pair, 16).map_err(|_| LineError::Syntax)?;
     }
     let len = data_text.len() / 2;
-    let frame = CanFrame::new(id, data.get(..len).ok_or(LineError::Syntax)?)
-        .ok_or(LineError::Syntax)?;
+    let frame =
+        CanFrame::new(id, data.get(..len).ok_or(LineError::Syntax)?).ok_or(LineError::Syntax)?;
     Ok(TimedFrame { t_us, frame })
 }
 

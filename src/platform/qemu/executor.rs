@@ -21,7 +21,8 @@ fn pender(_context: *mut ()) {
 
 /// Runs the executor forever; `init` spawns the tasks.
 pub fn run(init: impl FnOnce(Spawner)) -> ! {
-    let Some(executor) = cortex_m::singleton!(: raw::Executor = raw::Executor::new(core::ptr::null_mut()))
+    let Some(executor) =
+        cortex_m::singleton!(: raw::Executor = raw::Executor::new(core::ptr::null_mut()))
     else {
         // Note: `run` is called once from `main`; a second call is a programming error.
         crate::platform::qemu::run::fail("executor started twice", 3)

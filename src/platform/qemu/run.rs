@@ -90,12 +90,14 @@ pub fn options() -> Result<Options, &'static str> {
     while let Some(arg) = args.next() {
         match arg {
             "--in" => {
-                options.input =
-                    Some(HostPath::new(args.next().ok_or("--in needs a path")?).ok_or("--in: path too long")?);
+                options.input = Some(
+                    HostPath::new(args.next().ok_or("--in needs a path")?)
+                        .ok_or("--in: path too long")?,
+                );
             }
             "--tx" => {
-                options.tx_log =
-                    HostPath::new(args.next().ok_or("--tx needs a path")?).ok_or("--tx: path too long")?;
+                options.tx_log = HostPath::new(args.next().ok_or("--tx needs a path")?)
+                    .ok_or("--tx: path too long")?;
             }
             "--ticks" => {
                 options.ticks = HostPath::new(args.next().ok_or("--ticks needs a path")?)
@@ -203,7 +205,11 @@ impl TickRecorder {
             stalls,
             failed: false,
         };
-        let header: [u8; 12] = pack(&[b"CMQT", &1u32.to_le_bytes(), &(RECORD_LEN as u32).to_le_bytes()]);
+        let header: [u8; 12] = pack(&[
+            b"CMQT",
+            &1u32.to_le_bytes(),
+            &(RECORD_LEN as u32).to_le_bytes(),
+        ]);
         recorder.push(&header);
         recorder
     }
