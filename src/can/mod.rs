@@ -1,8 +1,31 @@
 //! The bus protocol of `catmodel.dbc` (the single source of truth): frame types, codecs of every
-//! message, CRC-8/SAE-J1850, rolling counters, freshness, and candump text.
+//! message, CRC-8/SAE-J1850, rolling counters, freshness, and candump text. `docs/bus.md`
+//! describes the messages, the bus-load budget and this API.
 //!
-//! Never panics on bus data: every decoder returns a typed [`DecodeError`]-style result and the
-//! node counts each rejection.
+//! - [`frame`]: [`CanId`], [`CanFrame`], [`TimedFrame`].
+//! - [`spec`]: the descriptor table (one [`spec::MessageSpec`] per DBC message) and the generic
+//!   little-endian bit packer; `host-tests/tests/dbc.rs` checks it against the DBC.
+//! - [`codec`]: one typed struct per message with `encode(&self, counter) -> CanFrame` and
+//!   `decode(&CanFrame) -> Result<(Self, counter), DecodeError>`; [`codec::decode_input`].
+//! - [`crc`]: [`crc8_sae_j1850`] and the per-frame CRC of byte 7.
+//! - [`counter`]: rolling-counter checking of the inputs.
+//! - [`freshness`]: timeouts and ages of the inputs.
+//! - [`candump`]: `parse_line` / `format_line` of the SocketCAN log format.
+//!
+//! Never panics on bus data: every decoder returns a typed [`DecodeError`] and the node counts
+//! each rejection.
+pub mod candump;
+pub mod codec;
+pub mod counter;
+pub mod crc;
 pub mod frame;
+pub mod freshness;
+pub mod spec;
 
+pub use codec::{
+    decode_input, DecodeError, EncodeReport, GnssCogSog, GnssPosition, HealthFlags, InputMessage,
+    ModelMode, NodeStatus, PedalReport, Prediction, PredictionPoint, SpeedReport, StateModel,
+    StateMotion, StatePosition, SteeringReport,
+};
+pub use crc::crc8_sae_j1850;
 pub use frame::{CanFrame, CanId, TimedFrame};

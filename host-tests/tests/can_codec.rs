@@ -1,0 +1,964 @@
+//! The bus codecs against independent references: CRC check values, hand-packed frames, a
+//! published NMEA 2000 frame (canboatjs README), round trips of every message at its limits,
+//! every error kind, the counter checker, freshness, the bus-load budget and candump text.
+use catmodel::can::candump::{format_line, parse_line, CandumpError};
+use catmodel::can::counter::{CounterCheck, CounterChecker};
+use catmodel::can::crc::frame_crc;
+use catmodel::can::freshness::{
+    age_10ms, is_recent, is_timed_out, Freshness, FreshnessConfig, Input, AGE_MAX, AGE_NEVER,
+};
+use catmodel::can::spec::{self, sig, MessageSpec, NODE_CATMODEL};
+use catmodel::can::*;
+use proptest::prelude::*;
+
+// ------------------------------------------------------------------------------------------
+// CRC
+
+#[test]
+fn crc8_sae_j1850_check_values() {
+    // CRC-8/SAE-J1850 catalogue check value and the two short vectors of facts.md.
+    assert_eq!(crc8_sae_j1850(b"123456789"), 0x4B);
+    assert_eq!(crc8_sae_j1850(b"0"), 0x71);
+    assert_eq!(crc8_sae_j1850(b"01"), 0x28);
+    // Empty input: init 0xFF xor 0xFF.
+    assert_eq!(crc8_sae_j1850(b""), 0x00);
+}
+
+/// Bitwise CRC written independently of the crate's, for the frame-level property.
+fn reference_crc(bytes: &[u8]) -> u8 {
+    let mut crc: u32 = 0xFF;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc <<= 1;
+            if crc & 0x100 != 0 {
+                crc ^= 0x11D;
+            }
+        }
+    }
+    (crc as u8) ^ 0xFF
+}
+
+proptest! {
+    #[test]
+    fn frame_crc_covers_id_high_low_then_seven_bytes(id in 0u16..=0x7FF, data in any::<[u8; 8]>()) {
+        let mut bytes = vec![(id >> 8) as u8, id as u8];
+        bytes.extend_from_slice(&data[..7]);
+        prop_assert_eq!(frame_crc(CanId::Standard(id), &data), reference_crc(&bytes));
+        prop_assert_eq!(crc8_sae_j1850(&bytes), reference_crc(&bytes));
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Hand-packed frames (independent of the descriptor table)
+
+#[test]
+fn steering_report_hand_packed() {
+    // 12.34 % -> raw 1234 = 0x04D2 little-endian in bytes 0-1; counter 5 in bits 52..55 =
+    // high nibble of byte 6; CRC over 0x01 0x00 then bytes 0..6.
+    let frame = SteeringReport {
+        steer_pct: Some(12.34),
+    }
+    .encode(5);
+    let body = [0xD2, 0x04, 0, 0, 0, 0, 0x50];
+    let crc = reference_crc(&[0x01, 0x00, 0xD2, 0x04, 0, 0, 0, 0, 0x50]);
+    assert_eq!(frame.id, CanId::Standard(0x100));
+    assert_eq!(frame.len, 8);
+    assert_eq!(&frame.data[..7], &body);
+    assert_eq!(frame.data[7], crc);
+    // Negative: -100 % -> raw -10000 = 0xD8F0.
+    let frame = SteeringReport {
+        steer_pct: Some(-100.0),
+    }
+    .encode(15);
+    assert_eq!(&frame.data[..7], &[0xF0, 0xD8, 0, 0, 0, 0, 0xF0]);
+}
+
+#[test]
+fn prediction_hand_packed() {
+    // counter 3 bits 0..3; dx = -0.01 m (raw -1 = 0x3FFF, 14 bits) at bits 4..17;
+    // dy = +0.02 (raw 2) at 18..31; dheading = 0.001 (raw 1) at 32..43; speed = 0.05 (raw 5)
+    // at 44..55.
+    let p = Prediction {
+        point: PredictionPoint::new(4).unwrap(),
+        dx_m: Some(-0.01),
+        dy_m: Some(0.02),
+        dheading_rad: Some(0.001),
+        speed_mps: Some(0.05),
+    };
+    let frame = p.encode(3);
+    let word: u64 = 3 | (0x3FFF << 4) | (2 << 18) | (1 << 32) | (5 << 44);
+    let bytes = word.to_le_bytes();
+    assert_eq!(frame.id, CanId::Standard(0x313));
+    assert_eq!(&frame.data[..7], &bytes[..7]);
+    assert_eq!(
+        frame.data[7],
+        reference_crc(&[
+            0x03, 0x13, bytes[0], bytes[1], bytes[2], bytes[3], bytes[4], bytes[5], bytes[6]
+        ])
+    );
+    let (back, counter) = Prediction::decode(&frame).unwrap();
+    assert_eq!(counter, 3);
+    assert_eq!(back.point.k(), 4);
+}
+
+#[test]
+fn nmea2000_position_published_frame() {
+    // canboatjs README (YDWG-02 example): "09F8017F 50 C3 B8 13 47 D8 2B C6" decodes to
+    // prio 2, PGN 129025, src 127, Latitude 33.0875728, Longitude -97.0205113.
+    let frame = CanFrame::new(
+        CanId::Extended(0x09F8_017F),
+        &[0x50, 0xC3, 0xB8, 0x13, 0x47, 0xD8, 0x2B, 0xC6],
+    )
+    .unwrap();
+    assert_eq!(spec::n2k_pgn_source(0x09F8_017F), (129_025, 127));
+    let fix = GnssPosition::decode(&frame, 127).unwrap();
+    assert_eq!(fix.lat_e7, 330_875_728);
+    assert_eq!(fix.lon_e7, -970_205_113);
+    assert_eq!(
+        GnssPosition::decode(&frame, spec::N2K_DEFAULT_SOURCE),
+        Err(DecodeError::WrongSource { got: 127 })
+    );
+    // Encoding the same fix from source 127 gives the same bytes and identifier.
+    assert_eq!(fix.encode(127), frame);
+    // Another priority is accepted (the PGN and source decide).
+    let mut other = frame;
+    other.id = CanId::Extended(0x1DF8_017F);
+    assert_eq!(GnssPosition::decode(&other, 127), Ok(fix));
+}
+
+#[test]
+fn nmea2000_cog_sog_layout() {
+    // canboat PGN 129026: SID u8, COG reference 2 bits, 6 reserved bits, COG u16 1e-4 rad,
+    // SOG u16 0.01 m/s, 2 reserved bytes (0xFF).
+    let m = GnssCogSog {
+        sid: 0x2A,
+        cog_reference: 0,
+        cog_rad: Some(1.2345),
+        sog_mps: Some(12.34),
+    };
+    let frame = m.encode(spec::N2K_DEFAULT_SOURCE);
+    assert_eq!(frame.id, CanId::Extended(0x09F8_021C));
+    assert_eq!(
+        frame.data,
+        [0x2A, 0xFC, 0x39, 0x30, 0xD2, 0x04, 0xFF, 0xFF] // 12345 = 0x3039, 1234 = 0x04D2
+    );
+    let back = GnssCogSog::decode(&frame, 0x1C).unwrap();
+    assert_eq!(back.sid, 0x2A);
+    assert!((back.cog_rad.unwrap() - 1.2345).abs() < 0.5e-4);
+    assert!((back.sog_mps.unwrap() - 12.34).abs() < 0.005);
+}
+
+// ------------------------------------------------------------------------------------------
+// Round trips at min / max / invalid
+
+/// |a - b| <= half a quantisation step (plus f32 rounding).
+fn close(a: Option<f32>, b: Option<f32>, scale: f32) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => (a - b).abs() <= 0.5 * scale + 1e-6 * b.abs(),
+        _ => false,
+    }
+}
+
+fn phys_min(s: &spec::SignalSpec) -> f32 {
+    s.to_physical(s.raw_min)
+}
+fn phys_max(s: &spec::SignalSpec) -> f32 {
+    s.to_physical(s.raw_max)
+}
+
+#[test]
+fn inputs_round_trip_at_limits_and_invalid() {
+    for counter in [0u8, 7, 15] {
+        for v in [
+            Some(phys_min(&sig::STEER_PCT)),
+            Some(phys_max(&sig::STEER_PCT)),
+            Some(0.0),
+            None,
+        ] {
+            let m = SteeringReport { steer_pct: v };
+            let (back, c) = SteeringReport::decode(&m.encode(counter)).unwrap();
+            assert_eq!(c, counter);
+            assert!(close(back.steer_pct, v, 0.01), "{v:?} -> {back:?}");
+        }
+        for (a, b) in [
+            (Some(0.0), Some(655.34)),
+            (Some(655.34), None),
+            (None, Some(0.0)),
+        ] {
+            let m = SpeedReport {
+                speed_mps: a,
+                speed_cmd_mps: b,
+            };
+            let (back, c) = SpeedReport::decode(&m.encode(counter)).unwrap();
+            assert_eq!(c, counter);
+            assert!(close(back.speed_mps, a, 0.01) && close(back.speed_cmd_mps, b, 0.01));
+        }
+        for (a, b) in [
+            (Some(0.0), Some(100.0)),
+            (Some(100.0), None),
+            (None, Some(0.0)),
+        ] {
+            let m = PedalReport {
+                accel_pct: a,
+                brake_pct: b,
+            };
+            let (back, c) = PedalReport::decode(&m.encode(counter)).unwrap();
+            assert_eq!(c, counter);
+            assert!(close(back.accel_pct, a, 0.01) && close(back.brake_pct, b, 0.01));
+        }
+    }
+    for (lat, lon) in [
+        (-900_000_000, -1_800_000_000),
+        (900_000_000, 1_800_000_000),
+        (0, 0),
+    ] {
+        let m = GnssPosition {
+            lat_e7: lat,
+            lon_e7: lon,
+        };
+        assert_eq!(GnssPosition::decode(&m.encode(0x1C), 0x1C), Ok(m));
+    }
+    for (cog, sog) in [
+        (Some(0.0), Some(0.0)),
+        (Some(phys_max(&sig::COG_RAD)), Some(655.32)),
+        (None, None),
+    ] {
+        let m = GnssCogSog {
+            sid: 255,
+            cog_reference: 3,
+            cog_rad: cog,
+            sog_mps: sog,
+        };
+        let back = GnssCogSog::decode(&m.encode(0x1C), 0x1C).unwrap();
+        assert_eq!((back.sid, back.cog_reference), (255, 3));
+        assert!(close(back.cog_rad, cog, 1e-4) && close(back.sog_mps, sog, 0.01));
+    }
+}
+
+#[test]
+fn state_messages_round_trip_at_limits_and_invalid() {
+    let lim = |s: &spec::SignalSpec| [Some(phys_min(s)), Some(phys_max(s)), None];
+    for counter in [0u8, 9, 15] {
+        for (i, (e, n)) in lim(&sig::EAST_M)
+            .into_iter()
+            .zip(lim(&sig::NORTH_M).into_iter().rev())
+            .enumerate()
+        {
+            let m = StatePosition {
+                position_valid: i % 2 == 0,
+                gnss_fresh: i == 1,
+                gnss_rejected: i == 2,
+                east_m: e,
+                north_m: n,
+            };
+            let (back, c) = StatePosition::decode(&m.encode(counter)).unwrap();
+            assert_eq!(c, counter);
+            assert_eq!(
+                (back.position_valid, back.gnss_fresh, back.gnss_rejected),
+                (m.position_valid, m.gnss_fresh, m.gnss_rejected)
+            );
+            assert!(
+                close(back.east_m, e, 0.01) && close(back.north_m, n, 0.01),
+                "{m:?} -> {back:?}"
+            );
+        }
+        for i in 0..3 {
+            let m = StateMotion {
+                mode: if i == 1 {
+                    ModelMode::Dynamic
+                } else {
+                    ModelMode::Kinematic
+                },
+                heading_rad: lim(&sig::HEADING_RAD)[i],
+                speed_mps: lim(&sig::STATE_SPEED_MPS)[2 - i],
+                yaw_rate_radps: lim(&sig::YAW_RATE_RADPS)[i],
+            };
+            let (back, c) = StateMotion::decode(&m.encode(counter)).unwrap();
+            assert_eq!((c, back.mode), (counter, m.mode));
+            assert!(close(back.heading_rad, m.heading_rad, 0.001));
+            assert!(close(back.speed_mps, m.speed_mps, 0.01));
+            assert!(close(back.yaw_rate_radps, m.yaw_rate_radps, 0.001));
+
+            let m = StateModel {
+                speed_model_mps: lim(&sig::SPEED_MODEL_MPS)[i],
+                dxdt_model_mps: lim(&sig::DXDT_MODEL_MPS)[2 - i],
+                lat_accel_mps2: lim(&sig::LAT_ACCEL_MPS2)[(i + 1) % 3],
+            };
+            let (back, c) = StateModel::decode(&m.encode(counter)).unwrap();
+            assert_eq!(c, counter);
+            assert!(close(back.speed_model_mps, m.speed_model_mps, 0.01));
+            assert!(close(back.dxdt_model_mps, m.dxdt_model_mps, 0.01));
+            assert!(close(back.lat_accel_mps2, m.lat_accel_mps2, 0.01));
+
+            for point in PredictionPoint::all() {
+                let m = Prediction {
+                    point,
+                    dx_m: lim(&sig::DX_M)[i],
+                    dy_m: lim(&sig::DY_M)[2 - i],
+                    dheading_rad: lim(&sig::DHEADING_RAD)[(i + 1) % 3],
+                    speed_mps: lim(&sig::PRED_SPEED_MPS)[(i + 2) % 3],
+                };
+                let frame = m.encode(counter);
+                assert_eq!(frame.id, CanId::Standard(0x30F + u16::from(point.k())));
+                let (back, c) = Prediction::decode(&frame).unwrap();
+                assert_eq!((c, back.point), (counter, point));
+                assert!(close(back.dx_m, m.dx_m, 0.01) && close(back.dy_m, m.dy_m, 0.01));
+                assert!(close(back.dheading_rad, m.dheading_rad, 0.001));
+                assert!(close(back.speed_mps, m.speed_mps, 0.01));
+            }
+        }
+    }
+    // Heading at +-pi fits (the DBC range is +-3.142).
+    for h in [core::f32::consts::PI, -core::f32::consts::PI] {
+        let (frame, report) = StateMotion {
+            heading_rad: Some(h),
+            ..Default::default()
+        }
+        .encode_with_report(0);
+        assert!(!report.any_substituted());
+        assert!(close(
+            StateMotion::decode(&frame).unwrap().0.heading_rad,
+            Some(h),
+            0.001
+        ));
+    }
+}
+
+#[test]
+fn node_status_pages_round_trip_and_saturate() {
+    let all_health = HealthFlags {
+        steer_stale: true,
+        speed_stale: false,
+        pedal_stale: true,
+        gnss_stale: false,
+        gnss_rejected_recently: true,
+        position_invalid: false,
+        prediction_saturated: true,
+        nonfinite_guard: false,
+        watchdog_reset: true,
+        overrun_recently: false,
+        input_invalid: true,
+    };
+    let pages = [
+        NodeStatus::Health {
+            mode: ModelMode::Dynamic,
+            health: all_health,
+            overrun_count: 65_535,
+            last_step_us: Some(65_534),
+        },
+        NodeStatus::Health {
+            mode: ModelMode::Kinematic,
+            health: HealthFlags::default(),
+            overrun_count: 0,
+            last_step_us: None,
+        },
+        NodeStatus::RxErrors {
+            crc_errors: 0,
+            counter_errors: 1,
+            dlc_errors: 65_535,
+        },
+        NodeStatus::RxRejects {
+            range_errors: 65_535,
+            gnss_gate_rejects: 2,
+            unknown_ids: 0,
+        },
+        NodeStatus::Platform {
+            tick_count: u32::MAX,
+            rx_queue_drops: 65_535,
+        },
+        NodeStatus::Ages {
+            ages_10ms: [0, 1, AGE_MAX, AGE_NEVER],
+            stack_high_water_bytes: Some(65_534),
+        },
+        NodeStatus::Ages {
+            ages_10ms: [AGE_NEVER; 4],
+            stack_high_water_bytes: None,
+        },
+    ];
+    for (i, page) in pages.iter().enumerate() {
+        let counter = (i % 16) as u8;
+        let (frame, report) = page.encode_with_report(counter);
+        assert!(!report.any_substituted(), "{page:?}");
+        assert_eq!(NodeStatus::decode(&frame), Ok((*page, counter)));
+        assert_eq!(
+            spec::sig::PAGE.read_raw(&frame.data),
+            i64::from(page.page())
+        );
+    }
+    // Counters saturate at the field maximum (never wrap); measurements at max - 1 (max = n/a).
+    let (frame, report) = NodeStatus::Health {
+        mode: ModelMode::Kinematic,
+        health: HealthFlags::default(),
+        overrun_count: 70_000,
+        last_step_us: Some(1_000_000),
+    }
+    .encode_with_report(0);
+    assert_eq!(report.saturated, 2);
+    assert_eq!(
+        NodeStatus::decode(&frame).unwrap().0,
+        NodeStatus::Health {
+            mode: ModelMode::Kinematic,
+            health: HealthFlags::default(),
+            overrun_count: 65_535,
+            last_step_us: Some(65_534)
+        }
+    );
+    let (frame, _) = NodeStatus::RxErrors {
+        crc_errors: u32::MAX,
+        counter_errors: 65_536,
+        dlc_errors: 3,
+    }
+    .encode_with_report(1);
+    assert_eq!(
+        NodeStatus::decode(&frame).unwrap().0,
+        NodeStatus::RxErrors {
+            crc_errors: 65_535,
+            counter_errors: 65_535,
+            dlc_errors: 3
+        }
+    );
+}
+
+#[test]
+fn encoders_replace_non_finite_and_out_of_range_by_not_available() {
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
+        let (frame, report) = Prediction {
+            point: PredictionPoint::new(1).unwrap(),
+            dx_m: Some(bad),
+            dy_m: Some(1.0),
+            dheading_rad: Some(bad),
+            speed_mps: Some(bad),
+        }
+        .encode_with_report(0);
+        assert_eq!(report.non_finite, 3);
+        assert!(report.any_substituted());
+        assert_eq!(sig::DX_M.read_raw(&frame.data), -8192);
+        assert_eq!(sig::DHEADING_RAD.read_raw(&frame.data), -2048);
+        assert_eq!(sig::PRED_SPEED_MPS.read_raw(&frame.data), 0xFFF);
+        let (back, _) = Prediction::decode(&frame).unwrap();
+        assert_eq!(
+            (back.dx_m, back.dheading_rad, back.speed_mps),
+            (None, None, None)
+        );
+        assert_eq!(back.dy_m, Some(1.0));
+    }
+    // Out of range: 81.92 m > 81.91 m, -0.01 m/s, 100.01 %.
+    let (frame, report) = Prediction {
+        point: PredictionPoint::new(10).unwrap(),
+        dx_m: Some(81.92),
+        dy_m: Some(-81.91),
+        dheading_rad: Some(2.047),
+        speed_mps: Some(-0.01),
+    }
+    .encode_with_report(0);
+    assert_eq!(
+        (report.out_of_range, report.non_finite, report.absent),
+        (2, 0, 0)
+    );
+    let (back, _) = Prediction::decode(&frame).unwrap();
+    assert_eq!(back.dx_m, None);
+    assert_eq!(back.speed_mps, None);
+    assert!(close(back.dy_m, Some(-81.91), 0.01));
+    let (_, report) = SteeringReport {
+        steer_pct: Some(100.01),
+    }
+    .encode_with_report(0);
+    assert_eq!(report.out_of_range, 1);
+    let (frame, report) = GnssPosition {
+        lat_e7: 900_000_001,
+        lon_e7: 0,
+    }
+    .encode_with_report(0x1C);
+    assert_eq!(report.out_of_range, 1);
+    assert_eq!(
+        GnssPosition::decode(&frame, 0x1C),
+        Err(DecodeError::Invalid {
+            signal: "latitude_deg"
+        })
+    );
+    let (_, report) = StateModel::default().encode_with_report(0);
+    assert_eq!(report.absent, 3);
+    assert!(!report.any_substituted());
+}
+
+proptest! {
+    /// Whatever f32 bits the model produces, the frame decodes, and every value is either
+    /// "not available" or within the DBC range and within half a step of the input.
+    #[test]
+    fn prediction_encoding_never_emits_garbage(
+        k in 1u8..=10, counter in 0u8..16,
+        dx in any::<u32>(), dy in -90.0f32..90.0, dh in any::<u32>(), v in -1.0f32..50.0,
+    ) {
+        let m = Prediction {
+            point: PredictionPoint::new(k).unwrap(),
+            dx_m: Some(f32::from_bits(dx)),
+            dy_m: Some(dy),
+            dheading_rad: Some(f32::from_bits(dh)),
+            speed_mps: Some(v),
+        };
+        let (back, c) = Prediction::decode(&m.encode(counter)).unwrap();
+        prop_assert_eq!(c, counter);
+        for (sent, got, s) in [
+            (m.dx_m, back.dx_m, &sig::DX_M),
+            (m.dy_m, back.dy_m, &sig::DY_M),
+            (m.dheading_rad, back.dheading_rad, &sig::DHEADING_RAD),
+            (m.speed_mps, back.speed_mps, &sig::PRED_SPEED_MPS),
+        ] {
+            if let Some(got) = got {
+                prop_assert!(got >= phys_min(s) - 1e-4 && got <= phys_max(s) + 1e-4);
+                prop_assert!(close(Some(got), sent, s.scale));
+            } else {
+                let sent = sent.unwrap();
+                let in_range = sent.is_finite() && s.to_raw(sent).is_some();
+                prop_assert!(!in_range, "{} = {} sent as n/a", s.name, sent);
+            }
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Error kinds
+
+/// Re-seals a frame whose payload was edited (so only the edited field is wrong).
+fn reseal(mut frame: CanFrame) -> CanFrame {
+    frame.data[7] = frame_crc(frame.id, &frame.data);
+    frame
+}
+
+#[test]
+fn decode_error_kinds() {
+    let good = SteeringReport {
+        steer_pct: Some(1.0),
+    }
+    .encode(1);
+    // Wrong id.
+    let mut f = good;
+    f.id = CanId::Standard(0x101);
+    assert_eq!(SteeringReport::decode(&f), Err(DecodeError::WrongId));
+    f.id = CanId::Extended(0x100);
+    assert_eq!(SteeringReport::decode(&f), Err(DecodeError::WrongId));
+    // DLC.
+    let mut f = good;
+    f.len = 7;
+    assert_eq!(
+        SteeringReport::decode(&f),
+        Err(DecodeError::Dlc {
+            expected: 8,
+            got: 7
+        })
+    );
+    // CRC: every single-bit flip of bytes 0..=7 is caught.
+    for bit in 0..64 {
+        let mut f = good;
+        f.data[bit / 8] ^= 1 << (bit % 8);
+        assert!(
+            matches!(SteeringReport::decode(&f), Err(DecodeError::Crc { .. })),
+            "bit {bit}"
+        );
+    }
+    // The CRC covers the id: the same payload under another id fails.
+    let mut f = SpeedReport {
+        speed_mps: Some(1.0),
+        speed_cmd_mps: Some(1.0),
+    }
+    .encode(0);
+    f.id = CanId::Standard(0x102);
+    assert!(matches!(
+        PedalReport::decode(&f),
+        Err(DecodeError::Crc { .. })
+    ));
+    // Out of range: steer raw 10001 (100.01 %), with a valid CRC.
+    let mut f = good;
+    sig::STEER_PCT.write_raw(&mut f.data, 10_001);
+    assert_eq!(
+        SteeringReport::decode(&reseal(f)),
+        Err(DecodeError::OutOfRange {
+            signal: "steer_pct"
+        })
+    );
+    // Invalid sentinel -> None for reports, Invalid for a position without latitude.
+    let mut f = good;
+    sig::STEER_PCT.write_raw(&mut f.data, -32_768);
+    assert_eq!(
+        SteeringReport::decode(&reseal(f)),
+        Ok((SteeringReport { steer_pct: None }, 1))
+    );
+    let mut f = GnssPosition {
+        lat_e7: 1,
+        lon_e7: 2,
+    }
+    .encode(0x1C);
+    sig::LONGITUDE_DEG.write_raw(&mut f.data, 0x7FFF_FFFF);
+    assert_eq!(
+        GnssPosition::decode(&f, 0x1C),
+        Err(DecodeError::Invalid {
+            signal: "longitude_deg"
+        })
+    );
+    sig::LONGITUDE_DEG.write_raw(&mut f.data, 1_800_000_001);
+    assert_eq!(
+        GnssPosition::decode(&f, 0x1C),
+        Err(DecodeError::OutOfRange {
+            signal: "longitude_deg"
+        })
+    );
+    // COG 0xFFFE (N2K "out of range") is out of range.
+    let mut f = GnssCogSog {
+        sid: 0,
+        cog_reference: 0,
+        cog_rad: Some(1.0),
+        sog_mps: Some(1.0),
+    }
+    .encode(0x1C);
+    sig::COG_RAD.write_raw(&mut f.data, 0xFFFE);
+    assert_eq!(
+        GnssCogSog::decode(&f, 0x1C),
+        Err(DecodeError::OutOfRange { signal: "cog_rad" })
+    );
+    // NODE_STATUS page 5..15 does not exist.
+    let mut f = NodeStatus::RxErrors {
+        crc_errors: 0,
+        counter_errors: 0,
+        dlc_errors: 0,
+    }
+    .encode(0);
+    sig::PAGE.write_raw(&mut f.data, 5);
+    assert_eq!(
+        NodeStatus::decode(&reseal(f)),
+        Err(DecodeError::OutOfRange { signal: "page" })
+    );
+    // Prediction ids outside 0x310..=0x319.
+    let mut f = Prediction {
+        point: PredictionPoint::new(1).unwrap(),
+        dx_m: None,
+        dy_m: None,
+        dheading_rad: None,
+        speed_mps: None,
+    }
+    .encode(0);
+    f.id = CanId::Standard(0x31A);
+    assert_eq!(Prediction::decode(&f), Err(DecodeError::WrongId));
+    f.id = CanId::Standard(0x30F);
+    assert_eq!(Prediction::decode(&f), Err(DecodeError::WrongId));
+    assert_eq!(PredictionPoint::new(0), None);
+    assert_eq!(PredictionPoint::new(11), None);
+}
+
+#[test]
+fn decode_input_dispatch() {
+    let src = spec::N2K_DEFAULT_SOURCE;
+    let s = SteeringReport {
+        steer_pct: Some(-3.0),
+    };
+    assert_eq!(
+        decode_input(&s.encode(2), src),
+        Ok(InputMessage::Steering(s, 2))
+    );
+    let v = SpeedReport {
+        speed_mps: Some(3.0),
+        speed_cmd_mps: None,
+    };
+    assert_eq!(
+        decode_input(&v.encode(3), src),
+        Ok(InputMessage::Speed(v, 3))
+    );
+    let p = PedalReport {
+        accel_pct: Some(50.0),
+        brake_pct: Some(0.0),
+    };
+    assert_eq!(
+        decode_input(&p.encode(4), src),
+        Ok(InputMessage::Pedal(p, 4))
+    );
+    let g = GnssPosition {
+        lat_e7: 322_316_000,
+        lon_e7: -1_109_531_000,
+    };
+    assert_eq!(
+        decode_input(&g.encode(src), src),
+        Ok(InputMessage::GnssPosition(g))
+    );
+    assert_eq!(
+        decode_input(&g.encode(0x22), src),
+        Err(DecodeError::WrongSource { got: 0x22 })
+    );
+    let c = GnssCogSog {
+        sid: 1,
+        cog_reference: 0,
+        cog_rad: Some(1.0),
+        sog_mps: Some(2.0),
+    };
+    assert!(matches!(
+        decode_input(&c.encode(src), src),
+        Ok(InputMessage::GnssCogSog(_))
+    ));
+    // Our own outputs and strangers are not inputs.
+    let out = StateModel::default().encode(0);
+    assert_eq!(decode_input(&out, src), Err(DecodeError::UnknownId));
+    let stranger = CanFrame::new(CanId::Extended(spec::n2k_id(2, 127_250, src)), &[0; 8]).unwrap();
+    assert_eq!(decode_input(&stranger, src), Err(DecodeError::UnknownId));
+}
+
+// ------------------------------------------------------------------------------------------
+// Rolling counter
+
+#[test]
+fn counter_checker_sequence_stuck_jump_wrap_reset() {
+    let mut c = CounterChecker::new();
+    assert_eq!(c.check(14), CounterCheck::First);
+    assert_eq!(c.check(15), CounterCheck::InSequence);
+    assert_eq!(c.check(0), CounterCheck::InSequence); // wraps mod 16
+    assert_eq!(c.check(0), CounterCheck::Stuck);
+    assert!(!CounterCheck::Stuck.accepted());
+    assert_eq!(c.check(0), CounterCheck::Stuck);
+    assert_eq!(c.check(1), CounterCheck::InSequence); // stuck does not move the reference
+    assert_eq!(c.check(4), CounterCheck::Jump { missed: 2 });
+    assert!(
+        CounterCheck::Jump { missed: 2 }.accepted() && CounterCheck::Jump { missed: 2 }.is_error()
+    );
+    assert_eq!(c.check(3), CounterCheck::Jump { missed: 14 }); // one step back = 14 lost
+    assert_eq!(c.check(0x14), CounterCheck::InSequence); // only the low 4 bits count
+    assert_eq!((c.stuck_count, c.jump_count, c.missed_frames), (2, 2, 16));
+    c.reset();
+    assert_eq!(c.check(9), CounterCheck::First);
+    assert_eq!(c.stuck_count, 2);
+    let mut c = CounterChecker::new();
+    c.stuck_count = u32::MAX;
+    c.check(1);
+    c.check(1);
+    assert_eq!(c.stuck_count, u32::MAX); // saturates
+}
+
+proptest! {
+    #[test]
+    fn counter_checker_accepts_every_in_sequence_stream(start in 0u8..16, n in 1usize..100) {
+        let mut c = CounterChecker::new();
+        for i in 0..n {
+            let v = c.check(((start as usize + i) % 16) as u8);
+            prop_assert!(v == CounterCheck::First || v == CounterCheck::InSequence);
+        }
+        prop_assert_eq!((c.stuck_count, c.jump_count), (0, 0));
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Freshness
+
+#[test]
+fn freshness_timeouts_and_ages() {
+    assert!(!is_timed_out(1_100_000, 1_000_000, 100_000)); // exactly the timeout: fresh
+    assert!(is_timed_out(1_100_001, 1_000_000, 100_000));
+    assert!(!is_timed_out(900_000, 1_000_000, 100_000)); // future sample: not timed out
+    assert!(is_recent(1_050_000, 1_000_000, 100_000));
+    assert_eq!(age_10ms(1_000_000, None), AGE_NEVER);
+    assert_eq!(age_10ms(1_000_000, Some(1_000_000)), 0);
+    assert_eq!(age_10ms(1_019_999, Some(1_000_000)), 1);
+    assert_eq!(age_10ms(1_000_000 + 2_540_000, Some(1_000_000)), 254);
+    assert_eq!(age_10ms(u64::MAX, Some(0)), AGE_MAX);
+
+    let cfg = FreshnessConfig::default();
+    assert_eq!(cfg.timeout_us(Input::Steer), 100_000);
+    assert_eq!(cfg.timeout_us(Input::Gnss), 200_000);
+    let mut f = Freshness::new();
+    assert!(!f.is_fresh(&cfg, Input::Steer, 0));
+    f.mark(Input::Steer, 1_000_000);
+    f.mark(Input::Gnss, 1_000_000);
+    f.mark(Input::Steer, 900_000); // older sample does not move the clock back
+    assert_eq!(f.last_us(Input::Steer), Some(1_000_000));
+    assert!(f.is_fresh(&cfg, Input::Steer, 1_100_000));
+    assert!(!f.is_fresh(&cfg, Input::Steer, 1_100_001));
+    assert!(f.is_fresh(&cfg, Input::Gnss, 1_150_000));
+    assert_eq!(f.ages_10ms(1_150_000), [15, AGE_NEVER, AGE_NEVER, 15]);
+}
+
+// ------------------------------------------------------------------------------------------
+// Bus load
+
+#[test]
+fn worst_case_frame_lengths_match_the_literature() {
+    // Davis, Burns, Bril, Lukkien 2007, eq (5): 135 bits (11-bit, 8 bytes), 160 (29-bit, 8).
+    assert_eq!(spec::worst_case_frame_bits(false, 8), 135);
+    assert_eq!(spec::worst_case_frame_bits(true, 8), 160);
+    assert_eq!(spec::nominal_frame_bits(false, 8), 111);
+    assert_eq!(spec::worst_case_frame_bits(false, 0), 55);
+}
+
+#[test]
+fn our_traffic_stays_under_20_percent_of_500_kbit() {
+    let load = |pick: &dyn Fn(&MessageSpec) -> bool, worst: bool| -> f64 {
+        spec::MESSAGES
+            .iter()
+            .filter(|m| pick(m))
+            .map(|m| {
+                let ext = matches!(m.id, CanId::Extended(_));
+                let bits = if worst {
+                    spec::worst_case_frame_bits(ext, m.dlc)
+                } else {
+                    spec::nominal_frame_bits(ext, m.dlc)
+                };
+                f64::from(bits) * 1000.0 / f64::from(m.cycle_ms)
+            })
+            .sum::<f64>()
+            / 500_000.0
+    };
+    let ours = |m: &MessageSpec| m.transmitter == NODE_CATMODEL;
+    let all = |_: &MessageSpec| true;
+    let (worst, nominal) = (load(&ours, true), load(&ours, false));
+    println!(
+        "node traffic: {:.2} % worst case, {:.2} % nominal; whole bus worst case {:.2} %",
+        100.0 * worst,
+        100.0 * nominal,
+        100.0 * load(&all, true)
+    );
+    assert_eq!(spec::MESSAGES.iter().filter(|m| ours(m)).count(), 14);
+    assert!(worst < 0.20, "worst-case node load {worst}");
+    assert!((worst - 14.0 * 135.0 * 50.0 / 500_000.0).abs() < 1e-12);
+}
+
+// ------------------------------------------------------------------------------------------
+// candump
+
+#[test]
+fn candump_formats_exactly() {
+    let frame = TimedFrame {
+        t_us: 1_700_000_000_123_456,
+        frame: CanFrame::new(CanId::Standard(0x123), &[0xDE, 0xAD, 0xBE, 0xEF]).unwrap(),
+    };
+    let mut s = String::new();
+    format_line(&frame, "can0", &mut s).unwrap();
+    assert_eq!(s, "(1700000000.123456) can0 123#DEADBEEF");
+
+    let frame = TimedFrame {
+        t_us: 20_000,
+        frame: CanFrame::new(CanId::Extended(0x09F8_011C), &[]).unwrap(),
+    };
+    let mut s = String::new();
+    format_line(&frame, "vcan1", &mut s).unwrap();
+    assert_eq!(s, "(0000000000.020000) vcan1 09F8011C#");
+
+    let frame = TimedFrame {
+        t_us: 5,
+        frame: CanFrame::new(CanId::Standard(0x7), &[0x0A, 0xB0]).unwrap(),
+    };
+    let mut s = String::new();
+    format_line(&frame, "can0", &mut s).unwrap();
+    assert_eq!(s, "(0000000000.000005) can0 007#0AB0");
+}
+
+#[test]
+fn candump_parses_valid_variants() {
+    let f = parse_line("(1700000000.123456) can0 123#DEADBEEF\n").unwrap();
+    assert_eq!(f.t_us, 1_700_000_000_123_456);
+    assert_eq!(
+        f.frame,
+        CanFrame::new(CanId::Standard(0x123), &[0xDE, 0xAD, 0xBE, 0xEF]).unwrap()
+    );
+    // CRLF, lower-case hex, short seconds, empty payload, 8 bytes, extended id.
+    let f = parse_line("(0.000001) can0 7ff#\r\n").unwrap();
+    assert_eq!(
+        (f.t_us, f.frame.id, f.frame.len),
+        (1, CanId::Standard(0x7FF), 0)
+    );
+    let f = parse_line("(12.500000) slcan0 1FFFFFFF#0102030405060708").unwrap();
+    assert_eq!(f.t_us, 12_500_000);
+    assert_eq!(f.frame.id, CanId::Extended(0x1FFF_FFFF));
+    assert_eq!(f.frame.payload(), &[1, 2, 3, 4, 5, 6, 7, 8]);
+    let f = parse_line("(1.000000) can0 00000123#aB").unwrap();
+    assert_eq!(
+        (f.frame.id, f.frame.payload()),
+        (CanId::Extended(0x123), &[0xAB][..])
+    );
+    // Largest timestamp that fits u64 microseconds.
+    let f = parse_line("(18446744073709.551615) can0 000#").unwrap();
+    assert_eq!(f.t_us, u64::MAX);
+}
+
+#[test]
+fn candump_rejects_with_reasons() {
+    use CandumpError::*;
+    let cases: &[(&str, CandumpError)] = &[
+        ("", Empty),
+        ("   \n", Empty),
+        ("1700000000.123456 can0 123#00", MissingTimestamp),
+        ("can0 123#00", MissingTimestamp),
+        ("(1700000000.123456 can0 123#00", BadTimestamp),
+        ("() can0 123#00", BadTimestamp),
+        ("(1700000000) can0 123#00", BadTimestamp),
+        ("(1700000000.12345) can0 123#00", BadTimestamp),
+        ("(1700000000.1234567) can0 123#00", BadTimestamp),
+        ("(.123456) can0 123#00", BadTimestamp),
+        ("(17000x0000.123456) can0 123#00", BadTimestamp),
+        ("(-1.000000) can0 123#00", BadTimestamp),
+        ("(1.-23456) can0 123#00", BadTimestamp),
+        ("(18446744073709.551616) can0 123#00", BadTimestamp),
+        ("(99999999999999999999.000000) can0 123#00", BadTimestamp),
+        ("(1.000000)", MissingInterface),
+        ("(1.000000)can0 123#00", MissingInterface),
+        ("(1.000000) can0", MissingInterface),
+        ("(1.000000)  can0 123#00", BadInterface),
+        ("(1.000000) averyveryverylongname 123#00", BadInterface),
+        ("(1.000000) can0 12300", MissingSeparator),
+        ("(1.000000) can0 #00", BadId),
+        ("(1.000000) can0 12#00", BadId),
+        ("(1.000000) can0 1234#00", BadId),
+        ("(1.000000) can0 12G#00", BadId),
+        ("(1.000000) can0 +12#00", BadId),
+        ("(1.000000) can0 800#00", IdOutOfRange),
+        ("(1.000000) can0 FFF#00", IdOutOfRange),
+        ("(1.000000) can0 20000000#00", IdOutOfRange),
+        ("(1.000000) can0 123#R", RemoteFrame),
+        ("(1.000000) can0 123#R4", RemoteFrame),
+        ("(1.000000) can0 123##100112233", FdFrame),
+        ("(1.000000) can0 123#0", OddHex),
+        ("(1.000000) can0 123#DEADBEE", OddHex),
+        ("(1.000000) can0 123#DEADBEEG", BadHex),
+        ("(1.000000) can0 123#DE.AD", BadHex),
+        ("(1.000000) can0 123#010203040506070809", TooLong),
+        ("(1.000000) can0 123#DEAD BEEF", TrailingGarbage),
+        ("(1.000000) can0 123#DEAD R", TrailingGarbage),
+    ];
+    for (line, want) in cases {
+        assert_eq!(parse_line(line), Err(*want), "{line:?}");
+    }
+}
+
+fn arb_frame() -> impl Strategy<Value = TimedFrame> {
+    let id = prop_oneof![
+        (0u16..=0x7FF).prop_map(CanId::Standard),
+        (0u32..=0x1FFF_FFFF).prop_map(CanId::Extended),
+    ];
+    (
+        any::<u64>(),
+        id,
+        proptest::collection::vec(any::<u8>(), 0..=8),
+    )
+        .prop_map(|(t_us, id, data)| TimedFrame {
+            t_us,
+            frame: CanFrame::new(id, &data).unwrap(),
+        })
+}
+
+proptest! {
+    #[test]
+    fn candump_parse_of_format_is_identity(frame in arb_frame(), iface in "[a-z][a-z0-9_]{0,14}") {
+        let mut line = String::new();
+        format_line(&frame, &iface, &mut line).unwrap();
+        prop_assert_eq!(parse_line(&line), Ok(frame));
+        // And the canonical text survives a second round.
+        let mut again = String::new();
+        format_line(&parse_line(&line).unwrap(), &iface, &mut again).unwrap();
+        prop_assert_eq!(again, line);
+    }
+
+    #[test]
+    fn candump_parse_never_panics(line in "\\PC{0,60}") {
+        let _ = parse_line(&line);
+    }
+
+    #[test]
+    fn candump_parse_never_panics_near_valid(prefix in "[(0-9.) a-zA-Z#]{0,40}") {
+        let _ = parse_line(&prefix);
+    }
+}

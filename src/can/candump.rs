@@ -1,0 +1,200 @@
+//! The SocketCAN log format of `candump -l` / `canplayer`, one frame per line:
+//! `(1700000000.123456) can0 123#DEADBEEF`.
+//!
+//! - Timestamp: decimal seconds, a dot, exactly six decimals; converted to integer microseconds
+//!   without any float. [`format_line`] pads the seconds to 10 digits as can-utils does
+//!   (`%010lu.%06lu`); [`parse_line`] accepts 1 to 20 digits.
+//! - Interface: 1 to 15 printable characters (Linux `IFNAMSIZ` - 1).
+//! - Identifier: exactly 3 hex digits = 11-bit (<= 0x7FF), exactly 8 = 29-bit (<= 0x1FFFFFFF).
+//! - Data: 0 to 8 bytes as pairs of hex digits, either case; [`format_line`] writes upper case.
+//! - Rejected with a reason: remote frames (`123#R`), CAN FD frames (`123##1...`), anything after
+//!   the data other than trailing whitespace / CR / LF.
+//!
+//! No allocation, no panic: this is what the QEMU replay bus parses on the target.
+use core::fmt::Write;
+
+use super::frame::{CanFrame, CanId, TimedFrame};
+
+/// Why a candump line was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CandumpError {
+    /// The line is empty (or only whitespace).
+    Empty,
+    /// The line does not start with `(`.
+    MissingTimestamp,
+    /// The timestamp is not `SECONDS.UUUUUU` (digits, one dot, six decimals, closing `)`), or
+    /// it overflows 64-bit microseconds.
+    BadTimestamp,
+    /// No interface after the timestamp (the line ends, or no single space follows `)`).
+    MissingInterface,
+    /// The interface name is empty, longer than 15 characters or not printable.
+    BadInterface,
+    /// No `#` between identifier and data.
+    MissingSeparator,
+    /// The identifier is not 3 or 8 hex digits.
+    BadId,
+    /// 3 hex digits above 0x7FF, or 8 hex digits above 0x1FFFFFFF.
+    IdOutOfRange,
+    /// A remote transmission request (`#R`): the node has no use for them.
+    RemoteFrame,
+    /// A CAN FD frame (`##`): the bus is classic CAN.
+    FdFrame,
+    /// A data character that is not a hex digit.
+    BadHex,
+    /// An odd number of data hex digits.
+    OddHex,
+    /// More than 8 data bytes.
+    TooLong,
+    /// Something other than whitespace after the data.
+    TrailingGarbage,
+}
+
+/// Longest interface name (Linux IFNAMSIZ 16, minus the terminating NUL).
+pub const MAX_IFACE_LEN: usize = 15;
+
+fn hex_value(c: u8) -> Option<u8> {
+    match c {
+        b'0'..=b'9' => Some(c - b'0'),
+        b'a'..=b'f' => Some(c - b'a' + 10),
+        b'A'..=b'F' => Some(c - b'A' + 10),
+        _ => None,
+    }
+}
+
+fn parse_hex_u32(text: &str) -> Option<u32> {
+    text.bytes().try_fold(0u32, |acc, c| {
+        let v = hex_value(c)?;
+        acc.checked_mul(16)?.checked_add(u32::from(v))
+    })
+}
+
+fn parse_decimal(text: &str) -> Option<u64> {
+    if text.is_empty() {
+        return None;
+    }
+    text.bytes().try_fold(0u64, |acc, c| {
+        if !c.is_ascii_digit() {
+            return None;
+        }
+        acc.checked_mul(10)?.checked_add(u64::from(c - b'0'))
+    })
+}
+
+/// `SECONDS.UUUUUU` to microseconds.
+fn parse_timestamp(text: &str) -> Result<u64, CandumpError> {
+    let (secs, frac) = text.split_once('.').ok_or(CandumpError::BadTimestamp)?;
+    if secs.is_empty() || secs.len() > 20 || frac.len() != 6 {
+        return Err(CandumpError::BadTimestamp);
+    }
+    let secs = parse_decimal(secs).ok_or(CandumpError::BadTimestamp)?;
+    let micros = parse_decimal(frac).ok_or(CandumpError::BadTimestamp)?;
+    secs.checked_mul(1_000_000)
+        .and_then(|us| us.checked_add(micros))
+        .ok_or(CandumpError::BadTimestamp)
+}
+
+fn parse_id(text: &str) -> Result<CanId, CandumpError> {
+    let value = parse_hex_u32(text).ok_or(CandumpError::BadId)?;
+    let id = match text.len() {
+        3 => CanId::Standard(u16::try_from(value).map_err(|_| CandumpError::IdOutOfRange)?),
+        8 => CanId::Extended(value),
+        _ => return Err(CandumpError::BadId),
+    };
+    if id.is_valid() {
+        Ok(id)
+    } else {
+        Err(CandumpError::IdOutOfRange)
+    }
+}
+
+fn parse_data(text: &str) -> Result<([u8; 8], u8), CandumpError> {
+    if text.starts_with('#') {
+        return Err(CandumpError::FdFrame);
+    }
+    if text.starts_with(['R', 'r']) {
+        return Err(CandumpError::RemoteFrame);
+    }
+    let bytes = text.as_bytes();
+    if let Some(bad) = bytes.iter().find(|c| hex_value(**c).is_none()) {
+        return Err(if bad.is_ascii_whitespace() {
+            CandumpError::TrailingGarbage
+        } else {
+            CandumpError::BadHex
+        });
+    }
+    if bytes.len() > 16 {
+        return Err(CandumpError::TooLong);
+    }
+    if !bytes.len().is_multiple_of(2) {
+        return Err(CandumpError::OddHex);
+    }
+    let mut data = [0u8; 8];
+    for (out, pair) in data.iter_mut().zip(bytes.chunks_exact(2)) {
+        let hi = pair.first().copied().and_then(hex_value).unwrap_or(0);
+        let lo = pair.get(1).copied().and_then(hex_value).unwrap_or(0);
+        *out = (hi << 4) | lo;
+    }
+    Ok((data, (bytes.len() / 2) as u8))
+}
+
+/// Parses one candump line (a trailing CR/LF or whitespace is ignored).
+pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
+    let line = line.trim_end();
+    if line.is_empty() {
+        return Err(CandumpError::Empty);
+    }
+    let rest = line
+        .strip_prefix('(')
+        .ok_or(CandumpError::MissingTimestamp)?;
+    let (stamp, rest) = rest.split_once(')').ok_or(CandumpError::BadTimestamp)?;
+    let t_us = parse_timestamp(stamp)?;
+    let rest = rest
+        .strip_prefix(' ')
+        .ok_or(CandumpError::MissingInterface)?;
+    let (iface, frame_text) = rest.split_once(' ').ok_or(CandumpError::MissingInterface)?;
+    if iface.is_empty()
+        || iface.len() > MAX_IFACE_LEN
+        || !iface.bytes().all(|c| c.is_ascii_graphic())
+    {
+        return Err(CandumpError::BadInterface);
+    }
+    let (id_text, data_text) = frame_text
+        .split_once('#')
+        .ok_or(CandumpError::MissingSeparator)?;
+    let id = parse_id(id_text)?;
+    let (data, len) = parse_data(data_text)?;
+    Ok(TimedFrame {
+        t_us,
+        frame: CanFrame { id, len, data },
+    })
+}
+
+/// Writes `frame` as one candump line on interface `iface`, without a line terminator:
+/// `(SSSSSSSSSS.UUUUUU) IFACE ID#DATA`, upper-case hex.
+pub fn format_line<W: Write>(frame: &TimedFrame, iface: &str, out: &mut W) -> core::fmt::Result {
+    let secs = frame.t_us / 1_000_000;
+    let micros = frame.t_us % 1_000_000;
+    write!(out, "({secs:010}.{micros:06}) {iface} ")?;
+    match frame.frame.id {
+        CanId::Standard(id) => write!(out, "{id:03X}#")?,
+        CanId::Extended(id) => write!(out, "{id:08X}#")?,
+    }
+    for byte in frame.frame.payload() {
+        write!(out, "{byte:02X}")?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_documented_example() {
+        let f = parse_line("(1700000000.123456) can0 123#DEADBEEF").unwrap();
+        assert_eq!(f.t_us, 1_700_000_000_123_456);
+        assert_eq!(f.frame.id, CanId::Standard(0x123));
+        assert_eq!(f.frame.payload(), &[0xDE, 0xAD, 0xBE, 0xEF]);
+    }
+}

@@ -1,0 +1,967 @@
+//! Typed codecs of every message of `catmodel.dbc`, in physical units.
+//!
+//! Every codec goes through the descriptor table of [`super::spec`] and its generic bit packer,
+//! so the DBC test that checks the table checks the codecs too.
+//!
+//! Encoding never emits garbage: a non-finite physical value, or one outside the signal's DBC
+//! range, goes on the bus as the signal's "not available" raw value and is counted in the
+//! [`EncodeReport`] (so the node can raise its health bits). Event counters on NODE_STATUS
+//! saturate at their largest raw value instead of wrapping.
+//!
+//! Decoding checks, in this order: identifier, DLC, CRC (protected messages), then every
+//! signal's range. A signal carrying its "invalid" sentinel decodes to `None` (the sender says
+//! it has no value), except where the whole message would be meaningless (a position fix without
+//! latitude or longitude), which is [`DecodeError::Invalid`].
+use super::crc::frame_crc;
+use super::frame::{CanFrame, CanId};
+use super::spec::{self, sig, Integrity, MessageSpec, SignalSpec};
+
+/// Why a frame was not accepted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DecodeError {
+    /// The identifier (or NMEA 2000 PGN) is not this message's.
+    WrongId,
+    /// NMEA 2000 PGN matches but the source address is not the configured receiver.
+    WrongSource {
+        /// Source address found.
+        got: u8,
+    },
+    /// No message of `catmodel.dbc` has this identifier.
+    UnknownId,
+    /// Data length code differs from the DBC's.
+    Dlc {
+        /// DLC of the DBC.
+        expected: u8,
+        /// DLC received.
+        got: u8,
+    },
+    /// Byte 7 does not hold the CRC-8/SAE-J1850 of identifier and payload.
+    Crc {
+        /// CRC computed here.
+        expected: u8,
+        /// CRC received.
+        got: u8,
+    },
+    /// A raw value outside the signal's DBC range (and not its sentinel).
+    OutOfRange {
+        /// Signal name.
+        signal: &'static str,
+    },
+    /// A signal without which the message means nothing carries its "invalid" sentinel.
+    Invalid {
+        /// Signal name.
+        signal: &'static str,
+    },
+}
+
+/// What an encoder had to substitute.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EncodeReport {
+    /// Physical values sent as "not available" because they were `None`.
+    pub absent: u8,
+    /// Physical values sent as "not available" because they were NaN or infinite.
+    pub non_finite: u8,
+    /// Physical values sent as "not available" because they were outside the DBC range.
+    pub out_of_range: u8,
+    /// Event counters that saturated at their largest raw value.
+    pub saturated: u8,
+}
+
+impl EncodeReport {
+    /// Whether any present value was replaced (non-finite, out of range or saturated).
+    pub const fn any_substituted(&self) -> bool {
+        self.non_finite > 0 || self.out_of_range > 0 || self.saturated > 0
+    }
+
+    /// Adds another report's counts.
+    pub fn merge(&mut self, other: &EncodeReport) {
+        self.absent = self.absent.saturating_add(other.absent);
+        self.non_finite = self.non_finite.saturating_add(other.non_finite);
+        self.out_of_range = self.out_of_range.saturating_add(other.out_of_range);
+        self.saturated = self.saturated.saturating_add(other.saturated);
+    }
+}
+
+/// Which model the node runs (STATE_MOTION and NODE_STATUS page 0 `mode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ModelMode {
+    /// Kinematic bicycle model (eq 8), raw 0.
+    #[default]
+    Kinematic,
+    /// Dynamic bicycle model, raw 1.
+    Dynamic,
+}
+
+impl ModelMode {
+    const fn raw(self) -> i64 {
+        match self {
+            ModelMode::Kinematic => 0,
+            ModelMode::Dynamic => 1,
+        }
+    }
+    const fn from_raw(raw: i64) -> Self {
+        if raw == 0 {
+            ModelMode::Kinematic
+        } else {
+            ModelMode::Dynamic
+        }
+    }
+}
+
+/// Builds one frame of a message from physical values.
+struct Writer {
+    spec: &'static MessageSpec,
+    data: [u8; 8],
+    report: EncodeReport,
+}
+
+impl Writer {
+    const fn new(spec: &'static MessageSpec) -> Self {
+        Self {
+            spec,
+            data: [0; 8],
+            report: EncodeReport {
+                absent: 0,
+                non_finite: 0,
+                out_of_range: 0,
+                saturated: 0,
+            },
+        }
+    }
+
+    /// A physical value, or "not available" (counted) when absent, non-finite or out of range.
+    fn phys(&mut self, s: &SignalSpec, value: Option<f32>) {
+        let raw = match value {
+            None => {
+                self.report.absent = self.report.absent.saturating_add(1);
+                None
+            }
+            Some(v) if !v.is_finite() => {
+                self.report.non_finite = self.report.non_finite.saturating_add(1);
+                None
+            }
+            Some(v) => {
+                let raw = s.to_raw(v);
+                if raw.is_none() {
+                    self.report.out_of_range = self.report.out_of_range.saturating_add(1);
+                }
+                raw
+            }
+        };
+        // Note: every float signal of the table has a sentinel; `raw_min` is the fallback.
+        let raw = raw.unwrap_or(s.not_available_raw.unwrap_or(s.raw_min));
+        s.write_raw(&mut self.data, raw);
+    }
+
+    /// An integer already known to be in range (flags, enums, N2K fields).
+    fn raw(&mut self, s: &SignalSpec, raw: i64) {
+        s.write_raw(&mut self.data, raw);
+    }
+
+    fn flag(&mut self, s: &SignalSpec, on: bool) {
+        s.write_raw(&mut self.data, i64::from(on));
+    }
+
+    /// An event counter, saturating at `raw_max`.
+    fn count(&mut self, s: &SignalSpec, value: u32) {
+        let raw = if i64::from(value) > s.raw_max {
+            self.report.saturated = self.report.saturated.saturating_add(1);
+            s.raw_max
+        } else {
+            i64::from(value)
+        };
+        s.write_raw(&mut self.data, raw);
+    }
+
+    /// An optional measurement, saturating at `raw_max`, sentinel when absent.
+    fn count_or_na(&mut self, s: &SignalSpec, value: Option<u32>) {
+        match value {
+            Some(v) => self.count(s, v),
+            None => s.write_raw(&mut self.data, s.not_available_raw.unwrap_or(s.raw_max)),
+        }
+    }
+
+    /// Writes counter and CRC (protected messages) and returns the frame.
+    fn finish(mut self, id: CanId, counter: u8) -> (CanFrame, EncodeReport) {
+        if let Integrity::CounterCrc(counter_spec) = self.spec.integrity {
+            counter_spec.write_raw(&mut self.data, i64::from(counter & 0x0F));
+            let crc = frame_crc(id, &self.data);
+            sig::CRC.write_raw(&mut self.data, i64::from(crc));
+        }
+        let frame = CanFrame {
+            id,
+            len: self.spec.dlc,
+            data: self.data,
+        };
+        (frame, self.report)
+    }
+}
+
+/// Reads one checked frame of a message.
+struct Reader {
+    data: [u8; 8],
+    counter: u8,
+}
+
+impl Reader {
+    /// Checks DLC and (protected messages) CRC; the identifier is checked by the caller.
+    fn new(spec: &MessageSpec, frame: &CanFrame) -> Result<Self, DecodeError> {
+        if frame.len != spec.dlc {
+            return Err(DecodeError::Dlc {
+                expected: spec.dlc,
+                got: frame.len,
+            });
+        }
+        let mut counter = 0;
+        if let Integrity::CounterCrc(counter_spec) = spec.integrity {
+            let expected = frame_crc(frame.id, &frame.data);
+            let got = sig::CRC.read_raw(&frame.data) as u8;
+            if expected != got {
+                return Err(DecodeError::Crc { expected, got });
+            }
+            counter = counter_spec.read_raw(&frame.data) as u8;
+        }
+        Ok(Self {
+            data: frame.data,
+            counter,
+        })
+    }
+
+    /// Checks a standard identifier, then as [`Reader::new`].
+    fn standard(spec: &MessageSpec, frame: &CanFrame) -> Result<Self, DecodeError> {
+        if frame.id != spec.id {
+            return Err(DecodeError::WrongId);
+        }
+        Self::new(spec, frame)
+    }
+
+    /// Checks an NMEA 2000 PGN (any priority) and source address, then as [`Reader::new`].
+    fn n2k(spec: &MessageSpec, frame: &CanFrame, source: u8) -> Result<Self, DecodeError> {
+        let (CanId::Extended(id), CanId::Extended(spec_id)) = (frame.id, spec.id) else {
+            return Err(DecodeError::WrongId);
+        };
+        let (pgn, src) = spec::n2k_pgn_source(id);
+        if pgn != spec::n2k_pgn_source(spec_id).0 {
+            return Err(DecodeError::WrongId);
+        }
+        if src != source {
+            return Err(DecodeError::WrongSource { got: src });
+        }
+        Self::new(spec, frame)
+    }
+
+    /// Raw value, range-checked; the sentinel reads as `None`.
+    fn raw(&self, s: &SignalSpec) -> Result<Option<i64>, DecodeError> {
+        let raw = s.read_raw(&self.data);
+        if Some(raw) == s.not_available_raw {
+            Ok(None)
+        } else if s.in_range(raw) {
+            Ok(Some(raw))
+        } else {
+            Err(DecodeError::OutOfRange { signal: s.name })
+        }
+    }
+
+    fn phys(&self, s: &SignalSpec) -> Result<Option<f32>, DecodeError> {
+        Ok(self.raw(s)?.map(|raw| s.to_physical(raw)))
+    }
+
+    /// A raw value that must be present (no sentinel, or sentinel = [`DecodeError::Invalid`]).
+    fn required(&self, s: &SignalSpec) -> Result<i64, DecodeError> {
+        self.raw(s)?.ok_or(DecodeError::Invalid { signal: s.name })
+    }
+
+    fn flag(&self, s: &SignalSpec) -> bool {
+        s.read_raw(&self.data) != 0
+    }
+
+    fn count(&self, s: &SignalSpec) -> Result<u32, DecodeError> {
+        Ok(self.required(s)? as u32)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Inputs
+
+/// STEERING_REPORT (0x100): measured steering.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SteeringReport {
+    /// Steering, % of full lock, -100..=100, positive = right; `None` = the DBW reports invalid.
+    pub steer_pct: Option<f32>,
+}
+
+impl SteeringReport {
+    /// The frame, with `counter` (4 bits) and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::STEERING_REPORT);
+        w.phys(&sig::STEER_PCT, self.steer_pct);
+        w.finish(spec::STEERING_REPORT.id, counter)
+    }
+    /// The message and its rolling counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::STEERING_REPORT, frame)?;
+        let msg = Self {
+            steer_pct: r.phys(&sig::STEER_PCT)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// SPEED_REPORT (0x101): measured and commanded speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedReport {
+    /// Measured speed, m/s; `None` = invalid.
+    pub speed_mps: Option<f32>,
+    /// Commanded speed, m/s; `None` = invalid.
+    pub speed_cmd_mps: Option<f32>,
+}
+
+impl SpeedReport {
+    /// The frame, with `counter` (4 bits) and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::SPEED_REPORT);
+        w.phys(&sig::SPEED_MPS, self.speed_mps);
+        w.phys(&sig::SPEED_CMD_MPS, self.speed_cmd_mps);
+        w.finish(spec::SPEED_REPORT.id, counter)
+    }
+    /// The message and its rolling counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::SPEED_REPORT, frame)?;
+        let msg = Self {
+            speed_mps: r.phys(&sig::SPEED_MPS)?,
+            speed_cmd_mps: r.phys(&sig::SPEED_CMD_MPS)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// PEDAL_REPORT (0x102): accelerator and brake pedals.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PedalReport {
+    /// Accelerator pedal, %, 0..=100; `None` = invalid.
+    pub accel_pct: Option<f32>,
+    /// Brake pedal, %, 0..=100; `None` = invalid.
+    pub brake_pct: Option<f32>,
+}
+
+impl PedalReport {
+    /// The frame, with `counter` (4 bits) and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::PEDAL_REPORT);
+        w.phys(&sig::ACCEL_PCT, self.accel_pct);
+        w.phys(&sig::BRAKE_PCT, self.brake_pct);
+        w.finish(spec::PEDAL_REPORT.id, counter)
+    }
+    /// The message and its rolling counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::PEDAL_REPORT, frame)?;
+        let msg = Self {
+            accel_pct: r.phys(&sig::ACCEL_PCT)?,
+            brake_pct: r.phys(&sig::BRAKE_PCT)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// NMEA 2000 PGN 129025 "Position, Rapid Update". Kept in integer 1e-7 degrees: an f32 of
+/// degrees would lose about a metre.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GnssPosition {
+    /// Latitude, 1e-7 deg, -90e7..=90e7.
+    pub lat_e7: i32,
+    /// Longitude, 1e-7 deg, -180e7..=180e7.
+    pub lon_e7: i32,
+}
+
+impl GnssPosition {
+    /// The frame from `source` (priority 2). Out-of-range coordinates go out as "not
+    /// available" (0x7FFFFFFF) and are counted.
+    pub fn encode(&self, source: u8) -> CanFrame {
+        self.encode_with_report(source).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, source: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::GNSS_POSITION_RAPID);
+        for (s, v) in [
+            (&sig::LATITUDE_DEG, self.lat_e7),
+            (&sig::LONGITUDE_DEG, self.lon_e7),
+        ] {
+            let v = i64::from(v);
+            if s.in_range(v) {
+                w.raw(s, v);
+            } else {
+                w.report.out_of_range = w.report.out_of_range.saturating_add(1);
+                w.raw(s, s.not_available_raw.unwrap_or(0));
+            }
+        }
+        let id = spec::n2k_id(spec::N2K_PRIORITY, spec::PGN_POSITION_RAPID, source);
+        w.finish(CanId::Extended(id), 0)
+    }
+    /// The fix, if the frame is PGN 129025 from `source` and both coordinates are available
+    /// and in range (plausibility against the previous fix is the node's gate).
+    pub fn decode(frame: &CanFrame, source: u8) -> Result<Self, DecodeError> {
+        let r = Reader::n2k(&spec::GNSS_POSITION_RAPID, frame, source)?;
+        Ok(Self {
+            lat_e7: r.required(&sig::LATITUDE_DEG)? as i32,
+            lon_e7: r.required(&sig::LONGITUDE_DEG)? as i32,
+        })
+    }
+}
+
+/// NMEA 2000 PGN 129026 "COG & SOG, Rapid Update".
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GnssCogSog {
+    /// Sequence identifier tying related PGNs together.
+    pub sid: u8,
+    /// Direction reference: 0 true, 1 magnetic, 2 error, 3 null.
+    pub cog_reference: u8,
+    /// Course over ground, rad, 0..=2 pi, clockwise from north; `None` = not available.
+    pub cog_rad: Option<f32>,
+    /// Speed over ground, m/s; `None` = not available.
+    pub sog_mps: Option<f32>,
+}
+
+impl GnssCogSog {
+    /// The frame from `source` (priority 2); reserved bits are 1 as NMEA 2000 requires.
+    pub fn encode(&self, source: u8) -> CanFrame {
+        self.encode_with_report(source).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, source: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::GNSS_COG_SOG_RAPID);
+        w.data = [0xFF; 8];
+        w.raw(&sig::SID, i64::from(self.sid));
+        w.raw(&sig::COG_REFERENCE, i64::from(self.cog_reference & 0x3));
+        w.phys(&sig::COG_RAD, self.cog_rad);
+        w.phys(&sig::SOG_MPS, self.sog_mps);
+        let id = spec::n2k_id(spec::N2K_PRIORITY, spec::PGN_COG_SOG_RAPID, source);
+        w.finish(CanId::Extended(id), 0)
+    }
+    /// The message, if the frame is PGN 129026 from `source`.
+    pub fn decode(frame: &CanFrame, source: u8) -> Result<Self, DecodeError> {
+        let r = Reader::n2k(&spec::GNSS_COG_SOG_RAPID, frame, source)?;
+        Ok(Self {
+            sid: r.required(&sig::SID)? as u8,
+            cog_reference: r.required(&sig::COG_REFERENCE)? as u8,
+            cog_rad: r.phys(&sig::COG_RAD)?,
+            sog_mps: r.phys(&sig::SOG_MPS)?,
+        })
+    }
+}
+
+/// Any input message, as [`decode_input`] classifies it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InputMessage {
+    /// 0x100 and its rolling counter.
+    Steering(SteeringReport, u8),
+    /// 0x101 and its rolling counter.
+    Speed(SpeedReport, u8),
+    /// 0x102 and its rolling counter.
+    Pedal(PedalReport, u8),
+    /// PGN 129025.
+    GnssPosition(GnssPosition),
+    /// PGN 129026.
+    GnssCogSog(GnssCogSog),
+}
+
+/// Decodes any input frame; [`DecodeError::UnknownId`] for identifiers that are not inputs
+/// (GNSS PGNs from another source are [`DecodeError::WrongSource`]).
+pub fn decode_input(frame: &CanFrame, gnss_source: u8) -> Result<InputMessage, DecodeError> {
+    match frame.id {
+        id if id == spec::STEERING_REPORT.id => {
+            SteeringReport::decode(frame).map(|(m, c)| InputMessage::Steering(m, c))
+        }
+        id if id == spec::SPEED_REPORT.id => {
+            SpeedReport::decode(frame).map(|(m, c)| InputMessage::Speed(m, c))
+        }
+        id if id == spec::PEDAL_REPORT.id => {
+            PedalReport::decode(frame).map(|(m, c)| InputMessage::Pedal(m, c))
+        }
+        CanId::Extended(raw) => match spec::n2k_pgn_source(raw).0 {
+            spec::PGN_POSITION_RAPID => {
+                GnssPosition::decode(frame, gnss_source).map(InputMessage::GnssPosition)
+            }
+            spec::PGN_COG_SOG_RAPID => {
+                GnssCogSog::decode(frame, gnss_source).map(InputMessage::GnssCogSog)
+            }
+            _ => Err(DecodeError::UnknownId),
+        },
+        CanId::Standard(_) => Err(DecodeError::UnknownId),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Outputs
+
+/// STATE_POSITION (0x300): flags and the filtered position in the local east/north frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StatePosition {
+    /// The position is valid.
+    pub position_valid: bool,
+    /// A GNSS fix arrived within its timeout.
+    pub gnss_fresh: bool,
+    /// The last GNSS fix was rejected by the plausibility gate.
+    pub gnss_rejected: bool,
+    /// East of the origin, m, |x| <= 83 886.07; `None` = not available.
+    pub east_m: Option<f32>,
+    /// North of the origin, m, |y| <= 83 886.07; `None` = not available.
+    pub north_m: Option<f32>,
+}
+
+impl StatePosition {
+    /// The frame, with `counter` (the tick sequence number mod 16) and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::STATE_POSITION);
+        w.flag(&sig::POSITION_VALID, self.position_valid);
+        w.flag(&sig::GNSS_FRESH, self.gnss_fresh);
+        w.flag(&sig::GNSS_REJECTED, self.gnss_rejected);
+        w.phys(&sig::EAST_M, self.east_m);
+        w.phys(&sig::NORTH_M, self.north_m);
+        w.finish(spec::STATE_POSITION.id, counter)
+    }
+    /// The message and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::STATE_POSITION, frame)?;
+        let msg = Self {
+            position_valid: r.flag(&sig::POSITION_VALID),
+            gnss_fresh: r.flag(&sig::GNSS_FRESH),
+            gnss_rejected: r.flag(&sig::GNSS_REJECTED),
+            east_m: r.phys(&sig::EAST_M)?,
+            north_m: r.phys(&sig::NORTH_M)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// STATE_MOTION (0x301): model mode, heading, speed and yaw rate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StateMotion {
+    /// Model in use.
+    pub mode: ModelMode,
+    /// Heading, rad, clockwise from north, [-pi, pi]; `None` = not available.
+    pub heading_rad: Option<f32>,
+    /// Speed, m/s; `None` = not available.
+    pub speed_mps: Option<f32>,
+    /// Yaw rate, rad/s, clockwise positive; `None` = not available.
+    pub yaw_rate_radps: Option<f32>,
+}
+
+impl StateMotion {
+    /// The frame, with `counter` and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::STATE_MOTION);
+        w.raw(&sig::MODE, self.mode.raw());
+        w.phys(&sig::HEADING_RAD, self.heading_rad);
+        w.phys(&sig::STATE_SPEED_MPS, self.speed_mps);
+        w.phys(&sig::YAW_RATE_RADPS, self.yaw_rate_radps);
+        w.finish(spec::STATE_MOTION.id, counter)
+    }
+    /// The message and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::STATE_MOTION, frame)?;
+        let msg = Self {
+            mode: ModelMode::from_raw(sig::MODE.read_raw(&r.data)),
+            heading_rad: r.phys(&sig::HEADING_RAD)?,
+            speed_mps: r.phys(&sig::STATE_SPEED_MPS)?,
+            yaw_rate_radps: r.phys(&sig::YAW_RATE_RADPS)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// STATE_MODEL (0x302): the identified models' outputs this tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StateModel {
+    /// Velocity-model output (eq 5), m/s; `None` = not available.
+    pub speed_model_mps: Option<f32>,
+    /// dx/dt model output (eq 7), m/s; `None` = not available.
+    pub dxdt_model_mps: Option<f32>,
+    /// Lateral acceleration, m/s^2, positive = right; `None` = not available.
+    pub lat_accel_mps2: Option<f32>,
+}
+
+impl StateModel {
+    /// The frame, with `counter` and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::STATE_MODEL);
+        w.phys(&sig::SPEED_MODEL_MPS, self.speed_model_mps);
+        w.phys(&sig::DXDT_MODEL_MPS, self.dxdt_model_mps);
+        w.phys(&sig::LAT_ACCEL_MPS2, self.lat_accel_mps2);
+        w.finish(spec::STATE_MODEL.id, counter)
+    }
+    /// The message and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::STATE_MODEL, frame)?;
+        let msg = Self {
+            speed_model_mps: r.phys(&sig::SPEED_MODEL_MPS)?,
+            dxdt_model_mps: r.phys(&sig::DXDT_MODEL_MPS)?,
+            lat_accel_mps2: r.phys(&sig::LAT_ACCEL_MPS2)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// Which prediction point, 1..=10 (point k is k * 0.2 s ahead); always a valid index.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct PredictionPoint(u8);
+
+impl PredictionPoint {
+    /// Point `k`, 1..=10.
+    pub const fn new(k: u8) -> Option<Self> {
+        if k >= 1 && k as usize <= spec::PREDICTION_POINTS {
+            Some(Self(k))
+        } else {
+            None
+        }
+    }
+    /// The point's number k, 1..=10.
+    pub const fn k(self) -> u8 {
+        self.0
+    }
+    /// Horizon, us (k * 200 000).
+    pub const fn horizon_us(self) -> u64 {
+        self.0 as u64 * spec::PREDICTION_STEP_US
+    }
+    /// All ten points, nearest first.
+    pub fn all() -> impl Iterator<Item = Self> {
+        (1..=spec::PREDICTION_POINTS as u8).map(Self)
+    }
+    fn spec(self) -> &'static MessageSpec {
+        // Note: `self.0` is 1..=10 by construction; the fallback is never taken.
+        spec::PREDICTIONS
+            .get(usize::from(self.0).wrapping_sub(1))
+            .unwrap_or(&spec::PREDICTIONS[0])
+    }
+}
+
+/// PREDICTION_k (0x310 + k - 1): point k of the horizon, relative to this tick's
+/// STATE_POSITION and STATE_MOTION heading. Out-of-range values go out as the raw minimum
+/// ("not available / saturated").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prediction {
+    /// Which point.
+    pub point: PredictionPoint,
+    /// East displacement, m, |dx| <= 81.91; `None` = not available.
+    pub dx_m: Option<f32>,
+    /// North displacement, m, |dy| <= 81.91; `None` = not available.
+    pub dy_m: Option<f32>,
+    /// Heading change, rad, |dh| <= 2.047; `None` = not available.
+    pub dheading_rad: Option<f32>,
+    /// Speed, m/s, 0..=40.94; `None` = not available.
+    pub speed_mps: Option<f32>,
+}
+
+impl Prediction {
+    /// The frame, with `counter` and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let spec = self.point.spec();
+        let mut w = Writer::new(spec);
+        w.phys(&sig::DX_M, self.dx_m);
+        w.phys(&sig::DY_M, self.dy_m);
+        w.phys(&sig::DHEADING_RAD, self.dheading_rad);
+        w.phys(&sig::PRED_SPEED_MPS, self.speed_mps);
+        w.finish(spec.id, counter)
+    }
+    /// The message (any of 0x310..=0x319) and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let CanId::Standard(id) = frame.id else {
+            return Err(DecodeError::WrongId);
+        };
+        let point = id
+            .checked_sub(spec::PREDICTION_BASE_ID)
+            .and_then(|i| u8::try_from(i + 1).ok())
+            .and_then(PredictionPoint::new)
+            .ok_or(DecodeError::WrongId)?;
+        let r = Reader::new(point.spec(), frame)?;
+        let msg = Self {
+            point,
+            dx_m: r.phys(&sig::DX_M)?,
+            dy_m: r.phys(&sig::DY_M)?,
+            dheading_rad: r.phys(&sig::DHEADING_RAD)?,
+            speed_mps: r.phys(&sig::PRED_SPEED_MPS)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// NODE_STATUS page 0 health bits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HealthFlags {
+    /// Steering report timed out.
+    pub steer_stale: bool,
+    /// Speed report timed out.
+    pub speed_stale: bool,
+    /// Pedal report timed out.
+    pub pedal_stale: bool,
+    /// GNSS timed out.
+    pub gnss_stale: bool,
+    /// A GNSS fix was rejected within the last second.
+    pub gnss_rejected_recently: bool,
+    /// No valid position.
+    pub position_invalid: bool,
+    /// A prediction value of this tick went out as "not available".
+    pub prediction_saturated: bool,
+    /// A non-finite value was caught this tick.
+    pub nonfinite_guard: bool,
+    /// The last reset was the watchdog's.
+    pub watchdog_reset: bool,
+    /// A tick overran within the last second.
+    pub overrun_recently: bool,
+    /// An input carried its "invalid" sentinel within the last second.
+    pub input_invalid: bool,
+}
+
+const HEALTH_BITS: [&SignalSpec; 11] = [
+    &sig::STEER_STALE,
+    &sig::SPEED_STALE,
+    &sig::PEDAL_STALE,
+    &sig::GNSS_STALE,
+    &sig::GNSS_REJECTED_RECENTLY,
+    &sig::POSITION_INVALID,
+    &sig::PREDICTION_SATURATED,
+    &sig::NONFINITE_GUARD,
+    &sig::WATCHDOG_RESET,
+    &sig::OVERRUN_RECENTLY,
+    &sig::INPUT_INVALID,
+];
+
+impl HealthFlags {
+    const fn as_array(&self) -> [bool; 11] {
+        [
+            self.steer_stale,
+            self.speed_stale,
+            self.pedal_stale,
+            self.gnss_stale,
+            self.gnss_rejected_recently,
+            self.position_invalid,
+            self.prediction_saturated,
+            self.nonfinite_guard,
+            self.watchdog_reset,
+            self.overrun_recently,
+            self.input_invalid,
+        ]
+    }
+    const fn from_array(b: [bool; 11]) -> Self {
+        Self {
+            steer_stale: b[0],
+            speed_stale: b[1],
+            pedal_stale: b[2],
+            gnss_stale: b[3],
+            gnss_rejected_recently: b[4],
+            position_invalid: b[5],
+            prediction_saturated: b[6],
+            nonfinite_guard: b[7],
+            watchdog_reset: b[8],
+            overrun_recently: b[9],
+            input_invalid: b[10],
+        }
+    }
+}
+
+/// NODE_STATUS (0x3F0), one page per tick (page = tick sequence number mod 5). Counters are
+/// given as u32 and saturate at the field's maximum on the bus.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NodeStatus {
+    /// Page 0.
+    Health {
+        /// Model in use.
+        mode: ModelMode,
+        /// Health bits.
+        health: HealthFlags,
+        /// Ticks that overran since boot (saturates at 65 535).
+        overrun_count: u32,
+        /// Duration of the previous step, us (saturates at 65 534); `None` = not measured.
+        last_step_us: Option<u32>,
+    },
+    /// Page 1.
+    RxErrors {
+        /// Frames with a bad CRC.
+        crc_errors: u32,
+        /// Stuck or jumping rolling counters.
+        counter_errors: u32,
+        /// Known identifiers with the wrong DLC.
+        dlc_errors: u32,
+    },
+    /// Page 2.
+    RxRejects {
+        /// Values outside their DBC range.
+        range_errors: u32,
+        /// GNSS fixes rejected by the plausibility gate.
+        gnss_gate_rejects: u32,
+        /// Identifiers the node does not know.
+        unknown_ids: u32,
+    },
+    /// Page 3.
+    Platform {
+        /// Ticks since boot (32 bits, saturating).
+        tick_count: u32,
+        /// Frames dropped by a full receive queue.
+        rx_queue_drops: u32,
+    },
+    /// Page 4.
+    Ages {
+        /// Ages of the last steering, speed, pedal and GNSS input, 10 ms units, 254 =
+        /// saturated, 255 = never received (see [`super::freshness::age_10ms`]).
+        ages_10ms: [u8; 4],
+        /// Deepest stack use, bytes (saturates at 65 534); `None` = not measured.
+        stack_high_water_bytes: Option<u32>,
+    },
+}
+
+const AGE_SIGNALS: [&SignalSpec; 4] = [
+    &sig::STEER_AGE,
+    &sig::SPEED_AGE,
+    &sig::PEDAL_AGE,
+    &sig::GNSS_AGE,
+];
+
+impl NodeStatus {
+    /// The multiplexer page of this variant, 0..=4.
+    pub const fn page(&self) -> u8 {
+        match self {
+            NodeStatus::Health { .. } => 0,
+            NodeStatus::RxErrors { .. } => 1,
+            NodeStatus::RxRejects { .. } => 2,
+            NodeStatus::Platform { .. } => 3,
+            NodeStatus::Ages { .. } => 4,
+        }
+    }
+
+    /// The frame, with `counter` and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+
+    /// As [`Self::encode`], with what saturated.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::NODE_STATUS);
+        w.raw(&sig::PAGE, i64::from(self.page()));
+        match *self {
+            NodeStatus::Health {
+                mode,
+                health,
+                overrun_count,
+                last_step_us,
+            } => {
+                w.raw(&sig::STATUS_MODE, mode.raw());
+                for (s, on) in HEALTH_BITS.iter().zip(health.as_array()) {
+                    w.flag(s, on);
+                }
+                w.count(&sig::OVERRUN_COUNT, overrun_count);
+                w.count_or_na(&sig::LAST_STEP_US, last_step_us);
+            }
+            NodeStatus::RxErrors {
+                crc_errors,
+                counter_errors,
+                dlc_errors,
+            } => {
+                w.count(&sig::CRC_ERRORS, crc_errors);
+                w.count(&sig::COUNTER_ERRORS, counter_errors);
+                w.count(&sig::DLC_ERRORS, dlc_errors);
+            }
+            NodeStatus::RxRejects {
+                range_errors,
+                gnss_gate_rejects,
+                unknown_ids,
+            } => {
+                w.count(&sig::RANGE_ERRORS, range_errors);
+                w.count(&sig::GNSS_GATE_REJECTS, gnss_gate_rejects);
+                w.count(&sig::UNKNOWN_IDS, unknown_ids);
+            }
+            NodeStatus::Platform {
+                tick_count,
+                rx_queue_drops,
+            } => {
+                w.count(&sig::TICK_COUNT, tick_count);
+                w.count(&sig::RX_QUEUE_DROPS, rx_queue_drops);
+            }
+            NodeStatus::Ages {
+                ages_10ms,
+                stack_high_water_bytes,
+            } => {
+                for (s, age) in AGE_SIGNALS.iter().zip(ages_10ms) {
+                    w.raw(s, i64::from(age));
+                }
+                w.count_or_na(&sig::STACK_HIGH_WATER_BYTES, stack_high_water_bytes);
+            }
+        }
+        w.finish(spec::NODE_STATUS.id, counter)
+    }
+
+    /// The page and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::NODE_STATUS, frame)?;
+        let msg = match r.required(&sig::PAGE)? {
+            0 => {
+                let mut bits = [false; 11];
+                for (b, s) in bits.iter_mut().zip(HEALTH_BITS) {
+                    *b = r.flag(s);
+                }
+                NodeStatus::Health {
+                    mode: ModelMode::from_raw(sig::STATUS_MODE.read_raw(&r.data)),
+                    health: HealthFlags::from_array(bits),
+                    overrun_count: r.count(&sig::OVERRUN_COUNT)?,
+                    last_step_us: r.raw(&sig::LAST_STEP_US)?.map(|v| v as u32),
+                }
+            }
+            1 => NodeStatus::RxErrors {
+                crc_errors: r.count(&sig::CRC_ERRORS)?,
+                counter_errors: r.count(&sig::COUNTER_ERRORS)?,
+                dlc_errors: r.count(&sig::DLC_ERRORS)?,
+            },
+            2 => NodeStatus::RxRejects {
+                range_errors: r.count(&sig::RANGE_ERRORS)?,
+                gnss_gate_rejects: r.count(&sig::GNSS_GATE_REJECTS)?,
+                unknown_ids: r.count(&sig::UNKNOWN_IDS)?,
+            },
+            3 => NodeStatus::Platform {
+                tick_count: r.count(&sig::TICK_COUNT)?,
+                rx_queue_drops: r.count(&sig::RX_QUEUE_DROPS)?,
+            },
+            _ => {
+                let mut ages_10ms = [0u8; 4];
+                for (a, s) in ages_10ms.iter_mut().zip(AGE_SIGNALS) {
+                    *a = s.read_raw(&r.data) as u8;
+                }
+                NodeStatus::Ages {
+                    ages_10ms,
+                    stack_high_water_bytes: r.raw(&sig::STACK_HIGH_WATER_BYTES)?.map(|v| v as u32),
+                }
+            }
+        };
+        Ok((msg, r.counter))
+    }
+}

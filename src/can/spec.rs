@@ -1,0 +1,712 @@
+//! The descriptor table of `catmodel.dbc`: one [`MessageSpec`] per message, one [`SignalSpec`]
+//! per signal, and the generic, panic-free little-endian (Intel) bit packer that every typed codec
+//! in [`super::codec`] goes through. `host-tests/tests/dbc.rs` checks this table against the DBC,
+//! field by field, so the DBC stays the single source of truth.
+//!
+//! Raw limits are integers (`raw_min..=raw_max`); the physical value is `raw * scale + offset`.
+//! Keeping the limits raw avoids f32 rounding on 32-bit signals (latitude in 1e-7 deg).
+use super::frame::{CanFrame, CanId};
+
+/// Name of our node in the DBC (`BU_`).
+pub const NODE_CATMODEL: &str = "CATMODEL";
+/// The drive-by-wire kit that sends the steering, speed and pedal reports.
+pub const NODE_DBW: &str = "DBW";
+/// The NMEA 2000 GNSS receiver.
+pub const NODE_GNSS: &str = "GNSS";
+/// The motion planner that consumes our predictions, state and status.
+pub const NODE_PLANNER: &str = "PLANNER";
+
+/// 2^bits for bits < 63 (saturating beyond), usable in const context.
+const fn pow2(bits: u8) -> i64 {
+    match 1i64.checked_shl(bits as u32) {
+        Some(v) if bits < 63 => v,
+        _ => i64::MAX,
+    }
+}
+
+/// How a signal takes part in multiplexing (DBC `M` / `mN`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mux {
+    /// Present in every frame of the message.
+    Plain,
+    /// The multiplexer switch itself (the page number).
+    Switch,
+    /// Present only when the switch equals this page.
+    Page(u8),
+}
+
+/// One signal: position, width, signedness, scaling, raw limits, unit and its
+/// "not available" sentinel. Byte order is always little-endian (Intel, `@1` in the DBC).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SignalSpec {
+    /// Signal name, as in the DBC.
+    pub name: &'static str,
+    /// Least significant bit, Intel numbering (bit `b` = byte `b / 8`, bit `b % 8`).
+    pub start_bit: u8,
+    /// Width in bits, 1..=32.
+    pub len_bits: u8,
+    /// Two's complement signed.
+    pub signed: bool,
+    /// Physical = raw * scale + offset.
+    pub scale: f32,
+    /// Physical = raw * scale + offset.
+    pub offset: f32,
+    /// Smallest valid raw value (DBC minimum = raw_min * scale + offset).
+    pub raw_min: i64,
+    /// Largest valid raw value (DBC maximum = raw_max * scale + offset).
+    pub raw_max: i64,
+    /// Physical unit, as in the DBC.
+    pub unit: &'static str,
+    /// Multiplexing role.
+    pub mux: Mux,
+    /// Raw value meaning "invalid / not available", outside `raw_min..=raw_max`.
+    pub not_available_raw: Option<i64>,
+}
+
+impl SignalSpec {
+    /// An unsigned integer signal with unit scale covering its full width.
+    pub const fn uint(name: &'static str, start_bit: u8, len_bits: u8) -> Self {
+        Self {
+            name,
+            start_bit,
+            len_bits,
+            signed: false,
+            scale: 1.0,
+            offset: 0.0,
+            raw_min: 0,
+            raw_max: pow2(len_bits).wrapping_sub(1),
+            unit: "",
+            mux: Mux::Plain,
+            not_available_raw: None,
+        }
+    }
+
+    /// A signed integer signal with unit scale covering its full width.
+    pub const fn int(name: &'static str, start_bit: u8, len_bits: u8) -> Self {
+        Self {
+            signed: true,
+            raw_min: pow2(len_bits.saturating_sub(1)).wrapping_neg(),
+            raw_max: pow2(len_bits.saturating_sub(1)).wrapping_sub(1),
+            ..Self::uint(name, start_bit, len_bits)
+        }
+    }
+
+    /// With a scale and a unit.
+    pub const fn scaled(self, scale: f32, unit: &'static str) -> Self {
+        Self {
+            scale,
+            unit,
+            ..self
+        }
+    }
+
+    /// With raw limits.
+    pub const fn raw_range(self, raw_min: i64, raw_max: i64) -> Self {
+        Self {
+            raw_min,
+            raw_max,
+            ..self
+        }
+    }
+
+    /// With a "not available" sentinel.
+    pub const fn na(self, raw: i64) -> Self {
+        Self {
+            not_available_raw: Some(raw),
+            ..self
+        }
+    }
+
+    /// Only present on multiplexer page `page`.
+    pub const fn on_page(self, page: u8) -> Self {
+        Self {
+            mux: Mux::Page(page),
+            ..self
+        }
+    }
+
+    /// As the multiplexer switch.
+    pub const fn switch(self) -> Self {
+        Self {
+            mux: Mux::Switch,
+            ..self
+        }
+    }
+
+    /// The bit mask of the signal's width (all ones in the low `len_bits` bits).
+    fn mask(&self) -> u64 {
+        1u64.checked_shl(u32::from(self.len_bits))
+            .map_or(u64::MAX, |m| m.wrapping_sub(1))
+    }
+
+    /// Reads the raw value (sign-extended when signed). Bits outside the 64-bit payload read 0.
+    pub fn read_raw(&self, data: &[u8; 8]) -> i64 {
+        let word = u64::from_le_bytes(*data);
+        let bits = word.checked_shr(u32::from(self.start_bit)).unwrap_or(0) & self.mask();
+        if self.signed && self.len_bits > 0 && self.len_bits < 64 {
+            let sign = 1u64 << (self.len_bits - 1);
+            // Two's complement sign extension: (bits ^ sign) - sign, in wrapping arithmetic.
+            (bits ^ sign).wrapping_sub(sign) as i64
+        } else {
+            bits as i64
+        }
+    }
+
+    /// Writes `raw` (truncated to the signal's width) into `data`, leaving other bits alone.
+    pub fn write_raw(&self, data: &mut [u8; 8], raw: i64) {
+        let shift = u32::from(self.start_bit);
+        let mask = self.mask().checked_shl(shift).unwrap_or(0);
+        let value = (raw as u64).checked_shl(shift).unwrap_or(0) & mask;
+        let word = (u64::from_le_bytes(*data) & !mask) | value;
+        *data = word.to_le_bytes();
+    }
+
+    /// Whether `raw` is within the signal's valid limits.
+    pub const fn in_range(&self, raw: i64) -> bool {
+        raw >= self.raw_min && raw <= self.raw_max
+    }
+
+    /// Physical value of a raw value (f32: exact for raw values up to 2^24).
+    pub fn to_physical(&self, raw: i64) -> f32 {
+        raw as f32 * self.scale + self.offset
+    }
+
+    /// Raw value of a physical one, rounded to nearest; `None` if `physical` is not finite or
+    /// the rounded value is outside `raw_min..=raw_max` (the caller then sends "not available").
+    pub fn to_raw(&self, physical: f32) -> Option<i64> {
+        let raw = libm::roundf((physical - self.offset) / self.scale);
+        // NaN fails both comparisons; limits of float signals are <= 2^24, exact in f32.
+        if raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32 {
+            Some(raw as i64)
+        } else {
+            None
+        }
+    }
+}
+
+/// How a message is protected.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Integrity {
+    /// 4-bit rolling counter (the given signal) and CRC-8/SAE-J1850 in byte 7.
+    CounterCrc(SignalSpec),
+    /// No counter or CRC (NMEA 2000): range and plausibility checks instead.
+    RangeOnly,
+}
+
+/// One message: identifier, length, cycle time, sender, receivers and signals.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MessageSpec {
+    /// Message name, as in the DBC.
+    pub name: &'static str,
+    /// Identifier (for NMEA 2000: priority 2, the default source address 0x1C).
+    pub id: CanId,
+    /// Data length code.
+    pub dlc: u8,
+    /// Nominal transmit period, ms (DBC attribute `GenMsgCycleTime`).
+    pub cycle_ms: u16,
+    /// Sending node.
+    pub transmitter: &'static str,
+    /// Receiving nodes of every signal.
+    pub receivers: &'static [&'static str],
+    /// Every signal, counter and CRC included.
+    pub signals: &'static [SignalSpec],
+    /// Counter and CRC, or none.
+    pub integrity: Integrity,
+}
+
+impl MessageSpec {
+    /// The signal called `name`.
+    pub fn signal(&self, name: &str) -> Option<&SignalSpec> {
+        self.signals.iter().find(|s| s.name == name)
+    }
+
+    /// An all-zero frame of this message's identifier and length.
+    pub const fn empty_frame(&self) -> CanFrame {
+        CanFrame {
+            id: self.id,
+            len: self.dlc,
+            data: [0; 8],
+        }
+    }
+}
+
+/// Signal definitions, shared by the table and the typed codecs.
+pub mod sig {
+    use super::SignalSpec;
+
+    /// Rolling counter of the inputs (bits 52..55).
+    pub const COUNTER_IN: SignalSpec = SignalSpec::uint("counter", 52, 4);
+    /// Rolling counter of the outputs (bits 0..3).
+    pub const COUNTER_OUT: SignalSpec = SignalSpec::uint("counter", 0, 4);
+    /// CRC-8/SAE-J1850, byte 7.
+    pub const CRC: SignalSpec = SignalSpec::uint("crc", 56, 8);
+
+    /// Steering, % of full lock, positive = right; -32768 = invalid.
+    pub const STEER_PCT: SignalSpec = SignalSpec::int("steer_pct", 0, 16)
+        .scaled(0.01, "%")
+        .raw_range(-10_000, 10_000)
+        .na(-32_768);
+    /// Measured speed; 0xFFFF = invalid.
+    pub const SPEED_MPS: SignalSpec = SignalSpec::uint("speed_mps", 0, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF);
+    /// Commanded speed; 0xFFFF = invalid.
+    pub const SPEED_CMD_MPS: SignalSpec = SignalSpec::uint("speed_cmd_mps", 16, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF);
+    /// Accelerator pedal; 0xFFFF = invalid.
+    pub const ACCEL_PCT: SignalSpec = SignalSpec::uint("accel_pct", 0, 16)
+        .scaled(0.01, "%")
+        .raw_range(0, 10_000)
+        .na(0xFFFF);
+    /// Brake pedal; 0xFFFF = invalid.
+    pub const BRAKE_PCT: SignalSpec = SignalSpec::uint("brake_pct", 16, 16)
+        .scaled(0.01, "%")
+        .raw_range(0, 10_000)
+        .na(0xFFFF);
+
+    /// NMEA 2000 PGN 129025 latitude, 1e-7 deg; 0x7FFFFFFF = not available.
+    pub const LATITUDE_DEG: SignalSpec = SignalSpec::int("latitude_deg", 0, 32)
+        .scaled(1e-7, "deg")
+        .raw_range(-900_000_000, 900_000_000)
+        .na(0x7FFF_FFFF);
+    /// NMEA 2000 PGN 129025 longitude, 1e-7 deg; 0x7FFFFFFF = not available.
+    pub const LONGITUDE_DEG: SignalSpec = SignalSpec::int("longitude_deg", 32, 32)
+        .scaled(1e-7, "deg")
+        .raw_range(-1_800_000_000, 1_800_000_000)
+        .na(0x7FFF_FFFF);
+    /// NMEA 2000 sequence identifier (ties 129026 to 129025 of the same fix).
+    pub const SID: SignalSpec = SignalSpec::uint("sid", 0, 8);
+    /// NMEA 2000 direction reference: 0 true, 1 magnetic, 2 error, 3 null.
+    pub const COG_REFERENCE: SignalSpec = SignalSpec::uint("cog_reference", 8, 2);
+    /// Course over ground, 1e-4 rad, [0, 2 pi]; 0xFFFF = not available.
+    pub const COG_RAD: SignalSpec = SignalSpec::uint("cog_rad", 16, 16)
+        .scaled(1e-4, "rad")
+        .raw_range(0, 62_832)
+        .na(0xFFFF);
+    /// Speed over ground, 0.01 m/s; 0xFFFF = not available (0xFFFD..0xFFFE reserved by N2K).
+    pub const SOG_MPS: SignalSpec = SignalSpec::uint("sog_mps", 32, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_532)
+        .na(0xFFFF);
+
+    /// STATE_POSITION flag: the position below is valid.
+    pub const POSITION_VALID: SignalSpec = SignalSpec::uint("position_valid", 4, 1);
+    /// STATE_POSITION flag: a GNSS fix arrived within its timeout.
+    pub const GNSS_FRESH: SignalSpec = SignalSpec::uint("gnss_fresh", 5, 1);
+    /// STATE_POSITION flag: the last GNSS fix was rejected by the plausibility gate.
+    pub const GNSS_REJECTED: SignalSpec = SignalSpec::uint("gnss_rejected", 6, 1);
+    /// East of the local origin, 0.01 m; raw minimum = not available.
+    pub const EAST_M: SignalSpec = SignalSpec::int("east_m", 8, 24)
+        .scaled(0.01, "m")
+        .raw_range(-8_388_607, 8_388_607)
+        .na(-8_388_608);
+    /// North of the local origin, 0.01 m; raw minimum = not available.
+    pub const NORTH_M: SignalSpec = SignalSpec::int("north_m", 32, 24)
+        .scaled(0.01, "m")
+        .raw_range(-8_388_607, 8_388_607)
+        .na(-8_388_608);
+
+    /// Model in use: 0 kinematic, 1 dynamic (STATE_MOTION).
+    pub const MODE: SignalSpec = SignalSpec::uint("mode", 4, 1);
+    /// Heading, clockwise from north, 0.001 rad, [-pi, pi]; -32768 = not available.
+    pub const HEADING_RAD: SignalSpec = SignalSpec::int("heading_rad", 8, 16)
+        .scaled(0.001, "rad")
+        .raw_range(-3_142, 3_142)
+        .na(-32_768);
+    /// Filtered speed, 0.01 m/s; 0xFFFF = not available.
+    pub const STATE_SPEED_MPS: SignalSpec = SignalSpec::uint("speed_mps", 24, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF);
+    /// Yaw rate, clockwise positive, 0.001 rad/s; -32768 = not available.
+    pub const YAW_RATE_RADPS: SignalSpec = SignalSpec::int("yaw_rate_radps", 40, 16)
+        .scaled(0.001, "rad/s")
+        .raw_range(-32_767, 32_767)
+        .na(-32_768);
+
+    /// Velocity-model output (eq 5), 0.01 m/s; 0xFFFF = not available.
+    pub const SPEED_MODEL_MPS: SignalSpec = SignalSpec::uint("speed_model_mps", 8, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF);
+    /// dx/dt model output (eq 7), 0.01 m/s; -32768 = not available.
+    pub const DXDT_MODEL_MPS: SignalSpec = SignalSpec::int("dxdt_model_mps", 24, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(-32_767, 32_767)
+        .na(-32_768);
+    /// Lateral acceleration, 0.01 m/s^2, positive = right; -32768 = not available.
+    pub const LAT_ACCEL_MPS2: SignalSpec = SignalSpec::int("lat_accel_mps2", 40, 16)
+        .scaled(0.01, "m/s^2")
+        .raw_range(-32_767, 32_767)
+        .na(-32_768);
+
+    /// Prediction: east displacement from the tick's STATE_POSITION, 0.01 m.
+    pub const DX_M: SignalSpec = SignalSpec::int("dx_m", 4, 14)
+        .scaled(0.01, "m")
+        .raw_range(-8_191, 8_191)
+        .na(-8_192);
+    /// Prediction: north displacement from the tick's STATE_POSITION, 0.01 m.
+    pub const DY_M: SignalSpec = SignalSpec::int("dy_m", 18, 14)
+        .scaled(0.01, "m")
+        .raw_range(-8_191, 8_191)
+        .na(-8_192);
+    /// Prediction: heading change from the tick's heading, 0.001 rad.
+    pub const DHEADING_RAD: SignalSpec = SignalSpec::int("dheading_rad", 32, 12)
+        .scaled(0.001, "rad")
+        .raw_range(-2_047, 2_047)
+        .na(-2_048);
+    /// Prediction: speed, 0.01 m/s; 0xFFF = not available.
+    pub const PRED_SPEED_MPS: SignalSpec = SignalSpec::uint("speed_mps", 44, 12)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 4_094)
+        .na(0xFFF);
+
+    /// NODE_STATUS page number (multiplexer switch).
+    pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 4).switch();
+    /// Page 0: model in use, 0 kinematic, 1 dynamic.
+    pub const STATUS_MODE: SignalSpec = SignalSpec::uint("mode", 8, 1).on_page(0);
+    /// Page 0 health bit.
+    pub const STEER_STALE: SignalSpec = SignalSpec::uint("steer_stale", 9, 1).on_page(0);
+    /// Page 0 health bit.
+    pub const SPEED_STALE: SignalSpec = SignalSpec::uint("speed_stale", 10, 1).on_page(0);
+    /// Page 0 health bit.
+    pub const PEDAL_STALE: SignalSpec = SignalSpec::uint("pedal_stale", 11, 1).on_page(0);
+    /// Page 0 health bit.
+    pub const GNSS_STALE: SignalSpec = SignalSpec::uint("gnss_stale", 12, 1).on_page(0);
+    /// Page 0 health bit: a GNSS fix was rejected within the last second.
+    pub const GNSS_REJECTED_RECENTLY: SignalSpec =
+        SignalSpec::uint("gnss_rejected_recently", 13, 1).on_page(0);
+    /// Page 0 health bit.
+    pub const POSITION_INVALID: SignalSpec = SignalSpec::uint("position_invalid", 14, 1).on_page(0);
+    /// Page 0 health bit: a prediction field of this tick went out as "not available".
+    pub const PREDICTION_SATURATED: SignalSpec =
+        SignalSpec::uint("prediction_saturated", 15, 1).on_page(0);
+    /// Page 0 health bit: a non-finite value was caught this tick.
+    pub const NONFINITE_GUARD: SignalSpec = SignalSpec::uint("nonfinite_guard", 16, 1).on_page(0);
+    /// Page 0 health bit: the last reset was the watchdog's.
+    pub const WATCHDOG_RESET: SignalSpec = SignalSpec::uint("watchdog_reset", 17, 1).on_page(0);
+    /// Page 0 health bit: a tick overran within the last second.
+    pub const OVERRUN_RECENTLY: SignalSpec = SignalSpec::uint("overrun_recently", 18, 1).on_page(0);
+    /// Page 0 health bit: an input carried its "invalid" sentinel within the last second.
+    pub const INPUT_INVALID: SignalSpec = SignalSpec::uint("input_invalid", 19, 1).on_page(0);
+    /// Page 0: ticks that overran since boot, saturating.
+    pub const OVERRUN_COUNT: SignalSpec = SignalSpec::uint("overrun_count", 24, 16).on_page(0);
+    /// Page 0: duration of the previous step, us; 0xFFFF = not available.
+    pub const LAST_STEP_US: SignalSpec = SignalSpec::uint("last_step_us", 40, 16)
+        .scaled(1.0, "us")
+        .raw_range(0, 0xFFFE)
+        .na(0xFFFF)
+        .on_page(0);
+    /// Page 1: frames with a bad CRC, saturating.
+    pub const CRC_ERRORS: SignalSpec = SignalSpec::uint("crc_errors", 8, 16).on_page(1);
+    /// Page 1: frames with a stuck counter, plus counter jumps, saturating.
+    pub const COUNTER_ERRORS: SignalSpec = SignalSpec::uint("counter_errors", 24, 16).on_page(1);
+    /// Page 1: frames of a known id with the wrong length, saturating.
+    pub const DLC_ERRORS: SignalSpec = SignalSpec::uint("dlc_errors", 40, 16).on_page(1);
+    /// Page 2: frames with a value outside its DBC range, saturating.
+    pub const RANGE_ERRORS: SignalSpec = SignalSpec::uint("range_errors", 8, 16).on_page(2);
+    /// Page 2: GNSS fixes rejected by the plausibility gate, saturating.
+    pub const GNSS_GATE_REJECTS: SignalSpec =
+        SignalSpec::uint("gnss_gate_rejects", 24, 16).on_page(2);
+    /// Page 2: frames of identifiers the node does not know, saturating.
+    pub const UNKNOWN_IDS: SignalSpec = SignalSpec::uint("unknown_ids", 40, 16).on_page(2);
+    /// Page 3: ticks since boot, saturating.
+    pub const TICK_COUNT: SignalSpec = SignalSpec::uint("tick_count", 8, 32).on_page(3);
+    /// Page 3: frames dropped by a full receive queue, saturating.
+    pub const RX_QUEUE_DROPS: SignalSpec = SignalSpec::uint("rx_queue_drops", 40, 16).on_page(3);
+    /// Page 4: age of the last steering report, 10 ms, 254 = saturated, 255 = never.
+    pub const STEER_AGE: SignalSpec = SignalSpec::uint("steer_age", 8, 8)
+        .scaled(10.0, "ms")
+        .raw_range(0, 254)
+        .na(255)
+        .on_page(4);
+    /// Page 4: age of the last speed report.
+    pub const SPEED_AGE: SignalSpec = SignalSpec::uint("speed_age", 16, 8)
+        .scaled(10.0, "ms")
+        .raw_range(0, 254)
+        .na(255)
+        .on_page(4);
+    /// Page 4: age of the last pedal report.
+    pub const PEDAL_AGE: SignalSpec = SignalSpec::uint("pedal_age", 24, 8)
+        .scaled(10.0, "ms")
+        .raw_range(0, 254)
+        .na(255)
+        .on_page(4);
+    /// Page 4: age of the last accepted GNSS fix.
+    pub const GNSS_AGE: SignalSpec = SignalSpec::uint("gnss_age", 32, 8)
+        .scaled(10.0, "ms")
+        .raw_range(0, 254)
+        .na(255)
+        .on_page(4);
+    /// Page 4: deepest stack use, bytes; 0xFFFF = not available.
+    pub const STACK_HIGH_WATER_BYTES: SignalSpec =
+        SignalSpec::uint("stack_high_water_bytes", 40, 16)
+            .scaled(1.0, "B")
+            .raw_range(0, 0xFFFE)
+            .na(0xFFFF)
+            .on_page(4);
+}
+
+use sig::*;
+
+const TO_NODE: &[&str] = &[NODE_CATMODEL];
+const TO_PLANNER: &[&str] = &[NODE_PLANNER];
+
+/// NMEA 2000 priority our GNSS identifiers carry (the PGNs' default).
+pub const N2K_PRIORITY: u32 = 2;
+/// NMEA 2000 source address of the GNSS receiver unless configured otherwise.
+pub const N2K_DEFAULT_SOURCE: u8 = 0x1C;
+/// NMEA 2000 PGN "Position, Rapid Update".
+pub const PGN_POSITION_RAPID: u32 = 129_025;
+/// NMEA 2000 PGN "COG & SOG, Rapid Update".
+pub const PGN_COG_SOG_RAPID: u32 = 129_026;
+
+/// The 29-bit identifier of an NMEA 2000 (ISO 11783 / J1939) PDU2 broadcast.
+pub const fn n2k_id(priority: u32, pgn: u32, source: u8) -> u32 {
+    ((priority & 0x7) << 26) | ((pgn & 0x3_FFFF) << 8) | source as u32
+}
+
+/// `(pgn, source)` of a 29-bit identifier (J1939 rules: PDU1 PGNs drop the destination byte).
+pub const fn n2k_pgn_source(id: u32) -> (u32, u8) {
+    let pf = (id >> 16) & 0xFF;
+    let pgn = if pf < 240 {
+        (id >> 8) & 0x3_FF00
+    } else {
+        (id >> 8) & 0x3_FFFF
+    };
+    (pgn, id as u8)
+}
+
+/// Input 0x100, 50 Hz.
+pub const STEERING_REPORT: MessageSpec = MessageSpec {
+    name: "STEERING_REPORT",
+    id: CanId::Standard(0x100),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_DBW,
+    receivers: TO_NODE,
+    signals: &[STEER_PCT, COUNTER_IN, CRC],
+    integrity: Integrity::CounterCrc(COUNTER_IN),
+};
+/// Input 0x101, 50 Hz.
+pub const SPEED_REPORT: MessageSpec = MessageSpec {
+    name: "SPEED_REPORT",
+    id: CanId::Standard(0x101),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_DBW,
+    receivers: TO_NODE,
+    signals: &[SPEED_MPS, SPEED_CMD_MPS, COUNTER_IN, CRC],
+    integrity: Integrity::CounterCrc(COUNTER_IN),
+};
+/// Input 0x102, 50 Hz.
+pub const PEDAL_REPORT: MessageSpec = MessageSpec {
+    name: "PEDAL_REPORT",
+    id: CanId::Standard(0x102),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_DBW,
+    receivers: TO_NODE,
+    signals: &[ACCEL_PCT, BRAKE_PCT, COUNTER_IN, CRC],
+    integrity: Integrity::CounterCrc(COUNTER_IN),
+};
+/// Input: NMEA 2000 PGN 129025, typically 10 Hz.
+pub const GNSS_POSITION_RAPID: MessageSpec = MessageSpec {
+    name: "GNSS_POSITION_RAPID",
+    id: CanId::Extended(n2k_id(N2K_PRIORITY, PGN_POSITION_RAPID, N2K_DEFAULT_SOURCE)),
+    dlc: 8,
+    cycle_ms: 100,
+    transmitter: NODE_GNSS,
+    receivers: TO_NODE,
+    signals: &[LATITUDE_DEG, LONGITUDE_DEG],
+    integrity: Integrity::RangeOnly,
+};
+/// Input: NMEA 2000 PGN 129026, typically 10 Hz.
+pub const GNSS_COG_SOG_RAPID: MessageSpec = MessageSpec {
+    name: "GNSS_COG_SOG_RAPID",
+    id: CanId::Extended(n2k_id(N2K_PRIORITY, PGN_COG_SOG_RAPID, N2K_DEFAULT_SOURCE)),
+    dlc: 8,
+    cycle_ms: 100,
+    transmitter: NODE_GNSS,
+    receivers: TO_NODE,
+    signals: &[SID, COG_REFERENCE, COG_RAD, SOG_MPS],
+    integrity: Integrity::RangeOnly,
+};
+/// Output 0x300, every tick.
+pub const STATE_POSITION: MessageSpec = MessageSpec {
+    name: "STATE_POSITION",
+    id: CanId::Standard(0x300),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_CATMODEL,
+    receivers: TO_PLANNER,
+    signals: &[
+        COUNTER_OUT,
+        POSITION_VALID,
+        GNSS_FRESH,
+        GNSS_REJECTED,
+        EAST_M,
+        NORTH_M,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Output 0x301, every tick.
+pub const STATE_MOTION: MessageSpec = MessageSpec {
+    name: "STATE_MOTION",
+    id: CanId::Standard(0x301),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_CATMODEL,
+    receivers: TO_PLANNER,
+    signals: &[
+        COUNTER_OUT,
+        MODE,
+        HEADING_RAD,
+        STATE_SPEED_MPS,
+        YAW_RATE_RADPS,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Output 0x302, every tick.
+pub const STATE_MODEL: MessageSpec = MessageSpec {
+    name: "STATE_MODEL",
+    id: CanId::Standard(0x302),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_CATMODEL,
+    receivers: TO_PLANNER,
+    signals: &[
+        COUNTER_OUT,
+        SPEED_MODEL_MPS,
+        DXDT_MODEL_MPS,
+        LAT_ACCEL_MPS2,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+
+/// Number of prediction points (PREDICTION_1..PREDICTION_10, point k at k * 0.2 s).
+pub const PREDICTION_POINTS: usize = 10;
+/// Identifier of PREDICTION_1; PREDICTION_k is `PREDICTION_BASE_ID + k - 1`.
+pub const PREDICTION_BASE_ID: u16 = 0x310;
+/// Horizon step between prediction points, us (0.2 s).
+pub const PREDICTION_STEP_US: u64 = 200_000;
+
+const PREDICTION_SIGNALS: &[SignalSpec] =
+    &[COUNTER_OUT, DX_M, DY_M, DHEADING_RAD, PRED_SPEED_MPS, CRC];
+
+const fn prediction(name: &'static str, k: u16) -> MessageSpec {
+    MessageSpec {
+        name,
+        id: CanId::Standard(PREDICTION_BASE_ID + k - 1),
+        dlc: 8,
+        cycle_ms: 20,
+        transmitter: NODE_CATMODEL,
+        receivers: TO_PLANNER,
+        signals: PREDICTION_SIGNALS,
+        integrity: Integrity::CounterCrc(COUNTER_OUT),
+    }
+}
+
+/// Outputs 0x310..=0x319, every tick.
+pub static PREDICTIONS: [MessageSpec; PREDICTION_POINTS] = [
+    prediction("PREDICTION_1", 1),
+    prediction("PREDICTION_2", 2),
+    prediction("PREDICTION_3", 3),
+    prediction("PREDICTION_4", 4),
+    prediction("PREDICTION_5", 5),
+    prediction("PREDICTION_6", 6),
+    prediction("PREDICTION_7", 7),
+    prediction("PREDICTION_8", 8),
+    prediction("PREDICTION_9", 9),
+    prediction("PREDICTION_10", 10),
+];
+
+/// Number of NODE_STATUS pages; page `tick % STATUS_PAGES` goes out each tick.
+pub const STATUS_PAGES: u8 = 5;
+
+/// Output 0x3F0, every tick, one multiplexed page per tick.
+pub const NODE_STATUS: MessageSpec = MessageSpec {
+    name: "NODE_STATUS",
+    id: CanId::Standard(0x3F0),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_CATMODEL,
+    receivers: TO_PLANNER,
+    signals: &[
+        COUNTER_OUT,
+        PAGE,
+        STATUS_MODE,
+        STEER_STALE,
+        SPEED_STALE,
+        PEDAL_STALE,
+        GNSS_STALE,
+        GNSS_REJECTED_RECENTLY,
+        POSITION_INVALID,
+        PREDICTION_SATURATED,
+        NONFINITE_GUARD,
+        WATCHDOG_RESET,
+        OVERRUN_RECENTLY,
+        INPUT_INVALID,
+        OVERRUN_COUNT,
+        LAST_STEP_US,
+        CRC_ERRORS,
+        COUNTER_ERRORS,
+        DLC_ERRORS,
+        RANGE_ERRORS,
+        GNSS_GATE_REJECTS,
+        UNKNOWN_IDS,
+        TICK_COUNT,
+        RX_QUEUE_DROPS,
+        STEER_AGE,
+        SPEED_AGE,
+        PEDAL_AGE,
+        GNSS_AGE,
+        STACK_HIGH_WATER_BYTES,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+
+/// Every message of `catmodel.dbc`, inputs first, in DBC order.
+pub static MESSAGES: [&MessageSpec; 19] = [
+    &STEERING_REPORT,
+    &SPEED_REPORT,
+    &PEDAL_REPORT,
+    &GNSS_POSITION_RAPID,
+    &GNSS_COG_SOG_RAPID,
+    &STATE_POSITION,
+    &STATE_MOTION,
+    &STATE_MODEL,
+    &PREDICTIONS[0],
+    &PREDICTIONS[1],
+    &PREDICTIONS[2],
+    &PREDICTIONS[3],
+    &PREDICTIONS[4],
+    &PREDICTIONS[5],
+    &PREDICTIONS[6],
+    &PREDICTIONS[7],
+    &PREDICTIONS[8],
+    &PREDICTIONS[9],
+    &NODE_STATUS,
+];
+
+/// Worst-case length in bits of a classic CAN data frame with `dlc` data bytes, bit stuffing
+/// included (Davis et al. 2007: `8s + g + 13 + floor((g + 8s - 1) / 4)`, g = 34 for 11-bit and
+/// 54 for 29-bit identifiers; interframe space included).
+pub const fn worst_case_frame_bits(extended: bool, dlc: u8) -> u32 {
+    let g: u32 = if extended { 54 } else { 34 };
+    let s = dlc as u32 * 8;
+    s + g + 13 + (g + s - 1) / 4
+}
+
+/// Frame length without stuff bits (SOF to the end of the interframe space).
+pub const fn nominal_frame_bits(extended: bool, dlc: u8) -> u32 {
+    let g: u32 = if extended { 54 } else { 34 };
+    dlc as u32 * 8 + g + 13
+}
