@@ -11,6 +11,7 @@ use semihosting::io::{Read, Seek, SeekFrom, Write};
 
 use super::candump::{self, LineError, LINE_CAP};
 use crate::app::{BusReceiver, BusTransmitter, RxError};
+use crate::can::candump::CandumpError;
 use crate::can::TimedFrame;
 use crate::node::first_tick_us;
 use crate::SAMPLE_PERIOD_US;
@@ -25,8 +26,8 @@ pub enum ReplayError {
     Io,
     /// Line `.0` (1-based) is longer than [`LINE_MAX`].
     LineTooLong(u32),
-    /// Line `.0` (1-based) is not a candump frame.
-    Syntax(u32),
+    /// Line `.0` (1-based) is not a candump frame, for reason `.1`.
+    Syntax(u32, CandumpError),
     /// No frame in the input.
     Empty,
 }
@@ -156,7 +157,7 @@ impl LineReader {
 /// One parsed line: `Ok(None)` for a blank line, `Err(Unsupported)` for a frame the node does
 /// not use (remote, CAN FD).
 fn parse_line(text: &[u8]) -> Result<Option<TimedFrame>, LineError> {
-    let text = core::str::from_utf8(text).map_err(|_| LineError::Syntax)?;
+    let text = core::str::from_utf8(text).map_err(|_| LineError::Syntax(CandumpError::BadHex))?;
     if text.trim().is_empty() {
         return Ok(None);
     }
@@ -195,7 +196,9 @@ pub fn scan(reader: &mut LineReader) -> Result<InputSummary, ReplayError> {
                 s.frames = s.frames.saturating_add(1);
             }
             Err(LineError::Unsupported) => unsupported = unsupported.saturating_add(1),
-            Err(LineError::Syntax) => return Err(ReplayError::Syntax(reader.line_no())),
+            Err(LineError::Syntax(error)) => {
+                return Err(ReplayError::Syntax(reader.line_no(), error))
+            }
         }
     }
     reader.rewind()?;

@@ -145,8 +145,10 @@ pub fn open_input(options: &Options) -> (LineReader, InputSummary) {
             semihosting::eprintln!("catmodel-qemu: input line {line} is too long");
             semihosting::process::exit(2)
         }
-        Err(ReplayError::Syntax(line)) => {
-            semihosting::eprintln!("catmodel-qemu: input line {line} is not a candump frame");
+        Err(ReplayError::Syntax(line, error)) => {
+            semihosting::eprintln!(
+                "catmodel-qemu: input line {line} is not a candump frame: {error:?}"
+            );
             semihosting::process::exit(2)
         }
     }
