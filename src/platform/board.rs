@@ -22,6 +22,7 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::wdg::IndependentWatchdog;
 
 use crate::app::{BusReceiver, BusTransmitter, RxError, TickPlatform, TickReport};
+use crate::can::spec::{PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
 use crate::can::{CanFrame, CanId, TimedFrame};
 
 /// Core clock, Hz (also the DWT cycle counter's rate).
@@ -32,7 +33,7 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
 /// Standard IDs the node listens to (steering, speed, pedal reports; catmodel.dbc).
 pub const INPUT_STANDARD_IDS: [u16; 3] = [0x100, 0x101, 0x102];
 /// NMEA 2000 PGNs the node listens to: 129025 position rapid update, 129026 COG & SOG rapid.
-pub const INPUT_PGNS: [u32; 2] = [129_025, 129_026];
+pub const INPUT_PGNS: [u32; 2] = [PGN_POSITION_RAPID, PGN_COG_SOG_RAPID];
 /// The PGN field of a 29-bit NMEA 2000 / J1939 identifier: bits 8..25 (reserved, data page,
 /// PDU format, PDU specific). Priority (26..28) and source address (0..7) are ignored.
 pub const PGN_ID_MASK: u32 = 0x3FFFF << 8;
