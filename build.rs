@@ -1,14 +1,59 @@
 //! Puts `memory.x` on the linker's search path for the embedded target (cortex-m-rt's `link.x`
-//! includes it). Host builds are untouched.
+//! includes it), and, for the QEMU firmware, provides the drive it replays by default:
+//! `data/bundled.can.log`, or a small synthetic placeholder while that file does not exist.
+//! Host builds are untouched.
 use std::{env, fs, path::PathBuf};
+
+const BUNDLED: &str = "data/bundled.can.log";
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=memory.x");
+    // Watch the drive, or the folder it will appear in (a path that does not exist would
+    // re-run this script on every build).
+    if std::path::Path::new(BUNDLED).exists() {
+        println!("cargo:rerun-if-changed={BUNDLED}");
+    } else if std::path::Path::new("data").exists() {
+        println!("cargo:rerun-if-changed=data");
+    }
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
     }
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("memory.x is at the package root");
     println!("cargo:rustc-link-search={}", out.display());
+
+    if env::var_os("CARGO_FEATURE_QEMU").is_some() {
+        let drive = fs::read(BUNDLED).unwrap_or_else(|_| placeholder_drive().into_bytes());
+        fs::write(out.join("bundled.can.log"), drive).expect("OUT_DIR is writable");
+    }
+}
+
+/// 10 s of the node's input IDs at their bus rates (standard 0x100-0x102 at 50 Hz, NMEA 2000
+/// PGN 129025 at 10 Hz), with zero payloads and a little arrival jitter. It exercises the
+/// replay and the tick timing, not the models.
+fn placeholder_drive() -> String {
+    let mut text = String::new();
+    let start_us: u64 = 1_700_000_000_003_000;
+    for k in 0..500u64 {
+        let t = start_us + k * 20_000;
+        for (i, id) in ["100", "101", "102"].iter().enumerate() {
+            let t_us = t + i as u64 * 250 + (k * 37) % 400;
+            text.push_str(&format!(
+                "({}.{:06}) can0 {}#0000000000000000\n",
+                t_us / 1_000_000,
+                t_us % 1_000_000,
+                id
+            ));
+        }
+        if k % 5 == 0 {
+            let t_us = t + 5_000;
+            text.push_str(&format!(
+                "({}.{:06}) can0 09F80100#0000000000000000\n",
+                t_us / 1_000_000,
+                t_us % 1_000_000
+            ));
+        }
+    }
+    text
 }

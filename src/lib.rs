@@ -35,12 +35,16 @@
 )]
 #![warn(missing_docs)]
 
+#[cfg(all(target_os = "none", any(feature = "board", feature = "qemu")))]
+pub mod app;
 pub mod can;
 pub mod geodesy;
 pub mod math;
 pub mod metrics;
 pub mod model;
 pub mod node;
+#[cfg(all(target_os = "none", any(feature = "board", feature = "qemu")))]
+pub mod platform;
 pub mod signal;
 pub mod vehicle;
 

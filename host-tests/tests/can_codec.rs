@@ -136,18 +136,18 @@ fn nmea2000_cog_sog_layout() {
     let m = GnssCogSog {
         sid: 0x2A,
         cog_reference: 0,
-        cog_rad: Some(3.1416),
+        cog_rad: Some(1.2345),
         sog_mps: Some(12.34),
     };
     let frame = m.encode(spec::N2K_DEFAULT_SOURCE);
     assert_eq!(frame.id, CanId::Extended(0x09F8_021C));
     assert_eq!(
         frame.data,
-        [0x2A, 0xFC, 0xB8, 0x7A, 0xD2, 0x04, 0xFF, 0xFF] // 31416 = 0x7AB8, 1234 = 0x04D2
+        [0x2A, 0xFC, 0x39, 0x30, 0xD2, 0x04, 0xFF, 0xFF] // 12345 = 0x3039, 1234 = 0x04D2
     );
     let back = GnssCogSog::decode(&frame, 0x1C).unwrap();
     assert_eq!(back.sid, 0x2A);
-    assert!((back.cog_rad.unwrap() - 3.1416).abs() < 0.5e-4);
+    assert!((back.cog_rad.unwrap() - 1.2345).abs() < 0.5e-4);
     assert!((back.sog_mps.unwrap() - 12.34).abs() < 0.005);
 }
 
@@ -224,7 +224,7 @@ fn inputs_round_trip_at_limits_and_invalid() {
     }
     for (cog, sog) in [
         (Some(0.0), Some(0.0)),
-        (Some(6.2832), Some(655.32)),
+        (Some(phys_max(&sig::COG_RAD)), Some(655.32)),
         (None, None),
     ] {
         let m = GnssCogSog {

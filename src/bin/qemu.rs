@@ -1,3 +1,88 @@
-//! (in progress on branch fw)
+//! catmodel on QEMU `-M netduinoplus2` (STM32F405): the same app layer and node as the board,
+//! over a replayed candump drive, with per-tick instruction counts. Run it with `cargo qemu`
+//! (docs/firmware.md); QEMU's exit status is this program's.
 #![no_std]
 #![no_main]
+
+use catmodel::app::{self, LinkCounters, RxQueue, TxQueue};
+use catmodel::platform::qemu::{executor, icount, replay, run, time_driver};
+use cortex_m_rt::entry;
+// The `defmt` feature is on for the core's types; nothing here logs through it, but a global
+// logger must exist for any dependency that does.
+use defmt_semihosting as _;
+
+static RX_QUEUE: RxQueue = RxQueue::new();
+static TX_QUEUE: TxQueue = TxQueue::new();
+static COUNTERS: LinkCounters = LinkCounters::new();
+
+#[embassy_executor::task]
+async fn receive_task(mut bus: replay::ReplayBus) {
+    app::receive_loop(&mut bus, &RX_QUEUE, &COUNTERS).await;
+}
+
+#[embassy_executor::task]
+async fn transmit_task(mut bus: replay::TxLog) {
+    app::transmit_loop(&mut bus, &TX_QUEUE, &COUNTERS).await
+}
+
+#[embassy_executor::task]
+async fn tick_task(
+    mut recorder: run::TickRecorder,
+    config: app::TickConfig,
+    input: replay::InputSummary,
+) {
+    let mut node = app::make_node();
+    let summary = app::tick_loop(
+        &mut node,
+        &RX_QUEUE,
+        &TX_QUEUE,
+        &COUNTERS,
+        &mut recorder,
+        &config,
+    )
+    .await;
+    app::wait_tx_drained(&TX_QUEUE).await;
+    let trailer = run::Trailer::new(&summary, &COUNTERS, &input);
+    if !recorder.finish(&trailer) {
+        run::fail("cannot write the tick records", 1);
+    }
+    semihosting::eprintln!(
+        "catmodel-qemu: {} ticks, {} frames in, {} overruns, {} rx queue drops",
+        summary.ticks,
+        input.frames,
+        summary.overruns,
+        trailer.rx_queue_drops
+    );
+    if trailer.tx_bus_errors > 0 {
+        run::fail("cannot write the tx log", 1);
+    }
+    semihosting::process::exit(0)
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(core) = cortex_m::Peripherals::take() else {
+        run::fail("core peripherals taken twice", 3)
+    };
+    icount::init();
+    let options = run::options().unwrap_or_else(|message| run::fail(message, 2));
+    let (reader, input) = run::open_input(&options);
+    let config = run::tick_config(&input);
+    let tx_log = replay::TxLog::new(run::create(&options.tx_log));
+    let recorder = run::TickRecorder::new(run::create(&options.ticks), options.stalls.clone());
+    let bus = replay::ReplayBus::new(reader, config.input_offset_us);
+
+    // Last: set-up time must not count as elapsed virtual time.
+    time_driver::start(core.SYST);
+    executor::run(|spawner| {
+        spawner.spawn(receive_task(bus).unwrap_or_else(|_| run::fail("spawn", 3)));
+        spawner.spawn(transmit_task(tx_log).unwrap_or_else(|_| run::fail("spawn", 3)));
+        spawner.spawn(tick_task(recorder, config, input).unwrap_or_else(|_| run::fail("spawn", 3)));
+    })
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    semihosting::eprintln!("catmodel-qemu: panic: {info}");
+    semihosting::process::exit(101)
+}

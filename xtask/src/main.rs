@@ -1,2 +1,614 @@
-//! catmodel automation (in progress).
-fn main() {}
+//! catmodel automation.
+//!
+//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): builds the QEMU firmware (release, the
+//!   profile we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table, and
+//!   fails if the run failed or a tick exceeded the instruction budget.
+//! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
+//!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
+//!   frame stays on the 20 ms grid.
+//! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+#[cfg(test)]
+#[path = "../../src/app/schedule.rs"]
+#[allow(dead_code)]
+mod schedule;
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+/// Instructions one tick may take (`catmodel::app::TICK_BUDGET_INSTRUCTIONS`).
+const BUDGET_INSTRUCTIONS: u32 = 30_000;
+/// Instructions available in one 20 ms tick at the board's 168 MHz, if one instruction took one
+/// cycle: the basis of `share_of_tick_percent`.
+const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = 0.02 * 168e6;
+const TICK_US: u64 = 20_000;
+const FLASH_BUDGET: u64 = 96 * 1024;
+const RAM_BUDGET: u64 = 24 * 1024;
+const INSTALL_QEMU: &str = "apt-get update && apt-get install -y qemu-system-arm";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("qemu") => qemu(args.get(1..).unwrap_or(&[])),
+        Some("qemu-overrun-test") => overrun_test(),
+        Some("size") => size(),
+        _ => Err(anyhow!(
+            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size\n\
+             (`cargo qemu` is `cargo xtask qemu`)"
+        )),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("xtask: error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args([
+            "build",
+            "--release",
+            "-p",
+            "catmodel",
+            "--features",
+            features,
+        ])
+        .args(["--bin", bin, "--target", TARGET])
+        .status()
+        .context("running cargo build")?;
+    if !status.success() {
+        bail!("building {bin} failed");
+    }
+    Ok(root().join("target").join(TARGET).join("release").join(bin))
+}
+
+// ---------------------------------------------------------------------------------------------
+// QEMU runs
+
+/// One tick as recorded by the QEMU firmware (`src/platform/qemu/run.rs`).
+#[derive(Clone, Copy, Debug)]
+struct TickRecord {
+    tick_us: u64,
+    slot: u64,
+    overruns: u32,
+    rx_queue_drops: u32,
+    rx_frames: u16,
+    tx_frames: u16,
+    drain: u32,
+    step: u32,
+    tick: u32,
+}
+
+/// Totals the firmware writes after the last tick.
+#[derive(Clone, Copy, Debug)]
+struct Trailer {
+    ticks: u64,
+    overruns: u32,
+    skipped_slots: u32,
+    rx_queue_drops: u32,
+    rx_bus_errors: u32,
+    rx_unsupported: u32,
+    tx_queue_drops: u32,
+    tx_bus_errors: u32,
+    input_frames: u32,
+    input_unsupported: u32,
+}
+
+fn u32_at(bytes: &[u8], at: usize) -> u32 {
+    let mut b = [0u8; 4];
+    b.copy_from_slice(&bytes[at..at + 4]);
+    u32::from_le_bytes(b)
+}
+
+fn u64_at(bytes: &[u8], at: usize) -> u64 {
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&bytes[at..at + 8]);
+    u64::from_le_bytes(b)
+}
+
+fn parse_ticks(bytes: &[u8]) -> Result<(Vec<TickRecord>, Trailer)> {
+    const RECORD: usize = 40;
+    const TRAILER: usize = 48;
+    if bytes.len() < 12 || &bytes[..4] != b"CMQT" || u32_at(bytes, 4) != 1 {
+        bail!("tick records: bad header");
+    }
+    if u32_at(bytes, 8) as usize != RECORD {
+        bail!("tick records: unexpected record size");
+    }
+    let body = &bytes[12..];
+    if body.len() < TRAILER || !(body.len() - TRAILER).is_multiple_of(RECORD) {
+        bail!("tick records: truncated (the firmware did not finish)");
+    }
+    let (records, trailer) = body.split_at(body.len() - TRAILER);
+    if &trailer[..4] != b"END!" {
+        bail!("tick records: no trailer (the firmware did not finish)");
+    }
+    let records = records
+        .chunks_exact(RECORD)
+        .map(|r| TickRecord {
+            tick_us: u64_at(r, 0),
+            slot: u64_at(r, 8),
+            overruns: u32_at(r, 16),
+            rx_queue_drops: u32_at(r, 20),
+            rx_frames: u16::from_le_bytes([r[24], r[25]]),
+            tx_frames: u16::from_le_bytes([r[26], r[27]]),
+            drain: u32_at(r, 28),
+            step: u32_at(r, 32),
+            tick: u32_at(r, 36),
+        })
+        .collect();
+    let t = &trailer[4..];
+    let trailer = Trailer {
+        ticks: u64_at(t, 0),
+        overruns: u32_at(t, 8),
+        skipped_slots: u32_at(t, 12),
+        rx_queue_drops: u32_at(t, 16),
+        rx_bus_errors: u32_at(t, 20),
+        rx_unsupported: u32_at(t, 24),
+        tx_queue_drops: u32_at(t, 28),
+        tx_bus_errors: u32_at(t, 32),
+        input_frames: u32_at(t, 36),
+        input_unsupported: u32_at(t, 40),
+    };
+    Ok((records, trailer))
+}
+
+struct QemuRun {
+    records: Vec<TickRecord>,
+    trailer: Trailer,
+    wall_s: f64,
+}
+
+/// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
+fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) -> Result<QemuRun> {
+    if Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}");
+    }
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let tx = out_dir.join("tx.log");
+    let ticks = out_dir.join("ticks.bin");
+    let _ = std::fs::remove_file(&ticks);
+    let mut append = vec!["catmodel-qemu".to_string()];
+    if let Some(input) = input {
+        let input = input
+            .canonicalize()
+            .with_context(|| format!("input {}", input.display()))?;
+        append.extend(["--in".into(), path_arg(&input)?]);
+    }
+    append.extend([
+        "--tx".into(),
+        path_arg(&tx)?,
+        "--ticks".into(),
+        path_arg(&ticks)?,
+    ]);
+    append.extend(extra.iter().map(|s| s.to_string()));
+
+    let started = Instant::now();
+    let output = Command::new("qemu-system-arm")
+        .current_dir(root())
+        .args(["-M", "netduinoplus2", "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-icount", "shift=0,align=off,sleep=off"])
+        .arg("-kernel")
+        .arg(elf)
+        .args(["-append", &append.join(" ")])
+        .output()
+        .context("running qemu-system-arm")?;
+    let wall_s = started.elapsed().as_secs_f64();
+    // The firmware reports in text on stderr; defmt output (if any dependency logs) goes to
+    // stdout as binary frames: keep it for `defmt-print -e ELF`.
+    let _ = std::fs::write(out_dir.join("defmt.bin"), &output.stdout);
+    eprint!("{}", String::from_utf8_lossy(&output.stderr));
+    if !output.status.success() {
+        bail!("the QEMU firmware failed ({})", output.status);
+    }
+    let bytes = std::fs::read(&ticks).with_context(|| format!("reading {}", ticks.display()))?;
+    let (records, trailer) = parse_ticks(&bytes)?;
+    if records.len() as u64 != trailer.ticks {
+        bail!(
+            "tick records: {} records, trailer says {}",
+            records.len(),
+            trailer.ticks
+        );
+    }
+    Ok(QemuRun {
+        records,
+        trailer,
+        wall_s,
+    })
+}
+
+fn path_arg(path: &Path) -> Result<String> {
+    let text = path.to_str().ok_or_else(|| anyhow!("non-UTF-8 path"))?;
+    if text.contains(char::is_whitespace) || text.len() > 250 {
+        bail!("QEMU's command line cannot carry the path {text:?} (spaces or too long)");
+    }
+    Ok(text.to_string())
+}
+
+/// min, median, p99, max by nearest rank.
+fn stats(values: &[u32]) -> [u32; 4] {
+    let mut sorted = values.to_vec();
+    sorted.sort_unstable();
+    if sorted.is_empty() {
+        return [0; 4];
+    }
+    let rank =
+        |p: f64| sorted[((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1];
+    [sorted[0], rank(0.5), rank(0.99), sorted[sorted.len() - 1]]
+}
+
+fn stats_json(values: &[u32]) -> serde_json::Value {
+    let [min, median, p99, max] = stats(values);
+    serde_json::json!({ "min": min, "median": median, "p99": p99, "max": max })
+}
+
+fn qemu(args: &[String]) -> Result<()> {
+    let input = match args {
+        [] => None,
+        [flag] if flag == "--" => None,
+        [flag, file] if flag == "--" => Some(PathBuf::from(file)),
+        [file] => Some(PathBuf::from(file)),
+        _ => bail!("usage: cargo qemu [-- FILE.log]"),
+    };
+    let elf = cargo_build("qemu", "catmodel-qemu")?;
+    let out_dir = root().join("target").join("qemu");
+    let run = run_qemu(&elf, &out_dir, input.as_deref(), &[])?;
+
+    let whole: Vec<u32> = run.records.iter().map(|r| r.tick).collect();
+    let drain: Vec<u32> = run.records.iter().map(|r| r.drain).collect();
+    let step: Vec<u32> = run.records.iter().map(|r| r.step).collect();
+    let handoff: Vec<u32> = run
+        .records
+        .iter()
+        .map(|r| r.tick.saturating_sub(r.drain).saturating_sub(r.step))
+        .collect();
+    let [_, _, _, max] = stats(&whole);
+    let share = f64::from(max) / INSTRUCTIONS_PER_TICK_AT_168MHZ * 100.0;
+    let timing = serde_json::json!({
+        "ticks": run.records.len(),
+        "unit": "instructions (QEMU -icount shift=0: TIM2 counts one per executed instruction); not Cortex-M4 cycles",
+        "instructions": stats_json(&whole),
+        "budget_instructions": BUDGET_INSTRUCTIONS,
+        "share_of_tick_percent": (share * 1000.0).round() / 1000.0,
+        "share_of_tick_basis": "max instructions / (0.02 s * 168e6), i.e. as if one instruction took one 168 MHz cycle",
+        "components": {
+            "drain_rx_queue": stats_json(&drain),
+            "node_step": stats_json(&step),
+            "handoff_tx_queue": stats_json(&handoff),
+        },
+        "overruns": run.trailer.overruns,
+        "skipped_slots": run.trailer.skipped_slots,
+        "rx_queue_drops": run.trailer.rx_queue_drops,
+        "input_frames": run.trailer.input_frames,
+        "input_frames_skipped_remote_or_fd": run.trailer.input_unsupported,
+        "rx_frames_to_node": run.records.iter().map(|r| u64::from(r.rx_frames)).sum::<u64>(),
+        "rx_bus_errors": run.trailer.rx_bus_errors,
+        "rx_unsupported": run.trailer.rx_unsupported,
+        "tx_frames": run.records.iter().map(|r| u64::from(r.tx_frames)).sum::<u64>(),
+        "qemu_wall_seconds": (run.wall_s * 1000.0).round() / 1000.0,
+    });
+    std::fs::write(
+        out_dir.join("timing.json"),
+        serde_json::to_string_pretty(&timing)? + "\n",
+    )?;
+
+    let mut table = String::new();
+    let _ = writeln!(
+        table,
+        "{} ticks, {} frames in, {} tx frames; QEMU wall time {:.2} s",
+        run.records.len(),
+        run.trailer.input_frames,
+        timing["tx_frames"],
+        run.wall_s
+    );
+    let _ = writeln!(
+        table,
+        "instructions per tick (QEMU instruction counts, not cycles):"
+    );
+    let _ = writeln!(
+        table,
+        "  {:<18}{:>9}{:>9}{:>9}{:>9}",
+        "", "min", "median", "p99", "max"
+    );
+    for (name, values) in [
+        ("whole tick", &whole),
+        ("  drain rx queue", &drain),
+        ("  Node::step", &step),
+        ("  handoff tx", &handoff),
+    ] {
+        let [a, b, c, d] = stats(values);
+        let _ = writeln!(table, "  {name:<18}{a:>9}{b:>9}{c:>9}{d:>9}");
+    }
+    let _ = writeln!(
+        table,
+        "budget {BUDGET_INSTRUCTIONS} instructions; slowest tick = {share:.3} % of a 20 ms tick at 168 MHz"
+    );
+    let _ = writeln!(
+        table,
+        "overruns {}, skipped slots {}, rx queue drops {}",
+        run.trailer.overruns, run.trailer.skipped_slots, run.trailer.rx_queue_drops
+    );
+    let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
+    print!("{table}");
+
+    if max > BUDGET_INSTRUCTIONS {
+        bail!("a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+    }
+    if run.trailer.overruns != 0 || run.trailer.rx_queue_drops != 0 {
+        bail!("the run had overruns or receive-queue drops");
+    }
+    if run.trailer.tx_queue_drops != 0 || run.trailer.tx_bus_errors != 0 {
+        bail!("transmit frames were lost");
+    }
+    Ok(())
+}
+
+/// Parses the timestamps of a candump file, us.
+fn candump_times(text: &str) -> Result<Vec<u64>> {
+    let mut times = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let stamp = line
+            .split_whitespace()
+            .next()
+            .and_then(|s| s.strip_prefix('('))
+            .and_then(|s| s.strip_suffix(')'))
+            .and_then(|s| s.split_once('.'))
+            .ok_or_else(|| anyhow!("tx.log line {}: no timestamp", n + 1))?;
+        let secs: u64 = stamp.0.parse()?;
+        let micros: u64 = stamp.1.parse()?;
+        times.push(secs * 1_000_000 + micros);
+    }
+    Ok(times)
+}
+
+/// Stalls slot 10 for 30 ms (its tick ends after slot 11 is due: one overrun, nothing skipped)
+/// and slot 30 for 50 ms (ends after slot 32 is due: one overrun, slot 31 is stale and skipped,
+/// one more overrun).
+fn overrun_test() -> Result<()> {
+    let elf = cargo_build("qemu", "catmodel-qemu")?;
+    let out_dir = root().join("target").join("qemu").join("overrun-test");
+    let run = run_qemu(
+        &elf,
+        &out_dir,
+        None,
+        &["--stall", "10:30", "--stall", "30:50"],
+    )?;
+    let records = &run.records;
+    let mut failures = Vec::new();
+    let mut check = |ok: bool, what: String| {
+        println!("{} {what}", if ok { "ok  " } else { "FAIL" });
+        if !ok {
+            failures.push(what);
+        }
+    };
+    let Some(first) = records.first() else {
+        bail!("no ticks recorded");
+    };
+    if records.len() < 40 {
+        bail!(
+            "the drive is too short for the stall test ({} ticks)",
+            records.len()
+        );
+    }
+    let overruns_at = |slot: u64| records.iter().find(|r| r.slot == slot).map(|r| r.overruns);
+    check(
+        run.trailer.overruns == 3,
+        format!("3 overruns counted in total (got {})", run.trailer.overruns),
+    );
+    check(
+        run.trailer.skipped_slots == 1,
+        format!("1 slot skipped (got {})", run.trailer.skipped_slots),
+    );
+    check(
+        overruns_at(10) == Some(0) && overruns_at(11) == Some(1),
+        format!(
+            "PlatformStats.overruns 0 at slot 10, 1 from slot 11 (got {:?}, {:?})",
+            overruns_at(10),
+            overruns_at(11)
+        ),
+    );
+    check(
+        overruns_at(31).is_none() && overruns_at(32) == Some(3),
+        format!(
+            "slot 31 skipped, PlatformStats.overruns 3 at slot 32 (got {:?}, {:?})",
+            overruns_at(31).is_some(),
+            overruns_at(32)
+        ),
+    );
+    let slots: Vec<u64> = records.iter().map(|r| r.slot).collect();
+    let expected: Vec<u64> = (0..=slots[slots.len() - 1]).filter(|&s| s != 31).collect();
+    check(
+        slots == expected,
+        "every other slot ran once, in order (no catch-up burst)".into(),
+    );
+    check(
+        records
+            .iter()
+            .all(|r| r.tick_us == first.tick_us + r.slot * TICK_US),
+        "every tick time is on the 20 ms grid".into(),
+    );
+    let tx_text = std::fs::read_to_string(out_dir.join("tx.log"))?;
+    let tx_times = candump_times(&tx_text)?;
+    let tick_times: std::collections::BTreeSet<u64> = records.iter().map(|r| r.tick_us).collect();
+    check(
+        tx_times.iter().all(|t| tick_times.contains(t)),
+        format!(
+            "all {} tx frames are stamped with a tick time on the grid",
+            tx_times.len()
+        ),
+    );
+    let expected_tx: u64 = records.iter().map(|r| u64::from(r.tx_frames)).sum();
+    check(
+        tx_times.len() as u64 == expected_tx,
+        format!("tx.log holds the {expected_tx} frames the ticks returned"),
+    );
+    let unexpected_drops = records.iter().any(|r| r.rx_queue_drops != 0);
+    check(!unexpected_drops, "no receive-queue drops".into());
+    println!("QEMU wall time {:.2} s", run.wall_s);
+    if failures.is_empty() {
+        println!("overrun test passed");
+        Ok(())
+    } else {
+        bail!("overrun test: {} check(s) failed", failures.len())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Size
+
+/// Flash and static RAM of an ELF32 little-endian image, from its section headers: allocated
+/// sections in flash (0x0800_0000..) count as flash; allocated sections in RAM (0x2000_0000..)
+/// count as RAM, and those with contents (.data) count as flash too (their load image).
+fn elf_flash_ram(bytes: &[u8]) -> Result<(u64, u64)> {
+    if bytes.len() < 52 || &bytes[..4] != b"\x7fELF" || bytes[4] != 1 || bytes[5] != 1 {
+        bail!("not a little-endian ELF32 file");
+    }
+    let u16_at = |at: usize| u16::from_le_bytes([bytes[at], bytes[at + 1]]);
+    let shoff = u32_at(bytes, 0x20) as usize;
+    let shentsize = u16_at(0x2E) as usize;
+    let shnum = u16_at(0x30) as usize;
+    const SHF_ALLOC: u32 = 0x2;
+    const SHT_NOBITS: u32 = 8;
+    let (mut flash, mut ram) = (0u64, 0u64);
+    for i in 0..shnum {
+        let at = shoff + i * shentsize;
+        if at + 40 > bytes.len() {
+            bail!("truncated section header table");
+        }
+        let kind = u32_at(bytes, at + 4);
+        let flags = u32_at(bytes, at + 8);
+        let addr = u32_at(bytes, at + 12);
+        let size = u64::from(u32_at(bytes, at + 20));
+        if flags & SHF_ALLOC == 0 || size == 0 {
+            continue;
+        }
+        match addr >> 24 {
+            0x08 => flash += size,
+            0x20 => {
+                ram += size;
+                if kind != SHT_NOBITS {
+                    flash += size;
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok((flash, ram))
+}
+
+fn size() -> Result<()> {
+    let elf = cargo_build("board", "catmodel-board")?;
+    let bytes = std::fs::read(&elf)?;
+    let (flash, ram) = elf_flash_ram(&bytes)?;
+    println!("catmodel-board (release, {TARGET}):");
+    println!(
+        "  flash {:>7} B = {:6.1} KiB of {} KiB budget",
+        flash,
+        flash as f64 / 1024.0,
+        FLASH_BUDGET / 1024
+    );
+    println!(
+        "  RAM   {:>7} B = {:6.1} KiB of {} KiB budget (static: .data + .bss + .uninit; stack not included)",
+        ram,
+        ram as f64 / 1024.0,
+        RAM_BUDGET / 1024
+    );
+    if flash > FLASH_BUDGET || ram > RAM_BUDGET {
+        bail!("the board firmware is over budget");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_rank_statistics() {
+        let values: Vec<u32> = (1..=100).rev().collect();
+        assert_eq!(stats(&values), [1, 50, 99, 100]);
+        assert_eq!(stats(&[7]), [7, 7, 7, 7]);
+        assert_eq!(stats(&[3, 1, 2]), [1, 2, 3, 3]);
+    }
+
+    #[test]
+    fn tick_records_round_trip_and_truncation_is_an_error() {
+        let mut bytes = b"CMQT".to_vec();
+        bytes.extend(1u32.to_le_bytes());
+        bytes.extend(40u32.to_le_bytes());
+        for field in [
+            &1_000u64.to_le_bytes()[..],
+            &2u64.to_le_bytes(),
+            &3u32.to_le_bytes(),
+        ] {
+            bytes.extend(field);
+        }
+        bytes.extend(4u32.to_le_bytes());
+        bytes.extend(5u16.to_le_bytes());
+        bytes.extend(6u16.to_le_bytes());
+        for v in [7u32, 8, 9] {
+            bytes.extend(v.to_le_bytes());
+        }
+        bytes.extend(b"END!");
+        bytes.extend(1u64.to_le_bytes());
+        for v in 10u32..19 {
+            bytes.extend(v.to_le_bytes());
+        }
+        let (records, trailer) = parse_ticks(&bytes).unwrap();
+        assert_eq!(records.len(), 1);
+        let r = records[0];
+        assert_eq!(
+            (
+                r.tick_us,
+                r.slot,
+                r.overruns,
+                r.rx_queue_drops,
+                r.rx_frames,
+                r.tx_frames
+            ),
+            (1_000, 2, 3, 4, 5, 6)
+        );
+        assert_eq!((r.drain, r.step, r.tick), (7, 8, 9));
+        assert_eq!(
+            (trailer.ticks, trailer.overruns, trailer.input_unsupported),
+            (1, 10, 18)
+        );
+        assert!(parse_ticks(&bytes[..bytes.len() - 1]).is_err());
+        assert!(parse_ticks(&bytes[..bytes.len() - 48]).is_err());
+    }
+
+    #[test]
+    fn candump_timestamps() {
+        let text = "(1700000000.020000) can0 123#00\n\n(0000000001.000001) can0 1FFFFFFF#\n";
+        assert_eq!(
+            candump_times(text).unwrap(),
+            vec![1_700_000_000_020_000, 1_000_001]
+        );
+        assert!(candump_times("can0 123#00").is_err());
+    }
+}
