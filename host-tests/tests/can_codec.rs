@@ -964,3 +964,38 @@ proptest! {
         let _ = parse_line(&prefix);
     }
 }
+
+proptest! {
+    /// No decoder panics on any frame, whatever its id, DLC (even > 8) or bytes; a decoded
+    /// message re-encodes to a frame that decodes to the same message and counter.
+    #[test]
+    fn decoders_never_panic_on_arbitrary_frames(
+        std_id in 0u16..=0x7FF, ext_id in 0u32..=0x1FFF_FFFF, use_ext in any::<bool>(),
+        len in 0u8..=15, data in any::<[u8; 8]>(), near in 0u16..0x10,
+    ) {
+        let ids = [
+            if use_ext { CanId::Extended(ext_id) } else { CanId::Standard(std_id) },
+            CanId::Standard(0x100 + near % 3),
+            CanId::Standard(0x300 + near % 3),
+            CanId::Standard(0x310 + near),
+            CanId::Standard(0x3F0),
+            CanId::Extended(spec::n2k_id(2, 129_025 + u32::from(near % 2), 0x1C)),
+        ];
+        for id in ids {
+            let frame = CanFrame { id, len, data };
+            let _ = decode_input(&frame, 0x1C);
+            let _ = GnssPosition::decode(&frame, 0x1C);
+            let _ = GnssCogSog::decode(&frame, 0x1C);
+            if let Ok((m, c)) = StatePosition::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = StateMotion::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = StateModel::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = NodeStatus::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = Prediction::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = SteeringReport::decode(&frame) {
+                // Only the signal bits, counter and CRC are defined; reserved bits re-encode as 0.
+                let again = m.encode(c);
+                prop_assert_eq!(SteeringReport::decode(&again), Ok((m, c)));
+            }
+        }
+    }
+}
