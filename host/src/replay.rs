@@ -93,7 +93,9 @@ pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
     let mut next = 0usize;
     let mut step = 0u64;
     let mut tx = TxFrames::new();
-    while now <= last_us + SAMPLE_PERIOD_US {
+    // The last tick is the one at or after the last frame (the QEMU run stops there too).
+    let last_tick_us = first_tick_us(last_us);
+    while now <= last_tick_us {
         let start = next;
         while next < frames.len() && frames[next].t_us <= now {
             next += 1;

@@ -321,8 +321,9 @@ pub async fn wait_tx_drained(tx: &TxQueue) {
     yield_now().await;
 }
 
-/// The node every platform runs. (In progress: becomes `Node::new(NodeConfig::default())`, the
-/// published model, once the core's configuration lands.)
-pub fn make_node() -> Node {
-    Node::default()
+/// The node every platform runs: the published models (eq 5, eq 7) on the CAT Vehicle. The
+/// configuration is validated on the host by the test suite; an error here can only come from a
+/// corrupted build, and the platforms stop rather than run a wrong model.
+pub fn make_node() -> Result<Node, crate::model::ModelError> {
+    crate::node::NodeConfig::paper().map(Node::new)
 }

@@ -66,7 +66,14 @@ async fn main(spawner: Spawner) {
         last_tick_us: None,
         watchdog_reset,
     };
-    let mut node = app::make_node();
+    let Ok(mut node) = app::make_node() else {
+        // The published model failed to build: nothing correct can be sent. Stay silent on
+        // the bus; the planner sees the node missing.
+        defmt::error!("model configuration invalid");
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
     app::tick_loop(
         &mut node,
         &RX_QUEUE,

@@ -31,7 +31,10 @@ async fn tick_task(
     config: app::TickConfig,
     input: replay::InputSummary,
 ) {
-    let mut node = app::make_node();
+    let Ok(mut node) = app::make_node() else {
+        // The published model failed to build: nothing correct can be sent.
+        semihosting::process::exit(3)
+    };
     let summary = app::tick_loop(
         &mut node,
         &RX_QUEUE,

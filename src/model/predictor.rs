@@ -8,9 +8,10 @@
 //! current difference between measured and modelled speed (an output-disturbance estimate, as
 //! in MPC), so the prediction starts at the measured speed.
 //!
-//! Cost: no transcendental call per step. The kinematic curvature `tan(delta_eff(v)) / L`
-//! depends on the predicted speed through eq 2's understeer term, so it is recomputed once per
-//! output point (every `output_every` steps) and held in between.
+//! Cost: no transcendental call per step. The kinematic curvature `tan(delta_eff(v)) / L` is
+//! evaluated once, at the current speed, and held over the horizon: eq 2's understeer term
+//! changes it by under 2 % for a 2 m/s speed change at 5 m/s, and `tan` costs thousands of
+//! instructions on the Cortex-M4F (libm's f32 tan works in software f64).
 use super::dynamic::{DynamicParams, LateralState};
 use super::hybrid::Mode;
 use super::kinematic::Pose;
@@ -96,7 +97,7 @@ pub fn rollout(
     let dt = horizon.dt_s;
     let every = horizon.output_every.max(1);
     let mut written = 0usize;
-    let mut curvature_per_m = vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps);
+    let curvature_per_m = vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps);
     let mut slot = out.iter_mut();
     for k in 1..=horizon.steps {
         let v_model = speed_model_step(start.speed_cmd_mps);
@@ -122,7 +123,6 @@ pub fn rollout(
                 speed_mps: v,
             };
             written += 1;
-            curvature_per_m = vehicle.curvature_per_m(start.center_steer_rad, v);
         }
     }
     written

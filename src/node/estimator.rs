@@ -72,6 +72,8 @@ pub struct EstimatorState {
     odo_now: Xy,
     /// Heading estimate, rad clockwise from north; `None` until a course was seen.
     heading_rad: Option<f32>,
+    /// sin and cos of the heading at this tick's dead-reckoning step.
+    heading_sin_cos: (f32, f32),
 }
 
 impl Default for EstimatorState {
@@ -89,6 +91,7 @@ impl Default for EstimatorState {
             track_head: 0,
             odo_now: Xy::default(),
             heading_rad: None,
+            heading_sin_cos: (0.0, 1.0),
         }
     }
 }
@@ -136,6 +139,8 @@ impl EstimatorState {
         let heading = self.heading_rad.unwrap_or(0.0);
         let mid = heading + 0.5 * yaw_rate_rps * dt_s;
         let (s, c) = math::sin_cos(mid);
+        // Close enough to the end-of-step heading for the <= 20 ms look-backs of `add_fix`.
+        self.heading_sin_cos = (s, c);
         self.odo_now.x_m += speed_mps * dt_s * s;
         self.odo_now.y_m += speed_mps * dt_s * c;
         if let Some(h) = self.heading_rad.as_mut() {
@@ -160,9 +165,9 @@ impl EstimatorState {
             .process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
         let filtered = Xy { x_m: fx, y_m: fy };
         self.filtered = Some(filtered);
-        // Where dead reckoning had the car when the fix was taken.
-        let heading = self.heading_rad.unwrap_or(0.0);
-        let (s, c) = math::sin_cos(heading);
+        // Where dead reckoning had the car when the fix was taken (the heading's sine and
+        // cosine were computed once this tick by `propagate`).
+        let (s, c) = self.heading_sin_cos;
         let back_m = speed_mps * age_s;
         let odo_fix = Xy {
             x_m: self.odo_now.x_m - back_m * s,

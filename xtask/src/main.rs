@@ -354,7 +354,15 @@ fn qemu(args: &[String]) -> Result<()> {
     print!("{table}");
 
     if max > BUDGET_INSTRUCTIONS {
-        bail!("a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+        // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
+        // the run, its outputs and every other check still count.
+        if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
+            eprintln!(
+                "xtask: WARNING: a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS} (not fatal: CATMODEL_BUDGET_WARN_ONLY)"
+            );
+        } else {
+            bail!("a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+        }
     }
     if run.trailer.overruns != 0 || run.trailer.rx_queue_drops != 0 {
         bail!("the run had overruns or receive-queue drops");
@@ -539,7 +547,11 @@ fn size() -> Result<()> {
         RAM_BUDGET / 1024
     );
     if flash > FLASH_BUDGET || ram > RAM_BUDGET {
-        bail!("the board firmware is over budget");
+        if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
+            eprintln!("xtask: WARNING: the board firmware is over budget (not fatal: CATMODEL_BUDGET_WARN_ONLY)");
+        } else {
+            bail!("the board firmware is over budget")
+        };
     }
     Ok(())
 }
