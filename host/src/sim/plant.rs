@@ -156,7 +156,10 @@ impl Plant {
         let weight = ((vx - BLEND_LO_MPS) / (BLEND_HI_MPS - BLEND_LO_MPS)).clamp(0.0, 1.0);
 
         let (fxf, fxr) = if moving {
-            (u.drive_n - brake_f - self.rolling_n * fz_f / (fz_f + fz_r), -brake_r - self.rolling_n * fz_r / (fz_f + fz_r))
+            (
+                u.drive_n - brake_f - self.rolling_n * fz_f / (fz_f + fz_r),
+                -brake_r - self.rolling_n * fz_r / (fz_f + fz_r),
+            )
         } else {
             // At rest: only a net forward push moves the car.
             let net = u.drive_n - u.brake_n - self.rolling_n;
@@ -210,7 +213,14 @@ impl Plant {
             drive_n: input.drive_force_n.max(0.0),
             brake_n: input.brake_force_n.max(0.0),
         };
-        let s0 = [state.x_m, state.y_m, state.heading_rad, state.vx_mps, state.vy_mps, state.yaw_rate_rps];
+        let s0 = [
+            state.x_m,
+            state.y_m,
+            state.heading_rad,
+            state.vx_mps,
+            state.vy_mps,
+            state.yaw_rate_rps,
+        ];
         let add = |a: &[f64; 6], k: &[f64; 6], h: f64| {
             let mut out = *a;
             for (o, d) in out.iter_mut().zip(k) {
@@ -237,7 +247,12 @@ impl Plant {
         };
         if state.vx_mps <= 0.0 {
             // Stopped within this step: clamp (no reversing), no residual sideways motion.
-            *state = PlantState { vx_mps: 0.0, vy_mps: 0.0, yaw_rate_rps: 0.0, ..*state };
+            *state = PlantState {
+                vx_mps: 0.0,
+                vy_mps: 0.0,
+                yaw_rate_rps: 0.0,
+                ..*state
+            };
         }
         (state.vx_mps - vx_before) / dt_s
     }
