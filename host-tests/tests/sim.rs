@@ -116,10 +116,12 @@ fn steady_state_radius_follows_the_understeer_relation_at_two_speeds() {
         );
         let radius = speed / yaw_rate.abs();
         let expected = torc_radius_m(steer_pct.abs(), speed);
-        // rtol 2 %: the TORC relation is the linear-tyre, small-angle steady state; the plant has
-        // magic-formula tyres (about 1.5 % stiffness loss at 2 m/s^2) and exact trigonometry.
+        println!("steer {steer_pct} % at {speed:.3} m/s: R {radius:.3} m, TORC {expected:.3} m");
+        // rtol 0.5 %: the TORC relation is the linear-tyre, small-angle steady state; the plant has
+        // magic-formula tyres (about 1.5 % stiffness loss at 2 m/s^2, which moves R by ~0.2 %)
+        // and exact trigonometry. Measured: 0.07 % and 0.06 %.
         assert!(
-            isclose(radius, expected, 0.02, 0.0),
+            isclose(radius, expected, 0.005, 0.0),
             "steer {steer_pct} % at {speed} m/s: R {radius} m, TORC {expected} m"
         );
         // ... and the understeer matters here: the kinematic radius is clearly different.
@@ -141,6 +143,7 @@ fn tightest_circle_is_near_the_published_geometry() {
         .collect();
     let n = tail.len() as f64;
     let radius = tail.iter().map(|r| r.speed / r.yaw_rate).sum::<f64>() / n;
+    println!("tightest circle (rear axle): {radius:.3} m");
     // Rear-axle radius at 100 % = 35.5 deg: L / tan(35.5 deg) = 3.68 m kinematically; the
     // manufacturer's 5.58 m minimum turning radius is the outer front corner, so the rear axle
     // must be well inside it. Bounds: 3.6..4.3 m.
@@ -186,7 +189,7 @@ fn speed_response_shows_delay_limits_and_reaches_the_command() {
         "max accel {max_accel}"
     );
     assert!(
-        max_decel >= -3.5 * 1.02 && max_decel < -2.0,
+        (-3.5 * 1.02..-2.0).contains(&max_decel),
         "max decel {max_decel}"
     );
     // Minimum rise time at 2 m/s^2 is 3.75 s after the delay; within 2 % of 7.5 m/s by t = 12 s
@@ -440,6 +443,9 @@ fn enu_to_lat_lon_matches_pymap3d() {
 #[test]
 fn simulated_files_round_trip_through_the_readers() {
     let out = run("smoke", 2);
+    for r in out.log.iter().skip(300).take(8) {
+        println!("{r:?}");
+    }
     let dir = std::env::temp_dir().join(format!("catmodel-sim-test-{}", std::process::id()));
     let (log_path, truth_path) = sim::write_outputs(&dir, "smoke", &out).expect("writes");
     assert_eq!(logcsv::read_log(&log_path).expect("reads"), out.log);

@@ -475,10 +475,10 @@ fn split_cells(line: &str) -> Vec<Cell<'_>> {
     let mut cells = Vec::new();
     let mut start_byte = 0;
     let mut start_char = 1;
-    let mut chars_seen = 0;
-    for (byte, ch) in line
+    for (char_index, (byte, ch)) in line
         .char_indices()
         .chain(std::iter::once((line.len(), ',')))
+        .enumerate()
     {
         if ch == ',' {
             let raw = line.get(start_byte..byte).unwrap_or("");
@@ -493,9 +493,8 @@ fn split_cells(line: &str) -> Vec<Cell<'_>> {
                 char_column: start_char,
             });
             start_byte = byte + 1;
-            start_char = chars_seen + 2;
+            start_char = char_index + 2;
         }
-        chars_seen += 1;
     }
     cells
 }

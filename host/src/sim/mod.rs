@@ -189,6 +189,7 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
         }
     };
 
+    let mut s0 = snapshot(&state, steer_pct);
     for k in 0..n_steps {
         let t0 = k as f64 * dt;
         if k % TRUTH_EVERY_STEPS == 0 {
@@ -208,7 +209,6 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
             });
         }
         let command = scenario.command_at(t0);
-        let s0 = snapshot(&state, steer_pct);
         steer_pct = steering.step(command.steer_pct);
         let drive = speed_ctl.step(command.speed_mps, state.vx_mps);
         let input = PlantInput {
@@ -224,6 +224,7 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
             brake_pct: drive.brake_pct,
         };
         sensors.observe(t0, t0 + dt, &s0, &s1, &held);
+        s0 = s1;
     }
 
     SimOutput {

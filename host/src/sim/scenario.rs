@@ -158,7 +158,7 @@ impl Scenario {
                 let duration_s = s.duration_s * (1.0 + rng.uniform_in(-0.05, 0.05));
                 let speed_mps = (s.speed_mps * (1.0 + 0.02 * rng.normal())).max(0.0);
                 let steer = match s.steer {
-                    SteerProfile::Hold(p) if p == 0.0 => SteerProfile::Hold(0.1 * rng.normal()),
+                    SteerProfile::Hold(0.0) => SteerProfile::Hold(0.1 * rng.normal()),
                     SteerProfile::Hold(p) => {
                         SteerProfile::Hold((p * (1.0 + 0.02 * rng.normal())).clamp(-100.0, 100.0))
                     }
