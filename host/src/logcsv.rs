@@ -34,7 +34,10 @@ pub struct LogRow {
 impl LogRow {
     /// A row at `t` where no sensor reported.
     pub fn empty(t: f64) -> Self {
-        LogRow { t, ..Default::default() }
+        LogRow {
+            t,
+            ..Default::default()
+        }
     }
 
     /// Fills the cells of `other` that are present into `self` (rows logged at the same time).
@@ -74,7 +77,16 @@ pub struct TruthRow {
 }
 
 /// Columns of the log schema, in the order the writer uses.
-pub const LOG_COLUMNS: [&str; 8] = ["t", "vel", "input_vel", "accel", "steer", "brake", "lat", "lon"];
+pub const LOG_COLUMNS: [&str; 8] = [
+    "t",
+    "vel",
+    "input_vel",
+    "accel",
+    "steer",
+    "brake",
+    "lat",
+    "lon",
+];
 /// Columns of the truth CSV.
 pub const TRUTH_COLUMNS: [&str; 6] = ["t", "x", "y", "heading", "yaw_rate", "speed"];
 
@@ -150,11 +162,16 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::NotUtf8 => write!(f, "not UTF-8 text"),
             LogErrorKind::MissingHeader => write!(f, "missing header row"),
             LogErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
-            LogErrorKind::DuplicateColumn(c) => write!(f, "column `{c}` appears twice in the header"),
+            LogErrorKind::DuplicateColumn(c) => {
+                write!(f, "column `{c}` appears twice in the header")
+            }
             LogErrorKind::MissingColumn(c) => write!(f, "missing required column `{c}`"),
             LogErrorKind::BlankLine => write!(f, "blank line inside the data"),
             LogErrorKind::FieldCount { expected, found } => {
-                write!(f, "expected {expected} cells as in the header, found {found}")
+                write!(
+                    f,
+                    "expected {expected} cells as in the header, found {found}"
+                )
             }
             LogErrorKind::MissingValue => write!(f, "empty cell where a value is required"),
             LogErrorKind::NotANumber(s) => write!(f, "not a number: `{s}`"),
@@ -165,7 +182,9 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::TimeNotIncreasing { t, previous } => {
                 write!(f, "time not increasing: {t} after {previous}")
             }
-            LogErrorKind::HalfFix => write!(f, "`lat` and `lon` must be both present or both empty"),
+            LogErrorKind::HalfFix => {
+                write!(f, "`lat` and `lon` must be both present or both empty")
+            }
         }
     }
 }
@@ -198,7 +217,13 @@ impl std::error::Error for LogError {
 }
 
 fn file_error(path: &Path, kind: LogErrorKind) -> LogError {
-    LogError { path: path.to_path_buf(), line: 0, char_column: 0, column: None, kind }
+    LogError {
+        path: path.to_path_buf(),
+        line: 0,
+        char_column: 0,
+        column: None,
+        kind,
+    }
 }
 
 /// Reads a driving log. All eight schema columns are required (a sensor that never reported is
@@ -274,7 +299,14 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Vec<TruthRow>, LogError> {
             };
         }
         check_time(&line, v[0], &mut previous)?;
-        rows.push(TruthRow { t: v[0], x: v[1], y: v[2], heading: v[3], yaw_rate: v[4], speed: v[5] });
+        rows.push(TruthRow {
+            t: v[0],
+            x: v[1],
+            y: v[2],
+            heading: v[3],
+            yaw_rate: v[4],
+            speed: v[5],
+        });
     }
     Ok(rows)
 }
@@ -294,14 +326,26 @@ pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<(), LogError> {
 }
 
 /// Writes a driving log to any writer. Errors carry (line, column, reason).
-pub fn write_log_to<W: Write>(w: &mut W, rows: &[LogRow]) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
+pub fn write_log_to<W: Write>(
+    w: &mut W,
+    rows: &[LogRow],
+) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
     let io = |e| (0, None, LogErrorKind::Io(e));
     writeln!(w, "{}", LOG_COLUMNS.join(",")).map_err(io)?;
     let mut previous: Option<f64> = None;
     let mut line_text = String::new();
     for (i, r) in rows.iter().enumerate() {
         let line = i + 2;
-        let cells = [Some(r.t), r.vel, r.input_vel, r.accel, r.steer, r.brake, r.lat, r.lon];
+        let cells = [
+            Some(r.t),
+            r.vel,
+            r.input_vel,
+            r.accel,
+            r.steer,
+            r.brake,
+            r.lat,
+            r.lon,
+        ];
         check_write(line, &cells, &LOG_COLUMNS, &mut previous)?;
         format_cells(&mut line_text, &cells);
         w.write_all(line_text.as_bytes()).map_err(io)?;
@@ -323,13 +367,23 @@ pub fn write_truth(path: &Path, rows: &[TruthRow]) -> Result<(), LogError> {
 }
 
 /// Writes a truth CSV to any writer. Errors carry (line, column, reason).
-pub fn write_truth_to<W: Write>(w: &mut W, rows: &[TruthRow]) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
+pub fn write_truth_to<W: Write>(
+    w: &mut W,
+    rows: &[TruthRow],
+) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
     let io = |e| (0, None, LogErrorKind::Io(e));
     writeln!(w, "{}", TRUTH_COLUMNS.join(",")).map_err(io)?;
     let mut previous: Option<f64> = None;
     let mut line_text = String::new();
     for (i, r) in rows.iter().enumerate() {
-        let cells = [Some(r.t), Some(r.x), Some(r.y), Some(r.heading), Some(r.yaw_rate), Some(r.speed)];
+        let cells = [
+            Some(r.t),
+            Some(r.x),
+            Some(r.y),
+            Some(r.heading),
+            Some(r.yaw_rate),
+            Some(r.speed),
+        ];
         check_write(i + 2, &cells, &TRUTH_COLUMNS, &mut previous)?;
         format_cells(&mut line_text, &cells);
         w.write_all(line_text.as_bytes()).map_err(io)?;
@@ -353,7 +407,11 @@ fn check_write(
     if let Some(Some(t)) = cells.first() {
         if let Some(p) = *previous {
             if *t <= p {
-                return Err((line, Some("t"), LogErrorKind::TimeNotIncreasing { t: *t, previous: p }));
+                return Err((
+                    line,
+                    Some("t"),
+                    LogErrorKind::TimeNotIncreasing { t: *t, previous: p },
+                ));
             }
         }
         *previous = Some(*t);
@@ -381,9 +439,18 @@ fn read_text(path: &Path) -> Result<String, LogError> {
     match String::from_utf8(bytes) {
         Ok(s) => Ok(s),
         Err(e) => {
-            let good = e.as_bytes().get(..e.utf8_error().valid_up_to()).unwrap_or(&[]);
+            let good = e
+                .as_bytes()
+                .get(..e.utf8_error().valid_up_to())
+                .unwrap_or(&[]);
             let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
-            Err(LogError { path: path.to_path_buf(), line, char_column: 0, column: None, kind: LogErrorKind::NotUtf8 })
+            Err(LogError {
+                path: path.to_path_buf(),
+                line,
+                char_column: 0,
+                column: None,
+                kind: LogErrorKind::NotUtf8,
+            })
         }
     }
 }
@@ -408,8 +475,11 @@ fn split_cells(line: &str) -> Vec<Cell<'_>> {
     let mut cells = Vec::new();
     let mut start_byte = 0;
     let mut start_char = 1;
-    let mut chars_seen = 0;
-    for (byte, ch) in line.char_indices().chain(std::iter::once((line.len(), ','))) {
+    for (char_index, (byte, ch)) in line
+        .char_indices()
+        .chain(std::iter::once((line.len(), ',')))
+        .enumerate()
+    {
         if ch == ',' {
             let raw = line.get(start_byte..byte).unwrap_or("");
             let trimmed = raw.trim();
@@ -418,11 +488,13 @@ fn split_cells(line: &str) -> Vec<Cell<'_>> {
                 .and_then(|s| s.strip_suffix('"'))
                 .unwrap_or(trimmed)
                 .trim();
-            cells.push(Cell { text, char_column: start_char });
+            cells.push(Cell {
+                text,
+                char_column: start_char,
+            });
             start_byte = byte + 1;
-            start_char = chars_seen + 2;
+            start_char = char_index + 2;
         }
-        chars_seen += 1;
     }
     cells
 }
@@ -439,9 +511,16 @@ struct Table<'a> {
 }
 
 impl<'a> Table<'a> {
-    fn new(text: &'a str, path: &'a Path, wanted: &'static [&'static str]) -> Result<Self, LogError> {
+    fn new(
+        text: &'a str,
+        path: &'a Path,
+        wanted: &'static [&'static str],
+    ) -> Result<Self, LogError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)));
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)));
         let err = |line, char_column, column: Option<String>, kind| LogError {
             path: path.to_path_buf(),
             line,
@@ -459,7 +538,12 @@ impl<'a> Table<'a> {
                 return Err(err(1, c.char_column, None, LogErrorKind::EmptyColumnName));
             }
             if cells.iter().take(i).any(|p| p.text == c.text) {
-                return Err(err(1, c.char_column, Some(c.text.to_string()), LogErrorKind::DuplicateColumn(c.text.to_string())));
+                return Err(err(
+                    1,
+                    c.char_column,
+                    Some(c.text.to_string()),
+                    LogErrorKind::DuplicateColumn(c.text.to_string()),
+                ));
             }
         }
         if cells.iter().all(|c| c.text.parse::<f64>().is_ok()) {
@@ -469,7 +553,14 @@ impl<'a> Table<'a> {
         for name in wanted {
             match cells.iter().position(|c| c.text == *name) {
                 Some(i) => index.push(i),
-                None => return Err(err(1, 0, Some((*name).to_string()), LogErrorKind::MissingColumn(name))),
+                None => {
+                    return Err(err(
+                        1,
+                        0,
+                        Some((*name).to_string()),
+                        LogErrorKind::MissingColumn(name),
+                    ))
+                }
             }
         }
         let mut data: Vec<(usize, &str)> = lines.collect();
@@ -477,20 +568,39 @@ impl<'a> Table<'a> {
         while data.last().is_some_and(|(_, l)| l.trim().is_empty()) {
             data.pop();
         }
-        Ok(Table { path, header_len: cells.len(), index, names: wanted, data })
+        Ok(Table {
+            path,
+            header_len: cells.len(),
+            index,
+            names: wanted,
+            data,
+        })
     }
 
     fn lines(&self) -> impl Iterator<Item = Result<Line<'_>, LogError>> + '_ {
         self.data.iter().map(move |&(number, text)| {
-            let fail = |kind| LogError { path: self.path.to_path_buf(), line: number, char_column: 0, column: None, kind };
+            let fail = |kind| LogError {
+                path: self.path.to_path_buf(),
+                line: number,
+                char_column: 0,
+                column: None,
+                kind,
+            };
             if text.trim().is_empty() {
                 return Err(fail(LogErrorKind::BlankLine));
             }
             let cells = split_cells(text);
             if cells.len() != self.header_len {
-                return Err(fail(LogErrorKind::FieldCount { expected: self.header_len, found: cells.len() }));
+                return Err(fail(LogErrorKind::FieldCount {
+                    expected: self.header_len,
+                    found: cells.len(),
+                }));
             }
-            Ok(Line { table: self, number, cells })
+            Ok(Line {
+                table: self,
+                number,
+                cells,
+            })
         })
     }
 }
@@ -524,7 +634,9 @@ impl Line<'_> {
         if text.is_empty() {
             return Ok(None);
         }
-        let v: f64 = text.parse().map_err(|_| self.error(i, LogErrorKind::NotANumber(text.to_string())))?;
+        let v: f64 = text
+            .parse()
+            .map_err(|_| self.error(i, LogErrorKind::NotANumber(text.to_string())))?;
         if !v.is_finite() {
             return Err(self.error(i, LogErrorKind::NonFinite(text.to_string())));
         }

@@ -298,8 +298,8 @@ impl std::error::Error for ConfigError {}
 impl VehicleConfig {
     /// Reads and validates a vehicle file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ConfigError::Io(path.to_path_buf(), e))?;
+        let text =
+            std::fs::read_to_string(path).map_err(|e| ConfigError::Io(path.to_path_buf(), e))?;
         let cfg: Self =
             toml::from_str(&text).map_err(|e| ConfigError::Toml(path.to_path_buf(), e))?;
         cfg.validate()?;
@@ -335,22 +335,49 @@ impl VehicleConfig {
             ("chassis.cg_to_rear_m", c.cg_to_rear_m),
             ("chassis.yaw_inertia_kg_m2", c.yaw_inertia_kg_m2),
             ("chassis.max_steer_deg", c.max_steer_deg),
-            ("tyre_front.cornering_stiffness_n_per_rad", self.tyre_front.cornering_stiffness_n_per_rad),
+            (
+                "tyre_front.cornering_stiffness_n_per_rad",
+                self.tyre_front.cornering_stiffness_n_per_rad,
+            ),
             ("tyre_front.shape_c", self.tyre_front.shape_c),
             ("tyre_front.friction_mu", self.tyre_front.friction_mu),
-            ("tyre_rear.cornering_stiffness_n_per_rad", self.tyre_rear.cornering_stiffness_n_per_rad),
+            (
+                "tyre_rear.cornering_stiffness_n_per_rad",
+                self.tyre_rear.cornering_stiffness_n_per_rad,
+            ),
             ("tyre_rear.shape_c", self.tyre_rear.shape_c),
             ("tyre_rear.friction_mu", self.tyre_rear.friction_mu),
-            ("steering.rate_limit_pct_per_s", self.steering.rate_limit_pct_per_s),
+            (
+                "steering.rate_limit_pct_per_s",
+                self.steering.rate_limit_pct_per_s,
+            ),
             ("speed_controller.period_s", self.speed_controller.period_s),
-            ("speed_controller.max_accel_mps2", self.speed_controller.max_accel_mps2),
-            ("speed_controller.max_decel_mps2", self.speed_controller.max_decel_mps2),
+            (
+                "speed_controller.max_accel_mps2",
+                self.speed_controller.max_accel_mps2,
+            ),
+            (
+                "speed_controller.max_decel_mps2",
+                self.speed_controller.max_decel_mps2,
+            ),
             ("sensors.bus.period_s", self.sensors.bus.period_s),
             ("sensors.gnss.period_s", self.sensors.gnss.period_s),
-            ("sensors.gnss.bias_correlation_s", self.sensors.gnss.bias_correlation_s),
-            ("sensors.gnss.resolution_deg", self.sensors.gnss.resolution_deg),
-            ("sensors.bus.speed_resolution_mps", self.sensors.bus.speed_resolution_mps),
-            ("sensors.bus.percent_resolution", self.sensors.bus.percent_resolution),
+            (
+                "sensors.gnss.bias_correlation_s",
+                self.sensors.gnss.bias_correlation_s,
+            ),
+            (
+                "sensors.gnss.resolution_deg",
+                self.sensors.gnss.resolution_deg,
+            ),
+            (
+                "sensors.bus.speed_resolution_mps",
+                self.sensors.bus.speed_resolution_mps,
+            ),
+            (
+                "sensors.bus.percent_resolution",
+                self.sensors.bus.percent_resolution,
+            ),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -360,29 +387,83 @@ impl VehicleConfig {
         let non_negative = [
             ("chassis.cg_height_m", c.cg_height_m),
             ("steering.lag_s", self.steering.lag_s),
-            ("speed_controller.command_delay_s", self.speed_controller.command_delay_s),
+            (
+                "speed_controller.command_delay_s",
+                self.speed_controller.command_delay_s,
+            ),
             ("speed_controller.kp_per_s", self.speed_controller.kp_per_s),
-            ("speed_controller.ki_per_s2", self.speed_controller.ki_per_s2),
-            ("speed_controller.actuator_lag_s", self.speed_controller.actuator_lag_s),
-            ("speed_controller.standstill_hold_decel_mps2", self.speed_controller.standstill_hold_decel_mps2),
-            ("resistance.rolling_coefficient", self.resistance.rolling_coefficient),
+            (
+                "speed_controller.ki_per_s2",
+                self.speed_controller.ki_per_s2,
+            ),
+            (
+                "speed_controller.actuator_lag_s",
+                self.speed_controller.actuator_lag_s,
+            ),
+            (
+                "speed_controller.standstill_hold_decel_mps2",
+                self.speed_controller.standstill_hold_decel_mps2,
+            ),
+            (
+                "resistance.rolling_coefficient",
+                self.resistance.rolling_coefficient,
+            ),
             ("resistance.drag_area_m2", self.resistance.drag_area_m2),
-            ("resistance.air_density_kg_m3", self.resistance.air_density_kg_m3),
-            ("sensors.bus.clock_error_ppm", self.sensors.bus.clock_error_ppm),
-            ("sensors.bus.timestamp_delay_min_s", self.sensors.bus.timestamp_delay_min_s),
-            ("sensors.bus.speed_noise_mps", self.sensors.bus.speed_noise_mps),
-            ("sensors.bus.speed_dead_band_mps", self.sensors.bus.speed_dead_band_mps),
-            ("sensors.bus.steer_noise_pct", self.sensors.bus.steer_noise_pct),
-            ("sensors.bus.pedal_noise_pct", self.sensors.bus.pedal_noise_pct),
-            ("sensors.gnss.clock_error_ppm", self.sensors.gnss.clock_error_ppm),
-            ("sensors.gnss.timestamp_delay_min_s", self.sensors.gnss.timestamp_delay_min_s),
-            ("sensors.gnss.white_noise_m", self.sensors.gnss.white_noise_m),
+            (
+                "resistance.air_density_kg_m3",
+                self.resistance.air_density_kg_m3,
+            ),
+            (
+                "sensors.bus.clock_error_ppm",
+                self.sensors.bus.clock_error_ppm,
+            ),
+            (
+                "sensors.bus.timestamp_delay_min_s",
+                self.sensors.bus.timestamp_delay_min_s,
+            ),
+            (
+                "sensors.bus.speed_noise_mps",
+                self.sensors.bus.speed_noise_mps,
+            ),
+            (
+                "sensors.bus.speed_dead_band_mps",
+                self.sensors.bus.speed_dead_band_mps,
+            ),
+            (
+                "sensors.bus.steer_noise_pct",
+                self.sensors.bus.steer_noise_pct,
+            ),
+            (
+                "sensors.bus.pedal_noise_pct",
+                self.sensors.bus.pedal_noise_pct,
+            ),
+            (
+                "sensors.gnss.clock_error_ppm",
+                self.sensors.gnss.clock_error_ppm,
+            ),
+            (
+                "sensors.gnss.timestamp_delay_min_s",
+                self.sensors.gnss.timestamp_delay_min_s,
+            ),
+            (
+                "sensors.gnss.white_noise_m",
+                self.sensors.gnss.white_noise_m,
+            ),
             ("sensors.gnss.bias_sigma_m", self.sensors.gnss.bias_sigma_m),
-            ("faults.gnss_outage_rate_per_s", self.faults.gnss_outage_rate_per_s),
+            (
+                "faults.gnss_outage_rate_per_s",
+                self.faults.gnss_outage_rate_per_s,
+            ),
             ("faults.gnss_outage_mean_s", self.faults.gnss_outage_mean_s),
-            ("faults.gnss_outlier_probability", self.faults.gnss_outlier_probability),
+            (
+                "faults.gnss_outlier_probability",
+                self.faults.gnss_outlier_probability,
+            ),
             ("faults.gnss_outlier_m", self.faults.gnss_outlier_m),
-            ("faults.bus_drop_probability", self.faults.bus_drop_probability),
+            (
+                "faults.bus_drop_probability",
+                self.faults.bus_drop_probability,
+            ),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -397,11 +478,18 @@ impl VehicleConfig {
             )));
         }
         if !(0.0..=1.0).contains(&c.brake_front_share) {
-            return Err(ConfigError::Invalid("chassis.brake_front_share must be in 0..1".into()));
+            return Err(ConfigError::Invalid(
+                "chassis.brake_front_share must be in 0..1".into(),
+            ));
         }
-        for (name, t) in [("tyre_front", &self.tyre_front), ("tyre_rear", &self.tyre_rear)] {
+        for (name, t) in [
+            ("tyre_front", &self.tyre_front),
+            ("tyre_rear", &self.tyre_rear),
+        ] {
             if !(t.curvature_e.is_finite() && t.curvature_e <= 1.0) {
-                return Err(ConfigError::Invalid(format!("{name}.curvature_e must be <= 1")));
+                return Err(ConfigError::Invalid(format!(
+                    "{name}.curvature_e must be <= 1"
+                )));
             }
             if t.shape_c >= 2.0 {
                 return Err(ConfigError::Invalid(format!(
@@ -415,19 +503,27 @@ impl VehicleConfig {
             && b.timestamp_delay_max_s - b.timestamp_delay_min_s < b.period_s)
         {
             return Err(ConfigError::Invalid(
-                "sensors.bus timestamp delay range must be ordered and narrower than the period".into(),
+                "sensors.bus timestamp delay range must be ordered and narrower than the period"
+                    .into(),
             ));
         }
         if !(g.timestamp_delay_max_s >= g.timestamp_delay_min_s
             && g.timestamp_delay_max_s - g.timestamp_delay_min_s < g.period_s)
         {
             return Err(ConfigError::Invalid(
-                "sensors.gnss timestamp delay range must be ordered and narrower than the period".into(),
+                "sensors.gnss timestamp delay range must be ordered and narrower than the period"
+                    .into(),
             ));
         }
         for (name, p) in [
-            ("faults.gnss_outlier_probability", self.faults.gnss_outlier_probability),
-            ("faults.bus_drop_probability", self.faults.bus_drop_probability),
+            (
+                "faults.gnss_outlier_probability",
+                self.faults.gnss_outlier_probability,
+            ),
+            (
+                "faults.bus_drop_probability",
+                self.faults.bus_drop_probability,
+            ),
         ] {
             if p > 1.0 {
                 return Err(ConfigError::Invalid(format!("{name} must be <= 1")));

@@ -68,7 +68,8 @@ impl SpeedController {
             self.update(command_mps, speed_mps);
         }
         self.tick = (self.tick + 1) % self.ticks_per_update;
-        self.accel_delivered_mps2 += self.lag_alpha * (self.accel_cmd_mps2 - self.accel_delivered_mps2);
+        self.accel_delivered_mps2 +=
+            self.lag_alpha * (self.accel_cmd_mps2 - self.accel_delivered_mps2);
         let force = self.mass_kg * self.accel_delivered_mps2;
         let p = &self.params;
         SpeedOutput {
@@ -112,7 +113,11 @@ pub struct SteeringActuator {
 impl SteeringActuator {
     /// Actuator at `initial_pct`, stepping every `dt_s`.
     pub fn new(params: &SteerParams, dt_s: f64, initial_pct: f64) -> Self {
-        let lag_alpha = if params.lag_s > 0.0 { 1.0 - libm::exp(-dt_s / params.lag_s) } else { 1.0 };
+        let lag_alpha = if params.lag_s > 0.0 {
+            1.0 - libm::exp(-dt_s / params.lag_s)
+        } else {
+            1.0
+        };
         Self {
             rate_pct_per_step: params.rate_limit_pct_per_s * dt_s,
             lag_alpha,
@@ -124,7 +129,8 @@ impl SteeringActuator {
     /// One step towards `command_pct` (clamped to +-100); returns the position, %.
     pub fn step(&mut self, command_pct: f64) -> f64 {
         let target = command_pct.clamp(-100.0, 100.0);
-        let change = (target - self.rate_limited_pct).clamp(-self.rate_pct_per_step, self.rate_pct_per_step);
+        let change =
+            (target - self.rate_limited_pct).clamp(-self.rate_pct_per_step, self.rate_pct_per_step);
         self.rate_limited_pct += change;
         self.position_pct += self.lag_alpha * (self.rate_limited_pct - self.position_pct);
         self.position_pct

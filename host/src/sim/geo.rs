@@ -13,7 +13,12 @@ const WGS84_F: f64 = 1.0 / 298.257_223_563;
 
 /// Latitude and longitude (degrees) of the point `east_m`, `north_m` from the origin
 /// (`origin_lat_deg`, `origin_lon_deg`, ellipsoid height 0), on the origin's tangent plane (up = 0).
-pub fn enu_to_lat_lon(origin_lat_deg: f64, origin_lon_deg: f64, east_m: f64, north_m: f64) -> (f64, f64) {
+pub fn enu_to_lat_lon(
+    origin_lat_deg: f64,
+    origin_lon_deg: f64,
+    east_m: f64,
+    north_m: f64,
+) -> (f64, f64) {
     let e2 = WGS84_F * (2.0 - WGS84_F);
     let lat0 = origin_lat_deg.to_radians();
     let lon0 = origin_lon_deg.to_radians();

@@ -51,7 +51,12 @@ pub struct SimOptions {
 
 impl Default for SimOptions {
     fn default() -> Self {
-        Self { seed: 0, faults: false, vary_commands: true, origin_deg: (geo::ORIGIN_LAT_DEG, geo::ORIGIN_LON_DEG) }
+        Self {
+            seed: 0,
+            faults: false,
+            vary_commands: true,
+            origin_deg: (geo::ORIGIN_LAT_DEG, geo::ORIGIN_LON_DEG),
+        }
     }
 }
 
@@ -92,8 +97,13 @@ impl std::error::Error for SimError {}
 
 /// Runs the built-in scenario `name`, with the vehicle file `vehicle` or the CAT Vehicle.
 /// This is what `catmodel simulate-drive` calls.
-pub fn run_named(name: &str, vehicle: Option<&Path>, options: &SimOptions) -> Result<SimOutput, SimError> {
-    let base = Scenario::builtin(name).ok_or_else(|| SimError::UnknownScenario(name.to_string()))?;
+pub fn run_named(
+    name: &str,
+    vehicle: Option<&Path>,
+    options: &SimOptions,
+) -> Result<SimOutput, SimError> {
+    let base =
+        Scenario::builtin(name).ok_or_else(|| SimError::UnknownScenario(name.to_string()))?;
     let cfg = match vehicle {
         Some(p) => VehicleConfig::load(p).map_err(SimError::Config)?,
         None => VehicleConfig::default(),
@@ -102,7 +112,11 @@ pub fn run_named(name: &str, vehicle: Option<&Path>, options: &SimOptions) -> Re
 }
 
 /// Writes `DIR/NAME.csv` (log) and `DIR/NAME.truth.csv`, creating `dir`; returns both paths.
-pub fn write_outputs(dir: &Path, name: &str, output: &SimOutput) -> Result<(PathBuf, PathBuf), LogError> {
+pub fn write_outputs(
+    dir: &Path,
+    name: &str,
+    output: &SimOutput,
+) -> Result<(PathBuf, PathBuf), LogError> {
     std::fs::create_dir_all(dir).map_err(|e| LogError {
         path: dir.to_path_buf(),
         line: 0,
@@ -145,7 +159,10 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
     let b = plant.cg_to_rear_m();
     let antenna_ahead = cfg.sensors.gnss.antenna_ahead_of_rear_axle_m;
     let max_steer_rad = cfg.chassis.max_steer_deg.to_radians();
-    let mut state = PlantState { heading_rad: scenario.initial_heading_rad, ..Default::default() };
+    let mut state = PlantState {
+        heading_rad: scenario.initial_heading_rad,
+        ..Default::default()
+    };
     let first = scenario.command_at(0.0);
     let mut steering = SteeringActuator::new(&cfg.steering, dt, first.steer_pct);
     let mut speed_ctl = SpeedController::new(&cfg.speed_controller, cfg.chassis.mass_kg, dt);
@@ -172,6 +189,7 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
         }
     };
 
+    let mut s0 = snapshot(&state, steer_pct);
     for k in 0..n_steps {
         let t0 = k as f64 * dt;
         if k % TRUTH_EVERY_STEPS == 0 {
@@ -184,11 +202,13 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
                 y: round_to(state.y_m - b * cos_h, micro),
                 heading: round_to(wrap_pi(state.heading_rad), micro),
                 yaw_rate: round_to(state.yaw_rate_rps, micro),
-                speed: round_to(libm::sqrt(state.vx_mps * state.vx_mps + v_lat_rear * v_lat_rear), micro),
+                speed: round_to(
+                    libm::sqrt(state.vx_mps * state.vx_mps + v_lat_rear * v_lat_rear),
+                    micro,
+                ),
             });
         }
         let command = scenario.command_at(t0);
-        let s0 = snapshot(&state, steer_pct);
         steer_pct = steering.step(command.steer_pct);
         let drive = speed_ctl.step(command.speed_mps, state.vx_mps);
         let input = PlantInput {
@@ -198,11 +218,20 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
         };
         ax_mps2 = plant.step(&mut state, &input, ax_mps2, dt);
         let s1 = snapshot(&state, steer_pct);
-        let held = Held { command_mps: command.speed_mps, accel_pct: drive.accel_pct, brake_pct: drive.brake_pct };
+        let held = Held {
+            command_mps: command.speed_mps,
+            accel_pct: drive.accel_pct,
+            brake_pct: drive.brake_pct,
+        };
         sensors.observe(t0, t0 + dt, &s0, &s1, &held);
+        s0 = s1;
     }
 
-    SimOutput { scenario, log: merge_rows(sensors.rows), truth }
+    SimOutput {
+        scenario,
+        log: merge_rows(sensors.rows),
+        truth,
+    }
 }
 
 /// Sorts the reports by log time and merges reports logged in the same microsecond into one row.

@@ -33,7 +33,10 @@ impl SimRng {
     pub fn new(seed: u64, stream: Stream) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream as u64);
-        Self { rng, spare_normal: None }
+        Self {
+            rng,
+            spare_normal: None,
+        }
     }
 
     /// Uniform in [0, 1), 53 random bits.

@@ -65,11 +65,22 @@ pub const SCENARIO_NAMES: [&str; 11] = [
 ];
 
 fn seg(duration_s: f64, speed_mps: f64, steer_pct: f64) -> Segment {
-    Segment { duration_s, speed_mps, steer: SteerProfile::Hold(steer_pct) }
+    Segment {
+        duration_s,
+        speed_mps,
+        steer: SteerProfile::Hold(steer_pct),
+    }
 }
 
 fn slalom(duration_s: f64, speed_mps: f64, amplitude_pct: f64, period_s: f64) -> Segment {
-    Segment { duration_s, speed_mps, steer: SteerProfile::Sine { amplitude_pct, period_s } }
+    Segment {
+        duration_s,
+        speed_mps,
+        steer: SteerProfile::Sine {
+            amplitude_pct,
+            period_s,
+        },
+    }
 }
 
 impl Scenario {
@@ -78,7 +89,13 @@ impl Scenario {
         // Initial heading: the test area's long axis, a little north of east.
         let heading = 1.2;
         let straight = |v: f64| vec![seg(2.0, 0.0, 0.0), seg(48.0, v, 0.0), seg(10.0, 0.0, 0.0)];
-        let turn = |steer: f64, v: f64| vec![seg(1.0, 0.0, steer), seg(54.0, v, steer), seg(5.0, 0.0, steer)];
+        let turn = |steer: f64, v: f64| {
+            vec![
+                seg(1.0, 0.0, steer),
+                seg(54.0, v, steer),
+                seg(5.0, 0.0, steer),
+            ]
+        };
         let segments = match name {
             "straight-2.5" => straight(2.5),
             "straight-5" => straight(5.0),
@@ -118,7 +135,11 @@ impl Scenario {
             "standstill" => vec![seg(20.0, 0.0, 0.0)],
             _ => return None,
         };
-        Some(Scenario { name: name.to_string(), initial_heading_rad: heading, segments })
+        Some(Scenario {
+            name: name.to_string(),
+            initial_heading_rad: heading,
+            segments,
+        })
     }
 
     /// Total length, s.
@@ -137,14 +158,23 @@ impl Scenario {
                 let duration_s = s.duration_s * (1.0 + rng.uniform_in(-0.05, 0.05));
                 let speed_mps = (s.speed_mps * (1.0 + 0.02 * rng.normal())).max(0.0);
                 let steer = match s.steer {
-                    SteerProfile::Hold(p) if p == 0.0 => SteerProfile::Hold(0.1 * rng.normal()),
-                    SteerProfile::Hold(p) => SteerProfile::Hold((p * (1.0 + 0.02 * rng.normal())).clamp(-100.0, 100.0)),
-                    SteerProfile::Sine { amplitude_pct, period_s } => SteerProfile::Sine {
+                    SteerProfile::Hold(0.0) => SteerProfile::Hold(0.1 * rng.normal()),
+                    SteerProfile::Hold(p) => {
+                        SteerProfile::Hold((p * (1.0 + 0.02 * rng.normal())).clamp(-100.0, 100.0))
+                    }
+                    SteerProfile::Sine {
+                        amplitude_pct,
+                        period_s,
+                    } => SteerProfile::Sine {
                         amplitude_pct: amplitude_pct * (1.0 + 0.03 * rng.normal()),
                         period_s: period_s * (1.0 + 0.03 * rng.normal()),
                     },
                 };
-                Segment { duration_s, speed_mps, steer }
+                Segment {
+                    duration_s,
+                    speed_mps,
+                    steer,
+                }
             })
             .collect();
         Scenario {
@@ -179,12 +209,18 @@ impl Scenario {
             start += s.duration_s;
         }
         match current {
-            None => Command { speed_mps: 0.0, steer_pct: 0.0 },
+            None => Command {
+                speed_mps: 0.0,
+                steer_pct: 0.0,
+            },
             Some(s) => Command {
                 speed_mps: s.speed_mps,
                 steer_pct: match s.steer {
                     SteerProfile::Hold(p) => p,
-                    SteerProfile::Sine { amplitude_pct, period_s } => {
+                    SteerProfile::Sine {
+                        amplitude_pct,
+                        period_s,
+                    } => {
                         let phase = 2.0 * core::f64::consts::PI * (t_s - start).max(0.0) / period_s;
                         (amplitude_pct * libm::sin(phase)).clamp(-100.0, 100.0)
                     }

@@ -125,16 +125,41 @@ pub struct SensorSuite {
 
 impl SensorSuite {
     /// Sensors for a run with `seed`; `faults` enables fault injection.
-    pub fn new(bus: &BusSensors, gnss: &Gnss, faults: Option<&Faults>, seed: u64, origin: (f64, f64)) -> Self {
+    pub fn new(
+        bus: &BusSensors,
+        gnss: &Gnss,
+        faults: Option<&Faults>,
+        seed: u64,
+        origin: (f64, f64),
+    ) -> Self {
         let mut reports = Vec::new();
-        for (kind, stream) in [(Kind::Speed, Stream::SpeedReport), (Kind::Steer, Stream::SteerReport), (Kind::Pedals, Stream::PedalReport)] {
+        for (kind, stream) in [
+            (Kind::Speed, Stream::SpeedReport),
+            (Kind::Steer, Stream::SteerReport),
+            (Kind::Pedals, Stream::PedalReport),
+        ] {
             let mut rng = SimRng::new(seed, stream);
-            let clock = Clock::new(&mut rng, bus.period_s, bus.clock_error_ppm, bus.timestamp_delay_min_s, bus.timestamp_delay_max_s);
+            let clock = Clock::new(
+                &mut rng,
+                bus.period_s,
+                bus.clock_error_ppm,
+                bus.timestamp_delay_min_s,
+                bus.timestamp_delay_max_s,
+            );
             reports.push(BusReport { kind, clock, rng });
         }
         let mut rng = SimRng::new(seed, Stream::Gnss);
-        let clock = Clock::new(&mut rng, gnss.period_s, gnss.clock_error_ppm, gnss.timestamp_delay_min_s, gnss.timestamp_delay_max_s);
-        let bias_m = [gnss.bias_sigma_m * rng.normal(), gnss.bias_sigma_m * rng.normal()];
+        let clock = Clock::new(
+            &mut rng,
+            gnss.period_s,
+            gnss.clock_error_ppm,
+            gnss.timestamp_delay_min_s,
+            gnss.timestamp_delay_max_s,
+        );
+        let bias_m = [
+            gnss.bias_sigma_m * rng.normal(),
+            gnss.bias_sigma_m * rng.normal(),
+        ];
         let bias_phi = libm::exp(-gnss.period_s / gnss.bias_correlation_s);
         let bias_drive_m = gnss.bias_sigma_m * libm::sqrt(1.0 - bias_phi * bias_phi);
         Self {
@@ -143,7 +168,14 @@ impl SensorSuite {
             faults: faults.cloned(),
             fault_rng: SimRng::new(seed, Stream::Faults),
             reports,
-            gnss: GnssReceiver { clock, rng, bias_m, bias_phi, bias_drive_m, outage_until_s: -1.0 },
+            gnss: GnssReceiver {
+                clock,
+                rng,
+                bias_m,
+                bias_phi,
+                bias_drive_m,
+                outage_until_s: -1.0,
+            },
             origin_lat_deg: origin.0,
             origin_lon_deg: origin.1,
             rows: Vec::new(),
@@ -171,7 +203,8 @@ impl SensorSuite {
                         row.input_vel = Some(quantize(held.command_mps, bus.speed_resolution_mps));
                     }
                     Kind::Steer => {
-                        let measured = (snap.steer_pct + bus.steer_noise_pct * rng.normal()).clamp(-100.0, 100.0);
+                        let measured = (snap.steer_pct + bus.steer_noise_pct * rng.normal())
+                            .clamp(-100.0, 100.0);
                         row.steer = Some(quantize(measured, bus.percent_resolution));
                     }
                     Kind::Pedals => {
@@ -180,7 +213,10 @@ impl SensorSuite {
                             if p <= 0.0 {
                                 0.0
                             } else {
-                                quantize((p + bus.pedal_noise_pct * rng.normal()).clamp(0.0, 100.0), bus.percent_resolution)
+                                quantize(
+                                    (p + bus.pedal_noise_pct * rng.normal()).clamp(0.0, 100.0),
+                                    bus.percent_resolution,
+                                )
                             }
                         };
                         row.accel = Some(pedal(held.accel_pct));
