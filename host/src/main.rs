@@ -129,8 +129,8 @@ fn run(cli: Cli) -> Result<()> {
             };
             let output = sim::run_named(&scenario, vehicle.as_deref(), &options)
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let (log_path, truth_path) = sim::write_outputs(&out, &scenario, &output)
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let (log_path, truth_path) =
+                sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
             let can_path = out.join(format!("{scenario}.can.log"));
             let frames = csv2can::encode_log(&output.log);
             replay::write_file(&can_path, &csv2can::to_candump(&frames))?;
