@@ -30,22 +30,8 @@ pub struct Prediction {
     pub mode: String,
 }
 
-/// Ground truth sample (`t,x,y,heading,yaw_rate,speed`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TruthSample {
-    /// s.
-    pub t: f64,
-    /// East, m.
-    pub x: f64,
-    /// North, m.
-    pub y: f64,
-    /// Heading clockwise from north, rad.
-    pub heading: f64,
-    /// rad/s.
-    pub yaw_rate: f64,
-    /// m/s.
-    pub speed: f64,
-}
+/// Ground truth sample (`t,x,y,heading,yaw_rate,speed`), as the truth CSV reader returns it.
+pub use crate::logcsv::TruthRow as TruthSample;
 
 /// The bus inputs the baseline is computed from, in local metres on the predictions' frame.
 #[derive(Clone, Debug, Default)]

@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use catmodel::can::codec::{decode_input, InputMessage};
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::geodesy::LocalFrame;
-use evaluate::{BaselineInputs, Evaluation, Prediction, Truth, TruthSample};
+use evaluate::{BaselineInputs, Evaluation, Prediction, Truth};
 
 /// The simulator's test site and the default origin of its truth files: the University of
 /// Arizona area in Tucson, where the CAT Vehicle drove, degrees.
@@ -103,28 +103,6 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     Ok(out)
 }
 
-/// Reads a truth CSV (`t,x,y,heading,yaw_rate,speed`).
-pub fn read_truth(path: &Path) -> Result<Vec<TruthSample>> {
-    let (header, rows) = csv_table(path)?;
-    let cols: Vec<usize> = ["t", "x", "y", "heading", "yaw_rate", "speed"]
-        .iter()
-        .map(|n| column(path, &header, n))
-        .collect::<Result<_>>()?;
-    let mut out = Vec::with_capacity(rows.len());
-    for (line, row) in rows {
-        let f = |i: usize| cell_f64(path, line, &header, &row, cols[i]);
-        out.push(TruthSample {
-            t: f(0)?,
-            x: f(1)?,
-            y: f(2)?,
-            heading: f(3)?,
-            yaw_rate: f(4)?,
-            speed: f(5)?,
-        });
-    }
-    Ok(out)
-}
-
 /// The baseline's inputs from a candump of the node's input frames, GNSS in local metres
 /// around `origin_deg`. Frames the node would reject are skipped here too.
 pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64)) -> Result<BaselineInputs> {
@@ -169,7 +147,7 @@ pub fn evaluate_files(
     origin_deg: (f64, f64),
 ) -> Result<Evaluation> {
     let preds = read_predictions(predictions)?;
-    let truth = Truth::new(read_truth(truth)?);
+    let truth = Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?);
     let inputs = baseline_inputs(inputs, origin_deg)?;
     Ok(evaluate::evaluate(
         &preds,
