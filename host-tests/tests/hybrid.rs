@@ -24,20 +24,15 @@ fn input() -> impl Strategy<Value = (f32, f32)> {
 
 /// Thresholds with enter > exit (the hysteresis band) and any dwell.
 fn config() -> impl Strategy<Value = HybridConfig> {
-    (
-        1.0f32..8.0,
-        0.1f32..3.0,
-        0.5f32..3.0,
-        0.1f32..1.5,
-        1u16..60,
-    )
-        .prop_map(|(exit_v, band_v, enter_a, band_a, dwell)| HybridConfig {
+    (1.0f32..8.0, 0.1f32..3.0, 0.5f32..3.0, 0.1f32..1.5, 1u16..60).prop_map(
+        |(exit_v, band_v, enter_a, band_a, dwell)| HybridConfig {
             enter_dynamic_speed_mps: exit_v + band_v,
             enter_dynamic_lat_accel_mps2: enter_a,
             exit_dynamic_speed_mps: exit_v,
             exit_dynamic_lat_accel_mps2: (enter_a - band_a).max(0.05),
             min_dwell_ticks: dwell,
-        })
+        },
+    )
 }
 
 /// Runs the switch over `inputs`, returning the mode after each tick.

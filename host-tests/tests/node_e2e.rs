@@ -1,26 +1,51 @@
 //! The node end to end on hand-built bus traffic whose answer is known by hand: a car driving
-//! due east at a constant 10 m/s, straight, with exact GNSS at 100 Hz and reports at 50 Hz.
+//! due east at a constant speed, straight or on a circle, with exact GNSS at 100 Hz from an
+//! antenna 1.478 m ahead of the rear axle and reports at 50 Hz. The node reports the rear axle.
 use catmodel::can::codec::{
     GnssPosition, Prediction, SpeedReport, StateMotion, StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
-use catmodel::node::{Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{
+    Node, NodeConfig, PlatformStats, Tick, TxFrames, CAT_VEHICLE_ANTENNA_AHEAD_M,
+};
+use catmodel::vehicle::CAT_VEHICLE;
 
 const ORIGIN: (i32, i32) = (322_319_000, -1_109_501_000);
 
-/// Frames of `seconds` of driving east at `v` m/s from the origin, starting at t = 1 s.
-fn drive_east(v: f32, seconds: f32) -> Vec<TimedFrame> {
+/// Rear axle `(east, north, heading)` at `t_s` of a drive that starts at the origin heading
+/// east at `v` m/s on a path of constant `curvature` (1/m, positive = turning right).
+fn rear_axle(v: f64, curvature: f64, t_s: f64) -> (f64, f64, f64) {
+    let h0 = std::f64::consts::FRAC_PI_2;
+    let w = v * curvature;
+    if w == 0.0 {
+        return (v * t_s, 0.0, h0);
+    }
+    let h = h0 + w * t_s;
+    // x' = v sin(h), y' = v cos(h) (eq 8), integrated in closed form.
+    (
+        (v / w) * (h0.cos() - h.cos()),
+        (v / w) * (h.sin() - h0.sin()),
+        h,
+    )
+}
+
+/// Frames of `seconds` of driving at `v` m/s with steering `steer_pct` from the origin,
+/// starting at t = 1 s. Returns the frames and the path's curvature.
+fn drive(v: f32, steer_pct: f32, seconds: f32) -> (Vec<TimedFrame>, f64) {
+    let center = CAT_VEHICLE.steer_pct_to_center_rad(steer_pct);
+    let curvature = f64::from(CAT_VEHICLE.curvature_per_m(center, v));
+    let lever = f64::from(CAT_VEHICLE_ANTENNA_AHEAD_M);
     let frame = LocalFrame::new(ORIGIN.0, ORIGIN.1).unwrap();
     let mut out = Vec::new();
     let n = (seconds * 100.0) as u64;
     for i in 0..n {
         let t_us = 1_000_000 + i * 10_000 + 3_000;
-        let east = v * (i as f32 * 0.01);
+        let (east, north, h) = rear_axle(f64::from(v), curvature, i as f64 * 0.01);
         let (lat, lon) = frame.from_local(Enu {
-            east_m: east,
-            north_m: 0.0,
+            east_m: (east + lever * h.sin()) as f32,
+            north_m: (north + lever * h.cos()) as f32,
         });
         let fix = GnssPosition {
             lat_e7: (lat * 1e7).round() as i32,
@@ -41,7 +66,7 @@ fn drive_east(v: f32, seconds: f32) -> Vec<TimedFrame> {
             push(
                 &mut out,
                 SteeringReport {
-                    steer_pct: Some(0.0),
+                    steer_pct: Some(steer_pct),
                 }
                 .encode(counter),
             );
@@ -55,7 +80,7 @@ fn drive_east(v: f32, seconds: f32) -> Vec<TimedFrame> {
             );
         }
     }
-    out
+    (out, curvature)
 }
 
 fn run(frames: &[TimedFrame]) -> (Node, Vec<(u64, TxFrames)>) {
@@ -88,7 +113,7 @@ fn run(frames: &[TimedFrame]) -> (Node, Vec<(u64, TxFrames)>) {
 #[test]
 fn straight_drive_is_tracked_and_predicted() {
     let v = 10.0;
-    let frames = drive_east(v, 20.0);
+    let (frames, _) = drive(v, 0.0, 20.0);
     let (node, ticks) = run(&frames);
     assert_eq!(
         node.counters().crc_errors + node.counters().counter_errors + node.counters().range_errors,
@@ -114,7 +139,8 @@ fn straight_drive_is_tracked_and_predicted() {
     }
     let pos = pos.expect("STATE_POSITION sent");
     assert!(pos.position_valid);
-    // The last fix is at most 10 ms old: the compensated position is where the car is now.
+    // The last fix is at most 10 ms old: the compensated position is where the car (its rear
+    // axle, 1.478 m behind the antenna) is now.
     let east = pos.east_m.unwrap();
     assert!(
         (east - v * t_s).abs() < 0.15,
@@ -134,4 +160,50 @@ fn straight_drive_is_tracked_and_predicted() {
         assert!(p.dy_m.unwrap().abs() < 0.05, "{p:?}");
         assert!((p.speed_mps.unwrap() - v).abs() < 0.05, "{p:?}");
     }
+}
+
+/// Decoded position and heading of the node's last tick.
+fn last_state(ticks: &[(u64, TxFrames)]) -> (u64, f32, f32, f32) {
+    let (now, tx) = ticks.last().unwrap();
+    let mut pos = None;
+    let mut heading = None;
+    for f in tx {
+        if let Ok((p, _)) = StatePosition::decode(f) {
+            pos = Some(p);
+        }
+        if let Ok((m, _)) = StateMotion::decode(f) {
+            heading = m.heading_rad;
+        }
+    }
+    let pos = pos.expect("STATE_POSITION sent");
+    assert!(pos.position_valid);
+    (
+        *now,
+        pos.east_m.unwrap(),
+        pos.north_m.unwrap(),
+        heading.unwrap(),
+    )
+}
+
+#[test]
+fn circle_is_tracked_at_the_rear_axle_with_the_true_heading() {
+    // 5 m/s at 30 % right steering: a ~14 m radius circle, kinematic mode (a_y ~1.8 m/s^2).
+    // In the turn the antenna's course leads the heading by atan(1.478 * curvature) ~ 0.1 rad
+    // and the antenna is 1.478 m off the rear axle: both must be taken out.
+    let v = 5.0;
+    let (frames, curvature) = drive(v, 30.0, 25.0);
+    assert!(curvature > 0.05, "{curvature}");
+    let (_, ticks) = run(&frames);
+    let (now, east, north, heading) = last_state(&ticks);
+    let t_s = (now as f64 - 1_003_000.0) * 1e-6;
+    let (te, tn, th) = rear_axle(f64::from(v), curvature, t_s);
+    let heading_err = (f64::from(heading) - th + std::f64::consts::PI)
+        .rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    assert!(heading_err.abs() < 0.01, "heading {heading} vs {th}");
+    let pos_err = ((f64::from(east) - te).powi(2) + (f64::from(north) - tn).powi(2)).sqrt();
+    assert!(
+        pos_err < 0.05,
+        "({east}, {north}) vs ({te}, {tn}): {pos_err} m"
+    );
 }

@@ -12,6 +12,12 @@
 //! Heading: propagated with the kinematic yaw rate (eq 8 with eq 2's understeer) every tick,
 //! and pulled towards the course of the filtered GNSS track (or the receiver's COG, PGN 129026,
 //! when it is fresh) while the car moves, by a complementary filter.
+//!
+//! Lever arm: the receiver measures its antenna, which sits `antenna_ahead_m` ahead of the
+//! reference point of eq 8 (the rear axle, whose velocity points along the heading). Everything
+//! inside the filter is the antenna's; [`EstimatorState::position`] moves the result back to the
+//! rear axle along the heading, and the antenna's course, which in a turn leads the heading by
+//! `atan(antenna_ahead * yaw_rate / v)`, is corrected before it steers the heading.
 use crate::math;
 use crate::signal::fir::{Fir, FirState};
 use crate::signal::moving_average::{MovingAverage, MovingAverageState};
@@ -40,6 +46,8 @@ pub struct EstimatorConfig {
     pub course_gain: f32,
     /// Heading is only corrected above this speed, m/s.
     pub course_min_speed_mps: f32,
+    /// GNSS antenna ahead of the rear axle (the reference point of eq 8), m; 0 = on the axle.
+    pub antenna_ahead_m: f32,
 }
 
 /// Planar position, m (east, north).
@@ -68,7 +76,7 @@ pub struct EstimatorState {
     /// Filtered track for the course estimate (ring).
     track: [Xy; TRACK_LEN],
     track_head: usize,
-    /// Dead-reckoned position now (arbitrary origin: only differences are used).
+    /// Dead-reckoned antenna position now (arbitrary origin: only differences are used).
     odo_now: Xy,
     /// Heading estimate, rad clockwise from north; `None` until a course was seen.
     heading_rad: Option<f32>,
@@ -98,8 +106,12 @@ impl Default for EstimatorState {
 
 impl EstimatorConfig {
     /// The paper's filter for a GNSS rate `gnss_hz`: 21-tap Hamming lowpass at `cutoff_hz`,
-    /// then a 10-sample moving average. `None` if the design is impossible (cutoff >= Nyquist).
-    pub fn paper(gnss_hz: f64, cutoff_hz: f64) -> Option<Self> {
+    /// then a 10-sample moving average; the antenna `antenna_ahead_m` ahead of the rear axle.
+    /// `None` if the design is impossible (cutoff >= Nyquist) or the lever arm is not finite.
+    pub fn paper(gnss_hz: f64, cutoff_hz: f64, antenna_ahead_m: f32) -> Option<Self> {
+        if !antenna_ahead_m.is_finite() {
+            return None;
+        }
         let fir = Fir::lowpass(cutoff_hz, gnss_hz).ok()?;
         let ma = MovingAverage::default();
         let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
@@ -110,6 +122,7 @@ impl EstimatorConfig {
             course_min_baseline_m: 1.5,
             course_gain: 0.05,
             course_min_speed_mps: 1.5,
+            antenna_ahead_m,
         })
     }
 }
@@ -133,16 +146,28 @@ impl EstimatorState {
         self.fixes
     }
 
-    /// Dead reckoning: the car moved `dt_s` at `speed_mps` while turning at `yaw_rate_rps`.
-    /// Call once per tick, before the tick's fixes are applied with their time offsets.
-    pub fn propagate(&mut self, speed_mps: f32, yaw_rate_rps: f32, dt_s: f32) {
+    /// Dead reckoning of the antenna: the car moved `dt_s` at `speed_mps` (rear axle, along the
+    /// heading) while turning at `yaw_rate_rps`; the antenna also swings sideways by
+    /// `antenna_ahead * yaw_rate`. Call once per tick, before the tick's fixes are applied with
+    /// their time offsets.
+    pub fn propagate(
+        &mut self,
+        cfg: &EstimatorConfig,
+        speed_mps: f32,
+        yaw_rate_rps: f32,
+        dt_s: f32,
+    ) {
         let heading = self.heading_rad.unwrap_or(0.0);
         let mid = heading + 0.5 * yaw_rate_rps * dt_s;
         let (s, c) = math::sin_cos(mid);
         // Close enough to the end-of-step heading for the <= 20 ms look-backs of `add_fix`.
         self.heading_sin_cos = (s, c);
-        self.odo_now.x_m += speed_mps * dt_s * s;
-        self.odo_now.y_m += speed_mps * dt_s * c;
+        let along_m = speed_mps * dt_s;
+        // Right of the heading is (cos, -sin); positive yaw rate (clockwise) swings the antenna
+        // to the right.
+        let across_m = cfg.antenna_ahead_m * yaw_rate_rps * dt_s;
+        self.odo_now.x_m += along_m * s + across_m * c;
+        self.odo_now.y_m += along_m * c - across_m * s;
         if let Some(h) = self.heading_rad.as_mut() {
             *h = math::wrap_pi(*h + yaw_rate_rps * dt_s);
         }
@@ -194,9 +219,21 @@ impl EstimatorState {
             .copied()
     }
 
-    /// The filtered position moved forward to now: `filtered + (odo_now - odo(delayed fix))`.
-    /// `None` until the filters have seen enough fixes to be past their start-up transient.
+    /// The rear axle now: [`Self::antenna_position`] moved back by the lever arm along the
+    /// heading. `None` without a position or a heading.
     pub fn position(&self, cfg: &EstimatorConfig) -> Option<Xy> {
+        let antenna = self.antenna_position(cfg)?;
+        let (s, c) = math::sin_cos(self.heading_rad?);
+        Some(Xy {
+            x_m: antenna.x_m - cfg.antenna_ahead_m * s,
+            y_m: antenna.y_m - cfg.antenna_ahead_m * c,
+        })
+    }
+
+    /// The antenna now: the filtered position moved forward by dead reckoning,
+    /// `filtered + (odo_now - odo(delayed fix))`. `None` until the filters have seen enough
+    /// fixes to be past their start-up transient.
+    pub fn antenna_position(&self, cfg: &EstimatorConfig) -> Option<Xy> {
         let filtered = self.filtered?;
         if (self.fixes as f32) < cfg.group_delay_fixes * 2.0 {
             return None;
@@ -216,16 +253,24 @@ impl EstimatorState {
         })
     }
 
-    /// Pulls the heading towards a course (rad, clockwise from north) measured `age_s` ago,
-    /// given the current yaw rate. The first course initialises the heading.
+    /// Pulls the heading towards the antenna's course (rad, clockwise from north) measured
+    /// `age_s` ago, given the current speed (> 0) and yaw rate. The antenna's course leads the
+    /// heading by `atan(antenna_ahead * yaw_rate / v)` (rigid body, no side slip at the rear
+    /// axle); that is removed first. The first course initialises the heading.
     pub fn correct_heading(
         &mut self,
         cfg: &EstimatorConfig,
         course_rad: f32,
         age_s: f32,
+        speed_mps: f32,
         yaw_rate_rps: f32,
     ) {
-        let course_now = math::wrap_pi(course_rad + yaw_rate_rps * age_s);
+        let lead_rad = if speed_mps > 0.0 {
+            math::atan(cfg.antenna_ahead_m * yaw_rate_rps / speed_mps)
+        } else {
+            0.0
+        };
+        let course_now = math::wrap_pi(course_rad - lead_rad + yaw_rate_rps * age_s);
         self.heading_rad = Some(match self.heading_rad {
             None => course_now,
             Some(h) => math::wrap_pi(h + cfg.course_gain * math::wrap_pi(course_now - h)),
@@ -258,13 +303,13 @@ mod tests {
     /// output is on the car (the uncompensated one trails by ~1.45 m).
     #[test]
     fn compensation_removes_the_filter_lag() {
-        let cfg = EstimatorConfig::paper(100.0, 2.0).unwrap();
+        let cfg = EstimatorConfig::paper(100.0, 2.0, 0.0).unwrap();
         let mut st = EstimatorState::default();
-        st.correct_heading(&cfg, core::f32::consts::FRAC_PI_2, 0.0, 0.0);
+        st.correct_heading(&cfg, core::f32::consts::FRAC_PI_2, 0.0, 10.0, 0.0);
         let v = 10.0;
         let mut t = 0.0f32;
         for _tick in 0..200 {
-            st.propagate(v, 0.0, 0.02);
+            st.propagate(&cfg, v, 0.0, 0.02);
             t += 0.02;
             // two fixes per tick, at t - 0.01 and t
             for age in [0.01f32, 0.0] {

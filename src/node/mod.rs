@@ -141,7 +141,8 @@ impl NodeConfig {
         let velocity = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, ts)?;
         let dxdt = MisoBlock::from_tfs(&paper::EQ7_DX_DT, ts)?;
         let estimator =
-            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ).ok_or(ModelError::NotFinite)?;
+            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ, CAT_VEHICLE_ANTENNA_AHEAD_M)
+                .ok_or(ModelError::NotFinite)?;
         Ok(Self {
             vehicle: CAT_VEHICLE,
             dynamics: CAT_VEHICLE_DYNAMICS,
@@ -163,6 +164,10 @@ impl NodeConfig {
 
 /// GNSS rate of the paper's receiver (NovAtel, "every 0.01 seconds", paper II-B), Hz.
 pub const GNSS_RATE_HZ: f64 = 100.0;
+/// GNSS antenna ahead of the rear axle on the CAT Vehicle, m: above the centre of gravity
+/// (CG to rear axle 1.478 m), where the simulator mounts it. The predicted positions are the
+/// rear axle's (eq 8's reference point).
+pub const CAT_VEHICLE_ANTENNA_AHEAD_M: f32 = 1.478;
 /// Lowpass cutoff for GNSS, Hz: passes the car's motion (manoeuvres < 1 Hz), removes the
 /// receiver's white noise.
 pub const GNSS_CUTOFF_HZ: f64 = 2.0;
@@ -332,8 +337,12 @@ impl Node {
             _ => SAMPLE_PERIOD_S,
         };
         self.last_tick_us = Some(now);
-        self.estimator
-            .propagate(self.speed_mps, self.yaw_rate_rps, dt_s);
+        self.estimator.propagate(
+            &self.config.estimator,
+            self.speed_mps,
+            self.yaw_rate_rps,
+            dt_s,
+        );
 
         for f in rx {
             self.receive(now, f);
@@ -395,8 +404,13 @@ impl Node {
         match self.cog {
             Some((cog, t)) if moving && now.saturating_sub(t) <= to.gnss_us => {
                 let age_s = now.saturating_sub(t) as f32 * 1e-6;
-                self.estimator
-                    .correct_heading(&cfg.estimator, cog, age_s, self.yaw_rate_rps);
+                self.estimator.correct_heading(
+                    &cfg.estimator,
+                    cog,
+                    age_s,
+                    speed_mps,
+                    self.yaw_rate_rps,
+                );
             }
             _ if moving => {
                 if let Some((course, age_fixes)) = self.estimator.track_course(&cfg.estimator) {
@@ -405,6 +419,7 @@ impl Node {
                         &cfg.estimator,
                         course,
                         age_s,
+                        speed_mps,
                         self.yaw_rate_rps,
                     );
                 }
@@ -664,7 +679,7 @@ impl Node {
         let cfg = &self.config;
         // Plausibility gate against where the car should be; repeated rejections mean the car
         // really is there (e.g. after a long gap): restart the filters on the fixes.
-        if let Some(p) = self.estimator.position(&cfg.estimator) {
+        if let Some(p) = self.estimator.antenna_position(&cfg.estimator) {
             let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
             if dx * dx + dy * dy > cfg.gnss_gate_m * cfg.gnss_gate_m {
                 self.gnss_rejects_in_row = self.gnss_rejects_in_row.saturating_add(1);
