@@ -3,10 +3,12 @@
 pub mod csv2can;
 pub mod evaluate;
 pub mod logcsv;
+pub mod plot;
+pub mod progress;
 pub mod replay;
 pub mod sim;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use catmodel::can::codec::{decode_input, InputMessage};
@@ -86,10 +88,25 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     .iter()
     .map(|n| column(path, &header, n))
     .collect::<Result<_>>()?;
-    let mut out = Vec::with_capacity(rows.len());
+    let mut out: Vec<Prediction> = Vec::with_capacity(rows.len());
     for (line, row) in rows {
+        if row.len() != header.len() {
+            bail!(
+                "{}:{line}: {} fields, the header has {}",
+                path.display(),
+                row.len(),
+                header.len()
+            );
+        }
         let f = |i: usize| cell_f64(path, line, &header, &row, cols[i]);
-        out.push(Prediction {
+        let mode = row.get(cols[7]).cloned().unwrap_or_default();
+        if mode != "kinematic" && mode != "dynamic" {
+            bail!(
+                "{}:{line}: column `mode`: {mode:?} is neither `kinematic` nor `dynamic`",
+                path.display()
+            );
+        }
+        let p = Prediction {
             t: f(0)?,
             step: f(1)? as u64,
             horizon_s: f(2)?,
@@ -97,8 +114,26 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
             y: f(4)?,
             heading: f(5)?,
             speed: f(6)?,
-            mode: row.get(cols[7]).cloned().unwrap_or_default(),
-        });
+            mode,
+        };
+        if p.horizon_s < 0.0 {
+            bail!(
+                "{}:{line}: column `horizon_s`: {} is negative",
+                path.display(),
+                p.horizon_s
+            );
+        }
+        if let Some(prev) = out.last() {
+            if p.t < prev.t {
+                bail!(
+                    "{}:{line}: column `t`: time goes backwards ({} s after {} s)",
+                    path.display(),
+                    p.t,
+                    prev.t
+                );
+            }
+        }
+        out.push(p);
     }
     Ok(out)
 }
@@ -139,6 +174,54 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64)) -> Result<BaselineIn
     Ok(inputs)
 }
 
+/// Everything `catmodel evaluate` reads: predictions, truth and the baseline's bus inputs.
+pub struct EvaluationData {
+    /// The node's predictions.
+    pub predictions: Vec<Prediction>,
+    /// Ground truth.
+    pub truth: Truth,
+    /// Raw GNSS, speed and steering from the candump.
+    pub inputs: BaselineInputs,
+}
+
+impl EvaluationData {
+    /// Reads the three files; `origin_deg` is the origin of the truth frame.
+    pub fn read(
+        predictions: &Path,
+        truth: &Path,
+        inputs: &Path,
+        origin_deg: (f64, f64),
+    ) -> Result<Self> {
+        Ok(Self {
+            predictions: read_predictions(predictions)?,
+            truth: Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?),
+            inputs: baseline_inputs(inputs, origin_deg)?,
+        })
+    }
+
+    /// Scores the predictions and the baseline (the CAT Vehicle's geometry for the baseline).
+    pub fn evaluate(&self) -> Evaluation {
+        evaluate::evaluate(
+            &self.predictions,
+            &self.truth,
+            &self.inputs,
+            &catmodel::vehicle::CAT_VEHICLE,
+        )
+    }
+
+    /// Writes the figures of [`evaluate::write_plots`] into `dir`.
+    pub fn write_plots(&self, dir: &Path, evaluation: &Evaluation) -> Result<Vec<PathBuf>> {
+        evaluate::write_plots(
+            dir,
+            &self.predictions,
+            &self.truth,
+            &self.inputs,
+            &catmodel::vehicle::CAT_VEHICLE,
+            evaluation,
+        )
+    }
+}
+
 /// `catmodel evaluate` on files.
 pub fn evaluate_files(
     predictions: &Path,
@@ -146,13 +229,5 @@ pub fn evaluate_files(
     inputs: &Path,
     origin_deg: (f64, f64),
 ) -> Result<Evaluation> {
-    let preds = read_predictions(predictions)?;
-    let truth = Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?);
-    let inputs = baseline_inputs(inputs, origin_deg)?;
-    Ok(evaluate::evaluate(
-        &preds,
-        &truth,
-        &inputs,
-        &catmodel::vehicle::CAT_VEHICLE,
-    ))
+    Ok(EvaluationData::read(predictions, truth, inputs, origin_deg)?.evaluate())
 }

@@ -27,8 +27,21 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
         if line.trim().is_empty() {
             continue;
         }
-        let frame = candump::parse_line(&line)
-            .map_err(|e| anyhow::anyhow!("{}:{lineno}: {e:?}: {line:?}", path.display()))?;
+        let frame = candump::parse_line(&line).map_err(|e| {
+            anyhow::anyhow!(
+                "{}:{lineno}: malformed candump line ({}): {line:?}",
+                path.display(),
+                candump_reason(e)
+            )
+        })?;
+        // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
+        if frame.t_us > u64::MAX / 2 {
+            bail!(
+                "{}:{lineno}: timestamp {} us out of range",
+                path.display(),
+                frame.t_us
+            );
+        }
         if let Some(prev) = last_t {
             if frame.t_us < prev {
                 bail!(
@@ -43,6 +56,27 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
         frames.push(frame);
     }
     Ok(frames)
+}
+
+/// What is wrong with a rejected candump line, in words.
+pub fn candump_reason(e: candump::CandumpError) -> &'static str {
+    use candump::CandumpError as E;
+    match e {
+        E::Empty => "empty line",
+        E::MissingTimestamp => "expected `(SECONDS.UUUUUU)` at the start",
+        E::BadTimestamp => "timestamp is not `(SECONDS.UUUUUU)` with six decimals",
+        E::MissingInterface => "no interface name after the timestamp",
+        E::BadInterface => "interface name empty, too long or not printable",
+        E::MissingSeparator => "no `#` between identifier and data",
+        E::BadId => "identifier is not 3 or 8 hex digits",
+        E::IdOutOfRange => "identifier above 0x7FF (3 digits) or 0x1FFFFFFF (8 digits)",
+        E::RemoteFrame => "remote frame (`#R`), not supported",
+        E::FdFrame => "CAN FD frame (`##`), not supported",
+        E::BadHex => "data is not hex",
+        E::OddHex => "odd number of data hex digits",
+        E::TooLong => "more than 8 data bytes",
+        E::TrailingGarbage => "unexpected text after the data",
+    }
 }
 
 /// One candump line (`(secs.micros) can0 ID#DATA`).
@@ -74,8 +108,27 @@ pub struct ReplayOutput {
     pub origin_e7: Option<(i32, i32)>,
 }
 
+/// Number of ticks [`replay`] runs over `frames` (sorted by time).
+pub fn tick_count(frames: &[TimedFrame]) -> u64 {
+    match (frames.first(), frames.last()) {
+        (Some(first), Some(last)) => {
+            (first_tick_us(last.t_us) - first_tick_us(first.t_us)) / SAMPLE_PERIOD_US + 1
+        }
+        _ => 0,
+    }
+}
+
 /// Runs the node over `frames` (sorted by time).
 pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
+    replay_with_progress(frames, config, |_| {})
+}
+
+/// [`replay`], calling `progress(ticks_done)` every 500 ticks.
+pub fn replay_with_progress(
+    frames: &[TimedFrame],
+    config: NodeConfig,
+    mut progress: impl FnMut(u64),
+) -> ReplayOutput {
     let mut node = Node::new(config);
     let mut csv = String::from("t,step,horizon_s,x,y,heading,speed,mode\n");
     let mut tx_log = String::new();
@@ -112,6 +165,9 @@ pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
         }
         append_prediction_rows(&mut csv, now, step, &tx);
         step += 1;
+        if step.is_multiple_of(500) {
+            progress(step);
+        }
         now += SAMPLE_PERIOD_US;
     }
     ReplayOutput {
