@@ -234,3 +234,36 @@ pub fn write_file(path: &Path, text: &str) -> Result<()> {
     f.write_all(text.as_bytes())
         .with_context(|| format!("writing {}", path.display()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(t_us: u64) -> TimedFrame {
+        TimedFrame {
+            t_us,
+            frame: CanFrame::new(catmodel::can::CanId::Standard(0x555), &[]).unwrap(),
+        }
+    }
+
+    #[test]
+    fn tick_count_matches_the_ticks_replay_runs() {
+        assert_eq!(tick_count(&[]), 0);
+        // Ticks at 20 000 (first frame 1 us rounded up) .. 100 000 (last frame 80 001 us).
+        let frames = [at(1), at(50_000), at(80_001)];
+        assert_eq!(tick_count(&frames), 5);
+        let config = NodeConfig::paper().unwrap();
+        let mut calls = Vec::new();
+        let out = replay_with_progress(&frames, config, |n| calls.push(n));
+        assert_eq!(out.ticks, 5);
+        assert!(calls.is_empty(), "progress every 500 ticks only");
+        // A frame exactly on a tick: that tick is the last.
+        assert_eq!(tick_count(&[at(20_000), at(40_000)]), 2);
+    }
+
+    #[test]
+    fn candump_errors_read_as_words() {
+        let e = candump::parse_line("(1.000000) can0 100#ABC").unwrap_err();
+        assert_eq!(candump_reason(e), "odd number of data hex digits");
+    }
+}
