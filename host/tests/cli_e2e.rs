@@ -286,7 +286,25 @@ fn bundled_smoke_drive_is_reproducible() {
         assert!(read(&dir.join(f)) == read(&data(f)), "data/{f} is stale");
     }
     assert!(read(&data("bundled.can.log")) == read(&data("smoke.can.log")));
-    // The second drive's candump is csv2can of its log.
+    // The second drive: the first 30 s of turn-left (the header and rows with t <= 30, as
+    // scripts/gen-data.sh cuts them with awk).
+    ok(&["simulate-drive", "--scenario", "turn-left", "--out", s(&dir)]);
+    for (full, cut) in [
+        ("turn-left.csv", "turn-left-30s.csv"),
+        ("turn-left.truth.csv", "turn-left-30s.truth.csv"),
+    ] {
+        let text = String::from_utf8(read(&dir.join(full))).unwrap();
+        let mut kept = String::new();
+        for (i, l) in text.lines().enumerate() {
+            let t: f64 = l.split(',').next().unwrap().parse().unwrap_or(0.0);
+            if i == 0 || t <= 30.0 {
+                kept.push_str(l);
+                kept.push('\n');
+            }
+        }
+        assert!(kept.as_bytes() == read(&data(cut)), "data/{cut} is stale");
+    }
+    // Its candump is csv2can of its log.
     let can = dir.join("turn.can.log");
     ok(&["csv2can", s(&data("turn-left-30s.csv")), "--out", s(&can)]);
     assert!(read(&can) == read(&data("turn-left-30s.can.log")));
