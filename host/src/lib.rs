@@ -231,3 +231,60 @@ pub fn evaluate_files(
 ) -> Result<Evaluation> {
     Ok(EvaluationData::read(predictions, truth, inputs, origin_deg)?.evaluate())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("catmodel-host-lib-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const HEADER: &str = "t,step,horizon_s,x,y,heading,speed,mode\n";
+
+    #[test]
+    fn predictions_reader_accepts_replay_output_and_names_bad_lines() {
+        let good = write(
+            "good.csv",
+            &format!("{HEADER}0.02,0,0.00,1.5,2,0.1,3,kinematic\n0.02,0,0.20,2,2,0.1,3,kinematic\n0.04,1,0.00,1.6,2,0.1,3,dynamic\n"),
+        );
+        let p = read_predictions(&good).unwrap();
+        assert_eq!(p.len(), 3);
+        assert_eq!((p[1].horizon_s, p[1].x, p[2].step), (0.2, 2.0, 1));
+        assert_eq!(p[2].mode, "dynamic");
+
+        let cases = [
+            (
+                "0.04,0,0.00,1,2,0.1,3,kinematic\n0.02,1,0.00,1,2,0.1,3,kinematic\n",
+                ":3: column `t`: time goes backwards",
+            ),
+            ("0.02,0,0.00,1,2,0.1,3,fast\n", ":2: column `mode`"),
+            (
+                "0.02,0,-0.20,1,2,0.1,3,kinematic\n",
+                ":2: column `horizon_s`: -0.2 is negative",
+            ),
+            (
+                "0.02,0,0.00,x,2,0.1,3,kinematic\n",
+                ":2: column `x`: \"x\" is not a number",
+            ),
+            ("0.02,0,0.00,1,2,0.1,3\n", ":2: 7 fields, the header has 8"),
+            (
+                "0.02,0,0.00,1,2,inf,3,kinematic\n",
+                ":2: column `heading`: \"inf\" is not finite",
+            ),
+        ];
+        for (i, (rows, want)) in cases.iter().enumerate() {
+            let path = write(&format!("bad{i}.csv"), &format!("{HEADER}{rows}"));
+            let err = format!("{:#}", read_predictions(&path).unwrap_err());
+            assert!(err.contains(want), "case {i}: {err}");
+            assert!(err.starts_with(&path.display().to_string()), "{err}");
+        }
+        let no_col = write("nocol.csv", "t,step\n0,0\n");
+        let err = format!("{:#}", read_predictions(&no_col).unwrap_err());
+        assert!(err.contains(":1: missing column `horizon_s`"), "{err}");
+    }
+}
