@@ -288,7 +288,13 @@ fn bundled_smoke_drive_is_reproducible() {
     assert!(read(&data("bundled.can.log")) == read(&data("smoke.can.log")));
     // The second drive: the first 30 s of turn-left (the header and rows with t <= 30, as
     // scripts/gen-data.sh cuts them with awk).
-    ok(&["simulate-drive", "--scenario", "turn-left", "--out", s(&dir)]);
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "turn-left",
+        "--out",
+        s(&dir),
+    ]);
     for (full, cut) in [
         ("turn-left.csv", "turn-left-30s.csv"),
         ("turn-left.truth.csv", "turn-left-30s.truth.csv"),
