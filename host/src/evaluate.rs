@@ -71,6 +71,11 @@ impl Truth {
         }
     }
 
+    /// The samples, sorted by time.
+    pub fn samples(&self) -> &[TruthSample] {
+        &self.samples
+    }
+
     /// `(x, y, heading, speed)` at time `t`, linearly interpolated; `None` outside the record.
     pub fn at(&self, t: f64) -> Option<(f64, f64, f64, f64)> {
         let s = &self.samples;
@@ -343,6 +348,188 @@ pub fn format_table(e: &Evaluation) -> String {
         ));
     }
     s
+}
+
+/// File names [`write_plots`] writes, in order.
+pub const PLOT_FILES: [&str; 4] = [
+    "path.svg",
+    "error_vs_horizon.svg",
+    "gnss_window.svg",
+    "position_error_time.svg",
+];
+
+/// Largest number of points per plotted series.
+const MAX_PLOT_POINTS: usize = 2000;
+/// Length of the zoomed GNSS window, s.
+const GNSS_WINDOW_S: f64 = 10.0;
+
+/// The horizon closest to `target_s` among the evaluated ones.
+fn nearest_horizon(predictions: &[Prediction], target_s: f64) -> Option<f64> {
+    predictions
+        .iter()
+        .map(|p| p.horizon_s)
+        .min_by(|a, b| (a - target_s).abs().total_cmp(&(b - target_s).abs()))
+}
+
+/// Writes the evaluation's figures as SVG into `dir` (see [`PLOT_FILES`]):
+/// - `path.svg`: the true path of the whole drive, the node's predictions about 1 s ahead and
+///   the baseline's, placed where they predict the car (east/north, m, equal scale);
+/// - `error_vs_horizon.svg`: RMS position error against horizon, node vs kinematic baseline,
+///   with the raw GNSS RMS error as a reference line;
+/// - `gnss_window.svg`: a 10 s window in the middle of the drive: raw GNSS fixes, the node's
+///   filtered position (horizon 0) and truth;
+/// - `position_error_time.svg`: position error over time of the filtered position and of raw
+///   GNSS.
+///
+/// Returns the paths written.
+pub fn write_plots(
+    dir: &std::path::Path,
+    predictions: &[Prediction],
+    truth: &Truth,
+    inputs: &BaselineInputs,
+    vehicle: &VehicleParams,
+    evaluation: &Evaluation,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    use crate::plot::{decimate, Figure, PALETTE};
+    let [truth_c, node_c, base_c, gnss_c, ..] = PALETTE;
+    let paths: Vec<_> = PLOT_FILES.iter().map(|f| dir.join(f)).collect();
+    let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
+
+    // 1. Path with the ~1 s-ahead predictions.
+    let h1 = nearest_horizon(predictions, 1.0).unwrap_or(1.0);
+    let node_h1: Vec<(f64, f64)> = predictions
+        .iter()
+        .filter(|p| (p.horizon_s - h1).abs() < 1e-6)
+        .map(|p| (p.x, p.y))
+        .collect();
+    let ticks: Vec<(f64, Vec<f64>)> = {
+        let mut t: Vec<f64> = predictions.iter().map(|p| p.t).collect();
+        t.dedup();
+        t.into_iter().map(|t| (t, vec![h1])).collect()
+    };
+    let base_h1: Vec<(f64, f64)> = baseline_predictions(inputs, vehicle, &ticks)
+        .into_iter()
+        .map(|(_, _, (x, y, _, _))| (x, y))
+        .collect();
+    Figure::new(
+        &format!("Path: truth and predictions {h1:.1} s ahead"),
+        "east (m)",
+        "north (m)",
+    )
+    .line("truth", decimate(&truth_xy, MAX_PLOT_POINTS))
+    .color(truth_c)
+    .scatter(
+        &format!("kinematic baseline (raw GNSS), {h1:.1} s ahead"),
+        decimate(&base_h1, MAX_PLOT_POINTS),
+    )
+    .color(base_c)
+    .scatter(
+        &format!("node, {h1:.1} s ahead"),
+        decimate(&node_h1, MAX_PLOT_POINTS),
+    )
+    .color(node_c)
+    .equal_aspect()
+    .write_svg(&paths[0])?;
+
+    // 2. Error against horizon.
+    let pick = |f: fn(&HorizonRow) -> &ErrorStats| -> Vec<(f64, f64)> {
+        evaluation
+            .horizons
+            .iter()
+            .filter(|r| f(r).count > 0)
+            .map(|r| (r.horizon_s, f(r).pos_rms_m))
+            .collect()
+    };
+    let node_rms = pick(|r| &r.node);
+    let base_rms = pick(|r| &r.baseline);
+    let last_h = evaluation.horizons.last().map_or(2.0, |r| r.horizon_s);
+    let raw = evaluation.raw_gnss.pos_rms_m;
+    Figure::new(
+        "Position error against horizon",
+        "horizon (s)",
+        "RMS position error (m)",
+    )
+    .line("node", node_rms)
+    .color(node_c)
+    .line("kinematic baseline (raw GNSS)", base_rms)
+    .color(base_c)
+    .line("raw GNSS (horizon 0)", vec![(0.0, raw), (last_h, raw)])
+    .color(gnss_c)
+    .y_from_zero()
+    .write_svg(&paths[1])?;
+
+    // 3. Zoomed window: raw vs filtered vs truth.
+    let t0 = predictions.first().map_or(0.0, |p| p.t);
+    let t1 = predictions.last().map_or(0.0, |p| p.t);
+    let mid = 0.5 * (t0 + t1);
+    let (w0, w1) = (
+        (mid - GNSS_WINDOW_S / 2.0).max(t0),
+        (mid + GNSS_WINDOW_S / 2.0).min(t1),
+    );
+    let in_window = |t: f64| t >= w0 && t <= w1;
+    let raw_xy: Vec<(f64, f64)> = inputs
+        .gnss
+        .iter()
+        .filter(|g| in_window(g.0))
+        .map(|g| (g.1, g.2))
+        .collect();
+    let filtered_xy: Vec<(f64, f64)> = predictions
+        .iter()
+        .filter(|p| p.horizon_s == 0.0 && in_window(p.t))
+        .map(|p| (p.x, p.y))
+        .collect();
+    let truth_window: Vec<(f64, f64)> = truth
+        .samples()
+        .iter()
+        .filter(|s| in_window(s.t))
+        .map(|s| (s.x, s.y))
+        .collect();
+    Figure::new(
+        &format!("GNSS raw vs filtered vs truth, t = {w0:.1} .. {w1:.1} s"),
+        "east (m)",
+        "north (m)",
+    )
+    .scatter("raw GNSS", raw_xy)
+    .color(gnss_c)
+    .line("truth", truth_window)
+    .color(truth_c)
+    .line("node, filtered (horizon 0)", filtered_xy)
+    .color(node_c)
+    .equal_aspect()
+    .write_svg(&paths[2])?;
+
+    // 4. Position error over time.
+    let filtered_err: Vec<(f64, f64)> = predictions
+        .iter()
+        .filter(|p| p.horizon_s == 0.0)
+        .filter_map(|p| {
+            let (tx, ty, _, _) = truth.at(p.t)?;
+            Some((p.t, ((p.x - tx).powi(2) + (p.y - ty).powi(2)).sqrt()))
+        })
+        .collect();
+    let raw_err: Vec<(f64, f64)> = inputs
+        .gnss
+        .iter()
+        .filter_map(|&(t, x, y)| {
+            let (tx, ty, _, _) = truth.at(t)?;
+            Some((t, ((x - tx).powi(2) + (y - ty).powi(2)).sqrt()))
+        })
+        .collect();
+    Figure::new(
+        "Current position error over time",
+        "time (s)",
+        "position error (m)",
+    )
+    .line("raw GNSS", decimate(&raw_err, MAX_PLOT_POINTS))
+    .color(gnss_c)
+    .line(
+        "node, filtered (horizon 0)",
+        decimate(&filtered_err, MAX_PLOT_POINTS),
+    )
+    .color(node_c)
+    .y_from_zero()
+    .write_svg(&paths[3])?;
+    Ok(paths)
 }
 
 #[cfg(test)]

@@ -3,10 +3,12 @@
 pub mod csv2can;
 pub mod evaluate;
 pub mod logcsv;
+pub mod plot;
+pub mod progress;
 pub mod replay;
 pub mod sim;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use catmodel::can::codec::{decode_input, InputMessage};
@@ -86,10 +88,25 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     .iter()
     .map(|n| column(path, &header, n))
     .collect::<Result<_>>()?;
-    let mut out = Vec::with_capacity(rows.len());
+    let mut out: Vec<Prediction> = Vec::with_capacity(rows.len());
     for (line, row) in rows {
+        if row.len() != header.len() {
+            bail!(
+                "{}:{line}: {} fields, the header has {}",
+                path.display(),
+                row.len(),
+                header.len()
+            );
+        }
         let f = |i: usize| cell_f64(path, line, &header, &row, cols[i]);
-        out.push(Prediction {
+        let mode = row.get(cols[7]).cloned().unwrap_or_default();
+        if mode != "kinematic" && mode != "dynamic" {
+            bail!(
+                "{}:{line}: column `mode`: {mode:?} is neither `kinematic` nor `dynamic`",
+                path.display()
+            );
+        }
+        let p = Prediction {
             t: f(0)?,
             step: f(1)? as u64,
             horizon_s: f(2)?,
@@ -97,8 +114,26 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
             y: f(4)?,
             heading: f(5)?,
             speed: f(6)?,
-            mode: row.get(cols[7]).cloned().unwrap_or_default(),
-        });
+            mode,
+        };
+        if p.horizon_s < 0.0 {
+            bail!(
+                "{}:{line}: column `horizon_s`: {} is negative",
+                path.display(),
+                p.horizon_s
+            );
+        }
+        if let Some(prev) = out.last() {
+            if p.t < prev.t {
+                bail!(
+                    "{}:{line}: column `t`: time goes backwards ({} s after {} s)",
+                    path.display(),
+                    p.t,
+                    prev.t
+                );
+            }
+        }
+        out.push(p);
     }
     Ok(out)
 }
@@ -139,6 +174,54 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64)) -> Result<BaselineIn
     Ok(inputs)
 }
 
+/// Everything `catmodel evaluate` reads: predictions, truth and the baseline's bus inputs.
+pub struct EvaluationData {
+    /// The node's predictions.
+    pub predictions: Vec<Prediction>,
+    /// Ground truth.
+    pub truth: Truth,
+    /// Raw GNSS, speed and steering from the candump.
+    pub inputs: BaselineInputs,
+}
+
+impl EvaluationData {
+    /// Reads the three files; `origin_deg` is the origin of the truth frame.
+    pub fn read(
+        predictions: &Path,
+        truth: &Path,
+        inputs: &Path,
+        origin_deg: (f64, f64),
+    ) -> Result<Self> {
+        Ok(Self {
+            predictions: read_predictions(predictions)?,
+            truth: Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?),
+            inputs: baseline_inputs(inputs, origin_deg)?,
+        })
+    }
+
+    /// Scores the predictions and the baseline (the CAT Vehicle's geometry for the baseline).
+    pub fn evaluate(&self) -> Evaluation {
+        evaluate::evaluate(
+            &self.predictions,
+            &self.truth,
+            &self.inputs,
+            &catmodel::vehicle::CAT_VEHICLE,
+        )
+    }
+
+    /// Writes the figures of [`evaluate::write_plots`] into `dir`.
+    pub fn write_plots(&self, dir: &Path, evaluation: &Evaluation) -> Result<Vec<PathBuf>> {
+        evaluate::write_plots(
+            dir,
+            &self.predictions,
+            &self.truth,
+            &self.inputs,
+            &catmodel::vehicle::CAT_VEHICLE,
+            evaluation,
+        )
+    }
+}
+
 /// `catmodel evaluate` on files.
 pub fn evaluate_files(
     predictions: &Path,
@@ -146,13 +229,62 @@ pub fn evaluate_files(
     inputs: &Path,
     origin_deg: (f64, f64),
 ) -> Result<Evaluation> {
-    let preds = read_predictions(predictions)?;
-    let truth = Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?);
-    let inputs = baseline_inputs(inputs, origin_deg)?;
-    Ok(evaluate::evaluate(
-        &preds,
-        &truth,
-        &inputs,
-        &catmodel::vehicle::CAT_VEHICLE,
-    ))
+    Ok(EvaluationData::read(predictions, truth, inputs, origin_deg)?.evaluate())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("catmodel-host-lib-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const HEADER: &str = "t,step,horizon_s,x,y,heading,speed,mode\n";
+
+    #[test]
+    fn predictions_reader_accepts_replay_output_and_names_bad_lines() {
+        let good = write(
+            "good.csv",
+            &format!("{HEADER}0.02,0,0.00,1.5,2,0.1,3,kinematic\n0.02,0,0.20,2,2,0.1,3,kinematic\n0.04,1,0.00,1.6,2,0.1,3,dynamic\n"),
+        );
+        let p = read_predictions(&good).unwrap();
+        assert_eq!(p.len(), 3);
+        assert_eq!((p[1].horizon_s, p[1].x, p[2].step), (0.2, 2.0, 1));
+        assert_eq!(p[2].mode, "dynamic");
+
+        let cases = [
+            (
+                "0.04,0,0.00,1,2,0.1,3,kinematic\n0.02,1,0.00,1,2,0.1,3,kinematic\n",
+                ":3: column `t`: time goes backwards",
+            ),
+            ("0.02,0,0.00,1,2,0.1,3,fast\n", ":2: column `mode`"),
+            (
+                "0.02,0,-0.20,1,2,0.1,3,kinematic\n",
+                ":2: column `horizon_s`: -0.2 is negative",
+            ),
+            (
+                "0.02,0,0.00,x,2,0.1,3,kinematic\n",
+                ":2: column `x`: \"x\" is not a number",
+            ),
+            ("0.02,0,0.00,1,2,0.1,3\n", ":2: 7 fields, the header has 8"),
+            (
+                "0.02,0,0.00,1,2,inf,3,kinematic\n",
+                ":2: column `heading`: \"inf\" is not finite",
+            ),
+        ];
+        for (i, (rows, want)) in cases.iter().enumerate() {
+            let path = write(&format!("bad{i}.csv"), &format!("{HEADER}{rows}"));
+            let err = format!("{:#}", read_predictions(&path).unwrap_err());
+            assert!(err.contains(want), "case {i}: {err}");
+            assert!(err.starts_with(&path.display().to_string()), "{err}");
+        }
+        let no_col = write("nocol.csv", "t,step\n0,0\n");
+        let err = format!("{:#}", read_predictions(&no_col).unwrap_err());
+        assert!(err.contains(":1: missing column `horizon_s`"), "{err}");
+    }
 }

@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use catmodel::node::NodeConfig;
+use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, evaluate, logcsv, replay, sim};
 use clap::{Parser, Subcommand};
 
@@ -78,6 +79,10 @@ enum Command {
         /// Also write the evaluation as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Write figures (SVG) into this directory: path.svg, error_vs_horizon.svg,
+        /// gnss_window.svg, position_error_time.svg.
+        #[arg(long, value_name = "DIR")]
+        plots: Option<PathBuf>,
     },
 }
 
@@ -127,13 +132,16 @@ fn run(cli: Cli) -> Result<()> {
                 faults,
                 ..sim::SimOptions::default()
             };
+            let progress = Progress::spinner(&format!("simulating {scenario}"));
             let output = sim::run_named(&scenario, vehicle.as_deref(), &options)
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
+            progress.set_message("writing");
             let (log_path, truth_path) =
                 sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
             let can_path = out.join(format!("{scenario}.can.log"));
             let frames = csv2can::encode_log(&output.log);
             replay::write_file(&can_path, &csv2can::to_candump(&frames))?;
+            progress.finish();
             eprintln!(
                 "wrote {}, {}, {}",
                 log_path.display(),
@@ -155,11 +163,19 @@ fn run(cli: Cli) -> Result<()> {
             out,
             tx_out,
         } => {
+            let reading = Progress::spinner(&format!("reading {}", log.display()));
             let frames = replay::read_candump(&log)?;
+            reading.finish();
             let mut config = NodeConfig::paper()
                 .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"))?;
             config.origin_e7 = origin.map(to_e7);
-            let result = replay::replay(&frames, config);
+            let progress = Progress::bar(replay::tick_count(&frames), "replay");
+            let mut done = 0;
+            let result = replay::replay_with_progress(&frames, config, |ticks| {
+                progress.inc(ticks - done);
+                done = ticks;
+            });
+            progress.finish();
             replay::write_file(&out, &result.predictions_csv)?;
             if let Some(tx) = tx_out {
                 replay::write_file(&tx, &result.tx_log)?;
@@ -178,16 +194,31 @@ fn run(cli: Cli) -> Result<()> {
             inputs,
             origin,
             json,
+            plots,
         } => {
             let inputs = match inputs {
                 Some(p) => p,
                 None => sibling_candump(&truth)?,
             };
             let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
-            let e = catmodel_host::evaluate_files(&predictions, &truth, &inputs, origin)?;
+            let progress = Progress::spinner("reading");
+            let data = catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin)?;
+            progress.set_message("evaluating");
+            let e = data.evaluate();
+            let written = match &plots {
+                Some(dir) => {
+                    progress.set_message("plotting");
+                    data.write_plots(dir, &e)?
+                }
+                None => Vec::new(),
+            };
+            progress.finish();
             print!("{}", evaluate::format_table(&e));
             if let Some(path) = json {
                 replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
+            }
+            for p in written {
+                eprintln!("wrote {}", p.display());
             }
             Ok(())
         }

@@ -27,8 +27,21 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
         if line.trim().is_empty() {
             continue;
         }
-        let frame = candump::parse_line(&line)
-            .map_err(|e| anyhow::anyhow!("{}:{lineno}: {e:?}: {line:?}", path.display()))?;
+        let frame = candump::parse_line(&line).map_err(|e| {
+            anyhow::anyhow!(
+                "{}:{lineno}: malformed candump line ({}): {line:?}",
+                path.display(),
+                candump_reason(e)
+            )
+        })?;
+        // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
+        if frame.t_us > u64::MAX / 2 {
+            bail!(
+                "{}:{lineno}: timestamp {} us out of range",
+                path.display(),
+                frame.t_us
+            );
+        }
         if let Some(prev) = last_t {
             if frame.t_us < prev {
                 bail!(
@@ -43,6 +56,27 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
         frames.push(frame);
     }
     Ok(frames)
+}
+
+/// What is wrong with a rejected candump line, in words.
+pub fn candump_reason(e: candump::CandumpError) -> &'static str {
+    use candump::CandumpError as E;
+    match e {
+        E::Empty => "empty line",
+        E::MissingTimestamp => "expected `(SECONDS.UUUUUU)` at the start",
+        E::BadTimestamp => "timestamp is not `(SECONDS.UUUUUU)` with six decimals",
+        E::MissingInterface => "no interface name after the timestamp",
+        E::BadInterface => "interface name empty, too long or not printable",
+        E::MissingSeparator => "no `#` between identifier and data",
+        E::BadId => "identifier is not 3 or 8 hex digits",
+        E::IdOutOfRange => "identifier above 0x7FF (3 digits) or 0x1FFFFFFF (8 digits)",
+        E::RemoteFrame => "remote frame (`#R`), not supported",
+        E::FdFrame => "CAN FD frame (`##`), not supported",
+        E::BadHex => "data is not hex",
+        E::OddHex => "odd number of data hex digits",
+        E::TooLong => "more than 8 data bytes",
+        E::TrailingGarbage => "unexpected text after the data",
+    }
 }
 
 /// One candump line (`(secs.micros) can0 ID#DATA`).
@@ -74,8 +108,27 @@ pub struct ReplayOutput {
     pub origin_e7: Option<(i32, i32)>,
 }
 
+/// Number of ticks [`replay`] runs over `frames` (sorted by time).
+pub fn tick_count(frames: &[TimedFrame]) -> u64 {
+    match (frames.first(), frames.last()) {
+        (Some(first), Some(last)) => {
+            (first_tick_us(last.t_us) - first_tick_us(first.t_us)) / SAMPLE_PERIOD_US + 1
+        }
+        _ => 0,
+    }
+}
+
 /// Runs the node over `frames` (sorted by time).
 pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
+    replay_with_progress(frames, config, |_| {})
+}
+
+/// [`replay`], calling `progress(ticks_done)` every 500 ticks.
+pub fn replay_with_progress(
+    frames: &[TimedFrame],
+    config: NodeConfig,
+    mut progress: impl FnMut(u64),
+) -> ReplayOutput {
     let mut node = Node::new(config);
     let mut csv = String::from("t,step,horizon_s,x,y,heading,speed,mode\n");
     let mut tx_log = String::new();
@@ -112,6 +165,9 @@ pub fn replay(frames: &[TimedFrame], config: NodeConfig) -> ReplayOutput {
         }
         append_prediction_rows(&mut csv, now, step, &tx);
         step += 1;
+        if step.is_multiple_of(500) {
+            progress(step);
+        }
         now += SAMPLE_PERIOD_US;
     }
     ReplayOutput {
@@ -177,4 +233,37 @@ pub fn write_file(path: &Path, text: &str) -> Result<()> {
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     f.write_all(text.as_bytes())
         .with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(t_us: u64) -> TimedFrame {
+        TimedFrame {
+            t_us,
+            frame: CanFrame::new(catmodel::can::CanId::Standard(0x555), &[]).unwrap(),
+        }
+    }
+
+    #[test]
+    fn tick_count_matches_the_ticks_replay_runs() {
+        assert_eq!(tick_count(&[]), 0);
+        // Ticks at 20 000 (first frame 1 us rounded up) .. 100 000 (last frame 80 001 us).
+        let frames = [at(1), at(50_000), at(80_001)];
+        assert_eq!(tick_count(&frames), 5);
+        let config = NodeConfig::paper().unwrap();
+        let mut calls = Vec::new();
+        let out = replay_with_progress(&frames, config, |n| calls.push(n));
+        assert_eq!(out.ticks, 5);
+        assert!(calls.is_empty(), "progress every 500 ticks only");
+        // A frame exactly on a tick: that tick is the last.
+        assert_eq!(tick_count(&[at(20_000), at(40_000)]), 2);
+    }
+
+    #[test]
+    fn candump_errors_read_as_words() {
+        let e = candump::parse_line("(1.000000) can0 100#ABC").unwrap_err();
+        assert_eq!(candump_reason(e), "odd number of data hex digits");
+    }
 }

@@ -1,0 +1,436 @@
+//! End to end: the built `catmodel` binary on the smoke drive (15 s).
+//! simulate-drive -> csv2can (equal to the written .can.log) -> replay -> evaluate (JSON, plots),
+//! determinism for a seed, the bundled data's reproducibility, and bad input (file:line, exit
+//! status).
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_catmodel");
+const ORIGIN: &str = "32.2319,-110.9501";
+
+/// A fresh directory under cargo's per-test tmp dir.
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli_e2e_{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("data")
+        .join(name)
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().unwrap()
+}
+
+/// Runs and requires success; returns stderr.
+fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "catmodel {args:?} failed:\n{stderr}");
+    stderr
+}
+
+/// Runs and requires failure; returns stderr.
+fn fails(args: &[&str]) -> String {
+    let out = run(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "catmodel {args:?} should fail:\n{stderr}"
+    );
+    assert!(stderr.starts_with("catmodel: error: "), "{stderr}");
+    stderr
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn read(p: &Path) -> Vec<u8> {
+    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// Well-formed XML as plotters writes it: balanced tags, one `<svg>` root.
+fn assert_well_formed_svg(text: &str, path: &Path) {
+    assert!(
+        text.starts_with("<svg"),
+        "{}: no <svg> root",
+        path.display()
+    );
+    let mut stack: Vec<&str> = Vec::new();
+    let mut rest = text;
+    let mut elements = 0;
+    while let Some(open) = rest.find('<') {
+        let close = rest[open..]
+            .find('>')
+            .unwrap_or_else(|| panic!("{}: unterminated tag", path.display()))
+            + open;
+        let tag = &rest[open + 1..close];
+        if tag.starts_with('?') || tag.starts_with('!') {
+        } else if let Some(name) = tag.strip_prefix('/') {
+            assert_eq!(stack.pop(), Some(name.trim()), "{}", path.display());
+        } else {
+            elements += 1;
+            let name = tag.split_whitespace().next().unwrap_or("");
+            assert!(!name.is_empty(), "{}: empty tag", path.display());
+            if !tag.ends_with('/') {
+                stack.push(name);
+            }
+        }
+        // Text between tags must not hold a raw '<' (checked by the find above) or '&' that
+        // does not start an entity.
+        rest = &rest[close + 1..];
+        let text_end = rest.find('<').unwrap_or(rest.len());
+        for (i, _) in rest[..text_end].match_indices('&') {
+            let ent = &rest[i..text_end];
+            assert!(
+                ["&amp;", "&lt;", "&gt;", "&quot;", "&apos;", "&#"]
+                    .iter()
+                    .any(|e| ent.starts_with(e)),
+                "{}: bare & in text",
+                path.display()
+            );
+        }
+        if stack.is_empty() {
+            assert!(
+                rest.trim().is_empty(),
+                "{}: content after </svg>",
+                path.display()
+            );
+            break;
+        }
+    }
+    assert!(stack.is_empty(), "{}: unclosed {stack:?}", path.display());
+    assert!(
+        elements > 20,
+        "{}: only {elements} elements",
+        path.display()
+    );
+}
+
+#[test]
+fn smoke_drive_through_every_command() {
+    let dir = tmp_dir("pipeline");
+    let (sim_a, sim_b) = (dir.join("a"), dir.join("b"));
+
+    // simulate-drive, twice with the same seed: identical bytes.
+    let msg = ok(&["simulate-drive", "--scenario", "smoke", "--out", s(&sim_a)]);
+    assert!(msg.contains("smoke.can.log"), "{msg}");
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "smoke",
+        "--seed",
+        "0",
+        "--out",
+        s(&sim_b),
+    ]);
+    for f in ["smoke.csv", "smoke.can.log", "smoke.truth.csv"] {
+        assert_eq!(read(&sim_a.join(f)), read(&sim_b.join(f)), "{f} differs");
+    }
+    // Another seed is another repetition.
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "smoke",
+        "--seed",
+        "3",
+        "--out",
+        s(&dir.join("c")),
+    ]);
+    assert_ne!(
+        read(&sim_a.join("smoke.csv")),
+        read(&dir.join("c").join("smoke.csv"))
+    );
+
+    // csv2can of the log equals the candump simulate-drive wrote.
+    let can = dir.join("csv2can.can.log");
+    let msg = ok(&["csv2can", s(&sim_a.join("smoke.csv")), "--out", s(&can)]);
+    assert!(msg.contains("frames"), "{msg}");
+    assert_eq!(read(&can), read(&sim_a.join("smoke.can.log")));
+
+    // replay: predictions for every tick, the node's frames, nothing rejected.
+    let pred = dir.join("pred.csv");
+    let tx = dir.join("tx.log");
+    let msg = ok(&[
+        "replay",
+        s(&sim_a.join("smoke.can.log")),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&pred),
+        "--tx-out",
+        s(&tx),
+    ]);
+    assert!(
+        msg.contains("crc 0, counter 0, dlc 0, range 0, gnss gate 0, unknown id 0, time 0"),
+        "{msg}"
+    );
+    let pred_text = String::from_utf8(read(&pred)).unwrap();
+    assert!(pred_text.starts_with("t,step,horizon_s,x,y,heading,speed,mode\n"));
+    let horizon0 = pred_text
+        .lines()
+        .filter(|l| l.split(',').nth(2) == Some("0.00"))
+        .count();
+    // 15 s at 50 Hz = 750 ticks, minus those before the node knows its heading (it needs the
+    // car to move: about 4 s in this drive).
+    assert!((500..=751).contains(&horizon0), "{horizon0} ticks");
+    // Every tx line is a valid candump line of one of our IDs.
+    let tx_text = String::from_utf8(read(&tx)).unwrap();
+    assert!(tx_text.lines().count() > 10 * horizon0);
+    for l in tx_text.lines().take(200) {
+        let f = catmodel::can::candump::parse_line(l).unwrap();
+        let catmodel::can::CanId::Standard(id) = f.frame.id else {
+            panic!("{l}")
+        };
+        assert!((0x300..=0x3F0).contains(&id), "{l}");
+    }
+
+    // evaluate: table, JSON and plots (inputs found beside the truth file).
+    let json = dir.join("eval.json");
+    let plots = dir.join("plots");
+    let out = run(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&sim_a.join("smoke.truth.csv")),
+        "--json",
+        s(&json),
+        "--plots",
+        s(&plots),
+    ]);
+    assert!(out.status.success(), "{:?}", out);
+    let table = String::from_utf8(out.stdout).unwrap();
+    assert!(table.starts_with("raw GNSS position error"), "{table}");
+    assert_eq!(table.lines().count(), 2 + 11, "{table}");
+
+    let e: serde_json::Value = serde_json::from_slice(&read(&json)).unwrap();
+    let horizons = e["horizons"].as_array().unwrap();
+    assert_eq!(horizons.len(), 11);
+    let at = |h: f64| {
+        horizons
+            .iter()
+            .find(|r| (r["horizon_s"].as_f64().unwrap() - h).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("no horizon {h}"))
+    };
+    // Every tick compared, but for the last one or two past the end of the truth record.
+    let compared = e["ticks"].as_u64().unwrap() as usize;
+    assert!(
+        compared <= horizon0 && compared + 3 >= horizon0,
+        "{compared}"
+    );
+    let raw = e["raw_gnss"]["pos_rms_m"].as_f64().unwrap();
+    // 100 Hz GNSS over 15 s, its error in the receiver's range (about 1.2 m plus bias).
+    assert!(e["raw_gnss"]["count"].as_u64().unwrap() > 1400);
+    assert!((0.5..5.0).contains(&raw), "raw GNSS RMS {raw}");
+    // 1 s ahead, the node beats the kinematic baseline fed with raw GNSS.
+    let node_1s = at(1.0)["node"]["pos_rms_m"].as_f64().unwrap();
+    let base_1s = at(1.0)["baseline"]["pos_rms_m"].as_f64().unwrap();
+    assert!(
+        node_1s < base_1s,
+        "1 s: node {node_1s} m vs baseline {base_1s} m"
+    );
+    // And its heading is far better than the raw-track heading.
+    let node_h = at(1.0)["node"]["heading_rms_rad"].as_f64().unwrap();
+    let base_h = at(1.0)["baseline"]["heading_rms_rad"].as_f64().unwrap();
+    assert!(node_h < base_h, "heading {node_h} vs {base_h}");
+    // Errors grow with the horizon for both (2 s worse than 0.2 s).
+    for who in ["node", "baseline"] {
+        let e02 = at(0.2)[who]["pos_rms_m"].as_f64().unwrap();
+        let e2 = at(2.0)[who]["pos_rms_m"].as_f64().unwrap();
+        assert!(e2 > e02, "{who}: {e02} at 0.2 s, {e2} at 2 s");
+    }
+
+    // The plots: four well-formed SVG files with their titles and legends as text.
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    for (file, must_contain) in [
+        ("path.svg", "truth"),
+        ("error_vs_horizon.svg", "kinematic baseline"),
+        ("gnss_window.svg", "raw GNSS"),
+        ("position_error_time.svg", "filtered"),
+    ] {
+        let p = plots.join(file);
+        assert!(stderr.contains(file), "{stderr}");
+        let text = String::from_utf8(read(&p)).unwrap();
+        assert_well_formed_svg(&text, &p);
+        assert!(text.contains(must_contain), "{file}");
+        assert!(text.contains("<text"), "{file}: no text elements");
+        assert!(text.len() < 1_000_000, "{file}: {} bytes", text.len());
+    }
+
+    // Replaying again gives the same bytes.
+    let pred2 = dir.join("pred2.csv");
+    ok(&[
+        "replay",
+        s(&sim_a.join("smoke.can.log")),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&pred2),
+    ]);
+    assert_eq!(read(&pred), read(&pred2));
+}
+
+/// data/ is what `scripts/gen-data.sh` writes: the smoke drive and its bundled copy.
+#[test]
+fn bundled_smoke_drive_is_reproducible() {
+    let dir = tmp_dir("bundled");
+    ok(&["simulate-drive", "--scenario", "smoke", "--out", s(&dir)]);
+    for f in ["smoke.csv", "smoke.can.log", "smoke.truth.csv"] {
+        assert!(read(&dir.join(f)) == read(&data(f)), "data/{f} is stale");
+    }
+    assert!(read(&data("bundled.can.log")) == read(&data("smoke.can.log")));
+    // The second drive: the first 30 s of turn-left (the header and rows with t <= 30, as
+    // scripts/gen-data.sh cuts them with awk).
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "turn-left",
+        "--out",
+        s(&dir),
+    ]);
+    for (full, cut) in [
+        ("turn-left.csv", "turn-left-30s.csv"),
+        ("turn-left.truth.csv", "turn-left-30s.truth.csv"),
+    ] {
+        let text = String::from_utf8(read(&dir.join(full))).unwrap();
+        let mut kept = String::new();
+        for (i, l) in text.lines().enumerate() {
+            let t: f64 = l.split(',').next().unwrap().parse().unwrap_or(0.0);
+            if i == 0 || t <= 30.0 {
+                kept.push_str(l);
+                kept.push('\n');
+            }
+        }
+        assert!(kept.as_bytes() == read(&data(cut)), "data/{cut} is stale");
+    }
+    // Its candump is csv2can of its log.
+    let can = dir.join("turn.can.log");
+    ok(&["csv2can", s(&data("turn-left-30s.csv")), "--out", s(&can)]);
+    assert!(read(&can) == read(&data("turn-left-30s.can.log")));
+}
+
+/// Writes `lines` of the smoke candump with line `n` (1-based) replaced.
+fn edited_candump(dir: &Path, name: &str, n: usize, replacement: &str) -> PathBuf {
+    let text = String::from_utf8(read(&data("smoke.can.log"))).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines[n - 1] = replacement;
+    let path = dir.join(name);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+#[test]
+fn bad_input_is_reported_with_file_and_line() {
+    let dir = tmp_dir("bad");
+    let pred = dir.join("p.csv");
+    let smoke = String::from_utf8(read(&data("smoke.can.log"))).unwrap();
+    let line = |n: usize| smoke.lines().nth(n - 1).unwrap().to_string();
+
+    // A malformed candump line: file:line and the reason.
+    let bad = edited_candump(&dir, "bad_hex.log", 7, "(0000000000.100000) can0 100#0G");
+    let err = fails(&["replay", s(&bad), "--out", s(&pred)]);
+    assert!(err.contains(&format!("{}:7: ", bad.display())), "{err}");
+    assert!(err.contains("data is not hex"), "{err}");
+    assert!(!pred.exists(), "no output on error");
+
+    let bad = edited_candump(&dir, "no_ts.log", 3, "can0 100#00");
+    let err = fails(&["replay", s(&bad), "--out", s(&pred)]);
+    assert!(err.contains(":3: malformed candump line"), "{err}");
+
+    // Time going backwards: an error naming the line.
+    // Line 10 stamped at t = 0, before line 9.
+    let backwards = format!("(0000000000.000000){}", line(10).split_once(')').unwrap().1);
+    let bad = edited_candump(&dir, "backwards.log", 10, &backwards);
+    let err = fails(&["replay", s(&bad), "--out", s(&pred)]);
+    assert!(err.contains(":10: time goes backwards"), "{err}");
+    // evaluate reads the same candump (for the baseline) and says the same.
+    let truth = dir.join("x.truth.csv");
+    std::fs::copy(data("smoke.truth.csv"), &truth).unwrap();
+    ok(&[
+        "replay",
+        s(&data("smoke.can.log")),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&pred),
+    ]);
+    let err = fails(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&bad),
+    ]);
+    assert!(err.contains(":10: time goes backwards"), "{err}");
+
+    // Unknown identifiers are counted and ignored.
+    let t = line(20).split_once(')').unwrap().0.to_string() + ")";
+    let mut with_unknown = String::new();
+    for (i, l) in smoke.lines().enumerate() {
+        with_unknown.push_str(l);
+        with_unknown.push('\n');
+        if i == 19 {
+            with_unknown.push_str(&format!("{t} can0 555#0102\n{t} can0 18FEF100#00\n"));
+        }
+    }
+    let unknown = dir.join("unknown.log");
+    std::fs::write(&unknown, with_unknown).unwrap();
+    let msg = ok(&["replay", s(&unknown), "--out", s(&pred)]);
+    assert!(msg.contains("unknown id 2,"), "{msg}");
+
+    // A malformed log CSV: file:line:column, the column's name and the reason.
+    let csv = String::from_utf8(read(&data("smoke.csv"))).unwrap();
+    let mut lines: Vec<String> = csv.lines().map(str::to_string).collect();
+    lines[4] = lines[4].replacen(',', ",abc", 1);
+    let bad_csv = dir.join("bad.csv");
+    std::fs::write(&bad_csv, lines.join("\n")).unwrap();
+    let err = fails(&["csv2can", s(&bad_csv), "--out", s(&dir.join("o.log"))]);
+    assert!(
+        err.contains(&format!("{}:5:", bad_csv.display())) && err.contains("`vel`"),
+        "{err}"
+    );
+    assert!(err.contains("not a number"), "{err}");
+    // Time going backwards in a CSV.
+    let mut lines: Vec<String> = csv.lines().map(str::to_string).collect();
+    lines.swap(6, 7);
+    std::fs::write(&bad_csv, lines.join("\n")).unwrap();
+    let err = fails(&["csv2can", s(&bad_csv), "--out", s(&dir.join("o.log"))]);
+    assert!(
+        err.contains(":8:") && err.contains("time not increasing"),
+        "{err}"
+    );
+
+    // A malformed predictions CSV.
+    let ptext = String::from_utf8(read(&pred)).unwrap();
+    let mut plines: Vec<&str> = ptext.lines().collect();
+    plines[3] = "oops";
+    let bad_pred = dir.join("bad_pred.csv");
+    std::fs::write(&bad_pred, plines.join("\n")).unwrap();
+    let err = fails(&[
+        "evaluate",
+        s(&bad_pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&data("smoke.can.log")),
+    ]);
+    assert!(err.contains(&format!("{}:4:", bad_pred.display())), "{err}");
+
+    // evaluate without --inputs needs NAME.truth.csv beside NAME.can.log.
+    let odd = dir.join("truth_without_suffix.csv");
+    std::fs::copy(data("smoke.truth.csv"), &odd).unwrap();
+    let err = fails(&["evaluate", s(&pred), "--truth", s(&odd)]);
+    assert!(err.contains("--inputs"), "{err}");
+
+    // A missing file names the file.
+    let err = fails(&["replay", s(&dir.join("nope.log")), "--out", s(&pred)]);
+    assert!(err.contains("nope.log"), "{err}");
+}
