@@ -160,8 +160,11 @@ pub struct HorizonRow {
 pub struct Evaluation {
     /// Per horizon, ascending.
     pub horizons: Vec<HorizonRow>,
-    /// Raw GNSS fixes against truth at their own timestamps.
+    /// Raw GNSS fixes (the antenna) against truth (the rear axle) at their own timestamps.
     pub raw_gnss: ErrorStats,
+    /// Raw GNSS fixes moved back to the rear axle along the *true* heading: the best any
+    /// per-fix lever-arm correction could do, the fair reference for the filtered position.
+    pub raw_gnss_at_axle: ErrorStats,
     /// Ticks whose horizon-0 position was compared.
     pub ticks: usize,
 }
@@ -214,10 +217,13 @@ fn raw_track_heading(gnss: &[(f64, f64, f64)], t: f64) -> Option<f64> {
     ((dx * dx + dy * dy).sqrt() >= MIN_DIST_M).then(|| dx.atan2(dy))
 }
 
-/// The kinematic-only baseline's predictions at the node's ticks and horizons.
+/// The kinematic-only baseline's predictions at the node's ticks and horizons: the latest raw
+/// fix, moved back to the rear axle by the lever arm along the raw track's heading, rolled
+/// forward by eq 8 with the measured speed and steering.
 pub fn baseline_predictions(
     inputs: &BaselineInputs,
     vehicle: &VehicleParams,
+    antenna_ahead_m: f64,
     ticks: &[(f64, Vec<f64>)],
 ) -> Vec<(f64, f64, State)> {
     let mut out = Vec::new();
@@ -240,7 +246,11 @@ pub fn baseline_predictions(
         // Eq 8 exactly as the paper's kinematic model: tan(delta) / L, no understeer term.
         let delta = vehicle.steer_pct_to_center_rad(steer as f32);
         let curvature = catmodel::math::tan(delta) / vehicle.wheelbase_m;
-        let mut pose = Pose::new(fix.1 as f32, fix.2 as f32, h0 as f32);
+        let (x0, y0) = (
+            fix.1 - antenna_ahead_m * h0.sin(),
+            fix.2 - antenna_ahead_m * h0.cos(),
+        );
+        let mut pose = Pose::new(x0 as f32, y0 as f32, h0 as f32);
         let mut elapsed = 0.0f64;
         let mut sorted = horizons.clone();
         sorted.sort_by(f64::total_cmp);
@@ -270,6 +280,7 @@ pub fn evaluate(
     truth: &Truth,
     inputs: &BaselineInputs,
     vehicle: &VehicleParams,
+    antenna_ahead_m: f64,
 ) -> Evaluation {
     let mut node_buckets = Vec::new();
     let mut ticks: Vec<(f64, Vec<f64>)> = Vec::new();
@@ -287,7 +298,7 @@ pub fn evaluate(
         }
     }
     let mut base_buckets = Vec::new();
-    for (t, h, state) in baseline_predictions(inputs, vehicle, &ticks) {
+    for (t, h, state) in baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks) {
         accumulate(truth, t, h, state, &mut base_buckets);
     }
     node_buckets.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -308,16 +319,24 @@ pub fn evaluate(
         });
     }
     let mut raw_pos = Vec::new();
+    let mut raw_axle = Vec::new();
     for (t, x, y) in &inputs.gnss {
-        if let Some((tx, ty, _, _)) = truth.at(*t) {
+        if let Some((tx, ty, th, _)) = truth.at(*t) {
             raw_pos.push(((x - tx).powi(2) + (y - ty).powi(2)).sqrt());
+            let (ax, ay) = (
+                x - antenna_ahead_m * th.sin(),
+                y - antenna_ahead_m * th.cos(),
+            );
+            raw_axle.push(((ax - tx).powi(2) + (ay - ty).powi(2)).sqrt());
         }
     }
     let zeros = vec![0.0; raw_pos.len()];
     let raw_gnss = ErrorStats::from_errors(&mut raw_pos, &zeros, &zeros);
+    let raw_gnss_at_axle = ErrorStats::from_errors(&mut raw_axle, &zeros, &zeros);
     Evaluation {
         horizons,
         raw_gnss,
+        raw_gnss_at_axle,
         ticks: tick_count,
     }
 }
@@ -328,6 +347,11 @@ pub fn format_table(e: &Evaluation) -> String {
     s.push_str(&format!(
         "raw GNSS position error: mean {:.3} m, RMS {:.3} m, p95 {:.3} m ({} fixes)\n",
         e.raw_gnss.pos_mean_m, e.raw_gnss.pos_rms_m, e.raw_gnss.pos_p95_m, e.raw_gnss.count
+    ));
+    let a = &e.raw_gnss_at_axle;
+    s.push_str(&format!(
+        "raw GNSS moved to the rear axle with the true heading: mean {:.3} m, RMS {:.3} m, p95 {:.3} m\n",
+        a.pos_mean_m, a.pos_rms_m, a.pos_p95_m
     ));
     s.push_str(
         "horizon_s | node pos mean  RMS    p95 m | heading RMS rad | speed RMS m/s | baseline pos mean  RMS    p95 m | heading RMS rad\n",
@@ -388,10 +412,11 @@ pub fn write_plots(
     truth: &Truth,
     inputs: &BaselineInputs,
     vehicle: &VehicleParams,
+    antenna_ahead_m: f64,
     evaluation: &Evaluation,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
     use crate::plot::{decimate, Figure, PALETTE};
-    let [truth_c, node_c, base_c, gnss_c, ..] = PALETTE;
+    let [truth_c, node_c, base_c, gnss_c, axle_c, ..] = PALETTE;
     let paths: Vec<_> = PLOT_FILES.iter().map(|f| dir.join(f)).collect();
     let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
 
@@ -407,7 +432,7 @@ pub fn write_plots(
         t.dedup();
         t.into_iter().map(|t| (t, vec![h1])).collect()
     };
-    let base_h1: Vec<(f64, f64)> = baseline_predictions(inputs, vehicle, &ticks)
+    let base_h1: Vec<(f64, f64)> = baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks)
         .into_iter()
         .map(|(_, _, (x, y, _, _))| (x, y))
         .collect();
@@ -444,6 +469,7 @@ pub fn write_plots(
     let base_rms = pick(|r| &r.baseline);
     let last_h = evaluation.horizons.last().map_or(2.0, |r| r.horizon_s);
     let raw = evaluation.raw_gnss.pos_rms_m;
+    let raw_axle = evaluation.raw_gnss_at_axle.pos_rms_m;
     Figure::new(
         "Position error against horizon",
         "horizon (s)",
@@ -455,6 +481,11 @@ pub fn write_plots(
     .color(base_c)
     .line("raw GNSS (horizon 0)", vec![(0.0, raw), (last_h, raw)])
     .color(gnss_c)
+    .line(
+        "raw GNSS at the rear axle, true heading (horizon 0)",
+        vec![(0.0, raw_axle), (last_h, raw_axle)],
+    )
+    .color(axle_c)
     .y_from_zero()
     .write_svg(&paths[1])?;
 
@@ -579,6 +610,7 @@ mod tests {
             &truth,
             &BaselineInputs::default(),
             &catmodel::vehicle::CAT_VEHICLE,
+            1.478,
         );
         assert_eq!(e.horizons.len(), 2);
         assert!(e.horizons[0].node.pos_rms_m < 1e-9);

@@ -206,6 +206,7 @@ impl EvaluationData {
             &self.truth,
             &self.inputs,
             &catmodel::vehicle::CAT_VEHICLE,
+            f64::from(catmodel::node::CAT_VEHICLE_ANTENNA_AHEAD_M),
         )
     }
 
@@ -217,6 +218,7 @@ impl EvaluationData {
             &self.truth,
             &self.inputs,
             &catmodel::vehicle::CAT_VEHICLE,
+            f64::from(catmodel::node::CAT_VEHICLE_ANTENNA_AHEAD_M),
             evaluation,
         )
     }

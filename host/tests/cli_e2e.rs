@@ -208,7 +208,7 @@ fn smoke_drive_through_every_command() {
     assert!(out.status.success(), "{:?}", out);
     let table = String::from_utf8(out.stdout).unwrap();
     assert!(table.starts_with("raw GNSS position error"), "{table}");
-    assert_eq!(table.lines().count(), 2 + 11, "{table}");
+    assert_eq!(table.lines().count(), 3 + 11, "{table}");
 
     let e: serde_json::Value = serde_json::from_slice(&read(&json)).unwrap();
     let horizons = e["horizons"].as_array().unwrap();

@@ -173,14 +173,29 @@ impl SignalSpec {
 
     /// Raw value of a physical one, rounded to nearest; `None` if `physical` is not finite or
     /// the rounded value is outside `raw_min..=raw_max` (the caller then sends "not available").
+    ///
+    /// Exact inverse of [`Self::to_physical`]: a value that decoding produced encodes to the
+    /// same raw value. Up to 2^22 f32 division rounds to it anyway; above (24-bit signals such
+    /// as positions near their range limits) `physical / scale` can land one step off, so the
+    /// neighbour that reproduces `physical` exactly is taken.
     pub fn to_raw(&self, physical: f32) -> Option<i64> {
-        let raw = libm::roundf((physical - self.offset) / self.scale);
+        let mut raw = libm::roundf((physical - self.offset) / self.scale);
         // NaN fails both comparisons; limits of float signals are <= 2^24, exact in f32.
-        if raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32 {
-            Some(raw as i64)
-        } else {
-            None
+        if !(raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32) {
+            return None;
         }
+        const EXACT_BELOW: f32 = 4_194_304.0; // 2^22
+        if raw.abs() >= EXACT_BELOW && self.to_physical(raw as i64) != physical {
+            for neighbour in [raw - 1.0, raw + 1.0] {
+                if neighbour >= self.raw_min as f32
+                    && neighbour <= self.raw_max as f32
+                    && self.to_physical(neighbour as i64) == physical
+                {
+                    raw = neighbour;
+                }
+            }
+        }
+        Some(raw as i64)
     }
 }
 
