@@ -33,7 +33,10 @@ fuzz_target!(|input: (RawFrame, u8)| {
     roundtrip!(Prediction, &f);
     roundtrip!(NodeStatus, &f);
     if let Ok(m) = GnssPosition::decode(&f, source) {
-        assert_eq!(GnssPosition::decode(&m.encode(source), source).ok(), Some(m));
+        assert_eq!(
+            GnssPosition::decode(&m.encode(source), source).ok(),
+            Some(m)
+        );
     }
     if let Ok(m) = GnssCogSog::decode(&f, source) {
         assert_eq!(GnssCogSog::decode(&m.encode(source), source).ok(), Some(m));

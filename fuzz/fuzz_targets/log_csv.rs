@@ -14,7 +14,12 @@ fuzz_target!(|data: &[u8]| {
     match parse_log(text, path) {
         Ok(rows) => {
             for w in rows.windows(2) {
-                assert!(w[1].t > w[0].t, "time not increasing: {} then {}", w[0].t, w[1].t);
+                assert!(
+                    w[1].t > w[0].t,
+                    "time not increasing: {} then {}",
+                    w[0].t,
+                    w[1].t
+                );
             }
             for r in &rows {
                 assert!(r.t.is_finite());

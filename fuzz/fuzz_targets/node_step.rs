@@ -23,13 +23,33 @@ const ORIGIN: (i32, i32) = (322_319_000, -1_109_501_000);
 #[derive(Arbitrary, Debug)]
 enum Input {
     Raw(RawFrame),
-    Steering { pct: f32, counter: u8 },
-    Speed { v: f32, cmd: Option<f32>, counter: u8 },
-    Pedal { accel: f32, brake: f32, counter: u8 },
+    Steering {
+        pct: f32,
+        counter: u8,
+    },
+    Speed {
+        v: f32,
+        cmd: Option<f32>,
+        counter: u8,
+    },
+    Pedal {
+        accel: f32,
+        brake: f32,
+        counter: u8,
+    },
     /// A fix `(d_lat, d_lon)` 1e-7 deg from the origin (within ~3 km), or anywhere.
-    FixNear { d_lat: i16, d_lon: i16 },
-    FixAnywhere { lat_e7: i32, lon_e7: i32 },
-    Cog { cog: f32, sog: f32 },
+    FixNear {
+        d_lat: i16,
+        d_lon: i16,
+    },
+    FixAnywhere {
+        lat_e7: i32,
+        lon_e7: i32,
+    },
+    Cog {
+        cog: f32,
+        sog: f32,
+    },
 }
 
 #[derive(Arbitrary, Debug)]
