@@ -2,6 +2,8 @@
 //! numbers with stated tolerances.
 use std::path::PathBuf;
 
+pub mod bus;
+
 /// Path of a file under `host-tests/reference/`.
 pub fn reference_path(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -1,0 +1,381 @@
+//! The fault matrix (docs/faults.md), one test per row: what the node does with each fault,
+//! which counter or health bit shows it, and that it recovers. Traffic comes from
+//! `catmodel_host_tests::bus` (a known drive), with the fault injected.
+use catmodel::can::codec::{NodeStatus, SpeedReport, SteeringReport};
+use catmodel::can::{CanFrame, CanId, TimedFrame};
+use catmodel::node::PlatformStats;
+use catmodel_host_tests::bus::{
+    self, config, drive, frames, rear_axle, reseal, run, run_with, Kind, TickOut,
+};
+
+/// The last tick whose status is the given page.
+fn last_page(ticks: &[TickOut], page: u8) -> NodeStatus {
+    ticks
+        .iter()
+        .rev()
+        .map(TickOut::status)
+        .find(|s| s.page() == page)
+        .expect("page sent")
+}
+
+fn health(ticks: &[TickOut]) -> catmodel::can::codec::HealthFlags {
+    match last_page(ticks, 0) {
+        NodeStatus::Health { health, .. } => health,
+        _ => unreachable!(),
+    }
+}
+
+/// Ticks within `[from_s, to_s)` of the drive.
+fn window(ticks: &[TickOut], from_s: f64, to_s: f64) -> &[TickOut] {
+    let a = ticks.iter().position(|t| t.t_s() >= from_s).unwrap();
+    let b = ticks.iter().position(|t| t.t_s() >= to_s).unwrap_or(ticks.len());
+    &ticks[a..b.max(a)]
+}
+
+/// Position error of a tick against the known drive at `v`, `steer_pct`.
+fn position_error(t: &TickOut, v: f32, steer_pct: f32) -> f64 {
+    let p = t.position();
+    let (e, n, _) = rear_axle(f64::from(v), bus::curvature(v, steer_pct), t.t_s());
+    (f64::from(p.east_m.unwrap()) - e).hypot(f64::from(p.north_m.unwrap()) - n)
+}
+
+#[test]
+fn crc_error_is_rejected_and_counted() {
+    let mut d = drive(10.0, 0.0, 6.0);
+    let mut corrupted = 0;
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Steering) {
+        if (l.frame.t_us / 20_000) % 2 == 0 {
+            l.frame.frame.data[7] ^= 0x01;
+            corrupted += 1;
+        }
+    }
+    let ticks = run(&frames(&d));
+    let last = ticks.last().unwrap();
+    assert_eq!(last.counters.crc_errors, corrupted);
+    // Every other report still arrives (25 Hz): steering never goes stale.
+    assert!(!health(&ticks).steer_stale);
+    match last_page(&ticks, 1) {
+        NodeStatus::RxErrors { crc_errors, .. } => assert!(crc_errors >= corrupted - 10),
+        _ => unreachable!(),
+    }
+    for t in &ticks {
+        t.assert_frames_valid();
+    }
+}
+
+#[test]
+fn stuck_counter_is_rejected_and_jumping_counter_is_counted_but_used() {
+    let mut d = drive(10.0, 0.0, 4.0);
+    // Speed reports: counter frozen at 3 (a stuck sender repeating itself).
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Speed) {
+        let (m, _) = SpeedReport::decode(&l.frame.frame).unwrap();
+        l.frame.frame = m.encode(3);
+    }
+    let ticks = run(&frames(&d));
+    let c = ticks.last().unwrap().counters;
+    let last_tick = ticks.last().unwrap().now_us;
+    let speed_frames = d
+        .iter()
+        .filter(|l| l.kind == Kind::Speed && l.frame.t_us <= last_tick)
+        .count() as u32;
+    assert_eq!(c.counter_errors, speed_frames - 1, "all but the first rejected");
+    assert!(health(&ticks).speed_stale, "a stuck sender is a stale sender");
+
+    // Steering: every third report lost: the counter jumps; counted, values used.
+    let d: Vec<_> = drive(10.0, 0.0, 4.0)
+        .into_iter()
+        .enumerate()
+        .filter(|(i, l)| !(l.kind == Kind::Steering && i % 3 == 0))
+        .map(|(_, l)| l.frame)
+        .collect();
+    let ticks = run(&d);
+    assert!(ticks.last().unwrap().counters.counter_errors > 0);
+    assert!(!health(&ticks).steer_stale);
+}
+
+#[test]
+fn wrong_dlc_is_rejected_and_counted() {
+    let mut d = drive(10.0, 0.0, 3.0);
+    let mut n = 0;
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Speed).step_by(5) {
+        l.frame.frame.len = 6;
+        n += 1;
+    }
+    let ticks = run(&frames(&d));
+    assert_eq!(ticks.last().unwrap().counters.dlc_errors, n);
+}
+
+#[test]
+fn out_of_range_and_invalid_sentinel_are_rejected_counted_and_flagged() {
+    let mut d = drive(10.0, 0.0, 3.0);
+    let mut n = 0;
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Steering).skip(40).step_by(10) {
+        // steer_pct: 16-bit signed at 0.01 %, DBC range -100..100: raw 12000 is 120 %.
+        l.frame.frame.data[0] = (12_000u16 & 0xFF) as u8;
+        l.frame.frame.data[1] = (12_000u16 >> 8) as u8;
+        l.frame.frame = reseal(l.frame.frame);
+        assert!(SteeringReport::decode(&l.frame.frame).is_err());
+        n += 1;
+    }
+    let ticks = run(&frames(&d));
+    assert_eq!(ticks.last().unwrap().counters.range_errors, n);
+    let recent = window(&ticks, 1.0, 2.9);
+    assert!(recent
+        .iter()
+        .any(|t| matches!(t.status(), NodeStatus::Health { health, .. } if health.input_invalid)));
+}
+
+#[test]
+fn steering_stale_withholds_predictions_and_recovers() {
+    // Steering silent from 4 s to 5 s of an 8 s turn.
+    let d: Vec<_> = drive(5.0, 20.0, 8.0)
+        .into_iter()
+        .filter(|l| {
+            let t = (l.frame.t_us - bus::START_US) as f64 * 1e-6;
+            !(l.kind == Kind::Steering && (4.0..5.0).contains(&t))
+        })
+        .collect();
+    let ticks = run(&frames(&d));
+    for t in window(&ticks, 4.15, 5.0) {
+        let preds = t.predictions();
+        assert!(
+            preds.iter().all(|p| p.dx_m.is_none() && p.dy_m.is_none()),
+            "t={} predictions sent without steering",
+            t.t_s()
+        );
+        assert!(t.position().position_valid, "the state still comes from GNSS");
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(health.steer_stale);
+        }
+        if let NodeStatus::Ages { ages_10ms, .. } = t.status() {
+            assert!(ages_10ms[0] >= 10, "{ages_10ms:?}");
+        }
+    }
+    for t in window(&ticks, 5.1, 8.0) {
+        assert!(t.predictions().iter().all(|p| p.dx_m.is_some()), "t={}", t.t_s());
+    }
+}
+
+#[test]
+fn speed_stale_predicts_from_the_speed_model_flagged() {
+    let d: Vec<_> = drive(10.0, 0.0, 8.0)
+        .into_iter()
+        .filter(|l| {
+            let t = (l.frame.t_us - bus::START_US) as f64 * 1e-6;
+            !(l.kind == Kind::Speed && (4.0..5.0).contains(&t))
+        })
+        .collect();
+    let ticks = run(&frames(&d));
+    for t in window(&ticks, 4.15, 5.0) {
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(health.speed_stale);
+        }
+        // The velocity model, at equilibrium on the last command, carries the speed.
+        assert!((t.estimate.speed_mps - 10.0).abs() < 0.2, "{}", t.estimate.speed_mps);
+        assert!(position_error(t, 10.0, 0.0) < 0.3);
+    }
+    let h = health(window(&ticks, 5.2, 8.0));
+    assert!(!h.speed_stale);
+}
+
+#[test]
+fn gnss_gap_is_dead_reckoned_then_invalid_then_reacquired() {
+    // GNSS silent from 5 s to 6 s (dead reckoning) and from 10 s to 13 s (lost after 2 s).
+    let d: Vec<_> = drive(10.0, 10.0, 18.0)
+        .into_iter()
+        .filter(|l| {
+            let t = (l.frame.t_us - bus::START_US) as f64 * 1e-6;
+            !(l.kind == Kind::Gnss && ((5.0..6.0).contains(&t) || (10.0..13.0).contains(&t)))
+        })
+        .collect();
+    let ticks = run(&frames(&d));
+    for t in window(&ticks, 5.25, 6.0) {
+        let p = t.position();
+        assert!(p.position_valid && !p.gnss_fresh, "t={}", t.t_s());
+        assert!(position_error(t, 10.0, 10.0) < 0.5, "t={}: {}", t.t_s(), position_error(t, 10.0, 10.0));
+    }
+    for t in window(&ticks, 12.05, 13.0) {
+        assert!(!t.position().position_valid, "t={}: lost after 2 s", t.t_s());
+        assert!(t.predictions().iter().all(|p| p.dx_m.is_none()));
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(health.gnss_stale && health.position_invalid);
+        }
+    }
+    // Back within half a second of fixes, on the car.
+    for t in window(&ticks, 13.5, 18.0) {
+        assert!(t.position().position_valid, "t={}", t.t_s());
+        assert!(position_error(t, 10.0, 10.0) < 0.2, "t={}: {}", t.t_s(), position_error(t, 10.0, 10.0));
+    }
+}
+
+/// Replaces GNSS fixes in `[from_s, to_s)` by fixes moved `offset_m` north.
+fn shift_fixes(d: &mut [bus::Labelled], from_s: f64, to_s: f64, offset_m: f32) {
+    use catmodel::can::codec::GnssPosition;
+    use catmodel::can::spec::N2K_DEFAULT_SOURCE;
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Gnss) {
+        let t = (l.frame.t_us - bus::START_US) as f64 * 1e-6;
+        if (from_s..to_s).contains(&t) {
+            let mut fix = GnssPosition::decode(&l.frame.frame, N2K_DEFAULT_SOURCE).unwrap();
+            fix.lat_e7 += (offset_m / 0.0111) as i32; // ~1.11 cm per 1e-7 deg of latitude
+            l.frame.frame = fix.encode(N2K_DEFAULT_SOURCE);
+        }
+    }
+}
+
+#[test]
+fn gnss_jump_beyond_the_gate_is_rejected_and_a_persistent_one_is_followed() {
+    // A 0.3 s burst 50 m off: rejected, counted, flagged; the position does not move.
+    let mut d = drive(10.0, 0.0, 14.0);
+    shift_fixes(&mut d, 5.0, 5.3, 50.0);
+    let ticks = run(&frames(&d));
+    assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 30);
+    for t in window(&ticks, 5.0, 7.0) {
+        assert!(position_error(t, 10.0, 0.0) < 0.3, "t={}", t.t_s());
+    }
+    assert!(window(&ticks, 5.1, 6.2)
+        .iter()
+        .any(|t| t.position().gnss_rejected));
+    // Persistent: 100 rejections in a row, then the fixes win and the filter restarts there.
+    let mut d = drive(10.0, 0.0, 14.0);
+    shift_fixes(&mut d, 5.0, 14.0, 50.0);
+    let ticks = run(&frames(&d));
+    let c = ticks.last().unwrap().counters;
+    assert_eq!(c.gnss_gate_rejects, 100);
+    let last = ticks.last().unwrap();
+    let p = last.position();
+    let (_, n, _) = rear_axle(10.0, 0.0, last.t_s());
+    assert!((f64::from(p.north_m.unwrap()) - (n + 50.0)).abs() < 0.5, "{p:?}");
+}
+
+#[test]
+fn gnss_outliers_inside_the_gate_are_smoothed() {
+    // Every 7th fix 4 m off, alternating sides: the lowpass keeps the error small.
+    let mut d = drive(10.0, 0.0, 10.0);
+    let mut k = 0;
+    for l in d.iter_mut().filter(|l| l.kind == Kind::Gnss) {
+        k += 1;
+        if k % 7 == 0 {
+            let t = (l.frame.t_us - bus::START_US) as f64 * 1e-6;
+            shift_fixes(
+                std::slice::from_mut(l),
+                t,
+                t + 1e-9,
+                if k % 14 == 0 { 4.0 } else { -4.0 },
+            );
+        }
+    }
+    let ticks = run(&frames(&d));
+    let worst = window(&ticks, 2.0, 10.0)
+        .iter()
+        .map(|t| position_error(t, 10.0, 0.0))
+        .fold(0.0, f64::max);
+    assert!(worst < 0.6, "worst {worst} m (raw outliers: 4 m)");
+}
+
+#[test]
+fn bus_flood_of_unknown_and_higher_priority_ids_is_counted_and_harmless() {
+    let d = frames(&drive(10.0, 0.0, 6.0));
+    let mut flooded: Vec<TimedFrame> = Vec::new();
+    let mut unknown = 0u32;
+    for f in &d {
+        flooded.push(*f);
+        // ~100 % of a 500 kbit/s bus: ~4000 frames/s, i.e. 40 per 10 ms between fixes.
+        for j in 0..40u32 {
+            let id = if j % 2 == 0 {
+                CanId::Standard((j % 0x0FF) as u16) // higher priority than every input
+            } else {
+                CanId::Extended(0x1000_0000 + j)
+            };
+            flooded.push(TimedFrame {
+                t_us: f.t_us,
+                frame: CanFrame::new(id, &[0xFF; 8]).unwrap(),
+            });
+            unknown += 1;
+        }
+    }
+    let clean = run(&d);
+    let ticks = run(&flooded);
+    // Frames after the last tick are never delivered.
+    let last_tick = ticks.last().unwrap().now_us;
+    let delivered = flooded
+        .iter()
+        .filter(|f| f.t_us <= last_tick && f.frame.data == [0xFF; 8])
+        .count() as u32;
+    assert!(delivered > unknown - 400);
+    assert_eq!(ticks.last().unwrap().counters.unknown_ids, delivered);
+    // The node's output is exactly what it is without the flood, but for the status pages.
+    for (a, b) in clean.iter().zip(&ticks) {
+        assert_eq!(a.position(), b.position());
+        assert_eq!(a.predictions(), b.predictions());
+    }
+}
+
+#[test]
+fn receive_queue_overflow_and_overruns_are_reported() {
+    let d = frames(&drive(10.0, 0.0, 6.0));
+    // The platform counts what it dropped and the ticks it missed; the node reports both.
+    let ticks = run_with(config(), &d, |i| PlatformStats {
+        rx_queue_drops: if i >= 100 { 7 } else { 0 },
+        overruns: if i >= 150 { 1 } else { 0 },
+        ..PlatformStats::default()
+    });
+    match last_page(&ticks, 3) {
+        NodeStatus::Platform { rx_queue_drops, .. } => assert_eq!(rx_queue_drops, 7),
+        _ => unreachable!(),
+    }
+    let h = window(&ticks, 3.05, 3.3);
+    assert!(h.iter().any(|t| matches!(t.status(),
+        NodeStatus::Health { health, overrun_count: 1, .. } if health.overrun_recently)));
+    // "Recently" means within the last second: 1 s after the overrun the bit clears.
+    let late = window(&ticks, 3.0 + 1.2, 4.0);
+    if !late.is_empty() {
+        assert!(late.iter().all(|t| !matches!(t.status(),
+            NodeStatus::Health { health, .. } if health.overrun_recently)));
+    }
+}
+
+#[test]
+fn time_jumps_and_frames_from_the_future() {
+    let d = frames(&drive(10.0, 0.0, 6.0));
+    // A frame stamped after the tick that receives it (clock mismatch): rejected, counted.
+    let mut node = catmodel::node::Node::new(config());
+    let mut tx = catmodel::node::TxFrames::new();
+    let tick = catmodel::node::Tick {
+        now_us: 2_000_000,
+        platform: PlatformStats::default(),
+    };
+    let future = TimedFrame {
+        t_us: 2_000_001,
+        ..d[0]
+    };
+    node.step(&tick, &[future], &mut tx);
+    assert_eq!(node.counters().time_errors, 1);
+    // The tick clock jumps 10 s ahead: GNSS is lost (position invalid), nothing non-finite.
+    let mut ticks = run(&d);
+    let mut node = catmodel::node::Node::new(config());
+    let mut now = catmodel::node::first_tick_us(d[0].t_us);
+    for f in d.chunks(3) {
+        let mut tx = catmodel::node::TxFrames::new();
+        node.step(
+            &catmodel::node::Tick {
+                now_us: now,
+                platform: PlatformStats::default(),
+            },
+            f,
+            &mut tx,
+        );
+        now = now.max(f.last().unwrap().t_us) + 20_000;
+    }
+    let mut tx = catmodel::node::TxFrames::new();
+    let est = node.step(
+        &catmodel::node::Tick {
+            now_us: now + 10_000_000,
+            platform: PlatformStats::default(),
+        },
+        &[],
+        &mut tx,
+    );
+    assert!(est.pose.is_none());
+    assert!(est.speed_mps.is_finite());
+    ticks.truncate(1);
+}
