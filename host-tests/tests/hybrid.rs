@@ -110,16 +110,6 @@ proptest! {
 }
 
 #[test]
-fn default_thresholds_match_the_brief() {
-    // Kinematic below ~4 m/s and low a_y, dynamic above ~6 m/s or |a_y| >= 2 m/s^2, 0.5 s dwell.
-    assert_eq!(DEFAULT_HYBRID.enter_dynamic_speed_mps, 6.0);
-    assert_eq!(DEFAULT_HYBRID.exit_dynamic_speed_mps, 4.0);
-    assert_eq!(DEFAULT_HYBRID.enter_dynamic_lat_accel_mps2, 2.0);
-    assert!(DEFAULT_HYBRID.exit_dynamic_lat_accel_mps2 < 2.0);
-    assert_eq!(DEFAULT_HYBRID.min_dwell_ticks, 25);
-}
-
-#[test]
 fn a_dwell_of_one_tick_still_cannot_switch_twice_in_a_tick() {
     // Alternating inputs across the whole band: with dwell 1 the mode may follow every tick,
     // but never more than one change per tick, and only on the side the input is on.

@@ -28,7 +28,10 @@ fn health(ticks: &[TickOut]) -> catmodel::can::codec::HealthFlags {
 /// Ticks within `[from_s, to_s)` of the drive.
 fn window(ticks: &[TickOut], from_s: f64, to_s: f64) -> &[TickOut] {
     let a = ticks.iter().position(|t| t.t_s() >= from_s).unwrap();
-    let b = ticks.iter().position(|t| t.t_s() >= to_s).unwrap_or(ticks.len());
+    let b = ticks
+        .iter()
+        .position(|t| t.t_s() >= to_s)
+        .unwrap_or(ticks.len());
     &ticks[a..b.max(a)]
 }
 
@@ -78,8 +81,15 @@ fn stuck_counter_is_rejected_and_jumping_counter_is_counted_but_used() {
         .iter()
         .filter(|l| l.kind == Kind::Speed && l.frame.t_us <= last_tick)
         .count() as u32;
-    assert_eq!(c.counter_errors, speed_frames - 1, "all but the first rejected");
-    assert!(health(&ticks).speed_stale, "a stuck sender is a stale sender");
+    assert_eq!(
+        c.counter_errors,
+        speed_frames - 1,
+        "all but the first rejected"
+    );
+    assert!(
+        health(&ticks).speed_stale,
+        "a stuck sender is a stale sender"
+    );
 
     // Steering: every third report lost: the counter jumps; counted, values used.
     let d: Vec<_> = drive(10.0, 0.0, 4.0)
@@ -109,7 +119,12 @@ fn wrong_dlc_is_rejected_and_counted() {
 fn out_of_range_and_invalid_sentinel_are_rejected_counted_and_flagged() {
     let mut d = drive(10.0, 0.0, 3.0);
     let mut n = 0;
-    for l in d.iter_mut().filter(|l| l.kind == Kind::Steering).skip(40).step_by(10) {
+    for l in d
+        .iter_mut()
+        .filter(|l| l.kind == Kind::Steering)
+        .skip(40)
+        .step_by(10)
+    {
         // steer_pct: 16-bit signed at 0.01 %, DBC range -100..100: raw 12000 is 120 %.
         l.frame.frame.data[0] = (12_000u16 & 0xFF) as u8;
         l.frame.frame.data[1] = (12_000u16 >> 8) as u8;
@@ -143,7 +158,10 @@ fn steering_stale_withholds_predictions_and_recovers() {
             "t={} predictions sent without steering",
             t.t_s()
         );
-        assert!(t.position().position_valid, "the state still comes from GNSS");
+        assert!(
+            t.position().position_valid,
+            "the state still comes from GNSS"
+        );
         if let NodeStatus::Health { health, .. } = t.status() {
             assert!(health.steer_stale);
         }
@@ -152,7 +170,11 @@ fn steering_stale_withholds_predictions_and_recovers() {
         }
     }
     for t in window(&ticks, 5.1, 8.0) {
-        assert!(t.predictions().iter().all(|p| p.dx_m.is_some()), "t={}", t.t_s());
+        assert!(
+            t.predictions().iter().all(|p| p.dx_m.is_some()),
+            "t={}",
+            t.t_s()
+        );
     }
 }
 
@@ -171,7 +193,11 @@ fn speed_stale_predicts_from_the_speed_model_flagged() {
             assert!(health.speed_stale);
         }
         // The velocity model, at equilibrium on the last command, carries the speed.
-        assert!((t.estimate.speed_mps - 10.0).abs() < 0.2, "{}", t.estimate.speed_mps);
+        assert!(
+            (t.estimate.speed_mps - 10.0).abs() < 0.2,
+            "{}",
+            t.estimate.speed_mps
+        );
         assert!(position_error(t, 10.0, 0.0) < 0.3);
     }
     let h = health(window(&ticks, 5.2, 8.0));
@@ -192,10 +218,19 @@ fn gnss_gap_is_dead_reckoned_then_invalid_then_reacquired() {
     for t in window(&ticks, 5.25, 6.0) {
         let p = t.position();
         assert!(p.position_valid && !p.gnss_fresh, "t={}", t.t_s());
-        assert!(position_error(t, 10.0, 10.0) < 0.5, "t={}: {}", t.t_s(), position_error(t, 10.0, 10.0));
+        assert!(
+            position_error(t, 10.0, 10.0) < 0.5,
+            "t={}: {}",
+            t.t_s(),
+            position_error(t, 10.0, 10.0)
+        );
     }
     for t in window(&ticks, 12.05, 13.0) {
-        assert!(!t.position().position_valid, "t={}: lost after 2 s", t.t_s());
+        assert!(
+            !t.position().position_valid,
+            "t={}: lost after 2 s",
+            t.t_s()
+        );
         assert!(t.predictions().iter().all(|p| p.dx_m.is_none()));
         if let NodeStatus::Health { health, .. } = t.status() {
             assert!(health.gnss_stale && health.position_invalid);
@@ -204,7 +239,12 @@ fn gnss_gap_is_dead_reckoned_then_invalid_then_reacquired() {
     // Back within half a second of fixes, on the car.
     for t in window(&ticks, 13.5, 18.0) {
         assert!(t.position().position_valid, "t={}", t.t_s());
-        assert!(position_error(t, 10.0, 10.0) < 0.2, "t={}: {}", t.t_s(), position_error(t, 10.0, 10.0));
+        assert!(
+            position_error(t, 10.0, 10.0) < 0.2,
+            "t={}: {}",
+            t.t_s(),
+            position_error(t, 10.0, 10.0)
+        );
     }
 }
 
@@ -244,7 +284,10 @@ fn gnss_jump_beyond_the_gate_is_rejected_and_a_persistent_one_is_followed() {
     let last = ticks.last().unwrap();
     let p = last.position();
     let (_, n, _) = rear_axle(10.0, 0.0, last.t_s());
-    assert!((f64::from(p.north_m.unwrap()) - (n + 50.0)).abs() < 0.5, "{p:?}");
+    assert!(
+        (f64::from(p.north_m.unwrap()) - (n + 50.0)).abs() < 0.5,
+        "{p:?}"
+    );
 }
 
 #[test]
@@ -327,11 +370,10 @@ fn receive_queue_overflow_and_overruns_are_reported() {
     assert!(h.iter().any(|t| matches!(t.status(),
         NodeStatus::Health { health, overrun_count: 1, .. } if health.overrun_recently)));
     // "Recently" means within the last second: 1 s after the overrun the bit clears.
-    let late = window(&ticks, 3.0 + 1.2, 4.0);
-    if !late.is_empty() {
-        assert!(late.iter().all(|t| !matches!(t.status(),
-            NodeStatus::Health { health, .. } if health.overrun_recently)));
-    }
+    let late = window(&ticks, 3.0 + 1.2, 6.0);
+    assert!(late.len() > 50);
+    assert!(late.iter().all(|t| !matches!(t.status(),
+        NodeStatus::Health { health, .. } if health.overrun_recently)));
 }
 
 #[test]

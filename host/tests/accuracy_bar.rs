@@ -67,8 +67,14 @@ fn validation_drive_meets_the_accuracy_bar() {
          1 s: node {node1:.3} m, baseline {base1:.3} m"
     );
     assert!(node0 < raw, "filtered {node0} vs raw {raw}");
-    assert!(node0 < raw_axle, "filtered {node0} vs raw at the axle {raw_axle}");
-    assert!(node1 < 0.75 * base1, "1 s: node {node1} vs baseline {base1}");
+    assert!(
+        node0 < raw_axle,
+        "filtered {node0} vs raw at the axle {raw_axle}"
+    );
+    assert!(
+        node1 < 0.75 * base1,
+        "1 s: node {node1} vs baseline {base1}"
+    );
     // Most ticks are scored (the node reports from its first heading on).
     assert!(e["ticks"].as_u64().unwrap() > 14_000, "{}", e["ticks"]);
 }

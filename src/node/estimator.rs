@@ -30,6 +30,9 @@ pub const GNSS_MA_SPAN: usize = 10;
 const TRACK_LEN: usize = 64;
 /// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
 const ODO_LEN: usize = 32;
+/// Missing fixes filled in after a gap, at most: the filters' memory (FIR taps + MA span);
+/// anything older would be flushed out anyway.
+pub const GAP_FILL_MAX_FIXES: u32 = (GNSS_FIR_TAPS + GNSS_MA_SPAN) as u32;
 
 /// Estimator tuning. Immutable configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -227,6 +230,23 @@ impl EstimatorState {
         Some(Xy {
             x_m: antenna.x_m - cfg.antenna_ahead_m * s,
             y_m: antenna.y_m - cfg.antenna_ahead_m * c,
+        })
+    }
+
+    /// Where dead reckoning puts the antenna `age_s` ago (straight back along this tick's
+    /// heading at `speed_mps`): the stand-in for a missing fix. `None` without a position.
+    pub fn dead_reckoned_antenna(
+        &self,
+        cfg: &EstimatorConfig,
+        age_s: f32,
+        speed_mps: f32,
+    ) -> Option<Xy> {
+        let now = self.antenna_position(cfg)?;
+        let (s, c) = self.heading_sin_cos;
+        let back_m = speed_mps * age_s;
+        Some(Xy {
+            x_m: now.x_m - back_m * s,
+            y_m: now.y_m - back_m * c,
         })
     }
 

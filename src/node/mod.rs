@@ -266,6 +266,20 @@ pub struct Node {
     tick_count: u32,
     counters: Counters,
     last_report: EncodeReport,
+    /// Platform overrun count seen at the previous tick, and when it last grew.
+    overruns_seen: u32,
+    last_overrun_us: Option<u64>,
+    /// Range errors at the previous tick, and when they last grew.
+    range_errors_seen: u32,
+    last_range_error_us: Option<u64>,
+}
+
+/// "Recently" in the health bits: within the last second, us.
+const RECENT_US: u64 = 1_000_000;
+
+/// `Some(t)` within [`RECENT_US`] of `now`.
+fn recent(now_us: u64, t_us: Option<u64>) -> bool {
+    matches!(t_us, Some(t) if now_us.saturating_sub(t) <= RECENT_US)
 }
 
 /// What one tick estimated, for the host tools (replay writes it next to the frames).
@@ -304,6 +318,10 @@ impl Node {
             tick_count: 0,
             counters: Counters::default(),
             last_report: EncodeReport::default(),
+            overruns_seen: 0,
+            last_overrun_us: None,
+            range_errors_seen: 0,
+            last_range_error_us: None,
         }
     }
 
@@ -452,7 +470,13 @@ impl Node {
         // Horizon.
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
         let mut n_points = 0;
-        if let (Some(p), Some(vel_state), Some(v_model)) = (pose, self.velocity, speed_model) {
+        // Without fresh steering the path ahead is unknown: no predictions (the state still
+        // goes out, flagged `steer_stale`).
+        let rollout_inputs = match (pose, self.velocity, speed_model, steer_pct) {
+            (Some(p), Some(v), Some(m), Some(_)) => Some((p, v, m)),
+            _ => None,
+        };
+        if let Some((p, vel_state, v_model)) = rollout_inputs {
             let mut rollout_state = vel_state;
             let start = PredictorStart {
                 pose: p,
@@ -477,8 +501,15 @@ impl Node {
         // Outputs.
         let counter = (self.tick_count & 0x0F) as u8;
         let mut report = EncodeReport::default();
-        let gnss_rejected =
-            matches!(self.last_gnss_reject_us, Some(t) if now.saturating_sub(t) <= 1_000_000);
+        let gnss_rejected = recent(now, self.last_gnss_reject_us);
+        if tick.platform.overruns > self.overruns_seen {
+            self.last_overrun_us = Some(now);
+        }
+        self.overruns_seen = tick.platform.overruns;
+        if self.counters.range_errors > self.range_errors_seen {
+            self.last_range_error_us = Some(now);
+        }
+        self.range_errors_seen = self.counters.range_errors;
         let model_mode = match mode {
             Mode::Kinematic => ModelMode::Kinematic,
             Mode::Dynamic => ModelMode::Dynamic,
@@ -557,8 +588,8 @@ impl Node {
                     prediction_saturated: self.last_report.saturated > 0,
                     nonfinite_guard: self.last_report.non_finite > 0 || c.nonfinite > 0,
                     watchdog_reset: tick.platform.watchdog_reset,
-                    overrun_recently: tick.platform.overruns > 0,
-                    input_invalid: c.range_errors > 0,
+                    overrun_recently: recent(now, self.last_overrun_us),
+                    input_invalid: recent(now, self.last_range_error_us),
                 },
                 overrun_count: tick.platform.overruns,
                 last_step_us: tick.platform.last_step_us,
@@ -693,6 +724,25 @@ impl Node {
         }
         self.gnss_rejects_in_row = 0;
         let age_s = now_us.saturating_sub(t_us) as f32 * 1e-6;
+        // The lowpass assumes one fix per period. Fixes missing since the last accepted one
+        // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
+        // the antenna at those instants, oldest first; no more than the filters remember.
+        if let Some(prev) = self.gnss_t_us {
+            let gap_periods = t_us.saturating_sub(prev) as f32 * 1e-6 / cfg.gnss_period_s;
+            let missing = ((gap_periods + 0.5) as u32)
+                .saturating_sub(1)
+                .min(estimator::GAP_FILL_MAX_FIXES);
+            for k in (1..=missing).rev() {
+                let age_k = age_s + k as f32 * cfg.gnss_period_s;
+                if let Some(p) =
+                    self.estimator
+                        .dead_reckoned_antenna(&cfg.estimator, age_k, self.speed_mps)
+                {
+                    self.estimator
+                        .add_fix(&cfg.estimator, p, age_k, self.speed_mps);
+                }
+            }
+        }
         self.estimator
             .add_fix(&cfg.estimator, fix, age_s, self.speed_mps);
         self.gnss_t_us = Some(t_us);
