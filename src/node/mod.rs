@@ -25,7 +25,7 @@ use crate::model::hybrid::{HybridConfig, HybridState, Mode, DEFAULT_HYBRID};
 use crate::model::kinematic::Pose;
 use crate::model::paper;
 use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStart};
-use crate::model::tf::ModelError;
+use crate::model::tf::{ModelError, TransferFunction};
 use crate::vehicle::{VehicleParams, CAT_VEHICLE};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
 use estimator::{EstimatorConfig, EstimatorState, Xy};
@@ -132,21 +132,61 @@ pub struct NodeConfig {
     pub max_speed_mps: f32,
 }
 
+/// What a model file carries (`models/paper.toml`, or one `catmodel identify` wrote): the
+/// vehicle, the hybrid thresholds and the identified continuous-time models, discretized
+/// (ZOH, f64) when the node is configured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeModels {
+    /// Geometry and steering conversion (eq 2-4).
+    pub vehicle: VehicleParams,
+    /// Hybrid switching thresholds.
+    pub hybrid: HybridConfig,
+    /// Commanded speed -> speed, with its input delay (eq 5's role); at most 2nd order.
+    pub velocity: TransferFunction,
+    /// dx/dt from [v_m, x, y, phi] (eq 7's role).
+    pub dxdt: [TransferFunction; 4],
+    /// Sample time, s (0.02: a delay must be a whole number of samples).
+    pub ts_s: f64,
+}
+
+impl NodeModels {
+    /// The published models (eq 5, eq 7) on the CAT Vehicle.
+    pub const fn paper() -> Self {
+        Self {
+            vehicle: CAT_VEHICLE,
+            hybrid: DEFAULT_HYBRID,
+            velocity: paper::EQ5_INTERNAL_CONTROLLER,
+            dxdt: paper::EQ7_DX_DT,
+            // f64 0.02 exactly: f64::from(0.02f32) would make 0.42 s a fractional delay.
+            ts_s: paper::PAPER_TS_S,
+        }
+    }
+}
+
 impl NodeConfig {
     /// The published models (eq 5, eq 7) on the CAT Vehicle, the paper's GNSS lowpass (20th
     /// order FIR, cutoff 2 Hz at the receiver's 100 Hz, then a 10-sample moving average).
     pub fn paper() -> Result<Self, ModelError> {
-        // f64 0.02 exactly: f64::from(0.02f32) would make 0.42 s a fractional delay.
-        let ts = paper::PAPER_TS_S;
-        let velocity = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, ts)?;
-        let dxdt = MisoBlock::from_tfs(&paper::EQ7_DX_DT, ts)?;
-        let estimator =
-            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ, CAT_VEHICLE_ANTENNA_AHEAD_M)
-                .ok_or(ModelError::NotFinite)?;
+        Self::with_models(&NodeModels::paper())
+    }
+
+    /// The node for `models`, with the paper's GNSS lowpass and the default timeouts and
+    /// gates. Fails if a model cannot be realized in the node's fixed-size blocks (speed model
+    /// above 2nd order, delay beyond the delay line, not a whole number of samples, unstable
+    /// discretization producing non-finite matrices).
+    pub fn with_models(models: &NodeModels) -> Result<Self, ModelError> {
+        let velocity = SsBlock::from_tf(&models.velocity, models.ts_s)?;
+        let dxdt = MisoBlock::from_tfs(&models.dxdt, models.ts_s)?;
+        let estimator = EstimatorConfig::paper(
+            GNSS_RATE_HZ,
+            GNSS_CUTOFF_HZ,
+            CAT_VEHICLE_ANTENNA_AHEAD_M,
+        )
+        .ok_or(ModelError::NotFinite)?;
         Ok(Self {
-            vehicle: CAT_VEHICLE,
+            vehicle: models.vehicle,
             dynamics: CAT_VEHICLE_DYNAMICS,
-            hybrid: DEFAULT_HYBRID,
+            hybrid: models.hybrid,
             horizon: predictor::DEFAULT_HORIZON,
             estimator,
             gnss_period_s: (1.0 / GNSS_RATE_HZ) as f32,
