@@ -141,11 +141,15 @@ pub fn rollout(
     written
 }
 
+/// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
+/// would link float formatting into the firmware).
 fn clamp_speed(v: f32, max_mps: f32) -> f32 {
-    if v.is_finite() {
-        v.clamp(0.0, max_mps)
-    } else {
+    if !v.is_finite() || v < 0.0 {
         0.0
+    } else if v > max_mps {
+        max_mps
+    } else {
+        v
     }
 }
 
