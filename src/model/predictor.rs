@@ -144,13 +144,17 @@ pub fn rollout(
 /// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
 /// would link float formatting into the firmware).
 fn clamp_speed(v: f32, max_mps: f32) -> f32 {
-    if !v.is_finite() || v < 0.0 {
-        0.0
-    } else if v > max_mps {
-        max_mps
-    } else {
-        v
+    if !v.is_finite() {
+        return 0.0;
     }
+    let mut x = v;
+    if x < 0.0 {
+        x = 0.0;
+    }
+    if x > max_mps {
+        x = max_mps;
+    }
+    x
 }
 
 #[cfg(test)]
