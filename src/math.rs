@@ -1,19 +1,26 @@
 //! The few `f32` transcendental functions the node uses, each with a measured error bound.
 //!
-//! Why these and not `micromath`: the node must hold position to 1 cm over a 40 m horizon
-//! (2.5e-4 relative) and heading to 1 mrad. `micromath` trades accuracy for speed and misses
-//! that by one to three orders of magnitude (measured by `host-tests/tests/math_bounds.rs` on
-//! the same grids as below: sin/cos 1.1e-3 absolute, atan/atan2 2.8e-3 rad, sqrt 6.1e-2
-//! relative, tan 2.3e-2 relative on ±0.7 rad). So every function here is the pure-Rust `libm` one
-//! (a port of musl/FreeBSD msun), which is within a few ulp of the true value.
+//! Why not `micromath`: the node must hold position to 1 cm over a 40 m horizon (2.5e-4
+//! relative) and heading to 1 mrad. `micromath` trades accuracy for speed and misses that by one
+//! to three orders of magnitude (measured by `host-tests/tests/math_bounds.rs` on the same grids
+//! as below: sin/cos 1.1e-3 absolute, atan/atan2 2.8e-3 rad, sqrt 6.1e-2 relative, tan 2.3e-2
+//! relative on ±0.7 rad).
 //!
-//! Bit-identity across targets (host replay vs Cortex-M4F, see `docs/architecture.md`): `libm`
-//! is plain Rust arithmetic (its `sinf`/`cosf`/`tanf` use `f64` internally, which the M4F
-//! emulates in software with IEEE-exact results), with one target-specific path: on x86-64
-//! `sqrtf` is the `sqrtss` instruction. IEEE 754 requires square root to be correctly rounded,
-//! and `libm`'s software `sqrtf` is correctly rounded too, so both give the same bits.
-//! Cost on the M4F: `sqrt` is cheap; `sin`/`cos`/`tan` pay for soft `f64` (order of a few
-//! hundred cycles each), which the 20 ms tick affords for the handful of calls per step.
+//! Why not `libm` for sin/cos/tan: its `sinf`/`cosf`/`tanf` evaluate in `f64`, which the
+//! Cortex-M4F (single-precision FPU) emulates in software: 1 200 to 2 300 instructions per call
+//! (measured in QEMU), a tenth of the node's tick budget for four calls. [`sin_cos`] and [`tan`]
+//! here are pure `f32`: Cody-Waite reduction by pi/2 with a three-part constant, then Taylor
+//! polynomials on [-pi/4, pi/4] (truncation < 1e-9, below f32 rounding), about 40
+//! instructions. `atan`/`atan2`/`sqrt` stay `libm`: they are `f32` throughout and cheap
+//! (80 to 110 instructions for `atan2f`).
+//!
+//! Bit-identity across targets (host replay vs Cortex-M4F, see `docs/architecture.md`): only
+//! additions, multiplications, divisions, comparisons and float/int conversions, evaluated in
+//! source order (Rust never fuses a multiply-add on its own), so x86-64 and the M4F give the
+//! same bits. `libm` is plain Rust
+//! arithmetic too, with one target-specific path: on x86-64 `sqrtf` is the `sqrtss`
+//! instruction. IEEE 754 requires square root to be correctly rounded, and `libm`'s software
+//! `sqrtf` is correctly rounded too, so both give the same bits.
 //!
 //! Bounds below are the worst case over dense grids (`cargo test -p catmodel-host-tests --test
 //! math_bounds`), measured against `f64` `std` functions, and asserted there.
@@ -25,31 +32,93 @@ pub const PI: f32 = core::f32::consts::PI;
 const TAU_HI: f32 = 6.283_081;
 const TAU_LO: f32 = 1.042_524_9e-4;
 
-/// Sine of `x` rad. `libm::sinf`. Measured worst error on [-pi, pi] (covers heading, increments
-/// to ±0.1 rad and steering to ±0.7 rad): 3.0e-8 absolute (half an ulp near 1).
+/// pi / 2 in three parts for the reduction of [`sin_cos`] and [`tan`]: `PIO2_1` has 8
+/// significant bits and `PIO2_2` 11, so `k * PIO2_1` and `k * PIO2_2` are exact for
+/// |k| < 2^13; the three sum to pi / 2 within 1.8e-15.
+const PIO2_1: f32 = 1.570_312_5;
+const PIO2_2: f32 = 4.837_513e-4;
+const PIO2_3: f32 = 7.549_79e-8;
+/// 2 / pi, rounded to f32 (only selects the quadrant; the reduction itself is exact).
+const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
+/// Largest |x| [`sin_cos`] and [`tan`] accept: 2^13 quadrants of pi / 2 (about 12 868 rad).
+pub const TRIG_MAX_ARG: f32 = 12_000.0;
+
+/// 1/n! for the Taylor series, rounded to f32.
+const INV_3F: f32 = 1.0 / 6.0;
+const INV_5F: f32 = 1.0 / 120.0;
+const INV_7F: f32 = 1.0 / 5_040.0;
+const INV_9F: f32 = 1.0 / 362_880.0;
+const INV_4F: f32 = 1.0 / 24.0;
+const INV_6F: f32 = 1.0 / 720.0;
+const INV_8F: f32 = 1.0 / 40_320.0;
+const INV_10F: f32 = 1.0 / 3_628_800.0;
+
+/// `x` reduced to `r` in about [-pi/4, pi/4] with `x = r + k pi/2`; returns `(r, k mod 4)`.
+/// Callers check |x| <= [`TRIG_MAX_ARG`] first.
+#[inline(always)]
+fn reduce_pio2(x: f32) -> (f32, u32) {
+    let t = x * FRAC_2_PI;
+    // Round half away from zero; |t| < 2^13, so the conversion is exact and in range.
+    let k = (if t >= 0.0 { t + 0.5 } else { t - 0.5 }) as i32;
+    let kf = k as f32;
+    let r = ((x - kf * PIO2_1) - kf * PIO2_2) - kf * PIO2_3;
+    (r, (k & 3) as u32)
+}
+
+/// sin and cos of `r` in [-pi/4, pi/4] by Taylor series to r^9 and r^10 (truncation
+/// < 7e-10 and < 1.2e-10 there).
+#[inline(always)]
+fn sin_cos_kernel(r: f32) -> (f32, f32) {
+    let r2 = r * r;
+    let s = r + r * r2 * (-INV_3F + r2 * (INV_5F + r2 * (-INV_7F + r2 * INV_9F)));
+    let c = 1.0 - 0.5 * r2 + r2 * r2 * (INV_4F + r2 * (-INV_6F + r2 * (INV_8F - r2 * INV_10F)));
+    (s, c)
+}
+
+/// `(sin x, cos x)` of `x` rad, pure `f32` (one reduction for both, see the module doc).
+/// Measured worst error on [-pi, pi] (heading, increments, steering): 9.1e-8 absolute for
+/// each (1.5 ulp near 1); 1.0e-7 over the whole domain |x| <= [`TRIG_MAX_ARG`]. Larger |x| or
+/// non-finite gives (NaN, NaN).
+pub fn sin_cos(x: f32) -> (f32, f32) {
+    if x.is_nan() || x.abs() > TRIG_MAX_ARG {
+        return (f32::NAN, f32::NAN);
+    }
+    let (r, q) = reduce_pio2(x);
+    let (s, c) = sin_cos_kernel(r);
+    match q {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+/// Sine of `x` rad: [`sin_cos`]`(x).0`, same bound.
 #[inline]
 pub fn sin(x: f32) -> f32 {
-    libm::sinf(x)
+    sin_cos(x).0
 }
 
-/// Cosine of `x` rad. `libm::cosf`. Measured worst error on [-pi, pi]: 3.0e-8 absolute.
+/// Cosine of `x` rad: [`sin_cos`]`(x).1`, same bound.
 #[inline]
 pub fn cos(x: f32) -> f32 {
-    libm::cosf(x)
+    sin_cos(x).1
 }
 
-/// `(sin x, cos x)` of `x` rad. `libm::sincosf` (one range reduction for both). Measured worst
-/// error on [-pi, pi]: 3.0e-8 absolute for each (same values as [`sin`] and [`cos`]).
-#[inline]
-pub fn sin_cos(x: f32) -> (f32, f32) {
-    libm::sincosf(x)
-}
-
-/// Tangent of `x` rad. `libm::tanf`. Measured worst relative error on [-1.4, 1.4] (covers
-/// steering angles to ±0.7 rad with margin): 8.0e-8.
-#[inline]
+/// Tangent of `x` rad, pure `f32`: the reduced sine over cosine (or minus cosine over sine in
+/// odd quadrants). Measured worst relative error on [-1.4, 1.4] (covers steering angles to
+/// ±0.7 rad with margin), and on [1.4, 1.55] towards the pole: 2.2e-7. |x| > [`TRIG_MAX_ARG`] or non-finite gives NaN.
 pub fn tan(x: f32) -> f32 {
-    libm::tanf(x)
+    if x.is_nan() || x.abs() > TRIG_MAX_ARG {
+        return f32::NAN;
+    }
+    let (r, q) = reduce_pio2(x);
+    let (s, c) = sin_cos_kernel(r);
+    if q & 1 == 0 {
+        s / c
+    } else {
+        -c / s
+    }
 }
 
 /// Arctangent of `x`, in rad, in (-pi/2, pi/2). `libm::atanf`. Measured worst error on
@@ -74,7 +143,8 @@ pub fn sqrt(x: f32) -> f32 {
     libm::sqrtf(x)
 }
 
-/// sqrt(x^2 + y^2) without intermediate overflow. `libm::hypotf`. Measured worst relative
+/// sqrt(x^2 + y^2) without intermediate overflow. `libm::hypotf` (it works in `f64`, soft on
+/// the M4F: not for the node's tick; host tools only). Measured worst relative
 /// error on |x|, |y| <= 1e4: 9.0e-8.
 #[inline]
 pub fn hypot(x: f32, y: f32) -> f32 {

@@ -44,7 +44,7 @@ async fn tick_task(
         &config,
     )
     .await;
-    app::wait_tx_drained(&TX_QUEUE).await;
+    app::wait_tx_drained(&COUNTERS).await;
     let trailer = run::Trailer::new(&summary, &COUNTERS, &input);
     if !recorder.finish(&trailer) {
         run::fail("cannot write the tick records", 1);

@@ -106,36 +106,74 @@ impl DynamicParams {
     /// One trapezoidal step of length `dt_s` with speed `vx_mps` and front wheel angle
     /// `delta_rad` held. Below `min_speed_mps` the state is set to the kinematic steady state.
     pub fn step(&self, state: &mut LateralState, vx_mps: f32, delta_rad: f32, dt_s: f32) {
-        if vx_mps < self.min_speed_mps {
-            *state = self.steady_state(vx_mps, delta_rad);
-            return;
-        }
+        self.stepper(delta_rad, dt_s).step(state, vx_mps);
+    }
+
+    /// The step's coefficients for a front wheel angle and step length held over many steps
+    /// (the horizon): the parameter products and quotients are computed once here, so each
+    /// [`LateralStepper::step`] has one division by the speed and one by the determinant.
+    pub fn stepper(&self, delta_rad: f32, dt_s: f32) -> LateralStepper {
         let cf = self.cornering_front_n_per_rad;
         let cr = self.cornering_rear_n_per_rad;
         let (lf, lr) = (self.cg_to_front_m, self.cg_to_rear_m);
         let m = self.mass_kg;
         let iz = self.yaw_inertia_kg_m2;
-        let a11 = -(cf + cr) / (m * vx_mps);
-        let a12 = -vx_mps - (cf * lf - cr * lr) / (m * vx_mps);
-        let a21 = -(cf * lf - cr * lr) / (iz * vx_mps);
-        let a22 = -(cf * lf * lf + cr * lr * lr) / (iz * vx_mps);
-        let b1 = cf / m * delta_rad;
-        let b2 = cf * lf / iz * delta_rad;
         let h = 0.5 * dt_s;
-        // (I - hA) x+ = (I + hA) x + dt b
+        LateralStepper {
+            params: *self,
+            delta_rad,
+            half_dt_s: h,
+            h_a11_vx: -h * (cf + cr) / m,
+            h_a12_vx: -h * (cf * lf - cr * lr) / m,
+            h_a21_vx: -h * (cf * lf - cr * lr) / iz,
+            h_a22_vx: -h * (cf * lf * lf + cr * lr * lr) / iz,
+            dt_b1: dt_s * cf / m * delta_rad,
+            dt_b2: dt_s * cf * lf / iz * delta_rad,
+        }
+    }
+}
+
+/// [`DynamicParams::step`] for a fixed wheel angle and step length. The continuous matrix is
+/// `A = A_vx / vx + [[0, -vx], [0, 0]]`; the fields hold `h A_vx` (h = dt / 2) and `dt B`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LateralStepper {
+    params: DynamicParams,
+    delta_rad: f32,
+    half_dt_s: f32,
+    h_a11_vx: f32,
+    h_a12_vx: f32,
+    h_a21_vx: f32,
+    h_a22_vx: f32,
+    dt_b1: f32,
+    dt_b2: f32,
+}
+
+impl LateralStepper {
+    /// One trapezoidal step at speed `vx_mps`: `(I - hA) x+ = (I + hA) x + dt B`. Below
+    /// `min_speed_mps` the state is set to the kinematic steady state.
+    #[inline]
+    pub fn step(&self, state: &mut LateralState, vx_mps: f32) {
+        if vx_mps < self.params.min_speed_mps {
+            *state = self.params.steady_state(vx_mps, self.delta_rad);
+            return;
+        }
+        let inv_vx = 1.0 / vx_mps;
+        let p11 = self.h_a11_vx * inv_vx;
+        let p12 = self.h_a12_vx * inv_vx - self.half_dt_s * vx_mps;
+        let p21 = self.h_a21_vx * inv_vx;
+        let p22 = self.h_a22_vx * inv_vx;
         let (x1, x2) = (state.vy_mps, state.yaw_rate_rps);
-        let r1 = x1 + h * (a11 * x1 + a12 * x2) + dt_s * b1;
-        let r2 = x2 + h * (a21 * x1 + a22 * x2) + dt_s * b2;
-        let m11 = 1.0 - h * a11;
-        let m12 = -h * a12;
-        let m21 = -h * a21;
-        let m22 = 1.0 - h * a22;
-        let det = m11 * m22 - m12 * m21;
+        let r1 = x1 + (p11 * x1 + p12 * x2) + self.dt_b1;
+        let r2 = x2 + (p21 * x1 + p22 * x2) + self.dt_b2;
+        let m11 = 1.0 - p11;
+        let m22 = 1.0 - p22;
+        let det = m11 * m22 - p12 * p21;
         // det > 1 for a stable A (trace < 0, det(A) > 0), so this division is safe; the guard
         // is for non-finite inputs only.
         if det.is_finite() && det != 0.0 {
-            state.vy_mps = (m22 * r1 - m12 * r2) / det;
-            state.yaw_rate_rps = (m11 * r2 - m21 * r1) / det;
+            let inv_det = 1.0 / det;
+            state.vy_mps = (m22 * r1 + p12 * r2) * inv_det;
+            state.yaw_rate_rps = (m11 * r2 + p21 * r1) * inv_det;
         }
     }
 }

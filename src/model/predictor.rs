@@ -9,9 +9,13 @@
 //! in MPC), so the prediction starts at the measured speed.
 //!
 //! Cost: no transcendental call per step. The kinematic curvature `tan(delta_eff(v)) / L` is
-//! evaluated once, at the current speed, and held over the horizon: eq 2's understeer term
-//! changes it by under 2 % for a 2 m/s speed change at 5 m/s, and `tan` costs thousands of
-//! instructions on the Cortex-M4F (libm's f32 tan works in software f64).
+//! evaluated once, at the current speed, and held over the horizon (eq 2's understeer term
+//! changes it by under 2 % for a 2 m/s speed change at 5 m/s). With the curvature held the
+//! kinematic path is a circle whatever the speed, so the kinematic roll-out only sums the
+//! distance per step and moves the pose once per output point ([`Pose::advance_arc`]). The
+//! dynamic roll-out steps the lateral model and the pose every 20 ms, with the lateral
+//! model's coefficients for the held steering computed once
+//! ([`super::dynamic::DynamicParams::stepper`]).
 use super::dynamic::{DynamicParams, LateralState};
 use super::hybrid::Mode;
 use super::kinematic::Pose;
@@ -98,23 +102,32 @@ pub fn rollout(
     let every = horizon.output_every.max(1);
     let mut written = 0usize;
     let curvature_per_m = vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps);
+    let lateral_step = dynamics.stepper(start.center_steer_rad, dt);
     let mut slot = out.iter_mut();
+    let mut until_point = every;
+    // Kinematic: distance driven since the last point (the path is the circle of the held
+    // curvature, so only the distance matters; see `Pose::advance_arc`).
+    let mut arc_m = 0.0f32;
     for k in 1..=horizon.steps {
         let v_model = speed_model_step(start.speed_cmd_mps);
         let v = clamp_speed(v_model + start.speed_bias_mps, horizon.max_speed_mps);
         match start.mode {
-            Mode::Kinematic => {
-                pose.advance(v, 0.0, v * curvature_per_m * dt, dt);
-            }
+            Mode::Kinematic => arc_m += v * dt,
             Mode::Dynamic => {
-                dynamics.step(&mut lateral, v, start.center_steer_rad, dt);
+                lateral_step.step(&mut lateral, v);
                 pose.advance(v, lateral.vy_mps, lateral.yaw_rate_rps * dt, dt);
             }
         }
-        if k % every == 0 {
+        until_point -= 1;
+        if until_point == 0 {
+            until_point = every;
             let Some(point) = slot.next() else {
                 break;
             };
+            if start.mode == Mode::Kinematic {
+                pose.advance_arc(arc_m, curvature_per_m);
+                arc_m = 0.0;
+            }
             *point = PredictedPoint {
                 horizon_s: f32::from(k) * dt,
                 x_m: pose.x_m,
@@ -128,12 +141,20 @@ pub fn rollout(
     written
 }
 
+/// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
+/// would link float formatting into the firmware).
 fn clamp_speed(v: f32, max_mps: f32) -> f32 {
-    if v.is_finite() {
-        v.clamp(0.0, max_mps)
-    } else {
-        0.0
+    if !v.is_finite() {
+        return 0.0;
     }
+    let mut x = v;
+    if x < 0.0 {
+        x = 0.0;
+    }
+    if x > max_mps {
+        x = max_mps;
+    }
+    x
 }
 
 #[cfg(test)]

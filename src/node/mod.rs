@@ -789,10 +789,18 @@ impl Node {
     }
 }
 
+/// `v` limited to [lo, hi], `lo` if not finite. Comparisons only: `f32::clamp` asserts
+/// `lo <= hi` with a formatted panic message, which links float formatting (~20 KiB of flash).
 fn clamp_finite(v: f32, lo: f32, hi: f32) -> f32 {
-    if v.is_finite() {
-        v.clamp(lo, hi)
-    } else {
-        lo
+    if !v.is_finite() {
+        return lo;
     }
+    let mut x = v;
+    if x < lo {
+        x = lo;
+    }
+    if x > hi {
+        x = hi;
+    }
+    x
 }
