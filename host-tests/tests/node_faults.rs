@@ -428,7 +428,12 @@ fn pedal_stale_is_flagged_and_nothing_else_changes() {
     let ticks = run(&frames(&drive(10.0, 0.0, 4.0)));
     let h = health(&ticks);
     assert!(h.pedal_stale && !h.steer_stale && !h.speed_stale && !h.gnss_stale);
-    assert!(ticks.last().unwrap().predictions().iter().all(|p| p.dx_m.is_some()));
+    assert!(ticks
+        .last()
+        .unwrap()
+        .predictions()
+        .iter()
+        .all(|p| p.dx_m.is_some()));
     match last_page(&ticks, 4) {
         NodeStatus::Ages { ages_10ms, .. } => assert_eq!(ages_10ms[2], 255, "never received"),
         _ => unreachable!(),

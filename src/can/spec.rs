@@ -63,6 +63,17 @@ pub struct SignalSpec {
     pub not_available_raw: Option<i64>,
 }
 
+/// Raw magnitudes below this (2^22) convert between raw and physical exactly in f32.
+const EXACT_BELOW: u64 = 1 << 22;
+
+/// The adjacent f32 of a finite non-zero `x` in the direction of `toward` (core has no
+/// `next_up` on the embedded target's MSRV path; bit arithmetic is exact).
+fn next_toward(x: f32, toward: f32) -> f32 {
+    let bits = x.to_bits();
+    let up = (toward > x) == (x > 0.0);
+    f32::from_bits(if up { bits + 1 } else { bits - 1 })
+}
+
 impl SignalSpec {
     /// An unsigned integer signal with unit scale covering its full width.
     pub const fn uint(name: &'static str, start_bit: u8, len_bits: u8) -> Self {
@@ -168,34 +179,44 @@ impl SignalSpec {
 
     /// Physical value of a raw value (f32: exact for raw values up to 2^24).
     pub fn to_physical(&self, raw: i64) -> f32 {
-        raw as f32 * self.scale + self.offset
+        let physical = raw as f32 * self.scale + self.offset;
+        if raw.unsigned_abs() >= EXACT_BELOW {
+            return self.exact_physical(raw, physical);
+        }
+        physical
+    }
+
+    /// Above 2^22 (24-bit signals such as positions near their range limits) the nearest f32
+    /// to `raw * scale` can divide back to a neighbouring raw value; then the adjacent f32 that
+    /// [`Self::to_raw`] maps back to `raw` is returned, so that encoding is the exact inverse
+    /// of decoding. Out of line: the node's own values never get here.
+    #[cold]
+    #[inline(never)]
+    fn exact_physical(&self, raw: i64, physical: f32) -> f32 {
+        if self.to_raw(physical) == Some(raw) {
+            return physical;
+        }
+        for candidate in [
+            next_toward(physical, f32::NEG_INFINITY),
+            next_toward(physical, f32::INFINITY),
+        ] {
+            if self.to_raw(candidate) == Some(raw) {
+                return candidate;
+            }
+        }
+        physical
     }
 
     /// Raw value of a physical one, rounded to nearest; `None` if `physical` is not finite or
     /// the rounded value is outside `raw_min..=raw_max` (the caller then sends "not available").
-    ///
-    /// Exact inverse of [`Self::to_physical`]: a value that decoding produced encodes to the
-    /// same raw value. Up to 2^22 f32 division rounds to it anyway; above (24-bit signals such
-    /// as positions near their range limits) `physical / scale` can land one step off, so the
-    /// neighbour that reproduces `physical` exactly is taken.
     pub fn to_raw(&self, physical: f32) -> Option<i64> {
-        let mut raw = libm::roundf((physical - self.offset) / self.scale);
+        let raw = libm::roundf((physical - self.offset) / self.scale);
         // NaN fails both comparisons; limits of float signals are <= 2^24, exact in f32.
-        if !(raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32) {
-            return None;
+        if raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32 {
+            Some(raw as i64)
+        } else {
+            None
         }
-        const EXACT_BELOW: f32 = 4_194_304.0; // 2^22
-        if raw.abs() >= EXACT_BELOW && self.to_physical(raw as i64) != physical {
-            for neighbour in [raw - 1.0, raw + 1.0] {
-                if neighbour >= self.raw_min as f32
-                    && neighbour <= self.raw_max as f32
-                    && self.to_physical(neighbour as i64) == physical
-                {
-                    raw = neighbour;
-                }
-            }
-        }
-        Some(raw as i64)
     }
 }
 

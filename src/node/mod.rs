@@ -177,12 +177,9 @@ impl NodeConfig {
     pub fn with_models(models: &NodeModels) -> Result<Self, ModelError> {
         let velocity = SsBlock::from_tf(&models.velocity, models.ts_s)?;
         let dxdt = MisoBlock::from_tfs(&models.dxdt, models.ts_s)?;
-        let estimator = EstimatorConfig::paper(
-            GNSS_RATE_HZ,
-            GNSS_CUTOFF_HZ,
-            CAT_VEHICLE_ANTENNA_AHEAD_M,
-        )
-        .ok_or(ModelError::NotFinite)?;
+        let estimator =
+            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ, CAT_VEHICLE_ANTENNA_AHEAD_M)
+                .ok_or(ModelError::NotFinite)?;
         Ok(Self {
             vehicle: models.vehicle,
             dynamics: CAT_VEHICLE_DYNAMICS,
