@@ -3,6 +3,7 @@
 pub mod csv2can;
 pub mod evaluate;
 pub mod logcsv;
+pub mod model_file;
 pub mod replay;
 pub mod sim;
 
