@@ -2,6 +2,7 @@
 //! Links the same `catmodel` core for everything the node does.
 pub mod csv2can;
 pub mod evaluate;
+pub mod identify;
 pub mod logcsv;
 pub mod model_file;
 pub mod replay;
