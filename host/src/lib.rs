@@ -2,7 +2,9 @@
 //! Links the same `catmodel` core for everything the node does.
 pub mod csv2can;
 pub mod evaluate;
+pub mod identify;
 pub mod logcsv;
+pub mod model_file;
 pub mod plot;
 pub mod progress;
 pub mod replay;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Result};
 use catmodel::node::NodeConfig;
 use catmodel_host::progress::Progress;
-use catmodel_host::{csv2can, evaluate, logcsv, replay, sim};
+use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -84,6 +84,54 @@ enum Command {
         #[arg(long, value_name = "DIR")]
         plots: Option<PathBuf>,
     },
+    /// Identify the models (eq 5, eq 7, lateral) from driving logs; write a model file.
+    Identify {
+        /// Training logs (CSV schema).
+        #[arg(required = true)]
+        logs: Vec<PathBuf>,
+        /// Validation logs.
+        #[arg(long, num_args = 1..)]
+        validate: Vec<PathBuf>,
+        /// Model file to write (TOML).
+        #[arg(long)]
+        out: PathBuf,
+        /// Write a report (Markdown summary and SVG plots) into this directory.
+        #[arg(long)]
+        report: Option<PathBuf>,
+        /// Vehicle, hybrid thresholds and fallback models from this model file
+        /// (default: models/paper.toml as built in).
+        #[arg(long)]
+        base: Option<PathBuf>,
+    },
+    /// Simulate each model of a model file over one log, beside the kinematic model.
+    Compare {
+        /// Log CSV.
+        log: PathBuf,
+        /// Model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// CSV to write: t,vel,vel_model,vel_kinematic,dx,dx_model,dx_kinematic.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Print the discrete state-space matrices of every model block as JSON.
+    Discretize {
+        /// Model file.
+        model: PathBuf,
+        /// Sample time, s (default: the file's).
+        #[arg(long)]
+        ts: Option<f64>,
+    },
+}
+
+/// The published model file, built into the binary.
+const PAPER_MODEL_TOML: &str = include_str!("../../models/paper.toml");
+
+fn load_base(base: Option<&Path>) -> Result<catmodel_host::model_file::ModelFile> {
+    Ok(match base {
+        Some(p) => model_file::load(p)?,
+        None => model_file::parse(PAPER_MODEL_TOML, Path::new("models/paper.toml"))?,
+    })
 }
 
 fn parse_origin(s: &str) -> Result<(f64, f64), String> {
@@ -220,6 +268,73 @@ fn run(cli: Cli) -> Result<()> {
             for p in written {
                 eprintln!("wrote {}", p.display());
             }
+            Ok(())
+        }
+        Command::Identify {
+            logs,
+            validate,
+            out,
+            report,
+            base,
+        } => {
+            let base = load_base(base.as_deref())?;
+            let opts = identify::IdentifyOptions::default();
+            let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
+                .with_message("reading logs");
+            let read = |paths: &[PathBuf]| -> Result<Vec<identify::preprocess::Experiment>> {
+                paths
+                    .iter()
+                    .map(|p| {
+                        let e = identify::preprocess::load_experiment(
+                            p,
+                            &base.vehicle,
+                            &opts.preprocess,
+                        );
+                        progress.inc(1);
+                        e
+                    })
+                    .collect()
+            };
+            let training = read(&logs)?;
+            let validation = read(&validate)?;
+            progress.finish_and_clear();
+            let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
+            spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+            let id = identify::identify(training, validation, &base, &opts)?;
+            spinner.finish_and_clear();
+            model_file::save(&out, &id.model)
+                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+            print!("{}", identify::summary(&id));
+            eprintln!("wrote {}", out.display());
+            if let Some(dir) = report {
+                let index = identify::report::write_report(&dir, &id)?;
+                eprintln!("wrote {}", index.display());
+            }
+            Ok(())
+        }
+        Command::Compare { log, model, out } => {
+            let file = model_file::load(&model)?;
+            let opts = identify::preprocess::PreprocessOptions::default();
+            let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
+            let sim = identify::validate::simulate_all(&file, &e)?;
+            let scores =
+                identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
+            print!(
+                "{}",
+                identify::validate::format_tables(
+                    &format!("{} with {}", log.display(), model.display()),
+                    &scores
+                )
+            );
+            if let Some(path) = out {
+                replay::write_file(&path, &identify::validate::compare_csv(&e, &sim))?;
+            }
+            Ok(())
+        }
+        Command::Discretize { model, ts } => {
+            let file = model_file::load(&model)?;
+            let d = identify::discretize::discretize_file(&file, ts)?;
+            println!("{}", serde_json::to_string_pretty(&d)?);
             Ok(())
         }
     }

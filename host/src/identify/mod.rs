@@ -1,0 +1,672 @@
+//! `catmodel identify`: driving logs -> validated models -> a model file. The paper's pipeline
+//! (II-C, II-D, II-E), each step a documented function:
+//! 1. [`preprocess`]: uniform 20 ms grid (eq 1), zero-phase FIR lowpass + moving average,
+//!    GNSS to local metres, steering percent to angles (eq 2-4);
+//! 2. [`delay`]: delay and settling time of the speed response per step (Fig 2);
+//! 3. [`correlation`]: ranking of 17 candidate regressors; [`arx`]: least-squares ARX (eq 6)
+//!    with order and delay selection;
+//! 4. [`oe`]: continuous-time transfer functions with input delay by simulation-error
+//!    minimisation (separable least squares + Levenberg-Marquardt from the ARX poles), for
+//!    the internal controller (eq 5), the dx/dt MISO model (eq 7) and the lateral model;
+//! 5. [`validate`]: fit % (pure simulation, MATLAB `compare`) and MSE on training and
+//!    validation data, each beside the kinematic model; written into the model file.
+pub mod arx;
+pub mod correlation;
+pub mod delay;
+pub mod discretize;
+pub mod oe;
+pub mod preprocess;
+pub mod report;
+pub mod simulate;
+pub mod validate;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use catmodel::model::tf::TransferFunction;
+
+use crate::model_file::{self, Block, Fit, Lateral, Model, ModelFile, VehicleSection};
+use arx::Arx;
+use oe::{BlockSpec, Data};
+use preprocess::{Experiment, PreprocessOptions};
+use validate::{Score, Scores, Simulated};
+
+/// How to identify.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IdentifyOptions {
+    /// Preprocessing.
+    pub preprocess: PreprocessOptions,
+    /// Largest input delay searched for the speed model, samples (60 = 1.2 s).
+    pub max_delay_samples: usize,
+    /// Denominator order of the speed model (the paper's eq 5: 2).
+    pub speed_order: usize,
+    /// Levenberg-Marquardt iterations, final fits.
+    pub max_iter: usize,
+}
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        Self {
+            preprocess: PreprocessOptions::default(),
+            max_delay_samples: 60,
+            speed_order: 2,
+            max_iter: 100,
+        }
+    }
+}
+
+/// The speed model's identification details.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpeedIdentification {
+    /// The selected ARX model (eq 6).
+    pub arx: Arx,
+    /// ARX pure-simulation scores, training and validation.
+    pub arx_training: Score,
+    /// ARX on validation data.
+    pub arx_validation: Option<Score>,
+    /// Output-error cost per scanned delay (samples, sum of squared errors).
+    pub delay_scan: Vec<(usize, f64)>,
+    /// The continuous-time model.
+    pub tf: TransferFunction,
+}
+
+/// Everything `identify` measured.
+#[derive(Debug, Clone)]
+pub struct Identification {
+    /// The model file to write.
+    pub model: ModelFile,
+    /// Training experiments (preprocessed).
+    pub training: Vec<Experiment>,
+    /// Validation experiments.
+    pub validation: Vec<Experiment>,
+    /// Simulations of the identified models on training data.
+    pub training_sims: Vec<Simulated>,
+    /// ... on validation data.
+    pub validation_sims: Vec<Simulated>,
+    /// Step responses of the speed (Fig 2), every experiment.
+    pub steps: Vec<delay::StepResponse>,
+    /// Correlation ranking for dx/dt.
+    pub correlation_dx: Vec<correlation::Ranked>,
+    /// Correlation ranking for the speed.
+    pub correlation_vel: Vec<correlation::Ranked>,
+    /// Speed model details.
+    pub speed: SpeedIdentification,
+    /// Scores on training data.
+    pub training_scores: Scores,
+    /// Scores on validation data.
+    pub validation_scores: Option<Scores>,
+    /// Things the user should know (skipped models, weak excitation, transfer caveats).
+    pub notes: Vec<String>,
+    /// Wall time of the identification (without reading files), s.
+    pub seconds: f64,
+}
+
+/// Weight of one experiment in the speed fit: `1 / var(y)` (each experiment's fit % counts
+/// alike, so that a few large, rate-limited steps do not dominate the small ones; measured on
+/// the simulator: validation fit 86.5 % unweighted, 90 % weighted).
+fn experiment_weight(y: &[f64]) -> f64 {
+    let n = y.len().max(1) as f64;
+    let m = y.iter().sum::<f64>() / n;
+    let v = y.iter().map(|a| (a - m) * (a - m)).sum::<f64>() / n;
+    if v > 1e-12 {
+        1.0 / v
+    } else {
+        1.0
+    }
+}
+
+fn span(v: impl Iterator<Item = f64>) -> f64 {
+    let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
+    hi - lo
+}
+
+/// Default initial denominators for a 2nd-order search besides the ARX poles.
+const DEFAULT_DENS_2: [[f64; 2]; 3] = [[2.0, 1.0], [1.0, 0.25], [4.0, 4.0]];
+
+fn initial_dens(arx: Option<&Arx>, order: usize, ts: f64) -> Vec<Vec<f64>> {
+    let mut out = Vec::new();
+    if let Some(d) = arx.and_then(|a| oe::continuous_den_from_discrete(&a.a, ts)) {
+        if d.len() == order {
+            out.push(d);
+        } else if d.len() == 1 && order == 2 {
+            // One ARX pole: add a faster one.
+            out.push(vec![d[0] + 5.0, d[0] * 5.0]);
+        }
+    }
+    match order {
+        1 => out.extend([vec![1.0], vec![5.0]]),
+        2 => out.extend(DEFAULT_DENS_2.iter().map(|d| d.to_vec())),
+        _ => out.extend([vec![3.0, 3.0, 1.0], vec![6.0, 12.0, 8.0]]),
+    }
+    out
+}
+
+/// SISO output-error fit with the delay chosen by scanning `candidates` (quick fits), then a
+/// full fit from every initial denominator at the best delays. Returns the best fit and the
+/// scan (delay, cost).
+pub fn fit_siso_with_delay_scan(
+    data: &[Data],
+    order: usize,
+    proper: bool,
+    candidates: &[usize],
+    inits: &[Vec<f64>],
+    ts: f64,
+    max_iter: usize,
+) -> Result<(oe::OeFit, Vec<(usize, f64)>)> {
+    let quick = |d: usize| -> f64 {
+        let spec = [BlockSpec {
+            order,
+            proper,
+            delay_samples: d,
+        }];
+        inits
+            .iter()
+            .take(1)
+            .filter_map(|init| oe::fit(data, &spec, std::slice::from_ref(init), ts, 8).ok())
+            .map(|f| f.cost)
+            .fold(f64::INFINITY, f64::min)
+    };
+    // Coarse scan every third candidate, then every candidate within 2 of the best two.
+    let mut scan: Vec<(usize, f64)> = candidates
+        .iter()
+        .step_by(3)
+        .map(|&d| (d, quick(d)))
+        .collect();
+    let mut sorted = scan.clone();
+    sorted.sort_by(|a, b| a.1.total_cmp(&b.1));
+    for &(centre, _) in sorted.iter().take(2) {
+        for &d in candidates {
+            if d.abs_diff(centre) <= 2 && !scan.iter().any(|(x, _)| *x == d) {
+                scan.push((d, quick(d)));
+            }
+        }
+    }
+    scan.sort_by_key(|x| x.0);
+    let mut order_by_cost: Vec<(usize, f64)> = scan.clone();
+    order_by_cost.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut best: Option<oe::OeFit> = None;
+    for &(d, _) in order_by_cost.iter().take(2) {
+        let spec = [BlockSpec {
+            order,
+            proper,
+            delay_samples: d,
+        }];
+        for init in inits.iter().take(2) {
+            if let Ok(f) = oe::fit(data, &spec, std::slice::from_ref(init), ts, max_iter) {
+                if best.as_ref().is_none_or(|b| f.cost < b.cost) {
+                    best = Some(f);
+                }
+            }
+        }
+    }
+    let best = best.context("no delay candidate gave a stable model")?;
+    Ok((best, scan))
+}
+
+/// Identifies the speed model (eq 5 form) from `input_vel` -> `vel`.
+pub fn identify_speed(
+    training: &[Experiment],
+    validation: &[Experiment],
+    opts: &IdentifyOptions,
+) -> Result<SpeedIdentification> {
+    let ts = opts.preprocess.ts_s;
+    if span(training.iter().flat_map(|e| e.input_vel.iter().copied())) < 0.1 {
+        bail!("input_vel (commanded speed) is constant over every training log: nothing excites the speed model; use logs with speed steps");
+    }
+    let inputs: Vec<[&[f64]; 1]> = training.iter().map(|e| [&e.input_vel[..]]).collect();
+    let data: Vec<Data> = training
+        .iter()
+        .zip(&inputs)
+        .map(|(e, u)| Data {
+            inputs: u,
+            output: &e.vel,
+            weight: experiment_weight(&e.vel),
+        })
+        .collect();
+    let arx = arx::select_siso(&data, opts.max_delay_samples)?;
+    let arx_sim = |set: &[Experiment]| -> Score {
+        let (mut y, mut yh) = (Vec::new(), Vec::new());
+        for e in set {
+            y.extend_from_slice(&e.vel);
+            yh.extend(arx.simulate(&[&e.input_vel], &e.vel));
+        }
+        validate::score(&y, &yh)
+    };
+    let arx_training = arx_sim(training);
+    let arx_validation = (!validation.is_empty()).then(|| arx_sim(validation));
+    let nk = arx.nk[0];
+    let lo = nk.saturating_sub(20);
+    let hi = (nk + 20).min(opts.max_delay_samples);
+    let candidates: Vec<usize> = (lo..=hi).collect();
+    let inits = initial_dens(Some(&arx), opts.speed_order, ts);
+    let (fit, delay_scan) = fit_siso_with_delay_scan(
+        &data,
+        opts.speed_order,
+        true,
+        &candidates,
+        &inits,
+        ts,
+        opts.max_iter,
+    )?;
+    Ok(SpeedIdentification {
+        arx,
+        arx_training,
+        arx_validation,
+        delay_scan,
+        tf: fit.tfs[0],
+    })
+}
+
+/// Identifies the eq 7 MISO dx/dt model (inputs `[v_m, x, y, phi]`, proper 2nd-order blocks,
+/// no delay), started from the common poles of a MISO ARX model, or `None` with the reason
+/// when an input is not excited.
+pub fn identify_dx_dt(
+    training: &[Experiment],
+    opts: &IdentifyOptions,
+) -> Result<std::result::Result<Vec<TransferFunction>, String>> {
+    let ts = opts.preprocess.ts_s;
+    let names = model_file::DX_DT_INPUTS;
+    let inputs: Vec<[&[f64]; 4]> = training
+        .iter()
+        .map(|e| [&e.vel[..], &e.x[..], &e.y[..], &e.delta_rad[..]])
+        .collect();
+    for (j, name) in names.iter().enumerate() {
+        if span(inputs.iter().flat_map(|u| u[j].iter().copied())) < 1e-3 {
+            return Ok(Err(format!(
+                "input `{name}` is constant over the training logs (drive turns or circles to excite it)"
+            )));
+        }
+    }
+    let data: Vec<Data> = training
+        .iter()
+        .zip(&inputs)
+        .map(|(e, u)| Data {
+            inputs: u,
+            output: &e.dx,
+            weight: 1.0,
+        })
+        .collect();
+    let arx = arx::estimate(&data, 2, &[3; 4], &[0; 4]).ok();
+    let specs = [BlockSpec {
+        order: 2,
+        proper: true,
+        delay_samples: 0,
+    }; 4];
+    let mut starts: Vec<Vec<Vec<f64>>> = Vec::new();
+    if let Some(d) = arx
+        .as_ref()
+        .and_then(|a| oe::continuous_den_from_discrete(&a.a, ts))
+        .filter(|d| d.len() == 2)
+    {
+        starts.push(vec![d; 4]);
+    }
+    // Without usable ARX poles: the published eq 7 poles.
+    if starts.is_empty() {
+        starts.push(
+            catmodel::model::paper::EQ7_DX_DT
+                .iter()
+                .map(|tf| tf.to_monic().denominator()[1..].to_vec())
+                .collect(),
+        );
+    }
+    let mut best: Option<oe::OeFit> = None;
+    for s in &starts {
+        if let Ok(f) = oe::fit(&data, &specs, s, ts, opts.max_iter.min(40)) {
+            if best.as_ref().is_none_or(|b| f.cost < b.cost) {
+                best = Some(f);
+            }
+        }
+    }
+    Ok(best
+        .map(|b| b.tfs)
+        .ok_or_else(|| "no stable fit found".to_string()))
+}
+
+/// Steering gain and understeer term from `r = v tan(g delta / (1 + K v^2)) / L` by
+/// Gauss-Newton on the samples faster than 2 m/s with |delta| > 0.01 rad; then the dynamic
+/// part, a first-order lag with delay, by output error. `Err(reason)` when the data do not
+/// excite it.
+pub fn identify_lateral(
+    training: &[Experiment],
+    vehicle: &VehicleSection,
+    opts: &IdentifyOptions,
+) -> Result<std::result::Result<(f64, f64, TransferFunction), String>> {
+    let mut pts = Vec::new();
+    for e in training {
+        for k in 0..e.len() {
+            if e.vel[k] > 2.0 && e.delta_rad[k].abs() > 0.01 {
+                pts.push((e.vel[k], e.delta_rad[k], e.yaw_rate[k]));
+            }
+        }
+    }
+    if pts.len() < 250 {
+        return Ok(Err(format!(
+            "only {} samples with steering above 0.01 rad at more than 2 m/s (at least 250 needed: drive turns or circles)",
+            pts.len()
+        )));
+    }
+    let l = vehicle.wheelbase_m;
+    let (mut g, mut k) = (1.0, vehicle.understeer_s2_per_m2);
+    let speed_span = span(pts.iter().map(|p| p.0));
+    let estimate_k = speed_span > 2.0;
+    for _ in 0..30 {
+        let (mut jtj, mut jtr) = ([[0.0; 2]; 2], [0.0; 2]);
+        for &(v, d, r) in &pts {
+            let den = 1.0 + k * v * v;
+            let arg = g * d / den;
+            let sec2 = 1.0 / arg.cos().powi(2);
+            let res = r - v * arg.tan() / l;
+            let jg = v / l * sec2 * d / den;
+            let jk = -v / l * sec2 * g * d * v * v / (den * den);
+            let j = [jg, if estimate_k { jk } else { 0.0 }];
+            for a in 0..2 {
+                for b in 0..2 {
+                    jtj[a][b] += j[a] * j[b];
+                }
+                jtr[a] += j[a] * res;
+            }
+        }
+        if !estimate_k {
+            jtj[1][1] = 1.0;
+        }
+        let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
+        if det.abs() < 1e-300 {
+            break;
+        }
+        let dg = (jtr[0] * jtj[1][1] - jtr[1] * jtj[0][1]) / det;
+        let dk = (jtj[0][0] * jtr[1] - jtj[1][0] * jtr[0]) / det;
+        g += dg;
+        k = (k + dk).max(0.0);
+        if dg.abs() < 1e-10 && dk.abs() < 1e-12 {
+            break;
+        }
+    }
+    if !(g.is_finite() && g > 0.1 && g < 10.0) {
+        return Ok(Err(format!("steering gain estimate {g} is implausible")));
+    }
+    // Dynamic part over whole experiments.
+    let r_kin: Vec<Vec<f64>> = training
+        .iter()
+        .map(|e| validate::kinematic_yaw(vehicle, g, k, &e.vel, &e.delta_rad))
+        .collect();
+    let inputs: Vec<[&[f64]; 1]> = r_kin.iter().map(|r| [&r[..]]).collect();
+    let data: Vec<Data> = training
+        .iter()
+        .zip(&inputs)
+        .map(|(e, u)| Data {
+            inputs: u,
+            output: &e.yaw_rate,
+            weight: 1.0,
+        })
+        .collect();
+    let ts = opts.preprocess.ts_s;
+    let (fit, _) = fit_siso_with_delay_scan(
+        &data,
+        1,
+        false,
+        &(0..=10).collect::<Vec<_>>(),
+        &initial_dens(None, 1, ts),
+        ts,
+        opts.max_iter,
+    )?;
+    let mut tf = fit.tfs[0];
+    let den = tf.to_monic();
+    let a = den.denominator()[1];
+    if a > MAX_LATERAL_POLE_PER_S {
+        // No lag measurable at this sample rate: keep the DC gain, lag = 2 samples.
+        let dc = tf.dc_gain().unwrap_or(1.0);
+        tf = TransferFunction::new(
+            &[dc * MAX_LATERAL_POLE_PER_S],
+            &[1.0, MAX_LATERAL_POLE_PER_S],
+            tf.delay_s(),
+        )
+        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    }
+    Ok(Ok((g, k, tf)))
+}
+
+/// Fastest lateral lag pole written, 1/s (time constant 2 samples of 20 ms): a faster fitted
+/// pole means no lag is measurable, and is replaced by this one with the same DC gain.
+pub const MAX_LATERAL_POLE_PER_S: f64 = 25.0;
+
+fn fit_from(
+    source: &str,
+    train: &Score,
+    kin_train: &Score,
+    val: Option<(&Score, &Score)>,
+    note: String,
+) -> Fit {
+    Fit {
+        source: source.to_string(),
+        training_fit_percent: train.fit_percent,
+        training_mse: train.mse,
+        kinematic_training_fit_percent: kin_train.fit_percent,
+        kinematic_training_mse: kin_train.mse,
+        validation_fit_percent: val.and_then(|v| v.0.fit_percent),
+        validation_mse: val.and_then(|v| v.0.mse),
+        kinematic_validation_fit_percent: val.and_then(|v| v.1.fit_percent),
+        kinematic_validation_mse: val.and_then(|v| v.1.mse),
+        note,
+    }
+}
+
+/// Loads and preprocesses logs.
+pub fn load_all(
+    paths: &[PathBuf],
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+) -> Result<Vec<Experiment>> {
+    paths
+        .iter()
+        .map(|p| preprocess::load_experiment(p, vehicle, opts))
+        .collect()
+}
+
+/// The whole pipeline on preprocessed experiments. `base` provides the vehicle, the hybrid
+/// thresholds and the models kept when the data cannot identify them (the published file).
+pub fn identify(
+    training: Vec<Experiment>,
+    validation: Vec<Experiment>,
+    base: &ModelFile,
+    opts: &IdentifyOptions,
+) -> Result<Identification> {
+    let started = Instant::now();
+    if training.is_empty() {
+        bail!("no training logs");
+    }
+    let vehicle = base.vehicle;
+    let mut notes = Vec::new();
+    let steps: Vec<delay::StepResponse> = training
+        .iter()
+        .chain(&validation)
+        .flat_map(|e| delay::step_responses(&e.name, &e.t, &e.input_vel, &e.vel))
+        .collect();
+    let correlation_dx = correlation::rank(&training, &vehicle, |e| &e.dx);
+    let correlation_vel = correlation::rank(&training, &vehicle, |e| &e.vel);
+
+    let speed = identify_speed(&training, &validation, opts)?;
+    let dx_dt_tfs = match identify_dx_dt(&training, opts)? {
+        Ok(tfs) => Some(tfs),
+        Err(why) => {
+            notes.push(format!(
+                "dx/dt (eq 7) not re-identified: {why}; the model file keeps the input model's dx_dt"
+            ));
+            None
+        }
+    };
+    let lateral = match identify_lateral(&training, &vehicle, opts)? {
+        Ok(l) => Some(l),
+        Err(why) => {
+            notes.push(format!("lateral model not identified: {why}"));
+            None
+        }
+    };
+
+    let mut model = base.clone();
+    model.name = "identified".into();
+    let names: Vec<&str> = training.iter().map(|e| e.name.as_str()).collect();
+    model.description = format!(
+        "Identified by catmodel identify from {} log(s): {}",
+        training.len(),
+        names.join(", ")
+    );
+    model.speed = Model {
+        equation: "eq 5 form (2nd order, input delay), simulation-error fit".into(),
+        output: "vel".into(),
+        output_unit: "m/s".into(),
+        blocks: vec![Block {
+            input: "input_vel".into(),
+            input_unit: "m/s".into(),
+            tf: speed.tf,
+        }],
+        fit: Fit::default(),
+    };
+    if let Some(tfs) = &dx_dt_tfs {
+        model.dx_dt = Model {
+            equation: "eq 7 form (MISO, proper 2nd-order blocks), simulation-error fit".into(),
+            output: "dx_dt".into(),
+            output_unit: "m/s".into(),
+            blocks: tfs
+                .iter()
+                .zip(model_file::DX_DT_INPUTS)
+                .zip(["m/s", "m", "m", "rad"])
+                .map(|((tf, i), u)| Block {
+                    input: i.into(),
+                    input_unit: u.into(),
+                    tf: *tf,
+                })
+                .collect(),
+            fit: Fit::default(),
+        };
+    }
+    model.lateral = lateral.map(|(g, k, tf)| Lateral {
+        steer_gain: g,
+        understeer_s2_per_m2: k,
+        model: Model {
+            equation: "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order".into(),
+            output: "yaw_rate".into(),
+            output_unit: "rad/s".into(),
+            blocks: vec![Block {
+                input: model_file::LATERAL_INPUTS[0].into(),
+                input_unit: "rad/s".into(),
+                tf,
+            }],
+            fit: Fit::default(),
+        },
+    });
+
+    let training_sims: Vec<Simulated> = training
+        .iter()
+        .map(|e| validate::simulate_all(&model, e))
+        .collect::<Result<_>>()?;
+    let validation_sims: Vec<Simulated> = validation
+        .iter()
+        .map(|e| validate::simulate_all(&model, e))
+        .collect::<Result<_>>()?;
+    let training_scores = validate::scores(&training, &training_sims);
+    let validation_scores =
+        (!validation.is_empty()).then(|| validate::scores(&validation, &validation_sims));
+    let vs = validation_scores.as_ref();
+    let source = "catmodel identify";
+    let note = "fit % over the concatenated logs, each simulated from its inputs alone";
+    model.speed.fit = fit_from(
+        source,
+        &training_scores.vel_model,
+        &training_scores.vel_kinematic,
+        vs.map(|v| (&v.vel_model, &v.vel_kinematic)),
+        note.into(),
+    );
+    if dx_dt_tfs.is_some() {
+        model.dx_dt.fit = fit_from(
+            source,
+            &training_scores.dx_model,
+            &training_scores.dx_kinematic,
+            vs.map(|v| (&v.dx_model, &v.dx_kinematic)),
+            "x, y are metres from each log's first GNSS fix: the model depends on where the car drives".into(),
+        );
+    }
+    if let (Some(l), Some(tr)) = (model.lateral.as_mut(), training_scores.yaw_model.as_ref()) {
+        let val = vs.and_then(|v| v.yaw_model.as_ref().map(|y| (y, &v.yaw_kinematic)));
+        l.model.fit = fit_from(
+            source,
+            tr,
+            &training_scores.yaw_kinematic,
+            val,
+            "yaw rate from the GNSS course; kinematic = nominal steering".into(),
+        );
+    }
+    if dx_dt_tfs.is_some() {
+        notes.push("dx/dt (eq 7) takes absolute positions x, y as inputs: it describes the places it was trained on, not the car; compare its validation fit with the training fit before trusting it elsewhere".into());
+    }
+    Ok(Identification {
+        model,
+        training,
+        validation,
+        training_sims,
+        validation_sims,
+        steps,
+        correlation_dx,
+        correlation_vel,
+        speed,
+        training_scores,
+        validation_scores,
+        notes,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Plain-text summary for the terminal: delay/settling means, the speed model, the tables.
+pub fn summary(id: &Identification) -> String {
+    let mut o = String::new();
+    let delay = delay::mean_of(id.steps.iter().map(|s| s.delay_s));
+    let settle = delay::mean_of(id.steps.iter().map(|s| s.settling_s));
+    o.push_str(&format!(
+        "speed steps: {} ; mean delay {} s ; mean settling {} s\n",
+        id.steps.len(),
+        delay.map_or("-".into(), |d| format!("{d:.3}")),
+        settle.map_or("-".into(), |d| format!("{d:.2}"))
+    ));
+    let a = &id.speed.arx;
+    o.push_str(&format!(
+        "ARX (eq 6): na {} nb {} nk {} ; pure-simulation fit training {} % validation {} %\n",
+        a.a.len() - 1,
+        a.b[0].len(),
+        a.nk[0],
+        fmt_opt(id.speed.arx_training.fit_percent),
+        fmt_opt(id.speed.arx_validation.and_then(|s| s.fit_percent)),
+    ));
+    let tf = &id.speed.tf;
+    o.push_str(&format!(
+        "speed model: e^(-{} s) {:?} / {:?}\n",
+        tf.delay_s(),
+        tf.numerator(),
+        tf.denominator()
+    ));
+    if let Some(l) = &id.model.lateral {
+        o.push_str(&format!(
+            "lateral: steer_gain {:.4}, understeer {:.5} s^2/m^2, G(s) = {:?} / {:?}\n",
+            l.steer_gain,
+            l.understeer_s2_per_m2,
+            l.model.blocks[0].tf.numerator(),
+            l.model.blocks[0].tf.denominator()
+        ));
+    }
+    o.push('\n');
+    o.push_str(&validate::format_tables("training", &id.training_scores));
+    if let Some(v) = &id.validation_scores {
+        o.push('\n');
+        o.push_str(&validate::format_tables("validation", v));
+    }
+    for n in &id.notes {
+        o.push_str(&format!("\nnote: {n}"));
+    }
+    o.push_str(&format!("\nidentified in {:.2} s\n", id.seconds));
+    o
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("-".into(), |x| format!("{x:.2}"))
+}

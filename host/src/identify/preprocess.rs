@@ -1,0 +1,331 @@
+//! Step 1 of the paper's pipeline (II-C): every signal of a log onto the uniform 20 ms grid
+//! (eq 1 with a fixed period), the 20th-order FIR lowpass and the moving-average smoothing
+//! applied zero-phase (offline), GNSS to local metres, steering percent to the centre-tyre
+//! angle (eq 2-4), and the derived signals the models need (dx/dt, heading, yaw rate).
+//!
+//! Filtering is the same linear, zero-phase operation on every signal, so an input/output pair
+//! of an LTI system stays an input/output pair of the same system after it (up to the edges).
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use catmodel::geodesy::{geodetic_to_enu, Geodetic};
+use catmodel::signal::{filtfilt, fir, resample, smooth};
+
+use crate::logcsv::{self, LogRow};
+use crate::model_file::VehicleSection;
+
+/// How logs are preprocessed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreprocessOptions {
+    /// Grid period, s (the car's 20 ms).
+    pub ts_s: f64,
+    /// FIR taps (20th order = 21 taps, paper II-C); 0 = no FIR.
+    pub fir_taps: usize,
+    /// FIR cutoff, Hz.
+    pub cutoff_hz: f64,
+    /// MATLAB `smooth` span (paper: 10, which MATLAB applies as 9); 0 or 1 = none.
+    pub smooth_span: usize,
+    /// Half-width of the central difference for dx/dt and yaw rate, samples (12 = +-0.24 s):
+    /// differentiating GNSS positions needs a baseline wider than one sample.
+    pub diff_half_width: usize,
+    /// Shortest accepted log after resampling, s.
+    pub min_duration_s: f64,
+}
+
+impl Default for PreprocessOptions {
+    fn default() -> Self {
+        Self {
+            ts_s: catmodel::model::paper::PAPER_TS_S,
+            fir_taps: 21,
+            cutoff_hz: 2.0,
+            smooth_span: 10,
+            diff_half_width: 12,
+            min_duration_s: 10.0,
+        }
+    }
+}
+
+/// One experiment on the uniform grid, filtered. Every vector has the length of `t`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Experiment {
+    /// Name (the file stem).
+    pub name: String,
+    /// Time, s, uniform with period `ts_s`.
+    pub t: Vec<f64>,
+    /// Grid period, s.
+    pub ts_s: f64,
+    /// Measured speed, m/s.
+    pub vel: Vec<f64>,
+    /// Commanded speed, m/s.
+    pub input_vel: Vec<f64>,
+    /// Steering, %, positive = right.
+    pub steer_pct: Vec<f64>,
+    /// Centre-tyre angle, rad (`max_steer_deg / 100 * steer_pct`): the paper's `phi`.
+    pub delta_rad: Vec<f64>,
+    /// Accelerator pedal, % (zeros when the log has none).
+    pub accel_pct: Vec<f64>,
+    /// Brake pedal, % (zeros when the log has none).
+    pub brake_pct: Vec<f64>,
+    /// East of the first fix, m.
+    pub x: Vec<f64>,
+    /// North of the first fix, m.
+    pub y: Vec<f64>,
+    /// dx/dt (east velocity), m/s, central difference of the filtered `x`.
+    pub dx: Vec<f64>,
+    /// dy/dt (north velocity), m/s.
+    pub dy: Vec<f64>,
+    /// Course over ground, clockwise from north, rad, unwrapped (held where slower than 1 m/s).
+    pub heading: Vec<f64>,
+    /// Yaw rate from the course, rad/s, positive clockwise (0 where slower than 1 m/s);
+    /// central difference over +-4 `diff_half_width` (the course is noisier than positions).
+    pub yaw_rate: Vec<f64>,
+    /// Origin of `x`, `y`: the first GNSS fix (lat, lon), degrees.
+    pub origin_deg: (f64, f64),
+}
+
+impl Experiment {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// True if there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+}
+
+/// Samples of one column: (t, value) where the cell was present.
+fn column(rows: &[LogRow], f: impl Fn(&LogRow) -> Option<f64>) -> (Vec<f64>, Vec<f64>) {
+    rows.iter().filter_map(|r| f(r).map(|v| (r.t, v))).unzip()
+}
+
+/// Linear interpolation of a column onto the grid.
+fn onto_grid(name: &str, t: &[f64], v: &[f64], grid: &[f64]) -> Result<Vec<f64>> {
+    let mut out = vec![0.0; grid.len()];
+    resample::interp_linear(t, v, grid, &mut out)
+        .map_err(|e| anyhow!("column `{name}`: resampling failed: {e:?}"))?;
+    Ok(out)
+}
+
+/// Zero-phase FIR lowpass (filtfilt) then MATLAB `smooth`, as the paper (II-C).
+pub fn filter_signal(x: &[f64], taps: &[f64], span: usize) -> Result<Vec<f64>> {
+    let mut y = x.to_vec();
+    if !taps.is_empty() {
+        let mut scratch = vec![0.0; filtfilt::filtfilt_scratch_len(taps.len(), x.len())];
+        filtfilt::filtfilt(taps, x, &mut y, &mut scratch)
+            .map_err(|e| anyhow!("zero-phase FIR: {e:?}"))?;
+    }
+    if span > 1 {
+        let mut z = vec![0.0; y.len()];
+        smooth::smooth(&y, span, &mut z).map_err(|e| anyhow!("smooth: {e:?}"))?;
+        y = z;
+    }
+    Ok(y)
+}
+
+/// Central difference with half-width `h` samples (one-sided, shrinking, at the ends).
+pub fn derivative(x: &[f64], ts_s: f64, h: usize) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|k| {
+            let lo = k.saturating_sub(h);
+            let hi = (k + h).min(n.saturating_sub(1));
+            if hi == lo {
+                0.0
+            } else {
+                (x[hi] - x[lo]) / ((hi - lo) as f64 * ts_s)
+            }
+        })
+        .collect()
+}
+
+/// The FIR taps of the options (empty when the FIR is off).
+pub fn taps(opts: &PreprocessOptions) -> Result<Vec<f64>> {
+    if opts.fir_taps == 0 {
+        return Ok(Vec::new());
+    }
+    let mut taps = vec![0.0; opts.fir_taps];
+    fir::design_lowpass(&mut taps, opts.cutoff_hz, 1.0 / opts.ts_s)
+        .map_err(|e| anyhow!("FIR design (cutoff {} Hz): {e:?}", opts.cutoff_hz))?;
+    Ok(taps)
+}
+
+/// Reads and preprocesses one log file. Errors name the file and what is missing.
+pub fn load_experiment(
+    path: &Path,
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+) -> Result<Experiment> {
+    let rows = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .map(|n| n.trim_end_matches(".csv").to_string())
+        .unwrap_or_else(|| "log".into());
+    preprocess_rows(&name, &rows, vehicle, opts).with_context(|| format!("{}", path.display()))
+}
+
+/// Preprocesses log rows (see the module doc).
+pub fn preprocess_rows(
+    name: &str,
+    rows: &[LogRow],
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+) -> Result<Experiment> {
+    let (tv, vel) = column(rows, |r| r.vel);
+    let (tc, cmd) = column(rows, |r| r.input_vel);
+    let (ts_, steer) = column(rows, |r| r.steer);
+    let (tg, latlon): (Vec<f64>, Vec<(f64, f64)>) = rows
+        .iter()
+        .filter_map(|r| match (r.lat, r.lon) {
+            (Some(a), Some(b)) => Some((r.t, (a, b))),
+            _ => None,
+        })
+        .unzip();
+    let mut missing = Vec::new();
+    for (n, len) in [
+        ("vel", tv.len()),
+        ("input_vel", tc.len()),
+        ("steer", ts_.len()),
+        ("lat/lon", tg.len()),
+    ] {
+        if len < 2 {
+            missing.push(n);
+        }
+    }
+    if !missing.is_empty() {
+        bail!(
+            "log has no usable data in column(s) {} (need at least 2 samples each of t, vel, input_vel, steer, lat, lon)",
+            missing.join(", ")
+        );
+    }
+    // The grid spans the time where every needed sensor has reported.
+    let t0 = [tv[0], tc[0], ts_[0], tg[0]]
+        .into_iter()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let t1 = [
+        *tv.last().unwrap_or(&0.0),
+        *tc.last().unwrap_or(&0.0),
+        *ts_.last().unwrap_or(&0.0),
+        *tg.last().unwrap_or(&0.0),
+    ]
+    .into_iter()
+    .fold(f64::INFINITY, f64::min);
+    if !(t1 - t0 >= opts.min_duration_s) {
+        bail!(
+            "too short: the sensors overlap for {:.2} s, at least {} s needed",
+            (t1 - t0).max(0.0),
+            opts.min_duration_s
+        );
+    }
+    let n = resample::fixed_period_len(t0, t1, opts.ts_s)
+        .map_err(|e| anyhow!("grid {t0}..{t1}: {e:?}"))?;
+    let mut grid = vec![0.0; n];
+    resample::fixed_period_grid(t0, opts.ts_s, &mut grid).map_err(|e| anyhow!("grid: {e:?}"))?;
+    // Rounding can push the last grid point a hair past t1.
+    while grid.last().is_some_and(|g| *g > t1) {
+        grid.pop();
+    }
+
+    let origin = latlon[0];
+    let o = Geodetic {
+        lat_deg: origin.0,
+        lon_deg: origin.1,
+        height_m: 0.0,
+    };
+    let (xe, yn): (Vec<f64>, Vec<f64>) = latlon
+        .iter()
+        .map(|(a, b)| {
+            let e = geodetic_to_enu(*a, *b, 0.0, &o);
+            (e.east_m, e.north_m)
+        })
+        .unzip();
+
+    let taps = taps(opts)?;
+    let f = |name: &str, t: &[f64], v: &[f64]| -> Result<Vec<f64>> {
+        let g = onto_grid(name, t, v, &grid)?;
+        filter_signal(&g, &taps, opts.smooth_span).with_context(|| format!("column `{name}`"))
+    };
+    let vel = f("vel", &tv, &vel)?;
+    let input_vel = f("input_vel", &tc, &cmd)?;
+    let steer_pct = f("steer", &ts_, &steer)?;
+    let x = f("lat/lon", &tg, &xe)?;
+    let y = f("lat/lon", &tg, &yn)?;
+    let optional = |name: &str, get: fn(&LogRow) -> Option<f64>| -> Result<Vec<f64>> {
+        let (mut t, mut v) = column(rows, get);
+        if t.len() < 2 {
+            return Ok(vec![0.0; grid.len()]);
+        }
+        // An optional sensor may start late or stop early: hold its end values.
+        if let (Some(&g0), Some(&t0), Some(&v0)) = (grid.first(), t.first(), v.first()) {
+            if t0 > g0 {
+                t.insert(0, g0);
+                v.insert(0, v0);
+            }
+        }
+        if let (Some(&g1), Some(&t1), Some(&v1)) = (grid.last(), t.last(), v.last()) {
+            if t1 < g1 {
+                t.push(g1);
+                v.push(v1);
+            }
+        }
+        f(name, &t, &v)
+    };
+    let accel_pct = optional("accel", |r| r.accel)?;
+    let brake_pct = optional("brake", |r| r.brake)?;
+    let delta_rad = steer_pct
+        .iter()
+        .map(|p| vehicle.steer_pct_to_rad(*p))
+        .collect();
+    let dx = derivative(&x, opts.ts_s, opts.diff_half_width);
+    let dy = derivative(&y, opts.ts_s, opts.diff_half_width);
+    let heading = course(&dx, &dy, 1.0);
+    let mut yaw_rate = derivative(&heading, opts.ts_s, 4 * opts.diff_half_width);
+    for (r, (a, b)) in yaw_rate.iter_mut().zip(dx.iter().zip(&dy)) {
+        if a.hypot(*b) < 1.0 {
+            *r = 0.0;
+        }
+    }
+    Ok(Experiment {
+        name: name.to_string(),
+        t: grid,
+        ts_s: opts.ts_s,
+        vel,
+        input_vel,
+        steer_pct,
+        delta_rad,
+        accel_pct,
+        brake_pct,
+        x,
+        y,
+        dx,
+        dy,
+        heading,
+        yaw_rate,
+        origin_deg: origin,
+    })
+}
+
+/// Course over ground from velocity components, clockwise from north, unwrapped; held at the
+/// last value (or the first valid one) where the speed is below `min_speed_mps`.
+pub fn course(dx: &[f64], dy: &[f64], min_speed_mps: f64) -> Vec<f64> {
+    let first = dx
+        .iter()
+        .zip(dy)
+        .find(|(a, b)| a.hypot(**b) >= min_speed_mps)
+        .map(|(a, b)| a.atan2(*b))
+        .unwrap_or(0.0);
+    let mut out = Vec::with_capacity(dx.len());
+    let mut prev = first;
+    for (a, b) in dx.iter().zip(dy) {
+        if a.hypot(*b) >= min_speed_mps {
+            let raw = a.atan2(*b);
+            let mut d = raw - prev;
+            d -= (d / std::f64::consts::TAU).round() * std::f64::consts::TAU;
+            prev += d;
+        }
+        out.push(prev);
+    }
+    out
+}
