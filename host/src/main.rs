@@ -3,7 +3,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Result};
-use catmodel::node::NodeConfig;
 use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
@@ -61,6 +60,9 @@ enum Command {
         /// Also write the frames the node sends, candump, stamped with the tick time.
         #[arg(long)]
         tx_out: Option<PathBuf>,
+        /// Model file (default: the published models, models/paper.toml, as in the firmware).
+        #[arg(long)]
+        model: Option<PathBuf>,
     },
     /// Score predictions against ground truth, beside a kinematic raw-GNSS baseline.
     Evaluate {
@@ -210,12 +212,12 @@ fn run(cli: Cli) -> Result<()> {
             origin,
             out,
             tx_out,
+            model,
         } => {
             let reading = Progress::spinner(&format!("reading {}", log.display()));
             let frames = replay::read_candump(&log)?;
             reading.finish();
-            let mut config = NodeConfig::paper()
-                .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"))?;
+            let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
             let progress = Progress::bar(replay::tick_count(&frames), "replay");
             let mut done = 0;
