@@ -22,10 +22,25 @@ fn json_matrix(v: &serde_json::Value) -> Vec<f64> {
 
 fn check(block: &DiscreteBlock, case: &serde_json::Value) {
     let what = format!("{} at ts {}", block.name, case["ts"]);
-    for (key, mine) in [("A", &block.a), ("B", &block.b), ("C", &block.c), ("D", &block.d)] {
-        assert_allclose(&flat(mine), &json_matrix(&case[key]), 1e-9, 1e-12, &format!("{what} {key}"));
+    for (key, mine) in [
+        ("A", &block.a),
+        ("B", &block.b),
+        ("C", &block.c),
+        ("D", &block.d),
+    ] {
+        assert_allclose(
+            &flat(mine),
+            &json_matrix(&case[key]),
+            1e-9,
+            1e-12,
+            &format!("{what} {key}"),
+        );
     }
-    assert_eq!(block.delay_samples as u64, case["delay_samples"].as_u64().unwrap(), "{what}");
+    assert_eq!(
+        block.delay_samples as u64,
+        case["delay_samples"].as_u64().unwrap(),
+        "{what}"
+    );
     let n = block.a.len();
     assert!(block.a.iter().all(|r| r.len() == n) && block.b.len() == n && block.c[0].len() == n);
 }
@@ -76,9 +91,18 @@ fn other_orders_match_python_control() {
             format!("[{}]", v.join(", "))
         };
         let edited = text
-            .replace("num = [0.03679, -0.1981, 0.7647]", &format!("num = {}", list("num")))
-            .replace("den = [1.0, 1.629, 0.7522]", &format!("den = {}", list("den")))
-            .replace("delay_s = 0.42", &format!("delay_s = {:?}", case["delay_s"].as_f64().unwrap()));
+            .replace(
+                "num = [0.03679, -0.1981, 0.7647]",
+                &format!("num = {}", list("num")),
+            )
+            .replace(
+                "den = [1.0, 1.629, 0.7522]",
+                &format!("den = {}", list("den")),
+            )
+            .replace(
+                "delay_s = 0.42",
+                &format!("delay_s = {:?}", case["delay_s"].as_f64().unwrap()),
+            );
         let file = parse(&edited, Path::new("edited.toml")).unwrap();
         let ts = case["ts"].as_f64().unwrap();
         let d = discretize_file(&file, Some(ts)).unwrap();
@@ -92,5 +116,8 @@ fn other_orders_match_python_control() {
 fn fractional_delay_is_a_clear_error() {
     let file = model_file::load(&model_file::paper_path()).unwrap();
     let e = discretize_file(&file, Some(0.04)).unwrap_err().to_string();
-    assert!(e.contains("speed.input_vel") && e.contains("not a whole number of samples"), "{e}");
+    assert!(
+        e.contains("speed.input_vel") && e.contains("not a whole number of samples"),
+        "{e}"
+    );
 }

@@ -369,7 +369,7 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
     check_positive(path, "vehicle.wheelbase_m", v.wheelbase_m)?;
     check_positive(path, "vehicle.track_m", v.track_m)?;
     check_positive(path, "vehicle.max_steer_deg", v.max_steer_deg)?;
-    if !(v.max_steer_deg < 90.0) {
+    if v.max_steer_deg >= 90.0 {
         return Err(err(
             path,
             format!(

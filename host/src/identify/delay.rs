@@ -66,7 +66,7 @@ pub fn step_responses(name: &str, t: &[f64], u: &[f64], y: &[f64]) -> Vec<StepRe
             let band = (0.05 * delta.abs()).max(0.1);
             let last_out = (ks..=end_b).rev().find(|&k| (y[k] - final_v).abs() > band);
             match last_out {
-                Some(k) if k + 1 <= end_b - tail / 2 => Some(t[k + 1] - t[ks]),
+                Some(k) if k < end_b - tail / 2 => Some(t[k + 1] - t[ks]),
                 Some(_) => None,
                 None => Some(0.0),
             }

@@ -212,7 +212,7 @@ pub fn preprocess_rows(
     ]
     .into_iter()
     .fold(f64::INFINITY, f64::min);
-    if !(t1 - t0 >= opts.min_duration_s) {
+    if (t1 - t0).is_nan() || t1 - t0 < opts.min_duration_s {
         bail!(
             "too short: the sensors overlap for {:.2} s, at least {} s needed",
             (t1 - t0).max(0.0),

@@ -33,12 +33,14 @@ pub fn states(dss: &DiscreteStateSpace, u: &[f64]) -> Vec<[f64; MAX_ORDER]> {
     for uk in delayed(u, dss.delay_samples) {
         out.push(x);
         let mut next = [0.0; MAX_ORDER];
-        for i in 0..n {
-            let mut acc = dss.bd[i] * uk;
-            for j in 0..n {
-                acc += dss.ad[i][j] * x[j];
-            }
-            next[i] = acc;
+        for ((slot, row), b) in next.iter_mut().zip(&dss.ad).zip(&dss.bd).take(n) {
+            *slot = b * uk
+                + row
+                    .iter()
+                    .zip(&x)
+                    .take(n)
+                    .map(|(a, xj)| a * xj)
+                    .sum::<f64>();
         }
         x = next;
     }
@@ -53,11 +55,14 @@ pub fn simulate(tf: &TransferFunction, ts_s: f64, u: &[f64]) -> Result<Vec<f64>>
         .iter()
         .zip(delayed(u, dss.delay_samples))
         .map(|(x, uk)| {
-            let mut y = dss.dd * uk;
-            for i in 0..dss.n {
-                y += dss.cd[i] * x[i];
-            }
-            y
+            dss.dd * uk
+                + dss
+                    .cd
+                    .iter()
+                    .zip(x)
+                    .take(dss.n)
+                    .map(|(c, xi)| c * xi)
+                    .sum::<f64>()
         })
         .collect())
 }

@@ -129,7 +129,8 @@ pub fn lateral_yaw(l: &Lateral, v: &VehicleSection, e: &Experiment) -> Result<Ve
 
 /// Scores of the simulated series over several experiments, concatenated.
 pub fn scores(experiments: &[Experiment], sims: &[Simulated]) -> Scores {
-    let cat = |f: &dyn Fn(&Experiment, &Simulated) -> (Vec<f64>, Vec<f64>)| {
+    type Pick<'a> = &'a dyn Fn(&Experiment, &Simulated) -> (Vec<f64>, Vec<f64>);
+    let cat = |f: Pick| {
         let mut y = Vec::new();
         let mut yh = Vec::new();
         for (e, s) in experiments.iter().zip(sims) {
