@@ -313,11 +313,8 @@ pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {
             blocks.len()
         ),
     };
-    let dxdt: [catmodel::model::tf::TransferFunction; 4] = file
-        .dx_dt
-        .tfs()
-        .try_into()
-        .map_err(|v: Vec<_>| {
+    let dxdt: [catmodel::model::tf::TransferFunction; 4] =
+        file.dx_dt.tfs().try_into().map_err(|v: Vec<_>| {
             anyhow::anyhow!(
                 "{}: the node runs the dx/dt model with 4 inputs [v_m, x, y, phi]; [dx_dt] has {}",
                 path.display(),

@@ -34,9 +34,10 @@ use estimator::{EstimatorConfig, EstimatorState, Xy};
 pub const MAX_TX_FRAMES: usize = 16;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
-/// Longest velocity-model input delay a model file may have: 32 samples = 0.64 s (eq 5 has
-/// 21); the predictor copies this buffer every tick, so it is kept small.
-pub const VELOCITY_DELAY_CAP: usize = 32;
+/// Longest velocity-model input delay a model file may have: 64 samples = 1.28 s (eq 5 has
+/// 21; models identified on the simulator's delayed, lagging speed loop reach ~48); the
+/// predictor copies this buffer every tick, so it is not larger.
+pub const VELOCITY_DELAY_CAP: usize = 64;
 /// Status pages, one per tick, cycling.
 const STATUS_PAGES: u32 = 5;
 
