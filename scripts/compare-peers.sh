@@ -60,8 +60,8 @@ for i in $(seq "$runs"); do
   "$py" scripts/peers/replay_scipy.py "$log" --origin "$origin" --out "$out/pred_scipy.csv" \
     --rollout "$rollout" --timing-json "$out/peer_timing.json" 2>/dev/null
   t2=$(now)
-  echo "$t1 - $t0" | bc -l >>"$out/catmodel.times"
-  echo "$t2 - $t1" | bc -l >>"$out/peer.times"
+  awk -v a="$t1" -v b="$t0" 'BEGIN { print a - b }' >>"$out/catmodel.times"
+  awk -v a="$t2" -v b="$t1" 'BEGIN { print a - b }' >>"$out/peer.times"
   "$py" -c 'import json,sys; t=json.load(open(sys.argv[1])); print(t["tick_loop_s"]); print(t["total_in_process_s"], file=sys.stderr)' \
     "$out/peer_timing.json" >>"$out/peer.loop_times" 2>>"$out/peer.inproc_times"
   echo "compare-peers: run $i/$runs: catmodel $(tail -1 "$out/catmodel.times") s, scipy $(tail -1 "$out/peer.times") s" >&2
@@ -76,7 +76,7 @@ agreement=$("$py" scripts/peers/compare_predictions.py "$out/pred_catmodel.csv" 
 rms_1s=$(echo "$agreement" | awk '/^horizon 1.0/ {print $(NF-4)}')
 
 fmt() { printf '%.3f' "$1"; }
-ratio() { printf '%.0f' "$(echo "$1 / $2" | bc -l)"; }
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.0f", a / b }'; }
 cores=$(nproc)
 cpu=$(awk -F': ' '/model name/ {print $2; exit}' /proc/cpuinfo 2>/dev/null || echo unknown)
 
