@@ -207,3 +207,14 @@ fn circle_is_tracked_at_the_rear_axle_with_the_true_heading() {
         "({east}, {north}) vs ({te}, {tn}): {pos_err} m"
     );
 }
+
+#[test]
+fn the_default_build_bakes_the_published_models() {
+    // build.rs bakes models/paper.toml unless CATMODEL_MODEL names another file.
+    if std::env::var_os("CATMODEL_MODEL").is_some() {
+        return;
+    }
+    let baked = catmodel::node::baked::baked_models().unwrap();
+    assert_eq!(baked, catmodel::node::NodeModels::paper());
+    assert_eq!(catmodel::node::baked::BAKED_MODEL_PATH, "models/paper.toml");
+}

@@ -361,9 +361,10 @@ pub async fn wait_tx_drained(counters: &LinkCounters) {
     }
 }
 
-/// The node every platform runs: the published models (eq 5, eq 7) on the CAT Vehicle. The
-/// configuration is validated on the host by the test suite; an error here can only come from a
-/// corrupted build, and the platforms stop rather than run a wrong model.
+/// The node every platform runs: the models baked in at build time (`models/paper.toml`, the
+/// published eq 5 and eq 7 on the CAT Vehicle, unless `CATMODEL_MODEL` names another file).
+/// The default is validated on the host by the test suite; an error here can only come from a
+/// model file the node cannot run, and the platforms stop rather than run a wrong model.
 pub fn make_node() -> Result<Node, crate::model::ModelError> {
-    crate::node::NodeConfig::paper().map(Node::new)
+    crate::node::NodeConfig::baked().map(Node::new)
 }

@@ -11,6 +11,15 @@
 //! Never panics on bus data, never allocates, never reads a clock; every output value is
 //! checked finite before it is encoded (non-finite values go out as "not available" and are
 //! counted, health bit `nonfinite_guard`).
+pub mod baked {
+    //! The model file baked in at build time (build.rs: `models/paper.toml`, or
+    //! `$CATMODEL_MODEL`): what the firmware runs.
+    use super::NodeModels;
+    use crate::model::hybrid::HybridConfig;
+    use crate::model::tf::{ModelError, TransferFunction};
+    use crate::vehicle::VehicleParams;
+    include!(concat!(env!("OUT_DIR"), "/baked_model.rs"));
+}
 pub mod estimator;
 
 use crate::can::codec::{
@@ -165,6 +174,11 @@ impl NodeModels {
 }
 
 impl NodeConfig {
+    /// The models baked in at build time (see [`baked`]): the firmware's configuration.
+    pub fn baked() -> Result<Self, ModelError> {
+        Self::with_models(&baked::baked_models()?)
+    }
+
     /// The published models (eq 5, eq 7) on the CAT Vehicle, the paper's GNSS lowpass (20th
     /// order FIR, cutoff 2 Hz at the receiver's 100 Hz, then a 10-sample moving average).
     pub fn paper() -> Result<Self, ModelError> {
