@@ -101,8 +101,8 @@ fn sim_experiment(name: &str, seed: u64) -> Experiment {
     .unwrap()
 }
 
-/// Trained on the four straight-line experiments of the simulator, the speed model reaches
-/// >= 87 % fit (pure simulation) on the 5-minute validation drive; the paper-sized set
+/// Trained on the four straight-line experiments of the simulator, the speed model reaches at
+/// least 87 % fit (pure simulation) on the 5-minute validation drive; the paper-sized set
 /// (11 one-minute experiments + validation) is identified in under 5 s.
 #[test]
 fn simulator_bars() {

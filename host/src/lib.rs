@@ -236,6 +236,56 @@ pub fn evaluate_files(
     Ok(EvaluationData::read(predictions, truth, inputs, origin_deg)?.evaluate())
 }
 
+/// The node configuration for a model file (`None`: the published models, exactly as the
+/// firmware's default). The file's vehicle, hybrid thresholds, speed model (one block) and
+/// dx/dt model (four blocks, inputs `[v_m, x, y, phi]`) replace the published ones; a lateral
+/// section's estimated steering gain scales the steering angle at 100 %. Everything else
+/// (GNSS lowpass, timeouts, gates) is the node's own.
+pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {
+    use catmodel::node::{NodeConfig, NodeModels};
+    let Some(path) = model else {
+        return NodeConfig::paper()
+            .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"));
+    };
+    let file = model_file::load(path)?;
+    let velocity = match file.speed.blocks.as_slice() {
+        [b] => b.tf,
+        blocks => bail!(
+            "{}: the node runs a single-input speed model; [speed] has {} blocks",
+            path.display(),
+            blocks.len()
+        ),
+    };
+    let dxdt: [catmodel::model::tf::TransferFunction; 4] =
+        file.dx_dt.tfs().try_into().map_err(|v: Vec<_>| {
+            anyhow::anyhow!(
+                "{}: the node runs the dx/dt model with 4 inputs [v_m, x, y, phi]; [dx_dt] has {}",
+                path.display(),
+                v.len()
+            )
+        })?;
+    let mut vehicle = file.vehicle.params();
+    if let Some(lateral) = &file.lateral {
+        vehicle.max_steer_rad =
+            (file.vehicle.max_steer_deg.to_radians() * lateral.steer_gain) as f32;
+        vehicle.understeer_s2_per_m2 = lateral.understeer_s2_per_m2 as f32;
+    }
+    NodeConfig::with_models(&NodeModels {
+        vehicle,
+        hybrid: file.hybrid.config(),
+        velocity,
+        dxdt,
+        ts_s: file.sample_time_s,
+    })
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "{}: the node cannot run these models: {}",
+            path.display(),
+            model_file::describe_model_error(&e)
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -291,54 +341,4 @@ mod tests {
         let err = format!("{:#}", read_predictions(&no_col).unwrap_err());
         assert!(err.contains(":1: missing column `horizon_s`"), "{err}");
     }
-}
-
-/// The node configuration for a model file (`None`: the published models, exactly as the
-/// firmware's default). The file's vehicle, hybrid thresholds, speed model (one block) and
-/// dx/dt model (four blocks, inputs `[v_m, x, y, phi]`) replace the published ones; a lateral
-/// section's estimated steering gain scales the steering angle at 100 %. Everything else
-/// (GNSS lowpass, timeouts, gates) is the node's own.
-pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {
-    use catmodel::node::{NodeConfig, NodeModels};
-    let Some(path) = model else {
-        return NodeConfig::paper()
-            .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"));
-    };
-    let file = model_file::load(path)?;
-    let velocity = match file.speed.blocks.as_slice() {
-        [b] => b.tf,
-        blocks => bail!(
-            "{}: the node runs a single-input speed model; [speed] has {} blocks",
-            path.display(),
-            blocks.len()
-        ),
-    };
-    let dxdt: [catmodel::model::tf::TransferFunction; 4] =
-        file.dx_dt.tfs().try_into().map_err(|v: Vec<_>| {
-            anyhow::anyhow!(
-                "{}: the node runs the dx/dt model with 4 inputs [v_m, x, y, phi]; [dx_dt] has {}",
-                path.display(),
-                v.len()
-            )
-        })?;
-    let mut vehicle = file.vehicle.params();
-    if let Some(lateral) = &file.lateral {
-        vehicle.max_steer_rad =
-            (file.vehicle.max_steer_deg.to_radians() * lateral.steer_gain) as f32;
-        vehicle.understeer_s2_per_m2 = lateral.understeer_s2_per_m2 as f32;
-    }
-    NodeConfig::with_models(&NodeModels {
-        vehicle,
-        hybrid: file.hybrid.config(),
-        velocity,
-        dxdt,
-        ts_s: file.sample_time_s,
-    })
-    .map_err(|e| {
-        anyhow::anyhow!(
-            "{}: the node cannot run these models: {}",
-            path.display(),
-            model_file::describe_model_error(&e)
-        )
-    })
 }
