@@ -195,7 +195,7 @@ impl DiscreteStateSpace {
                     v1.total_cmp(&v2)
                 })
                 .unwrap_or(col);
-            m.swap(col, pivot_row);
+            swap_rows(&mut m, col, pivot_row);
             let pivot = m.get(col).and_then(|r| r.get(col)).copied().unwrap_or(0.0);
             if pivot.abs() <= 1e-14 * scale.max(f64::MIN_POSITIVE) {
                 return Err(ModelError::NoEquilibrium);
@@ -220,6 +220,17 @@ impl DiscreteStateSpace {
             Ok(x)
         } else {
             Err(ModelError::NoEquilibrium)
+        }
+    }
+}
+
+/// Swaps rows `a` and `b` of `m`; out-of-range indices leave it unchanged (`<[T]>::swap` would
+/// panic: the core has no panic path, `cargo xtask no-panic`).
+fn swap_rows<T>(m: &mut [T], a: usize, b: usize) {
+    let (lo, hi) = (a.min(b), a.max(b));
+    if let Some((head, tail)) = m.split_at_mut_checked(hi) {
+        if let (Some(x), Some(y)) = (head.get_mut(lo), tail.first_mut()) {
+            core::mem::swap(x, y);
         }
     }
 }

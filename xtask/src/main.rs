@@ -8,12 +8,15 @@
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid.
 //! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
+//! - `cargo xtask no-panic`: links the core with an undefined panic handler ([`nopanic`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
+
+mod nopanic;
 
 #[cfg(test)]
 #[path = "../../src/app/schedule.rs"]
@@ -37,8 +40,9 @@ fn main() -> ExitCode {
         Some("qemu") => qemu(args.get(1..).unwrap_or(&[])),
         Some("qemu-overrun-test") => overrun_test(),
         Some("size") => size(),
+        Some("no-panic") => nopanic::no_panic(),
         _ => Err(anyhow!(
-            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size\n\
+            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size | no-panic\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
