@@ -39,6 +39,7 @@
 pub mod app;
 pub mod can;
 pub mod geodesy;
+pub mod health;
 pub mod math;
 pub mod metrics;
 pub mod model;

@@ -205,6 +205,11 @@ pub trait TickPlatform {
     fn counts_to_us(&self, counts: u32) -> Option<u32>;
     /// Called after every completed tick (board: feeds the watchdog; QEMU: records the counts).
     fn tick_completed(&mut self, report: &TickReport);
+    /// Deepest stack use so far, bytes, where the stack is painted; called once per tick after
+    /// [`Self::tick_completed`] (outside the measured tick), reported in the next tick's status.
+    fn stack_high_water_bytes(&mut self) -> Option<u32> {
+        None
+    }
 }
 
 /// Fixed parameters of the tick loop.
@@ -276,6 +281,7 @@ pub async fn tick_loop<P: TickPlatform>(
     let mut held = None;
     let mut out = TxBatch::default();
     let mut last_step_us = None;
+    let mut stack_high_water_bytes = None;
     let mut ticks = 0u64;
     loop {
         Timer::at(Instant::from_micros(grid.deadline_us())).await;
@@ -291,7 +297,7 @@ pub async fn tick_loop<P: TickPlatform>(
                 overruns: grid.overruns(),
                 rx_queue_drops: counters.rx_queue_drops.load(Ordering::Relaxed),
                 last_step_us,
-                stack_high_water_bytes: None,
+                stack_high_water_bytes,
                 watchdog_reset: config.watchdog_reset,
             },
         };
@@ -328,6 +334,7 @@ pub async fn tick_loop<P: TickPlatform>(
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
         });
+        stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());
         if config.last_tick_us.is_some_and(|last| tick_us >= last) {
             return TickSummary {

@@ -15,19 +15,24 @@ static RX_QUEUE: RxQueue = RxQueue::new();
 static TX_QUEUE: TxQueue = TxQueue::new();
 static COUNTERS: LinkCounters = LinkCounters::new();
 
+// The replay harness's buffers (input line reader, tx log, tick records: about 6 KiB) live in
+// statics and the tasks get references: passed by value they would be copied through main's
+// stack frame and again through the executor's spawn, tripling the stack the harness needs
+// (measured: 19 KiB high-water mark before, see docs/firmware.md "Stack").
+
 #[embassy_executor::task]
-async fn receive_task(mut bus: replay::ReplayBus) {
-    app::receive_loop(&mut bus, &RX_QUEUE, &COUNTERS).await;
+async fn receive_task(bus: &'static mut replay::ReplayBus) {
+    app::receive_loop(bus, &RX_QUEUE, &COUNTERS).await;
 }
 
 #[embassy_executor::task]
-async fn transmit_task(mut bus: replay::TxLog) {
-    app::transmit_loop(&mut bus, &TX_QUEUE, &COUNTERS).await
+async fn transmit_task(bus: &'static mut replay::TxLog) {
+    app::transmit_loop(bus, &TX_QUEUE, &COUNTERS).await
 }
 
 #[embassy_executor::task]
 async fn tick_task(
-    mut recorder: run::TickRecorder,
+    recorder: &'static mut run::TickRecorder,
     config: app::TickConfig,
     input: replay::InputSummary,
 ) {
@@ -36,12 +41,7 @@ async fn tick_task(
         semihosting::process::exit(3)
     };
     let summary = app::tick_loop(
-        &mut node,
-        &RX_QUEUE,
-        &TX_QUEUE,
-        &COUNTERS,
-        &mut recorder,
-        &config,
+        &mut node, &RX_QUEUE, &TX_QUEUE, &COUNTERS, recorder, &config,
     )
     .await;
     app::wait_tx_drained(&COUNTERS).await;
@@ -62,22 +62,58 @@ async fn tick_task(
     semihosting::process::exit(0)
 }
 
+/// What the tasks get: references to the harness statics, and two small values.
+struct Harness {
+    bus: &'static mut replay::ReplayBus,
+    tx_log: &'static mut replay::TxLog,
+    recorder: &'static mut run::TickRecorder,
+    config: app::TickConfig,
+    input: replay::InputSummary,
+}
+
+/// Reads the command line, opens the files, builds the harness statics. Not inlined: its
+/// frame (options, paths, the values on their way into the statics) is gone before the
+/// executor runs, instead of staying under every tick's stack.
+#[inline(never)]
+fn set_up() -> Harness {
+    let options = run::options().unwrap_or_else(|message| run::fail(message, 2));
+    let (reader, input) = run::open_input(&options);
+    let config = run::tick_config(&input);
+    let tx_log =
+        cortex_m::singleton!(: replay::TxLog = replay::TxLog::new(run::create(&options.tx_log)))
+            .unwrap_or_else(|| run::fail("harness statics taken twice", 3));
+    let recorder = cortex_m::singleton!(: run::TickRecorder =
+        run::TickRecorder::new(run::create(&options.ticks), options.stalls.clone()))
+    .unwrap_or_else(|| run::fail("harness statics taken twice", 3));
+    let bus = cortex_m::singleton!(: replay::ReplayBus =
+        replay::ReplayBus::new(reader, config.input_offset_us))
+    .unwrap_or_else(|| run::fail("harness statics taken twice", 3));
+    Harness {
+        bus,
+        tx_log,
+        recorder,
+        config,
+        input,
+    }
+}
+
 #[entry]
 fn main() -> ! {
     let Some(core) = cortex_m::Peripherals::take() else {
         run::fail("core peripherals taken twice", 3)
     };
     icount::init();
-    let options = run::options().unwrap_or_else(|message| run::fail(message, 2));
-    let (reader, input) = run::open_input(&options);
-    let config = run::tick_config(&input);
-    let tx_log = replay::TxLog::new(run::create(&options.tx_log));
-    let recorder = run::TickRecorder::new(run::create(&options.ticks), options.stalls.clone());
-    let bus = replay::ReplayBus::new(reader, config.input_offset_us);
-
+    let harness = set_up();
     // Last: set-up time must not count as elapsed virtual time.
     time_driver::start(core.SYST);
     executor::run(|spawner| {
+        let Harness {
+            bus,
+            tx_log,
+            recorder,
+            config,
+            input,
+        } = harness;
         spawner.spawn(receive_task(bus).unwrap_or_else(|_| run::fail("spawn", 3)));
         spawner.spawn(transmit_task(tx_log).unwrap_or_else(|_| run::fail("spawn", 3)));
         spawner.spawn(tick_task(recorder, config, input).unwrap_or_else(|_| run::fail("spawn", 3)));

@@ -24,11 +24,19 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use crate::app::{BusReceiver, BusTransmitter, RxError, TickPlatform, TickReport};
 use crate::can::spec::{PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
 use crate::can::{CanFrame, CanId, TimedFrame};
+use crate::health::{WatchdogFeeder, WatchdogTiming};
+use crate::platform::stack::StackMeter;
 
 /// Core clock, Hz (also the DWT cycle counter's rate).
 pub const SYSCLK_HZ: u32 = 168_000_000;
-/// Watchdog timeout: five ticks. A hung or starved tick loop resets the node.
+/// Watchdog timeout: five ticks at the nominal 32 kHz LSI; really 68..188 ms over the LSI's
+/// tolerance ([`WATCHDOG`]). A hung or starved tick loop resets the node; a single tick may
+/// stall up to 48 ms without a reset (counted as overruns).
 pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
+/// [`WATCHDOG_TIMEOUT_US`] with its LSI tolerance (tested on the host: `crate::health`).
+pub const WATCHDOG: WatchdogTiming = WatchdogTiming {
+    nominal_timeout_us: WATCHDOG_TIMEOUT_US,
+};
 
 /// Standard IDs the node listens to (steering, speed, pedal reports; catmodel.dbc).
 pub const INPUT_STANDARD_IDS: [u16; 3] = [0x100, 0x101, 0x102];
@@ -169,9 +177,12 @@ impl BusTransmitter for BoardTx {
     }
 }
 
-/// The board's [`TickPlatform`]: DWT cycles, watchdog fed after each completed tick.
+/// The board's [`TickPlatform`]: DWT cycles, watchdog fed after each completed tick (and
+/// nowhere else: [`WatchdogFeeder`]), stack high-water mark.
 pub struct BoardTick {
     watchdog: IndependentWatchdog<'static, IWDG>,
+    feeder: WatchdogFeeder,
+    stack: StackMeter,
     logged_overruns: u32,
 }
 
@@ -187,6 +198,8 @@ impl BoardTick {
         watchdog.unleash();
         Self {
             watchdog,
+            feeder: WatchdogFeeder::new(),
+            stack: StackMeter::new(),
             logged_overruns: 0,
         }
     }
@@ -202,7 +215,9 @@ impl TickPlatform for BoardTick {
     }
 
     fn tick_completed(&mut self, report: &TickReport) {
-        self.watchdog.pet();
+        if self.feeder.tick_completed(report.slot) {
+            self.watchdog.pet();
+        }
         if report.platform.overruns > self.logged_overruns {
             self.logged_overruns = report.platform.overruns;
             defmt::warn!(
@@ -211,5 +226,9 @@ impl TickPlatform for BoardTick {
                 report.slot
             );
         }
+    }
+
+    fn stack_high_water_bytes(&mut self) -> Option<u32> {
+        self.stack.step()
     }
 }

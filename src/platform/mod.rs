@@ -7,3 +7,4 @@ compile_error!("features `board` and `qemu` are exclusive: each brings its own t
 pub mod board;
 #[cfg(feature = "qemu")]
 pub mod qemu;
+pub mod stack;

@@ -9,6 +9,7 @@
 //!   frame stays on the 20 ms grid.
 //! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
 //! - `cargo xtask no-panic`: links the core with an undefined panic handler ([`nopanic`]).
+//! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -17,6 +18,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 
 mod nopanic;
+mod txcompare;
 
 #[cfg(test)]
 #[path = "../../src/app/schedule.rs"]
@@ -32,6 +34,9 @@ const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = 0.02 * 168e6;
 const TICK_US: u64 = 20_000;
 const FLASH_BUDGET: u64 = 96 * 1024;
 const RAM_BUDGET: u64 = 24 * 1024;
+/// Share of the stack region the measured high-water mark may use (the rest is headroom for
+/// the board's interrupt handlers and code paths the drive does not take).
+const STACK_USE_LIMIT: f64 = 0.75;
 const INSTALL_QEMU: &str = "apt-get update && apt-get install -y qemu-system-arm";
 
 fn main() -> ExitCode {
@@ -41,8 +46,9 @@ fn main() -> ExitCode {
         Some("qemu-overrun-test") => overrun_test(),
         Some("size") => size(),
         Some("no-panic") => nopanic::no_panic(),
+        Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
-            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size | no-panic\n\
+            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size | no-panic | tx-compare FW.log HOST.log\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
@@ -113,6 +119,10 @@ struct Trailer {
     tx_bus_errors: u32,
     input_frames: u32,
     input_unsupported: u32,
+    /// Deepest stack use of the run, bytes (painted-stack scan at the end).
+    stack_high_water: u32,
+    /// The stack region's size, bytes.
+    stack_size: u32,
 }
 
 fn u32_at(bytes: &[u8], at: usize) -> u32 {
@@ -129,9 +139,15 @@ fn u64_at(bytes: &[u8], at: usize) -> u64 {
 
 fn parse_ticks(bytes: &[u8]) -> Result<(Vec<TickRecord>, Trailer)> {
     const RECORD: usize = 40;
-    const TRAILER: usize = 48;
-    if bytes.len() < 12 || &bytes[..4] != b"CMQT" || u32_at(bytes, 4) != 1 {
+    const TRAILER: usize = 56;
+    if bytes.len() < 12 || &bytes[..4] != b"CMQT" {
         bail!("tick records: bad header");
+    }
+    if u32_at(bytes, 4) != 2 {
+        bail!(
+            "tick records: format version {} (expected 2)",
+            u32_at(bytes, 4)
+        );
     }
     if u32_at(bytes, 8) as usize != RECORD {
         bail!("tick records: unexpected record size");
@@ -170,6 +186,8 @@ fn parse_ticks(bytes: &[u8]) -> Result<(Vec<TickRecord>, Trailer)> {
         tx_bus_errors: u32_at(t, 32),
         input_frames: u32_at(t, 36),
         input_unsupported: u32_at(t, 40),
+        stack_high_water: u32_at(t, 44),
+        stack_size: u32_at(t, 48),
     };
     Ok((records, trailer))
 }
@@ -311,6 +329,8 @@ fn qemu(args: &[String]) -> Result<()> {
         "rx_bus_errors": run.trailer.rx_bus_errors,
         "rx_unsupported": run.trailer.rx_unsupported,
         "tx_frames": run.records.iter().map(|r| u64::from(r.tx_frames)).sum::<u64>(),
+        "stack_high_water_bytes": run.trailer.stack_high_water,
+        "stack_size_bytes": run.trailer.stack_size,
         "qemu_wall_seconds": (run.wall_s * 1000.0).round() / 1000.0,
     });
     std::fs::write(
@@ -354,8 +374,21 @@ fn qemu(args: &[String]) -> Result<()> {
         "overruns {}, skipped slots {}, rx queue drops {}",
         run.trailer.overruns, run.trailer.skipped_slots, run.trailer.rx_queue_drops
     );
+    let stack_share =
+        f64::from(run.trailer.stack_high_water) / f64::from(run.trailer.stack_size.max(1));
+    let _ = writeln!(
+        table,
+        "stack high-water mark {} B of the {} B stack ({:.0} %; limit {:.0} %)",
+        run.trailer.stack_high_water,
+        run.trailer.stack_size,
+        stack_share * 100.0,
+        STACK_USE_LIMIT * 100.0
+    );
     let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
     print!("{table}");
+    if run.trailer.stack_high_water == 0 || stack_share > STACK_USE_LIMIT {
+        bail!("stack high-water mark out of bounds (0: the stack was not painted; or too little headroom)");
+    }
 
     if max > BUDGET_INSTRUCTIONS {
         // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
@@ -533,10 +566,39 @@ fn elf_flash_ram(bytes: &[u8]) -> Result<(u64, u64)> {
     Ok((flash, ram))
 }
 
+/// The value of symbol `name` in an ELF32 little-endian image (from `.symtab`).
+fn elf_symbol(bytes: &[u8], name: &str) -> Option<u32> {
+    let u16_at = |at: usize| Some(u16::from_le_bytes(bytes.get(at..at + 2)?.try_into().ok()?));
+    let u32_le = |at: usize| Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?));
+    let shoff = u32_le(0x20)? as usize;
+    let shentsize = usize::from(u16_at(0x2E)?);
+    let shnum = usize::from(u16_at(0x30)?);
+    const SHT_SYMTAB: u32 = 2;
+    let section = |i: usize| shoff + i * shentsize;
+    let symtab = (0..shnum).find(|&i| u32_le(section(i) + 4) == Some(SHT_SYMTAB))?;
+    let (sym_off, sym_size) = (
+        u32_le(section(symtab) + 16)? as usize,
+        u32_le(section(symtab) + 20)? as usize,
+    );
+    let strtab = u32_le(section(symtab) + 24)? as usize;
+    let str_off = u32_le(section(strtab) + 16)? as usize;
+    (0..sym_size / 16).find_map(|k| {
+        let at = sym_off + k * 16;
+        let name_at = str_off + u32_le(at)? as usize;
+        let rest = bytes.get(name_at..)?;
+        let end = rest.iter().position(|&b| b == 0)?;
+        (&rest[..end] == name.as_bytes()).then(|| u32_le(at + 4))?
+    })
+}
+
 fn size() -> Result<()> {
     let elf = cargo_build("board", "catmodel-board")?;
     let bytes = std::fs::read(&elf)?;
     let (flash, ram) = elf_flash_ram(&bytes)?;
+    let stack_top = elf_symbol(&bytes, "_stack_start").context("no _stack_start symbol")?;
+    let stack_bottom = elf_symbol(&bytes, "_stack_end").context("no _stack_end symbol")?;
+    let data_start = elf_symbol(&bytes, "__sdata").context("no __sdata symbol")?;
+    let stack = u64::from(stack_top.saturating_sub(stack_bottom));
     println!("catmodel-board (release, {TARGET}):");
     println!(
         "  flash {:>7} B = {:6.1} KiB of {} KiB budget",
@@ -545,12 +607,25 @@ fn size() -> Result<()> {
         FLASH_BUDGET / 1024
     );
     println!(
-        "  RAM   {:>7} B = {:6.1} KiB of {} KiB budget (static: .data + .bss + .uninit; stack not included)",
-        ram,
+        "  RAM   {:>7} B = {:6.1} KiB of {} KiB budget: static (.data + .bss + .uninit) {:.1} KiB + the stack region {:.1} KiB",
+        ram + stack,
+        (ram + stack) as f64 / 1024.0,
+        RAM_BUDGET / 1024,
         ram as f64 / 1024.0,
-        RAM_BUDGET / 1024
+        stack as f64 / 1024.0
     );
-    if flash > FLASH_BUDGET || ram > RAM_BUDGET {
+    // The overflow guard (memory.x, src/platform/stack.rs): the stack starts at the bottom of
+    // SRAM and every static lies above its top, so an overflow faults below 0x2000_0000.
+    if stack_bottom != 0x2000_0000 || stack_top > data_start {
+        bail!(
+            "stack layout: the stack must sit at the bottom of SRAM below every static \
+             (stack 0x{stack_bottom:08x}..0x{stack_top:08x}, .data at 0x{data_start:08x})"
+        );
+    }
+    println!(
+        "  stack 0x{stack_bottom:08x}..0x{stack_top:08x} below .data/.bss (0x{data_start:08x}..): an overflow faults instead of overwriting statics"
+    );
+    if flash > FLASH_BUDGET || ram + stack > RAM_BUDGET {
         if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
             eprintln!("xtask: WARNING: the board firmware is over budget (not fatal: CATMODEL_BUDGET_WARN_ONLY)");
         } else {
@@ -575,7 +650,7 @@ mod tests {
     #[test]
     fn tick_records_round_trip_and_truncation_is_an_error() {
         let mut bytes = b"CMQT".to_vec();
-        bytes.extend(1u32.to_le_bytes());
+        bytes.extend(2u32.to_le_bytes());
         bytes.extend(40u32.to_le_bytes());
         for field in [
             &1_000u64.to_le_bytes()[..],
@@ -592,7 +667,7 @@ mod tests {
         }
         bytes.extend(b"END!");
         bytes.extend(1u64.to_le_bytes());
-        for v in 10u32..19 {
+        for v in 10u32..21 {
             bytes.extend(v.to_le_bytes());
         }
         let (records, trailer) = parse_ticks(&bytes).unwrap();
@@ -614,8 +689,12 @@ mod tests {
             (trailer.ticks, trailer.overruns, trailer.input_unsupported),
             (1, 10, 18)
         );
+        assert_eq!((trailer.stack_high_water, trailer.stack_size), (19, 20));
         assert!(parse_ticks(&bytes[..bytes.len() - 1]).is_err());
-        assert!(parse_ticks(&bytes[..bytes.len() - 48]).is_err());
+        assert!(parse_ticks(&bytes[..bytes.len() - 56]).is_err());
+        let mut old = bytes.clone();
+        old[4] = 1;
+        assert!(parse_ticks(&old).is_err());
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //!
 //! `TICKS.bin` (little-endian), read by xtask: a 12-byte header `CMQT`, version u32 = 1, record
 //! size u32 = 40; one 40-byte record per tick ([`TickRecorder`]); then a trailer `END!` followed
-//! by ten u32/u64 totals ([`Trailer`]). A file without the trailer is an incomplete run.
+//! by ten u32/u64 totals ([`Trailer`]) and the stack's high-water mark and size (u32 bytes
+//! each). A file without the trailer is an incomplete run.
 //!
 //! Exit codes: 0 done; 1 I/O error on a host file; 2 bad input or command line; 3 internal.
 use core::ffi::CStr;
@@ -19,6 +20,7 @@ use super::icount;
 use super::replay::{self, InputSummary, LineReader, ReplayError, Source};
 use crate::app::{LinkCounters, TickConfig, TickPlatform, TickReport, TickSummary};
 use crate::node::first_tick_us;
+use crate::platform::stack::StackMeter;
 use crate::SAMPLE_PERIOD_US;
 
 /// The drive replayed when no `--in` is given (data/bundled.can.log, copied by build.rs).
@@ -174,6 +176,8 @@ pub fn create(path: &HostPath) -> semihosting::fs::File {
 }
 
 const RECORD_LEN: usize = 40;
+/// Version of the `TICKS.bin` layout (2: the trailer ends with the stack figures).
+const TICKS_FORMAT_VERSION: u32 = 2;
 
 /// `fields` one after the other; bytes past `N` are dropped, missing ones are zero.
 fn pack<const N: usize>(fields: &[&[u8]]) -> [u8; N] {
@@ -193,6 +197,7 @@ const RECORDS_BUFFERED: usize = 64;
 /// the test stalls.
 pub struct TickRecorder {
     file: semihosting::fs::File,
+    stack: StackMeter,
     buf: heapless::Vec<u8, { RECORD_LEN * RECORDS_BUFFERED }>,
     stalls: heapless::Vec<Stall, MAX_STALLS>,
     failed: bool,
@@ -203,13 +208,14 @@ impl TickRecorder {
     pub fn new(file: semihosting::fs::File, stalls: heapless::Vec<Stall, MAX_STALLS>) -> Self {
         let mut recorder = Self {
             file,
+            stack: StackMeter::new(),
             buf: heapless::Vec::new(),
             stalls,
             failed: false,
         };
         let header: [u8; 12] = pack(&[
             b"CMQT",
-            &1u32.to_le_bytes(),
+            &TICKS_FORMAT_VERSION.to_le_bytes(),
             &(RECORD_LEN as u32).to_le_bytes(),
         ]);
         recorder.push(&header);
@@ -232,9 +238,12 @@ impl TickRecorder {
         }
     }
 
-    /// Writes the trailer and flushes; returns whether every write succeeded.
-    pub fn finish(mut self, trailer: &Trailer) -> bool {
-        let bytes: [u8; 4 + 8 + 9 * 4] = pack(&[
+    /// Writes the trailer (with the stack's exact high-water mark now) and flushes; returns
+    /// whether every write succeeded.
+    pub fn finish(&mut self, trailer: &Trailer) -> bool {
+        let stack_high_water = self.stack.finish().unwrap_or(0);
+        let stack_size = self.stack.size_bytes();
+        let bytes: [u8; 4 + 8 + 11 * 4] = pack(&[
             b"END!",
             &trailer.ticks.to_le_bytes(),
             &trailer.overruns.to_le_bytes(),
@@ -246,6 +255,8 @@ impl TickRecorder {
             &trailer.tx_bus_errors.to_le_bytes(),
             &trailer.input_frames.to_le_bytes(),
             &trailer.input_unsupported.to_le_bytes(),
+            &stack_high_water.to_le_bytes(),
+            &stack_size.to_le_bytes(),
         ]);
         self.push(&bytes);
         self.flush();
@@ -279,6 +290,10 @@ impl TickPlatform for TickRecorder {
         if let Some(stall) = self.stalls.iter().find(|s| s.slot == report.slot) {
             embassy_time::block_for(Duration::from_millis(u64::from(stall.ms)));
         }
+    }
+
+    fn stack_high_water_bytes(&mut self) -> Option<u32> {
+        self.stack.step()
     }
 }
 
