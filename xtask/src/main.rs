@@ -15,6 +15,8 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+mod bench;
+
 #[cfg(test)]
 #[path = "../../src/app/schedule.rs"]
 #[allow(dead_code)]
@@ -37,6 +39,7 @@ fn main() -> ExitCode {
         Some("qemu") => qemu(args.get(1..).unwrap_or(&[])),
         Some("qemu-overrun-test") => overrun_test(),
         Some("size") => size(),
+        Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size\n\
              (`cargo qemu` is `cargo xtask qemu`)"
