@@ -10,6 +10,8 @@
 //! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
 //! - `cargo xtask no-panic`: links the core with an undefined panic handler ([`nopanic`]).
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
+//! - `cargo xtask bench-target [--check]`: instructions per call of each firmware component in
+//!   QEMU ([`bench`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -17,6 +19,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+mod bench;
 mod nopanic;
 mod txcompare;
 
@@ -47,8 +50,10 @@ fn main() -> ExitCode {
         Some("size") => size(),
         Some("no-panic") => nopanic::no_panic(),
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
+        Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size | no-panic | tx-compare FW.log HOST.log\n\
+             | bench-target [--check]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
@@ -198,6 +203,21 @@ struct QemuRun {
     wall_s: f64,
 }
 
+/// QEMU's netduinoplus2 (STM32F405) running `elf` with semihosting, and with instruction-exact
+/// virtual time: under `-icount shift=0,align=off,sleep=off` TIM2 counts one per executed
+/// instruction and runs are bit-for-bit repeatable (docs/firmware.md).
+fn qemu_command(elf: &Path) -> Command {
+    let mut command = Command::new("qemu-system-arm");
+    command
+        .current_dir(root())
+        .args(["-M", "netduinoplus2", "-nographic"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .args(["-icount", "shift=0,align=off,sleep=off"])
+        .arg("-kernel")
+        .arg(elf);
+    command
+}
+
 /// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
 fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) -> Result<QemuRun> {
     if Command::new("qemu-system-arm")
@@ -227,13 +247,7 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
     append.extend(extra.iter().map(|s| s.to_string()));
 
     let started = Instant::now();
-    let output = Command::new("qemu-system-arm")
-        .current_dir(root())
-        .args(["-M", "netduinoplus2", "-nographic"])
-        .args(["-semihosting-config", "enable=on,target=native"])
-        .args(["-icount", "shift=0,align=off,sleep=off"])
-        .arg("-kernel")
-        .arg(elf)
+    let output = qemu_command(elf)
         .args(["-append", &append.join(" ")])
         .output()
         .context("running qemu-system-arm")?;

@@ -1,0 +1,148 @@
+//! `cargo xtask bench-target [--check]`: instructions per call of each node component on QEMU.
+//!
+//! Builds `catmodel-qemu-bench` (release: opt-level 3, fat LTO, thumbv7em-none-eabihf), runs it
+//! on `-M netduinoplus2` under `-icount shift=0` (TIM2 counts one per instruction, as in
+//! `cargo qemu`), and prints a markdown table (docs/firmware.md, "Per component"). The firmware
+//! prints one tab-separated line per component: `bench KEY NAME CALLS MIN MEDIAN MAX WHAT`.
+//! `--check` fails if a component's max exceeds its budget in [`BUDGETS`].
+use std::fmt::Write as _;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+use super::{cargo_build, qemu_command, root, INSTALL_QEMU};
+
+/// Max instructions per call allowed by `--check`: about 1.5x what was measured (README,
+/// "Instructions per component on the target"), so a regression, not noise, trips it (QEMU
+/// counts are exact and repeatable).
+const BUDGETS: &[(&str, u32)] = &[
+    ("gnss_fir", 160),
+    ("moving_average", 80),
+    ("velocity_eq5", 80),
+    ("dxdt_eq7", 200),
+    ("kinematic_eq8", 130),
+    ("kinematic_eq2_eq8", 240),
+    ("kinematic_textbook", 250),
+    ("dynamic_step", 150),
+    ("rollout_kinematic", 12_500),
+    ("rollout_dynamic", 30_000),
+    ("decode_steering", 280),
+    ("decode_speed", 330),
+    ("decode_pedal", 340),
+    ("decode_gnss_position", 160),
+    ("decode_gnss_cog_sog", 270),
+    ("encode_state_position", 510),
+    ("encode_state_motion", 680),
+    ("encode_state_model", 680),
+    ("encode_prediction", 830),
+    ("encode_node_status", 1_050),
+    ("encode_tick_set", 11_700),
+    ("tick_running", 30_000),
+    ("tick_all", 30_000),
+];
+
+/// One component's line.
+struct Row {
+    key: String,
+    name: String,
+    calls: u32,
+    min: u32,
+    median: u32,
+    max: u32,
+    what: String,
+}
+
+fn parse(stderr: &str) -> Result<(Vec<Row>, u32)> {
+    let mut rows = Vec::new();
+    let mut overhead = None;
+    let mut done = false;
+    for line in stderr.lines() {
+        let fields: Vec<&str> = line.split('\t').collect();
+        match fields.as_slice() {
+            ["bench", key, name, calls, min, median, max, what] => rows.push(Row {
+                key: key.to_string(),
+                name: name.to_string(),
+                calls: calls.parse()?,
+                min: min.parse()?,
+                median: median.parse()?,
+                max: max.parse()?,
+                what: what.to_string(),
+            }),
+            ["bench-overhead", n] => overhead = Some(n.parse()?),
+            ["bench-done"] => done = true,
+            _ => {}
+        }
+    }
+    if !done {
+        bail!("the benchmark firmware did not finish:\n{stderr}");
+    }
+    let overhead = overhead.ok_or_else(|| anyhow!("no bench-overhead line"))?;
+    Ok((rows, overhead))
+}
+
+pub fn bench_target(args: &[String]) -> Result<()> {
+    let check = match args {
+        [] => false,
+        [flag] if flag == "--check" => true,
+        _ => bail!("usage: cargo xtask bench-target [--check]"),
+    };
+    let elf = cargo_build("qemu", "catmodel-qemu-bench")?;
+    let output = qemu_command(&elf)
+        .args(["-append", "catmodel-qemu-bench"])
+        .output();
+    let output = match output {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
+        }
+        other => other.context("running qemu-system-arm")?,
+    };
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        bail!(
+            "the benchmark firmware failed ({}):\n{stderr}",
+            output.status
+        );
+    }
+    let (rows, overhead) = parse(&stderr)?;
+
+    let mut table = String::new();
+    let _ = writeln!(
+        table,
+        "| component | what one call does | calls | min | median | max |"
+    );
+    let _ = writeln!(table, "|---|---|---:|---:|---:|---:|");
+    for r in &rows {
+        let _ = writeln!(
+            table,
+            "| {} | {} | {} | {} | {} | {} |",
+            r.name, r.what, r.calls, r.min, r.median, r.max
+        );
+    }
+    let _ = writeln!(
+        table,
+        "\nInstructions per call (QEMU -icount shift=0, TIM2; not Cortex-M4 cycles), release \
+         profile (opt-level 3, fat LTO), timing overhead of {overhead} instructions subtracted."
+    );
+    print!("{table}");
+    let out_dir = root().join("target").join("qemu");
+    std::fs::create_dir_all(&out_dir)?;
+    std::fs::write(out_dir.join("bench-target.md"), &table)?;
+    println!("wrote target/qemu/bench-target.md");
+
+    if check {
+        let mut over = Vec::new();
+        for r in &rows {
+            match BUDGETS.iter().find(|(key, _)| *key == r.key) {
+                Some((_, budget)) if r.max > *budget => {
+                    over.push(format!("{}: max {} > budget {budget}", r.key, r.max))
+                }
+                Some(_) => {}
+                None => over.push(format!("{}: no budget in xtask/src/bench.rs", r.key)),
+            }
+        }
+        if !over.is_empty() {
+            bail!("over budget:\n  {}", over.join("\n  "));
+        }
+        println!("every component within its budget (--check)");
+    }
+    Ok(())
+}
