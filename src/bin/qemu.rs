@@ -77,6 +77,13 @@ struct Harness {
 #[inline(never)]
 fn set_up() -> Harness {
     let options = run::options().unwrap_or_else(|message| run::fail(message, 2));
+    if options.stack_overflow_test {
+        semihosting::eprintln!(
+            "catmodel-qemu: stack overflow test: recursing until the stack guard faults"
+        );
+        core::hint::black_box(run::overflow_stack(0));
+        run::fail("the stack overflowed without a fault", 3);
+    }
     let (reader, input) = run::open_input(&options);
     let config = run::tick_config(&input);
     let tx_log =

@@ -7,6 +7,8 @@
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid.
+//! - `cargo xtask qemu-stack-guard-test`: the firmware overflows its stack on purpose; checks
+//!   that the core faults as the stack pointer crosses the bottom of SRAM (memory.x).
 //! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
 //! - `cargo xtask no-panic`: links the core with an undefined panic handler ([`nopanic`]).
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
@@ -48,11 +50,12 @@ fn main() -> ExitCode {
         Some("qemu") => qemu(args.get(1..).unwrap_or(&[])),
         Some("qemu-overrun-test") => overrun_test(),
         Some("size") => size(),
+        Some("qemu-stack-guard-test") => stack_guard_test(),
         Some("no-panic") => nopanic::no_panic(),
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
-            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | size | no-panic | tx-compare FW.log HOST.log\n\
+            "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
              | bench-target [--check]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
@@ -578,6 +581,38 @@ fn elf_flash_ram(bytes: &[u8]) -> Result<(u64, u64)> {
         }
     }
     Ok((flash, ram))
+}
+
+/// The stack guard (memory.x, src/platform/stack.rs) in action: the QEMU firmware recurses until
+/// its stack runs out. The guard holds if the core faults with the stack pointer just below
+/// SRAM (0x2000_0000), i.e. after the whole stack region and before anything else: the fault
+/// cannot be stacked either, so the core locks up and QEMU stops ("Lockup") with the registers.
+fn stack_guard_test() -> Result<()> {
+    let elf = cargo_build("qemu", "catmodel-qemu")?;
+    let output = qemu_command(&elf)
+        .args(["-append", "catmodel-qemu --stack-overflow-test"])
+        .output()
+        .context("running qemu-system-arm")?;
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if output.status.success() || !stderr.contains("Lockup") {
+        bail!(
+            "expected a lockup from the stack guard, got {}:\n{stderr}",
+            output.status
+        );
+    }
+    let sp = stderr
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("R13="))
+        .and_then(|hex| u32::from_str_radix(hex, 16).ok())
+        .context("no R13 in QEMU's register dump")?;
+    // One 256-byte frame plus the exception frame below the bottom at most.
+    if !(0x2000_0000 - 1024..0x2000_0000).contains(&sp) {
+        bail!("the fault came with SP = 0x{sp:08x}, not just below 0x2000_0000");
+    }
+    println!(
+        "stack guard: the overflow faulted at SP = 0x{sp:08x}, just below SRAM; nothing above the stack region was written"
+    );
+    Ok(())
 }
 
 /// The value of symbol `name` in an ELF32 little-endian image (from `.symtab`).

@@ -1,7 +1,7 @@
 //! The QEMU run: command line, set-up, per-tick records for `cargo qemu`, and exit codes.
 //!
 //! Command line (QEMU `-append`): `[--in FILE.log] [--tx TX.log] [--ticks TICKS.bin]
-//! [--stall SLOT:MS]...`. Without `--in` the drive bundled in the firmware is replayed.
+//! [--stall SLOT:MS]... [--stack-overflow-test]`. Without `--in` the drive bundled in the firmware is replayed.
 //! Paths are host paths, relative to QEMU's working directory.
 //!
 //! `TICKS.bin` (little-endian), read by xtask: a 12-byte header `CMQT`, version u32 = 1, record
@@ -69,6 +69,9 @@ pub struct Options {
     pub ticks: HostPath,
     /// Test stalls.
     pub stalls: heapless::Vec<Stall, MAX_STALLS>,
+    /// `--stack-overflow-test`: overflow the stack on purpose instead of running
+    /// (`cargo xtask qemu-stack-guard-test`).
+    pub stack_overflow_test: bool,
 }
 
 fn parse_stall(text: &str) -> Option<Stall> {
@@ -87,6 +90,7 @@ pub fn options() -> Result<Options, &'static str> {
         tx_log: HostPath::new("target/qemu/tx.log").ok_or("path")?,
         ticks: HostPath::new("target/qemu/ticks.bin").ok_or("path")?,
         stalls: heapless::Vec::new(),
+        stack_overflow_test: false,
     };
     let mut args = (&args).filter_map(Result::ok);
     while let Some(arg) = args.next() {
@@ -112,12 +116,28 @@ pub fn options() -> Result<Options, &'static str> {
                     .ok_or("--stall needs SLOT:MS")?;
                 options.stalls.push(stall).map_err(|_| "too many --stall")?;
             }
+            "--stack-overflow-test" => options.stack_overflow_test = true,
             // The first word is the program name (QEMU passes the kernel path); flags are above.
             other if other.starts_with("--") => return Err("unknown option"),
             _ => {}
         }
     }
     Ok(options)
+}
+
+/// Recurses with 256-byte frames until the stack runs out: the guard test. With the stack at
+/// the bottom of SRAM (memory.x), the push below 0x2000_0000 faults; the fault cannot be
+/// stacked either, so the core locks up (QEMU reports "Lockup" and exits), having written
+/// nothing above the stack region.
+#[allow(unconditional_recursion)]
+pub fn overflow_stack(depth: u32) -> u32 {
+    let mut frame = [0u8; 256];
+    if let Some(first) = frame.first_mut() {
+        *first = depth as u8;
+    }
+    let frame = core::hint::black_box(frame);
+    let below = overflow_stack(depth.wrapping_add(1));
+    below.wrapping_add(u32::from(frame.iter().fold(0u8, |a, b| a ^ b)))
 }
 
 /// Prints `message` on the host's stderr and ends the run with `code`.
