@@ -377,6 +377,58 @@ fn receive_queue_overflow_and_overruns_are_reported() {
 }
 
 #[test]
+fn watchdog_reset_and_stack_high_water_mark_reach_the_status_frame() {
+    let d = frames(&drive(10.0, 0.0, 3.0));
+    // After a watchdog reset the board says so in every page 0; the stack mark (None until the
+    // platform's first scan pass finds it) goes to page 4, saturating at 65 534.
+    let ticks = run_with(config(), &d, |i| PlatformStats {
+        watchdog_reset: true,
+        stack_high_water_bytes: match i {
+            0..=49 => None,
+            50..=99 => Some(7_900),
+            _ => Some(1 << 20),
+        },
+        ..PlatformStats::default()
+    });
+    let pages: Vec<(usize, NodeStatus)> = ticks
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (i, t.status()))
+        .collect();
+    assert!(pages
+        .iter()
+        .any(|(_, p)| matches!(p, NodeStatus::Health { .. })));
+    for (i, page) in &pages {
+        match page {
+            NodeStatus::Health { health, .. } => assert!(health.watchdog_reset),
+            NodeStatus::Ages {
+                stack_high_water_bytes,
+                ..
+            } => {
+                let expected = match i {
+                    0..=49 => None,
+                    50..=99 => Some(7_900),
+                    _ => Some(65_534),
+                };
+                assert_eq!(*stack_high_water_bytes, expected, "tick {i}");
+            }
+            _ => {}
+        }
+    }
+    assert!(
+        pages
+            .iter()
+            .filter(|(_, p)| matches!(p, NodeStatus::Ages { .. }))
+            .count()
+            >= 10
+    );
+    // Without a watchdog reset the bit is clear.
+    let ticks = run(&d);
+    assert!(ticks.iter().all(|t| !matches!(t.status(),
+        NodeStatus::Health { health, .. } if health.watchdog_reset)));
+}
+
+#[test]
 fn time_jumps_and_frames_from_the_future() {
     let d = frames(&drive(10.0, 0.0, 6.0));
     // A frame stamped after the tick that receives it (clock mismatch): rejected, counted.
