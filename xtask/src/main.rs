@@ -6,7 +6,8 @@
 //!   fails if the run failed or a tick exceeded the instruction budget.
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
-//!   frame stays on the 20 ms grid.
+//!   frame stays on the 20 ms grid; then a 500 ms stall that overflows the receive queue: every
+//!   dropped frame is counted, and the count reaches the status frames.
 //! - `cargo xtask qemu-stack-guard-test`: the firmware overflows its stack on purpose; checks
 //!   that the core faults as the stack pointer crosses the bottom of SRAM (memory.x).
 //! - `cargo xtask size`: flash and static RAM of the board firmware against the budgets.
@@ -532,12 +533,55 @@ fn overrun_test() -> Result<()> {
     let unexpected_drops = records.iter().any(|r| r.rx_queue_drops != 0);
     check(!unexpected_drops, "no receive-queue drops".into());
     println!("QEMU wall time {:.2} s", run.wall_s);
+
+    // A 500 ms stall: the receive task cannot run either, so about 125 frames are due at once
+    // when it resumes, twice what the 64-frame receive queue holds. The excess must be dropped
+    // and counted (never silently): in the trailer, in PlatformStats, and in the status frames.
+    let flood_dir = root().join("target").join("qemu").join("rx-overflow-test");
+    let flood = run_qemu(&elf, &flood_dir, None, &["--stall", "100:500"])?;
+    let drops = flood.trailer.rx_queue_drops;
+    check(
+        drops > 0,
+        format!("a 500 ms stall overflows the receive queue: {drops} frames dropped and counted"),
+    );
+    let last = flood.records.last().map(|r| r.rx_queue_drops);
+    check(
+        last == Some(drops),
+        format!("PlatformStats.rx_queue_drops reaches the same count (got {last:?})"),
+    );
+    let delivered: u64 = flood.records.iter().map(|r| u64::from(r.rx_frames)).sum();
+    check(
+        delivered + u64::from(drops) == u64::from(flood.trailer.input_frames),
+        format!(
+            "every input frame was either handed to the node or counted as dropped ({delivered} + {drops} = {})",
+            flood.trailer.input_frames
+        ),
+    );
+    let status_drops =
+        rx_queue_drops_in_status(&std::fs::read_to_string(flood_dir.join("tx.log"))?);
+    check(
+        status_drops == Some(drops),
+        format!("NODE_STATUS page 3 reports {drops} receive-queue drops (got {status_drops:?})"),
+    );
     if failures.is_empty() {
         println!("overrun test passed");
         Ok(())
     } else {
         bail!("overrun test: {} check(s) failed", failures.len())
     }
+}
+
+/// The last receive-queue drop count NODE_STATUS page 3 reported in a candump text.
+fn rx_queue_drops_in_status(candump: &str) -> Option<u32> {
+    use catmodel::can::NodeStatus;
+    candump
+        .lines()
+        .filter_map(|line| catmodel::can::candump::parse_line(line).ok())
+        .filter_map(|f| match NodeStatus::decode(&f.frame) {
+            Ok((NodeStatus::Platform { rx_queue_drops, .. }, _)) => Some(rx_queue_drops),
+            _ => None,
+        })
+        .last()
 }
 
 // ---------------------------------------------------------------------------------------------
