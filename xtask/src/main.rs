@@ -581,7 +581,7 @@ fn rx_queue_drops_in_status(candump: &str) -> Option<u32> {
             Ok((NodeStatus::Platform { rx_queue_drops, .. }, _)) => Some(rx_queue_drops),
             _ => None,
         })
-        .last()
+        .next_back()
 }
 
 // ---------------------------------------------------------------------------------------------
