@@ -28,8 +28,11 @@ use catmodel_host::model_file::{self, VehicleSection};
 use catmodel_host::sim::{self, SimOptions};
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 
+/// A named log: (file stem, rows).
+type Log = (String, Vec<LogRow>);
+
 /// The log rows of one simulated drive, through the CSV text `simulate-drive` writes.
-fn drive(name: &str, seed: u64) -> (String, Vec<LogRow>) {
+fn drive(name: &str, seed: u64) -> Log {
     let out = sim::run_named(
         name,
         None,
@@ -47,7 +50,7 @@ fn drive(name: &str, seed: u64) -> (String, Vec<LogRow>) {
 }
 
 /// (training drives, validation drive), as in README "Identify, compare, discretize".
-fn paper_set() -> (Vec<(String, Vec<LogRow>)>, Vec<(String, Vec<LogRow>)>) {
+fn paper_set() -> (Vec<Log>, Vec<Log>) {
     let mut training: Vec<_> = [
         "straight-2.5",
         "straight-5",
@@ -69,7 +72,7 @@ fn paper_set() -> (Vec<(String, Vec<LogRow>)>, Vec<(String, Vec<LogRow>)>) {
     (training, vec![drive("validation", 3)])
 }
 
-fn preprocess(logs: &[(String, Vec<LogRow>)], vehicle: &VehicleSection) -> Vec<Experiment> {
+fn preprocess(logs: &[Log], vehicle: &VehicleSection) -> Vec<Experiment> {
     logs.iter()
         .map(|(name, rows)| {
             preprocess_rows(name, rows, vehicle, &PreprocessOptions::default())
