@@ -2,7 +2,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
@@ -221,15 +221,19 @@ fn run(cli: Cli) -> Result<()> {
             config.origin_e7 = origin.map(to_e7);
             let progress = Progress::bar(replay::tick_count(&frames), "replay");
             let mut done = 0;
-            let result = replay::replay_with_progress(&frames, config, |ticks| {
+            // Both files are created before the node runs (a bad path fails at once) and
+            // written as the node goes.
+            let csv_file = replay::create_file(&out)?;
+            let tx_file = tx_out.as_deref().map(replay::create_file).transpose()?;
+            let result = replay::replay_into(&frames, config, csv_file, tx_file, |ticks| {
                 progress.inc(ticks - done);
                 done = ticks;
-            });
+            })
+            .with_context(|| match &tx_out {
+                Some(tx) => format!("writing {} or {}", out.display(), tx.display()),
+                None => format!("writing {}", out.display()),
+            })?;
             progress.finish();
-            replay::write_file(&out, &result.predictions_csv)?;
-            if let Some(tx) = tx_out {
-                replay::write_file(&tx, &result.tx_log)?;
-            }
             let c = result.counters;
             eprintln!(
                 "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
