@@ -2,7 +2,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
@@ -215,29 +215,24 @@ fn run(cli: Cli) -> Result<()> {
             model,
         } => {
             let reading = Progress::spinner(&format!("reading {}", log.display()));
-            let frames = replay::read_candump(&log)?;
+            let text = replay::read_bytes(&log)?;
             reading.finish();
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
-            let progress = Progress::bar(replay::tick_count(&frames), "replay");
+            let progress = Progress::bar(replay::estimate_ticks(&text), "replay");
             let mut done = 0;
-            // Both files are created before the node runs (a bad path fails at once) and
-            // written as the node goes.
-            let csv_file = replay::create_file(&out)?;
-            let tx_file = tx_out.as_deref().map(replay::create_file).transpose()?;
-            let result = replay::replay_into(&frames, config, csv_file, tx_file, |ticks| {
-                progress.inc(ticks - done);
-                done = ticks;
-            })
-            .with_context(|| match &tx_out {
-                Some(tx) => format!("writing {} or {}", out.display(), tx.display()),
-                None => format!("writing {}", out.display()),
-            })?;
+            // The log is parsed while the node runs; the files are written only if it all
+            // parses.
+            let result =
+                replay::replay_file(&log, &text, config, &out, tx_out.as_deref(), |ticks| {
+                    progress.inc(ticks - done);
+                    done = ticks;
+                })?;
             progress.finish();
             let c = result.counters;
             eprintln!(
                 "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
-                frames.len(), result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
+                result.frames, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
                 c.range_errors, c.gnss_gate_rejects, c.unknown_ids, c.time_errors
             );
             Ok(())

@@ -152,6 +152,8 @@ pub struct ReplayText {
 /// What a replay did, its text aside.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ReplayStats {
+    /// Frames read.
+    pub frames: u64,
     /// Ticks run.
     pub ticks: u64,
     /// The node's rejection counters at the end.
@@ -200,6 +202,7 @@ pub fn replay_with_progress(
     };
     // Note: writing to a Vec cannot fail.
     let stats = replay_into(frames, config, &mut csv, tx_sink, progress).unwrap_or(ReplayStats {
+        frames: 0,
         ticks: 0,
         counters: Counters::default(),
         origin_e7: None,
@@ -232,74 +235,382 @@ pub fn replay_into<C: Write + Send, T: Write + Send>(
     config: NodeConfig,
     csv: C,
     tx_log: Option<T>,
-    mut progress: impl FnMut(u64),
+    progress: impl FnMut(u64),
 ) -> std::io::Result<ReplayStats> {
+    let source = SliceSource { frames, next: 0 };
+    let (stats, written, _) = run(source, config, csv, tx_log, progress);
+    written.map(|()| stats)
+}
+
+/// [`read_candump`] and [`replay_into`] at once, over the text of a candump file (`path`
+/// names it in errors): a third thread parses the text ahead of the node, so the node starts
+/// with the first lines. Nothing reaches the sinks unless the whole text parses (the errors
+/// are [`read_candump`]'s, word for word); then the text is the same as [`replay_into`]'s.
+pub fn replay_text_into<C: Write + Send, T: Write + Send>(
+    path: &Path,
+    text: &str,
+    config: NodeConfig,
+    csv: C,
+    tx_log: Option<T>,
+    progress: impl FnMut(u64),
+) -> Result<ReplayStats> {
+    let (to_node, chunks) = std::sync::mpsc::sync_channel::<Result<Vec<TimedFrame>>>(16);
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            let mut chunk = Vec::with_capacity(PARSE_CHUNK_FRAMES);
+            let mut last_t = None;
+            for (i, line) in text.lines().enumerate() {
+                if let Err(e) = push_line(path, i + 1, line, &mut last_t, &mut chunk) {
+                    // Note: a send fails only if the node stopped listening.
+                    let _ = to_node.send(Err(e));
+                    return;
+                }
+                if chunk.len() == PARSE_CHUNK_FRAMES {
+                    let full =
+                        std::mem::replace(&mut chunk, Vec::with_capacity(PARSE_CHUNK_FRAMES));
+                    if to_node.send(Ok(full)).is_err() {
+                        return;
+                    }
+                }
+            }
+            let _ = to_node.send(Ok(chunk));
+        });
+        let source = StreamSource {
+            chunks,
+            pending: Vec::with_capacity(2 * PARSE_CHUNK_FRAMES),
+            next: 0,
+            finished: false,
+            error: None,
+        };
+        let (stats, written, parse_error) = run(source, config, csv, tx_log, progress);
+        if let Some(e) = parse_error {
+            return Err(e);
+        }
+        written.context("writing the output")?;
+        Ok(stats)
+    })
+}
+
+/// `catmodel replay`: the candump file at `log` through the node, the predictions CSV to
+/// `csv_path` and the TX log to `tx_path` if given (files, with their directories, created
+/// only once the whole log has parsed: an error leaves none behind). `progress` as in
+/// [`replay_into`]; [`estimate_ticks`] gives the total.
+pub fn replay_file(
+    log: &Path,
+    text: &[u8],
+    config: NodeConfig,
+    csv_path: &Path,
+    tx_path: Option<&Path>,
+    progress: impl FnMut(u64),
+) -> Result<ReplayStats> {
+    let csv = LazyFile::new(csv_path);
+    let tx = tx_path.map(LazyFile::new);
+    match std::str::from_utf8(text) {
+        Ok(text) => replay_text_into(log, text, config, csv, tx, progress),
+        Err(_) => {
+            // Not UTF-8 somewhere: the line-by-line reader names the line.
+            let frames = read_candump_lines(log, BufReader::new(text))?;
+            replay_into(&frames, config, csv, tx, progress).context("writing the output")
+        }
+    }
+}
+
+/// Reads a whole file. Errors name it.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    let mut file =
+        std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes)
+        .with_context(|| format!("{}: reading", path.display()))?;
+    Ok(bytes)
+}
+
+/// The number of ticks a replay of candump `text` runs, from its first and last lines (0 if
+/// either does not parse): for a progress display.
+pub fn estimate_ticks(text: &[u8]) -> u64 {
+    let mut lines = text
+        .split(|&c| c == b'\n')
+        .filter(|l| !l.trim_ascii().is_empty());
+    let parse = |l: Option<&[u8]>| {
+        l.and_then(|l| std::str::from_utf8(l).ok())
+            .and_then(|l| candump::parse_line(l).ok())
+    };
+    let first = parse(lines.next());
+    let last = parse(
+        text.split(|&c| c == b'\n')
+            .rev()
+            .find(|l| !l.trim_ascii().is_empty()),
+    );
+    match (first, last) {
+        (Some(a), Some(b)) if b.t_us >= a.t_us && b.t_us <= u64::MAX / 2 => tick_count(&[a, b]),
+        _ => 0,
+    }
+}
+
+/// A file created (with its directories) on the first write or flush.
+struct LazyFile<'a> {
+    path: &'a Path,
+    file: Option<std::fs::File>,
+}
+
+impl<'a> LazyFile<'a> {
+    fn new(path: &'a Path) -> Self {
+        Self { path, file: None }
+    }
+
+    fn file(&mut self) -> std::io::Result<&mut std::fs::File> {
+        if self.file.is_none() {
+            let created = create_file(self.path).map_err(std::io::Error::other)?;
+            self.file = Some(created);
+        }
+        self.file
+            .as_mut()
+            .ok_or_else(|| std::io::Error::other("file not created"))
+    }
+}
+
+impl Write for LazyFile<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.file()?.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file()?.flush()
+    }
+}
+
+/// Frames parsed per piece handed to the node.
+const PARSE_CHUNK_FRAMES: usize = 2048;
+
+/// Where the node's input frames come from, in time order.
+trait FrameSource {
+    /// The time of the first frame; `None` if there is none.
+    fn first_t_us(&mut self) -> Option<u64>;
+    /// The frames up to `now_us` not taken yet.
+    fn take_until(&mut self, now_us: u64) -> &[TimedFrame];
+    /// Whether frames remain (after [`FrameSource::take_until`], all later than its `now_us`).
+    fn has_more(&mut self) -> bool;
+    /// Whether the input is complete and valid, so that text may leave (checked after each
+    /// tick); `None` while not known yet.
+    fn input_ok(&self) -> Option<bool>;
+    /// The input's error, if it had one.
+    fn into_error(self) -> Option<anyhow::Error>;
+}
+
+/// Frames in memory.
+struct SliceSource<'a> {
+    frames: &'a [TimedFrame],
+    next: usize,
+}
+
+impl FrameSource for SliceSource<'_> {
+    fn first_t_us(&mut self) -> Option<u64> {
+        self.frames.first().map(|f| f.t_us)
+    }
+    fn take_until(&mut self, now_us: u64) -> &[TimedFrame] {
+        let start = self.next;
+        let rest = self.frames.get(start..).unwrap_or_default();
+        self.next += rest.iter().take_while(|f| f.t_us <= now_us).count();
+        self.frames.get(start..self.next).unwrap_or_default()
+    }
+    fn has_more(&mut self) -> bool {
+        self.next < self.frames.len()
+    }
+    fn input_ok(&self) -> Option<bool> {
+        Some(true)
+    }
+    fn into_error(self) -> Option<anyhow::Error> {
+        None
+    }
+}
+
+/// Frames arriving in pieces from the parser thread; an `Err` ends the input.
+struct StreamSource {
+    chunks: std::sync::mpsc::Receiver<Result<Vec<TimedFrame>>>,
+    /// Frames received; `pending[next..]` not taken yet.
+    pending: Vec<TimedFrame>,
+    next: usize,
+    finished: bool,
+    error: Option<anyhow::Error>,
+}
+
+impl StreamSource {
+    /// Waits for the next piece; false at the end of the input (or on its error).
+    fn receive(&mut self) -> bool {
+        if self.finished {
+            return false;
+        }
+        match self.chunks.recv() {
+            Ok(Ok(chunk)) => {
+                self.pending.extend_from_slice(&chunk);
+                true
+            }
+            Ok(Err(e)) => {
+                self.error = Some(e);
+                self.finished = true;
+                false
+            }
+            // The parser sends its last piece, or its error, before it ends.
+            Err(_) => {
+                self.finished = true;
+                false
+            }
+        }
+    }
+}
+
+impl FrameSource for StreamSource {
+    fn first_t_us(&mut self) -> Option<u64> {
+        while self.pending.len() <= self.next {
+            if !self.receive() {
+                return None;
+            }
+        }
+        self.pending.get(self.next).map(|f| f.t_us)
+    }
+    fn take_until(&mut self, now_us: u64) -> &[TimedFrame] {
+        // Frames taken by earlier ticks are dropped now and then (here only: the slice
+        // returned below must stay where it is).
+        if self.next > PARSE_CHUNK_FRAMES {
+            self.pending.drain(..self.next);
+            self.next = 0;
+        }
+        let start = self.next;
+        loop {
+            let rest = self.pending.get(self.next..).unwrap_or_default();
+            let n = rest.iter().take_while(|f| f.t_us <= now_us).count();
+            self.next += n;
+            // Stop at the first later frame, or at the end of the input.
+            if n < rest.len() || !self.receive() {
+                break;
+            }
+        }
+        self.pending.get(start..self.next).unwrap_or_default()
+    }
+    fn has_more(&mut self) -> bool {
+        while self.pending.len() <= self.next {
+            if !self.receive() {
+                return false;
+            }
+        }
+        true
+    }
+    fn input_ok(&self) -> Option<bool> {
+        match (self.finished, &self.error) {
+            (false, _) => None,
+            (true, None) => Some(true),
+            (true, Some(_)) => Some(false),
+        }
+    }
+    fn into_error(self) -> Option<anyhow::Error> {
+        self.error
+    }
+}
+
+/// What the node sends the text writer.
+enum ToWriter {
+    /// Ticks' times and frames.
+    Batch(Vec<(u64, TxFrames)>),
+    /// The input is complete and valid: text may leave.
+    Release,
+}
+
+/// The node loop (this thread) and the text writer (a second one) over `source`.
+fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
+    mut source: S,
+    config: NodeConfig,
+    csv: C,
+    tx_log: Option<T>,
+    mut progress: impl FnMut(u64),
+) -> (ReplayStats, std::io::Result<()>, Option<anyhow::Error>) {
     let mut node = Node::new(config);
-    let (to_writer, batches) = std::sync::mpsc::sync_channel::<Vec<(u64, TxFrames)>>(8);
+    let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
-    let (written, ticks) = std::thread::scope(|scope| {
+    let mut frames = 0u64;
+    let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
             let mut out = TextOut::new(csv, tx_log);
-            for mut batch in batches {
-                for (now, tx) in &batch {
-                    out.tick(*now, tx);
+            for message in messages {
+                match message {
+                    ToWriter::Batch(mut batch) => {
+                        for (now, tx) in &batch {
+                            out.tick(*now, tx);
+                        }
+                        batch.clear();
+                        // Note: the node may have finished; a lost spare batch costs nothing.
+                        let _ = to_node.send(batch);
+                    }
+                    ToWriter::Release => out.release(),
                 }
-                batch.clear();
-                // Note: the node may have finished; a lost spare batch costs nothing.
-                let _ = to_node.send(batch);
             }
             out.finish()
         });
+        let mut released = false;
+        let release = |source: &S, released: &mut bool| {
+            if !*released && source.input_ok() == Some(true) {
+                *released = true;
+                let _ = to_writer.send(ToWriter::Release);
+            }
+        };
         let mut step = 0u64;
-        if let (Some(first), Some(last)) = (frames.first(), frames.last()) {
-            let mut now = first_tick_us(first.t_us);
-            let mut next = 0usize;
+        if let Some(first_t_us) = source.first_t_us() {
+            let mut now = first_tick_us(first_t_us);
             let mut batch = Vec::with_capacity(BATCH_TICKS);
-            // The last tick is the one at or after the last frame (the QEMU run stops there).
-            let last_tick_us = first_tick_us(last.t_us);
-            while now <= last_tick_us {
-                let start = next;
-                next += frames
-                    .get(start..)
-                    .unwrap_or_default()
-                    .iter()
-                    .take_while(|f| f.t_us <= now)
-                    .count();
+            loop {
                 let mut tx = TxFrames::new();
                 let tick = Tick {
                     now_us: now,
                     platform: PlatformStats::default(),
                 };
-                node.step(&tick, frames.get(start..next).unwrap_or_default(), &mut tx);
+                let rx = source.take_until(now);
+                frames += rx.len() as u64;
+                node.step(&tick, rx, &mut tx);
                 batch.push((now, tx));
-                if batch.len() == BATCH_TICKS {
-                    let fresh = spare
-                        .try_recv()
-                        .unwrap_or_else(|_| Vec::with_capacity(BATCH_TICKS));
-                    // Note: the writer only stops when this side hangs up.
-                    let _ = to_writer.send(std::mem::replace(&mut batch, fresh));
-                }
                 step += 1;
                 if step.is_multiple_of(500) {
                     progress(step);
                 }
+                // The last tick is the one at or after the last frame (the QEMU run stops
+                // there too): another one follows while a frame later than this one remains.
+                let more = source.has_more();
+                if source.input_ok() == Some(false) {
+                    break;
+                }
+                if batch.len() == BATCH_TICKS || !more {
+                    release(&source, &mut released);
+                    let fresh = spare
+                        .try_recv()
+                        .unwrap_or_else(|_| Vec::with_capacity(BATCH_TICKS));
+                    // Note: the writer only stops when this side hangs up.
+                    let _ = to_writer.send(ToWriter::Batch(std::mem::replace(&mut batch, fresh)));
+                }
+                if !more {
+                    break;
+                }
                 now += SAMPLE_PERIOD_US;
             }
-            let _ = to_writer.send(batch);
         }
+        // No frame at all: the input is over (and valid unless it failed).
+        let _ = source.has_more();
+        release(&source, &mut released);
         drop(to_writer);
         let written = match writer.join() {
             Ok(result) => result,
             Err(panic) => std::panic::resume_unwind(panic),
         };
-        (written, step)
+        (written, step, source.input_ok())
     });
-    written?;
-    Ok(ReplayStats {
+    let stats = ReplayStats {
+        frames,
         ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
-    })
+    };
+    let error = if input_ok == Some(true) {
+        None
+    } else {
+        source.into_error()
+    };
+    (stats, written, error)
 }
 
 /// The text a replay writes, tick by tick in the node's order, into buffers handed to the
@@ -310,6 +621,8 @@ struct TextOut<C, T> {
     csv: Vec<u8>,
     tx_log: Vec<u8>,
     step: u64,
+    /// Text leaves only once released (the input known to be valid).
+    released: bool,
     error: Option<std::io::Error>,
 }
 
@@ -328,8 +641,13 @@ impl<C: Write, T: Write> TextOut<C, T> {
             csv,
             tx_log,
             step: 0,
+            released: false,
             error: None,
         }
+    }
+
+    fn release(&mut self) {
+        self.released = true;
     }
 
     fn tick(&mut self, now_us: u64, tx: &TxFrames) {
@@ -341,7 +659,7 @@ impl<C: Write, T: Write> TextOut<C, T> {
         }
         append_prediction_rows(&mut self.csv, now_us, self.step, tx);
         self.step += 1;
-        if self.csv.len() >= CHUNK_BYTES || self.tx_log.len() >= CHUNK_BYTES {
+        if self.released && (self.csv.len() >= CHUNK_BYTES || self.tx_log.len() >= CHUNK_BYTES) {
             self.flush();
         }
     }
@@ -359,6 +677,10 @@ impl<C: Write, T: Write> TextOut<C, T> {
     }
 
     fn finish(mut self) -> std::io::Result<()> {
+        if !self.released {
+            // The input failed: nothing leaves.
+            return Ok(());
+        }
         self.flush();
         if let Some(e) = self.error.take() {
             return Err(e);
@@ -872,6 +1194,48 @@ mod tests {
         );
         assert_eq!(no_tx.predictions_csv, csv);
         assert!(no_tx.tx_log.is_empty());
+    }
+
+    /// Parsing ahead of the node gives the same text as parsing first; an error anywhere in
+    /// the log (here the very last line) gives `read_candump`'s error and no text at all.
+    #[test]
+    fn streamed_parsing_equals_parsing_first() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/bundled.can.log");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let frames = read_candump(&path).unwrap();
+        let config = NodeConfig::paper().unwrap();
+        let (mut csv_a, mut tx_a, mut csv_b, mut tx_b) = (vec![], vec![], vec![], vec![]);
+        let a = replay_into(&frames, config.clone(), &mut csv_a, Some(&mut tx_a), |_| {}).unwrap();
+        let b = replay_text_into(
+            &path,
+            &text,
+            config.clone(),
+            &mut csv_b,
+            Some(&mut tx_b),
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(a, b);
+        assert_eq!(b.frames, frames.len() as u64);
+        assert!(csv_a == csv_b && tx_a == tx_b);
+        assert!(csv_a.len() > 100_000);
+
+        let bad = format!("{text}(9999999999.000000) can0 100#0G\n");
+        let (mut csv, mut tx) = (vec![], vec![]);
+        let err = replay_text_into(&path, &bad, config.clone(), &mut csv, Some(&mut tx), |_| {})
+            .unwrap_err();
+        let lines = text.lines().count() + 1;
+        let expected = format!(
+            "{}:{lines}: malformed candump line (data is not hex)",
+            path.display()
+        );
+        assert!(err.to_string().starts_with(&expected), "{err}");
+        assert!(csv.is_empty() && tx.is_empty());
+        // An empty log: the header only.
+        let mut csv = vec![];
+        let s =
+            replay_text_into(&path, "", config, &mut csv, None::<&mut Vec<u8>>, |_| {}).unwrap();
+        assert_eq!((s.ticks, csv.as_slice()), (0, CSV_HEADER.as_bytes()));
     }
 
     /// The in-memory parser and the line-by-line reader agree, blank lines and CRLF included,
