@@ -10,7 +10,10 @@
 //! - `replay/validation_5min_node_only`: only the node's ticks over the same frames (the
 //!   schedule precomputed), no CSV or candump text: what the formatting costs is the difference.
 //! - `replay/validation_5min_from_text`: the same, starting from the candump text (parsing
-//!   every line, as `catmodel replay FILE.log` does after reading the file).
+//!   every line first, then `replay`).
+//! - `replay/validation_5min_cli`: what `catmodel replay FILE.log --out P.csv` does after
+//!   reading the file, minus writing it: `replay_text_into` (the text parsed on one thread
+//!   ahead of the node, the CSV formatted on another behind it) into `io::sink()`, no TX text.
 //!
 //! The slot for `identify` (issue 7: "identify on the paper-sized experiment set") is below,
 //! marked IDENTIFY-BENCH.
@@ -95,6 +98,21 @@ fn bench_replay(c: &mut Criterion) {
                 .collect();
             let out = replay::replay(&parsed, config.clone());
             black_box(out.predictions_csv.len() + out.tx_log.len())
+        })
+    });
+    let text_path = std::path::Path::new("validation.can.log");
+    group.bench_function("validation_5min_cli", |b| {
+        b.iter(|| {
+            let stats = replay::replay_text_into(
+                text_path,
+                black_box(&text),
+                config.clone(),
+                std::io::sink(),
+                None::<std::io::Sink>,
+                |_| {},
+            )
+            .expect("valid log");
+            black_box(stats.ticks)
         })
     });
     group.finish();

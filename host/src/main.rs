@@ -215,25 +215,24 @@ fn run(cli: Cli) -> Result<()> {
             model,
         } => {
             let reading = Progress::spinner(&format!("reading {}", log.display()));
-            let frames = replay::read_candump(&log)?;
+            let text = replay::read_bytes(&log)?;
             reading.finish();
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
-            let progress = Progress::bar(replay::tick_count(&frames), "replay");
+            let progress = Progress::bar(replay::estimate_ticks(&text), "replay");
             let mut done = 0;
-            let result = replay::replay_with_progress(&frames, config, |ticks| {
-                progress.inc(ticks - done);
-                done = ticks;
-            });
+            // The log is parsed while the node runs; the files are written only if it all
+            // parses.
+            let result =
+                replay::replay_file(&log, &text, config, &out, tx_out.as_deref(), |ticks| {
+                    progress.inc(ticks - done);
+                    done = ticks;
+                })?;
             progress.finish();
-            replay::write_file(&out, &result.predictions_csv)?;
-            if let Some(tx) = tx_out {
-                replay::write_file(&tx, &result.tx_log)?;
-            }
             let c = result.counters;
             eprintln!(
                 "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
-                frames.len(), result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
+                result.frames, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
                 c.range_errors, c.gnss_gate_rejects, c.unknown_ids, c.time_errors
             );
             Ok(())
