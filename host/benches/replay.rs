@@ -15,8 +15,7 @@
 //!   reading the file, minus writing it: `replay_text_into` (the text parsed on one thread
 //!   ahead of the node, the CSV formatted on another behind it) into `io::sink()`, no TX text.
 //!
-//! The slot for `identify` (issue 7: "identify on the paper-sized experiment set") is below,
-//! marked IDENTIFY-BENCH.
+//! `identify` on the paper-sized experiment set has its own bench: `host/benches/identify.rs`.
 use std::hint::black_box;
 
 use catmodel::can::{candump, TimedFrame};
@@ -117,15 +116,6 @@ fn bench_replay(c: &mut Criterion) {
     });
     group.finish();
 }
-
-// IDENTIFY-BENCH: slot for the `identify` benchmark (issue 7: `identify` on the paper-sized
-// experiment set). `identify` lives in host/src/identify/ on branch `ident`; the lead adds the
-// benchmark function here after merging it, and lists it in `criterion_group!` below, e.g.
-//
-//     fn bench_identify(c: &mut Criterion) {
-//         let experiments = /* the paper-sized simulated experiment set */;
-//         c.bench_function("identify/paper_set", |b| b.iter(|| /* identify(&experiments) */));
-//     }
 
 criterion_group!(benches, bench_replay);
 criterion_main!(benches);
