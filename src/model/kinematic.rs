@@ -97,6 +97,36 @@ impl Pose {
         }
     }
 
+    /// Moves the pose over a segment driven with side slip: `forward_m` along and `side_m` to the
+    /// right of the heading (the integrals of v and vy over the segment) while the heading
+    /// turns by `turn_rad`, as one arc with the forward and side components held, in pieces of
+    /// at most 0.5 rad (as [`Pose::advance_arc`]). Over a segment whose yaw rate and slip vary
+    /// (a transient), it differs from stepping [`Pose::advance`] per sample to first order in
+    /// that variation; the predictor adds that first-order term back
+    /// ([`Pose::shift_right`], `predictor::rollout`).
+    pub fn advance_segment(&mut self, forward_m: f32, side_m: f32, turn_rad: f32) {
+        let pieces = turn_rad.abs() * 2.0;
+        if pieces <= 1.0 {
+            self.advance(forward_m, side_m, turn_rad, 1.0);
+            return;
+        }
+        // `as` saturates (NaN gives 0); pieces > 1 here, so n >= 2.
+        let n = (pieces as u32 + 1).min(64);
+        let inv_n = 1.0 / n as f32;
+        let (fwd, side, turn) = (forward_m * inv_n, side_m * inv_n, turn_rad * inv_n);
+        for _ in 0..n {
+            self.advance(fwd, side, turn, 1.0);
+        }
+    }
+
+    /// Moves the position `right_m` to the right of the current heading (negative: left).
+    #[inline]
+    pub fn shift_right(&mut self, right_m: f32) {
+        // Right of heading theta (clockwise from north) is (cos theta, -sin theta) in (east, north).
+        self.x_m += right_m * self.cos_heading;
+        self.y_m -= right_m * self.sin_heading;
+    }
+
     /// The end-of-step heading: the mid-step direction rotated by the second half increment.
     #[inline(always)]
     fn turn_from_mid(&mut self, sin_mid: f32, cos_mid: f32, s_half: f32, c_half: f32, d: f32) {

@@ -13,10 +13,12 @@
 //! changes it by under 2 % for a 2 m/s speed change at 5 m/s). With the curvature held the
 //! kinematic path is a circle whatever the speed, so the kinematic roll-out only sums the
 //! distance per step and moves the pose once per output point ([`Pose::advance_arc`]). The
-//! dynamic roll-out steps the lateral model and the pose every 20 ms, with the lateral
-//! model's coefficients for the held steering computed once
-//! ([`super::dynamic::DynamicParams::stepper`]).
-use super::dynamic::{DynamicParams, LateralState};
+//! dynamic roll-out steps the lateral model every 20 ms (its coefficients for the held
+//! steering computed once, [`super::dynamic::DynamicParams::stepper`]) and sums the forward
+//! and side distances, the turn and the turn's first moment; the pose moves once per output
+//! point along that segment ([`Pose::advance_segment`]), corrected to first order for a yaw
+//! rate that changes within it.
+use super::dynamic::{DynamicParams, LateralState, LateralStepper};
 use super::hybrid::Mode;
 use super::kinematic::Pose;
 use crate::vehicle::VehicleParams;
@@ -93,41 +95,123 @@ pub fn rollout(
     vehicle: &VehicleParams,
     dynamics: &DynamicParams,
     start: &PredictorStart,
+    speed_model_step: impl FnMut(f32) -> f32,
+    out: &mut [PredictedPoint],
+) -> usize {
+    match start.mode {
+        Mode::Kinematic => {
+            let segment = ArcSegment {
+                curvature_per_m: vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps),
+                arc_m: 0.0,
+            };
+            roll(horizon, start, segment, speed_model_step, out)
+        }
+        Mode::Dynamic => {
+            let segment = SlipSegment {
+                stepper: dynamics.stepper(start.center_steer_rad, horizon.dt_s),
+                lateral: start.lateral,
+                forward_m: 0.0,
+                side_m: 0.0,
+                turn_rad: 0.0,
+                moment_m: 0.0,
+            };
+            roll(horizon, start, segment, speed_model_step, out)
+        }
+    }
+}
+
+/// How the pose moves between two output points: summed per 20 ms step, applied once per point.
+trait Segment {
+    /// One step at speed `v_mps` for `dt_s`.
+    fn step(&mut self, v_mps: f32, dt_s: f32);
+    /// Moves `pose` over the steps summed since the last point and starts a new segment.
+    fn apply(&mut self, pose: &mut Pose);
+}
+
+/// Kinematic: the path is the circle of the held curvature whatever the speed profile, so only
+/// the distance driven matters ([`Pose::advance_arc`]).
+struct ArcSegment {
+    curvature_per_m: f32,
+    arc_m: f32,
+}
+
+impl Segment for ArcSegment {
+    #[inline(always)]
+    fn step(&mut self, v_mps: f32, dt_s: f32) {
+        self.arc_m += v_mps * dt_s;
+    }
+
+    #[inline(always)]
+    fn apply(&mut self, pose: &mut Pose) {
+        pose.advance_arc(self.arc_m, self.curvature_per_m);
+        self.arc_m = 0.0;
+    }
+}
+
+/// Dynamic: the lateral model steps every 20 ms; the forward and side distances, the turn and
+/// the turn's first moment (sum of ds * (heading at the step's middle - heading at the
+/// segment's start)) are summed. The pose moves along the segment as one arc
+/// ([`Pose::advance_segment`]), which puts the moment at `forward * turn / 2`; the difference,
+/// the lateral offset of a segment whose yaw rate changes, is added back
+/// ([`Pose::shift_right`]).
+struct SlipSegment {
+    stepper: LateralStepper,
+    lateral: LateralState,
+    forward_m: f32,
+    side_m: f32,
+    turn_rad: f32,
+    moment_m: f32,
+}
+
+impl Segment for SlipSegment {
+    #[inline(always)]
+    fn step(&mut self, v_mps: f32, dt_s: f32) {
+        self.stepper.step(&mut self.lateral, v_mps);
+        let ds = v_mps * dt_s;
+        let dtheta = self.lateral.yaw_rate_rps * dt_s;
+        self.moment_m += ds * (self.turn_rad + 0.5 * dtheta);
+        self.forward_m += ds;
+        self.side_m += self.lateral.vy_mps * dt_s;
+        self.turn_rad += dtheta;
+    }
+
+    #[inline(always)]
+    fn apply(&mut self, pose: &mut Pose) {
+        pose.advance_segment(self.forward_m, self.side_m, self.turn_rad);
+        pose.shift_right(self.moment_m - 0.5 * self.forward_m * self.turn_rad);
+        self.forward_m = 0.0;
+        self.side_m = 0.0;
+        self.turn_rad = 0.0;
+        self.moment_m = 0.0;
+    }
+}
+
+/// The roll-out loop for one kind of segment (monomorphised: one tight loop per model).
+#[inline(always)]
+fn roll<S: Segment>(
+    horizon: &HorizonConfig,
+    start: &PredictorStart,
+    mut segment: S,
     mut speed_model_step: impl FnMut(f32) -> f32,
     out: &mut [PredictedPoint],
 ) -> usize {
     let mut pose = start.pose;
-    let mut lateral = start.lateral;
     let dt = horizon.dt_s;
     let every = horizon.output_every.max(1);
     let mut written = 0usize;
-    let curvature_per_m = vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps);
-    let lateral_step = dynamics.stepper(start.center_steer_rad, dt);
     let mut slot = out.iter_mut();
     let mut until_point = every;
-    // Kinematic: distance driven since the last point (the path is the circle of the held
-    // curvature, so only the distance matters; see `Pose::advance_arc`).
-    let mut arc_m = 0.0f32;
     for k in 1..=horizon.steps {
         let v_model = speed_model_step(start.speed_cmd_mps);
         let v = clamp_speed(v_model + start.speed_bias_mps, horizon.max_speed_mps);
-        match start.mode {
-            Mode::Kinematic => arc_m += v * dt,
-            Mode::Dynamic => {
-                lateral_step.step(&mut lateral, v);
-                pose.advance(v, lateral.vy_mps, lateral.yaw_rate_rps * dt, dt);
-            }
-        }
+        segment.step(v, dt);
         until_point -= 1;
         if until_point == 0 {
             until_point = every;
             let Some(point) = slot.next() else {
                 break;
             };
-            if start.mode == Mode::Kinematic {
-                pose.advance_arc(arc_m, curvature_per_m);
-                arc_m = 0.0;
-            }
+            segment.apply(&mut pose);
             *point = PredictedPoint {
                 horizon_s: f32::from(k) * dt,
                 x_m: pose.x_m,
@@ -234,6 +318,54 @@ mod tests {
             a.x_m > 0.5,
             "a right turn from heading north bends east: {a:?}"
         );
+    }
+
+    /// The dynamic roll-out moves the pose once per 0.2 s segment; against moving it every 20 ms
+    /// (`Pose::advance` per step, the reference), in a hard transient (straight, then full
+    /// steering at 20 m/s with the speed changing) and in steady cornering, every point is
+    /// within 5 mm (measured: under 1.5 mm) and 0.1 mrad.
+    #[test]
+    fn dynamic_segments_match_per_step_integration() {
+        for (steer, lateral0, v0, accel) in [
+            (0.15f32, LateralState::default(), 20.0f32, -2.0f32),
+            (-0.3, LateralState::default(), 8.0, 1.5),
+            (0.1, CAT_VEHICLE_DYNAMICS.steady_state(12.0, 0.1), 12.0, 0.0),
+        ] {
+            let mut s = start(Mode::Dynamic, steer, v0);
+            s.lateral = lateral0;
+            let speed = |k: u32| v0 + accel * 0.02 * k as f32;
+            let mut out = [PredictedPoint::default(); 10];
+            let mut k = 0;
+            rollout(
+                &DEFAULT_HORIZON,
+                &CAT_VEHICLE,
+                &CAT_VEHICLE_DYNAMICS,
+                &s,
+                |_| {
+                    k += 1;
+                    speed(k)
+                },
+                &mut out,
+            );
+            // Reference: the same lateral model, the pose advanced every step.
+            let stepper = CAT_VEHICLE_DYNAMICS.stepper(steer, 0.02);
+            let (mut pose, mut lat) = (s.pose, s.lateral);
+            for k in 1..=100u32 {
+                let v = speed(k);
+                stepper.step(&mut lat, v);
+                pose.advance(v, lat.vy_mps, lat.yaw_rate_rps * 0.02, 0.02);
+                if k % 10 == 0 {
+                    let p = out[(k / 10 - 1) as usize];
+                    let err = ((p.x_m - pose.x_m).powi(2) + (p.y_m - pose.y_m).powi(2)).sqrt();
+                    assert!(
+                        err < 0.005,
+                        "steer {steer} k {k}: {err} m, {p:?} vs {pose:?}"
+                    );
+                    let dh = crate::math::wrap_pi(p.heading_rad - pose.heading_rad).abs();
+                    assert!(dh < 1e-4, "steer {steer} k {k}: {dh} rad");
+                }
+            }
+        }
     }
 
     #[test]
