@@ -260,6 +260,10 @@ pub fn identify_speed(
     })
 }
 
+/// Speed-up factors of the published eq 7 poles used as extra starts of the dx/dt fit
+/// (`s -> s / k`: denominator `s^2 + k a_1 s + k^2 a_2`).
+pub const DX_DT_START_TIME_SCALES: [f64; 3] = [1.0, 2.0, 4.0];
+
 /// Identifies the eq 7 MISO dx/dt model (inputs `[v_m, x, y, phi]`, proper 2nd-order blocks,
 /// no delay), started from the common poles of a MISO ARX model, or `None` with the reason
 /// when an input is not excited.
@@ -295,6 +299,13 @@ pub fn identify_dx_dt(
         proper: true,
         delay_samples: 0,
     }; 4];
+    // Starts: the common ARX poles (when they map to s) and the published eq 7 poles at their
+    // own time scale and 2x, 4x faster. The cost surface has several nearly equal minima (the
+    // steering and y blocks are weakly determined: one minute of training data each) and a
+    // single start lands in whichever basin its path leads to (measured on the paper-sized set:
+    // the eq 7 start alone ends 0.2 % above the best training cost with 86.8 % validation fit,
+    // the 2x start at the best cost with 90.5 %). Each start is run to convergence and the
+    // lowest training cost wins.
     let mut starts: Vec<Vec<Vec<f64>>> = Vec::new();
     if let Some(d) = arx
         .as_ref()
@@ -303,14 +314,12 @@ pub fn identify_dx_dt(
     {
         starts.push(vec![d; 4]);
     }
-    // Without usable ARX poles: the published eq 7 poles.
-    if starts.is_empty() {
-        starts.push(
-            catmodel::model::paper::EQ7_DX_DT
-                .iter()
-                .map(|tf| tf.to_monic().denominator()[1..].to_vec())
-                .collect(),
-        );
+    let eq7: Vec<Vec<f64>> = catmodel::model::paper::EQ7_DX_DT
+        .iter()
+        .map(|tf| tf.to_monic().denominator()[1..].to_vec())
+        .collect();
+    for k in DX_DT_START_TIME_SCALES {
+        starts.push(eq7.iter().map(|d| vec![d[0] * k, d[1] * k * k]).collect());
     }
     let mut best: Option<oe::OeFit> = None;
     for s in &starts {

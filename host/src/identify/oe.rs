@@ -105,7 +105,13 @@ fn regressors(
                 block_cols[i].extend(xs.iter().map(|x| w * x[i]));
             }
             if spec.proper {
-                block_cols[spec.order].extend(delayed(u, spec.delay_samples).map(|v| w * v));
+                // s^n / D(s) u = u - sum_i a_i s^(n-1-i) / D(s) u.
+                block_cols[spec.order].extend(delayed(u, spec.delay_samples).zip(&xs).map(
+                    |(v, x)| {
+                        let lower: f64 = den.iter().zip(x).map(|(a, xi)| a * xi).sum();
+                        w * (v - lower)
+                    },
+                ));
             }
         }
         cols.extend(block_cols);
@@ -234,9 +240,7 @@ fn to_tfs(
             0.0
         };
         let mut num = vec![d];
-        for i in 0..spec.order {
-            num.push(c[i] + d * den[i]);
-        }
+        num.extend_from_slice(c);
         let mut full = vec![1.0];
         full.extend_from_slice(den);
         out.push(
