@@ -172,8 +172,8 @@ impl LocalFrame {
             return Err(GeodesyError::BeyondValidityRadius);
         }
         // Exact conversions: |d| <= 2^24.
-        let dlat = dlat_i as f32;
-        let dlon = dlon_i as f32;
+        let dlat = crate::math::i64_to_f32(dlat_i);
+        let dlon = crate::math::i64_to_f32(dlon_i);
         let east_m = dlon * (self.east_per_dlon + self.east_per_dlat_dlon * dlat);
         let north_m = dlat * (self.north_per_dlat + self.north_per_dlat2 * dlat)
             + self.north_per_dlon2 * dlon * dlon;

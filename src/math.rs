@@ -180,8 +180,51 @@ pub fn wrap_pi(x: f32) -> f32 {
     }
 }
 
+/// `x as f32`, the same rounding of the same value, but through `u32` where it fits: the
+/// Cortex-M4 converts 32-bit integers with one VCVT, 64-bit ones with a soft-float call.
+#[inline(always)]
+pub fn u64_to_f32(x: u64) -> f32 {
+    match u32::try_from(x) {
+        Ok(small) => small as f32,
+        Err(_) => x as f32,
+    }
+}
+
+/// `x as f32` through `i32` where it fits (see [`u64_to_f32`]).
+#[inline(always)]
+pub fn i64_to_f32(x: i64) -> f32 {
+    match i32::try_from(x) {
+        Ok(small) => small as f32,
+        Err(_) => x as f32,
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn integer_to_f32_through_32_bits_rounds_like_the_64_bit_cast() {
+        let mut edges: Vec<i64> = vec![0, 1, -1, i64::MAX, i64::MIN];
+        for shift in 0..63 {
+            for delta in -3i64..=3 {
+                edges.push((1i64 << shift).wrapping_add(delta));
+                edges.push((1i64 << shift).wrapping_neg().wrapping_add(delta));
+            }
+        }
+        // And a pseudo-random sweep (xorshift).
+        let mut r = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..200_000 {
+            r ^= r << 13;
+            r ^= r >> 7;
+            r ^= r << 17;
+            edges.push(r as i64 >> (r % 40));
+        }
+        for x in edges {
+            assert_eq!(super::i64_to_f32(x).to_bits(), (x as f32).to_bits(), "{x}");
+            let u = x as u64;
+            assert_eq!(super::u64_to_f32(u).to_bits(), (u as f32).to_bits(), "{u}");
+        }
+    }
+
     use super::*;
 
     #[test]

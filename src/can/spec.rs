@@ -179,7 +179,7 @@ impl SignalSpec {
 
     /// Physical value of a raw value (f32: exact for raw values up to 2^24).
     pub fn to_physical(&self, raw: i64) -> f32 {
-        let physical = raw as f32 * self.scale + self.offset;
+        let physical = crate::math::i64_to_f32(raw) * self.scale + self.offset;
         if raw.unsigned_abs() >= EXACT_BELOW {
             return self.exact_physical(raw, physical);
         }
@@ -213,7 +213,13 @@ impl SignalSpec {
         let raw = libm::roundf((physical - self.offset) / self.scale);
         // NaN fails both comparisons; limits of float signals are <= 2^24, exact in f32.
         if raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32 {
-            Some(raw as i64)
+            // `raw` is integer-valued: below 2^31 in magnitude `as i32` is exact, and one VCVT
+            // on the Cortex-M4 where `as i64` is a soft-float library call.
+            Some(if (-2_147_483_648.0..2_147_483_648.0).contains(&raw) {
+                i64::from(raw as i32)
+            } else {
+                raw as i64
+            })
         } else {
             None
         }

@@ -291,7 +291,28 @@ impl<T: Copy> Latest<T> {
 fn age_10ms(now_us: u64, t_us: Option<u64>) -> u8 {
     match t_us {
         None => 255,
-        Some(t) => (now_us.saturating_sub(t) / 10_000).min(254) as u8,
+        // Note: in u32 below 2.54 s (one UDIV instead of a 64-bit division call); the same
+        // value as `(age / 10_000).min(254)`.
+        Some(t) => match u32::try_from(now_us.saturating_sub(t)) {
+            Ok(age) if age < 2_540_000 => (age / 10_000) as u8,
+            _ => 254,
+        },
+    }
+}
+
+#[cfg(test)]
+mod age_tests {
+    #[test]
+    fn age_in_u32_equals_the_u64_formula() {
+        let reference = |now: u64, t: u64| (now.saturating_sub(t) / 10_000).min(254) as u8;
+        for d in (0..3_000_000u64)
+            .step_by(7)
+            .chain([u64::MAX, 1 << 32, (1 << 32) + 5])
+        {
+            assert_eq!(super::age_10ms(d, Some(0)), reference(d, 0), "{d}");
+        }
+        assert_eq!(super::age_10ms(5, Some(10)), 0);
+        assert_eq!(super::age_10ms(5, None), 255);
     }
 }
 
@@ -403,7 +424,7 @@ impl Node {
         let now = tick.now_us;
         let dt_s = match self.last_tick_us {
             // Missed ticks (overruns) are propagated over the real elapsed time, at most 0.1 s.
-            Some(prev) if now > prev => (now - prev).min(100_000) as f32 * 1e-6,
+            Some(prev) if now > prev => math::u64_to_f32((now - prev).min(100_000)) * 1e-6,
             _ => SAMPLE_PERIOD_S,
         };
         self.last_tick_us = Some(now);
@@ -473,7 +494,7 @@ impl Node {
         let moving = speed_mps >= cfg.estimator.course_min_speed_mps;
         match self.cog {
             Some((cog, t)) if moving && now.saturating_sub(t) <= to.gnss_us => {
-                let age_s = now.saturating_sub(t) as f32 * 1e-6;
+                let age_s = math::u64_to_f32(now.saturating_sub(t)) * 1e-6;
                 self.estimator.correct_heading(
                     &cfg.estimator,
                     cog,
@@ -775,12 +796,13 @@ impl Node {
             }
         }
         self.gnss_rejects_in_row = 0;
-        let age_s = now_us.saturating_sub(t_us) as f32 * 1e-6;
+        let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
         // The lowpass assumes one fix per period. Fixes missing since the last accepted one
         // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
         // the antenna at those instants, oldest first; no more than the filters remember.
         if let Some(prev) = self.gnss_t_us {
-            let gap_periods = t_us.saturating_sub(prev) as f32 * 1e-6 / cfg.gnss_period_s;
+            let gap_periods =
+                math::u64_to_f32(t_us.saturating_sub(prev)) * 1e-6 / cfg.gnss_period_s;
             let missing = ((gap_periods + 0.5) as u32)
                 .saturating_sub(1)
                 .min(estimator::GAP_FILL_MAX_FIXES);
