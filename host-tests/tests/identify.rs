@@ -8,6 +8,7 @@ use catmodel_host::identify::preprocess::{preprocess_rows, Experiment, Preproces
 use catmodel_host::identify::{self, simulate, IdentifyOptions};
 use catmodel_host::logcsv::LogRow;
 use catmodel_host::model_file;
+use catmodel_host::sim::scenario::PAPER_SIZED_TRAINING;
 use catmodel_host::sim::{self, SimOptions};
 
 fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
@@ -136,24 +137,10 @@ fn simulator_bars() {
         id.model
     );
 
-    let mut set: Vec<Experiment> = [
-        "straight-2.5",
-        "straight-5",
-        "straight-7.5",
-        "straight-10",
-        "turn-left",
-        "turn-right",
-        "circle-left",
-        "circle-right",
-    ]
-    .iter()
-    .map(|n| sim_experiment(n, 1))
-    .collect();
-    set.extend(
-        ["straight-2.5", "straight-5", "straight-10"]
-            .iter()
-            .map(|n| sim_experiment(n, 2)),
-    );
+    let set: Vec<Experiment> = PAPER_SIZED_TRAINING
+        .iter()
+        .map(|&(n, seed)| sim_experiment(n, seed))
+        .collect();
     assert_eq!(set.len(), 11);
     let started = Instant::now();
     let id = identify::identify(set, validation, &base, &IdentifyOptions::default()).unwrap();

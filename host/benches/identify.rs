@@ -25,6 +25,7 @@ use catmodel_host::identify::preprocess::{preprocess_rows, Experiment, Preproces
 use catmodel_host::identify::{self, IdentifyOptions};
 use catmodel_host::logcsv::{self, LogRow};
 use catmodel_host::model_file::{self, VehicleSection};
+use catmodel_host::sim::scenario::PAPER_SIZED_TRAINING;
 use catmodel_host::sim::{self, SimOptions};
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 
@@ -51,24 +52,10 @@ fn drive(name: &str, seed: u64) -> Log {
 
 /// (training drives, validation drive), as in README "Identify, compare, discretize".
 fn paper_set() -> (Vec<Log>, Vec<Log>) {
-    let mut training: Vec<_> = [
-        "straight-2.5",
-        "straight-5",
-        "straight-7.5",
-        "straight-10",
-        "turn-left",
-        "turn-right",
-        "circle-left",
-        "circle-right",
-    ]
-    .iter()
-    .map(|n| drive(n, 1))
-    .collect();
-    training.extend(
-        ["straight-2.5", "straight-5", "straight-10"]
-            .iter()
-            .map(|n| drive(n, 2)),
-    );
+    let training = PAPER_SIZED_TRAINING
+        .iter()
+        .map(|&(n, seed)| drive(n, seed))
+        .collect();
     (training, vec![drive("validation", 3)])
 }
 

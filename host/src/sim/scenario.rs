@@ -49,6 +49,23 @@ pub struct Scenario {
     pub segments: Vec<Segment>,
 }
 
+/// The paper-sized training set (README "Identify, compare, discretize"): (scenario, seed) of
+/// the 11 one-minute drives, the 8 manoeuvres with seed 1 and three straight lines again with
+/// seed 2. The validation drive is `validation` with seed 3.
+pub const PAPER_SIZED_TRAINING: [(&str, u64); 11] = [
+    ("straight-2.5", 1),
+    ("straight-5", 1),
+    ("straight-7.5", 1),
+    ("straight-10", 1),
+    ("turn-left", 1),
+    ("turn-right", 1),
+    ("circle-left", 1),
+    ("circle-right", 1),
+    ("straight-2.5", 2),
+    ("straight-5", 2),
+    ("straight-10", 2),
+];
+
 /// Names of the built-in scenarios.
 pub const SCENARIO_NAMES: [&str; 11] = [
     "straight-2.5",
