@@ -26,7 +26,7 @@ use crate::can::codec::{
     decode_input, DecodeError, EncodeReport, HealthFlags, InputMessage, ModelMode, NodeStatus,
     Prediction, PredictionPoint, StateModel, StateMotion, StatePosition,
 };
-use crate::can::{CanFrame, TimedFrame};
+use crate::can::{freshness, CanFrame, TimedFrame};
 use crate::geodesy::LocalFrame;
 use crate::model::block::{MisoBlock, MisoBlockState, SsBlock, SsBlockState};
 use crate::model::dynamic::{DynamicParams, LateralState, CAT_VEHICLE_DYNAMICS};
@@ -284,35 +284,6 @@ impl<T: Copy> Latest<T> {
             Some(t) if now_us.saturating_sub(t) <= timeout_us => self.value,
             _ => None,
         }
-    }
-}
-
-/// Age in 10 ms units for the status page: 254 = saturated, 255 = never received.
-fn age_10ms(now_us: u64, t_us: Option<u64>) -> u8 {
-    match t_us {
-        None => 255,
-        // Note: in u32 below 2.54 s (one UDIV instead of a 64-bit division call); the same
-        // value as `(age / 10_000).min(254)`.
-        Some(t) => match u32::try_from(now_us.saturating_sub(t)) {
-            Ok(age) if age < 2_540_000 => (age / 10_000) as u8,
-            _ => 254,
-        },
-    }
-}
-
-#[cfg(test)]
-mod age_tests {
-    #[test]
-    fn age_in_u32_equals_the_u64_formula() {
-        let reference = |now: u64, t: u64| (now.saturating_sub(t) / 10_000).min(254) as u8;
-        for d in (0..3_000_000u64)
-            .step_by(7)
-            .chain([u64::MAX, 1 << 32, (1 << 32) + 5])
-        {
-            assert_eq!(super::age_10ms(d, Some(0)), reference(d, 0), "{d}");
-        }
-        assert_eq!(super::age_10ms(5, Some(10)), 0);
-        assert_eq!(super::age_10ms(5, None), 255);
     }
 }
 
@@ -643,10 +614,10 @@ impl Node {
         }
         let c = self.counters;
         let ages = [
-            age_10ms(now, self.steer_pct.t_us),
-            age_10ms(now, self.speed.t_us),
-            age_10ms(now, self.pedal.t_us),
-            age_10ms(now, self.gnss_t_us),
+            freshness::age_10ms(now, self.steer_pct.t_us),
+            freshness::age_10ms(now, self.speed.t_us),
+            freshness::age_10ms(now, self.pedal.t_us),
+            freshness::age_10ms(now, self.gnss_t_us),
         ];
         let status = match self.tick_count % STATUS_PAGES {
             0 => NodeStatus::Health {
