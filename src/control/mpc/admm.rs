@@ -1,0 +1,501 @@
+//! A time-varying linear-quadratic MPC solver: ADMM whose primal step is one Riccati sweep.
+//!
+//! Problem (one input, `NX` states, horizon `N`, at most `NR` constraint rows per stage):
+//! ```text
+//! minimise    sum_{k=1..N} ( 1/2 x_k' diag(qd_k) x_k + ql_k' x_k )
+//!           + sum_{k=0..N-1} ( 1/2 r u_k^2 + rl_k u_k )
+//!           + sum_{rows i} mu_i dist(g_i, [lo_i, hi_i])          (soft rows)
+//! subject to  x_{k+1} = A_k x_k + B_k u_k + c_k,   x_0 given
+//!             u_lo_k <= u_k <= u_hi_k                            (hard)
+//!             lo_i <= g_i <= hi_i for hard rows,  g_i = ci1 x_k[j1] + ci2 x_k[j2]
+//! ```
+//! Rows touch at most two states (all of the controller's rows do: a body point's lateral
+//! offset is `e_y + s e_psi`, the steering range is one state), which keeps each row at two
+//! multiply-adds per evaluation.
+//!
+//! Soft rows carry an exact (L1) penalty `mu dist(g, [lo, hi])`: with `mu` above the row's
+//! Lagrange multiplier the solution is that of the hard constraint whenever one exists
+//! (exact-penalty theorem), and when none exists the problem stays feasible and the solver
+//! still converges, to the least-violating plan: a body that is already outside its corridor
+//! steers back in instead of making the problem infeasible.
+//!
+//! ADMM (Boyd et al. 2011, sec. 3; the splitting of OSQP, Stellato et al. 2020, and of TinyMPC,
+//! Nguyen et al. 2024): every row gets a copy `z` and a scaled dual `w`. One iteration
+//! 1. minimises the cost plus `rho/2 ||g - z + w||^2` subject to the dynamics: an LQR problem
+//!    whose quadratic part is fixed during a solve, so its Riccati gains are computed once per
+//!    solve ([`Workspace::factor`], the "factorisation", `2 NX^3` multiply-adds per stage) and
+//!    each iteration only sweeps the affine terms backward and rolls the policy forward
+//!    (`2 NX^2` per stage);
+//! 2. sets `z` to the proximal point of the row's constraint (a clamp, or a clamp moved by at
+//!    most `mu / rho` for soft rows) at the over-relaxed value `alpha g + (1 - alpha) z`;
+//! 3. adds the residual to `w`.
+//!
+//! TinyMPC caches the infinite-horizon gains of one fixed model; here the model changes with
+//! speed and path curvature from stage to stage and tick to tick, so the finite-horizon
+//! recursion is recomputed every solve (its cost is in docs/mpc.md). The iteration count is
+//! capped by the caller: the work is bounded by construction.
+//!
+//! Only + - * / and comparisons on f32, in source order: bit-identical on the host and the
+//! Cortex-M4F.
+use nalgebra::{SMatrix, SVector};
+
+/// One constraint row on a stage's state: `g = coef[0] x[idx[0]] + coef[1] x[idx[1]]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Row {
+    /// The two states the row reads (indices below `NX`; an index beyond reads 0).
+    pub idx: [usize; 2],
+    /// Their coefficients.
+    pub coef: [f32; 2],
+    /// Lower bound (may be `-inf`).
+    pub lower: f32,
+    /// Upper bound (may be `+inf`).
+    pub upper: f32,
+    /// ADMM penalty of this row; scales with 1 / (row unit)^2.
+    pub rho: f32,
+    /// Exact-penalty weight `mu` (cost per unit of violation); `f32::INFINITY` = hard.
+    pub soft_weight: f32,
+    /// Inactive rows are skipped (no cost, no copy).
+    pub active: bool,
+}
+
+impl Row {
+    /// A row that does nothing.
+    pub const INACTIVE: Row = Row {
+        idx: [0, 0],
+        coef: [0.0, 0.0],
+        lower: f32::NEG_INFINITY,
+        upper: f32::INFINITY,
+        rho: 0.0,
+        soft_weight: f32::INFINITY,
+        active: false,
+    };
+
+    /// The row's value at `x`.
+    #[inline(always)]
+    pub fn eval<const NX: usize>(&self, x: &SVector<f32, NX>) -> f32 {
+        let [i, j] = self.idx;
+        let [ci, cj] = self.coef;
+        ci * x.get(i).copied().unwrap_or(0.0) + cj * x.get(j).copied().unwrap_or(0.0)
+    }
+
+    /// Proximal step of the row's constraint at `v`: the point `z` minimising
+    /// `penalty(z) + rho/2 (z - v)^2` (a clamp for a hard row; a clamp moved by at most
+    /// `mu / rho` for a soft one).
+    #[inline(always)]
+    fn prox(&self, v: f32) -> f32 {
+        let reach = if self.soft_weight == f32::INFINITY || self.rho <= 0.0 {
+            f32::INFINITY
+        } else {
+            self.soft_weight / self.rho
+        };
+        if v > self.upper {
+            self.upper.max(v - reach)
+        } else if v < self.lower {
+            self.lower.min(v + reach)
+        } else {
+            v
+        }
+    }
+
+    /// How far `g` lies outside the row's bounds (0 inside).
+    #[inline]
+    pub fn violation(&self, g: f32) -> f32 {
+        (g - self.upper).max(self.lower - g).max(0.0)
+    }
+}
+
+/// The problem data of one solve. Stage `k` of the arrays: dynamics and input of step
+/// `k -> k + 1`, and the state cost and rows of `x_{k+1}`.
+#[derive(Clone, Debug)]
+pub struct Problem<const NX: usize, const N: usize, const NR: usize> {
+    /// `A_k`.
+    pub a: [SMatrix<f32, NX, NX>; N],
+    /// `B_k`.
+    pub b: [SVector<f32, NX>; N],
+    /// `c_k` (affine term of the dynamics).
+    pub c: [SVector<f32, NX>; N],
+    /// Diagonal of the state cost of `x_{k+1}` (>= 0).
+    pub q_diag: [SVector<f32, NX>; N],
+    /// Linear state cost of `x_{k+1}`.
+    pub q_lin: [SVector<f32, NX>; N],
+    /// Input cost `r` (> 0).
+    pub r: f32,
+    /// Linear input cost of `u_k`.
+    pub r_lin: [f32; N],
+    /// Input bounds of `u_k` (hard).
+    pub u_lower: [f32; N],
+    /// Input bounds of `u_k` (hard).
+    pub u_upper: [f32; N],
+    /// ADMM penalty of the input bounds.
+    pub u_rho: f32,
+    /// Rows on `x_{k+1}`.
+    pub rows: [[Row; NR]; N],
+}
+
+impl<const NX: usize, const N: usize, const NR: usize> Problem<NX, N, NR> {
+    /// A problem with zero dynamics and cost, no rows and unbounded inputs; the formulation
+    /// fills it in place every tick.
+    pub fn zeroed() -> Self {
+        Self {
+            a: [SMatrix::zeros(); N],
+            b: [SVector::zeros(); N],
+            c: [SVector::zeros(); N],
+            q_diag: [SVector::zeros(); N],
+            q_lin: [SVector::zeros(); N],
+            r: 1.0,
+            r_lin: [0.0; N],
+            u_lower: [f32::NEG_INFINITY; N],
+            u_upper: [f32::INFINITY; N],
+            u_rho: 1.0,
+            rows: [[Row::INACTIVE; NR]; N],
+        }
+    }
+}
+
+/// Why a solve could not produce a plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SolveError {
+    /// A Riccati pivot `r + B' P B` was not positive and finite (bad problem data).
+    BadPivot,
+    /// An iterate became non-finite (bad problem data).
+    NonFinite,
+}
+
+/// Solver settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AdmmSettings {
+    /// Iterations at most per solve (the bound of the worst case).
+    pub max_iterations: u16,
+    /// Stop early once the primal residual (max |g - z|, row units) is below this ...
+    pub primal_tolerance: f32,
+    /// ... and the dual residual (max rho |z - z_prev|) below this.
+    pub dual_tolerance: f32,
+    /// Over-relaxation alpha in (0, 2); 1.6 is the usual choice (Boyd et al. sec. 3.4.3).
+    pub relaxation: f32,
+}
+
+/// What a solve did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SolveReport {
+    /// Iterations run.
+    pub iterations: u16,
+    /// Max |g - z| over all rows and inputs after the last iteration.
+    pub primal_residual: f32,
+    /// Max rho |z - z_prev| over all rows and inputs in the last iteration.
+    pub dual_residual: f32,
+}
+
+/// Gains, iterates and duals: the solver's state, kept between solves for the warm start.
+#[derive(Clone, Debug)]
+pub struct Workspace<const NX: usize, const N: usize, const NR: usize> {
+    /// Feedback gains `u_k = -K_k x_k - d_k`.
+    k: [SVector<f32, NX>; N],
+    /// `1 / (r + rho_u + B' P B)` per stage.
+    inv_quu: [f32; N],
+    /// `P_{k+1} c_k` per stage.
+    pc: [SVector<f32, NX>; N],
+    /// Feedforward terms.
+    d: [f32; N],
+    /// Planned states `x_1 .. x_N`.
+    pub x: [SVector<f32, NX>; N],
+    /// Planned inputs `u_0 .. u_{N-1}`.
+    pub u: [f32; N],
+    /// Row copies.
+    pub z: [[f32; NR]; N],
+    /// Scaled row duals.
+    pub w: [[f32; NR]; N],
+    /// Input copies.
+    pub zu: [f32; N],
+    /// Scaled input duals.
+    pub wu: [f32; N],
+}
+
+impl<const NX: usize, const N: usize, const NR: usize> Default for Workspace<NX, N, NR> {
+    fn default() -> Self {
+        Self {
+            k: [SVector::zeros(); N],
+            inv_quu: [0.0; N],
+            pc: [SVector::zeros(); N],
+            d: [0.0; N],
+            x: [SVector::zeros(); N],
+            u: [0.0; N],
+            z: [[0.0; NR]; N],
+            w: [[0.0; NR]; N],
+            zu: [0.0; N],
+            wu: [0.0; N],
+        }
+    }
+}
+
+/// Adds `rho c c'` of each active row to `m` (the rows' share of the quadratic cost).
+#[inline(always)]
+fn add_rows_quadratic<const NX: usize, const NR: usize>(
+    m: &mut SMatrix<f32, NX, NX>,
+    rows: &[Row; NR],
+) {
+    for row in rows.iter().filter(|r| r.active) {
+        for (a, ca) in row.idx.iter().zip(row.coef) {
+            for (b, cb) in row.idx.iter().zip(row.coef) {
+                if let Some(v) = m.get_mut((*a, *b)) {
+                    *v += row.rho * ca * cb;
+                }
+            }
+        }
+    }
+}
+
+/// Linear state cost of a stage in the current iteration: `q_lin + sum rho c (w - z)`.
+#[inline(always)]
+fn stage_linear_cost<const NX: usize, const NR: usize>(
+    q_lin: &SVector<f32, NX>,
+    rows: &[Row; NR],
+    z: &[f32; NR],
+    w: &[f32; NR],
+) -> SVector<f32, NX> {
+    let mut q = *q_lin;
+    for ((row, z), w) in rows.iter().zip(z).zip(w) {
+        if row.active {
+            let s = row.rho * (w - z);
+            for (i, c) in row.idx.iter().zip(row.coef) {
+                if let Some(v) = q.get_mut(*i) {
+                    *v += c * s;
+                }
+            }
+        }
+    }
+    q
+}
+
+impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
+    /// The Riccati recursion of the iterations' LQR problem (fixed within a solve): gains
+    /// `K_k`, pivots and `P_{k+1} c_k`.
+    pub fn factor(&mut self, p: &Problem<NX, N, NR>) -> Result<(), SolveError> {
+        // P_N: terminal cost plus the rows' quadratic part.
+        let mut pm = SMatrix::<f32, NX, NX>::zeros();
+        if let (Some(qd), Some(rows)) = (p.q_diag.last(), p.rows.last()) {
+            pm = SMatrix::from_diagonal(qd);
+            add_rows_quadratic(&mut pm, rows);
+        }
+        let stages =
+            p.a.iter()
+                .zip(&p.b)
+                .zip(&p.c)
+                .zip(self.k.iter_mut().zip(self.inv_quu.iter_mut()))
+                .zip(self.pc.iter_mut())
+                .enumerate()
+                .rev();
+        for (k, ((((a, b), c), (gain, inv_quu)), pc)) in stages {
+            let pb = pm * b;
+            let quu = p.r + p.u_rho + b.dot(&pb);
+            if !(quu.is_finite() && quu > 0.0) {
+                return Err(SolveError::BadPivot);
+            }
+            let inv = 1.0 / quu;
+            let pa = pm * a;
+            // K = (B' P A) / quu, stored as a column.
+            *gain = pa.tr_mul(b) * inv;
+            *inv_quu = inv;
+            *pc = pm * c;
+            // P_k for the stage before (not needed for k = 0: x_0 is fixed).
+            if let Some(prev) = k.checked_sub(1) {
+                let mut next = a.tr_mul(&pa) - (*gain * gain.transpose()) * quu;
+                if let (Some(qd), Some(rows)) = (p.q_diag.get(prev), p.rows.get(prev)) {
+                    for (i, q) in qd.iter().enumerate() {
+                        if let Some(v) = next.get_mut((i, i)) {
+                            *v += q;
+                        }
+                    }
+                    add_rows_quadratic(&mut next, rows);
+                }
+                // Symmetrise: rounding would otherwise let P drift from symmetry.
+                pm = (next + next.transpose()) * 0.5;
+            }
+        }
+        Ok(())
+    }
+
+    /// Initialises the copies and duals from nothing: `z` = the rows at `x = 0` clamped, duals
+    /// 0. Use [`Workspace::shift`] instead to warm-start from the previous solve.
+    pub fn cold_start(&mut self, p: &Problem<NX, N, NR>) {
+        for ((z, w), rows) in self.z.iter_mut().zip(self.w.iter_mut()).zip(&p.rows) {
+            for ((z, w), row) in z.iter_mut().zip(w.iter_mut()).zip(rows) {
+                *z = row.prox(0.0);
+                *w = 0.0;
+            }
+        }
+        for (((zu, wu), lo), hi) in self
+            .zu
+            .iter_mut()
+            .zip(self.wu.iter_mut())
+            .zip(&p.u_lower)
+            .zip(&p.u_upper)
+        {
+            *zu = 0.0f32.clamp(lo.min(*hi), *hi);
+            *wu = 0.0;
+        }
+    }
+
+    /// Warm start: moves every copy and dual `fraction` of a stage towards the future (the
+    /// time between two solves over the stage length), by linear interpolation; the last stage
+    /// keeps its value. `fraction` is clamped to [0, 1].
+    pub fn shift(&mut self, fraction: f32) {
+        let f = fraction.clamp(0.0, 1.0);
+        shift_rows(&mut self.z, f);
+        shift_rows(&mut self.w, f);
+        shift_values(&mut self.zu, f);
+        shift_values(&mut self.wu, f);
+        shift_values(&mut self.u, f);
+        let mut x = self.x;
+        for (i, xi) in x.iter_mut().enumerate() {
+            if let Some(next) = self.x.get(i + 1) {
+                *xi += (next - *xi) * f;
+            }
+        }
+        self.x = x;
+    }
+
+    /// Runs ADMM from the current copies and duals (after [`Workspace::factor`]) from `x0`.
+    pub fn iterate(
+        &mut self,
+        p: &Problem<NX, N, NR>,
+        x0: &SVector<f32, NX>,
+        settings: &AdmmSettings,
+    ) -> Result<SolveReport, SolveError> {
+        let alpha = settings.relaxation;
+        let mut report = SolveReport::default();
+        for _ in 0..settings.max_iterations {
+            self.backward(p);
+            let (primal, dual) = self.forward(p, x0, alpha);
+            report.iterations += 1;
+            report.primal_residual = primal;
+            report.dual_residual = dual;
+            if !(primal.is_finite() && dual.is_finite()) {
+                return Err(SolveError::NonFinite);
+            }
+            if primal <= settings.primal_tolerance && dual <= settings.dual_tolerance {
+                break;
+            }
+        }
+        Ok(report)
+    }
+
+    /// The affine part of the Riccati recursion for the current copies and duals.
+    #[inline(always)]
+    fn backward(&mut self, p: &Problem<NX, N, NR>) {
+        let mut p_next = SVector::<f32, NX>::zeros();
+        if let (Some(ql), Some(rows), Some(z), Some(w)) =
+            (p.q_lin.last(), p.rows.last(), self.z.last(), self.w.last())
+        {
+            p_next = stage_linear_cost(ql, rows, z, w);
+        }
+        let stages =
+            p.a.iter()
+                .zip(&p.b)
+                .zip(self.k.iter().zip(&self.inv_quu).zip(&self.pc))
+                .zip(p.r_lin.iter().zip(&self.zu).zip(&self.wu))
+                .zip(self.d.iter_mut())
+                .enumerate()
+                .rev();
+        for (k, ((((a, b), ((gain, inv_quu), pc)), ((r_lin, zu), wu)), d)) in stages {
+            let bvec = pc + p_next;
+            let qu = r_lin + p.u_rho * (wu - zu) + b.dot(&bvec);
+            *d = qu * inv_quu;
+            if let Some(prev) = k.checked_sub(1) {
+                if let (Some(ql), Some(rows), Some(z), Some(w)) = (
+                    p.q_lin.get(prev),
+                    p.rows.get(prev),
+                    self.z.get(prev),
+                    self.w.get(prev),
+                ) {
+                    p_next = stage_linear_cost(ql, rows, z, w) + a.tr_mul(&bvec) - gain * qu;
+                }
+            }
+        }
+    }
+
+    /// Rolls the policy forward from `x0` and updates copies and duals; returns the primal and
+    /// dual residuals.
+    #[inline(always)]
+    fn forward(&mut self, p: &Problem<NX, N, NR>, x0: &SVector<f32, NX>, alpha: f32) -> (f32, f32) {
+        let mut x = *x0;
+        let mut primal = 0.0f32;
+        let mut dual = 0.0f32;
+        let stages =
+            p.a.iter()
+                .zip(&p.b)
+                .zip(&p.c)
+                .zip(self.k.iter().zip(&self.d))
+                .zip(p.u_lower.iter().zip(&p.u_upper))
+                .zip(
+                    self.u
+                        .iter_mut()
+                        .zip(self.zu.iter_mut())
+                        .zip(self.wu.iter_mut()),
+                )
+                .zip(self.x.iter_mut())
+                .zip(p.rows.iter().zip(self.z.iter_mut()).zip(self.w.iter_mut()));
+        for (((((((a, b), c), (gain, d)), (lo, hi)), ((u, zu), wu)), xs), ((rows, z), w)) in stages
+        {
+            let uk = -gain.dot(&x) - d;
+            *u = uk;
+            // Input copy: the hard box.
+            let relaxed = alpha * uk + (1.0 - alpha) * *zu;
+            let zu_new = (relaxed + *wu).clamp(lo.min(*hi), *hi);
+            dual = dual.max(p.u_rho * (zu_new - *zu).abs());
+            *wu += relaxed - zu_new;
+            *zu = zu_new;
+            primal = primal.max((uk - zu_new).abs());
+            x = a * x + b * uk + c;
+            *xs = x;
+            for ((row, z), w) in rows.iter().zip(z.iter_mut()).zip(w.iter_mut()) {
+                if !row.active {
+                    continue;
+                }
+                let g = row.eval(&x);
+                let relaxed = alpha * g + (1.0 - alpha) * *z;
+                let z_new = row.prox(relaxed + *w);
+                dual = dual.max(row.rho * (z_new - *z).abs());
+                *w += relaxed - z_new;
+                *z = z_new;
+                primal = primal.max((g - z_new).abs());
+            }
+        }
+        (primal, dual)
+    }
+}
+
+/// Linear interpolation of each stage's values `f` of the way to the next stage's.
+fn shift_rows<const NR: usize, const N: usize>(v: &mut [[f32; NR]; N], f: f32) {
+    let old = *v;
+    for (i, cur) in v.iter_mut().enumerate() {
+        if let Some(next) = old.get(i + 1) {
+            for (c, n) in cur.iter_mut().zip(next) {
+                *c += (n - *c) * f;
+            }
+        }
+    }
+}
+
+/// [`shift_rows`] for one value per stage.
+fn shift_values<const N: usize>(v: &mut [f32; N], f: f32) {
+    let old = *v;
+    for (i, cur) in v.iter_mut().enumerate() {
+        if let Some(next) = old.get(i + 1) {
+            *cur += (next - *cur) * f;
+        }
+    }
+}
+
+/// Factors and iterates: one complete solve from the workspace's current copies and duals.
+pub fn solve<const NX: usize, const N: usize, const NR: usize>(
+    ws: &mut Workspace<NX, N, NR>,
+    p: &Problem<NX, N, NR>,
+    x0: &SVector<f32, NX>,
+    settings: &AdmmSettings,
+) -> Result<SolveReport, SolveError> {
+    ws.factor(p)?;
+    ws.iterate(p, x0, settings)
+}

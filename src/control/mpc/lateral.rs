@@ -1,0 +1,515 @@
+//! The lateral problem: error states along the reference, linearised per stage, discretised by
+//! the trapezoidal rule, with the body's corners in the corridor and the obstacles' half-spaces
+//! as constraint rows.
+//!
+//! State `x = [e_y, e_psi, v_y, r, delta]`: lateral offset of the rear axle from the reference
+//! (m, positive right), heading error (rad, positive = pointing right of the path), lateral
+//! speed at the centre of gravity and yaw rate (the dynamic model's states; held at 0 in the
+//! kinematic mode), and the centre-tyre steering angle (rad). Input: the steering rate (rad/s),
+//! so the actuator's rate limit is a bound on the input and the steering range a bound on a
+//! state. Continuous dynamics with the speed `v` and path curvature `kappa` of the stage
+//! (averages of its two ends), linearised about the previous plan's heading error `e0` and
+//! steering `d0`:
+//! ```text
+//! e_y'   = v (sin e0 + cos e0 (e_psi - e0)) + cos e0 (v_y - l_r r)    (rear-axle velocity)
+//! e_psi' = r - v kappa - v kappa^2 e_y                               (dynamic)
+//!        = v (c(d0) + c'(d0) (delta - d0)) - v kappa - v kappa^2 e_y   (kinematic, eq 8 + eq 2)
+//! v_y', r' = the linear-tyre single-track model (model::dynamic)      (dynamic; 0 kinematic)
+//! delta' = u
+//! ```
+//! with `c(d) = tan(d / (1 + K v^2)) / L` the kinematic curvature. `-v kappa^2 e_y` is the
+//! first-order term of the Frenet frame's `v kappa / (1 - kappa e_y)`.
+//!
+//! Discretisation (trapezoidal / Tustin, step h): `A = M^-1 (I + h/2 F)`, `B = M^-1 h G`,
+//! `c = M^-1 h e` with `M = I - h/2 F`. A-stable (the tyre modes are fast at low speed: about
+//! -(Cf + Cr) / (m v) = -14 1/s at 7 m/s), exact for the integrators, exact in steady state.
+//! `M` is solved without pivoting: for these models every pivot is at least 1 (the proof is in
+//! docs/mpc.md), and a pivot below 0.5 is reported as an error, never divided by.
+use nalgebra::{SMatrix, SVector};
+
+use super::admm::{Problem, Row};
+use super::{
+    BodyGeometry, ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS,
+    STEP_S,
+};
+use crate::math;
+use crate::model::dynamic::DynamicParams;
+use crate::model::hybrid::Mode;
+use crate::vehicle::VehicleParams;
+
+/// State indices.
+pub const EY: usize = 0;
+/// Heading error.
+pub const EPSI: usize = 1;
+/// Lateral speed at the CG.
+pub const VY: usize = 2;
+/// Yaw rate.
+pub const R: usize = 3;
+/// Steering angle.
+pub const DELTA: usize = 4;
+
+/// Row slots per stage: the steering range, the four corners, one per obstacle.
+pub const ROW_STEER: usize = 0;
+/// Front-left corner (left bound of the corridor at the front sample).
+pub const ROW_FRONT_LEFT: usize = 1;
+/// Front-right corner.
+pub const ROW_FRONT_RIGHT: usize = 2;
+/// Rear-left corner.
+pub const ROW_REAR_LEFT: usize = 3;
+/// Rear-right corner.
+pub const ROW_REAR_RIGHT: usize = 4;
+/// First obstacle row (obstacle `i` is `ROW_OBSTACLE + i`).
+pub const ROW_OBSTACLE: usize = 5;
+
+/// Smallest pivot accepted in the trapezoidal solve (every pivot is >= 1 for these models).
+const MIN_PIVOT: f32 = 0.5;
+
+/// The linearisation point of every stage (0..=STEPS): the previous plan, shifted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Linearisation {
+    /// Heading error, rad.
+    pub e_psi: [f32; STEPS + 1],
+    /// Steering angle, rad.
+    pub delta: [f32; STEPS + 1],
+}
+
+/// Everything the builder needs besides the reference.
+pub struct LateralSetup<'a> {
+    /// Kinematic geometry and steering conversion.
+    pub vehicle: &'a VehicleParams,
+    /// Dynamic model parameters.
+    pub dynamics: &'a DynamicParams,
+    /// Body for the corridor and obstacle rows.
+    pub body: &'a BodyGeometry,
+    /// Cost weights and ADMM penalties.
+    pub weights: &'a Weights,
+    /// Lateral model of this solve.
+    pub mode: Mode,
+    /// Planned speed at each stage, m/s.
+    pub speeds_mps: &'a [f32; STEPS + 1],
+    /// Steering range, rad (symmetric).
+    pub max_steer_rad: f32,
+    /// Steering rate limit the plan may use, rad/s.
+    pub max_steer_rate_rad_per_s: f32,
+}
+
+/// Why the problem could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BuildError {
+    /// A pivot of the trapezoidal solve was below the bound (non-finite data).
+    Discretisation,
+}
+
+/// Feedforward steering for curvature `kappa` at speed `v`: the kinematic model's
+/// `(1 + K v^2) atan(L kappa)` (its steady state; the dynamic model's is the same to first
+/// order with its own understeer gradient).
+pub fn feedforward_steer_rad(l_m: f32, understeer: f32, v_mps: f32, kappa_per_m: f32) -> f32 {
+    (1.0 + understeer * v_mps * v_mps) * math::atan(l_m * kappa_per_m)
+}
+
+/// Continuous-time `F`, `e` of one stage (`G` is the unit vector of `delta`).
+fn continuous(
+    setup: &LateralSetup,
+    v: f32,
+    kappa: f32,
+    e0: f32,
+    d0: f32,
+) -> (SMatrix<f32, NX, NX>, SVector<f32, NX>) {
+    let (s0, c0) = math::sin_cos(e0);
+    let mut f = SMatrix::<f32, NX, NX>::zeros();
+    let mut e = SVector::<f32, NX>::zeros();
+    let set = |m: &mut SMatrix<f32, NX, NX>, i: usize, j: usize, v: f32| {
+        if let Some(x) = m.get_mut((i, j)) {
+            *x = v;
+        }
+    };
+    let sete = |m: &mut SVector<f32, NX>, i: usize, v: f32| {
+        if let Some(x) = m.get_mut(i) {
+            *x = v;
+        }
+    };
+    set(&mut f, EY, EPSI, v * c0);
+    sete(&mut e, EY, v * (s0 - c0 * e0));
+    set(&mut f, EPSI, EY, -v * kappa * kappa);
+    match setup.mode {
+        Mode::Dynamic => {
+            let p = setup.dynamics;
+            // The 1/v terms need a speed; below the model's floor use the floor (the hybrid
+            // switch keeps the dynamic mode above it; a plan that brakes may dip below).
+            let vx = v.max(p.min_speed_mps).max(0.1);
+            let cf = p.cornering_front_n_per_rad;
+            let cr = p.cornering_rear_n_per_rad;
+            let (lf, lr) = (p.cg_to_front_m, p.cg_to_rear_m);
+            let m = p.mass_kg;
+            let iz = p.yaw_inertia_kg_m2;
+            set(&mut f, EY, VY, c0);
+            set(&mut f, EY, R, -lr * c0);
+            set(&mut f, EPSI, R, 1.0);
+            sete(&mut e, EPSI, -v * kappa);
+            set(&mut f, VY, VY, -(cf + cr) / (m * vx));
+            set(&mut f, VY, R, -vx - (cf * lf - cr * lr) / (m * vx));
+            set(&mut f, VY, DELTA, cf / m);
+            set(&mut f, R, VY, -(cf * lf - cr * lr) / (iz * vx));
+            set(&mut f, R, R, -(cf * lf * lf + cr * lr * lr) / (iz * vx));
+            set(&mut f, R, DELTA, cf * lf / iz);
+        }
+        Mode::Kinematic => {
+            let veh = setup.vehicle;
+            let scale = 1.0 / (1.0 + veh.understeer_s2_per_m2 * v * v);
+            let t = math::tan(d0 * scale);
+            let c = t / veh.wheelbase_m;
+            let dc = scale * (1.0 + t * t) / veh.wheelbase_m;
+            set(&mut f, EPSI, DELTA, v * dc);
+            sete(&mut e, EPSI, v * (c - dc * d0) - v * kappa);
+        }
+    }
+    (f, e)
+}
+
+/// Trapezoidal discretisation of `x' = F x + G u + e` over `h`, with `G` = unit vector of
+/// `delta`: returns `(A, B, c)`.
+#[allow(clippy::type_complexity)]
+pub fn tustin(
+    f: &SMatrix<f32, NX, NX>,
+    e: &SVector<f32, NX>,
+    h: f32,
+) -> Option<(SMatrix<f32, NX, NX>, SVector<f32, NX>, SVector<f32, NX>)> {
+    let half = 0.5 * h;
+    let mut m = SMatrix::<f32, NX, NX>::identity() - f * half;
+    // Right-hand sides: [I + h/2 F | h G | h e].
+    let mut rhs = SMatrix::<f32, NX, { NX + 2 }>::zeros();
+    let plus = SMatrix::<f32, NX, NX>::identity() + f * half;
+    rhs.fixed_view_mut::<NX, NX>(0, 0).copy_from(&plus);
+    if let Some(g) = rhs.get_mut((DELTA, NX)) {
+        *g = h;
+    }
+    rhs.fixed_view_mut::<NX, 1>(0, NX + 1).copy_from(&(e * h));
+    // Forward elimination without pivoting (every pivot >= 1 here; see the module doc).
+    for p in 0..NX {
+        let piv = m.get((p, p)).copied().unwrap_or(0.0);
+        if !(piv.is_finite() && piv >= MIN_PIVOT) {
+            return None;
+        }
+        let inv = 1.0 / piv;
+        for i in p + 1..NX {
+            let factor = m.get((i, p)).copied().unwrap_or(0.0) * inv;
+            if factor == 0.0 {
+                continue;
+            }
+            for j in p..NX {
+                let sub = factor * m.get((p, j)).copied().unwrap_or(0.0);
+                if let Some(x) = m.get_mut((i, j)) {
+                    *x -= sub;
+                }
+            }
+            for j in 0..NX + 2 {
+                let sub = factor * rhs.get((p, j)).copied().unwrap_or(0.0);
+                if let Some(x) = rhs.get_mut((i, j)) {
+                    *x -= sub;
+                }
+            }
+        }
+    }
+    // Back substitution.
+    for p in (0..NX).rev() {
+        let inv = 1.0 / m.get((p, p)).copied().unwrap_or(1.0);
+        for j in 0..NX + 2 {
+            let mut s = rhs.get((p, j)).copied().unwrap_or(0.0);
+            for k in p + 1..NX {
+                s -=
+                    m.get((p, k)).copied().unwrap_or(0.0) * rhs.get((k, j)).copied().unwrap_or(0.0);
+            }
+            if let Some(x) = rhs.get_mut((p, j)) {
+                *x = s * inv;
+            }
+        }
+    }
+    let a = rhs.fixed_view::<NX, NX>(0, 0).into_owned();
+    let b = rhs.fixed_view::<NX, 1>(0, NX).into_owned();
+    let c = rhs.fixed_view::<NX, 1>(0, NX + 1).into_owned();
+    if a.iter()
+        .chain(b.iter())
+        .chain(c.iter())
+        .all(|v| v.is_finite())
+    {
+        Some((a, b, c))
+    } else {
+        None
+    }
+}
+
+/// A point of the body in the body frame: `ahead_m` ahead of the rear axle, `right_m` to the
+/// right of the centre line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyPoint {
+    /// Ahead of the rear axle, m.
+    pub ahead_m: f32,
+    /// Right of the centre line, m.
+    pub right_m: f32,
+}
+
+/// The lateral offset of a body point from a sample of the path, linearised in `(e_y, e_psi)`
+/// about `e_psi = e0`: `offset ~ a e_y + b e_psi + k`. The body pose is the reference pose
+/// `at` moved `e_y` to its right and turned by `e_psi`; the offset is measured along the
+/// right normal of `sample` (exact geometry at the linearisation point, so a sample further
+/// along a curved path is handled without a small-angle assumption between the two).
+pub fn body_offset(
+    at: &Sample,
+    sample: &Sample,
+    point: BodyPoint,
+    sin_e0: f32,
+    cos_e0: f32,
+    e0: f32,
+) -> (f32, f32, f32) {
+    let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
+    let (ss, cs) = (sample.pose.sin_heading, sample.pose.cos_heading);
+    // Right normal of the sample: (cos, -sin); of the reference: likewise.
+    let n_dot = cr * cs + sr * ss;
+    // Body heading theta = psi_r + e0: t = (sin, cos), n = (cos, -sin).
+    let st = sr * cos_e0 + cr * sin_e0;
+    let ct = cr * cos_e0 - sr * sin_e0;
+    let (s, l) = (point.ahead_m, point.right_m);
+    // Body-frame vector in the world: s t + l n.
+    let wx = s * st + l * ct;
+    let wy = s * ct - l * st;
+    // Its derivative in theta: s n - l t.
+    let dx = s * ct - l * st;
+    let dy = -s * st - l * ct;
+    let proj = |x: f32, y: f32| x * cs - y * ss;
+    let base = proj(at.pose.x_m - sample.pose.x_m, at.pose.y_m - sample.pose.y_m);
+    let b = proj(dx, dy);
+    let k = base + proj(wx, wy) - b * e0;
+    (n_dot, b, k)
+}
+
+/// A corner row: `lower <= offset` (left corner) or `offset <= upper` (right corner).
+fn corner_row(
+    at: &Sample,
+    sample: &Sample,
+    point: BodyPoint,
+    lin: (f32, f32, f32),
+    w: &Weights,
+) -> Row {
+    let (s0, c0, e0) = lin;
+    let (a, b, k) = body_offset(at, sample, point, s0, c0, e0);
+    let (lower, upper) = if point.right_m < 0.0 {
+        (-sample.left_m - k, f32::INFINITY)
+    } else {
+        (f32::NEG_INFINITY, sample.right_m - k)
+    };
+    Row {
+        idx: [EY, EPSI],
+        coef: [a, b],
+        lower,
+        upper,
+        rho: w.rho_corridor,
+        soft_weight: w.corridor_weight_per_m,
+        active: lower.is_finite() || upper.is_finite(),
+    }
+}
+
+/// One obstacle as the rows see it (inflated radius).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InflatedObstacle {
+    /// Centre, east, m.
+    pub x_m: f32,
+    /// Centre, north, m.
+    pub y_m: f32,
+    /// Radius plus uncertainty plus margin, m.
+    pub radius_m: f32,
+}
+
+/// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
+/// facing it stays beyond its inflated circle. `None` when the obstacle is ahead of the front
+/// or behind the rear by more than its radius.
+pub fn obstacle_row(
+    at: &Sample,
+    obstacle: &InflatedObstacle,
+    side: ObstacleSide,
+    body: &BodyGeometry,
+    lin: (f32, f32, f32),
+    w: &Weights,
+) -> Option<Row> {
+    let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
+    let (dx, dy) = (obstacle.x_m - at.pose.x_m, obstacle.y_m - at.pose.y_m);
+    let along = dx * sr + dy * cr;
+    let lateral = dx * cr - dy * sr;
+    let rear = -body.rear_overhang_m;
+    let front = body.length_m - body.rear_overhang_m;
+    let r = obstacle.radius_m;
+    if !(along > rear - r && along < front + r) {
+        return None;
+    }
+    // Nearest point of the side line, and how far the centre lies beyond the body's end:
+    // there the circle only reaches the side line within its half chord.
+    let ahead = along.clamp(rear, front);
+    let beyond = along - ahead;
+    let half_chord = math::sqrt((r * r - beyond * beyond).max(0.0));
+    let half_width = 0.5 * body.width_m;
+    let (s0, c0, e0) = lin;
+    let point = BodyPoint {
+        ahead_m: ahead,
+        right_m: match side {
+            // Passing on the left: the obstacle is on the body's right.
+            ObstacleSide::Left => half_width,
+            ObstacleSide::Right => -half_width,
+        },
+    };
+    let (a, b, k) = body_offset(at, at, point, s0, c0, e0);
+    let (lower, upper) = match side {
+        ObstacleSide::Left => (f32::NEG_INFINITY, lateral - half_chord - k),
+        ObstacleSide::Right => (lateral + half_chord - k, f32::INFINITY),
+    };
+    Some(Row {
+        idx: [EY, EPSI],
+        coef: [a, b],
+        lower,
+        upper,
+        rho: w.rho_obstacle,
+        soft_weight: w.obstacle_weight_per_m,
+        active: true,
+    })
+}
+
+/// Fills `problem` for this solve. `obstacles[i]` with its chosen side (or `None`).
+pub fn build(
+    problem: &mut Problem<NX, STEPS, ROWS>,
+    setup: &LateralSetup,
+    reference: &[ReferencePoint; STEPS + 1],
+    lin: &Linearisation,
+    obstacles: &[Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES],
+) -> Result<(), BuildError> {
+    let w = setup.weights;
+    let body = setup.body;
+    let understeer = match setup.mode {
+        Mode::Kinematic => setup.vehicle.understeer_s2_per_m2,
+        Mode::Dynamic => setup.dynamics.understeer_s2_per_m2(),
+    };
+    let front = body.length_m - body.rear_overhang_m;
+    let rear = -body.rear_overhang_m;
+    let half_width = 0.5 * body.width_m;
+    let corners = [
+        (
+            ROW_FRONT_LEFT,
+            BodyPoint {
+                ahead_m: front,
+                right_m: -half_width,
+            },
+            true,
+        ),
+        (
+            ROW_FRONT_RIGHT,
+            BodyPoint {
+                ahead_m: front,
+                right_m: half_width,
+            },
+            true,
+        ),
+        (
+            ROW_REAR_LEFT,
+            BodyPoint {
+                ahead_m: rear,
+                right_m: -half_width,
+            },
+            false,
+        ),
+        (
+            ROW_REAR_RIGHT,
+            BodyPoint {
+                ahead_m: rear,
+                right_m: half_width,
+            },
+            false,
+        ),
+    ];
+    problem.r = w.steer_rate;
+    problem.u_rho = w.rho_steer_rate;
+    let stages = problem
+        .a
+        .iter_mut()
+        .zip(problem.b.iter_mut())
+        .zip(problem.c.iter_mut())
+        .zip(problem.q_diag.iter_mut().zip(problem.q_lin.iter_mut()))
+        .zip(problem.r_lin.iter_mut())
+        .zip(problem.u_lower.iter_mut().zip(problem.u_upper.iter_mut()))
+        .zip(problem.rows.iter_mut())
+        .enumerate();
+    for (k, ((((((a, b), c), (qd, ql)), rl), (ulo, uhi)), rows)) in stages {
+        let (Some(r0), Some(r1)) = (reference.get(k), reference.get(k + 1)) else {
+            continue;
+        };
+        let v0 = setup.speeds_mps.get(k).copied().unwrap_or(0.0);
+        let v1 = setup.speeds_mps.get(k + 1).copied().unwrap_or(v0);
+        let e_a = lin.e_psi.get(k).copied().unwrap_or(0.0);
+        let e_b = lin.e_psi.get(k + 1).copied().unwrap_or(e_a);
+        let d_a = lin.delta.get(k).copied().unwrap_or(0.0);
+        let d_b = lin.delta.get(k + 1).copied().unwrap_or(d_a);
+        let v = 0.5 * (v0 + v1);
+        let kappa = 0.5 * (r0.curvature_per_m + r1.curvature_per_m);
+        let (f, e) = continuous(setup, v, kappa, 0.5 * (e_a + e_b), 0.5 * (d_a + d_b));
+        let (ad, bd, cd) = tustin(&f, &e, STEP_S).ok_or(BuildError::Discretisation)?;
+        *a = ad;
+        *b = bd;
+        *c = cd;
+        // Cost of x_{k+1}: offsets and heading error to zero, steering near the feedforward.
+        let terminal = if k + 1 == STEPS {
+            w.terminal_factor
+        } else {
+            1.0
+        };
+        let ff = feedforward_steer_rad(
+            setup.vehicle.wheelbase_m,
+            understeer,
+            v1,
+            r1.curvature_per_m,
+        );
+        *qd = SVector::<f32, NX>::from([
+            w.lateral_per_m2,
+            w.heading_per_rad2,
+            w.lateral_speed_per_mps2,
+            w.yaw_rate_per_rps2,
+            w.steer_per_rad2,
+        ]) * terminal;
+        *ql = SVector::<f32, NX>::zeros();
+        if let Some(x) = ql.get_mut(DELTA) {
+            *x = -w.steer_per_rad2 * terminal * ff;
+        }
+        *rl = 0.0;
+        *ulo = -setup.max_steer_rate_rad_per_s;
+        *uhi = setup.max_steer_rate_rad_per_s;
+        // Rows of x_{k+1}.
+        let (s0, c0) = math::sin_cos(e_b);
+        let lin_b = (s0, c0, e_b);
+        for row in rows.iter_mut() {
+            *row = Row::INACTIVE;
+        }
+        if let Some(row) = rows.get_mut(ROW_STEER) {
+            *row = Row {
+                idx: [DELTA, DELTA],
+                coef: [1.0, 0.0],
+                lower: -setup.max_steer_rad,
+                upper: setup.max_steer_rad,
+                rho: w.rho_steer,
+                soft_weight: f32::INFINITY,
+                active: true,
+            };
+        }
+        for (slot, point, at_front) in corners {
+            let sample = if at_front { &r1.front } else { &r1.rear };
+            if let Some(row) = rows.get_mut(slot) {
+                *row = corner_row(&r1.at, sample, point, lin_b, w);
+            }
+        }
+        for (i, ob) in obstacles.iter().enumerate() {
+            let Some((ob, side)) = ob else { continue };
+            if let (Some(row), Some(r)) = (
+                rows.get_mut(ROW_OBSTACLE + i),
+                obstacle_row(&r1.at, ob, *side, body, lin_b, w),
+            ) {
+                *row = r;
+            }
+        }
+    }
+    Ok(())
+}
