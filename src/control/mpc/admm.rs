@@ -39,6 +39,24 @@
 //! Cortex-M4F.
 use nalgebra::{SMatrix, SVector};
 
+use crate::math;
+
+/// Range of the adaptive penalty factor.
+const RHO_SCALE_MIN: f32 = 1e-3;
+const RHO_SCALE_MAX: f32 = 1e3;
+
+/// Residuals of one iteration and the scales they are judged against.
+struct Residuals {
+    /// Max |g - z|.
+    primal: f32,
+    /// Max rho |z - z_prev|.
+    dual: f32,
+    /// Max |g| (rows and inputs).
+    value_scale: f32,
+    /// Max |rho w| (the multipliers).
+    multiplier_scale: f32,
+}
+
 /// One constraint row on a stage's state: `g = coef[0] x[idx[0]] + coef[1] x[idx[1]]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Row {
@@ -82,11 +100,11 @@ impl Row {
     /// `penalty(z) + rho/2 (z - v)^2` (a clamp for a hard row; a clamp moved by at most
     /// `mu / rho` for a soft one).
     #[inline(always)]
-    fn prox(&self, v: f32) -> f32 {
-        let reach = if self.soft_weight == f32::INFINITY || self.rho <= 0.0 {
+    fn prox(&self, v: f32, rho: f32) -> f32 {
+        let reach = if self.soft_weight == f32::INFINITY || rho <= 0.0 {
             f32::INFINITY
         } else {
-            self.soft_weight / self.rho
+            self.soft_weight / rho
         };
         if v > self.upper {
             self.upper.max(v - reach)
@@ -174,6 +192,10 @@ pub struct AdmmSettings {
     pub dual_tolerance: f32,
     /// Over-relaxation alpha in (0, 2); 1.6 is the usual choice (Boyd et al. sec. 3.4.3).
     pub relaxation: f32,
+    /// Every this many iterations the penalties are rebalanced (OSQP's adaptive rho) and the
+    /// Riccati recursion recomputed, if the residuals are out of balance by more than 5x;
+    /// 0 = never. The worst case is `max_iterations / rho_update_every` extra factorisations.
+    pub rho_update_every: u16,
 }
 
 /// What a solve did.
@@ -191,6 +213,10 @@ pub struct SolveReport {
 /// Gains, iterates and duals: the solver's state, kept between solves for the warm start.
 #[derive(Clone, Debug)]
 pub struct Workspace<const NX: usize, const N: usize, const NR: usize> {
+    /// Factor on every row's and the inputs' penalty (adapted; kept for the next solve).
+    pub rho_scale: f32,
+    /// Factorisations done in the last solve.
+    pub factorisations: u16,
     /// Feedback gains `u_k = -K_k x_k - d_k`.
     k: [SVector<f32, NX>; N],
     /// `1 / (r + rho_u + B' P B)` per stage.
@@ -216,6 +242,8 @@ pub struct Workspace<const NX: usize, const N: usize, const NR: usize> {
 impl<const NX: usize, const N: usize, const NR: usize> Default for Workspace<NX, N, NR> {
     fn default() -> Self {
         Self {
+            rho_scale: 1.0,
+            factorisations: 0,
             k: [SVector::zeros(); N],
             inv_quu: [0.0; N],
             pc: [SVector::zeros(); N],
@@ -235,12 +263,14 @@ impl<const NX: usize, const N: usize, const NR: usize> Default for Workspace<NX,
 fn add_rows_quadratic<const NX: usize, const NR: usize>(
     m: &mut SMatrix<f32, NX, NX>,
     rows: &[Row; NR],
+    scale: f32,
 ) {
     for row in rows.iter().filter(|r| r.active) {
+        let rho = row.rho * scale;
         for (a, ca) in row.idx.iter().zip(row.coef) {
             for (b, cb) in row.idx.iter().zip(row.coef) {
                 if let Some(v) = m.get_mut((*a, *b)) {
-                    *v += row.rho * ca * cb;
+                    *v += rho * ca * cb;
                 }
             }
         }
@@ -254,11 +284,12 @@ fn stage_linear_cost<const NX: usize, const NR: usize>(
     rows: &[Row; NR],
     z: &[f32; NR],
     w: &[f32; NR],
+    scale: f32,
 ) -> SVector<f32, NX> {
     let mut q = *q_lin;
     for ((row, z), w) in rows.iter().zip(z).zip(w) {
         if row.active {
-            let s = row.rho * (w - z);
+            let s = row.rho * scale * (w - z);
             for (i, c) in row.idx.iter().zip(row.coef) {
                 if let Some(v) = q.get_mut(*i) {
                     *v += c * s;
@@ -277,7 +308,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
         let mut pm = SMatrix::<f32, NX, NX>::zeros();
         if let (Some(qd), Some(rows)) = (p.q_diag.last(), p.rows.last()) {
             pm = SMatrix::from_diagonal(qd);
-            add_rows_quadratic(&mut pm, rows);
+            add_rows_quadratic(&mut pm, rows, self.rho_scale);
         }
         let stages =
             p.a.iter()
@@ -289,7 +320,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                 .rev();
         for (k, ((((a, b), c), (gain, inv_quu)), pc)) in stages {
             let pb = pm * b;
-            let quu = p.r + p.u_rho + b.dot(&pb);
+            let quu = p.r + p.u_rho * self.rho_scale + b.dot(&pb);
             if !(quu.is_finite() && quu > 0.0) {
                 return Err(SolveError::BadPivot);
             }
@@ -308,12 +339,13 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                             *v += q;
                         }
                     }
-                    add_rows_quadratic(&mut next, rows);
+                    add_rows_quadratic(&mut next, rows, self.rho_scale);
                 }
                 // Symmetrise: rounding would otherwise let P drift from symmetry.
                 pm = (next + next.transpose()) * 0.5;
             }
         }
+        self.factorisations = self.factorisations.saturating_add(1);
         Ok(())
     }
 
@@ -322,7 +354,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     pub fn cold_start(&mut self, p: &Problem<NX, N, NR>) {
         for ((z, w), rows) in self.z.iter_mut().zip(self.w.iter_mut()).zip(&p.rows) {
             for ((z, w), row) in z.iter_mut().zip(w.iter_mut()).zip(rows) {
-                *z = row.prox(0.0);
+                *z = row.prox(0.0, f32::INFINITY);
                 *w = 0.0;
             }
         }
@@ -366,30 +398,67 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     ) -> Result<SolveReport, SolveError> {
         let alpha = settings.relaxation;
         let mut report = SolveReport::default();
-        for _ in 0..settings.max_iterations {
+        for i in 1..=settings.max_iterations {
             self.backward(p);
-            let (primal, dual) = self.forward(p, x0, alpha);
-            report.iterations += 1;
-            report.primal_residual = primal;
-            report.dual_residual = dual;
-            if !(primal.is_finite() && dual.is_finite()) {
+            let r = self.forward(p, x0, alpha);
+            report.iterations = i;
+            report.primal_residual = r.primal;
+            report.dual_residual = r.dual;
+            if !(r.primal.is_finite() && r.dual.is_finite()) {
                 return Err(SolveError::NonFinite);
             }
-            if primal <= settings.primal_tolerance && dual <= settings.dual_tolerance {
+            if r.primal <= settings.primal_tolerance && r.dual <= settings.dual_tolerance {
                 break;
+            }
+            if settings.rho_update_every > 0
+                && i % settings.rho_update_every == 0
+                && i < settings.max_iterations
+            {
+                self.rebalance(p, &r)?;
             }
         }
         Ok(report)
     }
 
+    /// OSQP's penalty update (Stellato et al. 2020, sec. 5.2): scale every penalty by
+    /// `sqrt(relative primal / relative dual residual)` when that is beyond 5x either way, keep
+    /// the multipliers (`y = rho w`, so `w` is divided by the factor) and refactor.
+    fn rebalance(&mut self, p: &Problem<NX, N, NR>, r: &Residuals) -> Result<(), SolveError> {
+        let rel_primal = r.primal / r.value_scale.max(1e-6);
+        let rel_dual = r.dual / r.multiplier_scale.max(1e-6);
+        if !(rel_primal > 0.0 && rel_dual > 0.0) {
+            return Ok(());
+        }
+        let ratio = math::sqrt(rel_primal / rel_dual).clamp(1e-2, 1e2);
+        if ratio < 5.0 && ratio > 0.2 {
+            return Ok(());
+        }
+        let new_scale = (self.rho_scale * ratio).clamp(RHO_SCALE_MIN, RHO_SCALE_MAX);
+        let factor = new_scale / self.rho_scale;
+        if factor == 1.0 {
+            return Ok(());
+        }
+        let inv = 1.0 / factor;
+        for w in self.w.iter_mut().flatten() {
+            *w *= inv;
+        }
+        for w in self.wu.iter_mut() {
+            *w *= inv;
+        }
+        self.rho_scale = new_scale;
+        self.factor(p)
+    }
+
     /// The affine part of the Riccati recursion for the current copies and duals.
     #[inline(always)]
     fn backward(&mut self, p: &Problem<NX, N, NR>) {
+        let scale = self.rho_scale;
+        let u_rho = p.u_rho * scale;
         let mut p_next = SVector::<f32, NX>::zeros();
         if let (Some(ql), Some(rows), Some(z), Some(w)) =
             (p.q_lin.last(), p.rows.last(), self.z.last(), self.w.last())
         {
-            p_next = stage_linear_cost(ql, rows, z, w);
+            p_next = stage_linear_cost(ql, rows, z, w, scale);
         }
         let stages =
             p.a.iter()
@@ -401,7 +470,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                 .rev();
         for (k, ((((a, b), ((gain, inv_quu), pc)), ((r_lin, zu), wu)), d)) in stages {
             let bvec = pc + p_next;
-            let qu = r_lin + p.u_rho * (wu - zu) + b.dot(&bvec);
+            let qu = r_lin + u_rho * (wu - zu) + b.dot(&bvec);
             *d = qu * inv_quu;
             if let Some(prev) = k.checked_sub(1) {
                 if let (Some(ql), Some(rows), Some(z), Some(w)) = (
@@ -410,7 +479,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                     self.z.get(prev),
                     self.w.get(prev),
                 ) {
-                    p_next = stage_linear_cost(ql, rows, z, w) + a.tr_mul(&bvec) - gain * qu;
+                    p_next = stage_linear_cost(ql, rows, z, w, scale) + a.tr_mul(&bvec) - gain * qu;
                 }
             }
         }
@@ -419,10 +488,14 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     /// Rolls the policy forward from `x0` and updates copies and duals; returns the primal and
     /// dual residuals.
     #[inline(always)]
-    fn forward(&mut self, p: &Problem<NX, N, NR>, x0: &SVector<f32, NX>, alpha: f32) -> (f32, f32) {
+    fn forward(&mut self, p: &Problem<NX, N, NR>, x0: &SVector<f32, NX>, alpha: f32) -> Residuals {
+        let scale = self.rho_scale;
+        let u_rho = p.u_rho * scale;
         let mut x = *x0;
         let mut primal = 0.0f32;
         let mut dual = 0.0f32;
+        let mut value_scale = 0.0f32;
+        let mut multiplier_scale = 0.0f32;
         let stages =
             p.a.iter()
                 .zip(&p.b)
@@ -444,10 +517,12 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
             // Input copy: the hard box.
             let relaxed = alpha * uk + (1.0 - alpha) * *zu;
             let zu_new = (relaxed + *wu).clamp(lo.min(*hi), *hi);
-            dual = dual.max(p.u_rho * (zu_new - *zu).abs());
+            dual = dual.max(u_rho * (zu_new - *zu).abs());
             *wu += relaxed - zu_new;
             *zu = zu_new;
             primal = primal.max((uk - zu_new).abs());
+            value_scale = value_scale.max(uk.abs());
+            multiplier_scale = multiplier_scale.max(u_rho * wu.abs());
             x = a * x + b * uk + c;
             *xs = x;
             for ((row, z), w) in rows.iter().zip(z.iter_mut()).zip(w.iter_mut()) {
@@ -456,14 +531,22 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                 }
                 let g = row.eval(&x);
                 let relaxed = alpha * g + (1.0 - alpha) * *z;
-                let z_new = row.prox(relaxed + *w);
-                dual = dual.max(row.rho * (z_new - *z).abs());
+                let rho = row.rho * scale;
+                let z_new = row.prox(relaxed + *w, rho);
+                dual = dual.max(rho * (z_new - *z).abs());
                 *w += relaxed - z_new;
                 *z = z_new;
                 primal = primal.max((g - z_new).abs());
+                value_scale = value_scale.max(g.abs());
+                multiplier_scale = multiplier_scale.max(rho * w.abs());
             }
         }
-        (primal, dual)
+        Residuals {
+            primal,
+            dual,
+            value_scale,
+            multiplier_scale,
+        }
     }
 }
 
@@ -496,6 +579,7 @@ pub fn solve<const NX: usize, const N: usize, const NR: usize>(
     x0: &SVector<f32, NX>,
     settings: &AdmmSettings,
 ) -> Result<SolveReport, SolveError> {
+    ws.factorisations = 0;
     ws.factor(p)?;
     ws.iterate(p, x0, settings)
 }

@@ -229,6 +229,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         primal_tolerance: 0.005,
         dual_tolerance: 0.05,
         relaxation: 1.6,
+        rho_update_every: 10,
     },
     speed: SpeedTuning {
         speed_weight: 1.0,
