@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 pub mod bus;
+pub mod mpc_sim;
 
 /// Path of a file under `host-tests/reference/`.
 pub fn reference_path(name: &str) -> PathBuf {

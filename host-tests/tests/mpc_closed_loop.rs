@@ -1,0 +1,103 @@
+//! The controller in closed loop with the host simulator's plant (host-tests/src/mpc_sim.rs):
+//! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
+//! side with room, and brakes (status 3) when there is none.
+use catmodel::control::mpc::{ControlStatus, FallbackReason, Obstacle, ObstacleSide, DEFAULT_TUNING};
+use catmodel_host::sim::config::VehicleConfig;
+use catmodel_host_tests::mpc_sim::{mpc_for, Loop, TestPath, ESCAPE_BODY};
+
+fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
+    TestPath::new(length, |s| (0.0, s), |_| (lane, lane), |_| speed)
+}
+
+fn summary(l: &Loop, from_s: f64) -> (f64, f64) {
+    let tail: Vec<f64> = l.log.iter().filter(|t| t.t_s >= from_s).map(|t| t.e_y_m).collect();
+    let rms = (tail.iter().map(|e| e * e).sum::<f64>() / tail.len().max(1) as f64).sqrt();
+    let max = tail.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    (rms, max)
+}
+
+#[test]
+fn converges_onto_a_straight_path_from_an_offset() {
+    let cfg = VehicleConfig::default();
+    let path = straight(400.0, 3.0, 10.0);
+    let mut l = Loop::new(cfg.clone(), mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING), &path, 10.0, 1.0, 0.0);
+    l.run(&path, 350.0, 30.0);
+    let (rms, max) = summary(&l, 5.0);
+    let iters: Vec<u16> = l.log.iter().map(|t| t.out.iterations).collect();
+    println!("rms {rms:.3} max {max:.3} iterations max {:?}", iters.iter().max());
+    for t in l.log.iter().step_by(25).take(20) {
+        println!("t {:.2} e_y {:+.3} v {:.2} steer {:+.1} status {:?} it {} res {:.1e}", t.t_s, t.e_y_m, t.speed_mps, t.out.steer_cmd_pct, t.out.status, t.out.iterations, t.out.primal_residual);
+    }
+    assert!(max < 0.05, "after 5 s: max |e_y| {max}");
+    assert!(l.log.iter().all(|t| t.out.status == ControlStatus::Tracking));
+}
+
+/// ISO 3888-2 double lane change for a car of width `b` (facts: section lengths 12, 13.5, 11,
+/// 12.5, 12 m; widths 1.1 b + 0.25, b + 1, 1.3 b + 0.25; section 3's near edge 1 m beside
+/// section 1's far edge), after `lead` m of straight approach, to the left. Returns the path
+/// (lane centres joined by cosine transitions) and the stations where sections 1, 3 and 5 begin.
+fn double_lane_change(b: f64, lead: f64, speed: f64) -> (TestPath, [(f64, f64); 3]) {
+    let w1 = 1.1 * b + 0.25;
+    let w3 = b + 1.0;
+    let w5 = 1.3 * b + 0.25;
+    let s1 = lead;
+    let s2 = s1 + 12.0;
+    let s3 = s2 + 13.5;
+    let s4 = s3 + 11.0;
+    let s5 = s4 + 12.5;
+    let s6 = s5 + 12.0;
+    let lane3_right = w1 / 2.0 + 1.0;
+    let lane3_left = lane3_right + w3;
+    let c3 = 0.5 * (lane3_right + lane3_left);
+    // Lateral position, left positive.
+    let p = move |s: f64| {
+        let blend = |a: f64, b: f64, s: f64| {
+            let t = ((s - a) / (b - a)).clamp(0.0, 1.0);
+            0.5 - 0.5 * (std::f64::consts::PI * t).cos()
+        };
+        if s < s3 {
+            c3 * blend(s2, s3, s)
+        } else {
+            c3 * (1.0 - blend(s4, s5, s))
+        }
+    };
+    let corridor = move |s: f64| {
+        let ps = p(s);
+        if s < s2 {
+            (w1 / 2.0, w1 / 2.0)
+        } else if s < s3 {
+            (lane3_left - ps, ps + w1 / 2.0)
+        } else if s < s4 {
+            (lane3_left - ps, ps - lane3_right)
+        } else if s < s5 {
+            (lane3_left - ps, ps + w5 / 2.0)
+        } else {
+            (w5 / 2.0, w5 / 2.0)
+        }
+    };
+    let path = TestPath::new(s6 + 60.0, move |s| (-p(s), s), corridor, move |_| speed);
+    (path, [(s1, s2), (s3, s4), (s5, s6)])
+}
+
+/// Runs the double lane change at `speed`; returns the largest corridor violation of the body
+/// and the largest iteration count.
+fn dlc_run(cfg: &VehicleConfig, speed: f64) -> (f64, u16, Loop) {
+    let (path, _) = double_lane_change(ESCAPE_BODY.width_m as f64, 40.0, speed);
+    let mut l = Loop::new(cfg.clone(), mpc_for(cfg, ESCAPE_BODY, DEFAULT_TUNING), &path, speed, 0.0, 0.0);
+    l.run(&path, path.length_m() - 20.0, 30.0);
+    let worst = l.log.iter().fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+    let iters = l.log.iter().map(|t| t.out.iterations).max().unwrap_or(0);
+    (worst, iters, l)
+}
+
+#[test]
+#[ignore = "tuning sweep; prints the highest clean double-lane-change speed"]
+fn dlc_speed_sweep() {
+    let cfg = VehicleConfig::default();
+    for v10 in (80..=200).step_by(5) {
+        let v = v10 as f64 / 10.0;
+        let (worst, iters, l) = dlc_run(&cfg, v);
+        let fallback = l.log.iter().filter(|t| t.out.status == ControlStatus::Fallback).count();
+        println!("{v:5.1} m/s: worst corridor violation {worst:+.3} m, max iterations {iters}, fallback ticks {fallback}");
+    }
+}
