@@ -70,7 +70,11 @@ impl TestPath {
         for i in 0..n {
             let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
             let ds = ((b - a) as f64) * PATH_STEP_M;
-            curvature.push(if ds > 0.0 { wrap(heading[b] - heading[a]) / ds } else { 0.0 });
+            curvature.push(if ds > 0.0 {
+                wrap(heading[b] - heading[a]) / ds
+            } else {
+                0.0
+            });
         }
         let (left, right): (Vec<f64>, Vec<f64>) =
             (0..n).map(|i| corridor(i as f64 * PATH_STEP_M)).unzip();
@@ -104,13 +108,25 @@ impl TestPath {
     pub fn pose(&self, s: f64) -> (f64, f64, f64) {
         let len = self.length_m();
         if s > len || s < 0.0 {
-            let (end, extra) = if s > len { (self.x.len() - 1, s - len) } else { (0, s) };
+            let (end, extra) = if s > len {
+                (self.x.len() - 1, s - len)
+            } else {
+                (0, s)
+            };
             let h = self.heading[end];
-            return (self.x[end] + extra * h.sin(), self.y[end] + extra * h.cos(), h);
+            return (
+                self.x[end] + extra * h.sin(),
+                self.y[end] + extra * h.cos(),
+                h,
+            );
         }
         let (i, t) = self.index(s);
         let h = self.heading[i] + wrap(self.heading[i + 1] - self.heading[i]) * t;
-        (Self::lerp(&self.x, i, t), Self::lerp(&self.y, i, t), wrap(h))
+        (
+            Self::lerp(&self.x, i, t),
+            Self::lerp(&self.y, i, t),
+            wrap(h),
+        )
     }
 
     /// Curvature at `s`, 1/m.
@@ -389,7 +405,8 @@ impl Loop {
             self.rng ^= self.rng >> 12;
             self.rng ^= self.rng << 25;
             self.rng ^= self.rng >> 27;
-            ((self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            ((self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5)
+                / (1u64 << 53) as f64
         };
         let (u1, u2) = (next(), next());
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
@@ -399,7 +416,11 @@ impl Loop {
     pub fn rear_axle(&self) -> (f64, f64, f64) {
         let b = self.cfg.chassis.cg_to_rear_m;
         let h = self.state.heading_rad;
-        (self.state.x_m - b * h.sin(), self.state.y_m - b * h.cos(), h)
+        (
+            self.state.x_m - b * h.sin(),
+            self.state.y_m - b * h.cos(),
+            h,
+        )
     }
 
     /// The body's corners (FL, FR, RL, RR) in the world, from the true pose.
@@ -410,7 +431,12 @@ impl Loop {
         let rear = -(body.rear_overhang_m as f64);
         let half = 0.5 * body.width_m as f64;
         let at = |s: f64, l: f64| (x + s * h.sin() + l * h.cos(), y + s * h.cos() - l * h.sin());
-        [at(front, -half), at(front, half), at(rear, -half), at(rear, half)]
+        [
+            at(front, -half),
+            at(front, half),
+            at(rear, -half),
+            at(rear, half),
+        ]
     }
 
     /// Distance from a circle to the body rectangle (negative inside), true pose.
@@ -426,7 +452,11 @@ impl Loop {
         let ox = (along - along.clamp(rear, front)).abs();
         let oy = (lateral.abs() - half).max(0.0);
         let inside = along > rear && along < front && lateral.abs() < half;
-        let d = if inside { -0.0 } else { (ox * ox + oy * oy).sqrt() };
+        let d = if inside {
+            -0.0
+        } else {
+            (ox * ox + oy * oy).sqrt()
+        };
         d - ob.radius_m as f64
     }
 
@@ -439,7 +469,9 @@ impl Loop {
         self.station_m = path.project(mx, my, self.station_m);
         let vx = self.state.vx_mps;
         let r = self.state.yaw_rate_rps;
-        let mode = self.hybrid.update(&mut self.hybrid_state, vx as f32, (vx * r) as f32);
+        let mode = self
+            .hybrid
+            .update(&mut self.hybrid_state, vx as f32, (vx * r) as f32);
         let max_steer = (self.cfg.chassis.max_steer_deg as f32).to_radians();
         let reference = path.reference(self.station_m, &self.planned_speeds, self.mpc.body());
         // The speed model's output now (its next step consumes the command sent now).
@@ -469,12 +501,15 @@ impl Loop {
         }
         self.last_speed_cmd = out.speed_cmd_mps;
         self.last_steer_cmd = out.steer_cmd_pct;
-        self.speed_model.step(&mut self.speed_model_state, out.speed_cmd_mps);
+        self.speed_model
+            .step(&mut self.speed_model_state, out.speed_cmd_mps);
         let dt = catmodel_host::sim::PLANT_STEP_S;
         let max_steer_rad = self.cfg.chassis.max_steer_deg.to_radians();
         for _ in 0..20 {
             self.steer_pct = self.steering.step(out.steer_cmd_pct as f64);
-            let drive = self.speed_ctl.step(out.speed_cmd_mps as f64, self.state.vx_mps);
+            let drive = self
+                .speed_ctl
+                .step(out.speed_cmd_mps as f64, self.state.vx_mps);
             let input = PlantInput {
                 steer_rad: self.steer_pct / 100.0 * max_steer_rad,
                 drive_force_n: drive.drive_force_n,

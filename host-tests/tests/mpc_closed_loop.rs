@@ -1,7 +1,7 @@
 //! The controller in closed loop with the host simulator's plant (host-tests/src/mpc_sim.rs):
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
-use catmodel::control::mpc::{ControlStatus, FallbackReason, Obstacle, ObstacleSide, DEFAULT_TUNING};
+use catmodel::control::mpc::{ControlStatus, MpcTuning, DEFAULT_TUNING};
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{mpc_for, Loop, TestPath, ESCAPE_BODY};
 
@@ -10,7 +10,12 @@ fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
 }
 
 fn summary(l: &Loop, from_s: f64) -> (f64, f64) {
-    let tail: Vec<f64> = l.log.iter().filter(|t| t.t_s >= from_s).map(|t| t.e_y_m).collect();
+    let tail: Vec<f64> = l
+        .log
+        .iter()
+        .filter(|t| t.t_s >= from_s)
+        .map(|t| t.e_y_m)
+        .collect();
     let rms = (tail.iter().map(|e| e * e).sum::<f64>() / tail.len().max(1) as f64).sqrt();
     let max = tail.iter().fold(0.0f64, |m, e| m.max(e.abs()));
     (rms, max)
@@ -20,16 +25,38 @@ fn summary(l: &Loop, from_s: f64) -> (f64, f64) {
 fn converges_onto_a_straight_path_from_an_offset() {
     let cfg = VehicleConfig::default();
     let path = straight(400.0, 3.0, 10.0);
-    let mut l = Loop::new(cfg.clone(), mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING), &path, 10.0, 1.0, 0.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        10.0,
+        1.0,
+        0.0,
+    );
     l.run(&path, 350.0, 30.0);
     let (rms, max) = summary(&l, 5.0);
     let iters: Vec<u16> = l.log.iter().map(|t| t.out.iterations).collect();
-    println!("rms {rms:.3} max {max:.3} iterations max {:?}", iters.iter().max());
+    println!(
+        "rms {rms:.3} max {max:.3} iterations max {:?}",
+        iters.iter().max()
+    );
     for t in l.log.iter().step_by(25).take(20) {
-        println!("t {:.2} e_y {:+.3} v {:.2} steer {:+.1} status {:?} it {} res {:.1e}", t.t_s, t.e_y_m, t.speed_mps, t.out.steer_cmd_pct, t.out.status, t.out.iterations, t.out.primal_residual);
+        println!(
+            "t {:.2} e_y {:+.3} v {:.2} steer {:+.1} status {:?} it {} res {:.1e}",
+            t.t_s,
+            t.e_y_m,
+            t.speed_mps,
+            t.out.steer_cmd_pct,
+            t.out.status,
+            t.out.iterations,
+            t.out.primal_residual
+        );
     }
     assert!(max < 0.05, "after 5 s: max |e_y| {max}");
-    assert!(l.log.iter().all(|t| t.out.status == ControlStatus::Tracking));
+    assert!(l
+        .log
+        .iter()
+        .all(|t| t.out.status == ControlStatus::Tracking));
 }
 
 /// ISO 3888-2 double lane change for a car of width `b` (facts: section lengths 12, 13.5, 11,
@@ -82,10 +109,24 @@ fn double_lane_change(b: f64, lead: f64, speed: f64) -> (TestPath, [(f64, f64); 
 /// Runs the double lane change at `speed`; returns the largest corridor violation of the body
 /// and the largest iteration count.
 fn dlc_run(cfg: &VehicleConfig, speed: f64) -> (f64, u16, Loop) {
+    dlc_run_with(cfg, speed, DEFAULT_TUNING)
+}
+
+fn dlc_run_with(cfg: &VehicleConfig, speed: f64, tuning: MpcTuning) -> (f64, u16, Loop) {
     let (path, _) = double_lane_change(ESCAPE_BODY.width_m as f64, 40.0, speed);
-    let mut l = Loop::new(cfg.clone(), mpc_for(cfg, ESCAPE_BODY, DEFAULT_TUNING), &path, speed, 0.0, 0.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(cfg, ESCAPE_BODY, tuning),
+        &path,
+        speed,
+        0.0,
+        0.0,
+    );
     l.run(&path, path.length_m() - 20.0, 30.0);
-    let worst = l.log.iter().fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+    let worst = l
+        .log
+        .iter()
+        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
     let iters = l.log.iter().map(|t| t.out.iterations).max().unwrap_or(0);
     (worst, iters, l)
 }
@@ -97,7 +138,33 @@ fn dlc_speed_sweep() {
     for v10 in (80..=200).step_by(5) {
         let v = v10 as f64 / 10.0;
         let (worst, iters, l) = dlc_run(&cfg, v);
-        let fallback = l.log.iter().filter(|t| t.out.status == ControlStatus::Fallback).count();
+        let fallback = l
+            .log
+            .iter()
+            .filter(|t| t.out.status == ControlStatus::Fallback)
+            .count();
         println!("{v:5.1} m/s: worst corridor violation {worst:+.3} m, max iterations {iters}, fallback ticks {fallback}");
+    }
+}
+
+#[test]
+#[ignore = "tuning sweep over the iteration cap"]
+fn dlc_iteration_cap_sweep() {
+    let cfg = VehicleConfig::default();
+    for cap in [5u16, 10, 15, 20, 30, 60] {
+        let mut best = 0.0;
+        for v10 in (100..=160).step_by(5) {
+            let v = v10 as f64 / 10.0;
+            let mut t = DEFAULT_TUNING;
+            t.admm.max_iterations = cap;
+            t.admm.rho_update_every = if cap >= 10 { 10 } else { 0 };
+            let (worst, _, _) = dlc_run_with(&cfg, v, t);
+            if worst <= 0.0 {
+                best = v;
+            } else {
+                break;
+            }
+        }
+        println!("cap {cap}: clean up to {best} m/s");
     }
 }

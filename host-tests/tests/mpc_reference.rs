@@ -70,20 +70,32 @@ fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
         q.r_lin[k] = f(&p["r_lin"][k]) as f32;
         q.u_lower[k] = f(&p["u_lower"][k]) as f32;
         q.u_upper[k] = f(&p["u_upper"][k]) as f32;
-        for (i, row) in p["rows"][k].as_array().unwrap().iter().enumerate() {
+        let mut slot = 0;
+        for row in p["rows"][k].as_array().unwrap() {
             let bound = |v: &Value, inf: f32| v.as_f64().map_or(inf, |x| x as f32);
-            q.rows[k][i] = Row {
-                idx: [
-                    row["idx"][0].as_u64().unwrap() as usize,
-                    row["idx"][1].as_u64().unwrap() as usize,
-                ],
-                coef: [f(&row["coef"][0]) as f32, f(&row["coef"][1]) as f32],
+            let idx = [
+                row["idx"][0].as_u64().unwrap(),
+                row["idx"][1].as_u64().unwrap(),
+            ];
+            if idx == [4, 4] {
+                // The steering range: the solver's state box.
+                q.box_state = 4;
+                q.box_lower[k] = bound(&row["lower"], f32::NEG_INFINITY);
+                q.box_upper[k] = bound(&row["upper"], f32::INFINITY);
+                q.box_rho = f(&row["rho"]) as f32;
+                continue;
+            }
+            assert_eq!(idx, [0, 1], "rows read e_y and e_psi");
+            q.rows[k][slot] = Row {
+                a: f(&row["coef"][0]) as f32,
+                b: f(&row["coef"][1]) as f32,
                 lower: bound(&row["lower"], f32::NEG_INFINITY),
                 upper: bound(&row["upper"], f32::INFINITY),
                 rho: f(&row["rho"]) as f32,
                 soft_weight: row["soft"].as_f64().map_or(f32::INFINITY, |x| x as f32),
                 active: true,
             };
+            slot += 1;
         }
     }
     q.r = f(&p["r"]) as f32;
@@ -118,6 +130,7 @@ fn settings(iterations: u16) -> AdmmSettings {
         primal_tolerance: 0.0,
         dual_tolerance: 0.0,
         relaxation: 1.6,
+        check_every: 1,
         rho_update_every: 0,
     }
 }
@@ -158,7 +171,7 @@ fn admm_reaches_the_interior_point_solution() {
             (j - j_ref).abs() <= 1e-4 * j_ref.abs().max(1.0),
             "case {n}: objective {j} vs {j_ref}"
         );
-        // Hard rows hold to the primal residual.
+        // Hard rows and the box hold to the primal residual.
         for k in 0..STEPS {
             for row in p.rows[k]
                 .iter()
@@ -169,6 +182,11 @@ fn admm_reaches_the_interior_point_solution() {
                     "case {n}: hard row violated"
                 );
             }
+            let d = ws.x[k][p.box_state];
+            assert!(
+                d >= p.box_lower[k] - 1e-3 && d <= p.box_upper[k] + 1e-3,
+                "case {n}: steering box"
+            );
         }
     }
 }

@@ -28,6 +28,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::admm::{Problem, Row};
+use super::{clamp, max};
 use super::{
     BodyGeometry, ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS,
     STEP_S,
@@ -48,18 +49,18 @@ pub const R: usize = 3;
 /// Steering angle.
 pub const DELTA: usize = 4;
 
-/// Row slots per stage: the steering range, the four corners, one per obstacle.
-pub const ROW_STEER: usize = 0;
+/// Row slots per stage: the four corners, then one per obstacle (the steering range is the
+/// solver's state box).
 /// Front-left corner (left bound of the corridor at the front sample).
-pub const ROW_FRONT_LEFT: usize = 1;
+pub const ROW_FRONT_LEFT: usize = 0;
 /// Front-right corner.
-pub const ROW_FRONT_RIGHT: usize = 2;
+pub const ROW_FRONT_RIGHT: usize = 1;
 /// Rear-left corner.
-pub const ROW_REAR_LEFT: usize = 3;
+pub const ROW_REAR_LEFT: usize = 2;
 /// Rear-right corner.
-pub const ROW_REAR_RIGHT: usize = 4;
+pub const ROW_REAR_RIGHT: usize = 3;
 /// First obstacle row (obstacle `i` is `ROW_OBSTACLE + i`).
-pub const ROW_OBSTACLE: usize = 5;
+pub const ROW_OBSTACLE: usize = 4;
 
 /// Smallest pivot accepted in the trapezoidal solve (every pivot is >= 1 for these models).
 const MIN_PIVOT: f32 = 0.5;
@@ -137,7 +138,7 @@ fn continuous(
             let p = setup.dynamics;
             // The 1/v terms need a speed; below the model's floor use the floor (the hybrid
             // switch keeps the dynamic mode above it; a plan that brakes may dip below).
-            let vx = v.max(p.min_speed_mps).max(0.1);
+            let vx = max(max(v, p.min_speed_mps), 0.1);
             let cf = p.cornering_front_n_per_rad;
             let cr = p.cornering_rear_n_per_rad;
             let (lf, lr) = (p.cg_to_front_m, p.cg_to_rear_m);
@@ -299,8 +300,8 @@ fn corner_row(
         (f32::NEG_INFINITY, sample.right_m - k)
     };
     Row {
-        idx: [EY, EPSI],
-        coef: [a, b],
+        a,
+        b,
         lower,
         upper,
         rho: w.rho_corridor,
@@ -343,9 +344,9 @@ pub fn obstacle_row(
     }
     // Nearest point of the side line, and how far the centre lies beyond the body's end:
     // there the circle only reaches the side line within its half chord.
-    let ahead = along.clamp(rear, front);
+    let ahead = clamp(along, rear, front);
     let beyond = along - ahead;
-    let half_chord = math::sqrt((r * r - beyond * beyond).max(0.0));
+    let half_chord = math::sqrt(max(r * r - beyond * beyond, 0.0));
     let half_width = 0.5 * body.width_m;
     let (s0, c0, e0) = lin;
     let point = BodyPoint {
@@ -362,8 +363,8 @@ pub fn obstacle_row(
         ObstacleSide::Right => (lateral + half_chord - k, f32::INFINITY),
     };
     Some(Row {
-        idx: [EY, EPSI],
-        coef: [a, b],
+        a,
+        b,
         lower,
         upper,
         rho: w.rho_obstacle,
@@ -425,6 +426,8 @@ pub fn build(
     ];
     problem.r = w.steer_rate;
     problem.u_rho = w.rho_steer_rate;
+    problem.box_state = DELTA;
+    problem.box_rho = w.rho_steer;
     let stages = problem
         .a
         .iter_mut()
@@ -434,8 +437,14 @@ pub fn build(
         .zip(problem.r_lin.iter_mut())
         .zip(problem.u_lower.iter_mut().zip(problem.u_upper.iter_mut()))
         .zip(problem.rows.iter_mut())
+        .zip(
+            problem
+                .box_lower
+                .iter_mut()
+                .zip(problem.box_upper.iter_mut()),
+        )
         .enumerate();
-    for (k, ((((((a, b), c), (qd, ql)), rl), (ulo, uhi)), rows)) in stages {
+    for (k, (((((((a, b), c), (qd, ql)), rl), (ulo, uhi)), rows), (blo, bhi))) in stages {
         let (Some(r0), Some(r1)) = (reference.get(k), reference.get(k + 1)) else {
             continue;
         };
@@ -484,17 +493,8 @@ pub fn build(
         for row in rows.iter_mut() {
             *row = Row::INACTIVE;
         }
-        if let Some(row) = rows.get_mut(ROW_STEER) {
-            *row = Row {
-                idx: [DELTA, DELTA],
-                coef: [1.0, 0.0],
-                lower: -setup.max_steer_rad,
-                upper: setup.max_steer_rad,
-                rho: w.rho_steer,
-                soft_weight: f32::INFINITY,
-                active: true,
-            };
-        }
+        *blo = -setup.max_steer_rad;
+        *bhi = setup.max_steer_rad;
         for (slot, point, at_front) in corners {
             let sample = if at_front { &r1.front } else { &r1.rear };
             if let Some(row) = rows.get_mut(slot) {

@@ -22,7 +22,7 @@
 //! configuration is built; an iteration is three `N x N` matrix-vector products.
 use nalgebra::{SMatrix, SVector};
 
-use super::{STEPS, TICKS_PER_STEP};
+use super::{clamp, max, STEPS, TICKS_PER_STEP};
 use crate::model::{SsBlock, SsBlockState};
 
 /// ADMM penalty of the command bounds (per (m/s)^2).
@@ -182,16 +182,16 @@ impl SpeedPlanner {
         targets_mps: &[f32; STEPS + 1],
     ) -> SpeedPlan {
         let t = &self.tuning;
-        let last = finite_or(start.last_command_mps, 0.0).clamp(0.0, t.max_speed_mps);
-        let v0 = finite_or(start.speed_mps, 0.0).max(0.0);
+        let last = clamp(finite_or(start.last_command_mps, 0.0), 0.0, t.max_speed_mps);
+        let v0 = max(finite_or(start.speed_mps, 0.0), 0.0);
         let f = SVector::<f32, STEPS>::from(self.free_response(start, last));
         // Reference: the targets, reached within the acceleration limits.
         let dt = super::STEP_S;
         let mut r = SVector::<f32, STEPS>::zeros();
         let mut prev = v0;
         for (rk, target) in r.iter_mut().zip(targets_mps.iter().skip(1)) {
-            let goal = finite_or(*target, 0.0).clamp(0.0, t.max_speed_mps);
-            prev = goal.clamp(prev - t.decel_mps2 * dt, prev + t.accel_mps2 * dt);
+            let goal = clamp(finite_or(*target, 0.0), 0.0, t.max_speed_mps);
+            prev = clamp(goal, prev - t.decel_mps2 * dt, prev + t.accel_mps2 * dt);
             *rk = prev;
         }
         // Linear cost of du: w_v P' (f - r).
@@ -215,7 +215,7 @@ impl SpeedPlanner {
                 .zip(state.w_cmd.iter_mut())
                 .zip(du.iter())
             {
-                let z_new = (d + *w).clamp(lo, hi);
+                let z_new = clamp(d + *w, lo, hi);
                 *w += d - z_new;
                 *z = z_new;
             }
@@ -228,7 +228,7 @@ impl SpeedPlanner {
             {
                 let v = d + *w;
                 let reach = SPEED_BOUND_WEIGHT / RHO_SPEED;
-                let z_new = if v > *room { room.max(v - reach) } else { v };
+                let z_new = if v > *room { max(*room, v - reach) } else { v };
                 *w += d - z_new;
                 *z = z_new;
             }
@@ -236,7 +236,7 @@ impl SpeedPlanner {
         // The commands are clamped to their bounds exactly (ADMM meets them only in the limit).
         let mut commands = [0.0f32; STEPS];
         for (c, d) in commands.iter_mut().zip(du.iter()) {
-            *c = finite_or(last + d, 0.0).clamp(0.0, t.max_speed_mps);
+            *c = clamp(finite_or(last + d, 0.0), 0.0, t.max_speed_mps);
         }
         let speeds = self.predict(&f, last, &commands, v0);
         SpeedPlan {
@@ -263,21 +263,25 @@ impl SpeedPlanner {
             *first = v0;
         }
         for (o, vk) in it.zip(v.iter()) {
-            *o = finite_or(*vk, 0.0).max(0.0);
+            *o = max(finite_or(*vk, 0.0), 0.0);
         }
         out
     }
 
     /// The plan of the fallback: command 0 (brake to a stop) over the whole horizon.
     pub fn stop(&self, start: &SpeedStart) -> SpeedPlan {
-        let last = finite_or(start.last_command_mps, 0.0).clamp(0.0, self.tuning.max_speed_mps);
+        let last = clamp(
+            finite_or(start.last_command_mps, 0.0),
+            0.0,
+            self.tuning.max_speed_mps,
+        );
         let f = SVector::<f32, STEPS>::from(self.free_response(start, last));
         let commands = [0.0f32; STEPS];
         let speeds = self.predict(
             &f,
             last,
             &commands,
-            finite_or(start.speed_mps, 0.0).max(0.0),
+            max(finite_or(start.speed_mps, 0.0), 0.0),
         );
         SpeedPlan {
             command_mps: 0.0,
