@@ -61,15 +61,17 @@ fn trapezoidal_discretisation_matches_scipy_bilinear() {
 /// The reference problem as the solver's data; rows beyond the file's are inactive.
 fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
     let mut q = Problem::<NX, STEPS, ROWS>::zeroed();
+    let (mut box_state, mut box_rho) = (0, 1.0);
     for k in 0..STEPS {
-        q.a[k] = mat5(&p["a"][k]);
-        q.b[k] = vec5(&p["b"][k]);
-        q.c[k] = vec5(&p["c"][k]);
-        q.q_diag[k] = vec5(&p["q_diag"][k]);
-        q.q_lin[k] = vec5(&p["q_lin"][k]);
-        q.r_lin[k] = f(&p["r_lin"][k]) as f32;
-        q.u_lower[k] = f(&p["u_lower"][k]) as f32;
-        q.u_upper[k] = f(&p["u_upper"][k]) as f32;
+        let st = &mut q.stages[k];
+        st.a = mat5(&p["a"][k]);
+        st.b = vec5(&p["b"][k]);
+        st.c = vec5(&p["c"][k]);
+        st.q_diag = vec5(&p["q_diag"][k]);
+        st.q_lin = vec5(&p["q_lin"][k]);
+        st.r_lin = f(&p["r_lin"][k]) as f32;
+        st.u_lower = f(&p["u_lower"][k]) as f32;
+        st.u_upper = f(&p["u_upper"][k]) as f32;
         let mut slot = 0;
         for row in p["rows"][k].as_array().unwrap() {
             let bound = |v: &Value, inf: f32| v.as_f64().map_or(inf, |x| x as f32);
@@ -79,14 +81,14 @@ fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
             ];
             if idx == [4, 4] {
                 // The steering range: the solver's state box.
-                q.box_state = 4;
-                q.box_lower[k] = bound(&row["lower"], f32::NEG_INFINITY);
-                q.box_upper[k] = bound(&row["upper"], f32::INFINITY);
-                q.box_rho = f(&row["rho"]) as f32;
+                box_state = 4;
+                st.box_lower = bound(&row["lower"], f32::NEG_INFINITY);
+                st.box_upper = bound(&row["upper"], f32::INFINITY);
+                box_rho = f(&row["rho"]) as f32;
                 continue;
             }
             assert_eq!(idx, [0, 1], "rows read e_y and e_psi");
-            q.rows[k][slot] = Row {
+            st.rows[slot] = Row {
                 a: f(&row["coef"][0]) as f32,
                 b: f(&row["coef"][1]) as f32,
                 lower: bound(&row["lower"], f32::NEG_INFINITY),
@@ -98,6 +100,8 @@ fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
             slot += 1;
         }
     }
+    q.box_state = box_state;
+    q.box_rho = box_rho;
     q.r = f(&p["r"]) as f32;
     q.u_rho = 10.0;
     (q, vec5(&p["x0"]))
@@ -107,14 +111,15 @@ fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
 fn objective(p: &Problem<NX, STEPS, ROWS>, ws: &Workspace<NX, STEPS, ROWS>) -> f64 {
     let mut j = 0.0f64;
     for k in 0..STEPS {
-        let x = &ws.x[k];
+        let (st, it) = (&p.stages[k], &ws.stages[k]);
+        let x = &it.x;
         for i in 0..NX {
             let xi = x[i] as f64;
-            j += 0.5 * p.q_diag[k][i] as f64 * xi * xi + p.q_lin[k][i] as f64 * xi;
+            j += 0.5 * st.q_diag[i] as f64 * xi * xi + st.q_lin[i] as f64 * xi;
         }
-        let u = ws.u[k] as f64;
-        j += 0.5 * p.r as f64 * u * u + p.r_lin[k] as f64 * u;
-        for row in p.rows[k]
+        let u = it.u as f64;
+        j += 0.5 * p.r as f64 * u * u + st.r_lin as f64 * u;
+        for row in st.rows
             .iter()
             .filter(|r| r.active && r.soft_weight.is_finite())
         {
@@ -147,7 +152,7 @@ fn admm_reaches_the_interior_point_solution() {
         let sol = &case["solution"];
         let u_ref = vec_f32(&sol["u"]);
         let worst_u =
-            ws.u.iter()
+            ws.stages.iter().map(|it| it.u)
                 .zip(&u_ref)
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f32, f32::max);
@@ -156,7 +161,7 @@ fn admm_reaches_the_interior_point_solution() {
                 let xr = vec_f32(&sol["x"][k]);
                 (0..NX).map(move |i| (k, i, xr[i]))
             })
-            .map(|(k, i, xr)| (ws.x[k][i] - xr).abs())
+            .map(|(k, i, xr)| (ws.stages[k].x[i] - xr).abs())
             .fold(0.0f32, f32::max);
         let j = objective(&p, &ws);
         let j_ref = f(&sol["objective"]);
@@ -173,18 +178,18 @@ fn admm_reaches_the_interior_point_solution() {
         );
         // Hard rows and the box hold to the primal residual.
         for k in 0..STEPS {
-            for row in p.rows[k]
+            for row in p.stages[k].rows
                 .iter()
                 .filter(|r| r.active && !r.soft_weight.is_finite())
             {
                 assert!(
-                    row.violation(row.eval(&ws.x[k])) < 1e-3,
+                    row.violation(row.eval(&ws.stages[k].x)) < 1e-3,
                     "case {n}: hard row violated"
                 );
             }
-            let d = ws.x[k][p.box_state];
+            let d = ws.stages[k].x[p.box_state];
             assert!(
-                d >= p.box_lower[k] - 1e-3 && d <= p.box_upper[k] + 1e-3,
+                d >= p.stages[k].box_lower - 1e-3 && d <= p.stages[k].box_upper + 1e-3,
                 "case {n}: steering box"
             );
         }
@@ -209,8 +214,8 @@ fn warm_start_beats_cold_start_at_the_iteration_cap() {
         let mut exact = solved.clone();
         exact.iterate(&p, &x1, &settings(20_000)).unwrap();
         let error = |ws: &Workspace<NX, STEPS, ROWS>| {
-            ws.u.iter()
-                .zip(&exact.u)
+            ws.stages.iter().map(|it| it.u)
+                .zip(exact.stages.iter().map(|it| it.u))
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f32, f32::max)
         };

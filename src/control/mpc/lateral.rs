@@ -428,23 +428,7 @@ pub fn build(
     problem.u_rho = w.rho_steer_rate;
     problem.box_state = DELTA;
     problem.box_rho = w.rho_steer;
-    let stages = problem
-        .a
-        .iter_mut()
-        .zip(problem.b.iter_mut())
-        .zip(problem.c.iter_mut())
-        .zip(problem.q_diag.iter_mut().zip(problem.q_lin.iter_mut()))
-        .zip(problem.r_lin.iter_mut())
-        .zip(problem.u_lower.iter_mut().zip(problem.u_upper.iter_mut()))
-        .zip(problem.rows.iter_mut())
-        .zip(
-            problem
-                .box_lower
-                .iter_mut()
-                .zip(problem.box_upper.iter_mut()),
-        )
-        .enumerate();
-    for (k, (((((((a, b), c), (qd, ql)), rl), (ulo, uhi)), rows), (blo, bhi))) in stages {
+    for (k, st) in problem.stages.iter_mut().enumerate() {
         let (Some(r0), Some(r1)) = (reference.get(k), reference.get(k + 1)) else {
             continue;
         };
@@ -458,9 +442,9 @@ pub fn build(
         let kappa = 0.5 * (r0.curvature_per_m + r1.curvature_per_m);
         let (f, e) = continuous(setup, v, kappa, 0.5 * (e_a + e_b), 0.5 * (d_a + d_b));
         let (ad, bd, cd) = tustin(&f, &e, STEP_S).ok_or(BuildError::Discretisation)?;
-        *a = ad;
-        *b = bd;
-        *c = cd;
+        st.a = ad;
+        st.b = bd;
+        st.c = cd;
         // Cost of x_{k+1}: offsets and heading error to zero, steering near the feedforward.
         let terminal = if k + 1 == STEPS {
             w.terminal_factor
@@ -473,38 +457,36 @@ pub fn build(
             v1,
             r1.curvature_per_m,
         );
-        *qd = SVector::<f32, NX>::from([
+        st.q_diag = SVector::<f32, NX>::from([
             w.lateral_per_m2,
             w.heading_per_rad2,
             w.lateral_speed_per_mps2,
             w.yaw_rate_per_rps2,
             w.steer_per_rad2,
         ]) * terminal;
-        *ql = SVector::<f32, NX>::zeros();
-        if let Some(x) = ql.get_mut(DELTA) {
+        st.q_lin = SVector::<f32, NX>::zeros();
+        if let Some(x) = st.q_lin.get_mut(DELTA) {
             *x = -w.steer_per_rad2 * terminal * ff;
         }
-        *rl = 0.0;
-        *ulo = -setup.max_steer_rate_rad_per_s;
-        *uhi = setup.max_steer_rate_rad_per_s;
+        st.r_lin = 0.0;
+        st.u_lower = -setup.max_steer_rate_rad_per_s;
+        st.u_upper = setup.max_steer_rate_rad_per_s;
         // Rows of x_{k+1}.
         let (s0, c0) = math::sin_cos(e_b);
         let lin_b = (s0, c0, e_b);
-        for row in rows.iter_mut() {
-            *row = Row::INACTIVE;
-        }
-        *blo = -setup.max_steer_rad;
-        *bhi = setup.max_steer_rad;
+        st.rows = [Row::INACTIVE; ROWS];
+        st.box_lower = -setup.max_steer_rad;
+        st.box_upper = setup.max_steer_rad;
         for (slot, point, at_front) in corners {
             let sample = if at_front { &r1.front } else { &r1.rear };
-            if let Some(row) = rows.get_mut(slot) {
+            if let Some(row) = st.rows.get_mut(slot) {
                 *row = corner_row(&r1.at, sample, point, lin_b, w);
             }
         }
         for (i, ob) in obstacles.iter().enumerate() {
             let Some((ob, side)) = ob else { continue };
             if let (Some(row), Some(r)) = (
-                rows.get_mut(ROW_OBSTACLE + i),
+                st.rows.get_mut(ROW_OBSTACLE + i),
                 obstacle_row(&r1.at, ob, *side, body, lin_b, w),
             ) {
                 *row = r;

@@ -503,7 +503,11 @@ impl MpcConfig {
             }
         };
         // 4. The plan as sent: inputs within their bounds exactly, states rolled from x0.
-        let (states, rates) = self.clamped_rollout(&state.problem, &x0, &state.workspace.u);
+        let mut planned_rates = [0.0f32; STEPS];
+        for (r, it) in planned_rates.iter_mut().zip(&state.workspace.stages) {
+            *r = it.u;
+        }
+        let (states, rates) = self.clamped_rollout(&state.problem, &x0, &planned_rates);
         if states.iter().any(|x| x.iter().any(|v| !v.is_finite())) {
             state.workspace = Workspace::default();
             return self.fallback(state, input, &speed_start, FallbackReason::Solver);
@@ -736,24 +740,17 @@ impl MpcConfig {
         let mut rates = [0.0f32; STEPS];
         let max = self.vehicle.max_steer_rad;
         let mut x = *x0;
-        for (k, ((((a, b), c), (lo, hi)), uk)) in
-            p.a.iter()
-                .zip(&p.b)
-                .zip(&p.c)
-                .zip(p.u_lower.iter().zip(&p.u_upper))
-                .zip(u)
-                .enumerate()
-        {
+        for (k, (st, uk)) in p.stages.iter().zip(u).enumerate() {
             let delta = x.get(lateral::DELTA).copied().unwrap_or(0.0);
             // delta_{k+1} = delta_k + h u exactly (trapezoidal integrator).
             let to_range_lo = (-max - delta) / STEP_S;
             let to_range_hi = (max - delta) / STEP_S;
-            let mut rate = clamp(finite_or(*uk, 0.0), *lo, *hi);
+            let mut rate = clamp(finite_or(*uk, 0.0), st.u_lower, st.u_upper);
             rate = clamp(rate, to_range_lo, to_range_hi);
             if let Some(r) = rates.get_mut(k) {
                 *r = rate;
             }
-            x = a * x + b * rate + c;
+            x = st.a * x + st.b * rate + st.c;
             if let Some(s) = states.get_mut(k + 1) {
                 *s = x;
             }
@@ -864,8 +861,8 @@ impl MpcConfig {
 fn violations(p: &Problem<NX, STEPS, ROWS>, states: &[SVector<f32, NX>; STEPS + 1]) -> (f32, f32) {
     let mut corridor = 0.0f32;
     let mut obstacle = 0.0f32;
-    for (rows, x) in p.rows.iter().zip(states.iter().skip(1)) {
-        for (i, row) in rows.iter().enumerate() {
+    for (st, x) in p.stages.iter().zip(states.iter().skip(1)) {
+        for (i, row) in st.rows.iter().enumerate() {
             if !row.active {
                 continue;
             }
