@@ -10,9 +10,10 @@
    from the lateral model at random speeds, solved to high accuracy by an interior-point method
    (cvxpy + Clarabel). The Rust ADMM must reach the same plan.
 3. `speed_qp`: the speed plan's QP (src/control/mpc/longitudinal.rs) for the published eq 5
-   model: its pulse response at 0.1 s from scipy (ZOH at 20 ms with the 21-sample delay,
-   simulated with scipy.signal.dlsim), and the condensed QP solved by cvxpy + Clarabel for a
-   start at steady state and a few target profiles.
+   model: its response at 0.1 s to a command held over one 0.2 s knot, from scipy (ZOH at
+   20 ms with the 21-sample delay, simulated with scipy.signal.dlsim), and the condensed QP
+   (10 knots, 20 steps) solved by cvxpy + Clarabel for a start at steady state and a few target
+   profiles.
 
 Writes host-tests/reference/mpc.json.
 
@@ -224,37 +225,43 @@ def eq5_discrete():
     return sig.cont2discrete((a, b, c, d), TS, method="zoh")
 
 
+PLAN = 20  # steps of 0.1 s in the speed plan
+KNOT = 2  # steps per command knot
+KNOTS = PLAN // KNOT
+
+
 def eq5_step_at_steps():
     """Step response (input 1 from sample 0) at samples 0, 5, 10, ... 100."""
     ad, bd, cd, dd, _ = eq5_discrete()
-    n = TICKS * N + 1
+    n = TICKS * PLAN + 1
     u = np.ones(n)
     u_delayed = np.concatenate([np.zeros(DELAY), u])[:n]
     _, y, _ = sig.dlsim((ad, bd, cd, dd, TS), u_delayed)
-    return y[:, 0][:: TICKS][: N + 1]
+    return y[:, 0][::TICKS][: PLAN + 1]
 
 
 def speed_cases():
     step = eq5_step_at_steps()
-    pulse = np.diff(np.concatenate([[0.0], step]))
-    # P[i, j] = pulse[i + 1 - j] (step k = i + 1, command j), 0 above.
-    pm = np.zeros((N, N))
-    for i in range(N):
-        for j in range(N):
-            m = i + 1 - j
-            if 0 <= m <= N:
+    # A command held over one knot: the step minus the step KNOT steps later.
+    pulse = step - np.concatenate([np.zeros(KNOT), step[:-KNOT]])
+    # P[i, j] = pulse[i + 1 - KNOT j] (step k = i + 1, knot j), 0 before the knot.
+    pm = np.zeros((PLAN, KNOTS))
+    for i in range(PLAN):
+        for j in range(KNOTS):
+            m = i + 1 - KNOT * j
+            if 0 <= m <= PLAN:
                 pm[i, j] = pulse[m]
     dc = sum(EQ5_NUM[-1:]) / EQ5_DEN[-1]
     cases = []
     tuning = {"speed_weight": 1.0, "command_change_weight": 0.5, "max_speed_mps": 30.0, "accel_mps2": 1.5, "decel_mps2": 3.0}
     for v0, targets in [
-        (5.0, [10.0] * (N + 1)),
-        (12.0, [12.0] * 8 + [6.0] * (N + 1 - 8)),
-        (0.0, [4.0] * (N + 1)),
-        (28.0, [35.0] * (N + 1)),
+        (5.0, [10.0] * (PLAN + 1)),
+        (12.0, [12.0] * 8 + [6.0] * (PLAN + 1 - 8)),
+        (0.0, [4.0] * (PLAN + 1)),
+        (28.0, [35.0] * (PLAN + 1)),
     ]:
         last = v0 / dc
-        f = np.full(N, v0)  # at steady state the free response is flat
+        f = np.full(PLAN, v0)  # at steady state the free response is flat
         ref = []
         prev = v0
         for t in targets[1:]:
@@ -262,7 +269,7 @@ def speed_cases():
             prev = min(max(goal, prev - tuning["decel_mps2"] * H), prev + tuning["accel_mps2"] * H)
             ref.append(prev)
         ref = np.array(ref)
-        du = cp.Variable(N)
+        du = cp.Variable(KNOTS)
         v = f + pm @ du
         diff = cp.hstack([du[0], du[1:] - du[:-1]])
         cost = 0.5 * tuning["speed_weight"] * cp.sum_squares(v - ref) + 0.5 * tuning["command_change_weight"] * cp.sum_squares(diff)

@@ -9,7 +9,7 @@
 //! the whole node over the bus).
 use catmodel::control::mpc::{
     BodyGeometry, CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle,
-    ReferencePoint, Sample, MAX_OBSTACLES, STEPS, STEP_S,
+    ReferencePoint, Sample, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use catmodel::model::dynamic::{DynamicParams, LateralState};
 use catmodel::model::hybrid::{HybridConfig, HybridState, DEFAULT_HYBRID};
@@ -197,7 +197,7 @@ impl TestPath {
     pub fn reference(
         &self,
         s0: f64,
-        speeds: &[f32; STEPS + 1],
+        speeds: &[f32; PLAN_STEPS + 1],
         body: &BodyGeometry,
     ) -> [ReferencePoint; STEPS + 1] {
         let front = (body.length_m - body.rear_overhang_m) as f64;
@@ -288,7 +288,7 @@ pub struct Loop {
     station_m: f64,
     last_speed_cmd: f32,
     last_steer_cmd: f32,
-    planned_speeds: [f32; STEPS + 1],
+    planned_speeds: [f32; PLAN_STEPS + 1],
     rng: u64,
     /// Measurement error.
     pub position_error: PositionError,
@@ -390,7 +390,7 @@ impl Loop {
             station_m: 0.0,
             last_speed_cmd,
             last_steer_cmd: 0.0,
-            planned_speeds: [speed_mps as f32; STEPS + 1],
+            planned_speeds: [speed_mps as f32; PLAN_STEPS + 1],
             rng: 0x9E37_79B9_7F4A_7C15,
             position_error: PositionError::NONE,
             obstacles: [None; MAX_OBSTACLES],

@@ -9,7 +9,10 @@
 use catmodel::control::mpc::admm::{AdmmSettings, Problem, Row, Workspace};
 use catmodel::control::mpc::lateral::tustin;
 use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState, SpeedTuning};
-use catmodel::control::mpc::{NX, ROWS, STEPS};
+use catmodel::control::mpc::{NX, PLAN_STEPS, ROWS};
+
+/// Stages of the reference problems (the solver is generic in the horizon).
+const STEPS: usize = 20;
 use catmodel::model::{paper, SsBlock};
 use catmodel_host_tests::load_reference;
 use nalgebra::{SMatrix, SVector};
@@ -258,7 +261,7 @@ fn speed_pulse_response_matches_scipy() {
     let r = load_reference("mpc.json");
     let planner = SpeedPlanner::new(&eq5_block(), speed_tuning(&r, 10)).unwrap();
     let want = vec_f32(&r["speed_qp"]["pulse"]);
-    assert_eq!(want.len(), STEPS + 1);
+    assert_eq!(want.len(), PLAN_STEPS + 1);
     for (m, (g, w)) in planner.pulse().iter().zip(&want).enumerate() {
         assert!((g - w).abs() < 2e-6, "pulse[{m}]: {g} vs {w}");
     }
@@ -281,7 +284,7 @@ fn speed_plan_matches_the_qp_solution() {
             speed_mps: v0,
             last_command_mps: f(&case["last_command"]) as f32,
         };
-        let targets: [f32; STEPS + 1] = vec_f32(&case["targets"]).try_into().unwrap();
+        let targets: [f32; PLAN_STEPS + 1] = vec_f32(&case["targets"]).try_into().unwrap();
         let plan = planner.plan(&mut SpeedState::default(), &start, &targets);
         let want = vec_f32(&case["commands"]);
         for (j, (g, w)) in plan.commands_mps.iter().zip(&want).enumerate() {

@@ -62,7 +62,7 @@ pub const ROW_REAR_RIGHT: usize = 3;
 /// First obstacle row (obstacle `i` is `ROW_OBSTACLE + i`).
 pub const ROW_OBSTACLE: usize = 4;
 
-/// Smallest pivot accepted in the trapezoidal solve (every pivot is >= 1 for these models).
+/// Smallest block determinant accepted in the trapezoidal solve (>= 1 for these models).
 const MIN_PIVOT: f32 = 0.5;
 
 /// The linearisation point of every stage (0..=STEPS): the previous plan, shifted.
@@ -169,7 +169,16 @@ fn continuous(
 }
 
 /// Trapezoidal discretisation of `x' = F x + G u + e` over `h`, with `G` = unit vector of
-/// `delta`: returns `(A, B, c)`.
+/// `delta`: returns `(A, B, c)`, the solution `X` of `M X = [I + h/2 F | h G | h e]` with
+/// `M = I - h/2 F`.
+///
+/// The solve uses the sparsity of the models' `F` ([`continuous`]): `delta` depends on nothing
+/// (its row of `F` is zero), `v_y` and `r` only on themselves and `delta`, and `e_y`, `e_psi` on
+/// everything but each other's... so `M` is block triangular: `delta`, then the 2 x 2 block of
+/// `(v_y, r)`, then the 2 x 2 block of `(e_y, e_psi)`. Entries of `F` outside that pattern are
+/// ignored (the reference test against scipy's `cont2discrete` covers both modes). A block
+/// determinant below [`MIN_PIVOT`] (never, for these models: each block is `I - h/2` times a
+/// stable 2 x 2 or a nilpotent-plus-small one) or any non-finite result gives `None`.
 #[allow(clippy::type_complexity)]
 pub fn tustin(
     f: &SMatrix<f32, NX, NX>,
@@ -177,58 +186,61 @@ pub fn tustin(
     h: f32,
 ) -> Option<(SMatrix<f32, NX, NX>, SVector<f32, NX>, SVector<f32, NX>)> {
     let half = 0.5 * h;
-    let mut m = SMatrix::<f32, NX, NX>::identity() - f * half;
-    // Right-hand sides: [I + h/2 F | h G | h e].
-    let mut rhs = SMatrix::<f32, NX, { NX + 2 }>::zeros();
-    let plus = SMatrix::<f32, NX, NX>::identity() + f * half;
-    rhs.fixed_view_mut::<NX, NX>(0, 0).copy_from(&plus);
-    if let Some(g) = rhs.get_mut((DELTA, NX)) {
-        *g = h;
-    }
-    rhs.fixed_view_mut::<NX, 1>(0, NX + 1).copy_from(&(e * h));
-    // Forward elimination without pivoting (every pivot >= 1 here; see the module doc).
-    for p in 0..NX {
-        let piv = m.get((p, p)).copied().unwrap_or(0.0);
-        if !(piv.is_finite() && piv >= MIN_PIVOT) {
-            return None;
+    let fm = |i: usize, j: usize| f.get((i, j)).copied().unwrap_or(0.0) * half;
+    // Right-hand side rows [I + h/2 F | h G | h e], 7 wide.
+    let rhs = |i: usize| -> [f32; NX + 2] {
+        let mut r = [0.0f32; NX + 2];
+        for (j, v) in r.iter_mut().enumerate().take(NX) {
+            *v = fm(i, j) + if i == j { 1.0 } else { 0.0 };
         }
-        let inv = 1.0 / piv;
-        for i in p + 1..NX {
-            let factor = m.get((i, p)).copied().unwrap_or(0.0) * inv;
-            if factor == 0.0 {
-                continue;
-            }
-            for j in p..NX {
-                let sub = factor * m.get((p, j)).copied().unwrap_or(0.0);
-                if let Some(x) = m.get_mut((i, j)) {
-                    *x -= sub;
-                }
-            }
-            for j in 0..NX + 2 {
-                let sub = factor * rhs.get((p, j)).copied().unwrap_or(0.0);
-                if let Some(x) = rhs.get_mut((i, j)) {
-                    *x -= sub;
-                }
+        if let Some(g) = r.get_mut(NX) {
+            *g = if i == DELTA { h } else { 0.0 };
+        }
+        if let Some(c) = r.get_mut(NX + 1) {
+            *c = e.get(i).copied().unwrap_or(0.0) * h;
+        }
+        r
+    };
+    // x_delta: its row of M is the unit row.
+    let xd = rhs(DELTA);
+    // (v_y, r): M_b [x_vy; x_r] = rhs - M[., delta] x_delta, with M = I - h/2 F.
+    let (vy_rows, r_rows) = solve2(
+        (1.0 - fm(VY, VY), -fm(VY, R), -fm(R, VY), 1.0 - fm(R, R)),
+        sub_scaled(rhs(VY), -fm(VY, DELTA), &xd),
+        sub_scaled(rhs(R), -fm(R, DELTA), &xd),
+    )?;
+    // (e_y, e_psi): the rest of their rows moved to the right-hand side.
+    let mut ey_rhs = rhs(EY);
+    let mut epsi_rhs = rhs(EPSI);
+    for (m_ey, m_epsi, x) in [
+        (-fm(EY, VY), -fm(EPSI, VY), &vy_rows),
+        (-fm(EY, R), -fm(EPSI, R), &r_rows),
+        (-fm(EY, DELTA), -fm(EPSI, DELTA), &xd),
+    ] {
+        ey_rhs = sub_scaled(ey_rhs, m_ey, x);
+        epsi_rhs = sub_scaled(epsi_rhs, m_epsi, x);
+    }
+    let (ey_rows, epsi_rows) = solve2(
+        (1.0 - fm(EY, EY), -fm(EY, EPSI), -fm(EPSI, EY), 1.0 - fm(EPSI, EPSI)),
+        ey_rhs,
+        epsi_rhs,
+    )?;
+    let mut a = SMatrix::<f32, NX, NX>::zeros();
+    let mut b = SVector::<f32, NX>::zeros();
+    let mut c = SVector::<f32, NX>::zeros();
+    for (i, row) in [(EY, ey_rows), (EPSI, epsi_rows), (VY, vy_rows), (R, r_rows), (DELTA, xd)] {
+        for (j, v) in row.iter().enumerate().take(NX) {
+            if let Some(x) = a.get_mut((i, j)) {
+                *x = *v;
             }
         }
-    }
-    // Back substitution.
-    for p in (0..NX).rev() {
-        let inv = 1.0 / m.get((p, p)).copied().unwrap_or(1.0);
-        for j in 0..NX + 2 {
-            let mut s = rhs.get((p, j)).copied().unwrap_or(0.0);
-            for k in p + 1..NX {
-                s -=
-                    m.get((p, k)).copied().unwrap_or(0.0) * rhs.get((k, j)).copied().unwrap_or(0.0);
-            }
-            if let Some(x) = rhs.get_mut((p, j)) {
-                *x = s * inv;
-            }
+        if let (Some(x), Some(v)) = (b.get_mut(i), row.get(NX)) {
+            *x = *v;
+        }
+        if let (Some(x), Some(v)) = (c.get_mut(i), row.get(NX + 1)) {
+            *x = *v;
         }
     }
-    let a = rhs.fixed_view::<NX, NX>(0, 0).into_owned();
-    let b = rhs.fixed_view::<NX, 1>(0, NX).into_owned();
-    let c = rhs.fixed_view::<NX, 1>(0, NX + 1).into_owned();
     if a.iter()
         .chain(b.iter())
         .chain(c.iter())
@@ -238,6 +250,40 @@ pub fn tustin(
     } else {
         None
     }
+}
+
+/// `r - m x` element-wise (one block elimination step).
+#[inline(always)]
+fn sub_scaled(mut r: [f32; NX + 2], m: f32, x: &[f32; NX + 2]) -> [f32; NX + 2] {
+    if m != 0.0 {
+        for (a, b) in r.iter_mut().zip(x) {
+            *a -= m * b;
+        }
+    }
+    r
+}
+
+/// Solves `[[m00, m01], [m10, m11]] [x; y] = [r0; r1]` for rows of right-hand sides, by
+/// Cramer's rule; `None` if the determinant is below [`MIN_PIVOT`] or not finite.
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn solve2(
+    (m00, m01, m10, m11): (f32, f32, f32, f32),
+    r0: [f32; NX + 2],
+    r1: [f32; NX + 2],
+) -> Option<([f32; NX + 2], [f32; NX + 2])> {
+    let det = m00 * m11 - m01 * m10;
+    if !(det.is_finite() && det >= MIN_PIVOT) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let mut x = [0.0f32; NX + 2];
+    let mut y = [0.0f32; NX + 2];
+    for (((x, y), a), b) in x.iter_mut().zip(y.iter_mut()).zip(&r0).zip(&r1) {
+        *x = (m11 * a - m01 * b) * inv;
+        *y = (m00 * b - m10 * a) * inv;
+    }
+    Some((x, y))
 }
 
 /// A point of the body in the body frame: `ahead_m` ahead of the rear axle, `right_m` to the

@@ -1,16 +1,17 @@
-//! The speed plan: the speed commands of the horizon, from the identified speed model (eq 5:
+//! The speed plan: the speed commands of the next 2 s, from the identified speed model (eq 5:
 //! commanded speed -> measured speed, 2nd order, 0.42 s input delay), as a condensed QP.
 //!
-//! The decision is the change `du_j` of the command against the last one sent, held over MPC
-//! step `j` (0.1 s). The model is linear, so the predicted speed at step `k` is
+//! The decision is the change `du_j` of the command against the last one sent, held over knot
+//! `j` ([`KNOT_STEPS`] MPC steps = 0.2 s; [`KNOTS`] knots cover [`PLAN_STEPS`]). The model is
+//! linear, so the predicted speed at MPC step `k` (0.1 s) is
 //! ```text
-//! v_k = f_k + bias + sum_{j<k} p_{k-j} du_j
+//! v_k = f_k + bias + sum_j p_{k - 2j} du_j
 //! ```
 //! with `f` the free response (a copy of the node's model state, delay line included, rolled
 //! forward with the last command held: the commands already in flight decide the first 0.42 s
-//! exactly, which is how the delay is handled) and `p` the response to a one-step pulse (from
-//! the model, once, when the configuration is built). `p_m` is zero while the pulse is still in
-//! the delay line, so the first four steps are not the plan's to change.
+//! exactly, which is how the delay is handled) and `p` the response to a command held over one
+//! knot (from the model, once, when the configuration is built). `p_m` is zero while the
+//! command is still in the delay line, so the first four steps are not the plan's to change.
 //!
 //! Cost `1/2 sum w_v (v_k - r_k)^2 + 1/2 sum w_du (du_j - du_{j-1})^2` (`du_{-1} = 0`: the change
 //! against the command sent last); hard bounds `0 <= u_j <= max_speed`; a soft (exact-penalty)
@@ -19,10 +20,17 @@
 //!
 //! Solver: ADMM on the condensed problem (constraints `z = [du; P du]`). Its matrix
 //! `H + rho_u I + rho_v P'P` never changes, so its inverse is computed once, in f64, when the
-//! configuration is built; an iteration is three `N x N` matrix-vector products.
+//! configuration is built; an iteration is three small matrix-vector products. Knots of 0.2 s
+//! rather than one command per 0.1 s step: a quarter of the work per iteration, and the speed
+//! loop (time constant about 1.2 s for eq 5) cannot follow a finer command anyway.
 use nalgebra::{SMatrix, SVector};
 
-use super::{clamp, max, STEPS, TICKS_PER_STEP};
+use super::{clamp, max, PLAN_STEPS, TICKS_PER_STEP};
+
+/// MPC steps per command knot (0.2 s).
+pub const KNOT_STEPS: usize = 2;
+/// Command knots over the plan.
+pub const KNOTS: usize = PLAN_STEPS / KNOT_STEPS;
 use crate::model::{SsBlock, SsBlockState};
 
 /// ADMM penalty of the command bounds (per (m/s)^2).
@@ -67,22 +75,23 @@ pub enum SpeedPlanError {
 pub struct SpeedPlanner {
     /// The speed model (eq 5 form), stepped for the free response.
     model: SsBlock<2>,
-    /// `pulse[m]` = speed change `m` steps after the start of a unit command held over one step.
-    pulse: [f32; STEPS + 1],
-    /// `P`: `v = f + P du`, lower triangular Toeplitz of `pulse`.
-    p: SMatrix<f32, STEPS, STEPS>,
+    /// `pulse[m]` = speed change `m` steps after the start of a unit command held over one
+    /// knot.
+    pulse: [f32; PLAN_STEPS + 1],
+    /// `P`: `v = f + P du` (steps 1..=PLAN_STEPS by knots).
+    p: SMatrix<f32, PLAN_STEPS, KNOTS>,
     /// `(H + rho_u I + rho_v P'P)^-1`.
-    kkt_inv: SMatrix<f32, STEPS, STEPS>,
+    kkt_inv: SMatrix<f32, KNOTS, KNOTS>,
     tuning: SpeedTuning,
 }
 
 /// The speed planner's warm start.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SpeedState {
-    z_cmd: [f32; STEPS],
-    w_cmd: [f32; STEPS],
-    z_speed: [f32; STEPS],
-    w_speed: [f32; STEPS],
+    z_cmd: [f32; KNOTS],
+    w_cmd: [f32; KNOTS],
+    z_speed: [f32; PLAN_STEPS],
+    w_speed: [f32; PLAN_STEPS],
 }
 
 /// A speed plan.
@@ -90,10 +99,10 @@ pub struct SpeedState {
 pub struct SpeedPlan {
     /// Command to send now, m/s.
     pub command_mps: f32,
-    /// Planned commands per step, m/s.
-    pub commands_mps: [f32; STEPS],
-    /// Predicted speed at steps 0..=STEPS (0 = now), m/s, >= 0.
-    pub speeds_mps: [f32; STEPS + 1],
+    /// Planned commands per knot, m/s.
+    pub commands_mps: [f32; KNOTS],
+    /// Predicted speed at steps 0..=PLAN_STEPS (0 = now), m/s, >= 0.
+    pub speeds_mps: [f32; PLAN_STEPS + 1],
 }
 
 /// What the plan starts from.
@@ -121,23 +130,29 @@ impl SpeedPlanner {
         {
             return Err(SpeedPlanError::BadTuning);
         }
-        // Unit step response at the start of every MPC step (call 5k, k = 0..=STEPS), then its
+        // Unit step response at the start of every MPC step (call 5k, k = 0..=PLAN_STEPS), then its
         // differences: the response to a command held over one step.
         let mut st = model.zero_state();
         let step_resp = roll(model, &mut st, 1.0);
-        let mut pulse = [0.0f32; STEPS + 1];
-        let mut before = 0.0f32;
-        for (p, s) in pulse.iter_mut().zip(step_resp) {
-            *p = s - before;
-            before = s;
+        // A command held over one knot is a unit step minus one KNOT_STEPS later.
+        let mut pulse = [0.0f32; PLAN_STEPS + 1];
+        for (m, p) in pulse.iter_mut().enumerate() {
+            let now = step_resp.get(m).copied().unwrap_or(0.0);
+            let later = m
+                .checked_sub(KNOT_STEPS)
+                .and_then(|i| step_resp.get(i))
+                .copied()
+                .unwrap_or(0.0);
+            *p = now - later;
         }
         if pulse.iter().any(|p| !p.is_finite()) || pulse.iter().all(|p| *p == 0.0) {
             return Err(SpeedPlanError::NoResponse);
         }
-        // Row i is step k = i + 1; column j the command of step j: pulse[k - j], 0 for j > k.
-        let p = SMatrix::<f32, STEPS, STEPS>::from_fn(|i, j| {
+        // Row i is step k = i + 1; column j the command of knot j (from step KNOT_STEPS j):
+        // pulse[k - KNOT_STEPS j], 0 before the knot starts.
+        let p = SMatrix::<f32, PLAN_STEPS, KNOTS>::from_fn(|i, j| {
             (i + 1)
-                .checked_sub(j)
+                .checked_sub(KNOT_STEPS * j)
                 .and_then(|m| pulse.get(m))
                 .copied()
                 .unwrap_or(0.0)
@@ -158,36 +173,36 @@ impl SpeedPlanner {
     }
 
     /// Pulse response (see the struct doc).
-    pub fn pulse(&self) -> &[f32; STEPS + 1] {
+    pub fn pulse(&self) -> &[f32; PLAN_STEPS + 1] {
         &self.pulse
     }
 
-    /// Free response at steps 1..=STEPS with `command_mps` held, plus the bias, m/s.
-    pub fn free_response(&self, start: &SpeedStart, command_mps: f32) -> [f32; STEPS] {
+    /// Free response at steps 1..=PLAN_STEPS with `command_mps` held, plus the bias, m/s.
+    pub fn free_response(&self, start: &SpeedStart, command_mps: f32) -> [f32; PLAN_STEPS] {
         let mut st = *start.model_state;
         let all = roll(&self.model, &mut st, command_mps);
-        let mut f = [0.0f32; STEPS];
+        let mut f = [0.0f32; PLAN_STEPS];
         for (v, y) in f.iter_mut().zip(all.iter().skip(1)) {
             *v = y + start.bias_mps;
         }
         f
     }
 
-    /// Plans the commands: reference from the targets (`targets_mps[k]`, k = 0..=STEPS, the
+    /// Plans the commands: reference from the targets (`targets_mps[k]`, k = 0..=PLAN_STEPS, the
     /// path's target speed where the car is expected at step k), then the QP.
     pub fn plan(
         &self,
         state: &mut SpeedState,
         start: &SpeedStart,
-        targets_mps: &[f32; STEPS + 1],
+        targets_mps: &[f32; PLAN_STEPS + 1],
     ) -> SpeedPlan {
         let t = &self.tuning;
         let last = clamp(finite_or(start.last_command_mps, 0.0), 0.0, t.max_speed_mps);
         let v0 = max(finite_or(start.speed_mps, 0.0), 0.0);
-        let f = SVector::<f32, STEPS>::from(self.free_response(start, last));
+        let f = SVector::<f32, PLAN_STEPS>::from(self.free_response(start, last));
         // Reference: the targets, reached within the acceleration limits.
         let dt = super::STEP_S;
-        let mut r = SVector::<f32, STEPS>::zeros();
+        let mut r = SVector::<f32, PLAN_STEPS>::zeros();
         let mut prev = v0;
         for (rk, target) in r.iter_mut().zip(targets_mps.iter().skip(1)) {
             let goal = clamp(finite_or(*target, 0.0), 0.0, t.max_speed_mps);
@@ -198,14 +213,14 @@ impl SpeedPlanner {
         let lin = self.p.tr_mul(&(f - r)) * t.speed_weight;
         let lo = -last;
         let hi = t.max_speed_mps - last;
-        let speed_room = SVector::<f32, STEPS>::from_element(t.max_speed_mps) - f;
+        let speed_room = SVector::<f32, PLAN_STEPS>::from_element(t.max_speed_mps) - f;
         state.shift();
-        let mut du = SVector::<f32, STEPS>::zeros();
+        let mut du = SVector::<f32, KNOTS>::zeros();
         for _ in 0..t.iterations {
-            let zc = SVector::<f32, STEPS>::from(state.z_cmd);
-            let wc = SVector::<f32, STEPS>::from(state.w_cmd);
-            let zs = SVector::<f32, STEPS>::from(state.z_speed);
-            let ws = SVector::<f32, STEPS>::from(state.w_speed);
+            let zc = SVector::<f32, KNOTS>::from(state.z_cmd);
+            let wc = SVector::<f32, KNOTS>::from(state.w_cmd);
+            let zs = SVector::<f32, PLAN_STEPS>::from(state.z_speed);
+            let ws = SVector::<f32, PLAN_STEPS>::from(state.w_speed);
             let rhs = -lin + (zc - wc) * RHO_COMMAND + self.p.tr_mul(&(zs - ws)) * RHO_SPEED;
             du = self.kkt_inv * rhs;
             let dv = self.p * du;
@@ -234,7 +249,7 @@ impl SpeedPlanner {
             }
         }
         // The commands are clamped to their bounds exactly (ADMM meets them only in the limit).
-        let mut commands = [0.0f32; STEPS];
+        let mut commands = [0.0f32; KNOTS];
         for (c, d) in commands.iter_mut().zip(du.iter()) {
             *c = clamp(finite_or(last + d, 0.0), 0.0, t.max_speed_mps);
         }
@@ -250,14 +265,14 @@ impl SpeedPlanner {
     /// (with `last` held), clamped at 0.
     pub fn predict(
         &self,
-        f: &SVector<f32, STEPS>,
+        f: &SVector<f32, PLAN_STEPS>,
         last: f32,
-        commands: &[f32; STEPS],
+        commands: &[f32; KNOTS],
         v0: f32,
-    ) -> [f32; STEPS + 1] {
-        let du = SVector::<f32, STEPS>::from_fn(|j, _| commands.get(j).map_or(0.0, |c| c - last));
+    ) -> [f32; PLAN_STEPS + 1] {
+        let du = SVector::<f32, KNOTS>::from_fn(|j, _| commands.get(j).map_or(0.0, |c| c - last));
         let v = f + self.p * du;
-        let mut out = [0.0f32; STEPS + 1];
+        let mut out = [0.0f32; PLAN_STEPS + 1];
         let mut it = out.iter_mut();
         if let Some(first) = it.next() {
             *first = v0;
@@ -275,8 +290,8 @@ impl SpeedPlanner {
             0.0,
             self.tuning.max_speed_mps,
         );
-        let f = SVector::<f32, STEPS>::from(self.free_response(start, last));
-        let commands = [0.0f32; STEPS];
+        let f = SVector::<f32, PLAN_STEPS>::from(self.free_response(start, last));
+        let commands = [0.0f32; KNOTS];
         let speeds = self.predict(
             &f,
             last,
@@ -292,29 +307,29 @@ impl SpeedPlanner {
 }
 
 impl SpeedState {
-    /// Warm start for the next tick: one tick is a fifth of a step.
+    /// Warm start for the next tick: one tick is a fifth of a step, a tenth of a knot.
     fn shift(&mut self) {
-        let f = 1.0 / TICKS_PER_STEP as f32;
-        for v in [
-            &mut self.z_cmd,
-            &mut self.w_cmd,
-            &mut self.z_speed,
-            &mut self.w_speed,
-        ] {
-            let old = *v;
-            for (i, cur) in v.iter_mut().enumerate() {
-                if let Some(next) = old.get(i + 1) {
-                    *cur += (next - *cur) * f;
-                }
-            }
-        }
+        let per_step = 1.0 / TICKS_PER_STEP as f32;
+        let per_knot = per_step / KNOT_STEPS as f32;
+        shift(&mut self.z_cmd, per_knot);
+        shift(&mut self.w_cmd, per_knot);
+        shift(&mut self.z_speed, per_step);
+        shift(&mut self.w_speed, per_step);
+    }
+}
+
+/// Each value moved `f` of the way to the next one (the last held).
+fn shift<const N: usize>(v: &mut [f32; N], f: f32) {
+    let old = *v;
+    for (cur, next) in v.iter_mut().zip(old.iter().skip(1)) {
+        *cur += (next - *cur) * f;
     }
 }
 
 /// The model's output at the start of each MPC step (calls 0, 5, 10, ... of `step`, the call
 /// `5k` being the sample at `t + k STEP_S`) with `u` held from now on.
-fn roll(model: &SsBlock<2>, st: &mut SsBlockState<2>, u: f32) -> [f32; STEPS + 1] {
-    let mut out = [0.0f32; STEPS + 1];
+fn roll(model: &SsBlock<2>, st: &mut SsBlockState<2>, u: f32) -> [f32; PLAN_STEPS + 1] {
+    let mut out = [0.0f32; PLAN_STEPS + 1];
     for y in out.iter_mut() {
         *y = model.step(st, u);
         for _ in 1..TICKS_PER_STEP {
@@ -336,28 +351,28 @@ fn finite_or(v: f32, fallback: f32) -> f32 {
 /// `(H + rho_u I + rho_v P'P)^-1` with `H = w_v P'P + w_du D'D` (D the first difference with
 /// `du_{-1} = 0`), in f64 by Cholesky, rounded to f32.
 fn kkt_inverse(
-    pulse: &[f32; STEPS + 1],
+    pulse: &[f32; PLAN_STEPS + 1],
     t: &SpeedTuning,
-) -> Result<SMatrix<f32, STEPS, STEPS>, SpeedPlanError> {
+) -> Result<SMatrix<f32, KNOTS, KNOTS>, SpeedPlanError> {
     let pm = |k: usize, j: usize| -> f64 {
         (k + 1)
-            .checked_sub(j)
+            .checked_sub(KNOT_STEPS * j)
             .and_then(|m| pulse.get(m))
             .map_or(0.0, |v| f64::from(*v))
     };
     let wv = f64::from(t.speed_weight) + f64::from(RHO_SPEED);
     let wd = f64::from(t.command_change_weight);
     // M = (w_v + rho_v) P'P + w_du D'D + rho_u I.
-    let mut m = [[0.0f64; STEPS]; STEPS];
+    let mut m = [[0.0f64; KNOTS]; KNOTS];
     for (i, row) in m.iter_mut().enumerate() {
         for (j, v) in row.iter_mut().enumerate() {
             let mut ptp = 0.0;
-            for k in 0..STEPS {
+            for k in 0..PLAN_STEPS {
                 ptp += pm(k, i) * pm(k, j);
             }
             // D'D: 2 on the diagonal (1 on the last), -1 beside it.
             let dtd = if i == j {
-                if i + 1 == STEPS {
+                if i + 1 == KNOTS {
                     1.0
                 } else {
                     2.0
@@ -372,10 +387,10 @@ fn kkt_inverse(
     }
     let l = cholesky(&m).ok_or(SpeedPlanError::NotPositiveDefinite)?;
     // Columns of the inverse: solve L L' x = e_c.
-    let mut inv = SMatrix::<f32, STEPS, STEPS>::zeros();
-    for c in 0..STEPS {
-        let mut y = [0.0f64; STEPS];
-        for i in 0..STEPS {
+    let mut inv = SMatrix::<f32, KNOTS, KNOTS>::zeros();
+    for c in 0..KNOTS {
+        let mut y = [0.0f64; KNOTS];
+        for i in 0..KNOTS {
             let mut s = if i == c { 1.0 } else { 0.0 };
             for k in 0..i {
                 s -= at(&l, i, k) * y.get(k).copied().unwrap_or(0.0);
@@ -384,10 +399,10 @@ fn kkt_inverse(
                 *yi = s / at(&l, i, i);
             }
         }
-        let mut x = [0.0f64; STEPS];
-        for i in (0..STEPS).rev() {
+        let mut x = [0.0f64; KNOTS];
+        for i in (0..KNOTS).rev() {
             let mut s = y.get(i).copied().unwrap_or(0.0);
-            for k in i + 1..STEPS {
+            for k in i + 1..KNOTS {
                 s -= at(&l, k, i) * x.get(k).copied().unwrap_or(0.0);
             }
             if let Some(xi) = x.get_mut(i) {
@@ -404,14 +419,14 @@ fn kkt_inverse(
 }
 
 /// `m[i][j]`, 0 outside.
-fn at(m: &[[f64; STEPS]; STEPS], i: usize, j: usize) -> f64 {
+fn at(m: &[[f64; KNOTS]; KNOTS], i: usize, j: usize) -> f64 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
 
 /// Lower Cholesky factor of a symmetric matrix; `None` unless positive definite.
-fn cholesky(m: &[[f64; STEPS]; STEPS]) -> Option<[[f64; STEPS]; STEPS]> {
-    let mut l = [[0.0f64; STEPS]; STEPS];
-    for i in 0..STEPS {
+fn cholesky(m: &[[f64; KNOTS]; KNOTS]) -> Option<[[f64; KNOTS]; KNOTS]> {
+    let mut l = [[0.0f64; KNOTS]; KNOTS];
+    for i in 0..KNOTS {
         for j in 0..=i {
             let mut s = at(m, i, j);
             for k in 0..j {
