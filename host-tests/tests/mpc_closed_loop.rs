@@ -1,7 +1,9 @@
 //! The controller in closed loop with the host simulator's plant (host-tests/src/mpc_sim.rs):
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
-use catmodel::control::mpc::{ControlStatus, MpcTuning, DEFAULT_TUNING};
+use catmodel::control::mpc::{
+    ControlStatus, FallbackReason, MpcTuning, Obstacle, ObstacleSide, DEFAULT_TUNING,
+};
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{mpc_for, Loop, TestPath, ESCAPE_BODY};
 
@@ -167,4 +169,155 @@ fn dlc_iteration_cap_sweep() {
         }
         println!("cap {cap}: clean up to {best} m/s");
     }
+}
+
+/// A left curve of radius `radius` after a straight lead-in, at constant speed.
+fn curve(radius: f64, lead: f64, speed: f64) -> TestPath {
+    TestPath::new(
+        lead + 1.5 * std::f64::consts::PI * radius,
+        move |s| {
+            if s <= lead {
+                (0.0, s)
+            } else {
+                // Left turn from heading north: centre at (-radius, lead).
+                let a = (s - lead) / radius;
+                (-radius + radius * a.cos(), lead + radius * a.sin())
+            }
+        },
+        |_| (2.0, 2.0),
+        move |_| speed,
+    )
+}
+
+#[test]
+fn holds_a_curve() {
+    let cfg = VehicleConfig::default();
+    let path = curve(40.0, 30.0, 8.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        8.0,
+        0.0,
+        0.0,
+    );
+    l.run(&path, path.length_m() - 10.0, 60.0);
+    // On the arc (after the entry transient), the rear axle stays on the path.
+    let on_arc: Vec<f64> = l
+        .log
+        .iter()
+        .filter(|t| t.station_m > 50.0)
+        .map(|t| t.e_y_m)
+        .collect();
+    let max = on_arc.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    println!(
+        "curve r 40 m at 8 m/s: max |e_y| on the arc {max:.3} m over {} ticks",
+        on_arc.len()
+    );
+    assert!(on_arc.len() > 300, "reached the arc");
+    assert!(max < 0.10, "max |e_y| {max}");
+    assert!(l.log.iter().all(|t| t.corridor_violation_m <= 0.0));
+}
+
+#[test]
+fn passes_an_obstacle_on_the_side_with_room() {
+    let cfg = VehicleConfig::default();
+    let path = straight(200.0, 3.5, 10.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        10.0,
+        0.0,
+        0.0,
+    );
+    // Slightly right of the centre line: the room is on the left.
+    let obstacle = Obstacle {
+        east_m: 0.4,
+        north_m: 60.0,
+        radius_m: 0.5,
+    };
+    l.obstacles[0] = Some(obstacle);
+    let mut clearance = f64::INFINITY;
+    let mut t = 0.0;
+    while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
+        l.tick(&path, t);
+        t += 0.02;
+        clearance = clearance.min(l.clearance(&obstacle));
+    }
+    let avoiding = l
+        .log
+        .iter()
+        .filter(|t| t.out.status == ControlStatus::Avoiding)
+        .count();
+    let sides: Vec<_> = l.log.iter().filter_map(|t| t.out.sides[0]).collect();
+    println!("obstacle: min body clearance {clearance:.3} m, {avoiding} ticks avoiding");
+    assert!(clearance >= 0.5, "clearance {clearance}");
+    assert!(avoiding > 50);
+    assert!(
+        sides.iter().all(|s| *s == ObstacleSide::Left),
+        "never changes its mind"
+    );
+    assert!(l.log.iter().all(|t| t.corridor_violation_m <= 0.0));
+    // Back on the path and tracking afterwards.
+    let last = l.log.last().unwrap();
+    assert_eq!(last.out.status, ControlStatus::Tracking);
+    assert!(last.e_y_m.abs() < 0.1, "{}", last.e_y_m);
+}
+
+/// An obstacle across a narrow corridor: status 3 from the first tick it is within the body's
+/// reach over the horizon, speed command 0, stopped short of it. The controller sees an
+/// obstacle once the 1.5 s horizon reaches it (here 5 m/s x 1.5 s + the body ahead of the rear
+/// axle + the inflated radius = 12.8 m ahead), and the car needs about 0.8 s of delay and lag
+/// plus v^2 / 2a to stop: 5 m/s is within that preview; at 8 m/s it is not (docs/mpc.md).
+#[test]
+fn brakes_when_no_side_fits() {
+    let cfg = VehicleConfig::default();
+    let path = straight(200.0, 1.5, 5.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        5.0,
+        0.0,
+        0.0,
+    );
+    let obstacle = Obstacle {
+        east_m: 0.0,
+        north_m: 40.0,
+        radius_m: 1.0,
+    };
+    l.obstacles[2] = Some(obstacle);
+    let mut clearance = f64::INFINITY;
+    let mut t = 0.0;
+    while t < 15.0 {
+        let out = l.tick(&path, t);
+        t += 0.02;
+        clearance = clearance.min(l.clearance(&obstacle));
+        assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
+        assert!(out
+            .plan
+            .iter()
+            .all(|p| p.x_m.is_finite() && p.y_m.is_finite()));
+    }
+    let fallback: Vec<_> = l
+        .log
+        .iter()
+        .filter(|t| t.out.status == ControlStatus::Fallback)
+        .collect();
+    let last = l.log.last().unwrap();
+    println!(
+        "blocked: {} fallback ticks, stopped at {:.2} m/s, clearance {clearance:.2} m",
+        fallback.len(),
+        last.speed_mps
+    );
+    assert!(!fallback.is_empty());
+    assert!(fallback
+        .iter()
+        .all(|t| t.out.fallback == Some(FallbackReason::NoPassage) && t.out.speed_cmd_mps == 0.0));
+    assert!(last.speed_mps < 0.05, "stopped");
+    assert!(
+        clearance > 0.0,
+        "stopped short of the obstacle: {clearance}"
+    );
 }

@@ -122,7 +122,8 @@ fn objective(p: &Problem<NX, STEPS, ROWS>, ws: &Workspace<NX, STEPS, ROWS>) -> f
         }
         let u = it.u as f64;
         j += 0.5 * p.r as f64 * u * u + st.r_lin as f64 * u;
-        for row in st.rows
+        for row in st
+            .rows
             .iter()
             .filter(|r| r.active && r.soft_weight.is_finite())
         {
@@ -154,11 +155,13 @@ fn admm_reaches_the_interior_point_solution() {
         let report = ws.iterate(&p, &x0, &settings(20_000)).unwrap();
         let sol = &case["solution"];
         let u_ref = vec_f32(&sol["u"]);
-        let worst_u =
-            ws.stages.iter().map(|it| it.u)
-                .zip(&u_ref)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f32, f32::max);
+        let worst_u = ws
+            .stages
+            .iter()
+            .map(|it| it.u)
+            .zip(&u_ref)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
         let worst_x = (0..STEPS)
             .flat_map(|k| {
                 let xr = vec_f32(&sol["x"][k]);
@@ -181,7 +184,8 @@ fn admm_reaches_the_interior_point_solution() {
         );
         // Hard rows and the box hold to the primal residual.
         for k in 0..STEPS {
-            for row in p.stages[k].rows
+            for row in p.stages[k]
+                .rows
                 .iter()
                 .filter(|r| r.active && !r.soft_weight.is_finite())
             {
@@ -217,7 +221,9 @@ fn warm_start_beats_cold_start_at_the_iteration_cap() {
         let mut exact = solved.clone();
         exact.iterate(&p, &x1, &settings(20_000)).unwrap();
         let error = |ws: &Workspace<NX, STEPS, ROWS>| {
-            ws.stages.iter().map(|it| it.u)
+            ws.stages
+                .iter()
+                .map(|it| it.u)
                 .zip(exact.stages.iter().map(|it| it.u))
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f32, f32::max)

@@ -221,14 +221,25 @@ pub fn tustin(
         epsi_rhs = sub_scaled(epsi_rhs, m_epsi, x);
     }
     let (ey_rows, epsi_rows) = solve2(
-        (1.0 - fm(EY, EY), -fm(EY, EPSI), -fm(EPSI, EY), 1.0 - fm(EPSI, EPSI)),
+        (
+            1.0 - fm(EY, EY),
+            -fm(EY, EPSI),
+            -fm(EPSI, EY),
+            1.0 - fm(EPSI, EPSI),
+        ),
         ey_rhs,
         epsi_rhs,
     )?;
     let mut a = SMatrix::<f32, NX, NX>::zeros();
     let mut b = SVector::<f32, NX>::zeros();
     let mut c = SVector::<f32, NX>::zeros();
-    for (i, row) in [(EY, ey_rows), (EPSI, epsi_rows), (VY, vy_rows), (R, r_rows), (DELTA, xd)] {
+    for (i, row) in [
+        (EY, ey_rows),
+        (EPSI, epsi_rows),
+        (VY, vy_rows),
+        (R, r_rows),
+        (DELTA, xd),
+    ] {
         for (j, v) in row.iter().enumerate().take(NX) {
             if let Some(x) = a.get_mut((i, j)) {
                 *x = *v;

@@ -246,7 +246,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     },
     steer_lead_s: 0.07,
     steer_rate_share: 0.9,
-    obstacle_margin_m: 0.3,
+    obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
     obstacle_tolerance_m: 0.1,
 };
