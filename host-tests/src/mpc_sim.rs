@@ -178,6 +178,18 @@ impl TestPath {
         (i as f64 * PATH_STEP_M + along).clamp(0.0, self.length_m())
     }
 
+    /// Station of the point nearest to (x, y) over the whole path.
+    pub fn project_anywhere(&self, x: f64, y: f64) -> f64 {
+        let mut best = (f64::INFINITY, 0);
+        for (i, (px, py)) in self.x.iter().zip(&self.y).enumerate() {
+            let d = (px - x).powi(2) + (py - y).powi(2);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        self.project(x, y, best.1 as f64 * PATH_STEP_M)
+    }
+
     /// Signed lateral offset (right positive) of (x, y) from the path at station `s`.
     pub fn offset(&self, x: f64, y: f64, s: f64) -> f64 {
         let (px, py, h) = self.pose(s);
@@ -190,6 +202,22 @@ impl TestPath {
             pose: Pose::new(x as f32, y as f32, h as f32),
             left_m: corridor.0 as f32,
             right_m: corridor.1 as f32,
+        }
+    }
+
+    /// An obstacle at (east, north) with radius `r`, placed along the path as the controller
+    /// reads it, seen from a rear axle at station `car_station`.
+    pub fn place(&self, east: f64, north: f64, r: f64, car_station: f64) -> Obstacle {
+        let s = self.project_anywhere(east, north);
+        let (left, right) = self.corridor(s);
+        Obstacle {
+            east_m: east as f32,
+            north_m: north as f32,
+            radius_m: r as f32,
+            ahead_m: (s - car_station) as f32,
+            path_offset_m: self.offset(east, north, s) as f32,
+            left_m: left as f32,
+            right_m: right as f32,
         }
     }
 
@@ -218,13 +246,30 @@ impl TestPath {
     }
 }
 
-/// The position error of the measurement: a constant bias plus white noise (m).
+/// An obstacle circle for [`Loop::obstacles`]; the loop fills in where it lies along the path
+/// every tick.
+pub fn circle(east_m: f32, north_m: f32, radius_m: f32) -> Obstacle {
+    Obstacle {
+        east_m,
+        north_m,
+        radius_m,
+        ahead_m: 0.0,
+        path_offset_m: 0.0,
+        left_m: 0.0,
+        right_m: 0.0,
+    }
+}
+
+/// The error of the measured pose: a constant position bias plus white noise on position and
+/// heading (the node's estimate error, to first order).
 #[derive(Clone, Copy, Debug)]
 pub struct PositionError {
     /// Constant error east, north, m.
     pub bias_m: (f64, f64),
     /// Standard deviation of the white part, m.
     pub white_m: f64,
+    /// Standard deviation of the heading error, rad.
+    pub heading_white_rad: f64,
     /// The bound the controller is told (inflates obstacles), m.
     pub uncertainty_m: f32,
 }
@@ -234,14 +279,29 @@ impl PositionError {
     pub const NONE: Self = Self {
         bias_m: (0.0, 0.0),
         white_m: 0.0,
+        heading_white_rad: 0.0,
         uncertainty_m: 0.0,
     };
-    /// A survey-grade (RTK) receiver after the node's filter: centimetres.
+    /// A survey-grade (RTK) receiver after the node's filter: centimetres (RTK fixes are
+    /// specified at about 1 cm + 1 ppm horizontal), heading a few milliradians.
     pub const RTK: Self = Self {
         bias_m: (0.01, -0.01),
         white_m: 0.01,
+        heading_white_rad: 0.003,
         uncertainty_m: 0.05,
     };
+    /// The simulator's standard receiver after the node's filter: the bias dominates (the
+    /// simulator draws it with 0.8 m sigma per axis; the node's filtered position is 0.92 m RMS
+    /// off on the 5-minute drive, README), `bias_m` is set per test; white part 0.1 m; the
+    /// controller is told 1.6 m (2 sigma).
+    pub fn standard(bias_m: (f64, f64)) -> Self {
+        Self {
+            bias_m,
+            white_m: 0.1,
+            heading_white_rad: 0.01,
+            uncertainty_m: 1.6,
+        }
+    }
 }
 
 /// One tick of the log.
@@ -466,6 +526,7 @@ impl Loop {
         let ex = self.position_error.bias_m.0 + self.position_error.white_m * self.normal();
         let ey = self.position_error.bias_m.1 + self.position_error.white_m * self.normal();
         let (mx, my) = (x + ex, y + ey);
+        let mh = h + self.position_error.heading_white_rad * self.normal();
         self.station_m = path.project(mx, my, self.station_m);
         let vx = self.state.vx_mps;
         let r = self.state.yaw_rate_rps;
@@ -474,14 +535,25 @@ impl Loop {
             .update(&mut self.hybrid_state, vx as f32, (vx * r) as f32);
         let max_steer = (self.cfg.chassis.max_steer_deg as f32).to_radians();
         let reference = path.reference(self.station_m, &self.planned_speeds, self.mpc.body());
+        let mut obstacles = [None; MAX_OBSTACLES];
+        for (o, ob) in obstacles.iter_mut().zip(&self.obstacles) {
+            *o = ob.map(|b| {
+                path.place(
+                    b.east_m as f64,
+                    b.north_m as f64,
+                    b.radius_m as f64,
+                    self.station_m,
+                )
+            });
+        }
         // The speed model's output now (its next step consumes the command sent now).
         let mut peek = self.speed_model_state;
         let modelled = self.speed_model.step(&mut peek, 0.0);
         let input = MpcInput {
             reference: &reference,
-            obstacles: &self.obstacles,
+            obstacles: &obstacles,
             car: CarState {
-                pose: Pose::new(mx as f32, my as f32, h as f32),
+                pose: Pose::new(mx as f32, my as f32, mh as f32),
                 speed_mps: vx as f32,
                 lateral: LateralState {
                     vy_mps: self.state.vy_mps as f32,

@@ -2,10 +2,10 @@
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
 use catmodel::control::mpc::{
-    ControlStatus, FallbackReason, MpcTuning, Obstacle, ObstacleSide, DEFAULT_TUNING,
+    ControlStatus, FallbackReason, MpcTuning, ObstacleSide, DEFAULT_TUNING,
 };
 use catmodel_host::sim::config::VehicleConfig;
-use catmodel_host_tests::mpc_sim::{mpc_for, Loop, TestPath, ESCAPE_BODY};
+use catmodel_host_tests::mpc_sim::{circle, mpc_for, Loop, PositionError, TestPath, ESCAPE_BODY};
 
 fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
     TestPath::new(length, |s| (0.0, s), |_| (lane, lane), |_| speed)
@@ -232,11 +232,7 @@ fn passes_an_obstacle_on_the_side_with_room() {
         0.0,
     );
     // Slightly right of the centre line: the room is on the left.
-    let obstacle = Obstacle {
-        east_m: 0.4,
-        north_m: 60.0,
-        radius_m: 0.5,
-    };
+    let obstacle = circle(0.4, 60.0, 0.5);
     l.obstacles[0] = Some(obstacle);
     let mut clearance = f64::INFINITY;
     let mut t = 0.0;
@@ -282,11 +278,7 @@ fn brakes_when_no_side_fits() {
         0.0,
         0.0,
     );
-    let obstacle = Obstacle {
-        east_m: 0.0,
-        north_m: 40.0,
-        radius_m: 1.0,
-    };
+    let obstacle = circle(0.0, 40.0, 1.0);
     l.obstacles[2] = Some(obstacle);
     let mut clearance = f64::INFINITY;
     let mut t = 0.0;
@@ -320,4 +312,191 @@ fn brakes_when_no_side_fits() {
         clearance > 0.0,
         "stopped short of the obstacle: {clearance}"
     );
+}
+
+/// A winding road: the centre line swings 3 m either side with a 60 m period (radius down to
+/// 30 m), corridor 2 m either side.
+fn s_curves(length: f64, speed: f64) -> TestPath {
+    let k = 2.0 * std::f64::consts::PI / 60.0;
+    TestPath::new(
+        length,
+        move |s| (3.0 * (k * s).sin(), s),
+        |_| (2.0, 2.0),
+        move |_| speed,
+    )
+}
+
+/// Goal: lateral RMS at most 0.10 m at 10 m/s with a survey-grade receiver.
+#[test]
+fn rtk_lateral_rms_at_10_mps() {
+    let cfg = VehicleConfig::default();
+    let path = s_curves(400.0, 10.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        10.0,
+        0.0,
+        0.0,
+    );
+    l.position_error = PositionError::RTK;
+    l.run(&path, 350.0, 60.0);
+    let (rms, max) = summary(&l, 3.0);
+    println!("RTK, winding road, 10 m/s: lateral RMS {rms:.3} m, max {max:.3} m");
+    assert!(rms <= 0.10, "RMS {rms}");
+}
+
+/// Goal: the obstacle passed with at least 0.5 m body clearance with the standard receiver,
+/// whichever way its bias points (here 1.2 m, 1.5 sigma, towards and away from the obstacle).
+#[test]
+fn standard_receiver_obstacle_clearance() {
+    let cfg = VehicleConfig::default();
+    for bias_east in [-1.2, 1.2, 0.0] {
+        let path = straight(200.0, 5.0, 10.0);
+        let mut l = Loop::new(
+            cfg.clone(),
+            mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+            &path,
+            10.0,
+            0.0,
+            0.0,
+        );
+        l.position_error = PositionError::standard((bias_east, 0.5));
+        let obstacle = circle(0.3, 60.0, 0.5);
+        l.obstacles[0] = Some(obstacle);
+        let mut clearance = f64::INFINITY;
+        let mut t = 0.0;
+        while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
+            l.tick(&path, t);
+            t += 0.02;
+            clearance = clearance.min(l.clearance(&obstacle));
+        }
+        let fallback = l
+            .log
+            .iter()
+            .filter(|t| t.out.status == ControlStatus::Fallback)
+            .count();
+        println!("standard receiver, bias {bias_east:+.1} m east: min body clearance {clearance:.3} m, fallback ticks {fallback}");
+        assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
+        assert_eq!(fallback, 0);
+    }
+}
+
+/// A winding road: the centre line swings 3 m either side with a 60 m period (radius down to
+/// 30 m), corridor 2 m either side.
+fn s_curves(length: f64, speed: f64) -> TestPath {
+    let k = 2.0 * std::f64::consts::PI / 60.0;
+    TestPath::new(
+        length,
+        move |s| (3.0 * (k * s).sin(), s),
+        |_| (2.0, 2.0),
+        move |_| speed,
+    )
+}
+
+/// Goal: lateral RMS at most 0.10 m at 10 m/s with a survey-grade receiver.
+#[test]
+fn rtk_lateral_rms_at_10_mps() {
+    let cfg = VehicleConfig::default();
+    let path = s_curves(400.0, 10.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        10.0,
+        0.0,
+        0.0,
+    );
+    l.position_error = PositionError::RTK;
+    l.run(&path, 350.0, 60.0);
+    let (rms, max) = summary(&l, 3.0);
+    println!("RTK, winding road, 10 m/s: lateral RMS {rms:.3} m, max {max:.3} m");
+    assert!(rms <= 0.10, "RMS {rms}");
+}
+
+/// Goal: the obstacle passed with at least 0.5 m body clearance with the standard receiver,
+/// whichever way its bias points (here 1.2 m, 1.5 sigma, towards and away from the obstacle).
+#[test]
+fn standard_receiver_obstacle_clearance() {
+    let cfg = VehicleConfig::default();
+    for bias_east in [-1.2, 1.2, 0.0] {
+        let path = straight(200.0, 5.0, 10.0);
+        let mut l = Loop::new(
+            cfg.clone(),
+            mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+            &path,
+            10.0,
+            0.0,
+            0.0,
+        );
+        l.position_error = PositionError::standard((bias_east, 0.5));
+        let obstacle = circle(0.3, 60.0, 0.5);
+        l.obstacles[0] = Some(obstacle);
+        let mut clearance = f64::INFINITY;
+        let mut t = 0.0;
+        while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
+            l.tick(&path, t);
+            t += 0.02;
+            clearance = clearance.min(l.clearance(&obstacle));
+        }
+        let fallback = l
+            .log
+            .iter()
+            .filter(|t| t.out.status == ControlStatus::Fallback)
+            .count();
+        println!("standard receiver, bias {bias_east:+.1} m east: min body clearance {clearance:.3} m, fallback ticks {fallback}");
+        assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
+        assert_eq!(fallback, 0);
+    }
+}
+
+#[test]
+#[ignore]
+fn zz_debug_standard() {
+    let cfg = VehicleConfig::default();
+    let v: f64 = std::env::var("V").map_or(10.0, |v| v.parse().unwrap());
+    let path = straight(200.0, 5.0, v);
+    let mut tuning = DEFAULT_TUNING;
+    tuning.admm.max_iterations = std::env::var("ITERS").map_or(20, |v| v.parse().unwrap());
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, tuning),
+        &path,
+        v,
+        0.0,
+        0.0,
+    );
+    let bias: f64 = std::env::var("BIAS").map_or(-1.2, |v| v.parse().unwrap());
+    let mut pe = PositionError::standard((bias, 0.5));
+    if std::env::var("NOBIAS").is_ok() {
+        pe.bias_m = (0.0, 0.0);
+        pe.white_m = 0.0;
+        pe.heading_white_rad = 0.0;
+    }
+    l.position_error = pe;
+    l.obstacles[0] = Some(circle(0.3, 60.0, 0.5));
+    let mut t = 0.0;
+    while t < 14.0 {
+        let out = l.tick(&path, t);
+        t += 0.02;
+        let last = l.log.last().unwrap();
+        if out.status != ControlStatus::Tracking && std::env::var("PLANS").is_ok() {
+            let xs: Vec<String> = out
+                .plan
+                .iter()
+                .take(16)
+                .map(|p| format!("{:.2}", p.x_m))
+                .collect();
+            let ds: Vec<String> = out
+                .plan
+                .iter()
+                .take(16)
+                .map(|p| format!("{:.3}", p.steer_rad))
+                .collect();
+            println!("  plan x {:?}\n  steer {:?}", xs, ds);
+        }
+        if (t * 50.0) as i32 % 10 == 0 || out.status == ControlStatus::Fallback {
+            println!("t {t:.2} s {:.1} e_y {:+.2} v {:.1} status {:?} {:?} it {} res {:.2e} corr {:.2} steer {:.1}", last.station_m, last.e_y_m, last.speed_mps, out.status, out.fallback, out.iterations, out.primal_residual, out.corridor_violation_m, out.steer_cmd_pct);
+        }
+    }
 }

@@ -4,8 +4,8 @@
 //! counts stay within their caps, and a non-finite input gives the fallback (status 3) without
 //! a NaN anywhere.
 use catmodel::control::mpc::{
-    CarState, ControlStatus, FallbackReason, MpcInput, MpcState, Obstacle, DEFAULT_TUNING,
-    MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    CarState, ControlStatus, FallbackReason, MpcInput, MpcState, DEFAULT_TUNING, MAX_OBSTACLES,
+    PLAN_STEPS, STEPS, STEP_S,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::Mode;
@@ -37,11 +37,20 @@ fn case() -> impl Strategy<Value = Case> {
         (0.0f64..28.0, -0.12f64..0.12, 0.3f64..4.0, 0.3f64..4.0),
         (-2.5f32..2.5, -0.6f32..0.6, -0.6f32..0.6),
         ((-1.0f32..1.0, -0.6f32..0.6), any::<bool>()),
-        prop::collection::vec((-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5), 0..=MAX_OBSTACLES),
+        prop::collection::vec(
+            (-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5),
+            0..=MAX_OBSTACLES,
+        ),
         (0.0f32..2.0, prop_oneof![6 => Just(0u8), 1 => 1u8..6]),
     )
         .prop_map(
-            |((speed, curvature, left, right), (offset, heading_error, steer), (lateral, dynamic), obstacles, (uncertainty, poison))| Case {
+            |(
+                (speed, curvature, left, right),
+                (offset, heading_error, steer),
+                (lateral, dynamic),
+                obstacles,
+                (uncertainty, poison),
+            )| Case {
                 speed,
                 curvature,
                 left,
@@ -95,11 +104,9 @@ proptest! {
         let mut obstacles = [None; MAX_OBSTACLES];
         for (slot, (lat, along, r)) in obstacles.iter_mut().zip(&c.obstacles) {
             let (ox, oy, oh) = path.pose(5.0 + *along as f64);
-            *slot = Some(Obstacle {
-                east_m: ox as f32 + lat * (oh as f32).cos(),
-                north_m: oy as f32 - lat * (oh as f32).sin(),
-                radius_m: *r,
-            });
+            let east = ox + *lat as f64 * oh.cos();
+            let north = oy - *lat as f64 * oh.sin();
+            *slot = Some(path.place(east, north, *r as f64, 5.0));
         }
         let mut steer = c.steer;
         let mut uncertainty = c.uncertainty;

@@ -382,8 +382,23 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
         // P_{k+1} while sweeping back: starts as the terminal cost.
         let mut pm = SMatrix::<f32, NX, NX>::zeros();
         for (st, it) in p.stages.iter().zip(self.stages.iter_mut()).rev() {
-            for ((rho, reach), row) in it.rho.iter_mut().zip(it.reach.iter_mut()).zip(&st.rows) {
+            let (x0, x1) = plane(&it.x);
+            for ((((rho, reach), row), z), w) in it
+                .rho
+                .iter_mut()
+                .zip(it.reach.iter_mut())
+                .zip(&st.rows)
+                .zip(it.z.iter_mut())
+                .zip(it.w.iter_mut())
+            {
+                let was_active = *rho != 0.0;
                 *rho = if row.active { row.rho * scale } else { 0.0 };
+                if row.active && !was_active {
+                    // A row that joins (an obstacle coming into reach): its copy starts at the
+                    // previous plan's value clamped, its dual at 0.
+                    *z = clamp(row.a * x0 + row.b * x1, row.lower, row.upper);
+                    *w = 0.0;
+                }
                 *reach = if row.soft_weight < f32::INFINITY && *rho > 0.0 {
                     row.soft_weight / *rho
                 } else {

@@ -376,6 +376,64 @@ pub struct InflatedObstacle {
     pub y_m: f32,
     /// Radius plus uncertainty plus margin, m.
     pub radius_m: f32,
+    /// Where it lies along the path, from the rear axle now, m ([`super::Obstacle::ahead_m`]).
+    pub ahead_m: f32,
+    /// Its centre's offset from the path there, m ([`super::Obstacle::path_offset_m`]).
+    pub path_offset_m: f32,
+}
+
+/// An end-of-horizon stage's row for an obstacle still ahead of the rear axle there (and at most the
+/// preview distance `preview_m` ahead of the body's front): the whole car already beside the
+/// obstacle, its centre line at least half the width plus the inflated radius from the
+/// obstacle's centre, measured from the path (the obstacle's path offset). The horizon ends before the car reaches the
+/// obstacle, and the stage's own geometric row would only ask the front corner to clear it,
+/// which a plan can meet by yawing towards the side at the last moment without moving the car
+/// aside (measured: such plans steer the wrong way first and leave no room for the rest of the
+/// manoeuvre); this terminal condition asks for the displacement the pass will need, early.
+/// `horizon_m` is the stage's station ahead of the rear axle now.
+pub fn terminal_row(
+    at: &Sample,
+    obstacle: &InflatedObstacle,
+    side: ObstacleSide,
+    body: &BodyGeometry,
+    lin: (f32, f32, f32),
+    w: &Weights,
+    (horizon_m, preview_m): (f32, f32),
+) -> Option<Row> {
+    let front = body.length_m - body.rear_overhang_m;
+    let ahead_of_axle = obstacle.ahead_m - horizon_m;
+    if !(ahead_of_axle > 0.0 && ahead_of_axle - front - obstacle.radius_m <= preview_m) {
+        return None;
+    }
+    let half_width = 0.5 * body.width_m;
+    let (s0, c0, e0) = lin;
+    let point = BodyPoint {
+        ahead_m: 0.0,
+        right_m: match side {
+            ObstacleSide::Left => half_width,
+            ObstacleSide::Right => -half_width,
+        },
+    };
+    let (a, b, k) = body_offset(at, at, point, s0, c0, e0);
+    let (lower, upper) = match side {
+        ObstacleSide::Left => (
+            f32::NEG_INFINITY,
+            obstacle.path_offset_m - obstacle.radius_m - k,
+        ),
+        ObstacleSide::Right => (
+            obstacle.path_offset_m + obstacle.radius_m - k,
+            f32::INFINITY,
+        ),
+    };
+    Some(Row {
+        a,
+        b,
+        lower,
+        upper,
+        rho: w.rho_obstacle,
+        soft_weight: w.obstacle_weight_per_m,
+        active: true,
+    })
 }
 
 /// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
@@ -430,14 +488,24 @@ pub fn obstacle_row(
     })
 }
 
-/// Fills `problem` for this solve. `obstacles[i]` with its chosen side (or `None`).
+/// Stages at the end of the horizon that get [`terminal_row`]s (the last 0.5 s): the car is to
+/// be beside an obstacle ahead by then, not only at the very end, which measured plans
+/// otherwise postponed until the manoeuvre no longer fitted.
+pub const TERMINAL_STAGES: usize = 5;
+
+/// Fills `problem` for this solve. `obstacles[i]` with its chosen side (or `None`);
+/// `preview_m`: how far beyond a stage's body front an obstacle still gets that stage's
+/// [`terminal_row`]. Returns, per stage, a bit per obstacle slot whose row is a terminal row.
 pub fn build(
     problem: &mut Problem<NX, STEPS, ROWS>,
     setup: &LateralSetup,
     reference: &[ReferencePoint; STEPS + 1],
     lin: &Linearisation,
     obstacles: &[Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES],
-) -> Result<(), BuildError> {
+    preview_m: f32,
+) -> Result<[u8; STEPS], BuildError> {
+    let mut terminal_mask = [0u8; STEPS];
+    let origin = reference.first().map(|r| r.at.pose);
     let w = setup.weights;
     let body = setup.body;
     let understeer = match setup.mode {
@@ -540,15 +608,26 @@ pub fn build(
                 *row = corner_row(&r1.at, sample, point, lin_b, w);
             }
         }
+        let end = k + TERMINAL_STAGES >= STEPS;
+        // The stage's station ahead of the rear axle now (chord along the first heading).
+        let station_m = origin.map_or(0.0, |o| {
+            (r1.at.pose.x_m - o.x_m) * o.sin_heading + (r1.at.pose.y_m - o.y_m) * o.cos_heading
+        });
         for (i, ob) in obstacles.iter().enumerate() {
             let Some((ob, side)) = ob else { continue };
-            if let (Some(row), Some(r)) = (
-                st.rows.get_mut(ROW_OBSTACLE + i),
-                obstacle_row(&r1.at, ob, *side, body, lin_b, w),
-            ) {
-                *row = r;
+            let terminal = end
+                .then(|| terminal_row(&r1.at, ob, *side, body, lin_b, w, (station_m, preview_m)))
+                .flatten();
+            if terminal.is_some() {
+                if let Some(m) = terminal_mask.get_mut(k) {
+                    *m |= 1 << i;
+                }
+            }
+            let row = terminal.or_else(|| obstacle_row(&r1.at, ob, *side, body, lin_b, w));
+            if let (Some(slot), Some(r)) = (st.rows.get_mut(ROW_OBSTACLE + i), row) {
+                *slot = r;
             }
         }
     }
-    Ok(())
+    Ok(terminal_mask)
 }

@@ -87,7 +87,8 @@ pub struct ReferencePoint {
     pub rear: Sample,
 }
 
-/// A circular obstacle, in the frame of the path.
+/// A circular obstacle, in the frame of the path, with where it lies along the path (the
+/// passing side is decided on these, whether or not the obstacle is within the horizon yet).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Obstacle {
@@ -97,6 +98,15 @@ pub struct Obstacle {
     pub north_m: f32,
     /// Radius, m.
     pub radius_m: f32,
+    /// Station of the centre's projection on the path minus the rear axle's station now, m
+    /// (negative: behind).
+    pub ahead_m: f32,
+    /// The centre's offset from the path there, m, positive right.
+    pub path_offset_m: f32,
+    /// The corridor at that station, m (as [`Sample::left_m`]).
+    pub left_m: f32,
+    /// The corridor at that station, m (as [`Sample::right_m`]).
+    pub right_m: f32,
 }
 
 /// Which side of an obstacle the car passes on.
@@ -207,8 +217,19 @@ pub struct MpcTuning {
     pub obstacle_margin_m: f32,
     /// The other side of an obstacle must have this much more room to change the decision, m.
     pub side_hysteresis_m: f32,
-    /// A plan whose body enters an inflated obstacle by more than this is not accepted, m.
+    /// A plan whose body enters an inflated obstacle by more than this within `stop_delay_s`
+    /// (two ticks in a row), or further out for more than `obstacle_persist_ticks` ticks in a
+    /// row, is not accepted, m.
     pub obstacle_tolerance_m: f32,
+    /// See `obstacle_tolerance_m`.
+    pub obstacle_persist_ticks: u16,
+    /// How far beyond the body's front at the end of the horizon an obstacle already pulls the
+    /// plan's last stages to its side, as time at the current speed, s (lateral::terminal_row).
+    pub preview_s: f32,
+    /// Time from a speed command of 0 to full braking (the speed loop's delay and rise), s:
+    /// an obstacle that leaves no room is acted on once it is within the stopping distance
+    /// `v stop_delay + v^2 / (2 decel)` (or the horizon, if that reaches further).
+    pub stop_delay_s: f32,
 }
 
 /// Tuned on the built-in plant (docs/mpc.md, "Tuning").
@@ -248,7 +269,12 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     steer_rate_share: 0.9,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
-    obstacle_tolerance_m: 0.1,
+    obstacle_tolerance_m: 0.25,
+    obstacle_persist_ticks: 10,
+    // Eq 5: 0.42 s delay, then a rise with time constant ~1.2 s; the simulator's speed loop:
+    // 0.4 s delay + 0.4 s actuator lag. 0.8 s covers the plant, conservatively.
+    stop_delay_s: 0.8,
+    preview_s: 1.5,
 };
 
 /// Why a configuration is refused.
@@ -367,6 +393,8 @@ pub struct MpcState {
     sides: [Option<ObstacleSide>; MAX_OBSTACLES],
     /// Steering of the last accepted plan, and ticks since it was made.
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
+    /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
+    obstacle_violation_ticks: u16,
 }
 
 impl Default for MpcState {
@@ -378,6 +406,7 @@ impl Default for MpcState {
             lin: None,
             sides: [None; MAX_OBSTACLES],
             last_steer_plan: None,
+            obstacle_violation_ticks: 0,
         }
     }
 }
@@ -400,7 +429,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 10] = [
+        let checks: [(bool, &'static str); 12] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -425,6 +454,11 @@ impl MpcConfig {
                 "ADMM relaxation (0 .. 2)",
             ),
             (weights_ok(&tuning.weights), "lateral weights"),
+            (positive(tuning.stop_delay_s), "stop_delay_s"),
+            (
+                tuning.preview_s.is_finite() && tuning.preview_s >= 0.0,
+                "preview_s",
+            ),
         ];
         if let Some((_, what)) = checks.iter().find(|(ok, _)| !ok) {
             return Err(MpcConfigError::BadParameter(what));
@@ -480,7 +514,6 @@ impl MpcConfig {
             Ok(o) => o,
             Err(reason) => return self.fallback(state, input, &speed_start, reason),
         };
-        let avoiding = obstacles.iter().any(Option::is_some);
         // 3. Lateral problem about the previous plan.
         let x0 = self.initial_state(input);
         let lin = self.linearisation(state, input, &x0, &speed_plan);
@@ -489,16 +522,27 @@ impl MpcConfig {
             *s = *v;
         }
         let setup = self.setup(car.mode, &speeds);
+        let preview_m = max(car.speed_mps, 0.0) * self.tuning.preview_s;
         let built = lateral::build(
             &mut state.problem,
             &setup,
             input.reference,
             &lin,
             &obstacles,
+            preview_m,
         );
-        if let Err(BuildError::Discretisation) = built {
-            return self.fallback(state, input, &speed_start, FallbackReason::Solver);
-        }
+        let terminal_mask = match built {
+            Ok(m) => m,
+            Err(BuildError::Discretisation) => {
+                return self.fallback(state, input, &speed_start, FallbackReason::Solver);
+            }
+        };
+        // Avoiding: some obstacle reaches the body within the horizon.
+        let avoiding = state
+            .problem
+            .stages
+            .iter()
+            .any(|st| st.rows.iter().skip(lateral::ROW_OBSTACLE).any(|r| r.active));
         if state.lin.is_some() {
             state.workspace.shift(1.0 / TICKS_PER_STEP as f32);
         } else {
@@ -522,8 +566,24 @@ impl MpcConfig {
             state.workspace = Workspace::default();
             return self.fallback(state, input, &speed_start, FallbackReason::Solver);
         }
-        let (corridor_violation_m, obstacle_violation_m) = violations(&state.problem, &states);
-        if obstacle_violation_m > self.tuning.obstacle_tolerance_m {
+        // The plan may still enter an obstacle after the iteration cap: at once within the time
+        // braking needs to take hold (then only braking can help), or for several ticks in a
+        // row further out (a solve that has not converged yet resolves it on the next ticks).
+        let imminent = (self.tuning.stop_delay_s / STEP_S) as usize;
+        let v = violations(&state.problem, &states, &terminal_mask, imminent);
+        let corridor_violation_m = v.corridor_m;
+        let tolerance = self.tuning.obstacle_tolerance_m;
+        if v.obstacle_m > tolerance {
+            state.obstacle_violation_ticks = state.obstacle_violation_ticks.saturating_add(1);
+        } else {
+            state.obstacle_violation_ticks = 0;
+        }
+        // An imminent violation must show in two ticks in a row: one noisy position fix can
+        // put a single plan's first stages inside (20 ms of latency is far below the speed
+        // loop's 0.4 s delay).
+        if (v.obstacle_imminent_m > tolerance && state.obstacle_violation_ticks >= 2)
+            || state.obstacle_violation_ticks > self.tuning.obstacle_persist_ticks
+        {
             return self.fallback(
                 state,
                 input,
@@ -648,8 +708,9 @@ impl MpcConfig {
         lin
     }
 
-    /// Per obstacle: inflated circle and the side to pass it on, if it is within reach of the
-    /// body during the horizon. Errors when an obstacle leaves room on neither side.
+    /// Per obstacle: inflated circle and the side to pass it on (more room, with hysteresis),
+    /// from where it lies along the path. Errors when an obstacle leaves room on neither side
+    /// and is within the stopping distance or the horizon.
     #[allow(clippy::type_complexity)]
     fn decide_sides(
         &self,
@@ -659,9 +720,10 @@ impl MpcConfig {
         let mut out = [None; MAX_OBSTACLES];
         let t = &self.tuning;
         let body = &self.body;
-        let rear = -body.rear_overhang_m;
         let front = body.length_m - body.rear_overhang_m;
-        let middle = 0.5 * (rear + front);
+        let v = max(input.car.speed_mps, 0.0);
+        let stopping_m = v * t.stop_delay_s + v * v / (2.0 * t.speed.decel_mps2);
+        let reach_m = max(stopping_m, horizon_m(input));
         for ((slot, memory), ob) in out
             .iter_mut()
             .zip(state.sides.iter_mut())
@@ -671,41 +733,15 @@ impl MpcConfig {
                 *memory = None;
                 continue;
             };
-            let inflated = InflatedObstacle {
-                x_m: ob.east_m,
-                y_m: ob.north_m,
-                radius_m: ob.radius_m + input.position_uncertainty_m + t.obstacle_margin_m,
-            };
-            let r = inflated.radius_m;
-            // The stage where the obstacle is closest to abeam of the body's middle.
-            let mut best: Option<(f32, f32, &Sample)> = None;
-            let mut behind = false;
-            for (k, rp) in input.reference.iter().enumerate() {
-                let p = &rp.at.pose;
-                let (dx, dy) = (inflated.x_m - p.x_m, inflated.y_m - p.y_m);
-                let along = dx * p.sin_heading + dy * p.cos_heading;
-                let lateral = dx * p.cos_heading - dy * p.sin_heading;
-                if k == 0 && along < rear - r {
-                    behind = true;
-                    break;
-                }
-                if along > rear - r && along < front + r {
-                    let gap = (along - middle).abs();
-                    if best.is_none_or(|(g, _, _)| gap < g) {
-                        best = Some((gap, lateral, &rp.at));
-                    }
-                }
-            }
-            if behind {
+            let r = ob.radius_m + input.position_uncertainty_m + t.obstacle_margin_m;
+            if ob.ahead_m + r < -body.rear_overhang_m {
+                // Passed: forget the decision.
                 *memory = None;
                 continue;
             }
-            let Some((_, lateral, at)) = best else {
-                continue;
-            };
             // Room between the corridor's edge and the inflated circle on each side.
-            let room_left = (lateral - r) + at.left_m;
-            let room_right = at.right_m - (lateral + r);
+            let room_left = (ob.path_offset_m - r) + ob.left_m;
+            let room_right = ob.right_m - (ob.path_offset_m + r);
             let need = body.width_m;
             let room = |s: ObstacleSide| match s {
                 ObstacleSide::Left => room_left,
@@ -727,13 +763,25 @@ impl MpcConfig {
                     };
                     if room(s) < need || room(s).is_nan() {
                         *memory = None;
-                        return Err(FallbackReason::NoPassage);
+                        if ob.ahead_m - r - front <= reach_m {
+                            return Err(FallbackReason::NoPassage);
+                        }
+                        continue;
                     }
                     s
                 }
             };
             *memory = Some(side);
-            *slot = Some((inflated, side));
+            *slot = Some((
+                InflatedObstacle {
+                    x_m: ob.east_m,
+                    y_m: ob.north_m,
+                    radius_m: r,
+                    ahead_m: ob.ahead_m,
+                    path_offset_m: ob.path_offset_m,
+                },
+                side,
+            ));
         }
         Ok(out)
     }
@@ -871,23 +919,66 @@ impl MpcConfig {
 }
 
 /// Largest corridor and obstacle violations of the rows over the planned states.
-fn violations(p: &Problem<NX, STEPS, ROWS>, states: &[SVector<f32, NX>; STEPS + 1]) -> (f32, f32) {
-    let mut corridor = 0.0f32;
-    let mut obstacle = 0.0f32;
-    for (st, x) in p.stages.iter().zip(states.iter().skip(1)) {
+/// The last reference point's station ahead of the first, m (along the first's heading: the
+/// chord, which is the arc to within 1 % for turns up to 0.5 rad over the horizon).
+fn horizon_m(input: &MpcInput) -> f32 {
+    match (input.reference.first(), input.reference.last()) {
+        (Some(a), Some(b)) => {
+            let (dx, dy) = (b.at.pose.x_m - a.at.pose.x_m, b.at.pose.y_m - a.at.pose.y_m);
+            dx * a.at.pose.sin_heading + dy * a.at.pose.cos_heading
+        }
+        _ => 0.0,
+    }
+}
+
+/// How far a plan's body leaves the corridor and enters the inflated obstacles.
+struct Violations {
+    /// Largest corridor violation, m.
+    corridor_m: f32,
+    /// Largest obstacle violation, m.
+    obstacle_m: f32,
+    /// Largest obstacle violation in the first `imminent` stages, m.
+    obstacle_imminent_m: f32,
+}
+
+fn violations(
+    p: &Problem<NX, STEPS, ROWS>,
+    states: &[SVector<f32, NX>; STEPS + 1],
+    terminal_mask: &[u8; STEPS],
+    imminent: usize,
+) -> Violations {
+    let mut v = Violations {
+        corridor_m: 0.0,
+        obstacle_m: 0.0,
+        obstacle_imminent_m: 0.0,
+    };
+    for (k, ((st, x), mask)) in p
+        .stages
+        .iter()
+        .zip(states.iter().skip(1))
+        .zip(terminal_mask)
+        .enumerate()
+    {
         for (i, row) in st.rows.iter().enumerate() {
             if !row.active {
                 continue;
             }
-            let v = row.violation(row.eval(x));
-            if i >= lateral::ROW_OBSTACLE {
-                obstacle = max(obstacle, v);
-            } else {
-                corridor = max(corridor, v);
+            let g = row.violation(row.eval(x));
+            match i.checked_sub(lateral::ROW_OBSTACLE) {
+                None => v.corridor_m = max(v.corridor_m, g),
+                // Terminal rows (lateral::terminal_row) pull the plan aside early; they are
+                // not expected to hold yet.
+                Some(slot) if mask & (1 << slot) != 0 => {}
+                Some(_) => {
+                    v.obstacle_m = max(v.obstacle_m, g);
+                    if k < imminent {
+                        v.obstacle_imminent_m = max(v.obstacle_imminent_m, g);
+                    }
+                }
             }
         }
     }
-    (corridor, obstacle)
+    v
 }
 
 /// Linear interpolation in a per-step sequence at fractional step `at` (held beyond the ends).
@@ -993,7 +1084,14 @@ fn input_ok(input: &MpcInput) -> bool {
             && r.speed_mps.is_finite()
     });
     let obstacles_ok = input.obstacles.iter().flatten().all(|o| {
-        o.east_m.is_finite() && o.north_m.is_finite() && o.radius_m.is_finite() && o.radius_m >= 0.0
+        o.east_m.is_finite()
+            && o.north_m.is_finite()
+            && o.radius_m.is_finite()
+            && o.radius_m >= 0.0
+            && o.ahead_m.is_finite()
+            && o.path_offset_m.is_finite()
+            && !o.left_m.is_nan()
+            && !o.right_m.is_nan()
     });
     pose_ok(&car.pose)
         && car.speed_mps.is_finite()
