@@ -427,6 +427,16 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
         Ok(())
     }
 
+    /// Back to the state of `Workspace::default()`, in place (no 3.5 KiB temporary on the
+    /// stack).
+    pub fn reset(&mut self) {
+        self.rho_scale = 1.0;
+        self.factorisations = 0;
+        for it in self.stages.iter_mut() {
+            *it = StageIterate::ZERO;
+        }
+    }
+
     /// Initialises the copies and duals from nothing: copies at the bounds' clamp of 0, duals 0.
     /// Use [`Workspace::shift`] instead to warm-start from the previous solve.
     pub fn cold_start(&mut self, p: &Problem<NX, N, NR>) {
@@ -448,9 +458,13 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     /// stage keeps its value. `fraction` is clamped to [0, 1].
     pub fn shift(&mut self, fraction: f32) {
         let f = fraction.clamp(0.0, 1.0);
-        let old = self.stages;
-        for (it, next) in self.stages.iter_mut().zip(old.iter().skip(1)) {
-            it.lerp_towards(next, f);
+        // In time order, each stage towards its successor's old value (not yet moved).
+        let mut rest = self.stages.as_mut_slice();
+        while let Some((it, tail)) = rest.split_first_mut() {
+            if let Some(next) = tail.first() {
+                it.lerp_towards(next, f);
+            }
+            rest = tail;
         }
     }
 

@@ -412,9 +412,15 @@ impl Default for MpcState {
 }
 
 impl MpcState {
-    /// Forgets the warm start and the side decisions (a new path).
+    /// Forgets the warm start and the side decisions (a new path), in place (the state is
+    /// 10 KiB: a fresh value would be built on the stack first).
     pub fn reset(&mut self) {
-        *self = Self::default();
+        self.workspace.reset();
+        self.speed = SpeedState::default();
+        self.lin = None;
+        self.sides = [None; MAX_OBSTACLES];
+        self.last_steer_plan = None;
+        self.obstacle_violation_ticks = 0;
     }
 }
 
@@ -552,7 +558,7 @@ impl MpcConfig {
         {
             Ok(r) => r,
             Err(SolveError::BadPivot | SolveError::NonFinite) => {
-                state.workspace = Workspace::default();
+                state.workspace.reset();
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
             }
         };
@@ -563,7 +569,7 @@ impl MpcConfig {
         }
         let (states, rates) = self.clamped_rollout(&state.problem, &x0, &planned_rates);
         if states.iter().any(|x| x.iter().any(|v| !v.is_finite())) {
-            state.workspace = Workspace::default();
+            state.workspace.reset();
             return self.fallback(state, input, &speed_start, FallbackReason::Solver);
         }
         // The plan may still enter an obstacle after the iteration cap: at once within the time
