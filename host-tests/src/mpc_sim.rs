@@ -8,14 +8,14 @@
 //! This is the controller's test bench, not the product's closed-loop simulator (that one runs
 //! the whole node over the bus).
 use catmodel::control::mpc::{
-    BodyGeometry, CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle,
-    ReferencePoint, Sample, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ReferencePoint,
+    Sample, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use catmodel::model::dynamic::{DynamicParams, LateralState};
-use catmodel::model::hybrid::{HybridConfig, HybridState, DEFAULT_HYBRID};
+use catmodel::model::hybrid::{HybridConfig, HybridState};
 use catmodel::model::kinematic::Pose;
 use catmodel::model::{paper, SsBlock, SsBlockState};
-use catmodel::vehicle::VehicleParams;
+use catmodel::vehicle::{Body, VehicleParams};
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host::sim::controller::{SpeedController, SteeringActuator};
 use catmodel_host::sim::plant::{Plant, PlantInput, PlantState};
@@ -226,7 +226,7 @@ impl TestPath {
         &self,
         s0: f64,
         speeds: &[f32; PLAN_STEPS + 1],
-        body: &BodyGeometry,
+        body: &Body,
     ) -> [ReferencePoint; STEPS + 1] {
         let front = (body.length_m - body.rear_overhang_m) as f64;
         let rear = body.rear_overhang_m as f64;
@@ -361,7 +361,7 @@ pub struct Loop {
 /// The CAT Vehicle's body for the tests: 2010 Ford Escape Hybrid, 4.44 m long, 1.81 m wide
 /// (manufacturer's figures); rear overhang about 0.9 m (length minus wheelbase 2.62 m minus a
 /// front overhang of about 0.92 m, estimated from side views).
-pub const ESCAPE_BODY: BodyGeometry = BodyGeometry {
+pub const ESCAPE_BODY: Body = Body {
     width_m: 1.81,
     length_m: 4.44,
     rear_overhang_m: 0.9,
@@ -369,7 +369,7 @@ pub const ESCAPE_BODY: BodyGeometry = BodyGeometry {
 
 /// The controller configuration for a plant vehicle: its geometry and linear tyre figures,
 /// the steering actuator's rate limit, eq 5 (published) as the speed model.
-pub fn mpc_for(cfg: &VehicleConfig, body: BodyGeometry, tuning: MpcTuning) -> MpcConfig {
+pub fn mpc_for(cfg: &VehicleConfig, body: Body, tuning: MpcTuning) -> MpcConfig {
     let c = &cfg.chassis;
     let vehicle = VehicleParams {
         wheelbase_m: c.wheelbase_m as f32,
@@ -389,7 +389,7 @@ pub fn mpc_for(cfg: &VehicleConfig, body: BodyGeometry, tuning: MpcTuning) -> Mp
     let rate = (cfg.steering.rate_limit_pct_per_s / 100.0 * c.max_steer_deg.to_radians()) as f32;
     let speed_model = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S)
         .expect("eq 5 discretises");
-    MpcConfig::new(vehicle, dynamics, body, rate, &speed_model, tuning).expect("valid config")
+    MpcConfig::new(vehicle, Some(dynamics), body, rate, &speed_model, tuning).expect("valid config")
 }
 
 impl Loop {
@@ -445,7 +445,8 @@ impl Loop {
             mpc_state: MpcState::default(),
             speed_model,
             speed_model_state,
-            hybrid: DEFAULT_HYBRID,
+            // The published model file's switching thresholds.
+            hybrid: catmodel_model_file::paper().hybrid.config(),
             hybrid_state,
             station_m: 0.0,
             last_speed_cmd,

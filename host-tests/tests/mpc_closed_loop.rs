@@ -2,7 +2,7 @@
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
 use catmodel::control::mpc::{
-    ControlStatus, FallbackReason, MpcTuning, ObstacleSide, DEFAULT_TUNING,
+    ControlStatus, FallbackReason, MpcConfig, MpcTuning, ObstacleSide, DEFAULT_TUNING,
 };
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{circle, mpc_for, Loop, PositionError, TestPath, ESCAPE_BODY};
@@ -380,4 +380,21 @@ fn standard_receiver_obstacle_clearance() {
         assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
         assert_eq!(fallback, 0);
     }
+}
+
+/// The controller built from the published model file (body, steering rate limit, `[dynamics]`
+/// and eq 5 from `models/paper.toml`, as the node has them) drives the winding road too.
+#[test]
+fn controller_from_the_model_file() {
+    let node = catmodel_model_file::paper().node_config();
+    let mpc = MpcConfig::for_node(&node, DEFAULT_TUNING).expect("the published car is valid");
+    assert_eq!(mpc.body(), &node.body);
+    let cfg = VehicleConfig::default();
+    let path = s_curves(300.0, 10.0);
+    let mut l = Loop::new(cfg, mpc, &path, 10.0, 0.0, 0.0);
+    l.position_error = PositionError::RTK;
+    l.run(&path, 250.0, 60.0);
+    let (rms, _) = summary(&l, 3.0);
+    println!("model-file controller, RTK, winding road: lateral RMS {rms:.3} m");
+    assert!(rms <= 0.10, "RMS {rms}");
 }

@@ -34,14 +34,14 @@ struct Case {
 
 fn case() -> impl Strategy<Value = Case> {
     (
-        (0.0f64..28.0, -0.12f64..0.12, 0.3f64..4.0, 0.3f64..4.0),
+        (0.0f64..28.0, -0.12f64..0.12, 0.3f64..6.0, 0.3f64..6.0),
         (-2.5f32..2.5, -0.6f32..0.6, -0.6f32..0.6),
         ((-1.0f32..1.0, -0.6f32..0.6), any::<bool>()),
         prop::collection::vec(
             (-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5),
             0..=MAX_OBSTACLES,
         ),
-        (0.0f32..2.0, prop_oneof![6 => Just(0u8), 1 => 1u8..6]),
+        (0.0f32..1.2, prop_oneof![6 => Just(0u8), 1 => 1u8..6]),
     )
         .prop_map(
             |(
@@ -84,7 +84,7 @@ fn arc(k: f64, left: f64, right: f64, speed: f64) -> TestPath {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(300))]
+    #![proptest_config(ProptestConfig::with_cases(500))]
 
     #[test]
     fn outputs_are_finite_and_within_limits(c in case()) {

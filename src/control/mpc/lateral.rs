@@ -30,13 +30,12 @@ use nalgebra::{SMatrix, SVector};
 use super::admm::{Problem, Row};
 use super::{clamp, max};
 use super::{
-    BodyGeometry, ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS,
-    STEP_S,
+    ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS, STEP_S,
 };
 use crate::math;
 use crate::model::dynamic::DynamicParams;
 use crate::model::hybrid::Mode;
-use crate::vehicle::VehicleParams;
+use crate::vehicle::{Body, VehicleParams};
 
 /// State indices.
 pub const EY: usize = 0;
@@ -78,10 +77,10 @@ pub struct Linearisation {
 pub struct LateralSetup<'a> {
     /// Kinematic geometry and steering conversion.
     pub vehicle: &'a VehicleParams,
-    /// Dynamic model parameters.
-    pub dynamics: &'a DynamicParams,
+    /// Dynamic model parameters (`None`: the kinematic model whatever the mode).
+    pub dynamics: Option<&'a DynamicParams>,
     /// Body for the corridor and obstacle rows.
-    pub body: &'a BodyGeometry,
+    pub body: &'a Body,
     /// Cost weights and ADMM penalties.
     pub weights: &'a Weights,
     /// Lateral model of this solve.
@@ -133,9 +132,8 @@ fn continuous(
     set(&mut f, EY, EPSI, v * c0);
     sete(&mut e, EY, v * (s0 - c0 * e0));
     set(&mut f, EPSI, EY, -v * kappa * kappa);
-    match setup.mode {
-        Mode::Dynamic => {
-            let p = setup.dynamics;
+    match setup.dynamics.filter(|_| setup.mode == Mode::Dynamic) {
+        Some(p) => {
             // The 1/v terms need a speed; below the model's floor use the floor (the hybrid
             // switch keeps the dynamic mode above it; a plan that brakes may dip below).
             let vx = max(max(v, p.min_speed_mps), 0.1);
@@ -155,7 +153,7 @@ fn continuous(
             set(&mut f, R, R, -(cf * lf * lf + cr * lr * lr) / (iz * vx));
             set(&mut f, R, DELTA, cf * lf / iz);
         }
-        Mode::Kinematic => {
+        None => {
             let veh = setup.vehicle;
             let scale = 1.0 / (1.0 + veh.understeer_s2_per_m2 * v * v);
             let t = math::tan(d0 * scale);
@@ -395,7 +393,7 @@ pub fn terminal_row(
     at: &Sample,
     obstacle: &InflatedObstacle,
     side: ObstacleSide,
-    body: &BodyGeometry,
+    body: &Body,
     lin: (f32, f32, f32),
     w: &Weights,
     (horizon_m, preview_m): (f32, f32),
@@ -443,7 +441,7 @@ pub fn obstacle_row(
     at: &Sample,
     obstacle: &InflatedObstacle,
     side: ObstacleSide,
-    body: &BodyGeometry,
+    body: &Body,
     lin: (f32, f32, f32),
     w: &Weights,
 ) -> Option<Row> {
@@ -508,9 +506,9 @@ pub fn build(
     let origin = reference.first().map(|r| r.at.pose);
     let w = setup.weights;
     let body = setup.body;
-    let understeer = match setup.mode {
-        Mode::Kinematic => setup.vehicle.understeer_s2_per_m2,
-        Mode::Dynamic => setup.dynamics.understeer_s2_per_m2(),
+    let understeer = match setup.dynamics.filter(|_| setup.mode == Mode::Dynamic) {
+        None => setup.vehicle.understeer_s2_per_m2,
+        Some(d) => d.understeer_s2_per_m2(),
     };
     let front = body.length_m - body.rear_overhang_m;
     let rear = -body.rear_overhang_m;

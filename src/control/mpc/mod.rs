@@ -37,7 +37,8 @@ use crate::model::dynamic::{DynamicParams, LateralState};
 use crate::model::hybrid::Mode;
 use crate::model::kinematic::Pose;
 use crate::model::{SsBlock, SsBlockState};
-use crate::vehicle::{VehicleParams, STEER_PCT_LIMIT};
+use crate::node::NodeConfig;
+use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
 
 /// MPC steps of the steering problem: 15 x 0.1 s = 1.5 s (measured: a longer horizon did not
 /// pass the double lane change faster, and costs a third more per iteration; docs/mpc.md).
@@ -152,18 +153,6 @@ pub struct MpcInput<'a> {
     /// Bound on the error of the position estimate, m (the estimator's 2-sigma or worse):
     /// obstacles are inflated by it.
     pub position_uncertainty_m: f32,
-}
-
-/// The body, relative to the rear axle.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct BodyGeometry {
-    /// Width, m.
-    pub width_m: f32,
-    /// Length bumper to bumper, m.
-    pub length_m: f32,
-    /// Rear bumper behind the rear axle, m.
-    pub rear_overhang_m: f32,
 }
 
 /// Cost weights and ADMM penalties of the lateral problem.
@@ -291,8 +280,8 @@ pub enum MpcConfigError {
 #[derive(Clone, Debug, PartialEq)]
 pub struct MpcConfig {
     vehicle: VehicleParams,
-    dynamics: DynamicParams,
-    body: BodyGeometry,
+    dynamics: Option<DynamicParams>,
+    body: Body,
     /// The steering actuator's rate limit, rad/s (centre-tyre angle).
     max_steer_rate_rad_per_s: f32,
     tuning: MpcTuning,
@@ -425,11 +414,12 @@ impl MpcState {
 }
 
 impl MpcConfig {
-    /// Checks the parameters and precomputes the speed planner.
+    /// Checks the parameters and precomputes the speed planner. Without `dynamics` the
+    /// controller plans with the kinematic model at every speed.
     pub fn new(
         vehicle: VehicleParams,
-        dynamics: DynamicParams,
-        body: BodyGeometry,
+        dynamics: Option<DynamicParams>,
+        body: Body,
         max_steer_rate_rad_per_s: f32,
         speed_model: &SsBlock<2>,
         tuning: MpcTuning,
@@ -480,13 +470,32 @@ impl MpcConfig {
         })
     }
 
+    /// The controller of the car a node is configured for: its geometry, body, dynamic model
+    /// (if any), steering actuator rate limit and speed model, from the model file
+    /// (`[vehicle]`, `[dynamics]`, `[speed]`); the plan's speed never exceeds the node's
+    /// `max_speed_mps` nor the tuning's.
+    pub fn for_node(node: &NodeConfig, tuning: MpcTuning) -> Result<Self, MpcConfigError> {
+        let rate_rad_per_s =
+            node.max_steer_rate_pct_per_s / STEER_PCT_LIMIT * node.vehicle.max_steer_rad;
+        let mut tuning = tuning;
+        tuning.speed.max_speed_mps = min(tuning.speed.max_speed_mps, node.max_speed_mps);
+        Self::new(
+            node.vehicle,
+            node.dynamics,
+            node.body,
+            rate_rad_per_s,
+            &node.velocity,
+            tuning,
+        )
+    }
+
     /// The tuning.
     pub fn tuning(&self) -> &MpcTuning {
         &self.tuning
     }
 
     /// The body.
-    pub fn body(&self) -> &BodyGeometry {
+    pub fn body(&self) -> &Body {
         &self.body
     }
 
@@ -527,7 +536,7 @@ impl MpcConfig {
         for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
             *s = *v;
         }
-        let setup = self.setup(car.mode, &speeds);
+        let setup = self.setup(self.mode(input), &speeds);
         let preview_m = max(car.speed_mps, 0.0) * self.tuning.preview_s;
         let built = lateral::build(
             &mut state.problem,
@@ -631,10 +640,19 @@ impl MpcConfig {
         }
     }
 
+    /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
+    /// dynamic model.
+    fn mode(&self, input: &MpcInput) -> Mode {
+        match (input.car.mode, &self.dynamics) {
+            (Mode::Dynamic, Some(_)) => Mode::Dynamic,
+            _ => Mode::Kinematic,
+        }
+    }
+
     fn setup<'a>(&'a self, mode: Mode, speeds: &'a [f32; STEPS + 1]) -> LateralSetup<'a> {
         LateralSetup {
             vehicle: &self.vehicle,
-            dynamics: &self.dynamics,
+            dynamics: self.dynamics.as_ref(),
             body: &self.body,
             weights: &self.tuning.weights,
             mode,
@@ -651,7 +669,7 @@ impl MpcConfig {
         let (dx, dy) = (car.pose.x_m - at.x_m, car.pose.y_m - at.y_m);
         let e_y = dx * at.cos_heading - dy * at.sin_heading;
         let e_psi = math::wrap_pi(car.pose.heading_rad - at.heading_rad);
-        let (vy, r) = match car.mode {
+        let (vy, r) = match self.mode(input) {
             Mode::Dynamic => (car.lateral.vy_mps, car.lateral.yaw_rate_rps),
             Mode::Kinematic => (0.0, 0.0),
         };
@@ -833,25 +851,43 @@ impl MpcConfig {
         let car = &input.car;
         let mut pose = car.pose;
         let mut lat = car.lateral;
-        let lr = self.dynamics.cg_to_rear_m;
+        let dynamics = match self.mode(input) {
+            Mode::Dynamic => self.dynamics.as_ref(),
+            Mode::Kinematic => None,
+        };
         let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
         let mut prev_steer = steer.first().copied().unwrap_or(0.0);
         let mut prev_speed = speeds.first().copied().unwrap_or(0.0);
-        // Beyond the steering plan its last value is held.
-        let held = steer.last().copied().unwrap_or(0.0);
-        let steer_all = steer.iter().copied().chain(core::iter::repeat(held));
+        // Beyond the steering plan: towards the path's steady steering at its last reference
+        // point (the terminal cost brings the plan back to the path), at the rate limit.
+        let target = input.reference.last().map_or(0.0, |r| {
+            lateral::feedforward_steer_rad(
+                self.vehicle.wheelbase_m,
+                self.vehicle.understeer_s2_per_m2,
+                speeds.get(STEPS).copied().unwrap_or(0.0),
+                r.curvature_per_m,
+            )
+        });
+        let step = self.max_steer_rate_rad_per_s * STEP_S;
+        let mut held = steer.last().copied().unwrap_or(0.0);
+        let beyond = core::iter::from_fn(|| {
+            held += clamp(target - held, -step, step);
+            Some(held)
+        });
+        let steer_all = steer.iter().copied().chain(beyond);
         for (k, ((pt, s), v)) in plan.iter_mut().zip(steer_all).zip(speeds).enumerate() {
             if k > 0 {
                 let v_mid = 0.5 * (prev_speed + v);
                 let d_mid = 0.5 * (prev_steer + s);
-                match car.mode {
-                    Mode::Kinematic => {
+                match dynamics {
+                    None => {
                         let kappa = self.vehicle.curvature_per_m(d_mid, v_mid);
                         pose.advance_no_slip(v_mid, kappa * v_mid * STEP_S, STEP_S);
                     }
-                    Mode::Dynamic => {
+                    Some(dynamics) => {
                         let before = lat;
-                        self.dynamics.step(&mut lat, v_mid, d_mid, STEP_S);
+                        let lr = dynamics.cg_to_rear_m;
+                        dynamics.step(&mut lat, v_mid, d_mid, STEP_S);
                         let r_mid = 0.5 * (before.yaw_rate_rps + lat.yaw_rate_rps);
                         let vy_rear = 0.5
                             * ((before.vy_mps - lr * before.yaw_rate_rps)
