@@ -176,8 +176,8 @@ pub struct Problem<const NX: usize, const N: usize, const NR: usize> {
 
 impl<const NX: usize, const N: usize, const NR: usize> Problem<NX, N, NR> {
     /// A problem with zero dynamics and cost, no rows and unbounded inputs and box; the
-    /// formulation fills it in place every tick.
-    pub fn zeroed() -> Self {
+    /// formulation fills it in place every tick. `const`, so that it can initialise a static.
+    pub const fn zeroed() -> Self {
         Self {
             stages: [Stage::ZERO; N],
             r: 1.0,
@@ -335,13 +335,20 @@ pub struct Workspace<const NX: usize, const N: usize, const NR: usize> {
     pub stages: [StageIterate<NX, NR>; N],
 }
 
-impl<const NX: usize, const N: usize, const NR: usize> Default for Workspace<NX, N, NR> {
-    fn default() -> Self {
+impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
+    /// Nothing solved yet. `const`, so that it can initialise a static.
+    pub const fn new() -> Self {
         Self {
             rho_scale: 1.0,
             factorisations: 0,
             stages: [StageIterate::ZERO; N],
         }
+    }
+}
+
+impl<const NX: usize, const N: usize, const NR: usize> Default for Workspace<NX, N, NR> {
+    fn default() -> Self {
+        Self::new()
     }
 }
 

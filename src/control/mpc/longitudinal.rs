@@ -86,7 +86,7 @@ pub struct SpeedPlanner {
 }
 
 /// The speed planner's warm start.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SpeedState {
     z_cmd: [f32; KNOTS],
     w_cmd: [f32; KNOTS],
@@ -307,6 +307,16 @@ impl SpeedPlanner {
 }
 
 impl SpeedState {
+    /// No plan yet. `const`, so that it can initialise a static.
+    pub const fn new() -> Self {
+        Self {
+            z_cmd: [0.0; KNOTS],
+            w_cmd: [0.0; KNOTS],
+            z_speed: [0.0; PLAN_STEPS],
+            w_speed: [0.0; PLAN_STEPS],
+        }
+    }
+
     /// Warm start for the next tick: one tick is a fifth of a step, a tenth of a knot.
     fn shift(&mut self) {
         let per_step = 1.0 / TICKS_PER_STEP as f32;
@@ -315,6 +325,12 @@ impl SpeedState {
         shift(&mut self.w_cmd, per_knot);
         shift(&mut self.z_speed, per_step);
         shift(&mut self.w_speed, per_step);
+    }
+}
+
+impl Default for SpeedState {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
@@ -385,7 +401,10 @@ fn kkt_inverse(
             *v = wv * ptp + wd * dtd + if i == j { f64::from(RHO_COMMAND) } else { 0.0 };
         }
     }
-    let l = cholesky(&m).ok_or(SpeedPlanError::NotPositiveDefinite)?;
+    if !cholesky_in_place(&mut m) {
+        return Err(SpeedPlanError::NotPositiveDefinite);
+    }
+    let l = &m;
     // Columns of the inverse: solve L L' x = e_c.
     let mut inv = SMatrix::<f32, KNOTS, KNOTS>::zeros();
     for c in 0..KNOTS {
@@ -393,20 +412,20 @@ fn kkt_inverse(
         for i in 0..KNOTS {
             let mut s = if i == c { 1.0 } else { 0.0 };
             for k in 0..i {
-                s -= at(&l, i, k) * y.get(k).copied().unwrap_or(0.0);
+                s -= at(l, i, k) * y.get(k).copied().unwrap_or(0.0);
             }
             if let Some(yi) = y.get_mut(i) {
-                *yi = s / at(&l, i, i);
+                *yi = s / at(l, i, i);
             }
         }
         let mut x = [0.0f64; KNOTS];
         for i in (0..KNOTS).rev() {
             let mut s = y.get(i).copied().unwrap_or(0.0);
             for k in i + 1..KNOTS {
-                s -= at(&l, k, i) * x.get(k).copied().unwrap_or(0.0);
+                s -= at(l, k, i) * x.get(k).copied().unwrap_or(0.0);
             }
             if let Some(xi) = x.get_mut(i) {
-                *xi = s / at(&l, i, i);
+                *xi = s / at(l, i, i);
             }
         }
         for (i, xi) in x.iter().enumerate() {
@@ -423,27 +442,27 @@ fn at(m: &[[f64; KNOTS]; KNOTS], i: usize, j: usize) -> f64 {
     m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
 
-/// Lower Cholesky factor of a symmetric matrix; `None` unless positive definite.
-fn cholesky(m: &[[f64; KNOTS]; KNOTS]) -> Option<[[f64; KNOTS]; KNOTS]> {
-    let mut l = [[0.0f64; KNOTS]; KNOTS];
+/// Lower Cholesky factor of a symmetric matrix, written over its lower triangle (each entry
+/// is read before it is overwritten); `false` unless positive definite.
+fn cholesky_in_place(m: &mut [[f64; KNOTS]; KNOTS]) -> bool {
     for i in 0..KNOTS {
         for j in 0..=i {
             let mut s = at(m, i, j);
             for k in 0..j {
-                s -= at(&l, i, k) * at(&l, j, k);
+                s -= at(m, i, k) * at(m, j, k);
             }
             let v = if i == j {
                 if !(s > 0.0 && s.is_finite()) {
-                    return None;
+                    return false;
                 }
                 libm::sqrt(s)
             } else {
-                s / at(&l, j, j)
+                s / at(m, j, j)
             };
-            if let Some(x) = l.get_mut(i).and_then(|r| r.get_mut(j)) {
+            if let Some(x) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
                 *x = v;
             }
         }
     }
-    Some(l)
+    true
 }

@@ -388,24 +388,30 @@ pub struct MpcState {
 
 impl Default for MpcState {
     fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl MpcState {
+    /// No solve yet. `const`, so that the firmware can keep the state (10 KiB) in a static
+    /// rather than build it on its 12 KiB stack.
+    pub const fn new() -> Self {
         Self {
-            workspace: Workspace::default(),
+            workspace: Workspace::new(),
             problem: Problem::zeroed(),
-            speed: SpeedState::default(),
+            speed: SpeedState::new(),
             lin: None,
             sides: [None; MAX_OBSTACLES],
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
         }
     }
-}
 
-impl MpcState {
     /// Forgets the warm start and the side decisions (a new path), in place (the state is
     /// 10 KiB: a fresh value would be built on the stack first).
     pub fn reset(&mut self) {
         self.workspace.reset();
-        self.speed = SpeedState::default();
+        self.speed = SpeedState::new();
         self.lin = None;
         self.sides = [None; MAX_OBSTACLES];
         self.last_steer_plan = None;
