@@ -4,8 +4,11 @@
 use catmodel::control::mpc::{
     ControlStatus, FallbackReason, MpcConfig, MpcTuning, ObstacleSide, DEFAULT_TUNING,
 };
+use catmodel::vehicle::Body;
 use catmodel_host::sim::config::VehicleConfig;
-use catmodel_host_tests::mpc_sim::{circle, mpc_for, Loop, PositionError, TestPath, ESCAPE_BODY};
+use catmodel_host_tests::mpc_sim::{
+    circle, hatchback, mpc_for, van, Loop, PositionError, TestPath, ESCAPE_BODY,
+};
 
 fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
     TestPath::new(length, |s| (0.0, s), |_| (lane, lane), |_| speed)
@@ -115,10 +118,19 @@ fn dlc_run(cfg: &VehicleConfig, speed: f64) -> (f64, u16, Loop) {
 }
 
 fn dlc_run_with(cfg: &VehicleConfig, speed: f64, tuning: MpcTuning) -> (f64, u16, Loop) {
-    let (path, _) = double_lane_change(ESCAPE_BODY.width_m as f64, 40.0, speed);
+    dlc_run_body(cfg, ESCAPE_BODY, speed, tuning)
+}
+
+fn dlc_run_body(
+    cfg: &VehicleConfig,
+    body: Body,
+    speed: f64,
+    tuning: MpcTuning,
+) -> (f64, u16, Loop) {
+    let (path, _) = double_lane_change(body.width_m as f64, 40.0, speed);
     let mut l = Loop::new(
         cfg.clone(),
-        mpc_for(cfg, ESCAPE_BODY, tuning),
+        mpc_for(cfg, body, tuning),
         &path,
         speed,
         0.0,
@@ -133,10 +145,32 @@ fn dlc_run_with(cfg: &VehicleConfig, speed: f64, tuning: MpcTuning) -> (f64, u16
     (worst, iters, l)
 }
 
+/// Highest speed (0.5 m/s steps from 8 m/s) at which the double lane change is clean.
+fn highest_clean_speed(cfg: &VehicleConfig, body: Body) -> f64 {
+    let mut best = 0.0;
+    for v10 in (80..=200).step_by(5) {
+        let v = v10 as f64 / 10.0;
+        let (worst, _, _) = dlc_run_body(cfg, body, v, DEFAULT_TUNING);
+        if worst > 0.0 {
+            break;
+        }
+        best = v;
+    }
+    best
+}
+
 #[test]
 #[ignore = "tuning sweep; prints the highest clean double-lane-change speed"]
 fn dlc_speed_sweep() {
     let cfg = VehicleConfig::default();
+    let (hatch_cfg, hatch_body) = hatchback();
+    let (van_cfg, van_body) = van();
+    println!(
+        "highest clean speed: CAT Vehicle {} m/s, hatchback {} m/s, van {} m/s",
+        highest_clean_speed(&cfg, ESCAPE_BODY),
+        highest_clean_speed(&hatch_cfg, hatch_body),
+        highest_clean_speed(&van_cfg, van_body)
+    );
     for v10 in (80..=200).step_by(5) {
         let v = v10 as f64 / 10.0;
         let (worst, iters, l) = dlc_run(&cfg, v);
@@ -397,4 +431,71 @@ fn controller_from_the_model_file() {
     let (rms, _) = summary(&l, 3.0);
     println!("model-file controller, RTK, winding road: lateral RMS {rms:.3} m");
     assert!(rms <= 0.10, "RMS {rms}");
+}
+
+/// The double lane change clean at 13 m/s on the CAT Vehicle (the defaults' car) and on the
+/// hatchback (its lanes sized for its 1.75 m width).
+#[test]
+fn double_lane_change_is_clean() {
+    let cfg = VehicleConfig::default();
+    let (worst, _, l) = dlc_run(&cfg, 13.0);
+    assert!(
+        worst <= 0.0,
+        "CAT Vehicle at 13 m/s: body {worst} m outside"
+    );
+    assert!(l
+        .log
+        .iter()
+        .all(|t| t.out.status == ControlStatus::Tracking));
+    let (hatch_cfg, hatch_body) = hatchback();
+    let (worst, _, _) = dlc_run_body(&hatch_cfg, hatch_body, 13.0, DEFAULT_TUNING);
+    assert!(worst <= 0.0, "hatchback at 13 m/s: body {worst} m outside");
+}
+
+/// The tracking and obstacle goals on the hatchback, with the defaults.
+#[test]
+fn second_vehicle_goals() {
+    let (cfg, body) = hatchback();
+    let path = s_curves(400.0, 10.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, body, DEFAULT_TUNING),
+        &path,
+        10.0,
+        0.0,
+        0.0,
+    );
+    l.position_error = PositionError::RTK;
+    l.run(&path, 350.0, 60.0);
+    let (rms, _) = summary(&l, 3.0);
+    println!("hatchback, RTK, winding road, 10 m/s: lateral RMS {rms:.3} m");
+    assert!(rms <= 0.10, "RMS {rms}");
+    for bias_east in [-1.2, 1.2] {
+        let path = straight(200.0, 5.0, 10.0);
+        let mut l = Loop::new(
+            cfg.clone(),
+            mpc_for(&cfg, body, DEFAULT_TUNING),
+            &path,
+            10.0,
+            0.0,
+            0.0,
+        );
+        l.position_error = PositionError::standard((bias_east, 0.5));
+        let obstacle = circle(0.3, 60.0, 0.5);
+        l.obstacles[0] = Some(obstacle);
+        let mut clearance = f64::INFINITY;
+        let mut t = 0.0;
+        while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
+            l.tick(&path, t);
+            t += 0.02;
+            clearance = clearance.min(l.clearance(&obstacle));
+        }
+        let fallback = l
+            .log
+            .iter()
+            .filter(|t| t.out.status == ControlStatus::Fallback)
+            .count();
+        println!("hatchback, standard receiver, bias {bias_east:+.1} m: clearance {clearance:.3} m, fallback ticks {fallback}");
+        assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
+    }
 }
