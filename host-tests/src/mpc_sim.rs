@@ -367,64 +367,102 @@ pub const ESCAPE_BODY: Body = Body {
     rear_overhang_m: 0.9,
 };
 
+/// The figures that make one test car differ from the CAT Vehicle's defaults.
+struct CarSpec {
+    wheelbase_m: f64,
+    track_m: f64,
+    mass_kg: f64,
+    cg_to_front_m: f64,
+    yaw_inertia_kg_m2: f64,
+    cg_height_m: f64,
+    max_steer_deg: f64,
+    cornering_n_per_rad: (f64, f64),
+    steer_rate_pct_per_s: f64,
+    steer_lag_s: f64,
+    speed_delay_s: f64,
+    max_accel_mps2: f64,
+    speed_lag_s: f64,
+    body: Body,
+}
+
+impl CarSpec {
+    fn build(&self) -> (VehicleConfig, Body) {
+        let mut cfg = VehicleConfig::default();
+        let c = &mut cfg.chassis;
+        c.wheelbase_m = self.wheelbase_m;
+        c.track_m = self.track_m;
+        c.mass_kg = self.mass_kg;
+        c.cg_to_front_m = self.cg_to_front_m;
+        c.cg_to_rear_m = self.wheelbase_m - self.cg_to_front_m;
+        c.yaw_inertia_kg_m2 = self.yaw_inertia_kg_m2;
+        c.cg_height_m = self.cg_height_m;
+        c.max_steer_deg = self.max_steer_deg;
+        cfg.tyre_front.cornering_stiffness_n_per_rad = self.cornering_n_per_rad.0;
+        cfg.tyre_rear.cornering_stiffness_n_per_rad = self.cornering_n_per_rad.1;
+        cfg.steering.rate_limit_pct_per_s = self.steer_rate_pct_per_s;
+        cfg.steering.lag_s = self.steer_lag_s;
+        cfg.speed_controller.command_delay_s = self.speed_delay_s;
+        cfg.speed_controller.max_accel_mps2 = self.max_accel_mps2;
+        cfg.speed_controller.actuator_lag_s = self.speed_lag_s;
+        cfg.validate().expect("a valid vehicle");
+        (cfg, self.body)
+    }
+}
+
 /// A second car the controller's defaults were not tuned on: a compact hatchback (2.55 m
 /// wheelbase, 1.3 t, CG further forward, softer tyres, 33 deg lock with a 75 %/s actuator and a
 /// 40 ms lag, a quicker but more delayed speed loop), 1.75 m wide and 4.1 m long. Typical
 /// figures of the class, chosen to differ from the CAT Vehicle in every parameter the
 /// controller uses, not a specific model.
 pub fn hatchback() -> (VehicleConfig, Body) {
-    let mut cfg = VehicleConfig::default();
-    let c = &mut cfg.chassis;
-    c.wheelbase_m = 2.55;
-    c.track_m = 1.5;
-    c.mass_kg = 1300.0;
-    c.cg_to_front_m = 1.0;
-    c.cg_to_rear_m = 1.55;
-    c.yaw_inertia_kg_m2 = 1900.0;
-    c.cg_height_m = 0.55;
-    c.max_steer_deg = 33.0;
-    cfg.tyre_front.cornering_stiffness_n_per_rad = 65_000.0;
-    cfg.tyre_rear.cornering_stiffness_n_per_rad = 72_000.0;
-    cfg.steering.rate_limit_pct_per_s = 75.0;
-    cfg.steering.lag_s = 0.04;
-    cfg.speed_controller.command_delay_s = 0.5;
-    cfg.speed_controller.max_accel_mps2 = 2.5;
-    cfg.speed_controller.actuator_lag_s = 0.3;
-    cfg.validate().expect("a valid vehicle");
-    let body = Body {
-        width_m: 1.75,
-        length_m: 4.1,
-        rear_overhang_m: 0.75,
-    };
-    (cfg, body)
+    CarSpec {
+        wheelbase_m: 2.55,
+        track_m: 1.5,
+        mass_kg: 1300.0,
+        cg_to_front_m: 1.0,
+        yaw_inertia_kg_m2: 1900.0,
+        cg_height_m: 0.55,
+        max_steer_deg: 33.0,
+        cornering_n_per_rad: (65_000.0, 72_000.0),
+        steer_rate_pct_per_s: 75.0,
+        steer_lag_s: 0.04,
+        speed_delay_s: 0.5,
+        max_accel_mps2: 2.5,
+        speed_lag_s: 0.3,
+        body: Body {
+            width_m: 1.75,
+            length_m: 4.1,
+            rear_overhang_m: 0.75,
+        },
+    }
+    .build()
 }
 
 /// A long-wheelbase van (3.0 m wheelbase, 2.4 t, 32 deg lock at 60 %/s with an 80 ms lag),
 /// 2.0 m wide, 5.0 m long with a 1.0 m rear overhang: the case the defaults do not cover
 /// (docs/mpc.md, "Limits": it does not pass the ISO 3888-2 lanes sized for its width).
 pub fn van() -> (VehicleConfig, Body) {
-    let mut cfg = VehicleConfig::default();
-    let c = &mut cfg.chassis;
-    c.wheelbase_m = 3.0;
-    c.track_m = 1.7;
-    c.mass_kg = 2400.0;
-    c.cg_to_front_m = 1.4;
-    c.cg_to_rear_m = 1.6;
-    c.yaw_inertia_kg_m2 = 4200.0;
-    c.cg_height_m = 0.8;
-    c.max_steer_deg = 32.0;
-    cfg.tyre_front.cornering_stiffness_n_per_rad = 100_000.0;
-    cfg.tyre_rear.cornering_stiffness_n_per_rad = 120_000.0;
-    cfg.steering.lag_s = 0.08;
-    cfg.speed_controller.max_accel_mps2 = 1.5;
-    cfg.speed_controller.actuator_lag_s = 0.5;
-    cfg.validate().expect("a valid vehicle");
-    let body = Body {
-        width_m: 2.0,
-        length_m: 5.0,
-        rear_overhang_m: 1.0,
-    };
-    (cfg, body)
+    CarSpec {
+        wheelbase_m: 3.0,
+        track_m: 1.7,
+        mass_kg: 2400.0,
+        cg_to_front_m: 1.4,
+        yaw_inertia_kg_m2: 4200.0,
+        cg_height_m: 0.8,
+        max_steer_deg: 32.0,
+        cornering_n_per_rad: (100_000.0, 120_000.0),
+        steer_rate_pct_per_s: 60.0,
+        steer_lag_s: 0.08,
+        speed_delay_s: 0.4,
+        max_accel_mps2: 1.5,
+        speed_lag_s: 0.5,
+        body: Body {
+            width_m: 2.0,
+            length_m: 5.0,
+            rear_overhang_m: 1.0,
+        },
+    }
+    .build()
 }
 
 /// The controller configuration for a plant vehicle: its geometry and linear tyre figures,

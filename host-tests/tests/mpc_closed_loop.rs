@@ -380,36 +380,48 @@ fn rtk_lateral_rms_at_10_mps() {
     assert!(rms <= 0.10, "RMS {rms}");
 }
 
+/// Drives past an obstacle 0.3 m right of the centre of a straight road (corridor 5 m each
+/// side) at 10 m/s with the standard receiver's error (`bias_east` m east, 0.5 m north); returns
+/// the smallest body clearance and the ticks in status 3.
+fn pass_obstacle_standard_receiver(
+    cfg: &VehicleConfig,
+    body: Body,
+    bias_east: f64,
+) -> (f64, usize) {
+    let path = straight(200.0, 5.0, 10.0);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(cfg, body, DEFAULT_TUNING),
+        &path,
+        10.0,
+        0.0,
+        0.0,
+    );
+    l.position_error = PositionError::standard((bias_east, 0.5));
+    let obstacle = circle(0.3, 60.0, 0.5);
+    l.obstacles[0] = Some(obstacle);
+    let mut clearance = f64::INFINITY;
+    let mut t = 0.0;
+    while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
+        l.tick(&path, t);
+        t += 0.02;
+        clearance = clearance.min(l.clearance(&obstacle));
+    }
+    let fallback = l
+        .log
+        .iter()
+        .filter(|t| t.out.status == ControlStatus::Fallback)
+        .count();
+    (clearance, fallback)
+}
+
 /// Goal: the obstacle passed with at least 0.5 m body clearance with the standard receiver,
 /// whichever way its bias points (here 1.2 m, 1.5 sigma, towards and away from the obstacle).
 #[test]
 fn standard_receiver_obstacle_clearance() {
     let cfg = VehicleConfig::default();
     for bias_east in [-1.2, 1.2, 0.0] {
-        let path = straight(200.0, 5.0, 10.0);
-        let mut l = Loop::new(
-            cfg.clone(),
-            mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
-            &path,
-            10.0,
-            0.0,
-            0.0,
-        );
-        l.position_error = PositionError::standard((bias_east, 0.5));
-        let obstacle = circle(0.3, 60.0, 0.5);
-        l.obstacles[0] = Some(obstacle);
-        let mut clearance = f64::INFINITY;
-        let mut t = 0.0;
-        while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
-            l.tick(&path, t);
-            t += 0.02;
-            clearance = clearance.min(l.clearance(&obstacle));
-        }
-        let fallback = l
-            .log
-            .iter()
-            .filter(|t| t.out.status == ControlStatus::Fallback)
-            .count();
+        let (clearance, fallback) = pass_obstacle_standard_receiver(&cfg, ESCAPE_BODY, bias_east);
         println!("standard receiver, bias {bias_east:+.1} m east: min body clearance {clearance:.3} m, fallback ticks {fallback}");
         assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
         assert_eq!(fallback, 0);
@@ -471,30 +483,7 @@ fn second_vehicle_goals() {
     println!("hatchback, RTK, winding road, 10 m/s: lateral RMS {rms:.3} m");
     assert!(rms <= 0.10, "RMS {rms}");
     for bias_east in [-1.2, 1.2] {
-        let path = straight(200.0, 5.0, 10.0);
-        let mut l = Loop::new(
-            cfg.clone(),
-            mpc_for(&cfg, body, DEFAULT_TUNING),
-            &path,
-            10.0,
-            0.0,
-            0.0,
-        );
-        l.position_error = PositionError::standard((bias_east, 0.5));
-        let obstacle = circle(0.3, 60.0, 0.5);
-        l.obstacles[0] = Some(obstacle);
-        let mut clearance = f64::INFINITY;
-        let mut t = 0.0;
-        while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
-            l.tick(&path, t);
-            t += 0.02;
-            clearance = clearance.min(l.clearance(&obstacle));
-        }
-        let fallback = l
-            .log
-            .iter()
-            .filter(|t| t.out.status == ControlStatus::Fallback)
-            .count();
+        let (clearance, fallback) = pass_obstacle_standard_receiver(&cfg, body, bias_east);
         println!("hatchback, standard receiver, bias {bias_east:+.1} m: clearance {clearance:.3} m, fallback ticks {fallback}");
         assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
     }

@@ -159,6 +159,31 @@ impl<const NX: usize, const NR: usize> Stage<NX, NR> {
     };
 }
 
+/// Steps 2 and 3 of an iteration for one copy: `z` to the proximal point at the over-relaxed
+/// `alpha g + (1 - alpha) z` (`bounds` = lower, upper, reach; a plain clamp unless `SOFT`), the
+/// residual into `w`; with `CHECK`, the residuals into `r`.
+#[inline(always)]
+fn update_copy<const CHECK: bool, const SOFT: bool>(
+    g: f32,
+    z: &mut f32,
+    w: &mut f32,
+    (lo, hi, reach): (f32, f32, f32),
+    (alpha, rho): (f32, f32),
+    r: &mut Residuals,
+) {
+    let relaxed = alpha * g + (1.0 - alpha) * *z;
+    let z_new = if SOFT {
+        prox(relaxed + *w, lo, hi, reach)
+    } else {
+        clamp(relaxed + *w, lo, hi)
+    };
+    *w += relaxed - z_new;
+    if CHECK {
+        r.add(g, *z, z_new, *w, rho);
+    }
+    *z = z_new;
+}
+
 /// The problem data of one solve.
 #[derive(Clone, Debug)]
 pub struct Problem<const NX: usize, const N: usize, const NR: usize> {
@@ -606,7 +631,6 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     ) -> Residuals {
         let u_rho = p.u_rho * self.rho_scale;
         let box_rho = p.box_rho * self.rho_scale;
-        let beta = 1.0 - alpha;
         let mut x = x0.data.0[0];
         let mut r = Residuals {
             primal: 0.0,
@@ -621,13 +645,8 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
             }
             it.u = uk;
             // Input copy: the hard box.
-            let relaxed = alpha * uk + beta * it.zu;
-            let zu = clamp(relaxed + it.wu, st.u_lower, st.u_upper);
-            it.wu += relaxed - zu;
-            if CHECK {
-                r.add(uk, it.zu, zu, it.wu, u_rho);
-            }
-            it.zu = zu;
+            let box_u = (st.u_lower, st.u_upper, f32::INFINITY);
+            update_copy::<CHECK, false>(uk, &mut it.zu, &mut it.wu, box_u, (alpha, u_rho), &mut r);
             // x_{k+1} = A x + B u + c, column by column.
             let mut xn = [0.0f32; NX];
             for ((xn, b), c) in xn.iter_mut().zip(st.b.iter()).zip(st.c.iter()) {
@@ -642,13 +661,8 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
             it.x = SVector::from(xn);
             // State box.
             let g = x.get(p.box_state).copied().unwrap_or(0.0);
-            let relaxed = alpha * g + beta * it.zb;
-            let zb = clamp(relaxed + it.wb, st.box_lower, st.box_upper);
-            it.wb += relaxed - zb;
-            if CHECK {
-                r.add(g, it.zb, zb, it.wb, box_rho);
-            }
-            it.zb = zb;
+            let box_x = (st.box_lower, st.box_upper, f32::INFINITY);
+            update_copy::<CHECK, false>(g, &mut it.zb, &mut it.wb, box_x, (alpha, box_rho), &mut r);
             // Rows on the plane.
             let mut first = x.iter();
             let x0 = first.next().copied().unwrap_or(0.0);
@@ -665,13 +679,8 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
                     continue;
                 }
                 let g = row.a * x0 + row.b * x1;
-                let relaxed = alpha * g + beta * *z;
-                let z_new = prox(relaxed + *w, row.lower, row.upper, *reach);
-                *w += relaxed - z_new;
-                if CHECK {
-                    r.add(g, *z, z_new, *w, *rho);
-                }
-                *z = z_new;
+                let bounds = (row.lower, row.upper, *reach);
+                update_copy::<CHECK, true>(g, z, w, bounds, (alpha, *rho), &mut r);
             }
         }
         r

@@ -403,27 +403,48 @@ pub fn terminal_row(
     if !(ahead_of_axle > 0.0 && ahead_of_axle - front - obstacle.radius_m <= preview_m) {
         return None;
     }
+    Some(side_row(
+        at,
+        body,
+        0.0,
+        side,
+        obstacle.path_offset_m,
+        obstacle.radius_m,
+        lin,
+        w,
+    ))
+}
+
+/// The row keeping the body's side that faces an obstacle, at the point `ahead_m` ahead of the
+/// rear axle, at least `clearance_m` beyond the obstacle's centre line `lateral_m` (offsets
+/// from the sample `at`, positive right): at most `lateral - clearance` passing on the left, at
+/// least `lateral + clearance` passing on the right.
+#[allow(clippy::too_many_arguments)]
+fn side_row(
+    at: &Sample,
+    body: &Body,
+    ahead_m: f32,
+    side: ObstacleSide,
+    lateral_m: f32,
+    clearance_m: f32,
+    (s0, c0, e0): (f32, f32, f32),
+    w: &Weights,
+) -> Row {
     let half_width = 0.5 * body.width_m;
-    let (s0, c0, e0) = lin;
     let point = BodyPoint {
-        ahead_m: 0.0,
+        ahead_m,
         right_m: match side {
+            // Passing on the left: the obstacle is on the body's right.
             ObstacleSide::Left => half_width,
             ObstacleSide::Right => -half_width,
         },
     };
     let (a, b, k) = body_offset(at, at, point, s0, c0, e0);
     let (lower, upper) = match side {
-        ObstacleSide::Left => (
-            f32::NEG_INFINITY,
-            obstacle.path_offset_m - obstacle.radius_m - k,
-        ),
-        ObstacleSide::Right => (
-            obstacle.path_offset_m + obstacle.radius_m - k,
-            f32::INFINITY,
-        ),
+        ObstacleSide::Left => (f32::NEG_INFINITY, lateral_m - clearance_m - k),
+        ObstacleSide::Right => (lateral_m + clearance_m - k, f32::INFINITY),
     };
-    Some(Row {
+    Row {
         a,
         b,
         lower,
@@ -431,7 +452,7 @@ pub fn terminal_row(
         rho: w.rho_obstacle,
         soft_weight: w.obstacle_weight_per_m,
         active: true,
-    })
+    }
 }
 
 /// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
@@ -460,30 +481,7 @@ pub fn obstacle_row(
     let ahead = clamp(along, rear, front);
     let beyond = along - ahead;
     let half_chord = math::sqrt(max(r * r - beyond * beyond, 0.0));
-    let half_width = 0.5 * body.width_m;
-    let (s0, c0, e0) = lin;
-    let point = BodyPoint {
-        ahead_m: ahead,
-        right_m: match side {
-            // Passing on the left: the obstacle is on the body's right.
-            ObstacleSide::Left => half_width,
-            ObstacleSide::Right => -half_width,
-        },
-    };
-    let (a, b, k) = body_offset(at, at, point, s0, c0, e0);
-    let (lower, upper) = match side {
-        ObstacleSide::Left => (f32::NEG_INFINITY, lateral - half_chord - k),
-        ObstacleSide::Right => (lateral + half_chord - k, f32::INFINITY),
-    };
-    Some(Row {
-        a,
-        b,
-        lower,
-        upper,
-        rho: w.rho_obstacle,
-        soft_weight: w.obstacle_weight_per_m,
-        active: true,
-    })
+    Some(side_row(at, body, ahead, side, lateral, half_chord, lin, w))
 }
 
 /// Stages at the end of the horizon that get [`terminal_row`]s (the last 0.5 s): the car is to
