@@ -2,7 +2,7 @@
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
 use catmodel::control::mpc::{
-    ControlStatus, FallbackReason, MpcConfig, MpcTuning, ObstacleSide, DEFAULT_TUNING,
+    ControlStatus, FallbackReason, MpcConfig, MpcTuning, Obstacle, ObstacleSide, DEFAULT_TUNING,
 };
 use catmodel::vehicle::Body;
 use catmodel_host::sim::config::VehicleConfig;
@@ -253,6 +253,32 @@ fn holds_a_curve() {
     assert!(l.log.iter().all(|t| t.corridor_violation_m <= 0.0));
 }
 
+/// Runs the loop until the rear axle passes `station_m` (or `max_s` seconds), with `obstacle`
+/// in slot `slot`; returns the smallest body clearance to it.
+fn drive_past(
+    l: &mut Loop,
+    path: &TestPath,
+    obstacle: Obstacle,
+    slot: usize,
+    station_m: f64,
+    max_s: f64,
+) -> f64 {
+    l.obstacles[slot] = Some(obstacle);
+    let mut clearance = f64::INFINITY;
+    let mut t = 0.0;
+    while l.log.last().is_none_or(|x| x.station_m < station_m) && t < max_s {
+        let out = l.tick(path, t);
+        assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
+        assert!(out
+            .plan
+            .iter()
+            .all(|p| p.x_m.is_finite() && p.y_m.is_finite()));
+        t += 0.02;
+        clearance = clearance.min(l.clearance(&obstacle));
+    }
+    clearance
+}
+
 #[test]
 fn passes_an_obstacle_on_the_side_with_room() {
     let cfg = VehicleConfig::default();
@@ -266,15 +292,7 @@ fn passes_an_obstacle_on_the_side_with_room() {
         0.0,
     );
     // Slightly right of the centre line: the room is on the left.
-    let obstacle = circle(0.4, 60.0, 0.5);
-    l.obstacles[0] = Some(obstacle);
-    let mut clearance = f64::INFINITY;
-    let mut t = 0.0;
-    while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
-        l.tick(&path, t);
-        t += 0.02;
-        clearance = clearance.min(l.clearance(&obstacle));
-    }
+    let clearance = drive_past(&mut l, &path, circle(0.4, 60.0, 0.5), 0, 120.0, 20.0);
     let avoiding = l
         .log
         .iter()
@@ -360,14 +378,12 @@ fn s_curves(length: f64, speed: f64) -> TestPath {
     )
 }
 
-/// Goal: lateral RMS at most 0.10 m at 10 m/s with a survey-grade receiver.
-#[test]
-fn rtk_lateral_rms_at_10_mps() {
-    let cfg = VehicleConfig::default();
+/// Lateral RMS and max (after 3 s) on the winding road at 10 m/s with the RTK receiver.
+fn rtk_winding_road(cfg: &VehicleConfig, body: Body) -> (f64, f64) {
     let path = s_curves(400.0, 10.0);
     let mut l = Loop::new(
         cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        mpc_for(cfg, body, DEFAULT_TUNING),
         &path,
         10.0,
         0.0,
@@ -375,7 +391,13 @@ fn rtk_lateral_rms_at_10_mps() {
     );
     l.position_error = PositionError::RTK;
     l.run(&path, 350.0, 60.0);
-    let (rms, max) = summary(&l, 3.0);
+    summary(&l, 3.0)
+}
+
+/// Goal: lateral RMS at most 0.10 m at 10 m/s with a survey-grade receiver.
+#[test]
+fn rtk_lateral_rms_at_10_mps() {
+    let (rms, max) = rtk_winding_road(&VehicleConfig::default(), ESCAPE_BODY);
     println!("RTK, winding road, 10 m/s: lateral RMS {rms:.3} m, max {max:.3} m");
     assert!(rms <= 0.10, "RMS {rms}");
 }
@@ -398,15 +420,7 @@ fn pass_obstacle_standard_receiver(
         0.0,
     );
     l.position_error = PositionError::standard((bias_east, 0.5));
-    let obstacle = circle(0.3, 60.0, 0.5);
-    l.obstacles[0] = Some(obstacle);
-    let mut clearance = f64::INFINITY;
-    let mut t = 0.0;
-    while l.log.last().is_none_or(|x| x.station_m < 120.0) && t < 20.0 {
-        l.tick(&path, t);
-        t += 0.02;
-        clearance = clearance.min(l.clearance(&obstacle));
-    }
+    let clearance = drive_past(&mut l, &path, circle(0.3, 60.0, 0.5), 0, 120.0, 20.0);
     let fallback = l
         .log
         .iter()
@@ -468,18 +482,7 @@ fn double_lane_change_is_clean() {
 #[test]
 fn second_vehicle_goals() {
     let (cfg, body) = hatchback();
-    let path = s_curves(400.0, 10.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, body, DEFAULT_TUNING),
-        &path,
-        10.0,
-        0.0,
-        0.0,
-    );
-    l.position_error = PositionError::RTK;
-    l.run(&path, 350.0, 60.0);
-    let (rms, _) = summary(&l, 3.0);
+    let (rms, _) = rtk_winding_road(&cfg, body);
     println!("hatchback, RTK, winding road, 10 m/s: lateral RMS {rms:.3} m");
     assert!(rms <= 0.10, "RMS {rms}");
     for bias_east in [-1.2, 1.2] {
