@@ -14,6 +14,17 @@ fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
     TestPath::new(length, |s| (0.0, s), |_| (lane, lane), |_| speed)
 }
 
+/// A car with the default controller on `path`, at `speed` and `offset` m right of it.
+fn car_loop(cfg: &VehicleConfig, body: Body, path: &TestPath, speed: f64, offset: f64) -> Loop {
+    let mpc = mpc_for(cfg, body, DEFAULT_TUNING);
+    Loop::new(cfg.clone(), mpc, path, speed, offset, 0.0)
+}
+
+/// The CAT Vehicle with the default controller on `path`.
+fn cat_loop(path: &TestPath, speed: f64, offset: f64) -> Loop {
+    car_loop(&VehicleConfig::default(), ESCAPE_BODY, path, speed, offset)
+}
+
 fn summary(l: &Loop, from_s: f64) -> (f64, f64) {
     let tail: Vec<f64> = l
         .log
@@ -28,16 +39,8 @@ fn summary(l: &Loop, from_s: f64) -> (f64, f64) {
 
 #[test]
 fn converges_onto_a_straight_path_from_an_offset() {
-    let cfg = VehicleConfig::default();
     let path = straight(400.0, 3.0, 10.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
-        &path,
-        10.0,
-        1.0,
-        0.0,
-    );
+    let mut l = cat_loop(&path, 10.0, 1.0);
     l.run(&path, 350.0, 30.0);
     let (rms, max) = summary(&l, 5.0);
     let iters: Vec<u16> = l.log.iter().map(|t| t.out.iterations).collect();
@@ -225,16 +228,8 @@ fn curve(radius: f64, lead: f64, speed: f64) -> TestPath {
 
 #[test]
 fn holds_a_curve() {
-    let cfg = VehicleConfig::default();
     let path = curve(40.0, 30.0, 8.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
-        &path,
-        8.0,
-        0.0,
-        0.0,
-    );
+    let mut l = cat_loop(&path, 8.0, 0.0);
     l.run(&path, path.length_m() - 10.0, 60.0);
     // On the arc (after the entry transient), the rear axle stays on the path.
     let on_arc: Vec<f64> = l
@@ -281,16 +276,8 @@ fn drive_past(
 
 #[test]
 fn passes_an_obstacle_on_the_side_with_room() {
-    let cfg = VehicleConfig::default();
     let path = straight(200.0, 3.5, 10.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
-        &path,
-        10.0,
-        0.0,
-        0.0,
-    );
+    let mut l = cat_loop(&path, 10.0, 0.0);
     // Slightly right of the centre line: the room is on the left.
     let clearance = drive_past(&mut l, &path, circle(0.4, 60.0, 0.5), 0, 120.0, 20.0);
     let avoiding = l
@@ -320,30 +307,16 @@ fn passes_an_obstacle_on_the_side_with_room() {
 /// plus v^2 / 2a to stop: 5 m/s is within that preview; at 8 m/s it is not (docs/mpc.md).
 #[test]
 fn brakes_when_no_side_fits() {
-    let cfg = VehicleConfig::default();
     let path = straight(200.0, 1.5, 5.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+    let mut l = cat_loop(&path, 5.0, 0.0);
+    let clearance = drive_past(
+        &mut l,
         &path,
-        5.0,
-        0.0,
-        0.0,
+        circle(0.0, 40.0, 1.0),
+        2,
+        f64::INFINITY,
+        15.0,
     );
-    let obstacle = circle(0.0, 40.0, 1.0);
-    l.obstacles[2] = Some(obstacle);
-    let mut clearance = f64::INFINITY;
-    let mut t = 0.0;
-    while t < 15.0 {
-        let out = l.tick(&path, t);
-        t += 0.02;
-        clearance = clearance.min(l.clearance(&obstacle));
-        assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
-        assert!(out
-            .plan
-            .iter()
-            .all(|p| p.x_m.is_finite() && p.y_m.is_finite()));
-    }
     let fallback: Vec<_> = l
         .log
         .iter()
@@ -381,14 +354,7 @@ fn s_curves(length: f64, speed: f64) -> TestPath {
 /// Lateral RMS and max (after 3 s) on the winding road at 10 m/s with the RTK receiver.
 fn rtk_winding_road(cfg: &VehicleConfig, body: Body) -> (f64, f64) {
     let path = s_curves(400.0, 10.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(cfg, body, DEFAULT_TUNING),
-        &path,
-        10.0,
-        0.0,
-        0.0,
-    );
+    let mut l = car_loop(cfg, body, &path, 10.0, 0.0);
     l.position_error = PositionError::RTK;
     l.run(&path, 350.0, 60.0);
     summary(&l, 3.0)
@@ -411,14 +377,7 @@ fn pass_obstacle_standard_receiver(
     bias_east: f64,
 ) -> (f64, usize) {
     let path = straight(200.0, 5.0, 10.0);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(cfg, body, DEFAULT_TUNING),
-        &path,
-        10.0,
-        0.0,
-        0.0,
-    );
+    let mut l = car_loop(cfg, body, &path, 10.0, 0.0);
     l.position_error = PositionError::standard((bias_east, 0.5));
     let clearance = drive_past(&mut l, &path, circle(0.3, 60.0, 0.5), 0, 120.0, 20.0);
     let fallback = l
