@@ -866,13 +866,15 @@ impl MpcConfig {
         let mut prev_speed = speeds.first().copied().unwrap_or(0.0);
         // Beyond the steering plan: towards the path's steady steering at its last reference
         // point (the terminal cost brings the plan back to the path), at the rate limit.
+        let max_steer = self.vehicle.max_steer_rad;
         let target = input.reference.last().map_or(0.0, |r| {
-            lateral::feedforward_steer_rad(
+            let ff = lateral::feedforward_steer_rad(
                 self.vehicle.wheelbase_m,
                 self.vehicle.understeer_s2_per_m2,
                 speeds.get(STEPS).copied().unwrap_or(0.0),
                 r.curvature_per_m,
-            )
+            );
+            clamp(ff, -max_steer, max_steer)
         });
         let step = self.max_steer_rate_rad_per_s * STEP_S;
         let mut held = steer.last().copied().unwrap_or(0.0);
