@@ -444,6 +444,50 @@ fn turning_window(truth: &Truth, len_s: f64) -> (f64, f64) {
     best.1
 }
 
+#[cfg(test)]
+mod plot_window_tests {
+    use super::*;
+
+    /// 60 s at 5 m/s: straight, a 90 degree turn over t = 30 .. 36 s, straight again; and
+    /// the same turn taken at 1 m/s, which must not count.
+    fn drive(turn_speed_mps: f64) -> Truth {
+        let rate = std::f64::consts::FRAC_PI_2 / 6.0;
+        Truth::new(
+            (0..=6000)
+                .map(|i| {
+                    let t = i as f64 * 0.01;
+                    let turning = (30.0..36.0).contains(&t);
+                    TruthSample {
+                        t,
+                        x: 0.0,
+                        y: 0.0,
+                        heading: 0.0,
+                        yaw_rate: if turning { rate } else { 0.0 },
+                        speed: if turning { turn_speed_mps } else { 5.0 },
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn zoom_window_holds_the_turn() {
+        let (t0, t1) = turning_window(&drive(5.0), 10.0);
+        assert!((t1 - t0 - 10.0).abs() < 0.02, "{t0} .. {t1}");
+        // Every turning sample (30.00 .. 35.99 s) inside.
+        assert!(t0 <= 30.0 && t1 >= 35.99 - 1e-9, "{t0} .. {t1}");
+        // Turning at walking pace does not count: the middle of the drive.
+        let (t0, t1) = turning_window(&drive(1.0), 10.0);
+        assert!(
+            (t0 - 25.0).abs() < 1e-9 && (t1 - 35.0).abs() < 1e-9,
+            "{t0} .. {t1}"
+        );
+        // A drive shorter than the window: all of it.
+        let short = Truth::new(drive(5.0).samples()[..500].to_vec());
+        assert_eq!(turning_window(&short, 10.0), (0.0, 4.99));
+    }
+}
+
 /// Writes the evaluation's figures as SVG into `dir` (see [`PLOT_FILES`]):
 /// - `path.svg`: two panels: the whole drive (truth, the node's and the baseline's predictions
 ///   about 1 s ahead, placed where they predict the car; east/north, m, equal scale), with the

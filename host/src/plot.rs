@@ -103,10 +103,6 @@ const LEGEND_GAP_PX: u32 = 28;
 /// Estimated width of one character of legend text: DejaVu Sans (librsvg's default) averages
 /// 0.42 em over these labels, Arial and Helvetica about 0.47 em; 0.5 em keeps entries apart.
 const LEGEND_CHAR_PX: f64 = 0.5 * LEGEND_FONT_PX as f64;
-/// Height the title takes.
-const TITLE_PX: u32 = 40;
-/// Height a panel's subtitle takes.
-const SUBTITLE_PX: u32 = 26;
 
 impl Panel {
     /// An empty panel.
@@ -314,24 +310,14 @@ impl Figure {
         (entries, rows)
     }
 
-    /// Pixel size of each panel's plot area (inside its axes).
-    fn plot_areas(&self, legend_rows: u32) -> (u32, u32) {
-        let n = self.panels.len().max(1) as u32;
-        let panel_w = self.size.0 / n;
-        let panel_h = self
-            .size
-            .1
-            .saturating_sub(TITLE_PX + legend_rows * LEGEND_ROW_PX + MARGIN_PX);
-        (
-            panel_w.saturating_sub(2 * MARGIN_PX + Y_LABEL_AREA_PX),
-            panel_h.saturating_sub(2 * MARGIN_PX + X_LABEL_AREA_PX + SUBTITLE_PX),
-        )
+    /// Height of the legend strip below the panels.
+    fn legend_px(rows: u32) -> u32 {
+        rows * LEGEND_ROW_PX + MARGIN_PX
     }
 
     /// Renders the figure as an SVG document.
     pub fn to_svg(&self) -> Result<String> {
         let (legend, rows) = self.legend();
-        let plot_px = self.plot_areas(rows);
         let mut out = String::new();
         {
             let root = SVGBackend::with_string(&mut out, self.size).into_drawing_area();
@@ -340,11 +326,11 @@ impl Figure {
                 .titled(&self.title, ("sans-serif", TITLE_FONT_PX))
                 .map_err(|x| anyhow!("plot: {x:?}"))?;
             let (_, body_h) = body.dim_in_pixel();
-            let legend_h = rows * LEGEND_ROW_PX + MARGIN_PX;
-            let (charts, legend_area) = body.split_vertically(body_h.saturating_sub(legend_h));
+            let (charts, legend_area) =
+                body.split_vertically(body_h.saturating_sub(Self::legend_px(rows)));
             let panels = charts.split_evenly((1, self.panels.len().max(1)));
             for (panel, area) in self.panels.iter().zip(&panels) {
-                draw_panel(panel, area, plot_px).map_err(|x| anyhow!("plot: {x:?}"))?;
+                draw_panel(panel, area).map_err(|x| anyhow!("plot: {x:?}"))?;
             }
             draw_legend(&legend, &legend_area).map_err(|x| anyhow!("plot: {x:?}"))?;
             root.present().map_err(|x| anyhow!("plot: {x:?}"))?;
@@ -362,9 +348,27 @@ impl Figure {
 type Area<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
 type DrawResult = std::result::Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
+/// The pixel size of the plot area (inside the axes) that [`draw_panel`] gets in `area`: the
+/// area less the margins, the axis label areas and the subtitle (plotters' `titled` takes the
+/// text's height plus twice `min(height / 2, 5)`).
+fn plot_area_px(area: &Area<'_>, subtitle: &str) -> (u32, u32) {
+    let (w, h) = area.dim_in_pixel();
+    let text_h = area
+        .estimate_text_size(
+            subtitle,
+            &("sans-serif", SUBTITLE_FONT_PX).into_text_style(area),
+        )
+        .map_or(0, |(_, h)| h);
+    let caption_h = text_h + 2 * (text_h / 2).min(5);
+    (
+        w.saturating_sub(2 * MARGIN_PX + Y_LABEL_AREA_PX),
+        h.saturating_sub(2 * MARGIN_PX + X_LABEL_AREA_PX + caption_h),
+    )
+}
+
 /// One panel: subtitle, axes, series in order.
-fn draw_panel(panel: &Panel, area: &Area<'_>, plot_px: (u32, u32)) -> DrawResult {
-    let ((x0, x1), (y0, y1)) = panel.ranges(plot_px);
+fn draw_panel(panel: &Panel, area: &Area<'_>) -> DrawResult {
+    let ((x0, x1), (y0, y1)) = panel.ranges(plot_area_px(area, &panel.subtitle));
     let mut chart = ChartBuilder::on(area)
         .caption(&panel.subtitle, ("sans-serif", SUBTITLE_FONT_PX))
         .margin(MARGIN_PX)
@@ -459,8 +463,8 @@ mod tests {
         assert_eq!(svg.matches("<circle").count(), 3);
     }
 
-    /// The legend is below the plot area: every legend text's y is below the x axis' label
-    /// area, i.e. no legend entry can cover data.
+    /// The legend is below the plot area: every legend text's y is below the x axis and its
+    /// label area, i.e. no legend entry can cover data.
     #[test]
     fn legend_lies_below_the_panels() {
         let fig = Figure::new("t", "x", "y")
@@ -469,23 +473,30 @@ mod tests {
         let (entries, rows) = fig.legend();
         assert_eq!((entries.len(), rows), (2, 1));
         let svg = fig.to_svg().unwrap();
-        let plot_bottom = TITLE_PX + SUBTITLE_PX + MARGIN_PX + fig.plot_areas(rows).1;
+        let legend_top = 600 - Figure::legend_px(rows);
         for label in ["first series", "second series"] {
-            let at = svg.find(&format!(">{label}<")).unwrap();
+            let at = svg.find(&format!("\n{label}\n</text>")).unwrap();
             let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
             let y: f64 = tag
-                .split("y=\"")
+                .split(" y=\"")
                 .nth(1)
                 .and_then(|s| s.split('"').next())
                 .unwrap()
                 .parse()
                 .unwrap();
-            assert!(
-                y > f64::from(plot_bottom + X_LABEL_AREA_PX),
-                "{label} at y {y}"
-            );
-            assert!(y < 600.0, "{label} at y {y}");
+            assert!(y > f64::from(legend_top) && y < 600.0, "{label} at y {y}");
         }
+        // The x axis description sits above the legend strip.
+        let at = svg.find("\nx\n</text>").unwrap();
+        let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
+        let axis_y: f64 = tag
+            .split(" y=\"")
+            .nth(1)
+            .and_then(|s| s.split('"').next())
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(axis_y < f64::from(legend_top), "axis label at {axis_y}");
     }
 
     #[test]
@@ -527,34 +538,30 @@ mod tests {
         assert!(x0 < 0.0 && x1 > 100.0 && y0 < 0.0 && y1 > 10.0);
     }
 
-    /// The plot area the ranges are computed for is the one plotters draws: two panels of a
-    /// 1400 px figure, axes 0..100 both ways on the left one.
+    /// The plot area the ranges are computed for is the one plotters draws: the left panel of
+    /// a two-panel 1400 px figure.
     #[test]
     fn plot_area_size_matches_what_plotters_draws() {
-        let fig = Figure::new("t", "x", "y")
-            .size(1400, 700)
-            .line("l", vec![(0.0, 0.0)])
-            .panel("zoom", "x", "y")
-            .line("m", vec![(0.0, 0.0)]);
-        let (_, rows) = fig.legend();
-        let (w, h) = fig.plot_areas(rows);
         let mut out = String::new();
-        {
-            let root = SVGBackend::with_string(&mut out, fig.size).into_drawing_area();
-            let body = root.titled("t", ("sans-serif", TITLE_FONT_PX)).unwrap();
-            let (_, body_h) = body.dim_in_pixel();
-            let (charts, _) = body.split_vertically(body_h - (rows * LEGEND_ROW_PX + MARGIN_PX));
-            let panels = charts.split_evenly((1, 2));
+        let root = SVGBackend::with_string(&mut out, (1400, 700)).into_drawing_area();
+        let body = root.titled("t", ("sans-serif", TITLE_FONT_PX)).unwrap();
+        let (_, body_h) = body.dim_in_pixel();
+        let (charts, _) = body.split_vertically(body_h - Figure::legend_px(2));
+        let panels = charts.split_evenly((1, 2));
+        for subtitle in ["Enlarged: t = 1 .. 2 s", ""] {
             let chart = ChartBuilder::on(&panels[0])
-                .caption("zoom", ("sans-serif", SUBTITLE_FONT_PX))
+                .caption(subtitle, ("sans-serif", SUBTITLE_FONT_PX))
                 .margin(MARGIN_PX)
                 .x_label_area_size(X_LABEL_AREA_PX)
                 .y_label_area_size(Y_LABEL_AREA_PX)
                 .build_cartesian_2d(0.0..100.0, 0.0..100.0)
                 .unwrap();
-            let (pw, ph) = chart.plotting_area().dim_in_pixel();
-            assert!(pw.abs_diff(w) <= 2, "width {pw} vs {w}");
-            assert!(ph.abs_diff(h) <= 6, "height {ph} vs {h}");
+            let drawn = chart.plotting_area().dim_in_pixel();
+            let computed = plot_area_px(&panels[0], subtitle);
+            assert!(
+                drawn.0.abs_diff(computed.0) <= 1 && drawn.1.abs_diff(computed.1) <= 1,
+                "{subtitle:?}: drawn {drawn:?}, computed {computed:?}"
+            );
         }
     }
 
