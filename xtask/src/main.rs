@@ -404,7 +404,7 @@ fn qemu(args: &[String]) -> Result<()> {
 fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
     let elf = cargo_build("qemu", "catmodel-qemu")?;
     let out_dir = root().join("target").join("qemu");
-    let run = run_qemu(&elf, &out_dir, input.as_deref(), &[])?;
+    let run = run_qemu(&elf, &out_dir, input, &[])?;
 
     let whole: Vec<u32> = run.records.iter().map(|r| r.tick).collect();
     let drain: Vec<u32> = run.records.iter().map(|r| r.drain).collect();

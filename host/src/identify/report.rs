@@ -25,6 +25,9 @@ const SETTLING_C: (u8, u8, u8) = PALETTE[5];
 /// Time series of 20 ms samples are dense: thin lines.
 const TRACE: Style = Style::Line { width_px: 1 };
 
+/// A named series of a report figure: label, points, colour.
+type Curve<'a> = (&'a str, Vec<(f64, f64)>, (u8, u8, u8));
+
 /// A report figure: `title` (with its figure number), `subtitle` (which log), line series, and
 /// labelled marker series; 900 x 500 with the legend below the data.
 fn plot(
@@ -32,8 +35,8 @@ fn plot(
     title: &str,
     subtitle: &str,
     (x_label, y_label): (&str, &str),
-    lines: Vec<(&str, Vec<(f64, f64)>, (u8, u8, u8))>,
-    markers: Vec<(&str, Vec<(f64, f64)>, (u8, u8, u8))>,
+    lines: Vec<Curve<'_>>,
+    markers: Vec<Curve<'_>>,
 ) -> Result<()> {
     let mut figure = Figure::new(title, x_label, y_label)
         .subtitle(subtitle)
