@@ -474,28 +474,23 @@ mod tests {
         assert_eq!((entries.len(), rows), (2, 1));
         let svg = fig.to_svg().unwrap();
         let legend_top = 600 - Figure::legend_px(rows);
-        for label in ["first series", "second series"] {
-            let at = svg.find(&format!("\n{label}\n</text>")).unwrap();
+        // The y attribute of the <text> element holding exactly `text`.
+        let text_y = |text: &str| -> f64 {
+            let at = svg.find(&format!("\n{text}\n</text>")).unwrap();
             let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
-            let y: f64 = tag
-                .split(" y=\"")
+            tag.split(" y=\"")
                 .nth(1)
                 .and_then(|s| s.split('"').next())
                 .unwrap()
                 .parse()
-                .unwrap();
+                .unwrap()
+        };
+        for label in ["first series", "second series"] {
+            let y = text_y(label);
             assert!(y > f64::from(legend_top) && y < 600.0, "{label} at y {y}");
         }
         // The x axis description sits above the legend strip.
-        let at = svg.find("\nx\n</text>").unwrap();
-        let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
-        let axis_y: f64 = tag
-            .split(" y=\"")
-            .nth(1)
-            .and_then(|s| s.split('"').next())
-            .unwrap()
-            .parse()
-            .unwrap();
+        let axis_y = text_y("x");
         assert!(axis_y < f64::from(legend_top), "axis label at {axis_y}");
     }
 
@@ -523,15 +518,21 @@ mod tests {
         assert_eq!(two.legend().0.len(), 1);
     }
 
-    #[test]
-    fn equal_aspect_gives_equal_units_per_pixel() {
+    /// A panel with one line through `points`.
+    fn one_line(points: Vec<(f64, f64)>) -> Panel {
         let mut panel = Panel::new("", "x", "y");
         panel.series.push(Series {
             label: "l".into(),
-            points: vec![(0.0, 0.0), (100.0, 10.0)],
+            points,
             style: Style::Line { width_px: 1 },
             color: None,
         });
+        panel
+    }
+
+    #[test]
+    fn equal_aspect_gives_equal_units_per_pixel() {
+        let mut panel = one_line(vec![(0.0, 0.0), (100.0, 10.0)]);
         panel.equal_aspect = true;
         let ((x0, x1), (y0, y1)) = panel.ranges((800, 400));
         assert!((((x1 - x0) / 800.0) - ((y1 - y0) / 400.0)).abs() < 1e-12);
@@ -567,13 +568,7 @@ mod tests {
 
     #[test]
     fn y_from_zero_and_empty_figures() {
-        let mut panel = Panel::new("", "x", "y");
-        panel.series.push(Series {
-            label: "l".into(),
-            points: vec![(0.0, 5.0), (1.0, 6.0)],
-            style: Style::Line { width_px: 1 },
-            color: None,
-        });
+        let mut panel = one_line(vec![(0.0, 5.0), (1.0, 6.0)]);
         panel.y_from_zero = true;
         assert_eq!(panel.ranges((100, 100)).1 .0, 0.0);
         // No points at all still renders.

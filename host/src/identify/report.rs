@@ -94,76 +94,51 @@ pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
     };
     if let (Some(e), Some(s)) = (sets.first(), sims.first()) {
         let log = format!("{label} log: {}", e.name);
-        plot(
-            &dir.join("fig4_speed.svg"),
-            "Fig 4: speed, measured and simulated",
-            &log,
-            ("t (s)", "speed (m/s)"),
-            vec![
-                ("measured", xy(&e.t, &e.vel), MEASURED_C),
-                (
-                    "transfer function (eq 5 form)",
-                    xy(&e.t, &s.vel_model),
-                    MODEL_C,
-                ),
-                ("kinematic", xy(&e.t, &s.vel_kinematic), KINEMATIC_C),
-            ],
-            Vec::new(),
-        )?;
-        plot(
-            &dir.join("fig5_speed_error.svg"),
-            "Fig 5: absolute speed error",
-            &log,
-            ("t (s)", "|error| (m/s)"),
-            vec![
-                (
-                    "transfer function (eq 5 form)",
-                    abs_err(&e.t, &e.vel, &s.vel_model),
-                    MODEL_C,
-                ),
-                (
-                    "kinematic",
-                    abs_err(&e.t, &e.vel, &s.vel_kinematic),
-                    KINEMATIC_C,
-                ),
-            ],
-            Vec::new(),
-        )?;
-        plot(
-            &dir.join("fig6_dx.svg"),
-            "Fig 6: dx/dt (east velocity), measured and simulated",
-            &log,
-            ("t (s)", "dx/dt (m/s)"),
-            vec![
-                ("measured (GNSS)", xy(&e.t, &e.dx), MEASURED_C),
-                (
-                    "transfer function (eq 7 form)",
-                    xy(&e.t, &s.dx_model),
-                    MODEL_C,
-                ),
-                ("kinematic", xy(&e.t, &s.dx_kinematic), KINEMATIC_C),
-            ],
-            Vec::new(),
-        )?;
-        plot(
-            &dir.join("fig7_dx_error.svg"),
-            "Fig 7: absolute dx/dt error",
-            &log,
-            ("t (s)", "|error| (m/s)"),
-            vec![
-                (
-                    "transfer function (eq 7 form)",
-                    abs_err(&e.t, &e.dx, &s.dx_model),
-                    MODEL_C,
-                ),
-                (
-                    "kinematic",
-                    abs_err(&e.t, &e.dx, &s.dx_kinematic),
-                    KINEMATIC_C,
-                ),
-            ],
-            Vec::new(),
-        )?;
+        // Fig 4 / 5 (speed) and Fig 6 / 7 (dx/dt): the signal, then the absolute errors.
+        let t = &e.t;
+        for (files, numbers, quantity, measured, (model, model_label), kinematic) in [
+            (
+                ("fig4_speed.svg", "fig5_speed_error.svg"),
+                (4, 5),
+                "speed",
+                ("measured", &e.vel),
+                (&s.vel_model, "transfer function (eq 5 form)"),
+                &s.vel_kinematic,
+            ),
+            (
+                ("fig6_dx.svg", "fig7_dx_error.svg"),
+                (6, 7),
+                "dx/dt (east velocity)",
+                ("measured (GNSS)", &e.dx),
+                (&s.dx_model, "transfer function (eq 7 form)"),
+                &s.dx_kinematic,
+            ),
+        ] {
+            let short = quantity.split(' ').next().unwrap_or(quantity);
+            plot(
+                &dir.join(files.0),
+                &format!("Fig {}: {quantity}, measured and simulated", numbers.0),
+                &log,
+                ("t (s)", &format!("{short} (m/s)")),
+                vec![
+                    (measured.0, xy(t, measured.1), MEASURED_C),
+                    (model_label, xy(t, model), MODEL_C),
+                    ("kinematic", xy(t, kinematic), KINEMATIC_C),
+                ],
+                Vec::new(),
+            )?;
+            plot(
+                &dir.join(files.1),
+                &format!("Fig {}: absolute {short} error", numbers.1),
+                &log,
+                ("t (s)", "|error| (m/s)"),
+                vec![
+                    (model_label, abs_err(t, measured.1, model), MODEL_C),
+                    ("kinematic", abs_err(t, measured.1, kinematic), KINEMATIC_C),
+                ],
+                Vec::new(),
+            )?;
+        }
         let resid: Vec<f64> = e.vel.iter().zip(&s.vel_model).map(|(a, b)| a - b).collect();
         let acf = autocorrelation(&resid, 250);
         let lags: Vec<(f64, f64)> = acf
