@@ -1,9 +1,11 @@
 //! catmodel automation.
 //!
-//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): builds the QEMU firmware (release, the
-//!   profile we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
-//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table, and
-//!   fails if the run failed or a tick exceeded the instruction budget.
+//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): checks the MCU target and
+//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (release, the profile we ship),
+//!   runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table and
+//!   one summary line (drive, machine, PASS or FAIL, slowest tick against the budget, bound),
+//!   and fails if the run failed or a tick exceeded the instruction budget.
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid; then a 500 ms stall that overflows the receive queue: every
