@@ -3,30 +3,10 @@
 //! the legend below the data.
 use std::path::{Path, PathBuf};
 
-use catmodel_host::identify::preprocess::{preprocess_rows, Experiment, PreprocessOptions};
+use catmodel_host::identify::preprocess::Experiment;
 use catmodel_host::identify::{self, IdentifyOptions};
 use catmodel_host::model_file;
-use catmodel_host::sim::{self, SimOptions};
-
-fn sim_experiment(name: &str, seed: u64) -> Experiment {
-    let out = sim::run_named(
-        name,
-        None,
-        &SimOptions {
-            seed,
-            ..SimOptions::default()
-        },
-    )
-    .unwrap();
-    let base = model_file::load(&model_file::paper_path()).unwrap();
-    preprocess_rows(
-        &format!("{name}-{seed}"),
-        &out.log,
-        &base.vehicle,
-        &PreprocessOptions::default(),
-    )
-    .unwrap()
-}
+use catmodel_host_tests::sim_experiment;
 
 fn report(name: &str, validation: Vec<Experiment>) -> PathBuf {
     let training = vec![
