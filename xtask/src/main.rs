@@ -17,6 +17,9 @@
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
 //! - `cargo xtask bench-target [--check]`: instructions per call of each firmware component in
 //!   QEMU ([`bench`]).
+//! - `cargo xtask tick-schedule`: QEMU and host replay tick at the same times on drives that
+//!   start at 0, on a tick boundary, just after and before one, and at an epoch time
+//!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
 use std::fmt::Write as _;
@@ -30,6 +33,7 @@ mod bench;
 mod corpus;
 mod nopanic;
 mod prereq;
+mod schedule;
 mod txcompare;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
@@ -55,9 +59,10 @@ fn main() -> ExitCode {
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
+        Some("tick-schedule") => schedule::tick_schedule(),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus\n\
+             | bench-target [--check] | model-corpus | tick-schedule\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
