@@ -49,7 +49,7 @@ use catmodel::can::TimedFrame;
 use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
-pub use schedule::TickGrid;
+pub use schedule::{ReplayClock, TickGrid};
 
 /// Frames the receive queue holds between two ticks. The filters admit five input messages at
 /// 50 Hz or less (about 5 frames per tick), so 64 leaves room for bursts; a full queue drops the
@@ -229,7 +229,8 @@ pub trait TickPlatform {
 pub struct TickConfig {
     /// Embassy time (us) of the first tick.
     pub first_tick_instant_us: u64,
-    /// Added to embassy time to get the input's time base, us.
+    /// Added to embassy time to get the input's time base, us, modulo 2^64 (a replayed drive
+    /// that starts at time 0 has a negative offset: [`ReplayClock`]).
     pub input_offset_us: u64,
     /// Stop after the tick at or past this time (input time base, us); `None` runs forever.
     pub last_tick_us: Option<u64>,
@@ -298,7 +299,7 @@ pub async fn tick_loop<P: TickPlatform>(
     loop {
         Timer::at(Instant::from_micros(grid.deadline_us())).await;
         grid.start(Instant::now().as_micros());
-        let tick_us = grid.deadline_us().saturating_add(config.input_offset_us);
+        let tick_us = grid.deadline_us().wrapping_add(config.input_offset_us);
 
         let c0 = platform.counter();
         drain_due(rx, tick_us, &mut held, &mut batch);

@@ -1,8 +1,9 @@
 //! The 20 ms tick grid: which slot runs next, and how many deadlines were missed.
 //!
 //! Pure bookkeeping on microsecond timestamps (no clock is read here), so that the overrun policy
-//! is the same on the board and in QEMU and can be unit-tested on the host (`cargo test -p xtask`
-//! compiles this file too).
+//! is the same on the board and in QEMU and is unit-tested on the host; and [`ReplayClock`], how a
+//! replayed drive's time base maps onto the firmware's clock (QEMU), property-tested on the host
+//! against host replay (`host-tests/tests/schedule.rs`).
 //!
 //! Policy (docs/firmware.md, "Overruns"):
 //! - Slot `k` is due at `origin_us + k * period_us`. Every slot either completes its tick before
@@ -11,6 +12,64 @@
 //! - A tick that *starts* one full period late or more would be stale: its slot is skipped (no
 //!   catch-up burst of old ticks), and each skipped slot counts one overrun. The tick then runs
 //!   for the latest slot whose time has come, so tick times stay on the grid and never drift.
+
+use catmodel::node::first_tick_us;
+use catmodel::SAMPLE_PERIOD_US;
+
+use crate::TickConfig;
+
+/// How a replayed input's time base (candump timestamps, us) maps onto the firmware's clock
+/// (embassy time, us since boot), so that the firmware ticks at exactly the times host replay
+/// does, whatever the first timestamp (0, a tick boundary, just after one, an epoch time).
+///
+/// Host replay ticks at `first_tick_us(first frame) + k * 20 ms` (`catmodel::node`). Here the
+/// first tick runs one period after boot (so the receive task has a period to queue the first
+/// frames), at embassy time [`SAMPLE_PERIOD_US`]: input time = embassy time + `input_offset_us`,
+/// with the offset `first_tick - 20 ms` taken modulo 2^64 (a drive starting at 0 has a negative
+/// offset; every sum below wraps back into range). A frame is released one period before the
+/// tick that consumes it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReplayClock {
+    offset_us: u64,
+}
+
+impl ReplayClock {
+    /// The clock for a drive whose first frame is stamped `first_frame_us`.
+    pub const fn new(first_frame_us: u64) -> Self {
+        Self {
+            offset_us: first_tick_us(first_frame_us).wrapping_sub(SAMPLE_PERIOD_US),
+        }
+    }
+
+    /// Input time minus embassy time, modulo 2^64.
+    pub const fn input_offset_us(&self) -> u64 {
+        self.offset_us
+    }
+
+    /// Input time of embassy time `instant_us`.
+    pub const fn input_us(&self, instant_us: u64) -> u64 {
+        instant_us.wrapping_add(self.offset_us)
+    }
+
+    /// Embassy time at which a frame stamped `frame_t_us` is handed to the receive queue: one
+    /// period before the tick that consumes it.
+    pub const fn release_instant_us(&self, frame_t_us: u64) -> u64 {
+        first_tick_us(frame_t_us)
+            .wrapping_sub(SAMPLE_PERIOD_US)
+            .wrapping_sub(self.offset_us)
+    }
+
+    /// The tick loop's configuration for a drive whose last frame is stamped `last_frame_us`:
+    /// the last tick is the one that consumes it.
+    pub const fn tick_config(&self, last_frame_us: u64) -> TickConfig {
+        TickConfig {
+            first_tick_instant_us: SAMPLE_PERIOD_US,
+            input_offset_us: self.offset_us,
+            last_tick_us: Some(first_tick_us(last_frame_us)),
+            watchdog_reset: false,
+        }
+    }
+}
 
 /// Position on the tick grid and the deadline misses seen so far.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -88,7 +147,25 @@ impl TickGrid {
 
 #[cfg(test)]
 mod tests {
-    use super::TickGrid;
+    use super::{ReplayClock, TickGrid};
+
+    #[test]
+    fn replay_clock_ticks_where_replay_does_for_every_kind_of_start() {
+        // 0, a tick boundary, just after one, just before one, an epoch time.
+        for first in [0, 40_000, 40_001, 39_999, 1_700_000_000_003_000u64] {
+            let clock = ReplayClock::new(first);
+            let config = clock.tick_config(first + 1_000_000);
+            let first_tick = catmodel::node::first_tick_us(first);
+            // The first tick (at embassy time one period) is the first tick of host replay.
+            assert_eq!(clock.input_us(config.first_tick_instant_us), first_tick);
+            // The first frame is released before (or as) that tick runs, never after.
+            assert!(clock.release_instant_us(first) <= config.first_tick_instant_us);
+            assert_eq!(
+                clock.release_instant_us(first) + P,
+                config.first_tick_instant_us
+            );
+        }
+    }
 
     const P: u64 = 20_000;
 
