@@ -23,8 +23,8 @@ pub mod baked {
 pub mod estimator;
 
 use crate::can::codec::{
-    decode_input, DecodeError, EncodeReport, HealthFlags, InputMessage, ModelMode, NodeStatus,
-    Prediction, PredictionPoint, StateModel, StateMotion, StatePosition,
+    decode_input, DecodeError, EncodeReport, HealthFlags, InputMessage, ModelMode, ModelOutputs,
+    NodeStatus, Prediction, PredictionPoint, StateMotion, StatePosition,
 };
 use crate::can::{freshness, CanFrame, TimedFrame};
 use crate::geodesy::LocalFrame;
@@ -39,7 +39,8 @@ use crate::vehicle::{VehicleParams, CAT_VEHICLE};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
 use estimator::{EstimatorConfig, EstimatorState, Xy};
 
-/// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.
+/// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
+/// controller's command are 14; 16 leaves room.
 pub const MAX_TX_FRAMES: usize = 16;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
@@ -48,7 +49,7 @@ pub const PREDICTION_POINTS: usize = 10;
 /// predictor copies this buffer every tick, so it is not larger.
 pub const VELOCITY_DELAY_CAP: usize = 64;
 /// Status pages, one per tick, cycling.
-const STATUS_PAGES: u32 = 5;
+const STATUS_PAGES: u32 = crate::can::spec::STATUS_PAGES as u32;
 
 /// The frames one tick sends, in transmit order.
 pub type TxFrames = heapless::Vec<CanFrame, MAX_TX_FRAMES>;
@@ -560,7 +561,7 @@ impl Node {
         };
         let mut push = |(frame, r): (CanFrame, EncodeReport), report: &mut EncodeReport| {
             report.merge(&r);
-            // Note: capacity 16 >= 3 + 10 + 1 frames; a full buffer would only lose frames
+            // Note: capacity 16 >= 2 + 10 + 1 frames; a full buffer would only lose frames
             // already counted in `MAX_TX_FRAMES`'s derivation.
             let _ = tx.push(frame);
         };
@@ -581,15 +582,6 @@ impl Node {
                 heading_rad: pose.map(|p| p.heading_rad),
                 speed_mps: Some(speed_mps),
                 yaw_rate_radps: Some(self.yaw_rate_rps),
-            }
-            .encode_with_report(counter),
-            &mut report,
-        );
-        push(
-            StateModel {
-                speed_model_mps: speed_model,
-                dxdt_model_mps: dxdt,
-                lat_accel_mps2: Some(speed_mps * self.yaw_rate_rps),
             }
             .encode_with_report(counter),
             &mut report,
@@ -652,10 +644,15 @@ impl Node {
                 tick_count: self.tick_count,
                 rx_queue_drops: tick.platform.rx_queue_drops,
             },
-            _ => NodeStatus::Ages {
+            4 => NodeStatus::Ages {
                 ages_10ms: ages,
                 stack_high_water_bytes: tick.platform.stack_high_water_bytes,
             },
+            _ => NodeStatus::Model(ModelOutputs {
+                speed_model_mps: speed_model,
+                dxdt_model_mps: dxdt,
+                lat_accel_mps2: Some(speed_mps * self.yaw_rate_rps),
+            }),
         };
         push(status.encode_with_report(counter), &mut report);
         self.counters.nonfinite = self
