@@ -17,6 +17,8 @@
 //! - [`geodesy`]: WGS-84 latitude/longitude <-> local east/north metres.
 //! - [`metrics`]: fit % as MATLAB `compare`, mean square error (paper II-E).
 //! - [`math`]: the few transcendental functions the node uses, with measured error bounds.
+//! - [`control`]: the planner's paths, obstacles and origin; path geometry; the reference
+//!   controller (pure pursuit).
 //! - [`can`]: the bus protocol of `catmodel.dbc`: frame codecs, CRC-8/SAE-J1850, rolling
 //!   counters, freshness, candump text.
 //! - [`node`]: `Node::step`, the pure 20 ms tick that the board, QEMU and host replay all run.
@@ -38,6 +40,7 @@
 #[cfg(all(target_os = "none", any(feature = "board", feature = "qemu")))]
 pub mod app;
 pub mod can;
+pub mod control;
 pub mod geodesy;
 pub mod health;
 pub mod math;

@@ -1,5 +1,6 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
 //! Links the same `catmodel` core for everything the node does.
+pub mod closed_loop;
 pub mod csv2can;
 pub mod evaluate;
 pub mod identify;
