@@ -145,19 +145,19 @@ fn circle_curvature_within_the_documented_bound() {
 // Properties
 
 fn arb_path() -> impl Strategy<Value = Vec<Waypoint>> {
-    // A random smooth path: start, heading, then per-point turns within +-0.3 rad and spacing
-    // 0.3..3 m.
+    // A random path a car can drive: start, heading, then per point a spacing of 0.3..3 m and
+    // a curvature within +-0.15 1/m (radius >= 6.7 m; the CAT Vehicle's tightest is 5.6 m).
     (
         -500.0f64..500.0,
         -500.0f64..500.0,
         -PI..PI,
-        prop::collection::vec((-0.3f64..0.3, 0.3f64..3.0), 2..120),
+        prop::collection::vec((-0.15f64..0.15, 0.3f64..3.0), 2..120),
     )
         .prop_map(|(e, n, h0, steps)| {
             let mut pts = vec![wp(e, n)];
             let (mut e, mut n, mut h) = (e, n, h0);
-            for (turn, d) in steps {
-                h += turn;
+            for (curvature, d) in steps {
+                h += curvature * d;
                 e += d * h.sin();
                 n += d * h.cos();
                 pts.push(wp(e, n));
@@ -181,7 +181,8 @@ proptest! {
         prop_assert!(d < 2e-3, "{d}");
     }
 
-    /// Walking along the path, the tracked projection's station never goes back.
+    /// Walking along the path (or beside it, closer than its radius of curvature), the tracked
+    /// projection's station never goes back.
     #[test]
     fn station_is_monotone_along_the_path(pts in arb_path(), offset in -0.5f32..0.5) {
         let p = path_of(&pts);
@@ -634,24 +635,53 @@ fn pure_pursuit_speed_loop_and_stops() {
     );
     let limit = (2.0 * cfg.stop_decel_mps2 * 4.0).sqrt();
     assert!(out.speed_cmd_mps <= limit + cfg.speed_kp * 0.01 + 1e-3);
-    // An obstacle on the path 8 m ahead: the target drops to stop short of it.
+    // An obstacle on the path 10 m ahead of the rear axle: the target drops so that the front
+    // bumper stops a margin short of it: free distance = 20 - 0.5 - margin - front - 10.
     let obstacle = [Some(ObstacleCircle {
         east_m: 0.2,
-        north_m: 18.0,
+        north_m: 20.0,
+        radius_m: 0.5,
+    })];
+    let free = 20.0 - 0.5 - cfg.obstacle_margin_m - cfg.front_m - 10.0;
+    let limit = (2.0 * cfg.stop_decel_mps2 * free).sqrt();
+    assert!(limit < 5.0);
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &obstacle,
+        &car(0.0, 10.0, 0.0, limit),
+    );
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-3,
+        "{} vs {limit}",
+        out.speed_cmd_mps
+    );
+    // Stopped at the margin (and past it): it stays stopped while the obstacle is there.
+    for north in [10.0 + free, 10.0 + free + 1.0] {
+        let out = cfg.process(
+            &mut PurePursuitState::default(),
+            &CAT_VEHICLE,
+            Some(&path),
+            &obstacle,
+            &car(0.0, north, 0.0, 0.0),
+        );
+        assert_eq!(out.speed_cmd_mps, 0.0, "{north}");
+    }
+    // Beside the path (2.7 m off, beyond half the width plus margin and radius): no stop.
+    let beside = [Some(ObstacleCircle {
+        east_m: 2.7,
+        north_m: 20.0,
         radius_m: 0.5,
     })];
     let out = cfg.process(
         &mut PurePursuitState::default(),
         &CAT_VEHICLE,
         Some(&path),
-        &obstacle,
+        &beside,
         &car(0.0, 10.0, 0.0, 5.0),
     );
-    let reach = 0.5 + cfg.half_width_m + cfg.obstacle_margin_m;
-    // The first path point within reach is at north >= 40 - reach, rounded up to a point.
-    let d = (18.0 - reach).ceil() - 10.0 - reach;
-    let limit = (2.0 * cfg.stop_decel_mps2 * d).sqrt();
-    assert!(out.speed_cmd_mps < 5.0 && out.speed_cmd_mps <= limit + 1e-3);
+    assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
 }
 
 #[test]

@@ -116,6 +116,35 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Close the loop: the plant simulator, the node and its controller on one bus, over a
+    /// scenario (dlc, obstacle, loop); writes DIR/session.can.log, session.tx.log,
+    /// metrics.json and plots.
+    ClosedLoop {
+        /// dlc (ISO 3888-2 double lane change), obstacle, loop.
+        #[arg(long)]
+        scenario: String,
+        /// mpc or pure-pursuit.
+        #[arg(long, default_value = "pure-pursuit")]
+        controller: String,
+        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Model file for the node (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
+        #[arg(long, default_value = "rtk")]
+        receiver: String,
+        /// Target speed, m/s (default: the scenario's).
+        #[arg(long)]
+        speed: Option<f64>,
+        /// Sensor noise seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
         /// Model file.
@@ -329,6 +358,35 @@ fn run(cli: Cli) -> Result<()> {
             );
             if let Some(path) = out {
                 replay::write_file(&path, &identify::validate::compare_csv(&e, &sim))?;
+            }
+            Ok(())
+        }
+        Command::ClosedLoop {
+            scenario,
+            controller,
+            vehicle,
+            model,
+            receiver,
+            speed,
+            seed,
+            out,
+        } => {
+            let progress = Progress::spinner(&format!("closed loop: {scenario}"));
+            let (metrics, written) =
+                catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
+                    scenario,
+                    controller,
+                    vehicle,
+                    model,
+                    receiver,
+                    speed_mps: speed,
+                    seed,
+                    out,
+                })?;
+            progress.finish();
+            println!("{}", serde_json::to_string_pretty(&metrics)?);
+            for p in written {
+                eprintln!("wrote {}", p.display());
             }
             Ok(())
         }

@@ -12,9 +12,10 @@
 //!
 //! Speed: the path's target speed a preview time ahead (the car's speed loop lags by its 0.4 s
 //! input delay), limited so that the car can stop at `stop_decel_mps2` before the path's end
-//! and before any obstacle whose circle, grown by half the body width and a margin, reaches
-//! the path ahead (pure pursuit cannot steer around one: it stops); then a PI loop on the
-//! speed error, its integral clamped (anti-windup).
+//! and with its front bumper a margin short of any obstacle whose circle, grown by half the
+//! body width and the margin, reaches the path ahead (pure pursuit cannot steer around one: it
+//! stops, and stays stopped while the obstacle is there); then a PI loop on the speed error,
+//! its integral clamped (anti-windup).
 //!
 //! Never panics, never returns a non-finite command: a non-finite intermediate falls back to
 //! the previous steering and zero speed (status fallback).
@@ -49,6 +50,8 @@ pub struct PurePursuitConfig {
     pub max_speed_mps: f32,
     /// Half the car's body width, m (obstacle check).
     pub half_width_m: f32,
+    /// The body's front ahead of the rear axle, m (obstacle check).
+    pub front_m: f32,
     /// Clearance kept from an obstacle when stopping, m.
     pub obstacle_margin_m: f32,
     /// Control period, s.
@@ -68,6 +71,7 @@ pub const DEFAULT_PURE_PURSUIT: PurePursuitConfig = PurePursuitConfig {
     stop_decel_mps2: 2.5,
     max_speed_mps: 40.0,
     half_width_m: 0.903,
+    front_m: 3.528,
     obstacle_margin_m: 1.0,
     period_s: crate::SAMPLE_PERIOD_S,
 };
@@ -178,7 +182,7 @@ impl PurePursuitConfig {
         let preview = path.sample(station + speed * self.speed_preview_s, segment);
         let mut target = preview.map_or(0.0, |p| p.speed_mps);
         let mut stop_at_m = path.length_m() - station;
-        if let Some(d) = self.obstacle_ahead_m(path, station, segment, obstacles) {
+        if let Some(d) = self.obstacle_ahead_m(path, station, obstacles) {
             stop_at_m = stop_at_m.min(d);
         }
         let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * stop_at_m.max(0.0));
@@ -209,29 +213,30 @@ impl PurePursuitConfig {
         }
     }
 
-    /// Distance along the path from `station` to where the first active obstacle, grown by
-    /// half the body width and the margin, comes within reach of the path (checked at the
-    /// path's points ahead), m; `None` if none does.
+    /// How far the rear axle may still travel along the path before the body's front comes
+    /// within the margin of an active obstacle that reaches the path (its circle, grown by half
+    /// the body width and the margin, overlaps the path), m; 0 when already there. Obstacles
+    /// behind the car's front are ignored once the rear axle has passed them. `None` if no
+    /// obstacle blocks the path.
     fn obstacle_ahead_m(
         &self,
         path: &Path,
         station: f32,
-        segment: usize,
         obstacles: &[Option<ObstacleCircle>],
     ) -> Option<f32> {
         let mut nearest: Option<f32> = None;
         for o in obstacles.iter().flatten() {
+            let Some(p) = path.project(o.east_m, o.north_m, None) else {
+                continue;
+            };
             let reach = o.radius_m + self.half_width_m + self.obstacle_margin_m;
-            for (i, w) in path.points().iter().enumerate().skip(segment + 1) {
-                let (dx, dy) = (w.east_m - o.east_m, w.north_m - o.north_m);
-                if dx * dx + dy * dy <= reach * reach {
-                    if let Some(s) = path.station_of(i) {
-                        let d = s - station - reach;
-                        nearest = Some(nearest.map_or(d, |n: f32| n.min(d)));
-                    }
-                    break;
-                }
+            if p.lateral_m.abs() > reach || p.station_m < station {
+                continue;
             }
+            // The front bumper stops `margin` short of the circle's near side.
+            let free = p.station_m - o.radius_m - self.obstacle_margin_m - self.front_m - station;
+            let d = free.max(0.0);
+            nearest = Some(nearest.map_or(d, |n: f32| n.min(d)));
         }
         nearest
     }

@@ -213,6 +213,11 @@ impl Rig {
         }
     }
 
+    /// Steps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+
     /// Time of the next step's start, s.
     pub fn time_s(&self) -> f64 {
         self.step as f64 * PLANT_STEP_S
