@@ -13,8 +13,10 @@
 //! a heading only in motion) and the controller is tracking: then the drive-by-wire follows
 //! CONTROL_COMMAND, with the usual 100 ms command timeout.
 pub mod driver;
+pub mod limits;
 pub mod metrics;
 pub mod planner;
+pub mod plots;
 pub mod scenario;
 
 use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
@@ -544,7 +546,8 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         max_time_s: 300.0,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
-    let files = write_session(&args.out, &output)?;
+    let mut files = write_session(&args.out, &output)?;
+    files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))
 }
 

@@ -238,28 +238,155 @@ pub fn dlc_lanes(width_m: f64) -> [Lane; 3] {
     ]
 }
 
+/// Clearance the planner keeps between the body and every cone when the car follows its path
+/// exactly, m: room for tracking error.
+pub const DLC_PATH_MARGIN_M: f64 = 0.15;
+
+/// One lateral transition of the planned path: a quintic from `(x0, y0)` to `(x1, y1)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transition {
+    /// Start, course `x`, m.
+    pub x0: f64,
+    /// End, course `x`, m.
+    pub x1: f64,
+    /// `y` before, m.
+    pub y0: f64,
+    /// `y` after, m.
+    pub y1: f64,
+}
+
+impl Transition {
+    fn y(&self, x: f64) -> f64 {
+        self.y0 + (self.y1 - self.y0) * smoothstep((x - self.x0) / (self.x1 - self.x0))
+    }
+
+    /// Largest |curvature| of the transition, 1/m: `|y''| / (1 + y'^2)^1.5`, sampled.
+    fn max_curvature(&self) -> f64 {
+        let a = self.y1 - self.y0;
+        let d = self.x1 - self.x0;
+        (0..=200)
+            .map(|i| {
+                let t = i as f64 / 200.0;
+                let dy = a / d * 30.0 * t * t * (1.0 - t) * (1.0 - t);
+                let ddy = a / (d * d) * 60.0 * t * (1.0 - t) * (1.0 - 2.0 * t);
+                ddy.abs() / (1.0 + dy * dy).powf(1.5)
+            })
+            .fold(0.0, f64::max)
+    }
+}
+
+/// The planner's double-lane-change path (course coordinates): two transitions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LaneChangeDesign {
+    /// From section 1 into section 3.
+    pub first: Transition,
+    /// From section 3 into section 5.
+    pub second: Transition,
+}
+
+impl LaneChangeDesign {
+    /// The path's `y` at course `x`.
+    pub fn y_at(&self, x: f64) -> f64 {
+        if x <= self.second.x0 {
+            self.first.y(x)
+        } else {
+            self.second.y(x)
+        }
+    }
+}
+
+/// The smallest clearance between the body, its rear axle on `y(x)` and heading along it, and
+/// the cones of `lanes`, for rear-axle `x` in `[from, to]` (0.05 m steps), m.
+fn path_clearance(body: &Body, lanes: &[Lane], y: impl Fn(f64) -> f64, from: f64, to: f64) -> f64 {
+    let cones: Vec<(f64, f64)> = lanes
+        .iter()
+        .flat_map(|l| {
+            stations(l.x_start_m, l.x_end_m, CONE_SPACING_M).flat_map(move |x| {
+                [
+                    (x, l.y_left_m + CONE_RADIUS_M),
+                    (x, l.y_right_m - CONE_RADIUS_M),
+                ]
+            })
+        })
+        .collect();
+    let mut worst = f64::INFINITY;
+    let n = ((to - from) / 0.05).ceil() as usize;
+    for i in 0..=n {
+        let x = from + (to - from) * i as f64 / n as f64;
+        let (ya, yb) = (y(x - 0.01), y(x + 0.01));
+        // Course frame as a local frame heading "north" (x -> north, y -> west): the body
+        // test is then the local one with heading = -atan(y').
+        let heading = -((yb - ya) / 0.02).atan();
+        for &(cx, cy) in &cones {
+            if (cx - x).abs() > body.length_m + 1.0 {
+                continue;
+            }
+            let d = super::metrics::distance_to_body(body, -y(x), x, heading, -cy, cx)
+                - CONE_RADIUS_M;
+            worst = worst.min(d);
+        }
+    }
+    worst
+}
+
+/// The least-curvature transitions (by grid search over where each starts and ends, 0.5 m
+/// steps) that keep the body [`DLC_PATH_MARGIN_M`] clear of every cone when followed exactly;
+/// in each lane the path runs on the side nearer the next lane, the margin from its edge.
+/// A planner's choice: the controllers track it and may use the corridor around it.
+pub fn design_lane_change(body: &Body, lanes: &[Lane; 3]) -> LaneChangeDesign {
+    let [s1, s3, s5] = *lanes;
+    let half = 0.5 * body.width_m;
+    let y1 = s1.y_left_m - half - DLC_PATH_MARGIN_M;
+    let y3 = s3.y_right_m + half + DLC_PATH_MARGIN_M;
+    let y5 = s5.y_left_m - half - DLC_PATH_MARGIN_M;
+    let best = |x_lo: f64, x_hi: f64, y0: f64, y1: f64, lanes: &[Lane]| -> Transition {
+        let mut best: Option<(f64, Transition)> = None;
+        let n = ((x_hi - x_lo) / 0.5).round() as usize;
+        for i in 0..=n {
+            for j in i + 4..=n {
+                let t = Transition {
+                    x0: x_lo + 0.5 * i as f64,
+                    x1: x_lo + 0.5 * j as f64,
+                    y0,
+                    y1,
+                };
+                let k = t.max_curvature();
+                if best.as_ref().is_some_and(|(b, _)| *b <= k) {
+                    continue;
+                }
+                let clear = path_clearance(
+                    body,
+                    lanes,
+                    |x| t.y(x),
+                    t.x0 - body.length_m,
+                    t.x1 + body.length_m,
+                );
+                if clear >= DLC_PATH_MARGIN_M - 1e-9 {
+                    best = Some((k, t));
+                }
+            }
+        }
+        // Note: the gap is long enough for the widest cars ISO 3888-2 covers; should no
+        // candidate fit, the gap itself is the fallback.
+        best.map(|(_, t)| t).unwrap_or(Transition {
+            x0: x_lo,
+            x1: x_hi,
+            y0,
+            y1,
+        })
+    };
+    let first = best(s1.x_start_m, s3.x_end_m, y1, y3, &[s1, s3]);
+    let second = best(s3.x_start_m, s5.x_end_m, y3, y5, &[s3, s5]);
+    LaneChangeDesign { first, second }
+}
+
 /// The double lane change at `speed_mps` for a car with `body`, starting at the local origin
 /// heading east.
 pub fn double_lane_change(body: &Body, speed_mps: f64) -> Course {
     let lanes = dlc_lanes(body.width_m);
     let [s1, s3, s5] = lanes;
-    let centre = |l: &Lane| 0.5 * (l.y_left_m + l.y_right_m);
-    let (y1, y3, y5) = (centre(&s1), centre(&s3), centre(&s5));
-    // The rear axle's path: the lane centres, joined by quintic transitions across the gaps,
-    // placed so that the body's middle (ahead of the rear axle by half the length less the rear
-    // overhang) crosses each gap while the rear axle transitions.
-    let ahead = 0.5 * body.length_m - body.rear_overhang_m;
-    let (g1, g2) = (
-        (s1.x_end_m - ahead, s3.x_start_m - ahead),
-        (s3.x_end_m - ahead, s5.x_start_m - ahead),
-    );
-    let y_at = |x: f64| {
-        if x <= g2.0 {
-            y1 + (y3 - y1) * smoothstep((x - g1.0) / (g1.1 - g1.0))
-        } else {
-            y3 + (y5 - y3) * smoothstep((x - g2.0) / (g2.1 - g2.0))
-        }
-    };
+    let design = design_lane_change(body, &lanes);
+    let y_at = |x: f64| design.y_at(x);
     // Corridor: the lane whose cones are beside the point; across a gap, the envelope of the
     // two lanes it joins.
     let edges = |x: f64| {
