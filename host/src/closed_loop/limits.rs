@@ -33,7 +33,9 @@ pub fn clean_at(
             receiver,
             max_time_s: 120.0,
         };
-        run(vehicle, &course, &mut driver, "", &options).metrics.clean
+        run(vehicle, &course, &mut driver, "", &options)
+            .metrics
+            .clean
     })
 }
 

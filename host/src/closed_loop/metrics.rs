@@ -4,10 +4,12 @@
 //!
 //! The body is a rectangle (`Body`: width, length, rear overhang) around the rear axle and
 //! heading; a cone is hit when the rectangle touches its base circle (distance from the circle's
-//! centre to the rectangle <= its radius).
+//! centre to the rectangle <= its radius). Not touching a cone is not enough: the car must go
+//! *through* the track, so every pair of cones is a gate, and the rear axle must cross each gate
+//! between its two lane edges (a missed gate is scored by how far outside it the axle crossed).
 use serde::Serialize;
 
-use super::scenario::{Cone, Course};
+use super::scenario::{self, Cone, Course, CourseFrame};
 use crate::sim::config::Body;
 
 /// Distance from `(east, north)` to the body whose rear axle is at `(x, y)` with `heading`
@@ -41,6 +43,14 @@ pub fn body_corners(body: &Body, x: f64, y: f64, heading: f64) -> [(f64, f64); 4
     ]
 }
 
+/// A gate of the track: course `x` and the lane's edges there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Gate {
+    x_m: f64,
+    y_right_m: f64,
+    y_left_m: f64,
+}
+
 /// Running scores, updated at every plant step.
 #[derive(Debug, Clone)]
 pub struct Scorer {
@@ -49,6 +59,11 @@ pub struct Scorer {
     cone_clearance_m: Vec<f64>,
     obstacles: Vec<(f64, f64, f64)>,
     obstacle_clearance_m: f64,
+    frame: CourseFrame,
+    gates: Vec<Gate>,
+    /// How far outside each gate the rear axle crossed it (0 inside), m; `None` not yet.
+    gate_miss_m: Vec<Option<f64>>,
+    last_x_m: Option<f64>,
 }
 
 impl Scorer {
@@ -64,6 +79,25 @@ impl Scorer {
                 .map(|o| (o.east_m, o.north_m, o.radius_m))
                 .collect(),
             obstacle_clearance_m: f64::INFINITY,
+            frame: course.frame,
+            gates: course
+                .lanes
+                .iter()
+                .flat_map(|l| {
+                    scenario::cone_stations(l).map(move |x_m| Gate {
+                        x_m,
+                        y_right_m: l.y_right_m,
+                        y_left_m: l.y_left_m,
+                    })
+                })
+                .collect(),
+            gate_miss_m: course
+                .lanes
+                .iter()
+                .flat_map(scenario::cone_stations)
+                .map(|_| None)
+                .collect(),
+            last_x_m: None,
         }
     }
 
@@ -83,6 +117,29 @@ impl Scorer {
             let d = distance_to_body(&self.body, x, y, heading, e, n) - r;
             self.obstacle_clearance_m = self.obstacle_clearance_m.min(d);
         }
+        let (cx, cy) = self.frame.to_course(x, y);
+        if let Some(prev) = self.last_x_m {
+            for (gate, miss) in self.gates.iter().zip(&mut self.gate_miss_m) {
+                if miss.is_none() && prev < gate.x_m && cx >= gate.x_m {
+                    *miss = Some((gate.y_right_m - cy).max(cy - gate.y_left_m).max(0.0));
+                }
+            }
+        }
+        self.last_x_m = Some(cx);
+    }
+
+    /// How far outside each gate the rear axle crossed it, m (0: through the gate); a gate not
+    /// reached is `None`.
+    pub fn gate_misses_m(&self) -> &[Option<f64>] {
+        &self.gate_miss_m
+    }
+
+    /// Gates the rear axle crossed outside the lane.
+    pub fn gates_missed(&self) -> usize {
+        self.gate_miss_m
+            .iter()
+            .filter(|m| m.is_some_and(|d| d > 0.0))
+            .count()
     }
 
     /// Cones touched (clearance <= 0), and the smallest clearance to any cone, m.
@@ -95,6 +152,11 @@ impl Scorer {
             .filter(|d| d.is_finite())
             .reduce(f64::min);
         (hits, min)
+    }
+
+    /// The smallest clearance of the body to each cone so far, m (infinite: never near).
+    pub fn cone_clearances_m(&self) -> &[f64] {
+        &self.cone_clearance_m
     }
 
     /// The smallest clearance between body and obstacle, m (negative: a collision).
@@ -120,6 +182,8 @@ pub struct Metrics {
     pub entry_speed_mps: Option<f64>,
     /// Cones the body touched.
     pub cone_hits: usize,
+    /// Gates (pairs of cones) the rear axle crossed outside the lane.
+    pub gates_missed: usize,
     /// Smallest body-cone clearance, m.
     pub min_cone_clearance_m: Option<f64>,
     /// Smallest body-obstacle clearance, m (negative: a collision).
@@ -138,6 +202,6 @@ pub struct Metrics {
     pub total_time_s: f64,
     /// Ticks by CONTROL_COMMAND status while engaged: no path, tracking, avoiding, fallback.
     pub status_ticks: [u64; 4],
-    /// Whether the run is clean: no cone hit, no collision, completed.
+    /// Whether the run is clean: no cone hit, no gate missed, no collision, completed.
     pub clean: bool,
 }

@@ -15,6 +15,7 @@
 pub mod driver;
 pub mod limits;
 pub mod metrics;
+pub mod optimal;
 pub mod planner;
 pub mod plots;
 pub mod scenario;
@@ -440,6 +441,7 @@ pub fn run(
         target_speed_mps: course.speed_mps,
         entry_speed_mps: entry_speed,
         cone_hits,
+        gates_missed: scorer.gates_missed(),
         min_cone_clearance_m: min_cone,
         min_obstacle_clearance_m: min_obstacle,
         completed,
@@ -452,7 +454,10 @@ pub fn run(
         driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
         total_time_s,
         status_ticks: dbw.status_ticks,
-        clean: completed && cone_hits == 0 && min_obstacle.is_none_or(|d| d > 0.0),
+        clean: completed
+            && cone_hits == 0
+            && scorer.gates_missed() == 0
+            && min_obstacle.is_none_or(|d| d > 0.0),
     };
     RunOutput {
         course: course.clone(),

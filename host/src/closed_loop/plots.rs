@@ -67,7 +67,12 @@ pub fn write_plots(dir: &Path, output: &RunOutput, body: &Body) -> Result<Vec<Pa
         .collect();
     let view: Vec<&super::Sample> = samples.iter().filter(|s| in_view(s)).collect();
     let (e0, e1, n0, n1) = view.iter().fold(
-        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
         |(a, b, c, d), s| {
             (
                 a.min(s.truth.x),
@@ -115,7 +120,10 @@ pub fn write_plots(dir: &Path, output: &RunOutput, body: &Body) -> Result<Vec<Pa
             .color((214, 39, 40));
     }
     fig = fig
-        .line("driven path (truth, rear axle)", decimate(&driven, MAX_LINE_POINTS))
+        .line(
+            "driven path (truth, rear axle)",
+            decimate(&driven, MAX_LINE_POINTS),
+        )
         .color((31, 119, 180))
         .equal_aspect();
     // As wide as the course is long: a lane change is 60 m by 5 m.

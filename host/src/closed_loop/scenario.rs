@@ -195,6 +195,11 @@ fn smoothstep(t: f64) -> f64 {
     t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
 }
 
+/// Course `x` of the cones along a lane's edges (both edges have cones at the same `x`).
+pub fn cone_stations(lane: &Lane) -> impl Iterator<Item = f64> {
+    stations(lane.x_start_m, lane.x_end_m, CONE_SPACING_M)
+}
+
 /// Course coordinates `x` from `from` to `to` (inclusive of `to`), at most `spacing` apart.
 fn stations(from: f64, to: f64, spacing: f64) -> impl Iterator<Item = f64> {
     let n = ((to - from) / spacing).ceil().max(1.0) as usize;
@@ -301,7 +306,7 @@ fn path_clearance(body: &Body, lanes: &[Lane], y: impl Fn(f64) -> f64, from: f64
     let cones: Vec<(f64, f64)> = lanes
         .iter()
         .flat_map(|l| {
-            stations(l.x_start_m, l.x_end_m, CONE_SPACING_M).flat_map(move |x| {
+            cone_stations(l).flat_map(move |x| {
                 [
                     (x, l.y_left_m + CONE_RADIUS_M),
                     (x, l.y_right_m - CONE_RADIUS_M),
@@ -321,8 +326,8 @@ fn path_clearance(body: &Body, lanes: &[Lane], y: impl Fn(f64) -> f64, from: f64
             if (cx - x).abs() > body.length_m + 1.0 {
                 continue;
             }
-            let d = super::metrics::distance_to_body(body, -y(x), x, heading, -cy, cx)
-                - CONE_RADIUS_M;
+            let d =
+                super::metrics::distance_to_body(body, -y(x), x, heading, -cy, cx) - CONE_RADIUS_M;
             worst = worst.min(d);
         }
     }
@@ -431,7 +436,7 @@ pub fn double_lane_change(body: &Body, speed_mps: f64) -> Course {
     };
     let mut cones = Vec::new();
     for lane in &lanes {
-        for x in stations(lane.x_start_m, lane.x_end_m, CONE_SPACING_M) {
+        for x in cone_stations(lane) {
             for y in [
                 lane.y_left_m + CONE_RADIUS_M,
                 lane.y_right_m - CONE_RADIUS_M,

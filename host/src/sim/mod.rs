@@ -150,12 +150,14 @@ fn round_to(x: f64, inv_resolution: f64) -> f64 {
 /// and the sensors on their own clocks, stepped [`PLANT_STEP_S`] at a time with the commands
 /// the car holds. [`simulate`] drives it from a scenario's command list; the closed loop
 /// (`crate::closed_loop`) from the controller's CONTROL_COMMAND frames.
+#[derive(Debug, Clone)]
 pub struct Rig {
     plant: Plant,
     state: PlantState,
     steering: SteeringActuator,
     speed_ctl: SpeedController,
-    sensors: SensorSuite,
+    /// `None`: a rig without sensors (the offline optimiser knows the state exactly).
+    sensors: Option<SensorSuite>,
     cg_to_rear_m: f64,
     antenna_ahead_m: f64,
     max_steer_rad: f64,
@@ -182,13 +184,13 @@ impl Rig {
             state: initial,
             steering: SteeringActuator::new(&cfg.steering, dt, steer_pct),
             speed_ctl: SpeedController::new(&cfg.speed_controller, cfg.chassis.mass_kg, dt),
-            sensors: SensorSuite::new(
+            sensors: Some(SensorSuite::new(
                 &cfg.sensors.bus,
                 &cfg.sensors.gnss,
                 options.faults.then_some(&cfg.faults),
                 options.seed,
                 options.origin_deg,
-            ),
+            )),
             cg_to_rear_m,
             antenna_ahead_m: cfg.sensors.gnss.antenna_ahead_of_rear_axle_m,
             max_steer_rad: cfg.chassis.max_steer_deg.to_radians(),
@@ -276,8 +278,9 @@ impl Rig {
             accel_pct: drive.accel_pct,
             brake_pct: drive.brake_pct,
         };
-        self.sensors
-            .observe(t0, t0 + dt, &self.snapshot, &s1, &held);
+        if let Some(sensors) = self.sensors.as_mut() {
+            sensors.observe(t0, t0 + dt, &self.snapshot, &s1, &held);
+        }
         self.snapshot = s1;
         self.step += 1;
     }
@@ -285,7 +288,16 @@ impl Rig {
     /// Takes the sensor reports produced so far, in production order (each stream in time
     /// order), with their log times in microseconds.
     pub fn take_reports(&mut self) -> Vec<(i64, LogRow)> {
-        std::mem::take(&mut self.sensors.rows)
+        self.sensors
+            .as_mut()
+            .map(|s| std::mem::take(&mut s.rows))
+            .unwrap_or_default()
+    }
+
+    /// The same rig without its sensors: nothing is measured, the state is known exactly.
+    pub fn without_sensors(mut self) -> Self {
+        self.sensors = None;
+        self
     }
 }
 
