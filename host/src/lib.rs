@@ -9,6 +9,7 @@ pub mod model_file;
 pub mod plot;
 pub mod progress;
 pub mod replay;
+pub mod sil;
 pub mod sim;
 
 use std::path::{Path, PathBuf};

@@ -145,6 +145,20 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
+    /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
+    /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
+    Sil {
+        /// Talk over stdin/stdout (the only transport).
+        #[arg(long, required = true)]
+        stdio: bool,
+        /// Model file (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+        #[arg(long, value_parser = parse_origin)]
+        origin: Option<(f64, f64)>,
+    },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
         /// Model file.
@@ -388,6 +402,23 @@ fn run(cli: Cli) -> Result<()> {
             for p in written {
                 eprintln!("wrote {}", p.display());
             }
+            Ok(())
+        }
+        Command::Sil {
+            stdio: _,
+            model,
+            origin,
+        } => {
+            let mut config = catmodel_host::node_config(model.as_deref())?;
+            config.origin_e7 = origin.map(to_e7);
+            let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
+            let controller =
+                catmodel_host::closed_loop::controller_named("pure-pursuit", &vehicle.body)?;
+            let mut driver =
+                catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
+            let stdin = std::io::stdin().lock();
+            let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+            catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             Ok(())
         }
         Command::Discretize { model, ts } => {

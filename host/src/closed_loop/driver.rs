@@ -7,11 +7,18 @@
 //! same frames, and its CONTROL_COMMAND goes out after the node's frames with the tick's
 //! counter. Once `Node` sends CONTROL_COMMAND, [`NodeDriver`] drops its own controller: the
 //! switch is the one `match` in [`NodeDriver::tick`].
+//!
+//! Frames: until the node adopts LOCAL_ORIGIN itself, it keeps its own local frame (the first
+//! fix, as in the firmware, so that a recorded session replays identically in QEMU), and the
+//! controller beside it moves the node's pose into the planner's frame by the offset between
+//! the two origins (the tangent planes' rotation is below 1e-5 rad within 60 km: ignored).
 use catmodel::can::codec::{decode_planner, ControlCommand, ControlStatus};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::path::Tracking;
+use catmodel::control::planner::PlannerEvent;
 use catmodel::control::planner::PlannerInputs;
 use catmodel::control::pure_pursuit::{CarState, PurePursuitConfig, PurePursuitState};
+use catmodel::geodesy::LocalFrame;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::{Node, NodeConfig, PlatformStats, Tick, TxFrames};
 
@@ -25,7 +32,7 @@ pub trait Driver {
 /// What a tick did, for the closed loop's records (never on the bus).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TickReport {
-    /// The node's estimate of the rear axle, local frame.
+    /// The node's estimate of the rear axle, in the planner's frame.
     pub pose: Option<Pose>,
     /// The node's speed, m/s.
     pub speed_mps: f32,
@@ -48,6 +55,8 @@ pub struct NodeDriver {
     planner: PlannerInputs,
     controller: Controller,
     pursuit: PurePursuitState,
+    /// The planner's map origin (1e-7 deg), once LOCAL_ORIGIN arrived.
+    planner_origin_e7: Option<(i32, i32)>,
 }
 
 impl NodeDriver {
@@ -58,7 +67,22 @@ impl NodeDriver {
             planner: PlannerInputs::new(),
             controller,
             pursuit: PurePursuitState::default(),
+            planner_origin_e7: None,
         }
+    }
+
+    /// The node's local frame origin in the planner's frame (east, north), m: zero while the
+    /// planner sent no origin (its frame is the node's).
+    fn frame_offset(&self) -> Option<(f32, f32)> {
+        let Some((lat, lon)) = self.planner_origin_e7 else {
+            return Some((0.0, 0.0));
+        };
+        let node = self.node.origin_e7()?;
+        let enu = LocalFrame::new(lat, lon)
+            .ok()?
+            .to_local(node.0, node.1)
+            .ok()?;
+        Some((enu.east_m, enu.north_m))
     }
 
     /// The node.
@@ -84,14 +108,21 @@ impl Driver for NodeDriver {
         let estimate = self.node.step(&tick, rx, &mut node_tx);
         for f in rx.iter().filter(|f| f.t_us <= now_us) {
             if let Ok(m) = decode_planner(&f.frame) {
-                self.planner.receive(&m);
+                if let PlannerEvent::Origin { lat_e7, lon_e7 } = self.planner.receive(&m) {
+                    self.planner_origin_e7 = Some((lat_e7, lon_e7));
+                }
             }
         }
         tx.extend_from_slice(&node_tx);
         let counter = (self.node.tick_count().wrapping_sub(1) & 0x0F) as u8;
         let vehicle = self.node.config().vehicle;
+        let offset = self.frame_offset();
+        let pose = estimate
+            .pose
+            .zip(offset)
+            .map(|(p, (e, n))| Pose::new(p.x_m + e, p.y_m + n, p.heading_rad));
         let car = CarState {
-            pose: estimate.pose,
+            pose,
             speed_mps: estimate.speed_mps,
         };
         let (command, tracking) = match self.controller {
@@ -113,7 +144,7 @@ impl Driver for NodeDriver {
         };
         tx.push(command.encode(counter));
         TickReport {
-            pose: estimate.pose,
+            pose,
             speed_mps: estimate.speed_mps,
             command,
             tracking,

@@ -517,9 +517,8 @@ pub fn load_setup(
         None => VehicleConfig::default(),
     };
     let base = crate::node_config(model)?;
-    let mut node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
-    let (lat, lon) = crate::SIM_ORIGIN_DEG;
-    node.origin_e7 = Some(((lat * 1e7).round() as i32, (lon * 1e7).round() as i32));
+    // The node takes its first fix as its origin, as the firmware does (see `driver`).
+    let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
     Ok((cfg, node))
 }
 
