@@ -168,7 +168,7 @@ impl TickOut {
             let ok = match id {
                 0x300 => StatePosition::decode(f).is_ok(),
                 0x301 => catmodel::can::codec::StateMotion::decode(f).is_ok(),
-                0x302 => catmodel::can::codec::StateModel::decode(f).is_ok(),
+                0x320 => catmodel::can::codec::ControlCommand::decode(f).is_ok(),
                 0x310..=0x319 => Prediction::decode(f).is_ok(),
                 0x3F0 => NodeStatus::decode(f).is_ok(),
                 _ => false,

@@ -45,7 +45,7 @@ fn the_same_messages_in_both() {
         "duplicate ids in the table"
     );
     assert_eq!(dbc_ids, rust_ids);
-    assert_eq!(dbc.messages.len(), 19);
+    assert_eq!(dbc.messages.len(), 24);
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
 //! Links the same `catmodel` core for everything the node does.
+pub mod closed_loop;
 pub mod csv2can;
 pub mod dbc;
 pub mod decode;
@@ -9,6 +10,7 @@ pub mod logcsv;
 pub mod plot;
 pub mod progress;
 pub mod replay;
+pub mod sil;
 pub mod sim;
 
 /// The model file reader (crate `catmodel-model-file`): the same one the firmware build uses.

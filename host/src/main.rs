@@ -131,6 +131,49 @@ enum Command {
         #[arg(long)]
         csv: bool,
     },
+    /// Close the loop: the plant simulator, the node and its controller on one bus, over a
+    /// scenario (dlc, obstacle, loop); writes DIR/session.can.log, session.tx.log,
+    /// metrics.json and plots.
+    ClosedLoop {
+        /// dlc (ISO 3888-2 double lane change), obstacle, loop.
+        #[arg(long)]
+        scenario: String,
+        /// mpc or pure-pursuit.
+        #[arg(long, default_value = "pure-pursuit")]
+        controller: String,
+        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Model file for the node (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
+        #[arg(long, default_value = "rtk")]
+        receiver: String,
+        /// Target speed, m/s (default: the scenario's).
+        #[arg(long)]
+        speed: Option<f64>,
+        /// Sensor noise seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
+    /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
+    /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
+    Sil {
+        /// Talk over stdin/stdout (the only transport).
+        #[arg(long, required = true)]
+        stdio: bool,
+        /// Model file (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+        #[arg(long, value_parser = parse_origin)]
+        origin: Option<(f64, f64)>,
+    },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
         /// Model file.
@@ -358,6 +401,52 @@ fn run(cli: Cli) -> Result<()> {
                 decode::Format::Table
             };
             decode::run(&log, &messages, format)
+        }
+        Command::ClosedLoop {
+            scenario,
+            controller,
+            vehicle,
+            model,
+            receiver,
+            speed,
+            seed,
+            out,
+        } => {
+            let progress = Progress::spinner(&format!("closed loop: {scenario}"));
+            let (metrics, written) =
+                catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
+                    scenario,
+                    controller,
+                    vehicle,
+                    model,
+                    receiver,
+                    speed_mps: speed,
+                    seed,
+                    out,
+                })?;
+            progress.finish();
+            println!("{}", serde_json::to_string_pretty(&metrics)?);
+            for p in written {
+                eprintln!("wrote {}", p.display());
+            }
+            Ok(())
+        }
+        Command::Sil {
+            stdio: _,
+            model,
+            origin,
+        } => {
+            let mut config = catmodel_host::node_config(model.as_deref())?;
+            config.origin_e7 = origin.map(to_e7);
+            let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
+            let controller =
+                catmodel_host::closed_loop::controller_named("pure-pursuit", &vehicle.body)?;
+            let mut driver =
+                catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
+            let stdin = std::io::stdin().lock();
+            let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+            catmodel_host::sil::run(&mut driver, stdin, stdout)?;
+            Ok(())
         }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;

@@ -42,7 +42,8 @@ use gnss::Gnss;
 use inputs::{Inputs, Snapshot};
 use publish::Health;
 
-/// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.
+/// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
+/// controller's command are 14; 16 leaves room.
 pub const MAX_TX_FRAMES: usize = 16;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;

@@ -1,10 +1,10 @@
 //! Stage 5, publish: the tick's frames in transmit order: STATE_POSITION, STATE_MOTION,
-//! STATE_MODEL, PREDICTION_1..10 (relative to the current pose) and one NODE_STATUS page (the
-//! five pages cycle). All share the tick's rolling counter. Every value is checked finite and
+//! PREDICTION_1..10 (relative to the current pose) and one NODE_STATUS page (the pages cycle;
+//! page 5 carries the models' outputs). All share the tick's rolling counter. Every value is checked finite and
 //! saturated to its field by the codec; what was substituted is counted and flagged in the next
 //! health page.
 use crate::can::codec::{
-    EncodeReport, HealthFlags, ModelMode, NodeStatus, Prediction, PredictionPoint, StateModel,
+    EncodeReport, HealthFlags, ModelMode, ModelOutputs, NodeStatus, Prediction, PredictionPoint,
     StateMotion, StatePosition,
 };
 use crate::can::CanFrame;
@@ -17,7 +17,7 @@ use super::inputs::Snapshot;
 use super::{Counters, Tick, TxFrames};
 
 /// Status pages, one per tick, cycling.
-const STATUS_PAGES: u32 = 5;
+const STATUS_PAGES: u32 = crate::can::spec::STATUS_PAGES as u32;
 /// "Recently" in the health bits: within the last second, us.
 const RECENT_US: u64 = 1_000_000;
 
@@ -87,7 +87,7 @@ impl Health {
         self.range_errors_seen = counters.range_errors;
         let mut push = |(frame, r): (CanFrame, EncodeReport)| {
             report.merge(&r);
-            // Note: capacity 16 >= 3 + 10 + 1 frames, so the push cannot fail.
+            // Note: capacity 16 >= 2 + 10 + 1 frames, so the push cannot fail.
             let _ = tx.push(frame);
         };
         let gnss_rejected = recent(now, out.gnss_rejected_us);
@@ -167,10 +167,15 @@ impl Health {
                 tick_count: self.tick_count,
                 rx_queue_drops: tick.platform.rx_queue_drops,
             },
-            _ => NodeStatus::Ages {
+            4 => NodeStatus::Ages {
                 ages_10ms: inputs.ages_10ms,
                 stack_high_water_bytes: tick.platform.stack_high_water_bytes,
             },
+            _ => NodeStatus::Model(ModelOutputs {
+                speed_model_mps: out.speed_model_mps,
+                dxdt_model_mps: out.dxdt_mps,
+                lat_accel_mps2: Some(out.speed_mps * out.yaw_rate_rps),
+            }),
         }
     }
 }
@@ -182,12 +187,12 @@ fn model_mode(mode: Mode) -> ModelMode {
     }
 }
 
-/// STATE_POSITION, STATE_MOTION, STATE_MODEL.
+/// STATE_POSITION, STATE_MOTION.
 fn state_frames(
     out: &Outputs<'_>,
     gnss_rejected: bool,
     counter: u8,
-) -> [(CanFrame, EncodeReport); 3] {
+) -> [(CanFrame, EncodeReport); 2] {
     [
         StatePosition {
             position_valid: out.pose.is_some(),
@@ -202,12 +207,6 @@ fn state_frames(
             heading_rad: out.pose.map(|p| p.heading_rad),
             speed_mps: Some(out.speed_mps),
             yaw_rate_radps: Some(out.yaw_rate_rps),
-        }
-        .encode_with_report(counter),
-        StateModel {
-            speed_model_mps: out.speed_model_mps,
-            dxdt_model_mps: out.dxdt_mps,
-            lat_accel_mps2: Some(out.speed_mps * out.yaw_rate_rps),
         }
         .encode_with_report(counter),
     ]

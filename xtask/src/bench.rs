@@ -32,7 +32,6 @@ const BUDGETS: &[(&str, u32)] = &[
     ("decode_gnss_cog_sog", 270),
     ("encode_state_position", 510),
     ("encode_state_motion", 680),
-    ("encode_state_model", 680),
     ("encode_prediction", 830),
     ("encode_node_status", 1_050),
     ("encode_tick_set", 11_700),

@@ -23,8 +23,8 @@
 use core::hint::black_box;
 
 use catmodel::can::codec::{
-    decode_input, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction, StateModel,
-    StateMotion, StatePosition,
+    decode_input, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction, StateMotion,
+    StatePosition,
 };
 use catmodel::can::{candump, CanFrame, TimedFrame};
 use catmodel::geodesy::LocalFrame;
@@ -550,7 +550,6 @@ fn bench_decode() {
 enum Output {
     Position(StatePosition),
     Motion(StateMotion),
-    Model(StateModel),
     Prediction(Prediction),
     Status(NodeStatus),
 }
@@ -562,9 +561,6 @@ impl Output {
         }
         if let Ok((m, c)) = StateMotion::decode(frame) {
             return Some((Self::Motion(m), c));
-        }
-        if let Ok((m, c)) = StateModel::decode(frame) {
-            return Some((Self::Model(m), c));
         }
         if let Ok((m, c)) = Prediction::decode(frame) {
             return Some((Self::Prediction(m), c));
@@ -579,7 +575,6 @@ impl Output {
         match self {
             Self::Position(m) => m.encode_with_report(counter),
             Self::Motion(m) => m.encode_with_report(counter),
-            Self::Model(m) => m.encode_with_report(counter),
             Self::Prediction(m) => m.encode_with_report(counter),
             Self::Status(m) => m.encode_with_report(counter),
         }
@@ -589,7 +584,7 @@ impl Output {
 /// Frame encode of every output kind (`encode_with_report`, as the node calls it), on the
 /// messages the node sent, and the whole set of one tick.
 fn bench_encode() {
-    let kinds = samples!([Calls; 4]);
+    let kinds = samples!([Calls; 3]);
     // Ten a tick.
     let predictions = samples!(Samples<{ 10 * CAP / 2 }>);
     let set = samples!(Calls);
@@ -604,7 +599,7 @@ fn bench_encode() {
                 let _ = outputs.push(out);
             }
         }
-        let [position, motion, model, status] = &mut *kinds;
+        let [position, motion, status] = &mut *kinds;
         for (out, counter) in &outputs {
             // Each kind's own encoder, called directly.
             let c = *counter;
@@ -614,9 +609,6 @@ fn bench_encode() {
                 }
                 Output::Motion(m) => {
                     motion.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
-                }
-                Output::Model(m) => {
-                    model.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
                 }
                 Output::Prediction(m) => {
                     predictions.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
@@ -643,14 +635,13 @@ fn bench_encode() {
         }
     });
     const WHAT: &str = "encode_with_report on a running tick's message: finite check, scale, round and saturate each signal, pack bits, counter, CRC-8";
-    let [position, motion, model, status] = &mut *kinds;
+    let [position, motion, status] = &mut *kinds;
     position.report(
         "encode_state_position",
         "encode STATE_POSITION (0x300)",
         WHAT,
     );
     motion.report("encode_state_motion", "encode STATE_MOTION (0x301)", WHAT);
-    model.report("encode_state_model", "encode STATE_MODEL (0x302)", WHAT);
     predictions.report(
         "encode_prediction",
         "encode PREDICTION_k (0x310..0x319)",
@@ -658,7 +649,7 @@ fn bench_encode() {
     );
     status.report(
         "encode_node_status",
-        "encode NODE_STATUS (0x3F0, 5 pages)",
+        "encode NODE_STATUS (0x3F0, 6 pages)",
         WHAT,
     );
     set.report(

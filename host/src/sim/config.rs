@@ -11,6 +11,8 @@ use std::path::Path;
 pub struct VehicleConfig {
     /// Rigid body and geometry.
     pub chassis: Chassis,
+    /// The body's outline, for clearance to cones and obstacles.
+    pub body: Body,
     /// Front axle tyres (both tyres lumped: single-track model).
     pub tyre_front: Tyre,
     /// Rear axle tyres.
@@ -49,6 +51,19 @@ pub struct Chassis {
     pub max_steer_deg: f64,
     /// Share of the brake force on the front axle, 0..1.
     pub brake_front_share: f64,
+}
+
+/// The body seen from above: a rectangle around the centreline, placed by its rear overhang
+/// behind the rear axle (mirrors not included, as in the published width).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Body {
+    /// Overall width, m (ISO 3888-2's `b`).
+    pub width_m: f64,
+    /// Overall length, m.
+    pub length_m: f64,
+    /// Rear bumper behind the rear axle, m.
+    pub rear_overhang_m: f64,
 }
 
 /// Simplified Pacejka magic formula for one axle (both tyres):
@@ -205,6 +220,11 @@ impl Default for VehicleConfig {
                 max_steer_deg: 35.5,
                 brake_front_share: 0.6,
             },
+            body: Body {
+                width_m: 1.806,
+                length_m: 4.437,
+                rear_overhang_m: 0.909,
+            },
             tyre_front: Tyre {
                 cornering_stiffness_n_per_rad: 80_000.0,
                 shape_c: 1.9,
@@ -335,6 +355,8 @@ impl VehicleConfig {
             ("chassis.cg_to_rear_m", c.cg_to_rear_m),
             ("chassis.yaw_inertia_kg_m2", c.yaw_inertia_kg_m2),
             ("chassis.max_steer_deg", c.max_steer_deg),
+            ("body.width_m", self.body.width_m),
+            ("body.length_m", self.body.length_m),
             (
                 "tyre_front.cornering_stiffness_n_per_rad",
                 self.tyre_front.cornering_stiffness_n_per_rad,
@@ -386,6 +408,7 @@ impl VehicleConfig {
         }
         let non_negative = [
             ("chassis.cg_height_m", c.cg_height_m),
+            ("body.rear_overhang_m", self.body.rear_overhang_m),
             ("steering.lag_s", self.steering.lag_s),
             (
                 "speed_controller.command_delay_s",
@@ -476,6 +499,11 @@ impl VehicleConfig {
                 c.cg_to_front_m + c.cg_to_rear_m,
                 c.wheelbase_m
             )));
+        }
+        if self.body.rear_overhang_m + c.wheelbase_m >= self.body.length_m {
+            return Err(ConfigError::Invalid(
+                "body.length_m must exceed body.rear_overhang_m + chassis.wheelbase_m".into(),
+            ));
         }
         if !(0.0..=1.0).contains(&c.brake_front_share) {
             return Err(ConfigError::Invalid(
