@@ -46,6 +46,9 @@ use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
 
 use catmodel::can::TimedFrame;
+use core::borrow::BorrowMut;
+
+use catmodel::node::drive::Drive;
 use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
@@ -281,8 +284,8 @@ fn drain_due(
 /// it returns to the transmit queue, then reports the tick to the platform. Overruns follow
 /// [`schedule`]: a late tick is counted, a stale slot is skipped (no catch-up burst), and tick
 /// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached.
-pub async fn tick_loop<P: TickPlatform>(
-    node: &mut Node,
+pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
+    node: &mut Node<D>,
     rx: &RxQueue,
     tx: &TxQueue,
     counters: &LinkCounters,

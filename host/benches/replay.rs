@@ -76,7 +76,7 @@ fn bench_replay(c: &mut Criterion) {
     assert_eq!(schedule.len() as u64, ticks);
     group.bench_function("validation_5min_node_only", |b| {
         b.iter(|| {
-            let mut node = Node::new(config.clone());
+            let mut node = catmodel_host::new_node(config.clone());
             let mut tx = TxFrames::new();
             for (now, range) in &schedule {
                 tx.clear();

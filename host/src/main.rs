@@ -139,7 +139,7 @@ enum Command {
         #[arg(long)]
         scenario: String,
         /// mpc or pure-pursuit.
-        #[arg(long, default_value = "pure-pursuit")]
+        #[arg(long, default_value = "mpc")]
         controller: String,
         /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
         #[arg(long)]
@@ -438,11 +438,11 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
-            let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
-            let controller =
-                catmodel_host::closed_loop::controller_named("pure-pursuit", &vehicle.body)?;
-            let mut driver =
-                catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
+            // The node exactly as the model file configures it, controller included.
+            let mut driver = catmodel_host::closed_loop::driver::NodeDriver::new(
+                config,
+                catmodel_host::closed_loop::driver::Controller::FromModel,
+            );
             let stdin = std::io::stdin().lock();
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             catmodel_host::sil::run(&mut driver, stdin, stdout)?;

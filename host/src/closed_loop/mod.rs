@@ -496,10 +496,7 @@ pub fn controller_named(name: &str, body: &Body) -> anyhow::Result<driver::Contr
                 ..catmodel::control::pure_pursuit::DEFAULT_PURE_PURSUIT
             },
         )),
-        "mpc" => anyhow::bail!(
-            "controller `mpc`: the model-predictive controller is not in this build yet; use \
-             --controller pure-pursuit"
-        ),
+        "mpc" => Ok(driver::Controller::Mpc),
         other => anyhow::bail!("unknown controller `{other}`; known: mpc, pure-pursuit"),
     }
 }
