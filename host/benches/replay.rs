@@ -28,6 +28,8 @@ fn validation_frames() -> Vec<TimedFrame> {
     let out =
         sim::run_named("validation", None, &sim::SimOptions::default()).expect("built-in scenario");
     csv2can::encode_log(&out.log)
+        .expect("simulated times are >= 0")
+        .frames
 }
 
 fn config() -> NodeConfig {

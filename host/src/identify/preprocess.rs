@@ -81,6 +81,8 @@ pub struct Experiment {
     pub yaw_rate: Vec<f64>,
     /// Origin of `x`, `y`: the first GNSS fix (lat, lon), degrees.
     pub origin_deg: (f64, f64),
+    /// What reading the log noticed without refusing it ([`logcsv::LogNotes::messages`]).
+    pub log_notes: Vec<String>,
 }
 
 impl Experiment {
@@ -157,13 +159,16 @@ pub fn load_experiment(
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
-    let rows = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
+    let log = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
     let name = path
         .file_name()
         .and_then(|n| n.to_str())
         .map(|n| n.trim_end_matches(".csv").to_string())
         .unwrap_or_else(|| "log".into());
-    preprocess_rows(&name, &rows, vehicle, opts).with_context(|| format!("{}", path.display()))
+    let mut e = preprocess_rows(&name, &log.rows, vehicle, opts)
+        .with_context(|| format!("{}", path.display()))?;
+    e.log_notes = log.notes.messages();
+    Ok(e)
 }
 
 /// Preprocesses log rows (see the module doc).
@@ -304,6 +309,7 @@ pub fn preprocess_rows(
         heading,
         yaw_rate,
         origin_deg: origin,
+        log_notes: Vec::new(),
     })
 }
 
