@@ -187,9 +187,10 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::OutOfRange { value, range } => write!(
                 f,
                 "{value} {unit} is outside {min}..{max} {unit} ({why})",
+                value = Readable(*value),
                 unit = range.unit,
-                min = range.min,
-                max = range.max,
+                min = Readable(range.min),
+                max = Readable(range.max),
                 why = range.why
             ),
             LogErrorKind::NullIsland => write!(
@@ -205,6 +206,21 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::HalfFix => {
                 write!(f, "`lat` and `lon` must be both present or both empty")
             }
+        }
+    }
+}
+
+/// A number as a person reads it: plain (`101`, `-0.5`), or in exponent form when plain
+/// would be a long run of digits (`1e30`, `1.5e-9`).
+struct Readable(f64);
+
+impl fmt::Display for Readable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = self.0.abs();
+        if a != 0.0 && !(1e-4..1e9).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
         }
     }
 }
@@ -338,6 +354,8 @@ const LON: usize = 7;
 pub struct Log {
     /// One row per instant.
     pub rows: Vec<LogRow>,
+    /// The file line each row starts on (the first of its instant's lines).
+    pub lines: Vec<usize>,
     /// Accepted, but worth telling the user.
     pub notes: LogNotes,
 }
@@ -413,6 +431,8 @@ pub fn read_log(path: &Path) -> Result<Log, LogError> {
 /// The instant being assembled from lines that share one `t`.
 struct PendingRow {
     row: LogRow,
+    /// The instant's first line.
+    line: usize,
     /// For each column: (line, character column) of the cell that set it.
     source: [(usize, usize); 8],
 }
@@ -451,6 +471,7 @@ pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
         ..LogNotes::default()
     };
     let mut rows = Vec::new();
+    let mut lines = Vec::new();
     let mut pending: Option<PendingRow> = None;
     for line in table.lines() {
         let line = line?;
@@ -471,14 +492,17 @@ pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
                 p
             }
             Some(p) => {
+                lines.push(p.line);
                 rows.push(p.finish(path)?);
                 PendingRow {
                     row: LogRow::empty(t),
+                    line: line.number,
                     source: [(0, 0); 8],
                 }
             }
             None => PendingRow {
                 row: LogRow::empty(t),
+                line: line.number,
                 source: [(0, 0); 8],
             },
         };
@@ -514,9 +538,10 @@ pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
         pending = Some(instant);
     }
     if let Some(p) = pending {
+        lines.push(p.line);
         rows.push(p.finish(path)?);
     }
-    Ok(Log { rows, notes })
+    Ok(Log { rows, lines, notes })
 }
 
 /// Reads a truth CSV (every cell required).

@@ -324,6 +324,14 @@ fn run(cli: Cli) -> Result<()> {
             let violations = identify::floor::check(&id);
             for v in &violations {
                 eprintln!("catmodel: warning: {v}");
+                if let Some((path, line, value)) =
+                    v.suspect.as_ref().and_then(|s| locate_suspect(s, &logs))
+                {
+                    eprintln!(
+                        "catmodel: warning: {}:{line}: this line's value {value} stands out",
+                        path.display()
+                    );
+                }
             }
             if !violations.is_empty() && !force {
                 bail!(
@@ -366,6 +374,21 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// The training log and line behind a suspect sample of the fit floor, with its value.
+fn locate_suspect(
+    suspect: &identify::floor::Suspect,
+    logs: &[PathBuf],
+) -> Option<(PathBuf, usize, f64)> {
+    let path = logs.iter().find(|p| {
+        p.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.trim_end_matches(".csv") == suspect.log)
+    })?;
+    let log = logcsv::read_log(path).ok()?;
+    let (line, value) = identify::floor::locate(suspect, &log)?;
+    Some((path.clone(), line, value))
 }
 
 /// What reading a file noticed without refusing it, on stderr: `catmodel: note: FILE[:LINE]: ...`.

@@ -10,16 +10,13 @@
 //! turns, or a validation drive outside what training covered. Writing such a model silently
 //! would bake it into a firmware.
 use super::preprocess::Experiment;
-use super::validate::{Score, Simulated};
+use super::validate::Score;
 use super::Identification;
 use crate::model_file::{Fit, ModelFile};
 
 /// Lowest accepted fit %, training and validation, of every model `identify` writes (speed,
 /// dx/dt when re-identified, lateral when identified).
 pub const FIT_FLOOR_PERCENT: f64 = 50.0;
-
-/// A residual this many times the RMS of the others is "a sample far outside the rest".
-const OUTLIER_RATIO: f64 = 8.0;
 
 /// A validation drive whose range exceeds training's by more than this share "leaves the
 /// training range".
@@ -57,6 +54,8 @@ pub struct FloorViolation {
     pub fit_percent: Option<f64>,
     /// The likely cause, in words.
     pub cause: String,
+    /// The sample that looks corrupt, when that is the likely cause.
+    pub suspect: Option<Suspect>,
 }
 
 impl std::fmt::Display for FloorViolation {
@@ -80,21 +79,6 @@ impl std::fmt::Display for FloorViolation {
     }
 }
 
-/// A series of every experiment: measured output, simulated output.
-type Pick = fn(&Experiment, &Simulated) -> (Vec<f64>, Vec<f64>);
-
-fn pick_speed(e: &Experiment, s: &Simulated) -> (Vec<f64>, Vec<f64>) {
-    (e.vel.clone(), s.vel_model.clone())
-}
-
-fn pick_dx(e: &Experiment, s: &Simulated) -> (Vec<f64>, Vec<f64>) {
-    (e.dx.clone(), s.dx_model.clone())
-}
-
-fn pick_yaw(e: &Experiment, s: &Simulated) -> (Vec<f64>, Vec<f64>) {
-    (e.yaw_rate.clone(), s.yaw_model.clone().unwrap_or_default())
-}
-
 /// Largest `|f|` over a set of experiments.
 fn max_abs(set: &[Experiment], f: fn(&Experiment) -> &[f64]) -> f64 {
     set.iter()
@@ -113,36 +97,81 @@ fn span(set: &[Experiment], f: fn(&Experiment) -> &[f64]) -> f64 {
     (hi - lo).max(0.0)
 }
 
-/// The sample with the largest residual, if it stands far out of the rest: (experiment, t,
-/// measured, simulated).
-fn outlier(set: &[Experiment], sims: &[Simulated], pick: Pick) -> Option<(String, f64, f64, f64)> {
-    let mut worst: Option<(String, f64, f64, f64, f64)> = None;
-    let (mut sum_sq, mut n) = (0.0, 0usize);
-    for (e, s) in set.iter().zip(sims) {
-        let (y, yh) = pick(e, s);
-        for ((t, a), b) in e.t.iter().zip(&y).zip(&yh) {
-            let r = (a - b).abs();
-            sum_sq += r * r;
-            n += 1;
-            if worst.as_ref().is_none_or(|w| r > w.4) {
-                worst = Some((e.name.clone(), *t, *a, *b, r));
+/// A measured sample that stands far outside the rest of its signal: where a corrupt value
+/// that passed the range checks sits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Suspect {
+    /// The experiment (the log's file stem).
+    pub log: String,
+    /// The log column it comes from (`vel`, `input_vel`, `steer`), or the derived signal
+    /// (`dx/dt from lat/lon`, `yaw rate from lat/lon`).
+    pub column: &'static str,
+    /// Time on the 20 ms grid, s.
+    pub t: f64,
+    /// The (filtered) value there.
+    pub value: f64,
+}
+
+/// A sample counts as far outside when its distance from the signal's median exceeds this
+/// many times the distance that 90 % of the samples stay within (step tests, standstills and
+/// turns keep the ratio under about 2).
+const OUTLIER_SPREAD_RATIO: f64 = 4.0;
+
+/// A signal of an experiment.
+type Signal = fn(&Experiment) -> &[f64];
+
+/// The sample of a signal farthest from its median over `set`, if it stands out.
+fn outlier(set: &[Experiment], column: &'static str, f: Signal) -> Option<Suspect> {
+    let mut all: Vec<f64> = set.iter().flat_map(|e| f(e).iter().copied()).collect();
+    all.sort_by(f64::total_cmp);
+    let median = *all.get(all.len() / 2)?;
+    let mut dev: Vec<f64> = all.iter().map(|v| (v - median).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let p90 = *dev.get(dev.len() * 9 / 10)?;
+    let mut worst: Option<(f64, Suspect)> = None;
+    for e in set {
+        for (t, v) in e.t.iter().zip(f(e)) {
+            let d = (v - median).abs();
+            if worst.as_ref().is_none_or(|w| d > w.0) {
+                let s = Suspect {
+                    log: e.name.clone(),
+                    column,
+                    t: *t,
+                    value: *v,
+                };
+                worst = Some((d, s));
             }
         }
     }
-    let (name, t, y, yh, r) = worst?;
-    let others = n.checked_sub(1).filter(|&m| m > 0)?;
-    let rms_others = ((sum_sq - r * r).max(0.0) / others as f64).sqrt();
-    (r > OUTLIER_RATIO * rms_others).then_some((name, t, y, yh))
+    let (d, s) = worst?;
+    (d > OUTLIER_SPREAD_RATIO * p90 && d > 0.0).then_some(s)
 }
 
-/// Why the training fit is low.
-fn training_cause(model: Which, set: &[Experiment], sims: &[Simulated], pick: Pick) -> String {
-    if let Some((name, t, y, yh)) = outlier(set, sims, pick) {
-        return format!(
-            "one sample stands far outside the rest: {name} near t = {t:.2} s (measured {y:.3}, model {yh:.3}); look at the log's lines there for a corrupt value"
-        );
-    }
+/// The measured signals a model is fitted on, named by the column they come from.
+fn signals(model: Which) -> [(&'static str, Signal); 2] {
     match model {
+        Which::Speed => [("vel", |e| &e.vel), ("input_vel", |e| &e.input_vel)],
+        Which::DxDt => [("vel", |e| &e.vel), ("dx/dt from lat/lon", |e| &e.dx)],
+        Which::Lateral => [
+            ("steer", |e| &e.steer_pct),
+            ("yaw rate from lat/lon", |e| &e.yaw_rate),
+        ],
+    }
+}
+
+/// Why the training fit is low, and the suspect sample if there is one.
+fn training_cause(model: Which, set: &[Experiment]) -> (String, Option<Suspect>) {
+    if let Some(s) = signals(model)
+        .into_iter()
+        .find_map(|(column, f)| outlier(set, column, f))
+    {
+        let cause = format!(
+            "one sample stands far outside the rest: `{}` in {} near t = {:.2} s ({:.3} after filtering); a corrupt value there?",
+            s.column, s.log, s.t, s.value
+        );
+        return (cause, Some(s));
+    }
+    let cause =     match model {
         Which::Speed => format!(
             "too little excitation or a car the 2nd-order delayed form does not describe: the commanded speed spans {:.2} m/s over the training logs (drive speed steps up and down, as the paper's straight lines)",
             span(set, |e| &e.input_vel)
@@ -156,7 +185,8 @@ fn training_cause(model: Which, set: &[Experiment], sims: &[Simulated], pick: Pi
             "too little excitation: steering spans {:.1} % over the training logs (drive turns and circles at several speeds)",
             span(set, |e| &e.steer_pct)
         ),
-    }
+    };
+    (cause, None)
 }
 
 /// Why the validation fit is low while training's is not.
@@ -191,26 +221,24 @@ fn below(score: &Score) -> bool {
 pub fn check(id: &Identification) -> Vec<FloorViolation> {
     let tr = &id.training_scores;
     let va = id.validation_scores.as_ref();
-    let mut models: Vec<(Which, Score, Option<Score>, Pick)> = vec![(
-        Which::Speed,
-        tr.vel_model,
-        va.map(|v| v.vel_model),
-        pick_speed,
-    )];
+    let mut models: Vec<(Which, Score, Option<Score>)> =
+        vec![(Which::Speed, tr.vel_model, va.map(|v| v.vel_model))];
     if id.dx_dt_identified {
-        models.push((Which::DxDt, tr.dx_model, va.map(|v| v.dx_model), pick_dx));
+        models.push((Which::DxDt, tr.dx_model, va.map(|v| v.dx_model)));
     }
     if let Some(yaw) = tr.yaw_model {
-        models.push((Which::Lateral, yaw, va.and_then(|v| v.yaw_model), pick_yaw));
+        models.push((Which::Lateral, yaw, va.and_then(|v| v.yaw_model)));
     }
     let mut out = Vec::new();
-    for (model, train, val, pick) in models {
+    for (model, train, val) in models {
         if below(&train) {
+            let (cause, suspect) = training_cause(model, &id.training);
             out.push(FloorViolation {
                 model,
                 data: "training",
                 fit_percent: train.fit_percent,
-                cause: training_cause(model, &id.training, &id.training_sims, pick),
+                cause,
+                suspect,
             });
         } else if let Some(val) = val.filter(below) {
             out.push(FloorViolation {
@@ -218,10 +246,36 @@ pub fn check(id: &Identification) -> Vec<FloorViolation> {
                 data: "validation",
                 fit_percent: val.fit_percent,
                 cause: validation_cause(model, &id.training, &id.validation),
+                suspect: None,
             });
         }
     }
     out
+}
+
+/// The log line behind a suspect: the row within 1 s of `suspect.t` whose raw cell is
+/// farthest from that column's median over the log, with its value. `None` for the signals
+/// derived from GNSS, or when the log has no such cell.
+pub fn locate(suspect: &Suspect, log: &crate::logcsv::Log) -> Option<(usize, f64)> {
+    let get: fn(&crate::logcsv::LogRow) -> Option<f64> = match suspect.column {
+        "vel" => |r| r.vel,
+        "input_vel" => |r| r.input_vel,
+        "steer" => |r| r.steer,
+        _ => return None,
+    };
+    let mut values: Vec<f64> = log.rows.iter().filter_map(get).collect();
+    values.sort_by(f64::total_cmp);
+    let median = *values.get(values.len() / 2)?;
+    log.rows
+        .iter()
+        .zip(&log.lines)
+        .filter(|(r, _)| (r.t - suspect.t).abs() <= 1.0)
+        .filter_map(|(r, line)| get(r).map(|v| (*line, v)))
+        // The first of equals: where a run of corrupt values starts.
+        .fold(None, |best: Option<(usize, f64)>, c| match best {
+            Some(b) if (c.1 - median).abs() <= (b.1 - median).abs() => Some(b),
+            _ => Some(c),
+        })
 }
 
 /// Writes the violations into the model file written with `--force`: the description and the
@@ -245,6 +299,6 @@ pub fn mark_forced(model: &mut ModelFile, violations: &[FloorViolation]) {
                 None => continue,
             },
         };
-        fit.note = format!("WARNING (--force): {v}. {}", fit.note);
+        fit.note = format!("WARNING (--force): {v} -- {}", fit.note);
     }
 }
