@@ -150,9 +150,8 @@ fn simulator_bars() {
         "paper-sized set identified in {secs:.2} s\n{}",
         identify::summary(&id)
     );
-    // The bar is < 5 s for the release CLI (measured 2.7 s); here other tests run in
-    // parallel threads on a shared machine, hence the margin.
-    assert!(secs < 10.0, "{secs:.2} s");
+    // Its run time is measured by the criterion bench `identify/paper_set` (README), not here:
+    // a wall-clock bound in a test fails on a loaded machine and proves nothing.
     let lateral = id
         .model
         .lateral

@@ -721,6 +721,14 @@ pub fn write_plots(
 mod tests {
     use super::*;
 
+    /// The CAT Vehicle's geometry (test reference; the CLI takes it from the model file).
+    const CAT_VEHICLE: catmodel::vehicle::VehicleParams = catmodel::vehicle::VehicleParams {
+        wheelbase_m: 2.62,
+        track_m: 1.55,
+        max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
+        understeer_s2_per_m2: 0.0015,
+    };
+
     fn truth_line() -> Truth {
         // 10 m/s due north for 10 s.
         Truth::new(
@@ -763,7 +771,7 @@ mod tests {
             &preds,
             &truth,
             &BaselineInputs::default(),
-            &catmodel::vehicle::CAT_VEHICLE,
+            &CAT_VEHICLE,
             1.478,
         );
         assert_eq!(e.horizons.len(), 2);

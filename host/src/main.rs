@@ -78,6 +78,10 @@ enum Command {
         /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
         #[arg(long, value_parser = parse_origin)]
         origin: Option<(f64, f64)>,
+        /// The car's model file (its geometry for the kinematic baseline, its GNSS antenna and
+        /// receiver address; default: models/paper.toml).
+        #[arg(long)]
+        model: Option<PathBuf>,
         /// Also write the evaluation as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -250,16 +254,20 @@ fn run(cli: Cli) -> Result<()> {
             truth,
             inputs,
             origin,
+            model,
             json,
             plots,
         } => {
+            let model = model_file::load(&model.unwrap_or_else(model_file::paper_path))?;
+            let car = catmodel_host::Car::from_model(&model);
             let inputs = match inputs {
                 Some(p) => p,
                 None => sibling_candump(&truth)?,
             };
             let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
             let progress = Progress::spinner("reading");
-            let data = catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin)?;
+            let data =
+                catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
             progress.set_message("evaluating");
             let e = data.evaluate();
             let written = match &plots {

@@ -15,6 +15,8 @@
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
 //! - `cargo xtask bench-target [--check]`: instructions per call of each firmware component in
 //!   QEMU ([`bench`]).
+//! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
+//!   bad model file of `models/bad/` with the same message ([`corpus`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -23,26 +25,20 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 
 mod bench;
+mod corpus;
 mod nopanic;
 mod txcompare;
 
-#[cfg(test)]
-#[path = "../../src/app/schedule.rs"]
-#[allow(dead_code)]
-mod schedule;
-
 const TARGET: &str = "thumbv7em-none-eabihf";
-/// Instructions one tick may take (`catmodel::app::TICK_BUDGET_INSTRUCTIONS`).
-const BUDGET_INSTRUCTIONS: u32 = 30_000;
+use catmodel::SAMPLE_PERIOD_US as TICK_US;
+use catmodel_app::budget::{
+    CYCLES_PER_TICK, FLASH_BUDGET_BYTES as FLASH_BUDGET, RAM_BUDGET_BYTES as RAM_BUDGET,
+    STACK_USE_LIMIT, TICK_BUDGET_INSTRUCTIONS as BUDGET_INSTRUCTIONS,
+};
+use catmodel_app::record::{self, TickRecord, Trailer};
 /// Instructions available in one 20 ms tick at the board's 168 MHz, if one instruction took one
 /// cycle: the basis of `share_of_tick_percent`.
-const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = 0.02 * 168e6;
-const TICK_US: u64 = 20_000;
-const FLASH_BUDGET: u64 = 96 * 1024;
-const RAM_BUDGET: u64 = 24 * 1024;
-/// Share of the stack region the measured high-water mark may use (the rest is headroom for
-/// the board's interrupt handlers and code paths the drive does not take).
-const STACK_USE_LIMIT: f64 = 0.75;
+const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = CYCLES_PER_TICK as f64;
 const INSTALL_QEMU: &str = "apt-get update && apt-get install -y qemu-system-arm";
 
 fn main() -> ExitCode {
@@ -55,9 +51,10 @@ fn main() -> ExitCode {
         Some("no-panic") => nopanic::no_panic(),
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
+        Some("model-corpus") => corpus::model_corpus(),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check]\n\
+             | bench-target [--check] | model-corpus\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
@@ -85,7 +82,7 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
             "build",
             "--release",
             "-p",
-            "catmodel",
+            "catmodel-firmware",
             "--features",
             features,
         ])
@@ -101,104 +98,26 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
 // ---------------------------------------------------------------------------------------------
 // QEMU runs
 
-/// One tick as recorded by the QEMU firmware (`src/platform/qemu/run.rs`).
-#[derive(Clone, Copy, Debug)]
-struct TickRecord {
-    tick_us: u64,
-    slot: u64,
-    overruns: u32,
-    rx_queue_drops: u32,
-    rx_frames: u16,
-    tx_frames: u16,
-    drain: u32,
-    step: u32,
-    tick: u32,
-}
-
-/// Totals the firmware writes after the last tick.
-#[derive(Clone, Copy, Debug)]
-struct Trailer {
-    ticks: u64,
-    overruns: u32,
-    skipped_slots: u32,
-    rx_queue_drops: u32,
-    rx_bus_errors: u32,
-    rx_unsupported: u32,
-    tx_queue_drops: u32,
-    tx_bus_errors: u32,
-    input_frames: u32,
-    input_unsupported: u32,
-    /// Deepest stack use of the run, bytes (painted-stack scan at the end).
-    stack_high_water: u32,
-    /// The stack region's size, bytes.
-    stack_size: u32,
-}
-
 fn u32_at(bytes: &[u8], at: usize) -> u32 {
     let mut b = [0u8; 4];
     b.copy_from_slice(&bytes[at..at + 4]);
     u32::from_le_bytes(b)
 }
 
-fn u64_at(bytes: &[u8], at: usize) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[at..at + 8]);
-    u64::from_le_bytes(b)
-}
-
+/// The QEMU firmware's tick records and trailer (`catmodel_app::record`, the format both ends
+/// share).
 fn parse_ticks(bytes: &[u8]) -> Result<(Vec<TickRecord>, Trailer)> {
-    const RECORD: usize = 40;
-    const TRAILER: usize = 56;
-    if bytes.len() < 12 || &bytes[..4] != b"CMQT" {
-        bail!("tick records: bad header");
+    match record::parse(bytes) {
+        Ok((records, trailer)) => Ok((records.collect(), trailer)),
+        Err(record::RecordError::BadHeader) => bail!("tick records: bad header"),
+        Err(record::RecordError::Version(v)) => bail!(
+            "tick records: format version {v} (expected {})",
+            record::FORMAT_VERSION
+        ),
+        Err(record::RecordError::Truncated) => {
+            bail!("tick records: truncated (the firmware did not finish)")
+        }
     }
-    if u32_at(bytes, 4) != 2 {
-        bail!(
-            "tick records: format version {} (expected 2)",
-            u32_at(bytes, 4)
-        );
-    }
-    if u32_at(bytes, 8) as usize != RECORD {
-        bail!("tick records: unexpected record size");
-    }
-    let body = &bytes[12..];
-    if body.len() < TRAILER || !(body.len() - TRAILER).is_multiple_of(RECORD) {
-        bail!("tick records: truncated (the firmware did not finish)");
-    }
-    let (records, trailer) = body.split_at(body.len() - TRAILER);
-    if &trailer[..4] != b"END!" {
-        bail!("tick records: no trailer (the firmware did not finish)");
-    }
-    let records = records
-        .chunks_exact(RECORD)
-        .map(|r| TickRecord {
-            tick_us: u64_at(r, 0),
-            slot: u64_at(r, 8),
-            overruns: u32_at(r, 16),
-            rx_queue_drops: u32_at(r, 20),
-            rx_frames: u16::from_le_bytes([r[24], r[25]]),
-            tx_frames: u16::from_le_bytes([r[26], r[27]]),
-            drain: u32_at(r, 28),
-            step: u32_at(r, 32),
-            tick: u32_at(r, 36),
-        })
-        .collect();
-    let t = &trailer[4..];
-    let trailer = Trailer {
-        ticks: u64_at(t, 0),
-        overruns: u32_at(t, 8),
-        skipped_slots: u32_at(t, 12),
-        rx_queue_drops: u32_at(t, 16),
-        rx_bus_errors: u32_at(t, 20),
-        rx_unsupported: u32_at(t, 24),
-        tx_queue_drops: u32_at(t, 28),
-        tx_bus_errors: u32_at(t, 32),
-        input_frames: u32_at(t, 36),
-        input_unsupported: u32_at(t, 40),
-        stack_high_water: u32_at(t, 44),
-        stack_size: u32_at(t, 48),
-    };
-    Ok((records, trailer))
 }
 
 struct QemuRun {
@@ -349,6 +268,7 @@ fn qemu(args: &[String]) -> Result<()> {
         "tx_frames": run.records.iter().map(|r| u64::from(r.tx_frames)).sum::<u64>(),
         "stack_high_water_bytes": run.trailer.stack_high_water,
         "stack_size_bytes": run.trailer.stack_size,
+        "node_boot_instructions": run.trailer.node_boot_instructions,
         "qemu_wall_seconds": (run.wall_s * 1000.0).round() / 1000.0,
     });
     std::fs::write(
@@ -391,6 +311,11 @@ fn qemu(args: &[String]) -> Result<()> {
         table,
         "overruns {}, skipped slots {}, rx queue drops {}",
         run.trailer.overruns, run.trailer.skipped_slots, run.trailer.rx_queue_drops
+    );
+    let _ = writeln!(
+        table,
+        "node built at boot in {} instructions (configuration image checked and read)",
+        run.trailer.node_boot_instructions
     );
     let stack_share =
         f64::from(run.trailer.stack_high_water) / f64::from(run.trailer.stack_size.max(1));
@@ -627,7 +552,7 @@ fn elf_flash_ram(bytes: &[u8]) -> Result<(u64, u64)> {
     Ok((flash, ram))
 }
 
-/// The stack guard (memory.x, src/platform/stack.rs) in action: the QEMU firmware recurses until
+/// The stack guard (memory.x, firmware/src/platform/stack.rs) in action: the QEMU firmware recurses until
 /// its stack runs out. The guard holds if the core faults with the stack pointer just below
 /// SRAM (0x2000_0000), i.e. after the whole stack region and before anything else: the fault
 /// cannot be stacked either, so the core locks up and QEMU stops ("Lockup") with the registers.
@@ -707,7 +632,7 @@ fn size() -> Result<()> {
         ram as f64 / 1024.0,
         stack as f64 / 1024.0
     );
-    // The overflow guard (memory.x, src/platform/stack.rs): the stack starts at the bottom of
+    // The overflow guard (memory.x, firmware/src/platform/stack.rs): the stack starts at the bottom of
     // SRAM and every static lies above its top, so an overflow faults below 0x2000_0000.
     if stack_bottom != 0x2000_0000 || stack_top > data_start {
         bail!(
@@ -743,7 +668,7 @@ mod tests {
     #[test]
     fn tick_records_round_trip_and_truncation_is_an_error() {
         let mut bytes = b"CMQT".to_vec();
-        bytes.extend(2u32.to_le_bytes());
+        bytes.extend(3u32.to_le_bytes());
         bytes.extend(40u32.to_le_bytes());
         for field in [
             &1_000u64.to_le_bytes()[..],
@@ -760,7 +685,7 @@ mod tests {
         }
         bytes.extend(b"END!");
         bytes.extend(1u64.to_le_bytes());
-        for v in 10u32..21 {
+        for v in 10u32..22 {
             bytes.extend(v.to_le_bytes());
         }
         let (records, trailer) = parse_ticks(&bytes).unwrap();
@@ -783,8 +708,9 @@ mod tests {
             (1, 10, 18)
         );
         assert_eq!((trailer.stack_high_water, trailer.stack_size), (19, 20));
+        assert_eq!(trailer.node_boot_instructions, 21);
         assert!(parse_ticks(&bytes[..bytes.len() - 1]).is_err());
-        assert!(parse_ticks(&bytes[..bytes.len() - 56]).is_err());
+        assert!(parse_ticks(&bytes[..bytes.len() - 60]).is_err());
         let mut old = bytes.clone();
         old[4] = 1;
         assert!(parse_ticks(&old).is_err());
