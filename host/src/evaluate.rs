@@ -812,13 +812,7 @@ mod tests {
                 }
             })
             .collect();
-        let e = evaluate(
-            &preds,
-            &truth,
-            &inputs,
-            &catmodel::vehicle::CAT_VEHICLE,
-            lever_m,
-        );
+        let e = evaluate(&preds, &truth, &inputs, &CAT_VEHICLE, lever_m);
         let f = &e.bias_floor;
         assert_eq!(f.ticks, 400);
         // Windows hold an odd or even number of fixes: the alternating noise leaves at most

@@ -88,14 +88,24 @@ fn sinc(x: f64) -> f64 {
     }
 }
 
-/// The taps; [`Fir::from_taps`] checks them again on the way in.
+/// The taps and how many are in use; [`Fir::from_taps`] checks the taps again on the way in,
+/// and the taps after the ones in use must be zero.
 impl<const N: usize> Image for Fir<N> {
     fn write(&self, w: &mut ImageWriter<'_>) {
-        self.taps.write(w);
+        let Self { taps, len } = self;
+        taps.write(w);
+        len.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         let taps = <[f32; N]>::read(r)?;
-        Self::from_taps(taps).map_err(|_| r.out_of_range())
+        let mut fir = Self::from_taps(taps).map_err(|_| r.out_of_range())?;
+        let len = usize::read(r)?;
+        let unused = taps.get(len..).filter(|_| len >= 1);
+        match unused {
+            Some(rest) if rest.iter().all(|t| *t == 0.0) => fir.len = len,
+            _ => return Err(r.out_of_range()),
+        }
+        Ok(fir)
     }
 }
 

@@ -17,11 +17,15 @@ pub struct MovingAverage<const N: usize> {
     span: usize,
 }
 
-/// Nothing to store: the span is the type's `N`.
+/// The span (1..=N); 1/span follows from it.
 impl<const N: usize> Image for MovingAverage<N> {
-    fn write(&self, _w: &mut ImageWriter<'_>) {}
-    fn read(_r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
-        Ok(Self::new())
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self { inv_n: _, span } = self;
+        span.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        let span = usize::read(r)?;
+        Self::with_span(span).ok_or_else(|| r.out_of_range())
     }
 }
 
