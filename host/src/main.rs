@@ -108,6 +108,10 @@ enum Command {
         /// (default: models/paper.toml as built in).
         #[arg(long)]
         base: Option<PathBuf>,
+        /// The car the logs come from: a TOML file with the model file's [vehicle] table and
+        /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
         /// Write the model even if a fit is below the floor (the warning goes into the file).
         #[arg(long)]
         force: bool,
@@ -293,9 +297,14 @@ fn run(cli: Cli) -> Result<()> {
             out,
             report,
             base,
+            vehicle,
             force,
         } => {
             let base = load_base(base.as_deref())?;
+            let base = match vehicle {
+                Some(car) => identify::car::apply(&base, &car)?,
+                None => base,
+            };
             let opts = identify::IdentifyOptions::default();
             let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
                 .with_message("reading logs");

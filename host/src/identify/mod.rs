@@ -12,6 +12,7 @@
 //!    validation data, each beside the kinematic model; written into the model file;
 //! 6. [`floor`]: every fit checked against the floor before the file may be written.
 pub mod arx;
+pub mod car;
 pub mod correlation;
 pub mod delay;
 pub mod discretize;
@@ -403,7 +404,15 @@ pub fn identify_lateral(
     // Dynamic part over whole experiments.
     let r_kin: Vec<Vec<f64>> = training
         .iter()
-        .map(|e| validate::kinematic_yaw(vehicle, g, k, &e.vel, &e.delta_rad))
+        .map(|e| {
+            e.as_measured_yaw(&validate::kinematic_yaw(
+                vehicle,
+                g,
+                k,
+                &e.vel,
+                &e.delta_rad,
+            ))
+        })
         .collect();
     let inputs: Vec<[&[f64]; 1]> = r_kin.iter().map(|r| [&r[..]]).collect();
     let data: Vec<Data> = training
