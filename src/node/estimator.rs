@@ -40,8 +40,8 @@ const TRACK_SPAN_S: f64 = 0.63;
 /// paper's lowpass (21 taps at 2 Hz, then 10 samples) is for, and the anchor of the scaling.
 pub const PAPER_GNSS_RATE_HZ: f64 = 100.0;
 /// Below this rate the course gain falls with the rate, Hz (see [`EstimatorConfig::design`]).
-const COURSE_GAIN_FULL_RATE_HZ: f64 = 10.0;
-/// Complementary-filter gain towards the course per 20 ms tick at 10 Hz and above: a 0.4 s
+const COURSE_GAIN_FULL_RATE_HZ: f64 = 25.0;
+/// Complementary-filter gain towards the course per 20 ms tick at 25 Hz and above: a 0.4 s
 /// time constant.
 const COURSE_GAIN: f32 = 0.05;
 /// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
@@ -208,8 +208,10 @@ impl EstimatorConfig {
     /// fix as it is, moved by dead reckoning). A window of 30 fixes at every rate (the paper's
     /// filter designed at the receiver's rate) lags 1.45 s at 10 Hz and lets the heading diverge;
     /// 0.3 s at every rate averages too few fixes. The course chord spans 0.63 s (63 fixes at
-    /// 100 Hz, at least one fix), and below 10 Hz the course gain falls with the rate, so the
-    /// heading averages as many course samples as at 10 Hz.
+    /// 100 Hz, at least one fix), and below 25 Hz the course gain falls as the square root of
+    /// the rate (0.032 per tick at 10 Hz, 0.01 at 1 Hz): a complementary filter's best gain
+    /// goes as sqrt(process noise / measurement noise), and the course's noise variance grows
+    /// as the rate falls (fewer fixes in each chord).
     pub fn design(
         gnss_rate_hz: f64,
         antenna_ahead_m: f32,
@@ -256,7 +258,8 @@ impl EstimatorConfig {
         let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
         let track_span_fixes =
             (libm::round(TRACK_SPAN_S * gnss_rate_hz) as u32).clamp(1, TRACK_LEN as u32 - 1);
-        let course_gain = COURSE_GAIN * (gnss_rate_hz / COURSE_GAIN_FULL_RATE_HZ).min(1.0) as f32;
+        let course_gain =
+            COURSE_GAIN * libm::sqrt((gnss_rate_hz / COURSE_GAIN_FULL_RATE_HZ).min(1.0)) as f32;
         Ok(Self {
             fir,
             ma,

@@ -17,6 +17,8 @@
 //!   QEMU ([`bench`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
+//! - `cargo xtask tick-schedule-drives`: QEMU == host replay on the bundled drive re-stamped to
+//!   start at 0, on a tick boundary, just after and before one, and at epoch times ([`drives`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -26,6 +28,7 @@ use anyhow::{anyhow, bail, Context, Result};
 
 mod bench;
 mod corpus;
+mod drives;
 mod nopanic;
 mod txcompare;
 
@@ -52,9 +55,10 @@ fn main() -> ExitCode {
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
+        Some("tick-schedule-drives") => drives::tick_schedule_drives(),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus\n\
+             | bench-target [--check] | model-corpus | tick-schedule-drives\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };

@@ -2,7 +2,7 @@
 //! written back out as candump lines, both over semihosting files on the host.
 //!
 //! Receive: a frame is put in the receive queue one tick ahead, at the time of the tick before
-//! the one it belongs to (the first tick at or after its timestamp, `node::first_tick_us`). The
+//! the one it belongs to (the first tick at or after its timestamp, `DriveClock::release_instant_us`). The
 //! tick drains only frames stamped at or before its own time, so every frame reaches the tick
 //! that host replay gives it, whatever the order in which timers that expire together run
 //! (docs/architecture.md, "Tick schedule"). The frame keeps its file timestamp as receive time.
@@ -12,9 +12,7 @@ use semihosting::io::{Read, Seek, SeekFrom, Write};
 use super::candump::{self, LineError, LINE_CAP};
 use catmodel::can::candump::CandumpError;
 use catmodel::can::TimedFrame;
-use catmodel::node::first_tick_us;
-use catmodel::SAMPLE_PERIOD_US;
-use catmodel_app::{BusReceiver, BusTransmitter, RxError};
+use catmodel_app::{BusReceiver, BusTransmitter, DriveClock, RxError};
 
 /// Longest input line accepted, bytes.
 pub const LINE_MAX: usize = 128;
@@ -211,17 +209,17 @@ pub fn scan(reader: &mut LineReader) -> Result<InputSummary, ReplayError> {
 pub struct ReplayBus {
     reader: LineReader,
     line: [u8; LINE_MAX],
-    /// Input time minus embassy time, us.
-    input_offset_us: u64,
+    /// The drive's first tick on the embassy clock and on the input's time base.
+    clock: DriveClock,
 }
 
 impl ReplayBus {
-    /// Replays `reader` (rewound) with embassy time 0 = input time `input_offset_us`.
-    pub fn new(reader: LineReader, input_offset_us: u64) -> Self {
+    /// Replays `reader` (rewound) on the tick schedule `clock`.
+    pub fn new(reader: LineReader, clock: DriveClock) -> Self {
         Self {
             reader,
             line: [0; LINE_MAX],
-            input_offset_us,
+            clock,
         }
     }
 }
@@ -239,9 +237,7 @@ impl BusReceiver for ReplayBus {
                     Err(_) => return Err(RxError::Unsupported),
                 },
             };
-            let release_us = first_tick_us(frame.t_us)
-                .saturating_sub(SAMPLE_PERIOD_US)
-                .saturating_sub(self.input_offset_us);
+            let release_us = self.clock.release_instant_us(frame.t_us);
             if Instant::now().as_micros() < release_us {
                 Timer::at(Instant::from_micros(release_us)).await;
             }

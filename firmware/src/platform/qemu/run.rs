@@ -19,9 +19,8 @@ use super::icount;
 use super::replay::{self, InputSummary, LineReader, ReplayError, Source};
 use crate::platform::stack::StackMeter;
 use catmodel::node::first_tick_us;
-use catmodel::SAMPLE_PERIOD_US;
 use catmodel_app::record::{self, Trailer};
-use catmodel_app::{LinkCounters, TickConfig, TickPlatform, TickReport, TickSummary};
+use catmodel_app::{DriveClock, LinkCounters, TickConfig, TickPlatform, TickReport, TickSummary};
 
 /// The drive replayed when no `--in` is given (data/bundled.can.log, copied by build.rs).
 pub static BUNDLED_DRIVE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/bundled.can.log"));
@@ -178,10 +177,8 @@ pub fn open_input(options: &Options) -> (LineReader, InputSummary) {
 
 /// The tick schedule of a drive: virtual 0 = one period before the first tick.
 pub fn tick_config(summary: &InputSummary) -> TickConfig {
-    let first_tick = first_tick_us(summary.first_t_us);
     TickConfig {
-        first_tick_instant_us: SAMPLE_PERIOD_US,
-        input_offset_us: first_tick.saturating_sub(SAMPLE_PERIOD_US),
+        clock: DriveClock::replay(summary.first_t_us),
         last_tick_us: Some(first_tick_us(summary.last_t_us)),
         watchdog_reset: false,
     }
