@@ -17,7 +17,13 @@
 //!
 //! On the tuning drive also the original bar: 1 s ahead at least a quarter below the baseline
 //! (on drives with a larger bias the bias dominates both errors and that ratio says little).
-use std::path::Path;
+//!
+//! And a second car, end to end (`host/vehicles/vw-polo.toml`: another wheelbase, antenna
+//! position, tyres, speed-loop delay, and a 10 Hz receiver): its experiments simulated, its
+//! models identified with `identify --vehicle` (every fit above the floor), replayed with that
+//! model file on drives identification did not see, and the goals for a 10 Hz receiver: within
+//! 20 % of the bias floor and below raw GNSS.
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_catmodel");
@@ -48,40 +54,75 @@ struct Scores {
     drive_ticks: f64,
 }
 
-fn scores(scenario: &str, seed: u64) -> Scores {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("accuracy_{scenario}_{seed}"));
+/// A car: the simulator's vehicle file and the model file the node runs (`None`: the CAT
+/// Vehicle and the published models).
+#[derive(Clone, Copy)]
+struct Car<'a> {
+    name: &'a str,
+    vehicle: Option<&'a Path>,
+    model: Option<&'a Path>,
+}
+
+const CAT: Car<'static> = Car {
+    name: "cat",
+    vehicle: None,
+    model: None,
+};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let d = dir.to_str().unwrap();
+    dir
+}
+
+/// `simulate-drive` of `scenario` with `seed` on `car` into `dir`.
+fn simulate(car: Car<'_>, scenario: &str, seed: u64, dir: &Path) {
     let seed_text = seed.to_string();
-    ok(&[
+    let mut args = vec![
         "simulate-drive",
         "--scenario",
         scenario,
         "--seed",
         &seed_text,
         "--out",
-        d,
-    ]);
+        dir.to_str().unwrap(),
+    ];
+    if let Some(v) = car.vehicle {
+        args.extend(["--vehicle", v.to_str().unwrap()]);
+    }
+    ok(&args);
+}
+
+fn scores(car: Car<'_>, scenario: &str, seed: u64) -> Scores {
+    let dir = tmp(&format!("accuracy_{}_{scenario}_{seed}", car.name));
+    let d = dir.to_str().unwrap();
+    simulate(car, scenario, seed, &dir);
     let pred = dir.join("pred.csv");
     let json = dir.join("eval.json");
-    ok(&[
+    let model: Vec<&str> = car
+        .model
+        .map(|m| vec!["--model", m.to_str().unwrap()])
+        .unwrap_or_default();
+    let replay = [
         "replay",
         &format!("{d}/{scenario}.can.log"),
         "--origin",
         "32.2319,-110.9501",
         "--out",
         pred.to_str().unwrap(),
-    ]);
+    ];
+    ok(&[&replay[..], &model].concat());
     let truth = format!("{d}/{scenario}.truth.csv");
-    ok(&[
+    let evaluate = [
         "evaluate",
         pred.to_str().unwrap(),
         "--truth",
         &truth,
         "--json",
         json.to_str().unwrap(),
-    ]);
+    ];
+    ok(&[&evaluate[..], &model].concat());
     let e: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let rms = |v: &serde_json::Value| v["pos_rms_m"].as_f64().unwrap();
     let horizon = |h: f64| {
@@ -106,8 +147,8 @@ fn scores(scenario: &str, seed: u64) -> Scores {
         drive_ticks: truth_rows as f64 / 2.0,
     };
     eprintln!(
-        "{scenario} seed {seed}: horizon 0: node {:.3} m = {:.3} x the bias floor {:.3} m, raw at axle {:.3} m; 1 s: node {:.3} m, baseline {:.3} m",
-        s.node0, s.floor_ratio, s.floor, s.raw_axle, s.node1, s.base1
+        "{} {scenario} seed {seed}: horizon 0: node {:.3} m = {:.3} x the bias floor {:.3} m, raw at axle {:.3} m; 1 s: node {:.3} m, baseline {:.3} m",
+        car.name, s.node0, s.floor_ratio, s.floor, s.raw_axle, s.node1, s.base1
     );
     s
 }
@@ -117,9 +158,11 @@ fn above_floor(rms: f64, floor: f64) -> f64 {
     (rms * rms - floor * floor).max(0.0).sqrt()
 }
 
-fn check_every_drive_bar(name: &str, s: &Scores) {
+/// The bar of one drive: the filtered position within `floor_share` of the bias floor, and the
+/// 1 s predictions' error above the floor at most `above_floor_share` of the baseline's.
+fn check_every_drive_bar(name: &str, s: &Scores, floor_share: f64, above_floor_share: f64) {
     assert!(
-        s.floor_ratio <= 1.10,
+        s.floor_ratio <= floor_share,
         "{name}: filtered {} m is {} x the floor",
         s.node0,
         s.floor_ratio
@@ -138,7 +181,7 @@ fn check_every_drive_bar(name: &str, s: &Scores) {
     );
     let (node, base) = (above_floor(s.node1, s.floor), above_floor(s.base1, s.floor));
     assert!(
-        node <= 0.5 * base,
+        node <= above_floor_share * base,
         "{name}: 1 s above the floor: node {node} vs baseline {base}"
     );
     // Most ticks are scored (the node reports from its first heading on).
@@ -152,8 +195,8 @@ fn check_every_drive_bar(name: &str, s: &Scores) {
 
 #[test]
 fn validation_drive_meets_the_accuracy_bar() {
-    let s = scores("validation", 0);
-    check_every_drive_bar("validation seed 0", &s);
+    let s = scores(CAT, "validation", 0);
+    check_every_drive_bar("validation seed 0", &s, 1.10, 0.5);
     assert!(
         s.node1 < 0.75 * s.base1,
         "1 s: node {} vs baseline {}",
@@ -170,7 +213,63 @@ fn drives_nothing_was_tuned_on_meet_the_accuracy_bar() {
         ("suburb", 11),
         ("suburb", 16),
     ] {
-        let s = scores(scenario, seed);
-        check_every_drive_bar(&format!("{scenario} seed {seed}"), &s);
+        let s = scores(CAT, scenario, seed);
+        check_every_drive_bar(&format!("{scenario} seed {seed}"), &s, 1.10, 0.5);
+    }
+}
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+/// The paper-sized training set (README, "Identify, compare, discretize") and the validation
+/// drive with seed 3, of the second car.
+#[test]
+fn a_second_car_end_to_end() {
+    let vehicle = repo("host/vehicles/vw-polo.toml");
+    let polo = Car {
+        name: "vw-polo",
+        vehicle: Some(&vehicle),
+        model: None,
+    };
+    let dir = tmp("second_car_identify");
+    let mut training = Vec::new();
+    for (scenario, seed) in catmodel_host::sim::scenario::PAPER_SIZED_TRAINING {
+        let sub = dir.join(format!("seed{seed}"));
+        simulate(polo, scenario, seed, &sub);
+        training.push(sub.join(format!("{scenario}.csv")));
+    }
+    simulate(polo, "validation", 3, &dir);
+    let model = dir.join("vw-polo.toml");
+    let car_file = repo("host/vehicles/vw-polo.car.toml");
+    let mut args: Vec<&str> = vec!["identify"];
+    args.extend(training.iter().map(|p| p.to_str().unwrap()));
+    let validation = dir.join("validation.csv");
+    args.extend([
+        "--validate",
+        validation.to_str().unwrap(),
+        "--vehicle",
+        car_file.to_str().unwrap(),
+        "--out",
+        model.to_str().unwrap(),
+    ]);
+    // Every fit above the floor, or nothing is written.
+    ok(&args);
+    let file = catmodel_host::model_file::load(&model).unwrap();
+    assert_eq!(file.vehicle.gnss_rate_hz, 10.0);
+    assert_eq!(file.vehicle.antenna_ahead_m, 0.6);
+    assert_eq!(file.vehicle.wheelbase_m, 2.564);
+    assert_eq!(file.dynamics.map(|d| d.mass_kg), Some(1200.0));
+    assert!(file.lateral.is_some(), "the lateral model is identified");
+
+    let polo = Car {
+        model: Some(&model),
+        ..polo
+    };
+    // Drives identification did not see. A 10 Hz course steers the heading less well than a
+    // 100 Hz one: the 1 s bar above the floor is 0.6 of the baseline's (0.5 at 100 Hz).
+    for (scenario, seed) in [("validation", 0), ("validation", 9), ("suburb", 7)] {
+        let s = scores(polo, scenario, seed);
+        check_every_drive_bar(&format!("vw-polo {scenario} seed {seed}"), &s, 1.20, 0.6);
     }
 }
