@@ -225,6 +225,14 @@ impl EstimatorConfig {
         )
     }
 
+    /// The lowpass cutoff of [`EstimatorConfig::design_scaled`], Hz: it follows the window's
+    /// time scale, `2 Hz (rate / 100)^window_exponent`, and stays below 0.45 x the rate (below
+    /// Nyquist; never binding from 1 to 100 Hz with the design's exponent).
+    pub fn scaled_cutoff_hz(gnss_rate_hz: f64, window_exponent: f64) -> f64 {
+        let scale = gnss_rate_hz / PAPER_GNSS_RATE_HZ;
+        (GNSS_CUTOFF_HZ * libm::pow(scale, window_exponent)).min(0.45 * gnss_rate_hz)
+    }
+
     /// [`EstimatorConfig::design`] with the window time scaling as `rate^-window_exponent`
     /// (0: the paper's 0.3 s at every rate; 1: its 30 fixes at every rate), for the comparison
     /// that chose [`WINDOW_EXPONENT`].
@@ -250,9 +258,7 @@ impl EstimatorConfig {
         let taps = (taps | 1).clamp(1, GNSS_FIR_TAPS);
         let span =
             (libm::round(GNSS_MA_SPAN as f64 * window_share) as usize).clamp(1, GNSS_MA_SPAN);
-        // The cutoff follows the window's time scale; below Nyquist for every rate >= 0.9 Hz.
-        let cutoff_hz =
-            (GNSS_CUTOFF_HZ * libm::pow(scale, window_exponent)).min(0.45 * gnss_rate_hz);
+        let cutoff_hz = Self::scaled_cutoff_hz(gnss_rate_hz, window_exponent);
         let fir = Fir::lowpass_len(taps, cutoff_hz, gnss_rate_hz)?;
         let ma = MovingAverage::with_span(span).ok_or(FilterError::NoTaps)?;
         let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
