@@ -25,16 +25,7 @@ fuzz_target!(|data: &[u8]| {
             }
             for r in &rows {
                 assert!(r.t.is_finite());
-                let cells = [
-                    Some(r.t),
-                    r.vel,
-                    r.input_vel,
-                    r.accel,
-                    r.steer,
-                    r.brake,
-                    r.lat,
-                    r.lon,
-                ];
+                let cells = r.cells();
                 for (v, range) in cells.iter().zip(&LOG_RANGES) {
                     if let Some(v) = v {
                         assert!(

@@ -47,6 +47,20 @@ impl LogRow {
         }
     }
 
+    /// The cells in the order of [`LOG_COLUMNS`] (`t` always present).
+    pub fn cells(&self) -> [Option<f64>; 8] {
+        [
+            Some(self.t),
+            self.vel,
+            self.input_vel,
+            self.accel,
+            self.steer,
+            self.brake,
+            self.lat,
+            self.lon,
+        ]
+    }
+
     /// Fills the cells of `other` that are present into `self` (rows logged at the same time).
     pub fn merge(&mut self, other: &LogRow) {
         let pairs = [
@@ -602,16 +616,7 @@ pub fn write_log_to<W: Write>(
     let mut line_text = String::new();
     for (i, r) in rows.iter().enumerate() {
         let line = i + 2;
-        let cells = [
-            Some(r.t),
-            r.vel,
-            r.input_vel,
-            r.accel,
-            r.steer,
-            r.brake,
-            r.lat,
-            r.lon,
-        ];
+        let cells = r.cells();
         check_write(line, &cells, &LOG_COLUMNS, &mut previous)?;
         format_cells(&mut line_text, &cells);
         w.write_all(line_text.as_bytes()).map_err(io)?;
