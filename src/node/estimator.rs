@@ -207,8 +207,11 @@ impl EstimatorConfig {
     /// 0.93 Hz and 2 samples (a 0.6 s window, 0.25 s delay); at 1 Hz 1 tap and 1 sample (each
     /// fix as it is, moved by dead reckoning). A window of 30 fixes at every rate (the paper's
     /// filter designed at the receiver's rate) lags 1.45 s at 10 Hz and lets the heading diverge;
-    /// 0.3 s at every rate averages too few fixes. The course chord spans 0.63 s (63 fixes at
-    /// 100 Hz, at least one fix), and below 25 Hz the course gain falls as the square root of
+    /// 0.3 s at every rate averages too few fixes (the comparison on the second car:
+    /// `cargo run --release -p catmodel-host --example gnss_rate -- --exponents`).
+    ///
+    /// The course chord spans 0.63 s (63 fixes at 100 Hz, at least one fix), and below 25 Hz
+    /// the course gain falls as the square root of
     /// the rate (0.032 per tick at 10 Hz, 0.01 at 1 Hz): a complementary filter's best gain
     /// goes as sqrt(process noise / measurement noise), and the course's noise variance grows
     /// as the rate falls (fewer fixes in each chord).

@@ -152,10 +152,10 @@ pub fn filter_signal(x: &[f64], taps: &[f64], span: usize) -> Result<Vec<f64>> {
 /// `opts.diff_half_width` at 100 Hz, times `(100 / rate)^(1/7)` (17 at 10 Hz, 23 at 1 Hz).
 /// Why 1/7: a slope fitted over a baseline of T seconds to fixes with white noise has a
 /// variance ~ 1 / (rate T^3), and the path's curvature biases it ~ T^2; the sum of the
-/// variance and the squared bias is least for T ~ rate^(-1/7). Measured on the second car's
-/// 10 Hz receiver (0.4 m noise): lateral fit 51 % / 58 % (training / validation) with 12,
-/// 74 % / 78 % with 17; wider baselines smooth the dx/dt model's output beyond what eq 7's
-/// form follows (validation -13 % with 25).
+/// variance and the squared bias is least for T ~ rate^(-1/7). With it the second car's 10 Hz
+/// receiver (0.4 m noise) gives a lateral fit of 74 % / 78 % (training / validation,
+/// `scripts/second-car.sh`); with the 100 Hz baseline of 12 samples its course is too noisy
+/// for the fit floor.
 pub fn diff_half_width(opts: &PreprocessOptions, gnss_rate_hz: f64) -> usize {
     let rate = if gnss_rate_hz.is_finite() && gnss_rate_hz > 0.0 {
         gnss_rate_hz
