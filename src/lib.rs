@@ -19,6 +19,7 @@
 //! - [`math`]: the few transcendental functions the node uses, with measured error bounds.
 //! - [`can`]: the bus protocol of `catmodel.dbc`: frame codecs, CRC-8/SAE-J1850, rolling
 //!   counters, freshness, candump text.
+//! - [`control`]: the model-predictive controller (speed and steering plans over 2 s).
 //! - [`node`]: `Node::step`, the pure 20 ms tick that the board, QEMU and host replay all run.
 #![cfg_attr(not(test), no_std)]
 #![cfg_attr(
@@ -36,6 +37,7 @@
 #![warn(missing_docs)]
 
 pub mod can;
+pub mod control;
 pub mod geodesy;
 pub mod image;
 pub mod math;

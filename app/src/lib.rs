@@ -14,9 +14,9 @@
 //! the same code on both.
 //!
 //! Time: embassy-time runs at 1 MHz (`tick-hz-1_000_000`), so its ticks are microseconds. The
-//! node's time base (the input's, [`catmodel::node::Tick::now_us`]) meets the embassy clock at
-//! the first tick ([`schedule::DriveClock`]): the same instant on the board, clock 20 ms =
-//! the drive's first tick in QEMU (docs/architecture.md, "Tick schedule").
+//! node's time base (the input's, [`catmodel::node::Tick::now_us`]) is the embassy clock plus a
+//! fixed offset ([`TickConfig::input_offset_us`]): 0 on the board, `first_tick_us - 20 000` in
+//! QEMU (docs/architecture.md, "Tick schedule").
 //!
 //! Budget: one tick (drain + step + handoff) must stay under 30 000 instructions, 0.9 % of the
 //! 20 ms period at 168 MHz; `cargo qemu` measures it and fails above it.
@@ -49,7 +49,7 @@ use catmodel::can::TimedFrame;
 use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
-pub use schedule::{DriveClock, TickGrid};
+pub use schedule::{ReplayClock, TickGrid};
 
 /// Frames the receive queue holds between two ticks. The filters admit five input messages at
 /// 50 Hz or less (about 5 frames per tick), so 64 leaves room for bursts; a full queue drops the
@@ -227,8 +227,11 @@ pub trait TickPlatform {
 /// Fixed parameters of the tick loop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TickConfig {
-    /// The first tick on the embassy clock and on the input's time base.
-    pub clock: DriveClock,
+    /// Embassy time (us) of the first tick.
+    pub first_tick_instant_us: u64,
+    /// Added to embassy time to get the input's time base, us, modulo 2^64 (a replayed drive
+    /// that starts at time 0 has a negative offset: [`ReplayClock`]).
+    pub input_offset_us: u64,
     /// Stop after the tick at or past this time (input time base, us); `None` runs forever.
     pub last_tick_us: Option<u64>,
     /// The last reset was caused by the watchdog (board; read once at boot).
@@ -286,7 +289,7 @@ pub async fn tick_loop<P: TickPlatform>(
     platform: &mut P,
     config: &TickConfig,
 ) -> TickSummary {
-    let mut grid = TickGrid::new(config.clock.first_tick_instant_us, SAMPLE_PERIOD_US);
+    let mut grid = TickGrid::new(config.first_tick_instant_us, SAMPLE_PERIOD_US);
     let mut batch: heapless::Vec<TimedFrame, RX_BATCH_LEN> = heapless::Vec::new();
     let mut held = None;
     let mut out = TxBatch::default();
@@ -296,7 +299,7 @@ pub async fn tick_loop<P: TickPlatform>(
     loop {
         Timer::at(Instant::from_micros(grid.deadline_us())).await;
         grid.start(Instant::now().as_micros());
-        let tick_us = config.clock.node_us(grid.deadline_us());
+        let tick_us = grid.deadline_us().wrapping_add(config.input_offset_us);
 
         let c0 = platform.counter();
         drain_due(rx, tick_us, &mut held, &mut batch);

@@ -1,8 +1,9 @@
 //! The 20 ms tick grid: which slot runs next, and how many deadlines were missed.
 //!
 //! Pure bookkeeping on microsecond timestamps (no clock is read here), so that the overrun policy
-//! and the meeting of the platform clock with the input's time base ([`DriveClock`]) are the
-//! same on the board and in QEMU and are tested on the host.
+//! is the same on the board and in QEMU and is unit-tested on the host; and [`ReplayClock`], how a
+//! replayed drive's time base maps onto the firmware's clock (QEMU), property-tested on the host
+//! against host replay (`host-tests/tests/schedule.rs`).
 //!
 //! Policy (docs/firmware.md, "Overruns"):
 //! - Slot `k` is due at `origin_us + k * period_us`. Every slot either completes its tick before
@@ -15,52 +16,58 @@
 use catmodel::node::first_tick_us;
 use catmodel::SAMPLE_PERIOD_US;
 
-/// Where a platform's clock (embassy time, us) meets the node's time base (the input's, us):
-/// tick k runs at clock instant `first_tick_instant_us + k * 20 ms` with node time
-/// `first_tick_us + k * 20 ms` (docs/architecture.md, "Tick schedule"). Both sides count up
-/// from the first tick, so no offset is ever negative: a drive whose first frame is stamped
-/// `(0000000000.000000)` has its first tick at node time 0 on every platform.
+use crate::TickConfig;
+
+/// How a replayed input's time base (candump timestamps, us) maps onto the firmware's clock
+/// (embassy time, us since boot), so that the firmware ticks at exactly the times host replay
+/// does, whatever the first timestamp (0, a tick boundary, just after one, an epoch time).
+///
+/// Host replay ticks at `first_tick_us(first frame) + k * 20 ms` (`catmodel::node`). Here the
+/// first tick runs one period after boot (so the receive task has a period to queue the first
+/// frames), at embassy time [`SAMPLE_PERIOD_US`]: input time = embassy time + `input_offset_us`,
+/// with the offset `first_tick - 20 ms` taken modulo 2^64 (a drive starting at 0 has a negative
+/// offset; every sum below wraps back into range). A frame is released one period before the
+/// tick that consumes it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct DriveClock {
-    /// Clock instant of the first tick, us.
-    pub first_tick_instant_us: u64,
-    /// Node time of the first tick, us (a whole multiple of 20 ms).
-    pub first_tick_us: u64,
+pub struct ReplayClock {
+    offset_us: u64,
 }
 
-impl DriveClock {
-    /// The board: its clock is the node's time base; the first tick at `first_tick_us`.
-    pub const fn identity(first_tick_us: u64) -> Self {
+impl ReplayClock {
+    /// The clock for a drive whose first frame is stamped `first_frame_us`.
+    pub const fn new(first_frame_us: u64) -> Self {
         Self {
-            first_tick_instant_us: first_tick_us,
-            first_tick_us,
+            offset_us: first_tick_us(first_frame_us).wrapping_sub(SAMPLE_PERIOD_US),
         }
     }
 
-    /// A recorded drive whose first frame is stamped `first_frame_us`, replayed on a clock that
-    /// starts at 0 (QEMU): its first tick ([`first_tick_us`], as host replay's) one period
-    /// after clock 0, so that the frames it consumes can be handed over one period before it.
-    pub const fn replay(first_frame_us: u64) -> Self {
-        Self {
+    /// Input time minus embassy time, modulo 2^64.
+    pub const fn input_offset_us(&self) -> u64 {
+        self.offset_us
+    }
+
+    /// Input time of embassy time `instant_us`.
+    pub const fn input_us(&self, instant_us: u64) -> u64 {
+        instant_us.wrapping_add(self.offset_us)
+    }
+
+    /// Embassy time at which a frame stamped `frame_t_us` is handed to the receive queue: one
+    /// period before the tick that consumes it.
+    pub const fn release_instant_us(&self, frame_t_us: u64) -> u64 {
+        first_tick_us(frame_t_us)
+            .wrapping_sub(SAMPLE_PERIOD_US)
+            .wrapping_sub(self.offset_us)
+    }
+
+    /// The tick loop's configuration for a drive whose last frame is stamped `last_frame_us`:
+    /// the last tick is the one that consumes it.
+    pub const fn tick_config(&self, last_frame_us: u64) -> TickConfig {
+        TickConfig {
             first_tick_instant_us: SAMPLE_PERIOD_US,
-            first_tick_us: first_tick_us(first_frame_us),
+            input_offset_us: self.offset_us,
+            last_tick_us: Some(first_tick_us(last_frame_us)),
+            watchdog_reset: false,
         }
-    }
-
-    /// Node time of clock instant `instant_us` (at or after the first tick).
-    pub const fn node_us(&self, instant_us: u64) -> u64 {
-        self.first_tick_us
-            .saturating_add(instant_us.saturating_sub(self.first_tick_instant_us))
-    }
-
-    /// Clock instant at which a frame stamped `t_us` (at or after the first frame) is handed
-    /// to the node's receive queue: one period before the tick that consumes it, the first
-    /// tick at or after `t_us` ([`first_tick_us`]), as in host replay.
-    pub const fn release_instant_us(&self, t_us: u64) -> u64 {
-        let ticks_after_first = first_tick_us(t_us).saturating_sub(self.first_tick_us);
-        self.first_tick_instant_us
-            .saturating_add(ticks_after_first)
-            .saturating_sub(SAMPLE_PERIOD_US)
     }
 }
 
@@ -140,7 +147,25 @@ impl TickGrid {
 
 #[cfg(test)]
 mod tests {
-    use super::TickGrid;
+    use super::{ReplayClock, TickGrid};
+
+    #[test]
+    fn replay_clock_ticks_where_replay_does_for_every_kind_of_start() {
+        // 0, a tick boundary, just after one, just before one, an epoch time.
+        for first in [0, 40_000, 40_001, 39_999, 1_700_000_000_003_000u64] {
+            let clock = ReplayClock::new(first);
+            let config = clock.tick_config(first + 1_000_000);
+            let first_tick = catmodel::node::first_tick_us(first);
+            // The first tick (at embassy time one period) is the first tick of host replay.
+            assert_eq!(clock.input_us(config.first_tick_instant_us), first_tick);
+            // The first frame is released before (or as) that tick runs, never after.
+            assert!(clock.release_instant_us(first) <= config.first_tick_instant_us);
+            assert_eq!(
+                clock.release_instant_us(first) + P,
+                config.first_tick_instant_us
+            );
+        }
+    }
 
     const P: u64 = 20_000;
 
@@ -221,87 +246,5 @@ mod tests {
         assert!(!grid.finish(P));
         assert_eq!(grid.start(P), 0);
         assert_eq!(grid.overruns(), 0);
-    }
-
-    /// One tick schedule for every platform, whatever the first timestamp: for a drive whose
-    /// frames are stamped `first + offsets`, host replay runs tick k at node time
-    /// `first_tick_us(first) + k P` and gives each frame to the first tick at or after its
-    /// stamp; QEMU's tick k (clock `P + k P`) carries the same node time, and each frame is
-    /// released to its queue no later than that tick's clock instant (and one period before
-    /// it), so it reaches the same tick.
-    fn check_drive(first: u64, offsets: &[u64]) {
-        use super::DriveClock;
-        use catmodel::node::first_tick_us;
-        let clock = DriveClock::replay(first);
-        let host_first = first_tick_us(first);
-        assert_eq!(clock.first_tick_us, host_first);
-        // The first tick: at node time 0 for a drive starting at 0, on the boundary itself for
-        // one starting on a boundary, the next boundary otherwise.
-        assert!(host_first >= first && host_first - first < P);
-        for &off in offsets {
-            let t = first + off;
-            let k = (first_tick_us(t) - host_first) / P;
-            let instant = clock.first_tick_instant_us + k * P;
-            assert_eq!(clock.node_us(instant), host_first + k * P, "tick {k}");
-            let release = clock.release_instant_us(t);
-            assert!(
-                release <= instant,
-                "frame {t} released at {release} after its tick {instant}"
-            );
-            assert_eq!(instant - release, P, "frame {t}");
-            // The tick before would not take it: its node time is before the stamp.
-            if k > 0 {
-                assert!(clock.node_us(instant - P) < t);
-            }
-            assert!(clock.node_us(instant) >= t);
-        }
-    }
-
-    #[test]
-    fn first_timestamps_at_zero_on_a_boundary_just_after_and_at_epoch_times() {
-        let offsets = [0, 1, 19_999, 20_000, 20_001, 39_999, 1_000_000, 300_000_000];
-        for first in [
-            0,
-            1,
-            19_999,
-            20_000,
-            20_001,
-            // 2023-11-14 22:13:20 UTC, on a boundary, and 1 us after.
-            1_700_000_000_000_000,
-            1_700_000_000_000_001,
-            1_700_000_000_019_999,
-        ] {
-            check_drive(first, &offsets);
-        }
-        // The drive: first frame `(0000000000.000000)`: first tick at node time 0.
-        let clock = super::DriveClock::replay(0);
-        assert_eq!(clock.node_us(clock.first_tick_instant_us), 0);
-        assert_eq!(clock.release_instant_us(0), 0);
-    }
-
-    #[test]
-    fn the_board_clock_is_the_node_time_base() {
-        let clock = super::DriveClock::identity(40_000);
-        for instant in [40_000, 60_000, 1_000_000] {
-            assert_eq!(clock.node_us(instant), instant);
-        }
-    }
-
-    use proptest::prelude::*;
-
-    proptest! {
-        #[test]
-        fn any_first_timestamp_gives_one_schedule(
-            // Up to 3e16 us (year 2920): beyond any recorder; the node saturates at u64::MAX / 2.
-            first in prop_oneof![
-                0u64..100_000,
-                (0u64..1_500_000_000).prop_map(|k| k * P),
-                (0u64..1_500_000_000).prop_map(|k| k * P + 1),
-                0u64..30_000_000_000_000_000,
-            ],
-            offsets in prop::collection::vec(0u64..3_600_000_000, 1..40),
-        ) {
-            check_drive(first, &offsets);
-        }
     }
 }

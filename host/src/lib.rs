@@ -1,6 +1,8 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
 //! Links the same `catmodel` core for everything the node does.
 pub mod csv2can;
+pub mod dbc;
+pub mod decode;
 pub mod evaluate;
 pub mod identify;
 pub mod logcsv;

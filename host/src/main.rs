@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use catmodel_host::progress::Progress;
-use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
+use catmodel_host::{csv2can, decode, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -126,6 +126,17 @@ enum Command {
         /// CSV to write: t,vel,vel_model,vel_kinematic,dx,dx_model,dx_kinematic.
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
+    Decode {
+        /// candump log.
+        log: PathBuf,
+        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        messages: Vec<String>,
+        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
+        #[arg(long)]
+        csv: bool,
     },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
@@ -383,6 +394,14 @@ fn run(cli: Cli) -> Result<()> {
                 replay::write_file(&path, &identify::validate::compare_csv(&e, &sim))?;
             }
             Ok(())
+        }
+        Command::Decode { log, messages, csv } => {
+            let format = if csv {
+                decode::Format::Csv
+            } else {
+                decode::Format::Table
+            };
+            decode::run(&log, &messages, format)
         }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;

@@ -1,9 +1,11 @@
 //! catmodel automation.
 //!
-//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): builds the QEMU firmware (release, the
-//!   profile we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
-//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table, and
-//!   fails if the run failed or a tick exceeded the instruction budget.
+//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): checks the MCU target and
+//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (release, the profile we ship),
+//!   runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table and
+//!   one summary line (drive, machine, PASS or FAIL, slowest tick against the budget, bound),
+//!   and fails if the run failed or a tick exceeded the instruction budget.
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid; then a 500 ms stall that overflows the receive queue: every
@@ -15,10 +17,11 @@
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
 //! - `cargo xtask bench-target [--check]`: instructions per call of each firmware component in
 //!   QEMU ([`bench`]).
+//! - `cargo xtask tick-schedule`: QEMU and host replay tick at the same times on drives that
+//!   start at 0, on a tick boundary, just after and before one, and at an epoch time
+//!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
-//! - `cargo xtask tick-schedule-drives`: QEMU == host replay on the bundled drive re-stamped to
-//!   start at 0, on a tick boundary, just after and before one, and at epoch times ([`drives`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -28,8 +31,9 @@ use anyhow::{anyhow, bail, Context, Result};
 
 mod bench;
 mod corpus;
-mod drives;
 mod nopanic;
+mod prereq;
+mod schedule;
 mod txcompare;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
@@ -55,15 +59,16 @@ fn main() -> ExitCode {
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
-        Some("tick-schedule-drives") => drives::tick_schedule_drives(),
+        Some("tick-schedule") => schedule::tick_schedule(),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus | tick-schedule-drives\n\
+             | bench-target [--check] | model-corpus | tick-schedule\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(error) if error.is::<Reported>() => ExitCode::FAILURE,
         Err(error) => {
             eprintln!("xtask: error: {error:#}");
             ExitCode::FAILURE
@@ -79,6 +84,11 @@ fn root() -> PathBuf {
 }
 
 fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
+    // Said before minutes of building, not after.
+    prereq::ensure_target()?;
+    if features == "qemu" {
+        prereq::ensure_qemu()?;
+    }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(root())
@@ -147,13 +157,6 @@ fn qemu_command(elf: &Path) -> Command {
 
 /// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
 fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) -> Result<QemuRun> {
-    if Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}");
-    }
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let tx = out_dir.join("tx.log");
     let ticks = out_dir.join("ticks.bin");
@@ -182,10 +185,12 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
     // The firmware reports in text on stderr; defmt output (if any dependency logs) goes to
     // stdout as binary frames: keep it for `defmt-print -e ELF`.
     let _ = std::fs::write(out_dir.join("defmt.bin"), &output.stdout);
-    eprint!("{}", String::from_utf8_lossy(&output.stderr));
     if !output.status.success() {
+        eprint!("{}", String::from_utf8_lossy(&output.stderr));
         bail!("the QEMU firmware failed ({})", output.status);
     }
+    // On success the firmware's one line of counts repeats the trailer, which the callers
+    // print: not echoed.
     let bytes = std::fs::read(&ticks).with_context(|| format!("reading {}", ticks.display()))?;
     let (records, trailer) = parse_ticks(&bytes)?;
     if records.len() as u64 != trailer.ticks {
@@ -227,6 +232,70 @@ fn stats_json(values: &[u32]) -> serde_json::Value {
     serde_json::json!({ "min": min, "median": median, "p99": p99, "max": max })
 }
 
+/// The machine `cargo qemu` runs on, as its summary line names it.
+const QEMU_MACHINE: &str = "QEMU netduinoplus2 (STM32F405, Cortex-M4F)";
+
+/// An error the command has already reported (its summary line says FAIL).
+#[derive(Debug)]
+struct Reported;
+
+impl std::fmt::Display for Reported {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("reported above")
+    }
+}
+
+impl std::error::Error for Reported {}
+
+/// What one `cargo qemu` run found: the slowest tick, the bound if `timing.json` has one, and
+/// what failed.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Verdict {
+    max_instructions: u32,
+    bound_instructions: Option<u64>,
+    failures: Vec<String>,
+    /// Checks turned into warnings (CATMODEL_BUDGET_WARN_ONLY).
+    waived: Vec<String>,
+}
+
+/// `21267` -> `21 267`: figures as the README writes them.
+fn grouped(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// The one line `cargo qemu` ends with: the drive, the machine, PASS or FAIL, the slowest tick
+/// against the budget, and the worst-case bound.
+fn summary_line(drive: &str, v: &Verdict) -> String {
+    let verdict = if v.failures.is_empty() {
+        if v.waived.is_empty() {
+            "PASS".to_string()
+        } else {
+            format!("PASS with checks waived ({})", v.waived.join("; "))
+        }
+    } else {
+        format!("FAIL ({})", v.failures.join("; "))
+    };
+    let share = f64::from(v.max_instructions) / f64::from(BUDGET_INSTRUCTIONS) * 100.0;
+    let bound = v
+        .bound_instructions
+        .map_or("bound: not computed".to_string(), |b| {
+            format!("bound {} instructions", grouped(b))
+        });
+    format!(
+        "cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, slowest tick {} instructions = {share:.0} % of the {} budget, {bound}",
+        grouped(u64::from(v.max_instructions)),
+        grouped(u64::from(BUDGET_INSTRUCTIONS)),
+    )
+}
+
 fn qemu(args: &[String]) -> Result<()> {
     let input = match args {
         [] => None,
@@ -235,9 +304,33 @@ fn qemu(args: &[String]) -> Result<()> {
         [file] => Some(PathBuf::from(file)),
         _ => bail!("usage: cargo qemu [-- FILE.log]"),
     };
+    let drive = input.as_ref().map_or_else(
+        || "data/bundled.can.log".to_string(),
+        |p| p.display().to_string(),
+    );
+    match qemu_run(input.as_deref()) {
+        Ok(verdict) => {
+            println!("{}", summary_line(&drive, &verdict));
+            if verdict.failures.is_empty() {
+                Ok(())
+            } else {
+                Err(Reported.into())
+            }
+        }
+        Err(error) => {
+            eprintln!("xtask: error: {error:#}");
+            println!("cargo qemu: {drive} on {QEMU_MACHINE}: FAIL (the run did not complete: see the error above)");
+            Err(Reported.into())
+        }
+    }
+}
+
+/// Builds and runs the QEMU firmware over `input` (default: the bundled drive), writes
+/// `target/qemu/timing.json`, prints the table, and checks the run.
+fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
     let elf = cargo_build("qemu", "catmodel-qemu")?;
     let out_dir = root().join("target").join("qemu");
-    let run = run_qemu(&elf, &out_dir, input.as_deref(), &[])?;
+    let run = run_qemu(&elf, &out_dir, input, &[])?;
 
     let whole: Vec<u32> = run.records.iter().map(|r| r.tick).collect();
     let drain: Vec<u32> = run.records.iter().map(|r| r.drain).collect();
@@ -333,28 +426,48 @@ fn qemu(args: &[String]) -> Result<()> {
     );
     let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
     print!("{table}");
-    if run.trailer.stack_high_water == 0 || stack_share > STACK_USE_LIMIT {
-        bail!("stack high-water mark out of bounds (0: the stack was not painted; or too little headroom)");
-    }
 
+    let mut verdict = Verdict {
+        max_instructions: max,
+        bound_instructions: timing["worst_case_bound_instructions"].as_u64(),
+        ..Verdict::default()
+    };
+    if run.trailer.stack_high_water == 0 {
+        verdict
+            .failures
+            .push("stack high-water mark 0: the stack was not painted".into());
+    } else if stack_share > STACK_USE_LIMIT {
+        verdict.failures.push(format!(
+            "stack high-water mark {:.0} % of the stack, over {:.0} %",
+            stack_share * 100.0,
+            STACK_USE_LIMIT * 100.0
+        ));
+    }
     if max > BUDGET_INSTRUCTIONS {
         // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
         // the run, its outputs and every other check still count.
+        let over = format!("a tick took {}, over the budget", grouped(u64::from(max)));
         if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
-            eprintln!(
-                "xtask: WARNING: a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS} (not fatal: CATMODEL_BUDGET_WARN_ONLY)"
-            );
+            verdict
+                .waived
+                .push(format!("{over}: CATMODEL_BUDGET_WARN_ONLY"));
         } else {
-            bail!("a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+            verdict.failures.push(over);
         }
     }
     if run.trailer.overruns != 0 || run.trailer.rx_queue_drops != 0 {
-        bail!("the run had overruns or receive-queue drops");
+        verdict.failures.push(format!(
+            "{} overruns, {} receive-queue drops",
+            run.trailer.overruns, run.trailer.rx_queue_drops
+        ));
     }
     if run.trailer.tx_queue_drops != 0 || run.trailer.tx_bus_errors != 0 {
-        bail!("transmit frames were lost");
+        verdict.failures.push(format!(
+            "{} transmit frames lost",
+            u64::from(run.trailer.tx_queue_drops) + u64::from(run.trailer.tx_bus_errors)
+        ));
     }
-    Ok(())
+    Ok(verdict)
 }
 
 /// Parses the timestamps of a candump file, us.
@@ -718,6 +831,37 @@ mod tests {
         let mut old = bytes.clone();
         old[4] = 1;
         assert!(parse_ticks(&old).is_err());
+    }
+
+    #[test]
+    fn summary_line_names_drive_machine_verdict_and_budget() {
+        assert_eq!(grouped(21_267), "21 267");
+        assert_eq!(grouped(999), "999");
+        assert_eq!(grouped(1_000_000), "1 000 000");
+        let pass = Verdict {
+            max_instructions: 21_267,
+            ..Verdict::default()
+        };
+        assert_eq!(
+            summary_line("data/bundled.can.log", &pass),
+            "cargo qemu: data/bundled.can.log on QEMU netduinoplus2 (STM32F405, Cortex-M4F): PASS, \
+             slowest tick 21 267 instructions = 71 % of the 30 000 budget, bound: not computed"
+        );
+        let fail = Verdict {
+            max_instructions: 31_000,
+            bound_instructions: Some(45_000),
+            failures: vec![
+                "a tick took 31 000, over the budget".into(),
+                "1 overruns".into(),
+            ],
+            waived: Vec::new(),
+        };
+        let line = summary_line("d.log", &fail);
+        assert!(
+            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 103 % of the 30 000 budget, bound 45 000 instructions"),
+            "{line}"
+        );
+        assert_eq!(line.lines().count(), 1);
     }
 
     #[test]

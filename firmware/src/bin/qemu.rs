@@ -99,7 +99,7 @@ fn set_up() -> Harness {
         run::TickRecorder::new(run::create(&options.ticks), options.stalls.clone()))
     .unwrap_or_else(|| run::fail("harness statics taken twice", 3));
     let bus = cortex_m::singleton!(: replay::ReplayBus =
-        replay::ReplayBus::new(reader, config.clock))
+        replay::ReplayBus::new(reader, catmodel_app::ReplayClock::new(input.first_t_us)))
     .unwrap_or_else(|| run::fail("harness statics taken twice", 3));
     Harness {
         bus,

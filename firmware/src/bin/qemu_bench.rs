@@ -113,23 +113,8 @@ static mut OVERHEAD: u32 = 0;
 /// instructions it took (minus the timing overhead).
 #[inline(always)]
 fn timed<R>(f: impl FnOnce() -> R) -> (R, u32) {
-    let t0 = icount::now();
-    let r = black_box(f());
-    let t1 = icount::now();
     // Safety: written once in `main` before any measurement; single-threaded, no interrupts.
-    let overhead = unsafe { OVERHEAD };
-    (r, t1.wrapping_sub(t0).saturating_sub(overhead))
-}
-
-fn calibrate() -> u32 {
-    let mut min = u32::MAX;
-    for i in 0..64u32 {
-        let t0 = icount::now();
-        black_box(black_box(i));
-        let t1 = icount::now();
-        min = min.min(t1.wrapping_sub(t0));
-    }
-    min
+    icount::timed(unsafe { OVERHEAD }, f)
 }
 
 /// The latest measured inputs, decoded from the received frames (not timed).
@@ -686,7 +671,7 @@ fn bench_encode() {
 #[entry]
 fn main() -> ! {
     icount::init();
-    let overhead = calibrate();
+    let overhead = icount::calibrate();
     // Safety: the only write, before any read; single-threaded, no interrupts enabled.
     unsafe { OVERHEAD = overhead };
     semihosting::eprintln!("bench-overhead\t{overhead}");

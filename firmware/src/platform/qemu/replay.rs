@@ -2,7 +2,7 @@
 //! written back out as candump lines, both over semihosting files on the host.
 //!
 //! Receive: a frame is put in the receive queue one tick ahead, at the time of the tick before
-//! the one it belongs to (the first tick at or after its timestamp, `DriveClock::release_instant_us`). The
+//! the one it belongs to (the first tick at or after its timestamp, `node::first_tick_us`). The
 //! tick drains only frames stamped at or before its own time, so every frame reaches the tick
 //! that host replay gives it, whatever the order in which timers that expire together run
 //! (docs/architecture.md, "Tick schedule"). The frame keeps its file timestamp as receive time.
@@ -12,7 +12,7 @@ use semihosting::io::{Read, Seek, SeekFrom, Write};
 use super::candump::{self, LineError, LINE_CAP};
 use catmodel::can::candump::CandumpError;
 use catmodel::can::TimedFrame;
-use catmodel_app::{BusReceiver, BusTransmitter, DriveClock, RxError};
+use catmodel_app::{BusReceiver, BusTransmitter, ReplayClock, RxError};
 
 /// Longest input line accepted, bytes.
 pub const LINE_MAX: usize = 128;
@@ -209,13 +209,13 @@ pub fn scan(reader: &mut LineReader) -> Result<InputSummary, ReplayError> {
 pub struct ReplayBus {
     reader: LineReader,
     line: [u8; LINE_MAX],
-    /// The drive's first tick on the embassy clock and on the input's time base.
-    clock: DriveClock,
+    /// The input's time base on the embassy clock.
+    clock: ReplayClock,
 }
 
 impl ReplayBus {
-    /// Replays `reader` (rewound) on the tick schedule `clock`.
-    pub fn new(reader: LineReader, clock: DriveClock) -> Self {
+    /// Replays `reader` (rewound) on `clock`.
+    pub fn new(reader: LineReader, clock: ReplayClock) -> Self {
         Self {
             reader,
             line: [0; LINE_MAX],

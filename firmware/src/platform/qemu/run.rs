@@ -18,9 +18,8 @@ use semihosting::io::Write;
 use super::icount;
 use super::replay::{self, InputSummary, LineReader, ReplayError, Source};
 use crate::platform::stack::StackMeter;
-use catmodel::node::first_tick_us;
 use catmodel_app::record::{self, Trailer};
-use catmodel_app::{DriveClock, LinkCounters, TickConfig, TickPlatform, TickReport, TickSummary};
+use catmodel_app::{LinkCounters, ReplayClock, TickConfig, TickPlatform, TickReport, TickSummary};
 
 /// The drive replayed when no `--in` is given (data/bundled.can.log, copied by build.rs).
 pub static BUNDLED_DRIVE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/bundled.can.log"));
@@ -175,13 +174,9 @@ pub fn open_input(options: &Options) -> (LineReader, InputSummary) {
     }
 }
 
-/// The tick schedule of a drive: virtual 0 = one period before the first tick.
+/// The tick loop's configuration for the drive `summary` describes ([`ReplayClock`]).
 pub fn tick_config(summary: &InputSummary) -> TickConfig {
-    TickConfig {
-        clock: DriveClock::replay(summary.first_t_us),
-        last_tick_us: Some(first_tick_us(summary.last_t_us)),
-        watchdog_reset: false,
-    }
+    ReplayClock::new(summary.first_t_us).tick_config(summary.last_t_us)
 }
 
 /// Creates (truncates) a host file for writing.
