@@ -5,7 +5,7 @@
 #![no_main]
 
 use catmodel::SAMPLE_PERIOD_US;
-use catmodel_app::{self as app, DriveClock, LinkCounters, RxQueue, TickConfig, TxQueue};
+use catmodel_app::{self as app, LinkCounters, RxQueue, TickConfig, TxQueue};
 use catmodel_firmware::platform::board::{self, BoardRx, BoardTick, BoardTx};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
@@ -61,7 +61,8 @@ async fn main(spawner: Spawner) {
     // The board's time base is its own clock: ticks on whole multiples of 20 ms since boot.
     let first_tick_us = (Instant::now().as_micros() / SAMPLE_PERIOD_US + 2) * SAMPLE_PERIOD_US;
     let config = TickConfig {
-        clock: DriveClock::identity(first_tick_us),
+        first_tick_instant_us: first_tick_us,
+        input_offset_us: 0,
         last_tick_us: None,
         watchdog_reset,
     };
