@@ -28,15 +28,6 @@ fn read(path: &Path) -> Result<Vec<(String, TimedFrame)>> {
         .collect()
 }
 
-/// [`compare`] on two candump files; also requires the firmware to have reported its stack.
-pub fn compare_files(firmware: &Path, host: &Path) -> Result<Comparison> {
-    let result = compare(&read(firmware)?, &read(host)?)?;
-    if result.deepest_reported.is_none() {
-        bail!("the firmware never reported its stack high-water mark in NODE_STATUS page 4");
-    }
-    Ok(result)
-}
-
 /// The stack field of a NODE_STATUS page 4 frame, if `frame` is one.
 fn stack_page(frame: &TimedFrame) -> Option<(NodeStatus, u8)> {
     if frame.frame.id != CanId::Standard(NODE_STATUS_ID) {
@@ -115,9 +106,10 @@ pub fn tx_compare(args: &[String]) -> Result<()> {
     let [firmware, host] = args else {
         bail!("usage: cargo xtask tx-compare FIRMWARE.log HOST.log");
     };
-    let result = compare_files(Path::new(firmware), Path::new(host))?;
-    // Note: `compare_files` refuses a run without a reported stack.
-    let deepest = result.deepest_reported.unwrap_or_default();
+    let result = compare(&read(Path::new(firmware))?, &read(Path::new(host))?)?;
+    let Some(deepest) = result.deepest_reported else {
+        bail!("the firmware never reported its stack high-water mark in NODE_STATUS page 4");
+    };
     println!(
         "tx-compare: {} frames identical to host replay ({} status page-4 frames differ only by \
          the firmware's stack high-water mark, deepest reported {deepest} B)",
