@@ -45,6 +45,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
 
+use catmodel::can::codec::ControlStatus;
 use catmodel::can::TimedFrame;
 use core::borrow::BorrowMut;
 
@@ -208,6 +209,8 @@ pub struct TickReport {
     pub step_counts: u32,
     /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
     pub tick_counts: u32,
+    /// A controller planned in this tick (its budget differs: `budget`).
+    pub controller: bool,
 }
 
 /// What the tick loop needs from its platform.
@@ -319,7 +322,7 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
         };
         out.tick_us = tick_us;
         out.frames.clear();
-        node.step(&tick, &batch, &mut out.frames);
+        let estimate = node.step(&tick, &batch, &mut out.frames);
         let c2 = platform.counter();
         let tx_frames = out.frames.len();
         counters
@@ -349,6 +352,7 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
             drain_counts: c1.wrapping_sub(c0),
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
+            controller: estimate.control != ControlStatus::NoPath,
         });
         stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());

@@ -36,7 +36,7 @@ pub mod baked {
     }
 
     /// The drive stage's state (about 23 KiB), in a static initialised at compile time: built
-    /// at run time it would pass through the 12 KiB stack. `None` after the first call.
+    /// at run time it would pass through the 16 KiB stack. `None` after the first call.
     pub fn take_drive() -> Option<&'static mut Drive> {
         static TAKEN: AtomicBool = AtomicBool::new(false);
         static mut DRIVE: Drive = Drive::new();

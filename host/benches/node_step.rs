@@ -13,7 +13,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use catmodel::can::TimedFrame;
-use catmodel::node::{first_tick_us, Node, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_host::replay::read_candump;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};

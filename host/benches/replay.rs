@@ -19,7 +19,7 @@
 use std::hint::black_box;
 
 use catmodel::can::{candump, TimedFrame};
-use catmodel::node::{first_tick_us, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, NodeConfig, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_host::{csv2can, replay, sim, SIM_ORIGIN_DEG};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -28,6 +28,8 @@ fn validation_frames() -> Vec<TimedFrame> {
     let out =
         sim::run_named("validation", None, &sim::SimOptions::default()).expect("built-in scenario");
     csv2can::encode_log(&out.log)
+        .expect("simulated times are >= 0")
+        .frames
 }
 
 fn config() -> NodeConfig {

@@ -189,14 +189,19 @@ impl PurePursuitConfig {
         let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * stop_at_m.max(0.0));
         target = target.min(stop_limit).min(self.max_speed_mps);
         let error = target - speed;
-        let integral = (state.integral_mps + self.speed_ki_per_s * error * self.period_s).clamp(
+        let integral = math::clamp(
+            state.integral_mps + self.speed_ki_per_s * error * self.period_s,
             -self.speed_integral_limit_mps,
             self.speed_integral_limit_mps,
         );
         let speed_cmd = if target <= 0.0 {
             0.0
         } else {
-            (target + self.speed_kp * error + integral).clamp(0.0, self.max_speed_mps)
+            math::clamp(
+                target + self.speed_kp * error + integral,
+                0.0,
+                self.max_speed_mps,
+            )
         };
 
         if !(steer_pct.is_finite() && speed_cmd.is_finite() && integral.is_finite()) {

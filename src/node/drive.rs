@@ -20,7 +20,7 @@
 //!
 //! The state (about 23 KiB: two paths of 256 points and the controller's warm start) is kept
 //! apart from [`super::Node`] so that a platform can place it in a static, initialised at
-//! compile time ([`Drive::new`] is `const`): built on the 12 KiB stack it would overflow it.
+//! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
     self, MpcConfig, MpcInput, MpcOutput, MpcState, ReferencePoint, Sample, DEFAULT_TUNING,

@@ -30,6 +30,7 @@ pub mod publish;
 
 use core::borrow::BorrowMut;
 
+use crate::can::codec::ControlStatus;
 use crate::can::freshness::{FreshnessConfig, Input};
 use crate::can::TimedFrame;
 use crate::image::{self, Image, ImageError, ImageReader, ImageWriter};
@@ -264,6 +265,8 @@ pub struct TickEstimate {
     pub speed_mps: f32,
     /// Lateral model in use.
     pub mode: Mode,
+    /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
+    pub control: ControlStatus,
 }
 
 /// The models' state (stage 2).
@@ -305,7 +308,7 @@ struct Estimate {
 /// The node's mutable state, one part per stage. The drive stage's state is large (see
 /// [`drive`]) and lives where the platform put it: `D` is a `&'static mut Drive` in a static
 /// on the MCU, a `Box<Drive>` on the host.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Node<D: BorrowMut<Drive>> {
     config: NodeConfig,
     inputs: Inputs,
@@ -396,6 +399,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
             mode: motion.mode,
+            control: drive.command.status,
         }
     }
 
@@ -465,7 +469,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
                 .unwrap_or(m.speed_mps);
             cfg.velocity.step(state, u)
         });
-        let speed_mps = clamp_finite(
+        let speed_mps = math::clamp_finite(
             inputs
                 .speeds
                 .map(|(v, _)| v)
@@ -625,20 +629,4 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
-}
-
-/// `v` limited to [lo, hi], `lo` if not finite. Comparisons only: `f32::clamp` asserts
-/// `lo <= hi` with a formatted panic message, which links float formatting (~20 KiB of flash).
-fn clamp_finite(v: f32, lo: f32, hi: f32) -> f32 {
-    if !v.is_finite() {
-        return lo;
-    }
-    let mut x = v;
-    if x < lo {
-        x = lo;
-    }
-    if x > hi {
-        x = hi;
-    }
-    x
 }

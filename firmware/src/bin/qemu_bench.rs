@@ -89,7 +89,7 @@ impl<const N: usize> Samples<N> {
 
 /// A `&'static mut` to a fresh, zeroed sample store of type `$t`, one static per use site.
 /// The stores (3 KiB each, 81 KiB in all) live in .bss: on the stack they would not fit its
-/// 12 KiB region (memory.x). Each use site runs once (one call per benchmark group).
+/// 16 KiB region (memory.x). Each use site runs once (one call per benchmark group).
 macro_rules! samples {
     ($t:ty) => {{
         static mut STORE: $t = zeroed_store();

@@ -185,7 +185,7 @@ impl TrackAtSpeed {
         let mut spun = false;
         let mut k = 0u64;
         loop {
-            if k % per_tick == 0 {
+            if k.is_multiple_of(per_tick) {
                 steer = command(rig.time_s() - t0, &rig);
             }
             rig.step(&Command {
