@@ -18,7 +18,8 @@ use proptest::prelude::*;
 
 #[test]
 fn crc8_sae_j1850_check_values() {
-    // CRC-8/SAE-J1850 catalogue check value and the two short vectors of facts.md.
+    // CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, xorout 0xFF) catalogue check value, and two short
+    // vectors consistent with the static_asserts of Dataspeed's ds_dbw CAN driver.
     assert_eq!(crc8_sae_j1850(b"123456789"), 0x4B);
     assert_eq!(crc8_sae_j1850(b"0"), 0x71);
     assert_eq!(crc8_sae_j1850(b"01"), 0x28);

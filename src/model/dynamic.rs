@@ -8,7 +8,7 @@
 //!
 //! vy is positive to the right and r positive clockwise (a right turn), the catmodel convention.
 //! Its steady state is `r = vx delta / (L + K_us vx^2)` with the understeer gradient
-//! `K_us = m (Cr lr - Cf lf) / (Cf Cr L)`: for the CAT Vehicle figures of facts.md this is the
+//! `K_us = m (Cr lr - Cf lf) / (Cf Cr L)`: for the CAT Vehicle figures (models/paper.toml `[dynamics]`) this is the
 //! `0.0015 v^2` term of eq 2 (see [`DynamicParams::understeer_s2_per_m2`]).
 //!
 //! The model is stiff at low speed (poles ~ -(Cf + Cr)/(m vx)), so each step uses the
