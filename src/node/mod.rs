@@ -354,6 +354,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
         self.drive.borrow_mut()
     }
 
+    /// The node's drive stage back, e.g. to build a fresh node around it (its state is
+    /// reset and reconfigured by [`Node::new`]).
+    pub fn into_drive(self) -> D {
+        self.drive
+    }
+
     /// The configuration.
     pub fn config(&self) -> &NodeConfig {
         &self.config

@@ -177,10 +177,7 @@ mod tests {
             vec![Site {
                 function: "catmodel::node::Node::step".into(),
                 callee: "core::panicking::panic_bounds_check".into(),
-                lines: vec![
-                    "src/node/mod.rs:400".into(),
-                    "src/node/mod.rs:404".into()
-                ],
+                lines: vec!["src/node/mod.rs:400".into(), "src/node/mod.rs:404".into()],
             }]
         );
     }

@@ -33,13 +33,16 @@ use catmodel::model::hybrid::Mode;
 use catmodel::model::kinematic::{self, Pose};
 use catmodel::model::predictor::{self, PredictedPoint, PredictorStart};
 use catmodel::model::{MisoBlockState, SsBlockState};
+use catmodel::node::drive::Drive;
 use catmodel::node::{
     first_tick_us, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
     PREDICTION_POINTS, VELOCITY_DELAY_CAP,
 };
 use catmodel::signal::{FirState, MovingAverageState};
 use catmodel::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
+use catmodel_firmware::baked::FirmwareNode;
 use catmodel_firmware::platform::qemu::{icount, run::BUNDLED_DRIVE};
+use core::cell::Cell;
 use cortex_m_rt::entry;
 // The `defmt` feature is on for the core's types; nothing here logs through it, but a global
 // logger must exist for any dependency that does.
@@ -159,9 +162,12 @@ fn replay(
     mut step: impl FnMut(&mut FirmwareNode, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
     mut each: impl FnMut(&View),
 ) {
-    let Ok(mut node) = catmodel_firmware::baked::node() else {
+    let drive = critical_section::with(|cs| DRIVE.borrow(cs).take())
+        .or_else(catmodel_firmware::baked::take_drive);
+    let (Ok(config), Some(drive)) = (catmodel_firmware::baked::node_config(), drive) else {
         fail("the baked model does not build")
     };
+    let mut node = Node::new(config, drive);
     let config = node.config().clone();
     let mut rx: heapless::Vec<TimedFrame, 64> = heapless::Vec::new();
     let mut inputs = Inputs::default();
@@ -217,7 +223,13 @@ fn replay(
     if let Some(now) = tick_us {
         run_tick(&mut node, now, &rx, &mut inputs);
     }
+    critical_section::with(|cs| DRIVE.borrow(cs).set(Some(node.into_drive())));
 }
+
+/// The drive stage's state, handed from one benchmark group's node to the next (the firmware
+/// has exactly one, in a static: `baked::take_drive`).
+static DRIVE: critical_section::Mutex<Cell<Option<&'static mut Drive>>> =
+    critical_section::Mutex::new(Cell::new(None));
 
 fn node_step(
     node: &mut FirmwareNode,
