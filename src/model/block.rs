@@ -91,6 +91,28 @@ pub struct SsBlockState<const N: usize, const DELAY_CAP: usize = DEFAULT_DELAY_C
     pub delay: DelayLineState<DELAY_CAP>,
 }
 
+/// [`SsBlock::forecast`]: a copy of the state vector stepped along the inputs in flight, then a
+/// held input.
+#[derive(Clone, Debug)]
+pub struct Forecast<'a, const N: usize, const DELAY_CAP: usize> {
+    block: &'a SsBlock<N, DELAY_CAP>,
+    x: SVector<f32, N>,
+    in_flight: core::iter::Chain<core::slice::Iter<'a, f32>, core::slice::Iter<'a, f32>>,
+    u_hold: f32,
+}
+
+impl<const N: usize, const DELAY_CAP: usize> Forecast<'_, N, DELAY_CAP> {
+    /// The output of the next step (as [`SsBlock::step`] would return it).
+    #[inline(always)]
+    pub fn next_output(&mut self) -> f32 {
+        let u = self.in_flight.next().copied().unwrap_or(self.u_hold);
+        let b = self.block;
+        let y = b.c.dot(&self.x) + b.d * u;
+        self.x = b.a * self.x + b.b * u;
+        y
+    }
+}
+
 impl<const N: usize, const DELAY_CAP: usize> SsBlock<N, DELAY_CAP> {
     /// ZOH-discretizes `tf` at `ts_s` (f64) and rounds to f32.
     ///
@@ -162,6 +184,24 @@ impl<const N: usize, const DELAY_CAP: usize> SsBlock<N, DELAY_CAP> {
         let y = self.c.dot(&state.x) + self.d * u_d;
         state.x = self.a * state.x + self.b * u_d;
         y
+    }
+
+    /// The block's outputs from `state` on, without touching it: the inputs already in its
+    /// delay line first (they reach the model in the next `delay_samples` steps), then `u_hold`
+    /// held. Each [`Forecast::next_output`] is one [`SsBlock::step`], bit for bit, without the
+    /// ring buffer's bookkeeping (the horizon predictor's speed profile).
+    pub fn forecast<'a>(
+        &'a self,
+        state: &'a SsBlockState<N, DELAY_CAP>,
+        u_hold: f32,
+    ) -> Forecast<'a, N, DELAY_CAP> {
+        let (first, then) = self.delay.in_flight(&state.delay);
+        Forecast {
+            block: self,
+            x: state.x,
+            in_flight: first.iter().chain(then.iter()),
+            u_hold,
+        }
     }
 
     /// All-zero state (zero output history and zero inputs in flight).

@@ -18,7 +18,7 @@
 //! and side distances, the turn and the turn's first moment; the pose moves once per output
 //! point along that segment ([`Pose::advance_segment`]), corrected to first order for a yaw
 //! rate that changes within it.
-use super::dynamic::{DynamicParams, LateralState, LateralStepper};
+use super::dynamic::{DynamicParams, HeldStep, LateralState, LateralStepper};
 use super::hybrid::Mode;
 use super::kinematic::Pose;
 use crate::image::{Image, ImageError, ImageReader, ImageWriter};
@@ -85,8 +85,6 @@ pub struct PredictorStart {
     pub speed_mps: f32,
     /// Measured speed minus the velocity model's current output, m/s.
     pub speed_bias_mps: f32,
-    /// Latest commanded speed, m/s.
-    pub speed_cmd_mps: f32,
     /// Latest measured centre-tyre steering angle, rad (positive right).
     pub center_steer_rad: f32,
     /// Current lateral state (used by the dynamic model).
@@ -111,16 +109,26 @@ pub struct PredictedPoint {
     pub speed_mps: f32,
 }
 
-/// Rolls forward. `speed_model_step` advances a copy of the velocity model by one step with the
-/// given commanded speed and returns its output (m/s). Fills `out` with up to `out.len()`
-/// points and returns how many were written. The dynamic model runs when the start's mode is
-/// dynamic and the car has one (`dynamics`); otherwise the kinematic model.
+/// Steps of the speed model between two output points, at most: the horizon's 0.2 s at 20 ms
+/// (a configuration image with more is refused). Each segment's speeds are computed into a
+/// buffer of this size before the lateral model runs over them.
+pub const MAX_STEPS_PER_POINT: usize = 10;
+
+/// Rolls forward. `speed_model` returns the velocity model's next output (m/s) along the
+/// horizon, the commanded speed held (the node passes a forecast of eq 5 from a copy of its
+/// state). Fills `out` with up to `out.len()` points and returns how many were written. The
+/// dynamic model runs when the start's mode is dynamic and the car has one (`dynamics`);
+/// otherwise the kinematic model.
+///
+/// Fixed work for a given horizon: `points x steps_per_point` speed-model steps, one pass of
+/// the lateral model over each segment's steps and one pose update per point, whatever the
+/// data (no loop depends on a value: a turn of any size is one step, [`Pose::advance_segment`]).
 pub fn rollout(
     horizon: &HorizonConfig,
     vehicle: &VehicleParams,
     dynamics: Option<&DynamicParams>,
     start: &PredictorStart,
-    speed_model_step: impl FnMut(f32) -> f32,
+    speed_model: impl FnMut() -> f32,
     out: &mut [PredictedPoint],
 ) -> usize {
     match (start.mode, dynamics) {
@@ -133,22 +141,22 @@ pub fn rollout(
                 turn_rad: 0.0,
                 moment_m: 0.0,
             };
-            roll(horizon, start, segment, speed_model_step, out)
+            roll(horizon, start, segment, speed_model, out)
         }
         _ => {
             let segment = ArcSegment {
                 curvature_per_m: vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps),
                 arc_m: 0.0,
             };
-            roll(horizon, start, segment, speed_model_step, out)
+            roll(horizon, start, segment, speed_model, out)
         }
     }
 }
 
-/// How the pose moves between two output points: summed per 20 ms step, applied once per point.
+/// How the pose moves between two output points: the segment's steps summed, applied once.
 trait Segment {
-    /// One step at speed `v_mps` for `dt_s`.
-    fn step(&mut self, v_mps: f32, dt_s: f32);
+    /// The segment's steps, at speeds `v_mps` (one per step) for `dt_s` each.
+    fn steps(&mut self, v_mps: &[f32], dt_s: f32);
     /// Moves `pose` over the steps summed since the last point and starts a new segment.
     fn apply(&mut self, pose: &mut Pose);
 }
@@ -162,8 +170,10 @@ struct ArcSegment {
 
 impl Segment for ArcSegment {
     #[inline(always)]
-    fn step(&mut self, v_mps: f32, dt_s: f32) {
-        self.arc_m += v_mps * dt_s;
+    fn steps(&mut self, v_mps: &[f32], dt_s: f32) {
+        for v in v_mps {
+            self.arc_m += v * dt_s;
+        }
     }
 
     #[inline(always)]
@@ -173,7 +183,11 @@ impl Segment for ArcSegment {
     }
 }
 
-/// Dynamic: the lateral model steps every 20 ms; the forward and side distances, the turn and
+/// Dynamic: the lateral model steps every 20 ms with the segment's mean speed held in its
+/// coefficients ([`LateralStepper::held`]: one solve per segment instead of one per step); its
+/// state is taken as yaw and side slip per metre driven, so the heading and the side offset
+/// follow the distance of each step at its own speed (exact at constant speed, and a stop
+/// within a segment turns the car no further). The forward and side distances, the turn and
 /// the turn's first moment (sum of ds * (heading at the step's middle - heading at the
 /// segment's start)) are summed. The pose moves along the segment as one arc
 /// ([`Pose::advance_segment`]), which puts the moment at `forward * turn / 2`; the difference,
@@ -188,16 +202,56 @@ struct SlipSegment {
     moment_m: f32,
 }
 
+impl SlipSegment {
+    /// One step of `ds_m` with `dtheta_rad` of turn and `side_m` of side slip.
+    #[inline(always)]
+    fn add(&mut self, ds_m: f32, dtheta_rad: f32, side_m: f32) {
+        self.moment_m += ds_m * (self.turn_rad + 0.5 * dtheta_rad);
+        self.forward_m += ds_m;
+        self.side_m += side_m;
+        self.turn_rad += dtheta_rad;
+    }
+}
+
 impl Segment for SlipSegment {
     #[inline(always)]
-    fn step(&mut self, v_mps: f32, dt_s: f32) {
-        self.stepper.step(&mut self.lateral, v_mps);
-        let ds = v_mps * dt_s;
-        let dtheta = self.lateral.yaw_rate_rps * dt_s;
-        self.moment_m += ds * (self.turn_rad + 0.5 * dtheta);
-        self.forward_m += ds;
-        self.side_m += self.lateral.vy_mps * dt_s;
-        self.turn_rad += dtheta;
+    fn steps(&mut self, v_mps: &[f32], dt_s: f32) {
+        let mut sum_mps = 0.0f32;
+        for v in v_mps {
+            sum_mps += v;
+        }
+        let mean_mps = sum_mps / v_mps.len().max(1) as f32;
+        match self.stepper.held(mean_mps) {
+            HeldStep::Slow {
+                curvature_per_m,
+                slip_per_m,
+            } => {
+                for v in v_mps {
+                    let ds = v * dt_s;
+                    self.add(ds, curvature_per_m * ds, slip_per_m * ds);
+                }
+                // The kinematic steady state at the segment's last speed.
+                let v_end = v_mps.last().copied().unwrap_or(0.0);
+                self.lateral = LateralState {
+                    vy_mps: slip_per_m * v_end,
+                    yaw_rate_rps: curvature_per_m * v_end,
+                };
+            }
+            HeldStep::Fast { m, g, vx_mps } => {
+                let [[m11, m12], [m21, m22]] = m;
+                let inv_vx = 1.0 / vx_mps;
+                let (mut vy, mut r) = (self.lateral.vy_mps, self.lateral.yaw_rate_rps);
+                for v in v_mps {
+                    (vy, r) = (m11 * vy + m12 * r + g[0], m21 * vy + m22 * r + g[1]);
+                    let ds = v * dt_s;
+                    self.add(ds, r * inv_vx * ds, vy * inv_vx * ds);
+                }
+                self.lateral = LateralState {
+                    vy_mps: vy,
+                    yaw_rate_rps: r,
+                };
+            }
+        }
     }
 
     #[inline(always)]
@@ -211,43 +265,41 @@ impl Segment for SlipSegment {
     }
 }
 
-/// The roll-out loop for one kind of segment (monomorphised: one tight loop per model).
+/// The roll-out loop for one kind of segment (monomorphised: one tight loop per model):
+/// per output point, the segment's speeds (eq 5 with the output bias, clamped to [0, max]),
+/// then the lateral model over them, then the pose.
 #[inline(always)]
 fn roll<S: Segment>(
     horizon: &HorizonConfig,
     start: &PredictorStart,
     mut segment: S,
-    mut speed_model_step: impl FnMut(f32) -> f32,
+    mut speed_model: impl FnMut() -> f32,
     out: &mut [PredictedPoint],
 ) -> usize {
     let mut pose = start.pose;
     let dt = horizon.dt_s;
-    let every = horizon.output_every.max(1);
-    let mut written = 0usize;
-    let mut slot = out.iter_mut();
-    let mut until_point = every;
-    for k in 1..=horizon.steps {
-        let v_model = speed_model_step(start.speed_cmd_mps);
-        let v = clamp_speed(v_model + start.speed_bias_mps, horizon.max_speed_mps);
-        segment.step(v, dt);
-        until_point -= 1;
-        if until_point == 0 {
-            until_point = every;
-            let Some(point) = slot.next() else {
-                break;
-            };
-            segment.apply(&mut pose);
-            *point = PredictedPoint {
-                horizon_s: f32::from(k) * dt,
-                x_m: pose.x_m,
-                y_m: pose.y_m,
-                heading_rad: pose.heading_rad,
-                speed_mps: v,
-            };
-            written += 1;
+    let every = usize::from(horizon.output_every).clamp(1, MAX_STEPS_PER_POINT);
+    let points = (usize::from(horizon.steps) / every).min(out.len());
+    let mut speeds = [0.0f32; MAX_STEPS_PER_POINT];
+    let mut k = 0u16;
+    for point in out.iter_mut().take(points) {
+        let block = speeds.get_mut(..every).unwrap_or(&mut []);
+        for v in block.iter_mut() {
+            *v = clamp_speed(speed_model() + start.speed_bias_mps, horizon.max_speed_mps);
         }
+        segment.steps(block, dt);
+        segment.apply(&mut pose);
+        // `every` <= MAX_STEPS_PER_POINT, so this cannot overflow.
+        k += every as u16;
+        *point = PredictedPoint {
+            horizon_s: f32::from(k) * dt,
+            x_m: pose.x_m,
+            y_m: pose.y_m,
+            heading_rad: pose.heading_rad,
+            speed_mps: block.last().copied().unwrap_or(0.0),
+        };
     }
-    written
+    points
 }
 
 /// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
@@ -277,7 +329,6 @@ mod tests {
             pose: Pose::new(0.0, 0.0, 0.0),
             speed_mps: speed,
             speed_bias_mps: 0.0,
-            speed_cmd_mps: speed,
             center_steer_rad: steer_rad,
             lateral: CAT_VEHICLE_DYNAMICS.steady_state(speed, steer_rad),
             mode,
@@ -294,7 +345,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &s,
-            |_| 5.0,
+            || 5.0,
             &mut out,
         );
         assert_eq!(n, 10);
@@ -320,7 +371,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Kinematic, steer, 8.0),
-            |_| 8.0,
+            || 8.0,
             &mut kin,
         );
         rollout(
@@ -328,7 +379,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Dynamic, steer, 8.0),
-            |_| 8.0,
+            || 8.0,
             &mut dynm,
         );
         let (a, b) = (kin[9], dynm[9]);
@@ -366,7 +417,7 @@ mod tests {
                 &CAT_VEHICLE,
                 Some(&CAT_VEHICLE_DYNAMICS),
                 &s,
-                |_| {
+                || {
                     k += 1;
                     speed(k)
                 },
@@ -402,7 +453,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &s,
-            |_| f32::NAN,
+            || f32::NAN,
             &mut out,
         );
         for p in out {

@@ -32,9 +32,6 @@ pub const GNSS_MA_SPAN: usize = 10;
 const TRACK_LEN: usize = 64;
 /// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
 const ODO_LEN: usize = 32;
-/// Missing fixes filled in after a gap, at most: the filters' memory (FIR taps + MA span);
-/// anything older would be flushed out anyway.
-pub const GAP_FILL_MAX_FIXES: u32 = (GNSS_FIR_TAPS + GNSS_MA_SPAN) as u32;
 
 /// Estimator tuning. Immutable configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -195,12 +192,15 @@ impl EstimatorConfig {
 }
 
 impl EstimatorState {
-    /// Forgets everything (e.g. after a GNSS outage or a position jump).
+    /// Forgets every fix (e.g. after a GNSS outage or a position jump): the next fix primes
+    /// the filters. Only the fix count and the filter output are cleared: nothing reads the
+    /// histories below the fix count (the next fix overwrites the filters' memory, the rings
+    /// are read at most `fixes` back), so this is the same as starting afresh, in a few
+    /// instructions instead of rewriting the whole state. The heading survives a position
+    /// reset: it is still the car's.
     pub fn reset(&mut self) {
-        let heading = self.heading_rad;
-        *self = Self::default();
-        // The heading survives a position reset: it is still the car's.
-        self.heading_rad = heading;
+        self.fixes = 0;
+        self.filtered = None;
     }
 
     /// Current heading estimate, rad.
@@ -275,6 +275,62 @@ impl EstimatorState {
             *slot = filtered;
         }
         self.fixes = self.fixes.saturating_add(1);
+    }
+
+    /// Restarts the filters on the dead-reckoned track after a gap of `missing` fixes whose
+    /// newest one would have come one period before a fix of age `age_s`: the state is what
+    /// filling the filters' whole memory with dead-reckoned positions gives (for a gap as long
+    /// as that memory, what filling fix by fix does, to rounding), computed directly in fixed
+    /// work. On that straight, evenly spaced track a unit-gain symmetric FIR and the moving
+    /// average are pure delays, so each filter's history is the track itself, shifted by its
+    /// group delay. Without a position (filters not warm) it does nothing.
+    pub fn restart_on_track(
+        &mut self,
+        cfg: &EstimatorConfig,
+        age_s: f32,
+        missing: u32,
+        speed_mps: f32,
+    ) {
+        let Some(now) = self.antenna_position(cfg) else {
+            return;
+        };
+        let (s, c) = self.heading_sin_cos;
+        let period_s = cfg.gnss_period_s;
+        // The antenna `k` periods before the fix (k = 1: the newest missing one), moved
+        // `delay` fixes further back.
+        let track = |k: usize, delay: f32| {
+            let back_m = speed_mps * (age_s + (k as f32 + delay) * period_s);
+            Xy {
+                x_m: now.x_m - back_m * s,
+                y_m: now.y_m - back_m * c,
+            }
+        };
+        self.fir_x.load(|k| track(k + 1, 0.0).x_m);
+        self.fir_y.load(|k| track(k + 1, 0.0).y_m);
+        let fir_delay = cfg.fir.group_delay_samples();
+        self.ma_x.load(|k| track(k + 1, fir_delay).x_m);
+        self.ma_y.load(|k| track(k + 1, fir_delay).y_m);
+        // The histories get one entry per missing fix, oldest first, as filling would give.
+        let odo_entries = (missing as usize).min(ODO_LEN);
+        for k in (1..=odo_entries).rev() {
+            let back_m = speed_mps * (age_s + k as f32 * period_s);
+            self.odo_head = (self.odo_head + 1) % ODO_LEN;
+            if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
+                *slot = Xy {
+                    x_m: self.odo_now.x_m - back_m * s,
+                    y_m: self.odo_now.y_m - back_m * c,
+                };
+            }
+        }
+        let track_entries = (missing as usize).min(TRACK_LEN);
+        for k in (1..=track_entries).rev() {
+            self.track_head = (self.track_head + 1) % TRACK_LEN;
+            if let Some(slot) = self.track.get_mut(self.track_head) {
+                *slot = track(k, cfg.group_delay_fixes);
+            }
+        }
+        self.filtered = Some(track(1, cfg.group_delay_fixes));
+        self.fixes = self.fixes.saturating_add(missing);
     }
 
     /// Dead-reckoned position `k` fixes ago (0 = the latest fix); `None` if not recorded yet.

@@ -6,7 +6,8 @@
 //! top to bottom to follow a frame from the bus to a prediction:
 //! 1. **receive and validate** ([`inputs`]): decode each frame (DLC, CRC-8, rolling counter,
 //!    range; GNSS range and a plausibility gate), count every rejection, keep the latest valid
-//!    value of each input with its receive time; GNSS fixes go into the lowpass ([`gnss`]);
+//!    value of each input with its receive time; then the tick's GNSS fixes go into the
+//!    lowpass ([`gnss`]);
 //! 2. **models and hybrid switch**: the speed model (eq 5) driven by the commanded speed, the
 //!    active lateral model (kinematic eq 8, or the dynamic single-track model) chosen by the
 //!    hybrid switch;
@@ -17,7 +18,9 @@
 //!    finite before it is encoded (non-finite values go out as "not available" and are
 //!    counted, health bit `nonfinite_guard`).
 //!
-//! Never panics on bus data, never allocates, never reads a clock.
+//! Never panics on bus data, never allocates, never reads a clock. Its work is bounded for any
+//! input: at most [`MAX_RX_FRAMES_PER_TICK`] frames a tick, fixed loop counts everywhere else
+//! ([`stage`] writes the structure down; docs/firmware.md, "Worst-case tick").
 //!
 //! Configuration ([`NodeConfig`]) is everything about the car: built from the model file by
 //! `catmodel-model-file` (host) or read from the image the firmware build baked
@@ -26,6 +29,7 @@ pub mod estimator;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
+pub mod stage;
 
 use crate::can::freshness::{FreshnessConfig, Input};
 use crate::can::TimedFrame;
@@ -39,8 +43,11 @@ use crate::vehicle::{Body, VehicleParams};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
 use estimator::EstimatorConfig;
 use gnss::Gnss;
-use inputs::{Inputs, Snapshot};
+use inputs::{GnssMessage, Inputs, Snapshot};
 use publish::Health;
+pub use stage::{
+    NoProbe, Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK, MAX_RX_FRAMES_PER_TICK,
+};
 
 /// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.
 pub const MAX_TX_FRAMES: usize = 16;
@@ -229,6 +236,9 @@ pub struct Counters {
     pub unknown_ids: u32,
     /// Frames stamped after the tick that received them (clock mismatch), rejected.
     pub time_errors: u32,
+    /// Frames beyond [`MAX_RX_FRAMES_PER_TICK`] handed to one tick, not used (the app and host
+    /// replay never hand more: they keep the rest for the next tick).
+    pub rx_over_cap: u32,
     /// Output values replaced because they were not finite.
     pub nonfinite: u32,
     /// Output values saturated to their field's range.
@@ -338,19 +348,38 @@ impl Node {
         self.gnss.origin_e7()
     }
 
-    /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order) and
-    /// appends this tick's frames to `tx`. Returns what the tick estimated.
+    /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order; the
+    /// first [`MAX_RX_FRAMES_PER_TICK`], any more are counted and not used) and appends this
+    /// tick's frames to `tx`. Returns what the tick estimated.
     pub fn step(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
+        self.step_probed(tick, rx, tx, &mut NoProbe)
+    }
+
+    /// [`Node::step`], telling `probe` where each stage ends ([`stage`]): how the tick's
+    /// worst case is measured. Same results as `step`.
+    #[inline(always)]
+    pub fn step_probed<P: StageProbe>(
+        &mut self,
+        tick: &Tick,
+        rx: &[TimedFrame],
+        tx: &mut TxFrames,
+        probe: &mut P,
+    ) -> TickEstimate {
         let now = tick.now_us;
         let dt_s = self.advance(now);
-        self.receive(now, rx);
+        probe.lap(Stage::Advance);
+        self.receive(now, rx, probe);
         let snapshot = self.inputs.snapshot(&self.config, now);
         let motion = self.run_models(&snapshot, dt_s);
+        probe.lap(Stage::Models);
         let estimate = self.estimate(now, &motion);
+        probe.lap(Stage::Estimate);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
         let predicted = self.predict(&snapshot, &motion, &estimate, &mut points);
         let horizon = points.get(..predicted).unwrap_or(&[]);
+        probe.lap(Stage::Predict);
         self.publish(tick, &snapshot, &motion, &estimate, horizon, tx);
+        probe.lap(Stage::Publish);
         TickEstimate {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
@@ -376,19 +405,41 @@ impl Node {
         dt_s
     }
 
-    /// Stage 1: every received frame decoded, validated and applied (or counted as rejected).
-    fn receive(&mut self, now_us: u64, rx: &[TimedFrame]) {
-        for frame in rx {
-            if let Some(gnss) = self.inputs.receive(&self.config, now_us, frame) {
-                self.gnss.receive(
-                    &self.config,
-                    now_us,
-                    &gnss,
-                    self.models.speed_mps,
-                    &mut self.inputs,
-                );
+    /// Stage 1: every received frame (the first [`MAX_RX_FRAMES_PER_TICK`]) decoded, validated
+    /// and applied, or counted as rejected; then the tick's GNSS fixes (the first
+    /// [`GNSS_FIXES_PER_TICK`], in arrival order) through the GNSS stage. The reports change
+    /// nothing the GNSS stage reads (it uses last tick's speed), so handling the fixes after
+    /// the frames is the same as handling them in between.
+    fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) {
+        let (frames, over_cap) = rx.split_at(rx.len().min(MAX_RX_FRAMES_PER_TICK));
+        let c = &mut self.inputs.counters;
+        c.rx_over_cap = c
+            .rx_over_cap
+            .saturating_add(u32::try_from(over_cap.len()).unwrap_or(u32::MAX));
+        let mut fixes = gnss::TickFixes::new();
+        for frame in frames {
+            match self.inputs.receive(&self.config, now_us, frame) {
+                Some(GnssMessage::Fix(fix)) => {
+                    if fixes.push(fix).is_err() {
+                        bump(&mut self.inputs.counters.gnss_gate_rejects);
+                        self.gnss.rejected(fix.t_us);
+                    }
+                }
+                Some(GnssMessage::Course(course)) => {
+                    self.gnss.receive_course(&self.config, &course);
+                }
+                None => {}
             }
+            probe.lap(Stage::Frame);
         }
+        self.gnss.receive_fixes(
+            &self.config,
+            now_us,
+            &fixes,
+            self.models.speed_mps,
+            &mut self.inputs,
+            probe,
+        );
     }
 
     /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.
@@ -503,22 +554,23 @@ impl Node {
         ) else {
             return 0;
         };
-        let mut rollout_state = *velocity;
         let start = PredictorStart {
             pose,
             speed_mps: motion.speed_mps,
             speed_bias_mps: motion.speed_mps - v_model,
-            speed_cmd_mps: motion.speed_cmd_mps.unwrap_or(motion.speed_mps),
             center_steer_rad: motion.center_steer_rad,
             lateral: self.models.lateral,
             mode: motion.mode,
         };
+        // Eq 5 along the horizon: the commands in its delay line, then the latest one held.
+        let u_hold = motion.speed_cmd_mps.unwrap_or(motion.speed_mps);
+        let mut speeds = cfg.velocity.forecast(velocity, u_hold);
         predictor::rollout(
             &cfg.horizon,
             &cfg.vehicle,
             cfg.dynamics.as_ref(),
             &start,
-            |u| cfg.velocity.step(&mut rollout_state, u),
+            || speeds.next_output(),
             points,
         )
     }

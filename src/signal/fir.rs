@@ -227,6 +227,18 @@ impl<const N: usize> FirState<N> {
     pub fn reset(&mut self) {
         *self = Self::new();
     }
+
+    /// Replaces the history: `input(k)` is the input `k` samples before the newest (k = 0 the
+    /// newest, up to N - 1), as if those N samples had just been pushed. N calls, no filtering.
+    pub fn load(&mut self, mut input: impl FnMut(usize) -> f32) {
+        self.newest = 0;
+        let [first, second] = &mut self.line;
+        for (k, (a, b)) in first.iter_mut().zip(second.iter_mut()).enumerate() {
+            let x = input(k);
+            *a = x;
+            *b = x;
+        }
+    }
 }
 
 #[cfg(test)]

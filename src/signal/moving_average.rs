@@ -120,6 +120,17 @@ impl<const N: usize> MovingAverageState<N> {
     pub fn reset(&mut self) {
         *self = Self::new();
     }
+
+    /// Replaces the window: `input(k)` is the input `k` samples before the newest (k = 0 the
+    /// newest, up to N - 1), as if those N samples had just been pushed in order.
+    pub fn load(&mut self, mut input: impl FnMut(usize) -> f32) {
+        // Chronological order in the slots, the oldest where the next sample goes.
+        for (slot, k) in self.window.iter_mut().zip((0..N).rev()) {
+            *slot = input(k);
+        }
+        self.next = 0;
+        self.count = N;
+    }
 }
 
 #[cfg(test)]

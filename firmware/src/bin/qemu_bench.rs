@@ -468,7 +468,6 @@ fn bench_rollouts() {
                 pose,
                 speed_mps: speed,
                 speed_bias_mps: speed - v_model,
-                speed_cmd_mps: cmd,
                 center_steer_rad: steer,
                 lateral: match mode {
                     Mode::Kinematic => dynamics.steady_state(speed, steer),
@@ -479,14 +478,13 @@ fn bench_rollouts() {
             let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
             let vel_state = *state;
             let (_, n) = timed(|| {
-                let mut rollout_state = *black_box(&vel_state);
-                let velocity = &cfg.velocity;
+                let mut speeds = cfg.velocity.forecast(black_box(&vel_state), black_box(cmd));
                 predictor::rollout(
                     &cfg.horizon,
                     &cfg.vehicle,
                     Some(dynamics),
                     black_box(&start),
-                    |u| velocity.step(&mut rollout_state, u),
+                    || speeds.next_output(),
                     black_box(&mut points),
                 )
             });
