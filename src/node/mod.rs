@@ -46,7 +46,8 @@ use gnss::Gnss;
 use inputs::{GnssMessage, Inputs, Snapshot};
 use publish::Health;
 pub use stage::{
-    NoProbe, Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK, MAX_RX_FRAMES_PER_TICK,
+    NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK,
+    MAX_RX_FRAMES_PER_TICK, TICK_STAGES,
 };
 
 /// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.

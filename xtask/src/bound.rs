@@ -1,0 +1,274 @@
+//! The tick's worst-case bound: the structure written down next to the code
+//! (`catmodel::node::stage::TICK_STAGES`, each stage's runs per tick at most; the app's drain,
+//! handoff and the step's return once each) times each stage's most expensive run, measured
+//! in QEMU by `catmodel-qemu-bench --stages` over the dedicated drives of
+//! [`crate::drives::stage_corpus`]:
+//!
+//! `bound = sum over rows of max_per_tick x max`
+//!
+//! It holds for any input as far as (1) the counts are bounded by the code (a stage that runs
+//! more often than its row says fails the measurement), (2) no stage's cost depends on the data
+//! beyond the paths the dedicated drives take (every loop has a fixed count; the branches are
+//! the ones the drives exercise), and (3) the probed build of the step costs what the plain
+//! one does (the difference is a row of its own). `cargo xtask adversarial` then tries to break
+//! it on whole ticks. The table is data: a new stage is a new row, nothing here changes.
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use catmodel::node::NodeConfig;
+use catmodel_app::budget::{CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS};
+
+use super::{cargo_build, drives, qemu_command, root, INSTALL_QEMU};
+
+/// One row of the bound.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Row {
+    /// Stage key.
+    pub key: String,
+    /// Runs per tick, at most.
+    pub max_per_tick: u32,
+    /// Runs measured.
+    pub runs: u32,
+    /// Most expensive run measured, instructions.
+    pub max: u32,
+    /// The drive that showed it.
+    pub drive: String,
+    /// Why no more runs.
+    pub because: String,
+}
+
+impl Row {
+    /// This row's part of the bound.
+    pub fn part(&self) -> u64 {
+        u64::from(self.max_per_tick) * u64::from(self.max)
+    }
+}
+
+/// The bound and what it was computed from.
+#[derive(Clone, Debug)]
+pub struct Bound {
+    /// The rows, node stages first, in the order they run.
+    pub rows: Vec<Row>,
+    /// Ticks measured over the dedicated drives.
+    pub ticks: u32,
+    /// The largest whole tick among them (drain + plain step + handoff), and its drive.
+    pub max_tick: (u32, String),
+    /// The drives.
+    pub drives: Vec<String>,
+}
+
+impl Bound {
+    /// The tick's bound, instructions.
+    pub fn total(&self) -> u64 {
+        self.rows.iter().map(Row::part).sum()
+    }
+
+    /// The table printed by `cargo qemu` and `cargo xtask bench-target`.
+    pub fn table(&self) -> String {
+        let total = self.total();
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "worst case per tick, from the code's structure and each stage's measured maximum \
+             ({} ticks of {} dedicated drives; QEMU instruction counts, not cycles):",
+            self.ticks,
+            self.drives.len()
+        );
+        let _ = writeln!(
+            t,
+            "  {:<18}{:>10}{:>8}{:>9}{:>8}  {:<28}bounded by",
+            "stage", "max/tick", "max", "part", "share", "max seen on"
+        );
+        for r in &self.rows {
+            let share = r.part() as f64 / total.max(1) as f64 * 100.0;
+            let _ = writeln!(
+                t,
+                "  {:<18}{:>10}{:>8}{:>9}{:>7.1}%  {:<28}{}",
+                r.key,
+                r.max_per_tick,
+                r.max,
+                r.part(),
+                share,
+                r.drive,
+                r.because
+            );
+        }
+        let _ = writeln!(
+            t,
+            "  bound {total} instructions (budget {TICK_BUDGET_INSTRUCTIONS}; {:.3} % of a 20 ms tick at 168 MHz if one instruction took one cycle); largest tick of these drives {}",
+            total as f64 / CYCLES_PER_TICK as f64 * 100.0,
+            self.max_tick.0
+        );
+        t
+    }
+
+    /// The markdown table of the README and docs/firmware.md.
+    pub fn markdown(&self) -> String {
+        let total = self.total();
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "| stage | runs per tick, at most | bounded by | most expensive run | on drive | part of the bound | share |"
+        );
+        let _ = writeln!(t, "|---|---:|---|---:|---|---:|---:|");
+        for r in &self.rows {
+            let _ = writeln!(
+                t,
+                "| {} | {} | {} | {} | {} | {} | {:.1} % |",
+                r.key,
+                r.max_per_tick,
+                r.because,
+                r.max,
+                r.drive,
+                r.part(),
+                r.part() as f64 / total.max(1) as f64 * 100.0
+            );
+        }
+        let _ = writeln!(t, "| **tick** | | | | | **{total}** | 100 % |");
+        t
+    }
+
+    /// `worst_case` of `timing.json`.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "method": "sum over the tick's stages of (runs per tick at most, from catmodel::node::stage::TICK_STAGES and the app) x (most expensive run measured in QEMU on dedicated drives)",
+            "drives": self.drives,
+            "ticks_measured": self.ticks,
+            "largest_tick_measured": self.max_tick.0,
+            "largest_tick_drive": self.max_tick.1,
+            "stages": self.rows.iter().map(|r| serde_json::json!({
+                "stage": r.key,
+                "max_per_tick": r.max_per_tick,
+                "runs_measured": r.runs,
+                "max_instructions": r.max,
+                "max_on_drive": r.drive,
+                "part_instructions": r.part(),
+                "bounded_by": r.because,
+            })).collect::<Vec<_>>(),
+        })
+    }
+}
+
+/// The configuration the firmware bakes: `CATMODEL_MODEL` or `models/paper.toml` (the
+/// firmware's build script reads the same file through the same reader).
+pub fn baked_car() -> Result<NodeConfig> {
+    let path = match std::env::var_os("CATMODEL_MODEL") {
+        Some(p) => PathBuf::from(p),
+        None => root().join("models").join("paper.toml"),
+    };
+    let file = catmodel_model_file::load(&path).map_err(|e| anyhow!("{e}"))?;
+    Ok(file.node_config())
+}
+
+/// Writes the dedicated drives into `dir`; returns their paths relative to the repository.
+pub fn write_stage_corpus(car: &NodeConfig, dir: &Path) -> Result<Vec<String>> {
+    let mut paths = Vec::new();
+    for spec in drives::stage_corpus(car) {
+        let frames = drives::generate(&spec, car);
+        let path = dir.join(format!("{}.log", spec.name));
+        drives::write_candump(&path, &frames)?;
+        let rel = path
+            .strip_prefix(root())
+            .unwrap_or(&path)
+            .to_string_lossy()
+            .into_owned();
+        paths.push(rel);
+    }
+    Ok(paths)
+}
+
+/// Parses the `--stages` output of the bench firmware.
+pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
+    let name = |index: &str| -> Result<String> {
+        let i: usize = index.parse()?;
+        Ok(drives.get(i).cloned().unwrap_or_else(|| format!("#{i}")))
+    };
+    let mut rows = Vec::new();
+    let mut ticks = None;
+    let mut done = false;
+    for line in stderr.lines() {
+        let fields: Vec<&str> = line.split('\t').collect();
+        match fields.as_slice() {
+            ["stage", key, max_per_tick, runs, max, drive, because] => rows.push(Row {
+                key: key.to_string(),
+                max_per_tick: max_per_tick.parse()?,
+                runs: runs.parse()?,
+                max: max.parse()?,
+                drive: name(drive)?,
+                because: because.to_string(),
+            }),
+            ["stage-ticks", n, max, drive] => {
+                ticks = Some((n.parse()?, (max.parse()?, name(drive)?)))
+            }
+            ["stage-done"] => done = true,
+            _ => {}
+        }
+    }
+    if !done || rows.is_empty() {
+        bail!("the stage measurement did not finish:\n{stderr}");
+    }
+    let (ticks, max_tick) = ticks.ok_or_else(|| anyhow!("no stage-ticks line"))?;
+    Ok(Bound {
+        rows,
+        ticks,
+        max_tick,
+        drives,
+    })
+}
+
+/// Generates the dedicated drives, builds the bench firmware and measures every stage in QEMU.
+pub fn measure() -> Result<Bound> {
+    let car = baked_car()?;
+    let dir = root().join("target").join("qemu").join("stages");
+    let drives = write_stage_corpus(&car, &dir)?;
+    let elf = cargo_build("qemu", "catmodel-qemu-bench")?;
+    let mut append = vec!["catmodel-qemu-bench".to_string(), "--stages".to_string()];
+    append.extend(drives.iter().cloned());
+    let output = qemu_command(&elf)
+        .args(["-append", &append.join(" ")])
+        .output();
+    let output = match output {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
+        }
+        other => other.context("running qemu-system-arm")?,
+    };
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        bail!(
+            "the stage measurement failed ({}):\n{stderr}",
+            output.status
+        );
+    }
+    let names = drives
+        .iter()
+        .map(|p| {
+            Path::new(p)
+                .file_stem()
+                .map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
+        })
+        .collect();
+    parse(&stderr, names)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bound_is_the_sum_of_runs_times_maxima() {
+        let text =
+            "noise\nstage\tframe\t16\t100\t200\t0\tMAX\nstage\tpredict\t1\t9\t5000\t1\tonce\n\
+                    stage-ticks\t9\t7000\t1\nstage-done\n";
+        let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        assert_eq!(b.total(), 16 * 200 + 5000);
+        assert_eq!(
+            (b.ticks, b.max_tick.0, b.max_tick.1.as_str()),
+            (9, 7000, "b")
+        );
+        assert_eq!(b.rows[1].drive, "b");
+        assert!(b.table().contains("bound 8200 instructions"));
+        assert!(parse("stage\tx\t1\t1\t1\tw\n", vec![]).is_err());
+    }
+}
