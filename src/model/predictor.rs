@@ -114,9 +114,9 @@ pub struct PredictedPoint {
 /// buffer of this size before the lateral model runs over them.
 pub const MAX_STEPS_PER_POINT: usize = 10;
 
-/// Rolls forward. `speed_model` returns the velocity model's next output (m/s) along the
-/// horizon, the commanded speed held (the node passes a forecast of eq 5 from a copy of its
-/// state). Fills `out` with up to `out.len()` points and returns how many were written. The
+/// Rolls forward. `speed_model` fills its slice with the velocity model's next outputs (m/s)
+/// along the horizon, the commanded speed held (the node passes a forecast of eq 5 from its
+/// state, [`crate::model::block::Forecast::fill`]). Fills `out` with up to `out.len()` points and returns how many were written. The
 /// dynamic model runs when the start's mode is dynamic and the car has one (`dynamics`);
 /// otherwise the kinematic model.
 ///
@@ -128,7 +128,7 @@ pub fn rollout(
     vehicle: &VehicleParams,
     dynamics: Option<&DynamicParams>,
     start: &PredictorStart,
-    speed_model: impl FnMut() -> f32,
+    speed_model: impl FnMut(&mut [f32]),
     out: &mut [PredictedPoint],
 ) -> usize {
     match (start.mode, dynamics) {
@@ -273,7 +273,7 @@ fn roll<S: Segment>(
     horizon: &HorizonConfig,
     start: &PredictorStart,
     mut segment: S,
-    mut speed_model: impl FnMut() -> f32,
+    mut speed_model: impl FnMut(&mut [f32]),
     out: &mut [PredictedPoint],
 ) -> usize {
     let mut pose = start.pose;
@@ -284,8 +284,9 @@ fn roll<S: Segment>(
     let mut k = 0u16;
     for point in out.iter_mut().take(points) {
         let block = speeds.get_mut(..every).unwrap_or(&mut []);
+        speed_model(block);
         for v in block.iter_mut() {
-            *v = clamp_speed(speed_model() + start.speed_bias_mps, horizon.max_speed_mps);
+            *v = clamp_speed(*v + start.speed_bias_mps, horizon.max_speed_mps);
         }
         segment.steps(block, dt);
         segment.apply(&mut pose);
@@ -302,20 +303,20 @@ fn roll<S: Segment>(
     points
 }
 
-/// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
-/// would link float formatting into the firmware).
+/// `v` limited to [0, max_mps]: NaN gives 0, +infinity `max_mps` (comparisons only:
+/// `f32::clamp`'s assertion would link float formatting into the firmware, and `f32::max` is a
+/// library call on the Cortex-M4).
+#[inline(always)]
 fn clamp_speed(v: f32, max_mps: f32) -> f32 {
-    if !v.is_finite() {
-        return 0.0;
+    if v > 0.0 {
+        if v < max_mps {
+            v
+        } else {
+            max_mps
+        }
+    } else {
+        0.0
     }
-    let mut x = v;
-    if x < 0.0 {
-        x = 0.0;
-    }
-    if x > max_mps {
-        x = max_mps;
-    }
-    x
 }
 
 #[cfg(test)]
@@ -345,7 +346,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &s,
-            || 5.0,
+            |v: &mut [f32]| v.fill(5.0),
             &mut out,
         );
         assert_eq!(n, 10);
@@ -371,7 +372,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Kinematic, steer, 8.0),
-            || 8.0,
+            |v: &mut [f32]| v.fill(8.0),
             &mut kin,
         );
         rollout(
@@ -379,7 +380,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Dynamic, steer, 8.0),
-            || 8.0,
+            |v: &mut [f32]| v.fill(8.0),
             &mut dynm,
         );
         let (a, b) = (kin[9], dynm[9]);
@@ -417,9 +418,11 @@ mod tests {
                 &CAT_VEHICLE,
                 Some(&CAT_VEHICLE_DYNAMICS),
                 &s,
-                || {
-                    k += 1;
-                    speed(k)
+                |v: &mut [f32]| {
+                    for slot in v {
+                        k += 1;
+                        *slot = speed(k);
+                    }
                 },
                 &mut out,
             );
@@ -453,7 +456,7 @@ mod tests {
             &CAT_VEHICLE,
             Some(&CAT_VEHICLE_DYNAMICS),
             &s,
-            || f32::NAN,
+            |v: &mut [f32]| v.fill(f32::NAN),
             &mut out,
         );
         for p in out {

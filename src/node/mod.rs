@@ -571,7 +571,7 @@ impl Node {
             &cfg.vehicle,
             cfg.dynamics.as_ref(),
             &start,
-            || speeds.next_output(),
+            |block| speeds.fill(block),
             points,
         )
     }

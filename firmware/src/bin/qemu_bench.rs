@@ -485,7 +485,7 @@ fn bench_rollouts() {
                     &cfg.vehicle,
                     Some(dynamics),
                     black_box(&start),
-                    || speeds.next_output(),
+                    |block| speeds.fill(block),
                     black_box(&mut points),
                 )
             });
