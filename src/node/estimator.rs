@@ -250,12 +250,11 @@ impl EstimatorState {
             self.ma_x.prime(fix.x_m);
             self.ma_y.prime(fix.y_m);
         }
-        let fx = cfg
-            .ma
-            .process(&mut self.ma_x, cfg.fir.process(&mut self.fir_x, fix.x_m));
-        let fy = cfg
-            .ma
-            .process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
+        let (lx, ly) = cfg
+            .fir
+            .process_pair((&mut self.fir_x, &mut self.fir_y), (fix.x_m, fix.y_m));
+        let fx = cfg.ma.process(&mut self.ma_x, lx);
+        let fy = cfg.ma.process(&mut self.ma_y, ly);
         let filtered = Xy { x_m: fx, y_m: fy };
         self.filtered = Some(filtered);
         // Where dead reckoning had the car when the fix was taken (the heading's sine and
@@ -278,58 +277,59 @@ impl EstimatorState {
     }
 
     /// Restarts the filters on the dead-reckoned track after a gap of `missing` fixes whose
-    /// newest one would have come one period before a fix of age `age_s`: the state is what
-    /// filling the filters' whole memory with dead-reckoned positions gives (for a gap as long
-    /// as that memory, what filling fix by fix does, to rounding), computed directly in fixed
-    /// work. On that straight, evenly spaced track a unit-gain symmetric FIR and the moving
-    /// average are pure delays, so each filter's history is the track itself, shifted by its
-    /// group delay. Without a position (filters not warm) it does nothing.
+    /// newest one would have come one period before a fix of age `age_s`, the antenna being at
+    /// `antenna` now: the state is what filling the filters' whole memory with dead-reckoned
+    /// positions gives (for a gap as long as that memory, what filling fix by fix does, to
+    /// rounding), computed directly in fixed work. On that straight, evenly spaced track a
+    /// unit-gain symmetric FIR and the moving average are pure delays, so each filter's history
+    /// is the track itself, shifted by its group delay.
     pub fn restart_on_track(
         &mut self,
         cfg: &EstimatorConfig,
+        antenna: Xy,
         age_s: f32,
         missing: u32,
         speed_mps: f32,
     ) {
-        let Some(now) = self.antenna_position(cfg) else {
-            return;
-        };
         let (s, c) = self.heading_sin_cos;
-        let period_s = cfg.gnss_period_s;
-        // The antenna `k` periods before the fix (k = 1: the newest missing one), moved
-        // `delay` fixes further back.
-        let track = |k: usize, delay: f32| {
-            let back_m = speed_mps * (age_s + (k as f32 + delay) * period_s);
-            Xy {
-                x_m: now.x_m - back_m * s,
-                y_m: now.y_m - back_m * c,
-            }
+        // The antenna `k` periods before the fix, moved `delay` fixes further back: `back_m`
+        // metres behind where it is now.
+        let step_m = speed_mps * cfg.gnss_period_s;
+        let back_m = |k: usize, delay: f32| speed_mps * age_s + (k as f32 + delay) * step_m;
+        let at = |back: f32| Xy {
+            x_m: antenna.x_m - back * s,
+            y_m: antenna.y_m - back * c,
         };
-        self.fir_x.load(|k| track(k + 1, 0.0).x_m);
-        self.fir_y.load(|k| track(k + 1, 0.0).y_m);
+        self.fir_x.load(|k| at(back_m(k + 1, 0.0)).x_m);
+        self.fir_y.load(|k| at(back_m(k + 1, 0.0)).y_m);
         let fir_delay = cfg.fir.group_delay_samples();
-        self.ma_x.load(|k| track(k + 1, fir_delay).x_m);
-        self.ma_y.load(|k| track(k + 1, fir_delay).y_m);
-        // The histories get one entry per missing fix, oldest first, as filling would give.
+        self.ma_x.load(|k| at(back_m(k + 1, fir_delay)).x_m);
+        self.ma_y.load(|k| at(back_m(k + 1, fir_delay)).y_m);
+        // The histories get one entry per missing fix, oldest first, as filling would give:
+        // the dead-reckoned position then, and the filters' output then. Of the dead-reckoning
+        // history only the entries the delay compensation can still read are written (it reads
+        // `group_delay` and one more fixes back; older entries only get older).
+        let odo = self.odo_now;
         let odo_entries = (missing as usize).min(ODO_LEN);
-        for k in (1..=odo_entries).rev() {
-            let back_m = speed_mps * (age_s + k as f32 * period_s);
+        let odo_read = (cfg.group_delay_fixes.max(0.0) as usize + 2).min(odo_entries);
+        self.odo_head = (self.odo_head + odo_entries - odo_read) % ODO_LEN;
+        for k in (1..=odo_read).rev() {
+            let back = back_m(k, 0.0);
             self.odo_head = (self.odo_head + 1) % ODO_LEN;
             if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
                 *slot = Xy {
-                    x_m: self.odo_now.x_m - back_m * s,
-                    y_m: self.odo_now.y_m - back_m * c,
+                    x_m: odo.x_m - back * s,
+                    y_m: odo.y_m - back * c,
                 };
             }
         }
-        let track_entries = (missing as usize).min(TRACK_LEN);
-        for k in (1..=track_entries).rev() {
+        for k in (1..=(missing as usize).min(TRACK_LEN)).rev() {
             self.track_head = (self.track_head + 1) % TRACK_LEN;
             if let Some(slot) = self.track.get_mut(self.track_head) {
-                *slot = track(k, cfg.group_delay_fixes);
+                *slot = at(back_m(k, cfg.group_delay_fixes));
             }
         }
-        self.filtered = Some(track(1, cfg.group_delay_fixes));
+        self.filtered = Some(at(back_m(1, cfg.group_delay_fixes)));
         self.fixes = self.fixes.saturating_add(missing);
     }
 
@@ -355,21 +355,15 @@ impl EstimatorState {
         })
     }
 
-    /// Where dead reckoning puts the antenna `age_s` ago (straight back along this tick's
-    /// heading at `speed_mps`): the stand-in for a missing fix. `None` without a position.
-    pub fn dead_reckoned_antenna(
-        &self,
-        cfg: &EstimatorConfig,
-        age_s: f32,
-        speed_mps: f32,
-    ) -> Option<Xy> {
-        let now = self.antenna_position(cfg)?;
+    /// Where dead reckoning puts the antenna `age_s` before it was at `antenna` (straight back
+    /// along this tick's heading at `speed_mps`): the stand-in for a missing fix.
+    pub fn dead_reckoned_back(&self, antenna: Xy, age_s: f32, speed_mps: f32) -> Xy {
         let (s, c) = self.heading_sin_cos;
         let back_m = speed_mps * age_s;
-        Some(Xy {
-            x_m: now.x_m - back_m * s,
-            y_m: now.y_m - back_m * c,
-        })
+        Xy {
+            x_m: antenna.x_m - back_m * s,
+            y_m: antenna.y_m - back_m * c,
+        }
     }
 
     /// The antenna now: the filtered position moved forward by dead reckoning,

@@ -136,7 +136,7 @@ impl Gnss {
         let cfg = &config.estimator;
         // Plausibility gate against where the car should be; repeated rejections mean the car
         // really is there (e.g. after a long gap): restart the filters on the fixes.
-        let antenna = self.estimator.antenna_position(cfg);
+        let mut antenna = self.estimator.antenna_position(cfg);
         if let Some(p) = antenna {
             let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
             if dx * dx + dy * dy > config.gnss_gate_m * config.gnss_gate_m {
@@ -148,6 +148,7 @@ impl Gnss {
                     return;
                 }
                 self.estimator.reset();
+                antenna = None;
             }
         }
         self.rejects_in_row = 0;
@@ -157,10 +158,10 @@ impl Gnss {
         // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
         // the antenna at those instants, oldest first, up to the tick's budget; a longer gap
         // restarts the filters on that dead-reckoned track at once (what filling the filters'
-        // whole memory would do). Without a position (filters not warm) there is nothing to
-        // dead-reckon from.
+        // whole memory would do). Without a position (filters not warm, or just restarted)
+        // there is nothing to dead-reckon from.
         let prev = inputs.freshness.last_us(Input::Gnss);
-        if let (Some(prev), true) = (prev, self.estimator.antenna_position(cfg).is_some()) {
+        if let (Some(prev), Some(antenna)) = (prev, antenna) {
             let gap_periods =
                 math::u64_to_f32(t_us.saturating_sub(prev)) * 1e-6 / cfg.gnss_period_s;
             let missing = ((gap_periods + 0.5) as u32).saturating_sub(1);
@@ -168,15 +169,14 @@ impl Gnss {
                 gaps.fills_left -= missing;
                 for k in (1..=missing).rev() {
                     let age_k = age_s + k as f32 * cfg.gnss_period_s;
-                    if let Some(p) = self.estimator.dead_reckoned_antenna(cfg, age_k, speed_mps) {
-                        self.estimator.add_fix(cfg, p, age_k, speed_mps);
-                    }
+                    let p = self.estimator.dead_reckoned_back(antenna, age_k, speed_mps);
+                    self.estimator.add_fix(cfg, p, age_k, speed_mps);
                     probe.lap(Stage::GnssFill);
                 }
             } else if missing > 0 && gaps.restart_left {
                 gaps.restart_left = false;
                 self.estimator
-                    .restart_on_track(cfg, age_s, missing, speed_mps);
+                    .restart_on_track(cfg, antenna, age_s, missing, speed_mps);
                 probe.lap(Stage::GnssRestart);
             } else if missing > 0 {
                 // A second long gap within one tick (only a backlog of fixes makes one): this

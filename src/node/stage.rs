@@ -19,23 +19,22 @@
 //! `host-tests/tests/tick_stages.rs` runs the node over adversarial ticks with a counting probe
 //! and checks that no stage ever runs more often than its row says.
 
-/// Frames one tick decodes at most: 16. The inputs of `catmodel.dbc` are 7 frames per 20 ms at
+/// Frames one tick decodes at most: 12. The inputs of `catmodel.dbc` are 7 frames per 20 ms at
 /// their highest rates (steering, speed and pedal reports at 50 Hz: 3; GNSS position and
-/// COG/SOG at up to 100 Hz: 4), so 16 leaves more than twice the nominal traffic for jitter
-/// and bursts. Frames beyond it wait for the next tick (the app's receive queue and host replay
+/// COG/SOG at up to 100 Hz: 4), so 12 leaves 70 % above the nominal traffic for jitter and
+/// bursts (a backlog drains at 5 frames a tick). Frames beyond it wait for the next tick (the app's receive queue and host replay
 /// hold them; the queue drops beyond its length and counts it); a caller that hands
 /// `Node::step` more has the rest counted (`Counters::rx_over_cap`, NODE_STATUS page 3) and not
 /// used.
-pub const MAX_RX_FRAMES_PER_TICK: usize = 16;
-/// GNSS fixes one tick filters at most: 4, twice what a 100 Hz receiver (the fastest the
-/// node is designed for, the paper's) delivers per 20 ms. Further fixes in the same tick are
-/// rejected and counted (`gnss_gate_rejects`).
-pub const GNSS_FIXES_PER_TICK: usize = 4;
-/// Missing fixes one tick fills by dead reckoning at most (a receiver that skipped up to 4
-/// fixes, 40 ms at 100 Hz); a longer gap restarts the lowpass on the dead-reckoned track in
-/// one step instead ([`super::estimator::EstimatorState::restart_on_track`]), at most once per
-/// tick.
-pub const GAP_FILL_PER_TICK: u32 = 4;
+pub const MAX_RX_FRAMES_PER_TICK: usize = 12;
+/// GNSS fixes one tick filters at most: 3, one more than a 100 Hz receiver (the fastest the
+/// node is designed for, the paper's) delivers per 20 ms, for timing jitter. Further fixes in
+/// the same tick are rejected and counted (`gnss_gate_rejects`).
+pub const GNSS_FIXES_PER_TICK: usize = 3;
+/// Missing fixes one tick fills by dead reckoning at most (a receiver that skipped one or two
+/// fixes); a longer gap restarts the lowpass on the dead-reckoned track in one step instead
+/// ([`super::estimator::EstimatorState::restart_on_track`]), at most once per tick.
+pub const GAP_FILL_PER_TICK: u32 = 2;
 
 /// A piece of a tick's work, for measuring it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

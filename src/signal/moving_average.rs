@@ -111,9 +111,9 @@ impl<const N: usize> MovingAverageState<N> {
         }
     }
 
-    /// Refills the window with `value` (see [`MovingAverageState::primed`]).
+    /// Refills the window with `value` (see [`MovingAverageState::primed`]), in place.
     pub fn prime(&mut self, value: f32) {
-        *self = Self::primed(value);
+        self.load(|_| value);
     }
 
     /// Back to empty.
