@@ -158,9 +158,11 @@ impl Health {
                 gnss_gate_rejects: c.gnss_gate_rejects,
                 unknown_ids: c.unknown_ids,
             },
+            // Frames lost for capacity: the platform's receive queue, and any beyond the
+            // node's per-tick cap (which the app and host replay never hand it).
             3 => NodeStatus::Platform {
                 tick_count: self.tick_count,
-                rx_queue_drops: tick.platform.rx_queue_drops,
+                rx_queue_drops: tick.platform.rx_queue_drops.saturating_add(c.rx_over_cap),
             },
             _ => NodeStatus::Ages {
                 ages_10ms: inputs.ages_10ms,

@@ -20,6 +20,8 @@
 //!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
+//! - `cargo xtask adversarial [--runs N] [--seed S]`: drives made to break the tick's
+//!   worst-case bound ([`bound`]), run in QEMU; fails if a tick exceeds it ([`adversarial`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -27,6 +29,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+mod adversarial;
 mod bench;
 mod bound;
 mod corpus;
@@ -59,9 +62,10 @@ fn main() -> ExitCode {
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
         Some("tick-schedule") => schedule::tick_schedule(),
+        Some("adversarial") => adversarial::adversarial(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus | tick-schedule\n\
+             | bench-target [--check] | model-corpus | tick-schedule | adversarial [--runs N] [--seed S]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
