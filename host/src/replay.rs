@@ -397,7 +397,9 @@ trait FrameSource {
     /// The time of the first frame; `None` if there is none.
     fn first_t_us(&mut self) -> Option<u64>;
     /// The next frame not taken yet if it is due at `now_us` (stamped at or before it).
-    fn next_due(&mut self, now_us: u64) -> Option<TimedFrame>;
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame>;
+    /// Takes the frame [`FrameSource::peek_due`] returned.
+    fn take(&mut self);
     /// Whether frames remain.
     fn has_more(&mut self) -> bool;
     /// Whether the input is complete and valid, so that text may leave (checked after each
@@ -417,10 +419,14 @@ impl FrameSource for SliceSource<'_> {
     fn first_t_us(&mut self) -> Option<u64> {
         self.frames.first().map(|f| f.t_us)
     }
-    fn next_due(&mut self, now_us: u64) -> Option<TimedFrame> {
-        let frame = self.frames.get(self.next).filter(|f| f.t_us <= now_us)?;
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame> {
+        self.frames
+            .get(self.next)
+            .filter(|f| f.t_us <= now_us)
+            .copied()
+    }
+    fn take(&mut self) {
         self.next += 1;
-        Some(*frame)
     }
     fn has_more(&mut self) -> bool {
         self.next < self.frames.len()
@@ -477,7 +483,7 @@ impl FrameSource for StreamSource {
         }
         self.pending.get(self.next).map(|f| f.t_us)
     }
-    fn next_due(&mut self, now_us: u64) -> Option<TimedFrame> {
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame> {
         // Frames taken by earlier ticks are dropped now and then.
         if self.next > PARSE_CHUNK_FRAMES {
             self.pending.drain(..self.next);
@@ -488,9 +494,13 @@ impl FrameSource for StreamSource {
                 return None;
             }
         }
-        let frame = self.pending.get(self.next).filter(|f| f.t_us <= now_us)?;
+        self.pending
+            .get(self.next)
+            .filter(|f| f.t_us <= now_us)
+            .copied()
+    }
+    fn take(&mut self) {
         self.next += 1;
-        Some(*frame)
     }
     fn has_more(&mut self) -> bool {
         while self.pending.len() <= self.next {
@@ -569,15 +579,19 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     now_us: now,
                     platform: PlatformStats::default(),
                 };
-                // What the firmware's app does: the acceptance filter first, then at most
-                // the node's per-tick cap of due frames, the rest left for the next tick.
+                // What the firmware's app does: the acceptance filter first (its refusals
+                // never wait), then at most the node's per-tick cap of due frames, the rest
+                // left for the next tick.
                 rx.clear();
-                while rx.len() < MAX_RX_FRAMES_PER_TICK {
-                    match source.next_due(now) {
-                        Some(f) if !is_node_input(f.frame.id) => filtered += 1,
-                        Some(f) => rx.push(f),
-                        None => break,
+                while let Some(f) = source.peek_due(now) {
+                    if !is_node_input(f.frame.id) {
+                        filtered += 1;
+                    } else if rx.len() < MAX_RX_FRAMES_PER_TICK {
+                        rx.push(f);
+                    } else {
+                        break;
                     }
+                    source.take();
                 }
                 frames += rx.len() as u64;
                 node.step(&tick, &rx, &mut tx);

@@ -7,16 +7,20 @@
 //! of every load and fault at once, then a search over drive parameters: `N` drives, the first
 //! half random, the second half mutations of the heaviest drive found so far (a (1+1)
 //! evolution strategy on the slowest tick). Every tick of every drive is measured; the command
-//! fails if one exceeds the bound (or the bound exceeds the budget). Drives go to
-//! `target/adversarial/NAME.log` (candump), a summary to `target/adversarial/summary.json`.
-use std::path::PathBuf;
+//! fails if one exceeds the bound (or the bound exceeds the budget). On every drive whose
+//! frames all fit the firmware's receive queue (no drops), host replay must also send
+//! byte-identical frames (`cargo xtask tx-compare`): the per-tick cap and the frames it holds
+//! back work the same in both. Drives go to `target/adversarial/NAME.log` (candump), a summary
+//! to `target/adversarial/summary.json`.
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use catmodel::node::NodeConfig;
 use catmodel_app::budget::TICK_BUDGET_INSTRUCTIONS;
 
 use super::drives::{self, Periodic, Profile, Rng, Spec};
-use super::{bound, cargo_build, root, run_qemu};
+use super::{bound, cargo_build, root, run_qemu, txcompare};
 
 /// One drive's result.
 struct Outcome {
@@ -26,6 +30,8 @@ struct Outcome {
     max_slot: u64,
     rx_queue_drops: u32,
     overruns: u32,
+    /// Frames compared with host replay (drives without receive-queue drops).
+    replay_frames: Option<usize>,
 }
 
 /// Every load and fault at once, and the heaviest combinations of two.
@@ -71,6 +77,16 @@ fn targeted(car: &NodeConfig) -> Vec<Spec> {
         corrupt_per_tick: 8,
         unknown_per_tick: 30,
         ..Spec::plain("everything-at-once")
+    });
+    // Bursts the cap holds back and the receive queue still holds: QEMU and host replay must
+    // hand the same frames to the same ticks.
+    specs.push(Spec {
+        burst: Some(Periodic {
+            first_s: 1.0,
+            every_s: 0.9,
+            len_s: 0.05,
+        }),
+        ..Spec::plain("bursts-held-back")
     });
     specs.push(Spec {
         speed: Profile::Sine {
@@ -172,12 +188,51 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
     out
 }
 
-/// Runs one drive in QEMU.
-fn run(elf: &std::path::Path, car: &NodeConfig, spec: Spec) -> Result<Outcome> {
+/// The host CLI (release), for the comparison with replay.
+fn host_binary() -> Result<PathBuf> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args(["build", "--release", "--quiet", "-p", "catmodel-host"])
+        .status()
+        .context("running cargo build")?;
+    if !status.success() {
+        bail!("building catmodel-host failed");
+    }
+    Ok(root().join("target").join("release").join("catmodel"))
+}
+
+/// Runs one drive in QEMU (and, without receive-queue drops, host replay beside it).
+fn run(elf: &Path, host: &Path, car: &NodeConfig, spec: Spec) -> Result<Outcome> {
     let dir = root().join("target").join("adversarial");
     let path = dir.join(format!("{}.log", spec.name));
     drives::write_candump(&path, &drives::generate(&spec, car))?;
-    let run = run_qemu(elf, &dir.join("run"), Some(&path), &[])?;
+    let out = dir.join("run");
+    let run = run_qemu(elf, &out, Some(&path), &[])?;
+    let replay_frames = if run.trailer.rx_queue_drops == 0 {
+        let replay_tx = out.join("replay-tx.log");
+        let status = Command::new(host)
+            .arg("replay")
+            .arg(&path)
+            .arg("--out")
+            .arg(out.join("replay-pred.csv"))
+            .arg("--tx-out")
+            .arg(&replay_tx)
+            .output()
+            .context("running catmodel replay")?;
+        if !status.status.success() {
+            bail!(
+                "catmodel replay failed on {}: {}",
+                path.display(),
+                String::from_utf8_lossy(&status.stderr)
+            );
+        }
+        let compared = txcompare::compare_files(&out.join("tx.log"), &replay_tx)
+            .with_context(|| format!("QEMU and host replay differ on {}", path.display()))?;
+        Some(compared.frames)
+    } else {
+        None
+    };
     let (max_slot, max_tick) = run
         .records
         .iter()
@@ -191,6 +246,7 @@ fn run(elf: &std::path::Path, car: &NodeConfig, spec: Spec) -> Result<Outcome> {
         max_slot,
         rx_queue_drops: run.trailer.rx_queue_drops,
         overruns: run.trailer.overruns,
+        replay_frames,
     })
 }
 
@@ -210,10 +266,11 @@ pub fn adversarial(args: &[String]) -> Result<()> {
     let total = bound.total();
     let car = bound::baked_car()?;
     let elf = cargo_build("qemu", "catmodel-qemu")?;
+    let host = host_binary()?;
     let mut rng = Rng::new(seed);
     let mut outcomes: Vec<Outcome> = Vec::new();
     for spec in targeted(&car) {
-        outcomes.push(run(&elf, &car, spec)?);
+        outcomes.push(run(&elf, &host, &car, spec)?);
     }
     let mut best: Option<Spec> = None;
     let mut best_tick = 0;
@@ -223,7 +280,7 @@ pub fn adversarial(args: &[String]) -> Result<()> {
             (Some(b), false) => mutate(&mut rng, &car, b, name),
             _ => random(&mut rng, &car, name),
         };
-        let outcome = run(&elf, &car, spec)?;
+        let outcome = run(&elf, &host, &car, spec)?;
         if outcome.max_tick > best_tick {
             best_tick = outcome.max_tick;
             best = Some(outcome.spec.clone());
@@ -233,18 +290,22 @@ pub fn adversarial(args: &[String]) -> Result<()> {
 
     outcomes.sort_by_key(|o| std::cmp::Reverse(o.max_tick));
     println!(
-        "\n{:<34}{:>7}{:>10}{:>9}{:>8}{:>10}",
+        "\n{:<34}{:>7}{:>10}{:>9}{:>8}{:>10}  QEMU == replay",
         "drive", "ticks", "max tick", "of bound", "slot", "rx drops"
     );
     for o in &outcomes {
         println!(
-            "{:<34}{:>7}{:>10}{:>8.1}%{:>8}{:>10}",
+            "{:<34}{:>7}{:>10}{:>8.1}%{:>8}{:>10}  {}",
             o.spec.name,
             o.ticks,
             o.max_tick,
             f64::from(o.max_tick) / total as f64 * 100.0,
             o.max_slot,
-            o.rx_queue_drops
+            o.rx_queue_drops,
+            match o.replay_frames {
+                Some(n) => format!("{n} frames identical"),
+                None => "not compared (queue drops)".to_string(),
+            }
         );
     }
     let worst = outcomes.first().map_or(0, |o| o.max_tick);
@@ -266,6 +327,7 @@ pub fn adversarial(args: &[String]) -> Result<()> {
             "max_tick_slot": o.max_slot,
             "rx_queue_drops": o.rx_queue_drops,
             "overruns": o.overruns,
+            "replay_identical_frames": o.replay_frames,
         })).collect::<Vec<_>>(),
     });
     let path: PathBuf = root()
