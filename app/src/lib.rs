@@ -433,3 +433,49 @@ pub async fn wait_tx_drained(counters: &LinkCounters) {
         yield_now().await;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use catmodel::can::{CanFrame, CanId};
+
+    fn frame(t_us: u64, tag: u8) -> TimedFrame {
+        TimedFrame {
+            t_us,
+            frame: CanFrame::new(CanId::Standard(0x100), &[tag]).unwrap_or(CanFrame::EMPTY),
+        }
+    }
+
+    #[test]
+    fn a_tick_takes_its_due_frames_in_order_up_to_the_batch() {
+        let q = RxQueue::new();
+        // 20 frames due at the tick, then 3 later ones.
+        for i in 0..20u8 {
+            assert!(q.try_push(frame(1_000 + u64::from(i), i)).is_ok());
+        }
+        for i in 20..23u8 {
+            assert!(q.try_push(frame(30_000, i)).is_ok());
+        }
+        let mut batch = heapless::Vec::new();
+        q.drain_due(20_000, &mut batch);
+        let tags: heapless::Vec<u8, RX_BATCH_LEN> = batch.iter().map(|f| f.frame.data[0]).collect();
+        assert_eq!(batch.len(), RX_BATCH_LEN);
+        assert!(tags.iter().enumerate().all(|(i, t)| usize::from(*t) == i));
+        // The rest of the due frames go first at the next tick; the later ones wait.
+        q.drain_due(20_000, &mut batch);
+        assert_eq!(batch.len(), 20 - RX_BATCH_LEN);
+        assert_eq!(
+            batch.first().map(|f| f.frame.data[0]),
+            Some(RX_BATCH_LEN as u8)
+        );
+        assert_eq!(q.len(), 3);
+        q.drain_due(40_000, &mut batch);
+        assert_eq!(batch.len(), 3);
+        assert!(q.is_empty());
+        // A full queue gives the frame back.
+        for i in 0..RX_QUEUE_LEN {
+            assert!(q.try_push(frame(i as u64, 0)).is_ok());
+        }
+        assert_eq!(q.try_push(frame(0, 9)), Err(frame(0, 9)));
+    }
+}

@@ -438,6 +438,58 @@ impl EstimatorState {
 mod tests {
     use super::*;
 
+    /// After a gap longer than the filters' memory, restarting them on the dead-reckoned track
+    /// in one step gives what filling the missing fixes one by one gives (the FIR and the
+    /// moving average are pure delays on that track), to f32 rounding; so do the fixes after.
+    #[test]
+    fn restart_on_the_track_is_filling_the_gap() {
+        let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
+        let (v, heading) = (10.0f32, 0.7f32);
+        let mut warm = EstimatorState::default();
+        warm.correct_heading(&cfg, heading, 0.0, v, 0.0);
+        let (s, c) = (heading.sin(), heading.cos());
+        let mut t = 0.0f32;
+        let at = |t: f32| Xy {
+            x_m: 20.0 + v * t * s,
+            y_m: -5.0 + v * t * c,
+        };
+        for _ in 0..100 {
+            warm.propagate(&cfg, v, 0.0, 0.02);
+            t += 0.02;
+            for age in [0.01f32, 0.0] {
+                warm.add_fix(&cfg, at(t - age), age, v);
+            }
+        }
+        // 40 fixes missing, then the fix of this tick (age 0).
+        let missing = 40u32;
+        warm.propagate(&cfg, v, 0.0, 0.02);
+        t += 0.02;
+        let antenna = warm.antenna_position(&cfg).unwrap();
+        let mut filled = warm.clone();
+        for k in (1..=missing).rev() {
+            let age_k = k as f32 * cfg.gnss_period_s;
+            let p = filled.dead_reckoned_back(antenna, age_k, v);
+            filled.add_fix(&cfg, p, age_k, v);
+        }
+        let mut restarted = warm.clone();
+        restarted.restart_on_track(&cfg, antenna, 0.0, missing, v);
+        assert_eq!(filled.fixes(), restarted.fixes());
+        for step in 0..40 {
+            for state in [&mut filled, &mut restarted] {
+                if step > 0 {
+                    state.propagate(&cfg, v, 0.0, 0.01);
+                }
+                state.add_fix(&cfg, at(t + step as f32 * 0.01), 0.0, v);
+            }
+            let (a, b) = (
+                filled.position(&cfg).unwrap(),
+                restarted.position(&cfg).unwrap(),
+            );
+            let d = ((a.x_m - b.x_m).powi(2) + (a.y_m - b.y_m).powi(2)).sqrt();
+            assert!(d < 1e-4, "fix {step}: {d} m, {a:?} vs {b:?}");
+        }
+    }
+
     /// A car at 10 m/s due east, exact GNSS at 100 Hz, ticks at 50 Hz: the compensated filter
     /// output is on the car (the uncompensated one trails by ~1.45 m).
     #[test]

@@ -295,6 +295,54 @@ mod tests {
         assert!(fir.process(&mut s, 12.5).abs() < 1.0);
     }
 
+    /// Deterministic inputs in the node's range (positions in metres).
+    fn signal(n: usize, seed: u32) -> Vec<f32> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                (x % 200_000) as f32 * 0.01 - 1000.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn pair_is_two_single_filters_bit_for_bit() {
+        let fir = Fir::<21>::lowpass(2.0, 100.0).unwrap();
+        let (a, b) = (signal(300, 7), signal(300, 11));
+        let (mut sa, mut sb) = (FirState::new(), FirState::new());
+        let (mut ra, mut rb) = (FirState::new(), FirState::new());
+        for (x, y) in a.iter().zip(&b) {
+            let pair = fir.process_pair((&mut sa, &mut sb), (*x, *y));
+            let single = (fir.process(&mut ra, *x), fir.process(&mut rb, *y));
+            assert_eq!(pair.0.to_bits(), single.0.to_bits());
+            assert_eq!(pair.1.to_bits(), single.1.to_bits());
+        }
+    }
+
+    #[test]
+    fn a_loaded_history_is_a_pushed_one() {
+        let fir = Fir::<21>::lowpass(2.0, 100.0).unwrap();
+        let x = signal(40, 3);
+        let mut pushed = FirState::new();
+        for v in &x[..30] {
+            fir.process(&mut pushed, *v);
+        }
+        let mut loaded = FirState::primed(5.0);
+        loaded.load(|k| x[29 - k]);
+        for v in &x[30..] {
+            assert_eq!(
+                fir.process(&mut loaded, *v).to_bits(),
+                fir.process(&mut pushed, *v).to_bits()
+            );
+        }
+        let mut primed = FirState::<21>::new();
+        primed.prime(2.5);
+        assert_eq!(primed, FirState::primed(2.5));
+    }
+
     #[test]
     fn design_rejects_bad_input() {
         let mut t = [0.0; 5];
