@@ -252,16 +252,22 @@ impl LateralStepper {
     /// `min_speed_mps`. A singular or non-finite system leaves the state unchanged, as `step`
     /// does.
     pub fn held(&self, vx_mps: f32) -> HeldStep {
-        // Note: `!(a >= b)` rather than `a < b` so that a NaN speed takes this branch too.
-        if !(vx_mps >= self.params.min_speed_mps) {
+        if vx_mps >= self.params.min_speed_mps {
+            self.held_fast(vx_mps)
+        } else {
+            // Below the minimum speed, and a NaN speed.
             let l = self.params.wheelbase_m();
             let k = self.params.understeer_s2_per_m2();
             let curvature_per_m = self.delta_rad / (l * (1.0 + k * vx_mps * vx_mps));
-            return HeldStep::Slow {
+            HeldStep::Slow {
                 curvature_per_m,
                 slip_per_m: curvature_per_m * self.params.cg_to_rear_m,
-            };
+            }
         }
+    }
+
+    /// [`LateralStepper::held`] at or above the minimum speed.
+    fn held_fast(&self, vx_mps: f32) -> HeldStep {
         let inv_vx = 1.0 / vx_mps;
         let p11 = self.h_a11_vx * inv_vx;
         let p12 = self.h_a12_vx * inv_vx - self.half_dt_s * vx_mps;

@@ -421,9 +421,9 @@ impl Node {
         for frame in frames {
             match self.inputs.receive(&self.config, now_us, frame) {
                 Some(GnssMessage::Fix(fix)) => {
-                    if fixes.push(fix).is_err() {
+                    if let Err(over) = fixes.push(fix) {
                         bump(&mut self.inputs.counters.gnss_gate_rejects);
-                        self.gnss.rejected(fix.t_us);
+                        self.gnss.rejected(over.t_us);
                     }
                 }
                 Some(GnssMessage::Course(course)) => {
