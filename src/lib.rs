@@ -17,8 +17,11 @@
 //! - [`geodesy`]: WGS-84 latitude/longitude <-> local east/north metres.
 //! - [`metrics`]: fit % as MATLAB `compare`, mean square error (paper II-E).
 //! - [`math`]: the few transcendental functions the node uses, with measured error bounds.
+//! - [`control`]: the planner's paths, obstacles and origin; path geometry; the reference
+//!   controller (pure pursuit).
 //! - [`can`]: the bus protocol of `catmodel.dbc`: frame codecs, CRC-8/SAE-J1850, rolling
 //!   counters, freshness, candump text.
+//! - [`control`]: the model-predictive controller (speed and steering plans over 2 s).
 //! - [`node`]: `Node::step`, the pure 20 ms tick that the board, QEMU and host replay all run.
 #![cfg_attr(not(test), no_std)]
 #![cfg_attr(
@@ -36,6 +39,7 @@
 #![warn(missing_docs)]
 
 pub mod can;
+pub mod control;
 pub mod geodesy;
 pub mod image;
 pub mod math;

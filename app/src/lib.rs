@@ -49,8 +49,12 @@ use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
 use heapless::Deque;
 
+use catmodel::can::codec::ControlStatus;
 use catmodel::can::spec::is_node_input;
 use catmodel::can::TimedFrame;
+use core::borrow::BorrowMut;
+
+use catmodel::node::drive::Drive;
 use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
@@ -273,6 +277,8 @@ pub struct TickReport {
     pub step_counts: u32,
     /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
     pub tick_counts: u32,
+    /// A controller planned in this tick (its budget differs: `budget`).
+    pub controller: bool,
 }
 
 /// What the tick loop needs from its platform.
@@ -324,8 +330,8 @@ pub struct TickSummary {
 /// [`schedule`]: a late tick is counted, a stale slot is skipped (no catch-up burst), and tick
 /// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached and
 /// no received frame waits any more.
-pub async fn tick_loop<P: TickPlatform>(
-    node: &mut Node,
+pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
+    node: &mut Node<D>,
     rx: &RxQueue,
     tx: &TxQueue,
     counters: &LinkCounters,
@@ -359,7 +365,7 @@ pub async fn tick_loop<P: TickPlatform>(
         let c0 = platform.counter();
         rx.drain_due(tick_us, &mut batch);
         let c1 = platform.counter();
-        node.step(&tick, &batch, &mut out.frames);
+        let estimate = node.step(&tick, &batch, &mut out.frames);
         let c2 = platform.counter();
         let tx_frames = hand_off(tx, counters, &mut out);
         let c3 = platform.counter();
@@ -376,6 +382,7 @@ pub async fn tick_loop<P: TickPlatform>(
             drain_counts: c1.wrapping_sub(c0),
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
+            controller: estimate.control != ControlStatus::NoPath,
         });
         stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());

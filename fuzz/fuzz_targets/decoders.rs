@@ -2,8 +2,9 @@
 //! it again (with the same counter or source) decodes to the same message.
 #![no_main]
 use catmodel::can::codec::{
-    decode_input, GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport,
-    StateModel, StateMotion, StatePosition, SteeringReport,
+    decode_input, decode_planner, ControlCommand, GnssCogSog, GnssPosition, LocalOrigin,
+    NodeStatus, Obstacle, PathHeader, PathLimits, PathPoint, PedalReport, Prediction, SpeedReport,
+    StateMotion, StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel_fuzz::RawFrame;
@@ -29,7 +30,13 @@ fuzz_target!(|input: (RawFrame, u8)| {
     roundtrip!(PedalReport, &f);
     roundtrip!(StatePosition, &f);
     roundtrip!(StateMotion, &f);
-    roundtrip!(StateModel, &f);
+    roundtrip!(ControlCommand, &f);
+    let _ = decode_planner(&f);
+    roundtrip!(PathHeader, &f);
+    roundtrip!(PathPoint, &f);
+    roundtrip!(PathLimits, &f);
+    roundtrip!(Obstacle, &f);
+    roundtrip!(LocalOrigin, &f);
     roundtrip!(Prediction, &f);
     roundtrip!(NodeStatus, &f);
     if let Ok(m) = GnssPosition::decode(&f, source) {

@@ -9,8 +9,8 @@
 #![no_main]
 use arbitrary::Arbitrary;
 use catmodel::can::codec::{
-    GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport, StateModel,
-    StateMotion, StatePosition, SteeringReport,
+    GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport, StateMotion,
+    StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
@@ -115,7 +115,7 @@ fn assert_decodes(f: &CanFrame) {
     let ok = match id {
         0x300 => StatePosition::decode(f).is_ok(),
         0x301 => StateMotion::decode(f).is_ok(),
-        0x302 => StateModel::decode(f).is_ok(),
+        0x320 => catmodel::can::codec::ControlCommand::decode(f).is_ok(),
         0x310..=0x319 => Prediction::decode(f).is_ok(),
         0x3F0 => NodeStatus::decode(f).is_ok(),
         _ => false,
@@ -154,7 +154,7 @@ fuzz_target!(|input: (bool, Vec<Step>)| {
     if fixed_origin {
         config.origin_e7 = Some(ORIGIN);
     }
-    let mut node = Node::new(config);
+    let mut node = catmodel_host::new_node(config);
     let mut now: u64 = 1_000_000_000;
     let mut overruns = 0u32;
     for step in steps.iter().take(400) {

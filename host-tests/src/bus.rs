@@ -11,7 +11,7 @@ use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::{
-    first_tick_us, Counters, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
+    first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
 };
 
 /// Origin of the local frame, 1e-7 deg.
@@ -168,7 +168,7 @@ impl TickOut {
             let ok = match id {
                 0x300 => StatePosition::decode(f).is_ok(),
                 0x301 => catmodel::can::codec::StateMotion::decode(f).is_ok(),
-                0x302 => catmodel::can::codec::StateModel::decode(f).is_ok(),
+                0x320 => catmodel::can::codec::ControlCommand::decode(f).is_ok(),
                 0x310..=0x319 => Prediction::decode(f).is_ok(),
                 0x3F0 => NodeStatus::decode(f).is_ok(),
                 _ => false,
@@ -192,7 +192,7 @@ pub fn run_with(
     frames: &[TimedFrame],
     platform: impl Fn(usize) -> PlatformStats,
 ) -> Vec<TickOut> {
-    let mut node = Node::new(config);
+    let mut node = catmodel_host::new_node(config);
     let mut out = Vec::new();
     let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
         return out;

@@ -283,13 +283,16 @@ fn state_messages_round_trip_at_limits_and_invalid() {
             assert!(close(back.speed_mps, m.speed_mps, 0.01));
             assert!(close(back.yaw_rate_radps, m.yaw_rate_radps, 0.001));
 
-            let m = StateModel {
+            let m = ModelOutputs {
                 speed_model_mps: lim(&sig::SPEED_MODEL_MPS)[i],
                 dxdt_model_mps: lim(&sig::DXDT_MODEL_MPS)[2 - i],
                 lat_accel_mps2: lim(&sig::LAT_ACCEL_MPS2)[(i + 1) % 3],
             };
-            let (back, c) = StateModel::decode(&m.encode(counter)).unwrap();
+            let (back, c) = NodeStatus::decode(&NodeStatus::Model(m).encode(counter)).unwrap();
             assert_eq!(c, counter);
+            let NodeStatus::Model(back) = back else {
+                panic!("page 5 decoded as {back:?}")
+            };
             assert!(close(back.speed_model_mps, m.speed_model_mps, 0.01));
             assert!(close(back.dxdt_model_mps, m.dxdt_model_mps, 0.01));
             assert!(close(back.lat_accel_mps2, m.lat_accel_mps2, 0.01));
@@ -378,6 +381,11 @@ fn node_status_pages_round_trip_and_saturate() {
             ages_10ms: [AGE_NEVER; 4],
             stack_high_water_bytes: None,
         },
+        NodeStatus::Model(ModelOutputs {
+            speed_model_mps: Some(12.5),
+            dxdt_model_mps: Some(-3.25),
+            lat_accel_mps2: None,
+        }),
     ];
     for (i, page) in pages.iter().enumerate() {
         let counter = (i % 16) as u8;
@@ -480,7 +488,7 @@ fn encoders_replace_non_finite_and_out_of_range_by_not_available() {
             signal: "latitude_deg"
         })
     );
-    let (_, report) = StateModel::default().encode_with_report(0);
+    let (_, report) = NodeStatus::Model(ModelOutputs::default()).encode_with_report(0);
     assert_eq!(report.absent, 3);
     assert!(!report.any_substituted());
 }
@@ -518,6 +526,331 @@ proptest! {
             }
         }
     }
+}
+
+// ------------------------------------------------------------------------------------------
+// The controller's messages: planner inputs and CONTROL_COMMAND
+
+/// The 8 bytes of a little-endian 64-bit word with `crc` in byte 7 computed independently.
+fn hand_frame(id: u16, word: u64) -> [u8; 8] {
+    let mut bytes = word.to_le_bytes();
+    let mut covered = vec![(id >> 8) as u8, id as u8];
+    covered.extend_from_slice(&bytes[..7]);
+    bytes[7] = reference_crc(&covered);
+    bytes
+}
+
+#[test]
+fn path_point_hand_packed() {
+    // counter 7 (bits 0..3), path_id 3 (4..7), index 200 (8..15); east -0.02 m = raw -1 as 20
+    // bits (16..35); north 10 485.74 m = raw 524 287 (36..55).
+    let p = PathPoint {
+        path_id: 3,
+        index: 200,
+        east_m: -0.02,
+        north_m: 10_485.74,
+    };
+    let word: u64 = 7 | (3 << 4) | (200 << 8) | (0xF_FFFF << 16) | (524_287 << 36);
+    let frame = p.encode(7);
+    assert_eq!(frame.id, CanId::Standard(0x201));
+    assert_eq!(frame.data, hand_frame(0x201, word));
+    let (back, c) = PathPoint::decode(&frame).unwrap();
+    assert_eq!((c, back.path_id, back.index), (7, 3, 200));
+    assert!((back.east_m + 0.02).abs() < 1e-6 && (back.north_m - 10_485.74).abs() < 1e-3);
+}
+
+#[test]
+fn path_limits_header_obstacle_origin_hand_packed() {
+    // PATH_LIMITS: speed 12.34 m/s = 1234 (16..27), left 1.5 m = 150 (28..41), right 163.82 m
+    // = 16 382 (42..55).
+    let l = PathLimits {
+        path_id: 15,
+        index: 0,
+        speed_mps: 12.34,
+        left_m: 1.5,
+        right_m: 163.82,
+    };
+    let word: u64 = 1 | (15 << 4) | (1234 << 16) | (150 << 28) | (16_382 << 42);
+    assert_eq!(l.encode(1).data, hand_frame(0x202, word));
+    // PATH_HEADER: count 256 in bits 8..16.
+    let h = PathHeader {
+        path_id: 9,
+        count: 256,
+    };
+    assert_eq!(h.encode(0).data, hand_frame(0x200, (9 << 4) | (256 << 8)));
+    // OBSTACLE: slot 2 (4..5), active (6), east 1 m = 50 (8..27), north -1 m = -50 as 20 bits
+    // (28..47), radius 0.75 m = 15 (48..55).
+    let o = Obstacle {
+        obstacle_id: 2,
+        circle: Some(ObstacleCircle {
+            east_m: 1.0,
+            north_m: -1.0,
+            radius_m: 0.75,
+        }),
+    };
+    let north_raw = (1u64 << 20) - 50;
+    let word = 4 | (2 << 4) | (1 << 6) | (50 << 8) | (north_raw << 28) | (15 << 48);
+    assert_eq!(o.encode(4).data, hand_frame(0x203, word));
+    // LOCAL_ORIGIN: page bit 4; latitude 32.2319 deg = 322 319 000 in bits 8..39.
+    let lat = LocalOrigin::Latitude {
+        lat_e7: 322_319_000,
+    };
+    assert_eq!(
+        lat.encode(5).data,
+        hand_frame(0x204, 5 | (322_319_000 << 8))
+    );
+    let lon = LocalOrigin::Longitude {
+        lon_e7: -1_109_501_000,
+    };
+    let lon_raw = u64::from((-1_109_501_000i32) as u32);
+    assert_eq!(
+        lon.encode(6).data,
+        hand_frame(0x204, 6 | (1 << 4) | (lon_raw << 8))
+    );
+    assert_eq!(LocalOrigin::decode(&lon.encode(6)), Ok((lon, 6)));
+}
+
+#[test]
+fn control_command_hand_packed() {
+    // counter 11; status 2 (bits 4..5); steer -12.34 % = raw -1234 = 0xFB2E (8..23); speed
+    // 10 m/s = 1000 (24..39).
+    let m = ControlCommand {
+        status: ControlStatus::Avoiding,
+        steer_cmd_pct: Some(-12.34),
+        speed_cmd_mps: Some(10.0),
+    };
+    let word: u64 = 11 | (2 << 4) | (0xFB2E << 8) | (1000 << 24);
+    let frame = m.encode(11);
+    assert_eq!(frame.id, CanId::Standard(0x320));
+    assert_eq!(frame.data, hand_frame(0x320, word));
+    let (back, c) = ControlCommand::decode(&frame).unwrap();
+    assert_eq!((c, back.status), (11, ControlStatus::Avoiding));
+    assert!(close(back.steer_cmd_pct, m.steer_cmd_pct, 0.01));
+    assert!(close(back.speed_cmd_mps, m.speed_cmd_mps, 0.01));
+}
+
+#[test]
+fn controller_messages_round_trip_at_limits() {
+    let lim = |s: &spec::SignalSpec| [phys_min(s), phys_max(s), 0.0];
+    for counter in [0u8, 8, 15] {
+        for i in 0..3 {
+            let p = PathPoint {
+                path_id: counter,
+                index: [0, 255, 17][i],
+                east_m: lim(&sig::PATH_EAST_M)[i],
+                north_m: lim(&sig::PATH_NORTH_M)[2 - i],
+            };
+            let (back, c) = PathPoint::decode(&p.encode(counter)).unwrap();
+            assert_eq!((c, back.path_id, back.index), (counter, p.path_id, p.index));
+            assert!(close(Some(back.east_m), Some(p.east_m), 0.02));
+            assert!(close(Some(back.north_m), Some(p.north_m), 0.02));
+            let l = PathLimits {
+                path_id: counter ^ 0x0F,
+                index: p.index,
+                speed_mps: lim(&sig::PATH_SPEED_MPS)[i],
+                left_m: lim(&sig::PATH_LEFT_M)[(i + 1) % 3],
+                right_m: lim(&sig::PATH_RIGHT_M)[(i + 2) % 3],
+            };
+            let (back, c) = PathLimits::decode(&l.encode(counter)).unwrap();
+            assert_eq!((c, back.path_id, back.index), (counter, l.path_id, l.index));
+            for (a, b) in [
+                (back.speed_mps, l.speed_mps),
+                (back.left_m, l.left_m),
+                (back.right_m, l.right_m),
+            ] {
+                assert!(close(Some(a), Some(b), 0.01), "{l:?} -> {back:?}");
+            }
+            let h = PathHeader {
+                path_id: counter,
+                count: [2, 256, 128][i],
+            };
+            assert_eq!(PathHeader::decode(&h.encode(counter)), Ok((h, counter)));
+            let o = Obstacle {
+                obstacle_id: (i % 4) as u8,
+                circle: (i != 2).then_some(ObstacleCircle {
+                    east_m: lim(&sig::OBSTACLE_EAST_M)[i],
+                    north_m: lim(&sig::OBSTACLE_NORTH_M)[(i + 1) % 3],
+                    radius_m: lim(&sig::OBSTACLE_RADIUS_M)[i],
+                }),
+            };
+            let (back, c) = Obstacle::decode(&o.encode(counter)).unwrap();
+            assert_eq!((c, back.obstacle_id), (counter, o.obstacle_id));
+            match (back.circle, o.circle) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    assert!(close(Some(a.east_m), Some(b.east_m), 0.02));
+                    assert!(close(Some(a.north_m), Some(b.north_m), 0.02));
+                    assert!(close(Some(a.radius_m), Some(b.radius_m), 0.05));
+                }
+                other => panic!("{other:?}"),
+            }
+            for origin in [
+                LocalOrigin::Latitude {
+                    lat_e7: [-900_000_000, 900_000_000, 0][i],
+                },
+                LocalOrigin::Longitude {
+                    lon_e7: [-1_800_000_000, 1_800_000_000, 0][i],
+                },
+            ] {
+                assert_eq!(
+                    LocalOrigin::decode(&origin.encode(counter)),
+                    Ok((origin, counter))
+                );
+            }
+            for status in [
+                ControlStatus::NoPath,
+                ControlStatus::Tracking,
+                ControlStatus::Avoiding,
+                ControlStatus::Fallback,
+            ] {
+                let m = ControlCommand {
+                    status,
+                    steer_cmd_pct: [Some(-100.0), Some(100.0), None][i],
+                    speed_cmd_mps: [Some(655.34), None, Some(0.0)][i],
+                };
+                let (back, c) = ControlCommand::decode(&m.encode(counter)).unwrap();
+                assert_eq!((c, back.status), (counter, status));
+                assert!(close(back.steer_cmd_pct, m.steer_cmd_pct, 0.01));
+                assert!(close(back.speed_cmd_mps, m.speed_cmd_mps, 0.01));
+            }
+        }
+    }
+}
+
+#[test]
+fn controller_messages_reject_bad_values() {
+    // Out-of-range or non-finite values go out as "not available" (counted), and a receiver
+    // rejects the frame: the path module never sees a value that is not a real one.
+    for bad in [f32::NAN, f32::INFINITY, 10_486.0, -10_486.0] {
+        let (frame, report) = PathPoint {
+            path_id: 1,
+            index: 0,
+            east_m: bad,
+            north_m: 0.0,
+        }
+        .encode_with_report(0);
+        assert_eq!(report.non_finite + report.out_of_range, 1, "{bad}");
+        assert_eq!(
+            PathPoint::decode(&frame),
+            Err(DecodeError::Invalid { signal: "east_m" })
+        );
+    }
+    for (speed, left, signal) in [
+        (-0.1, 1.0, "speed_mps"),
+        (41.0, 1.0, "speed_mps"),
+        (5.0, f32::NAN, "left_m"),
+        (5.0, 200.0, "left_m"),
+    ] {
+        let (frame, report) = PathLimits {
+            path_id: 1,
+            index: 0,
+            speed_mps: speed,
+            left_m: left,
+            right_m: 1.0,
+        }
+        .encode_with_report(0);
+        assert!(report.any_substituted());
+        assert_eq!(
+            PathLimits::decode(&frame),
+            Err(DecodeError::Invalid { signal })
+        );
+    }
+    for count in [0u16, 1, 257, 1000] {
+        let (frame, report) = PathHeader { path_id: 0, count }.encode_with_report(0);
+        assert_eq!(report.out_of_range, 1, "{count}");
+        assert_eq!(
+            PathHeader::decode(&frame),
+            Err(DecodeError::OutOfRange { signal: "count" })
+        );
+    }
+    let (frame, report) = Obstacle {
+        obstacle_id: 0,
+        circle: Some(ObstacleCircle {
+            east_m: 0.0,
+            north_m: 0.0,
+            radius_m: 12.8,
+        }),
+    }
+    .encode_with_report(0);
+    assert_eq!(report.out_of_range, 1);
+    assert_eq!(
+        Obstacle::decode(&frame),
+        Err(DecodeError::Invalid { signal: "radius_m" })
+    );
+    let (frame, report) = LocalOrigin::Latitude {
+        lat_e7: 900_000_001,
+    }
+    .encode_with_report(0);
+    assert_eq!(report.out_of_range, 1);
+    assert_eq!(
+        LocalOrigin::decode(&frame),
+        Err(DecodeError::Invalid {
+            signal: "latitude_deg"
+        })
+    );
+    // A CRC error and a wrong DLC are caught like on every frame of ours.
+    let mut f = PathHeader {
+        path_id: 0,
+        count: 10,
+    }
+    .encode(0);
+    f.data[1] ^= 0x01;
+    assert!(matches!(
+        PathHeader::decode(&f),
+        Err(DecodeError::Crc { .. })
+    ));
+    let short = CanFrame::new(CanId::Standard(0x201), &[0; 7]).unwrap();
+    assert_eq!(
+        decode_planner(&short),
+        Err(DecodeError::Dlc {
+            expected: 8,
+            got: 7
+        })
+    );
+}
+
+#[test]
+fn decode_planner_dispatch_and_decode_input_unchanged() {
+    let h = PathHeader {
+        path_id: 4,
+        count: 10,
+    };
+    let p = PathPoint {
+        path_id: 4,
+        index: 1,
+        east_m: 1.0,
+        north_m: 2.0,
+    };
+    let o = Obstacle {
+        obstacle_id: 3,
+        circle: None,
+    };
+    assert_eq!(
+        decode_planner(&h.encode(1)),
+        Ok(PlannerMessage::PathHeader(h, 1))
+    );
+    assert!(matches!(
+        decode_planner(&p.encode(2)),
+        Ok(PlannerMessage::PathPoint(_, 2))
+    ));
+    assert_eq!(
+        decode_planner(&o.encode(3)),
+        Ok(PlannerMessage::Obstacle(o, 3))
+    );
+    // The planner's frames are not vehicle inputs, and the vehicle's are not the planner's.
+    for frame in [h.encode(1), p.encode(2), o.encode(3)] {
+        assert_eq!(
+            decode_input(&frame, spec::N2K_DEFAULT_SOURCE),
+            Err(DecodeError::UnknownId)
+        );
+    }
+    let steer = SteeringReport {
+        steer_pct: Some(1.0),
+    }
+    .encode(0);
+    assert_eq!(decode_planner(&steer), Err(DecodeError::UnknownId));
+    let command = ControlCommand::default().encode(0);
+    assert_eq!(decode_planner(&command), Err(DecodeError::UnknownId));
 }
 
 // ------------------------------------------------------------------------------------------
@@ -619,14 +952,14 @@ fn decode_error_kinds() {
         GnssCogSog::decode(&f, 0x1C),
         Err(DecodeError::OutOfRange { signal: "cog_rad" })
     );
-    // NODE_STATUS page 5..15 does not exist.
+    // NODE_STATUS page 6..15 does not exist.
     let mut f = NodeStatus::RxErrors {
         crc_errors: 0,
         counter_errors: 0,
         dlc_errors: 0,
     }
     .encode(0);
-    sig::PAGE.write_raw(&mut f.data, 5);
+    sig::PAGE.write_raw(&mut f.data, 6);
     assert_eq!(
         NodeStatus::decode(&reseal(f)),
         Err(DecodeError::OutOfRange { signal: "page" })
@@ -697,7 +1030,7 @@ fn decode_input_dispatch() {
         Ok(InputMessage::GnssCogSog(_))
     ));
     // Our own outputs and strangers are not inputs.
-    let out = StateModel::default().encode(0);
+    let out = StateMotion::default().encode(0);
     assert_eq!(decode_input(&out, src), Err(DecodeError::UnknownId));
     let stranger = CanFrame::new(CanId::Extended(spec::n2k_id(2, 127_250, src)), &[0; 8]).unwrap();
     assert_eq!(decode_input(&stranger, src), Err(DecodeError::UnknownId));
@@ -806,7 +1139,8 @@ fn our_traffic_stays_under_20_percent_of_500_kbit() {
             / 500_000.0
     };
     let ours = |m: &MessageSpec| m.transmitter == NODE_CATMODEL;
-    let all = |_: &MessageSpec| true;
+    // The planner's messages are events (cycle 0): see `a_full_path_transfer_at_the_paced_rate`.
+    let all = |m: &MessageSpec| m.cycle_ms > 0;
     let (worst, nominal) = (load(&ours, true), load(&ours, false));
     println!(
         "node traffic: {:.2} % worst case, {:.2} % nominal; whole bus worst case {:.2} %",
@@ -817,6 +1151,36 @@ fn our_traffic_stays_under_20_percent_of_500_kbit() {
     assert_eq!(spec::MESSAGES.iter().filter(|m| ours(m)).count(), 14);
     assert!(worst < 0.20, "worst-case node load {worst}");
     assert!((worst - 14.0 * 135.0 * 50.0 / 500_000.0).abs() < 1e-12);
+    assert!(
+        spec::MESSAGES
+            .iter()
+            .all(|m| m.cycle_ms > 0 || m.transmitter == spec::NODE_PLANNER),
+        "only the planner's messages are event-driven"
+    );
+}
+
+#[test]
+fn a_full_path_transfer_at_the_paced_rate() {
+    // A full path: PATH_HEADER, then PATH_POINT and PATH_LIMITS for each of the 256 points.
+    let frames = 1 + 2 * spec::MAX_PATH_POINTS;
+    let bits = |m: &MessageSpec| spec::worst_case_frame_bits(false, m.dlc);
+    let path_bits = bits(&spec::PATH_HEADER) as usize
+        + spec::MAX_PATH_POINTS * (bits(&spec::PATH_POINT) + bits(&spec::PATH_LIMITS)) as usize;
+    assert_eq!((frames, path_bits), (513, 513 * 135));
+    // Back to back it would hold the bus for 139 ms; paced at the simulated planner's rate
+    // (catmodel_host::closed_loop::planner::PATH_FRAMES_PER_TICK per 20 ms) it takes ticks:
+    let per_tick = catmodel_host::closed_loop::planner::PATH_FRAMES_PER_TICK;
+    let ticks = frames.div_ceil(per_tick);
+    let share = (per_tick * 135) as f64 / (0.020 * 500_000.0);
+    println!(
+        "256-point path: {frames} frames, {:.1} ms back to back; paced at {per_tick} frames per \
+         20 ms: {:.2} s at {:.1} % of the bus",
+        path_bits as f64 / 500.0,
+        ticks as f64 * 0.020,
+        100.0 * share
+    );
+    assert_eq!(ticks, 43);
+    assert!(share < 0.20, "{share}");
 }
 
 // ------------------------------------------------------------------------------------------
@@ -958,11 +1322,6 @@ proptest! {
     fn candump_parse_never_panics(line in "\\PC{0,60}") {
         let _ = parse_line(&line);
     }
-
-    #[test]
-    fn candump_parse_never_panics_near_valid(prefix in "[(0-9.) a-zA-Z#]{0,40}") {
-        let _ = parse_line(&prefix);
-    }
 }
 
 proptest! {
@@ -976,7 +1335,9 @@ proptest! {
         let ids = [
             if use_ext { CanId::Extended(ext_id) } else { CanId::Standard(std_id) },
             CanId::Standard(0x100 + near % 3),
-            CanId::Standard(0x300 + near % 3),
+            CanId::Standard(0x300 + near % 2),
+            CanId::Standard(0x200 + near % 5),
+            CanId::Standard(0x320),
             CanId::Standard(0x310 + near),
             CanId::Standard(0x3F0),
             CanId::Extended(spec::n2k_id(2, 129_025 + u32::from(near % 2), 0x1C)),
@@ -988,7 +1349,18 @@ proptest! {
             let _ = GnssCogSog::decode(&frame, 0x1C);
             if let Ok((m, c)) = StatePosition::decode(&frame) { let _ = m.encode(c); }
             if let Ok((m, c)) = StateMotion::decode(&frame) { let _ = m.encode(c); }
-            if let Ok((m, c)) = StateModel::decode(&frame) { let _ = m.encode(c); }
+            if let Ok((m, c)) = ControlCommand::decode(&frame) { let _ = m.encode(c); }
+            if let Ok(m) = decode_planner(&frame) {
+                // Every planner message that decodes re-encodes to a frame that decodes to it.
+                let again = match m {
+                    PlannerMessage::PathHeader(m, c) => m.encode(c),
+                    PlannerMessage::PathPoint(m, c) => m.encode(c),
+                    PlannerMessage::PathLimits(m, c) => m.encode(c),
+                    PlannerMessage::Obstacle(m, c) => m.encode(c),
+                    PlannerMessage::LocalOrigin(m, c) => m.encode(c),
+                };
+                prop_assert_eq!(decode_planner(&again), Ok(m));
+            }
             if let Ok((m, c)) = NodeStatus::decode(&frame) { let _ = m.encode(c); }
             if let Ok((m, c)) = Prediction::decode(&frame) { let _ = m.encode(c); }
             if let Ok((m, c)) = SteeringReport::decode(&frame) {

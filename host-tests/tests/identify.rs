@@ -9,7 +9,7 @@ use catmodel_host::identify::{self, simulate, IdentifyOptions};
 use catmodel_host::logcsv::LogRow;
 use catmodel_host::model_file;
 use catmodel_host::sim::scenario::PAPER_SIZED_TRAINING;
-use catmodel_host::sim::{self, SimOptions};
+use catmodel_host_tests::sim_experiment;
 
 fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
     let n = input_vel.len();
@@ -31,6 +31,8 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         heading: z.clone(),
         yaw_rate: z,
         origin_deg: (0.0, 0.0),
+        yaw_half_width: 48,
+        log_notes: Vec::new(),
     }
 }
 
@@ -80,26 +82,6 @@ fn recovers_the_published_speed_model() {
         check(num[i] / den[0], paper::EQ5_NUM[i], &format!("num[{i}]"));
         check(den[i] / den[0], paper::EQ5_DEN[i], &format!("den[{i}]"));
     }
-}
-
-fn sim_experiment(name: &str, seed: u64) -> Experiment {
-    let out = sim::run_named(
-        name,
-        None,
-        &SimOptions {
-            seed,
-            ..SimOptions::default()
-        },
-    )
-    .unwrap();
-    let base = model_file::load(&model_file::paper_path()).unwrap();
-    preprocess_rows(
-        &format!("{name}-{seed}"),
-        &out.log,
-        &base.vehicle,
-        &PreprocessOptions::default(),
-    )
-    .unwrap()
 }
 
 /// Trained on the four straight-line experiments of the simulator, the speed model reaches at

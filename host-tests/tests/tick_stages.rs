@@ -4,10 +4,10 @@
 //! times the receiver's rate, gaps of every length, jumps beyond the gate), and no stage may
 //! ever run more often than its row says. The second factor, each stage's most expensive run,
 //! is measured in QEMU (`cargo xtask bench-target`, docs/firmware.md "Worst-case tick").
-use catmodel::can::codec::SteeringReport;
+use catmodel::can::codec::{LocalOrigin, SteeringReport};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::node::{
-    first_tick_us, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
+    first_tick_us, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
 };
 use catmodel_host_tests::bus::{config, drive, Kind, Labelled, START_US};
 
@@ -75,6 +75,26 @@ fn heavy_drive() -> Vec<TimedFrame> {
                 ..fix
             });
         }
+        // Every 2 s the planner moves the map origin (both pages of LOCAL_ORIGIN, twice in
+        // the same tick: the node applies the last one, once).
+        if fix_index % 200 == 100 {
+            for (k, lat_e7) in [(0u8, 322_300_000), (2, 322_310_000)] {
+                for (c, page) in [
+                    (k, LocalOrigin::Latitude { lat_e7 }),
+                    (
+                        k + 1,
+                        LocalOrigin::Longitude {
+                            lon_e7: -1_109_500_000,
+                        },
+                    ),
+                ] {
+                    frames.push(TimedFrame {
+                        t_us: fix.t_us,
+                        frame: page.encode(c),
+                    });
+                }
+            }
+        }
         // Every 0.5 s a burst of 30 frames the node must decode and reject.
         if fix_index % 50 == 0 {
             for _ in 0..30 {
@@ -92,8 +112,8 @@ fn heavy_drive() -> Vec<TimedFrame> {
 /// Steps a probed and a plain node over `frames` (every due frame handed to the tick: more
 /// than the cap when there are); returns the counts and whether both sent the same frames.
 fn run(frames: &[TimedFrame]) -> (Counting, bool) {
-    let mut probed = Node::new(config());
-    let mut plain = Node::new(config());
+    let mut probed = catmodel_host::new_node(config());
+    let mut plain = catmodel_host::new_node(config());
     let mut counting = Counting::default();
     let mut same = true;
     let mut now = first_tick_us(frames[0].t_us);
@@ -129,13 +149,16 @@ fn every_stage_has_one_row() {
         | Stage::GnssRestart
         | Stage::GnssFixFilter
         | Stage::Models
+        | Stage::Origin
         | Stage::Estimate
+        | Stage::Drive
         | Stage::Predict
         | Stage::Publish => true,
     };
     let all = [
         Stage::Advance,
         Stage::Frame,
+        Stage::Origin,
         Stage::GnssOrigin,
         Stage::GnssFixCheck,
         Stage::GnssFill,
@@ -143,6 +166,7 @@ fn every_stage_has_one_row() {
         Stage::GnssFixFilter,
         Stage::Models,
         Stage::Estimate,
+        Stage::Drive,
         Stage::Predict,
         Stage::Publish,
     ];

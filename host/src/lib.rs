@@ -1,16 +1,28 @@
 //! Host side of catmodel: log files, the plant simulator, replay, evaluation, identification.
 //! Links the same `catmodel` core for everything the node does.
+pub mod closed_loop;
 pub mod csv2can;
+pub mod dbc;
+pub mod decode;
 pub mod evaluate;
 pub mod identify;
 pub mod logcsv;
 pub mod plot;
 pub mod progress;
 pub mod replay;
+pub mod sil;
 pub mod sim;
 
 /// The model file reader (crate `catmodel-model-file`): the same one the firmware build uses.
 pub use catmodel_model_file as model_file;
+
+/// The node as the host runs it: its drive stage (about 23 KiB) on the heap.
+pub type HostNode = catmodel::node::Node<Box<catmodel::node::drive::Drive>>;
+
+/// A node for the car of `config`, with a fresh drive stage on the heap.
+pub fn new_node(config: catmodel::node::NodeConfig) -> HostNode {
+    catmodel::node::Node::new(config, Box::new(catmodel::node::drive::Drive::new()))
+}
 
 use std::path::{Path, PathBuf};
 

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use catmodel_host::progress::Progress;
-use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
+use catmodel_host::{csv2can, decode, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -23,7 +23,7 @@ enum Command {
     /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
     SimulateDrive {
         /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
-        /// circle-left, circle-right, validation, smoke.
+        /// circle-left, circle-right, validation, smoke, standstill, suburb.
         #[arg(long)]
         scenario: String,
         /// Output directory.
@@ -108,6 +108,13 @@ enum Command {
         /// (default: models/paper.toml as built in).
         #[arg(long)]
         base: Option<PathBuf>,
+        /// The car the logs come from: a TOML file with the model file's [vehicle] table and
+        /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Write the model even if a fit is below the floor (the warning goes into the file).
+        #[arg(long)]
+        force: bool,
     },
     /// Simulate each model of a model file over one log, beside the kinematic model.
     Compare {
@@ -119,6 +126,60 @@ enum Command {
         /// CSV to write: t,vel,vel_model,vel_kinematic,dx,dx_model,dx_kinematic.
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
+    Decode {
+        /// candump log.
+        log: PathBuf,
+        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        messages: Vec<String>,
+        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
+        #[arg(long)]
+        csv: bool,
+    },
+    /// Close the loop: the plant simulator, the node and its controller on one bus, over a
+    /// scenario (dlc, obstacle, loop); writes DIR/session.can.log, session.tx.log,
+    /// metrics.json and plots.
+    ClosedLoop {
+        /// dlc (ISO 3888-2 double lane change), obstacle, loop.
+        #[arg(long)]
+        scenario: String,
+        /// mpc or pure-pursuit.
+        #[arg(long, default_value = "mpc")]
+        controller: String,
+        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Model file for the node (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
+        #[arg(long, default_value = "rtk")]
+        receiver: String,
+        /// Target speed, m/s (default: the scenario's).
+        #[arg(long)]
+        speed: Option<f64>,
+        /// Sensor noise seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
+    /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
+    /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
+    Sil {
+        /// Talk over stdin/stdout (the only transport).
+        #[arg(long, required = true)]
+        stdio: bool,
+        /// Model file (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+        #[arg(long, value_parser = parse_origin)]
+        origin: Option<(f64, f64)>,
     },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
@@ -193,8 +254,8 @@ fn run(cli: Cli) -> Result<()> {
             let (log_path, truth_path) =
                 sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
             let can_path = out.join(format!("{scenario}.can.log"));
-            let frames = csv2can::encode_log(&output.log);
-            replay::write_file(&can_path, &csv2can::to_candump(&frames))?;
+            let encoded = csv2can::encode_log(&output.log)?;
+            replay::write_file(&can_path, &csv2can::to_candump(&encoded.frames))?;
             progress.finish();
             eprintln!(
                 "wrote {}, {}, {}",
@@ -205,10 +266,15 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Csv2can { log, out } => {
-            let rows = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let frames = csv2can::encode_log(&rows);
-            replay::write_file(&out, &csv2can::to_candump(&frames))?;
-            eprintln!("wrote {} frames to {}", frames.len(), out.display());
+            let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
+            print_notes(&read.notes.messages());
+            let encoded = csv2can::encode_log(&read.rows)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
+            if let Some(note) = encoded.note() {
+                print_notes(&[format!("{}: {note}", log.display())]);
+            }
+            replay::write_file(&out, &csv2can::to_candump(&encoded.frames))?;
+            eprintln!("wrote {} frames to {}", encoded.frames.len(), out.display());
             Ok(())
         }
         Command::Replay {
@@ -285,8 +351,14 @@ fn run(cli: Cli) -> Result<()> {
             out,
             report,
             base,
+            vehicle,
+            force,
         } => {
             let base = load_base(base.as_deref())?;
+            let base = match vehicle {
+                Some(car) => identify::car::apply(&base, &car)?,
+                None => base,
+            };
             let opts = identify::IdentifyOptions::default();
             let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
                 .with_message("reading logs");
@@ -307,24 +379,50 @@ fn run(cli: Cli) -> Result<()> {
             let training = read(&logs)?;
             let validation = read(&validate)?;
             progress.finish_and_clear();
+            for e in training.iter().chain(&validation) {
+                print_notes(&e.log_notes);
+            }
             let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
             spinner.enable_steady_tick(std::time::Duration::from_millis(120));
-            let id = identify::identify(training, validation, &base, &opts)?;
+            let mut id = identify::identify(training, validation, &base, &opts)?;
             spinner.finish_and_clear();
-            model_file::save(&out, &id.model)
-                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
             print!("{}", identify::summary(&id));
-            eprintln!("wrote {}", out.display());
+            // The report first: it is what shows why a model falls below the floor.
             if let Some(dir) = report {
                 let index = identify::report::write_report(&dir, &id)?;
                 eprintln!("wrote {}", index.display());
             }
+            let violations = identify::floor::check(&id);
+            for v in &violations {
+                eprintln!("catmodel: warning: {v}");
+                if let Some((path, line, value)) =
+                    v.suspect.as_ref().and_then(|s| locate_suspect(s, &logs))
+                {
+                    eprintln!(
+                        "catmodel: warning: {}:{line}: this line's value {value} stands out",
+                        path.display()
+                    );
+                }
+            }
+            if !violations.is_empty() && !force {
+                bail!(
+                    "{} not written: {} fit(s) below the {} % floor (see the warnings above; --force writes it anyway, with the warning in the file)",
+                    out.display(),
+                    violations.len(),
+                    identify::floor::FIT_FLOOR_PERCENT
+                );
+            }
+            identify::floor::mark_forced(&mut id.model, &violations);
+            model_file::save(&out, &id.model)
+                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+            eprintln!("wrote {}", out.display());
             Ok(())
         }
         Command::Compare { log, model, out } => {
             let file = model_file::load(&model)?;
             let opts = identify::preprocess::PreprocessOptions::default();
             let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
+            print_notes(&e.log_notes);
             let sim = identify::validate::simulate_all(&file, &e)?;
             let scores =
                 identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
@@ -340,12 +438,88 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Command::Decode { log, messages, csv } => {
+            let format = if csv {
+                decode::Format::Csv
+            } else {
+                decode::Format::Table
+            };
+            decode::run(&log, &messages, format)
+        }
+        Command::ClosedLoop {
+            scenario,
+            controller,
+            vehicle,
+            model,
+            receiver,
+            speed,
+            seed,
+            out,
+        } => {
+            let progress = Progress::spinner(&format!("closed loop: {scenario}"));
+            let (metrics, written) =
+                catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
+                    scenario,
+                    controller,
+                    vehicle,
+                    model,
+                    receiver,
+                    speed_mps: speed,
+                    seed,
+                    out,
+                })?;
+            progress.finish();
+            println!("{}", serde_json::to_string_pretty(&metrics)?);
+            for p in written {
+                eprintln!("wrote {}", p.display());
+            }
+            Ok(())
+        }
+        Command::Sil {
+            stdio: _,
+            model,
+            origin,
+        } => {
+            let mut config = catmodel_host::node_config(model.as_deref())?;
+            config.origin_e7 = origin.map(to_e7);
+            // The node exactly as the model file configures it, controller included.
+            let mut driver = catmodel_host::closed_loop::driver::NodeDriver::new(
+                config,
+                catmodel_host::closed_loop::driver::Controller::FromModel,
+            );
+            let stdin = std::io::stdin().lock();
+            let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+            catmodel_host::sil::run(&mut driver, stdin, stdout)?;
+            Ok(())
+        }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;
             let d = identify::discretize::discretize_file(&file, ts)?;
             println!("{}", serde_json::to_string_pretty(&d)?);
             Ok(())
         }
+    }
+}
+
+/// The training log and line behind a suspect sample of the fit floor, with its value.
+fn locate_suspect(
+    suspect: &identify::floor::Suspect,
+    logs: &[PathBuf],
+) -> Option<(PathBuf, usize, f64)> {
+    let path = logs.iter().find(|p| {
+        p.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.trim_end_matches(".csv") == suspect.log)
+    })?;
+    let log = logcsv::read_log(path).ok()?;
+    let (line, value) = identify::floor::locate(suspect, &log)?;
+    Some((path.clone(), line, value))
+}
+
+/// What reading a file noticed without refusing it, on stderr: `catmodel: note: FILE[:LINE]: ...`.
+fn print_notes(notes: &[String]) {
+    for n in notes {
+        eprintln!("catmodel: note: {n}");
     }
 }
 

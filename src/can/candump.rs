@@ -81,8 +81,9 @@ fn parse_decimal(text: &str) -> Option<u64> {
     })
 }
 
-/// `SECONDS.UUUUUU` to microseconds.
-fn parse_timestamp(text: &str) -> Result<u64, CandumpError> {
+/// `SECONDS.UUUUUU` (1-20 digits, a dot, exactly six decimals) to microseconds, without float;
+/// the candump timestamp's syntax, also used by the SIL protocol's `TICK` lines.
+pub fn parse_timestamp(text: &str) -> Result<u64, CandumpError> {
     let (secs, frac) = text.split_once('.').ok_or(CandumpError::BadTimestamp)?;
     if secs.is_empty() || secs.len() > 20 || frac.len() != 6 {
         return Err(CandumpError::BadTimestamp);

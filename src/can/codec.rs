@@ -161,6 +161,19 @@ impl Writer {
         s.write_raw(&mut self.data, raw);
     }
 
+    /// An integer that must be within the signal's limits; outside them the sentinel, or for a
+    /// signal without one `raw_min - 1` (PATH_HEADER `count`: 1), goes out so that receivers
+    /// reject it, and it is counted.
+    fn checked(&mut self, s: &SignalSpec, raw: i64) {
+        let raw = if s.in_range(raw) {
+            raw
+        } else {
+            self.report.out_of_range = self.report.out_of_range.saturating_add(1);
+            s.not_available_raw.unwrap_or(s.raw_min.wrapping_sub(1))
+        };
+        s.write_raw(&mut self.data, raw);
+    }
+
     fn flag(&mut self, s: &SignalSpec, on: bool) {
         s.write_raw(&mut self.data, i64::from(on));
     }
@@ -278,6 +291,11 @@ impl Reader {
     /// A raw value that must be present (no sentinel, or sentinel = [`DecodeError::Invalid`]).
     fn required(&self, s: &SignalSpec) -> Result<i64, DecodeError> {
         self.raw(s)?.ok_or(DecodeError::Invalid { signal: s.name })
+    }
+
+    /// A physical value that must be present ([`DecodeError::Invalid`] for the sentinel).
+    fn required_phys(&self, s: &SignalSpec) -> Result<f32, DecodeError> {
+        Ok(s.to_physical(self.required(s)?))
     }
 
     fn flag(&self, s: &SignalSpec) -> bool {
@@ -470,6 +488,295 @@ impl GnssCogSog {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Inputs from the planner (docs/bus.md, "The controller's messages")
+
+/// PATH_HEADER (0x200): a new path `path_id` of `count` points follows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathHeader {
+    /// Path identifier, 0..=15 (only the low 4 bits are sent).
+    pub path_id: u8,
+    /// Number of points, 2..=[`spec::MAX_PATH_POINTS`].
+    pub count: u16,
+}
+
+impl PathHeader {
+    /// The frame, with `counter` (4 bits) and its CRC. A `count` outside 2..=256 goes out as 0,
+    /// which every receiver rejects, and is counted in the report.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::PATH_HEADER);
+        w.raw(&sig::PATH_ID, i64::from(self.path_id & 0x0F));
+        w.checked(&sig::PATH_COUNT, i64::from(self.count));
+        w.finish(spec::PATH_HEADER.id, counter)
+    }
+    /// The message and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::PATH_HEADER, frame)?;
+        let msg = Self {
+            path_id: r.required(&sig::PATH_ID)? as u8,
+            count: r.required(&sig::PATH_COUNT)? as u16,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// PATH_POINT (0x201): point `index` of path `path_id`, the rear axle's position there in the
+/// node's local frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathPoint {
+    /// Path identifier, 0..=15.
+    pub path_id: u8,
+    /// Point index, 0..count-1.
+    pub index: u8,
+    /// East of the local origin, m, |east| <= 10 485.74, 0.02 m resolution.
+    pub east_m: f32,
+    /// North of the local origin, m, same range.
+    pub north_m: f32,
+}
+
+impl PathPoint {
+    /// The frame, with `counter` and its CRC. A coordinate outside the range (or not finite)
+    /// goes out as "not available", which receivers reject, and is counted in the report.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::PATH_POINT);
+        w.raw(&sig::PATH_ID, i64::from(self.path_id & 0x0F));
+        w.raw(&sig::PATH_INDEX, i64::from(self.index));
+        w.phys(&sig::PATH_EAST_M, Some(self.east_m));
+        w.phys(&sig::PATH_NORTH_M, Some(self.north_m));
+        w.finish(spec::PATH_POINT.id, counter)
+    }
+    /// The message and its counter; a coordinate "not available" is [`DecodeError::Invalid`].
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::PATH_POINT, frame)?;
+        let msg = Self {
+            path_id: r.required(&sig::PATH_ID)? as u8,
+            index: r.required(&sig::PATH_INDEX)? as u8,
+            east_m: r.required_phys(&sig::PATH_EAST_M)?,
+            north_m: r.required_phys(&sig::PATH_NORTH_M)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// PATH_LIMITS (0x202): target speed and corridor at point `index` of path `path_id`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathLimits {
+    /// Path identifier, 0..=15.
+    pub path_id: u8,
+    /// Point index, 0..count-1.
+    pub index: u8,
+    /// Target speed at the point, m/s, 0..=40.94.
+    pub speed_mps: f32,
+    /// How far the body may stray to the left of the point, m, 0..=163.82.
+    pub left_m: f32,
+    /// How far the body may stray to the right of the point, m, 0..=163.82.
+    pub right_m: f32,
+}
+
+impl PathLimits {
+    /// The frame, with `counter` and its CRC; out-of-range values go out as "not available"
+    /// (rejected by receivers) and are counted.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::PATH_LIMITS);
+        w.raw(&sig::PATH_ID, i64::from(self.path_id & 0x0F));
+        w.raw(&sig::PATH_INDEX, i64::from(self.index));
+        w.phys(&sig::PATH_SPEED_MPS, Some(self.speed_mps));
+        w.phys(&sig::PATH_LEFT_M, Some(self.left_m));
+        w.phys(&sig::PATH_RIGHT_M, Some(self.right_m));
+        w.finish(spec::PATH_LIMITS.id, counter)
+    }
+    /// The message and its counter; a value "not available" is [`DecodeError::Invalid`].
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::PATH_LIMITS, frame)?;
+        let msg = Self {
+            path_id: r.required(&sig::PATH_ID)? as u8,
+            index: r.required(&sig::PATH_INDEX)? as u8,
+            speed_mps: r.required_phys(&sig::PATH_SPEED_MPS)?,
+            left_m: r.required_phys(&sig::PATH_LEFT_M)?,
+            right_m: r.required_phys(&sig::PATH_RIGHT_M)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// OBSTACLE (0x203): slot `obstacle_id` holds a circle the body keeps clear of, or is cleared.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Obstacle {
+    /// Slot, 0..=3 (only the low 2 bits are sent).
+    pub obstacle_id: u8,
+    /// The circle, or `None`: the slot is cleared (`active` = 0, position "not available").
+    pub circle: Option<ObstacleCircle>,
+}
+
+/// Where an obstacle is, in the node's local frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObstacleCircle {
+    /// Centre east of the local origin, m, 0.02 m resolution.
+    pub east_m: f32,
+    /// Centre north of the local origin, m.
+    pub north_m: f32,
+    /// Radius, m, 0..=12.75, 0.05 m resolution.
+    pub radius_m: f32,
+}
+
+impl Obstacle {
+    /// The frame, with `counter` and its CRC. An active obstacle with a value out of range
+    /// goes out with that value "not available" (rejected by receivers), counted.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::OBSTACLE);
+        w.raw(&sig::OBSTACLE_ID, i64::from(self.obstacle_id & 0x03));
+        w.flag(&sig::OBSTACLE_ACTIVE, self.circle.is_some());
+        match self.circle {
+            Some(c) => {
+                w.phys(&sig::OBSTACLE_EAST_M, Some(c.east_m));
+                w.phys(&sig::OBSTACLE_NORTH_M, Some(c.north_m));
+                w.phys(&sig::OBSTACLE_RADIUS_M, Some(c.radius_m));
+            }
+            None => {
+                let na = |s: &SignalSpec| s.not_available_raw.unwrap_or(0);
+                w.raw(&sig::OBSTACLE_EAST_M, na(&sig::OBSTACLE_EAST_M));
+                w.raw(&sig::OBSTACLE_NORTH_M, na(&sig::OBSTACLE_NORTH_M));
+            }
+        }
+        w.finish(spec::OBSTACLE.id, counter)
+    }
+    /// The message and its counter. An active obstacle needs its centre
+    /// ([`DecodeError::Invalid`] otherwise); a cleared slot's other fields are ignored.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::OBSTACLE, frame)?;
+        let circle = if r.flag(&sig::OBSTACLE_ACTIVE) {
+            Some(ObstacleCircle {
+                east_m: r.required_phys(&sig::OBSTACLE_EAST_M)?,
+                north_m: r.required_phys(&sig::OBSTACLE_NORTH_M)?,
+                radius_m: r.required_phys(&sig::OBSTACLE_RADIUS_M)?,
+            })
+        } else {
+            None
+        };
+        let msg = Self {
+            obstacle_id: r.required(&sig::OBSTACLE_ID)? as u8,
+            circle,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// LOCAL_ORIGIN (0x204): one page of the planner's map origin. The origin is the latitude
+/// page followed by the longitude page with the next counter value (see
+/// `catmodel::control::planner`). Kept in integer 1e-7 degrees, like [`GnssPosition`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LocalOrigin {
+    /// Page 0: latitude, 1e-7 deg, -90e7..=90e7.
+    Latitude {
+        /// Latitude, 1e-7 deg.
+        lat_e7: i32,
+    },
+    /// Page 1: longitude, 1e-7 deg, -180e7..=180e7.
+    Longitude {
+        /// Longitude, 1e-7 deg.
+        lon_e7: i32,
+    },
+}
+
+impl LocalOrigin {
+    /// The frame, with `counter` and its CRC; a coordinate out of range goes out as "not
+    /// available" (rejected by receivers), counted.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut w = Writer::new(&spec::LOCAL_ORIGIN);
+        let (page, s, v) = match *self {
+            LocalOrigin::Latitude { lat_e7 } => (0, &sig::ORIGIN_LATITUDE_DEG, lat_e7),
+            LocalOrigin::Longitude { lon_e7 } => (1, &sig::ORIGIN_LONGITUDE_DEG, lon_e7),
+        };
+        w.raw(&sig::ORIGIN_PAGE, page);
+        let v = i64::from(v);
+        if s.in_range(v) {
+            w.raw(s, v);
+        } else {
+            w.report.out_of_range = w.report.out_of_range.saturating_add(1);
+            w.raw(s, s.not_available_raw.unwrap_or(0));
+        }
+        w.finish(spec::LOCAL_ORIGIN.id, counter)
+    }
+    /// The page and its counter; a coordinate "not available" is [`DecodeError::Invalid`].
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::LOCAL_ORIGIN, frame)?;
+        let msg = if r.flag(&sig::ORIGIN_PAGE) {
+            LocalOrigin::Longitude {
+                lon_e7: r.required(&sig::ORIGIN_LONGITUDE_DEG)? as i32,
+            }
+        } else {
+            LocalOrigin::Latitude {
+                lat_e7: r.required(&sig::ORIGIN_LATITUDE_DEG)? as i32,
+            }
+        };
+        Ok((msg, r.counter))
+    }
+}
+
+/// Any message from the planner, as [`decode_planner`] classifies it, with its rolling counter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlannerMessage {
+    /// 0x200.
+    PathHeader(PathHeader, u8),
+    /// 0x201.
+    PathPoint(PathPoint, u8),
+    /// 0x202.
+    PathLimits(PathLimits, u8),
+    /// 0x203.
+    Obstacle(Obstacle, u8),
+    /// 0x204.
+    LocalOrigin(LocalOrigin, u8),
+}
+
+/// Decodes any frame from the planner; [`DecodeError::UnknownId`] for other identifiers.
+/// Kept apart from [`decode_input`] (the vehicle's reports), which is unchanged.
+pub fn decode_planner(frame: &CanFrame) -> Result<PlannerMessage, DecodeError> {
+    match frame.id {
+        id if id == spec::PATH_HEADER.id => {
+            PathHeader::decode(frame).map(|(m, c)| PlannerMessage::PathHeader(m, c))
+        }
+        id if id == spec::PATH_POINT.id => {
+            PathPoint::decode(frame).map(|(m, c)| PlannerMessage::PathPoint(m, c))
+        }
+        id if id == spec::PATH_LIMITS.id => {
+            PathLimits::decode(frame).map(|(m, c)| PlannerMessage::PathLimits(m, c))
+        }
+        id if id == spec::OBSTACLE.id => {
+            Obstacle::decode(frame).map(|(m, c)| PlannerMessage::Obstacle(m, c))
+        }
+        id if id == spec::LOCAL_ORIGIN.id => {
+            LocalOrigin::decode(frame).map(|(m, c)| PlannerMessage::LocalOrigin(m, c))
+        }
+        _ => Err(DecodeError::UnknownId),
+    }
+}
+
 /// Any input message, as [`decode_input`] classifies it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum InputMessage {
@@ -610,46 +917,16 @@ impl StateMotion {
     }
 }
 
-/// STATE_MODEL (0x302): the identified models' outputs this tick.
+/// The identified models' outputs of one tick (NODE_STATUS page 5).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StateModel {
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModelOutputs {
     /// Velocity-model output (eq 5), m/s; `None` = not available.
     pub speed_model_mps: Option<f32>,
     /// dx/dt model output (eq 7), m/s; `None` = not available.
     pub dxdt_model_mps: Option<f32>,
     /// Lateral acceleration, m/s^2, positive = right; `None` = not available.
     pub lat_accel_mps2: Option<f32>,
-}
-
-impl StateModel {
-    /// The frame, with `counter` and its CRC.
-    pub fn encode(&self, counter: u8) -> CanFrame {
-        self.encode_with_report(counter).0
-    }
-    /// As [`Self::encode`], with what had to be substituted.
-    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
-        let mut frame = CanFrame::EMPTY;
-        let report = self.encode_into(counter, &mut frame);
-        (frame, report)
-    }
-    /// As [`Self::encode_with_report`], into `out` (in place).
-    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
-        let mut w = Writer::new(&spec::STATE_MODEL);
-        w.phys(&sig::SPEED_MODEL_MPS, self.speed_model_mps);
-        w.phys(&sig::DXDT_MODEL_MPS, self.dxdt_model_mps);
-        w.phys(&sig::LAT_ACCEL_MPS2, self.lat_accel_mps2);
-        w.finish_into(spec::STATE_MODEL.id, counter, out)
-    }
-    /// The message and its counter.
-    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
-        let r = Reader::standard(&spec::STATE_MODEL, frame)?;
-        let msg = Self {
-            speed_model_mps: r.phys(&sig::SPEED_MODEL_MPS)?,
-            dxdt_model_mps: r.phys(&sig::DXDT_MODEL_MPS)?,
-            lat_accel_mps2: r.phys(&sig::LAT_ACCEL_MPS2)?,
-        };
-        Ok((msg, r.counter))
-    }
 }
 
 /// Which prediction point, 1..=10 (point k is k * 0.2 s ahead); always a valid index.
@@ -745,6 +1022,85 @@ impl Prediction {
     }
 }
 
+/// What the controller is doing (CONTROL_COMMAND `status`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlStatus {
+    /// No complete path: the command holds the car (speed 0), raw 0.
+    #[default]
+    NoPath,
+    /// Following the path, raw 1.
+    Tracking,
+    /// Following the path around an obstacle, raw 2.
+    Avoiding,
+    /// The controller could not plan (infeasible, inputs stale): its documented fallback,
+    /// raw 3.
+    Fallback,
+}
+
+impl ControlStatus {
+    const fn raw(self) -> i64 {
+        match self {
+            ControlStatus::NoPath => 0,
+            ControlStatus::Tracking => 1,
+            ControlStatus::Avoiding => 2,
+            ControlStatus::Fallback => 3,
+        }
+    }
+    const fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => ControlStatus::Tracking,
+            2 => ControlStatus::Avoiding,
+            3 => ControlStatus::Fallback,
+            _ => ControlStatus::NoPath,
+        }
+    }
+}
+
+/// CONTROL_COMMAND (0x320): the controller's steering and speed commands of this tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControlCommand {
+    /// What the controller is doing.
+    pub status: ControlStatus,
+    /// Steering command, % of full lock, -100..=100, positive = right (as STEERING_REPORT);
+    /// `None` = not available.
+    pub steer_cmd_pct: Option<f32>,
+    /// Speed command, m/s; `None` = not available.
+    pub speed_cmd_mps: Option<f32>,
+}
+
+impl ControlCommand {
+    /// The frame, with `counter` and its CRC.
+    pub fn encode(&self, counter: u8) -> CanFrame {
+        self.encode_with_report(counter).0
+    }
+    /// As [`Self::encode`], with what had to be substituted.
+    pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
+        let mut w = Writer::new(&spec::CONTROL_COMMAND);
+        w.raw(&sig::COMMAND_STATUS, self.status.raw());
+        w.phys(&sig::STEER_CMD_PCT, self.steer_cmd_pct);
+        w.phys(&sig::COMMAND_SPEED_MPS, self.speed_cmd_mps);
+        w.finish_into(spec::CONTROL_COMMAND.id, counter, out)
+    }
+    /// The message and its counter.
+    pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
+        let r = Reader::standard(&spec::CONTROL_COMMAND, frame)?;
+        let msg = Self {
+            status: ControlStatus::from_raw(r.required(&sig::COMMAND_STATUS)?),
+            steer_cmd_pct: r.phys(&sig::STEER_CMD_PCT)?,
+            speed_cmd_mps: r.phys(&sig::COMMAND_SPEED_MPS)?,
+        };
+        Ok((msg, r.counter))
+    }
+}
+
 /// NODE_STATUS page 0 health bits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -820,9 +1176,9 @@ impl HealthFlags {
     }
 }
 
-/// NODE_STATUS (0x3F0), one page per tick (page = tick sequence number mod 5). Counters are
+/// NODE_STATUS (0x3F0), one page per tick (page = tick sequence number mod 6). Counters are
 /// given as u32 and saturate at the field's maximum on the bus.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum NodeStatus {
     /// Page 0.
@@ -869,6 +1225,9 @@ pub enum NodeStatus {
         /// Deepest stack use, bytes (saturates at 65 534); `None` = not measured.
         stack_high_water_bytes: Option<u32>,
     },
+    /// Page 5: the identified models' outputs (50 Hz / 6: diagnostics; the page took over the
+    /// former STATE_MODEL frame's slot so that CONTROL_COMMAND fits the bus budget).
+    Model(ModelOutputs),
 }
 
 const AGE_SIGNALS: [&SignalSpec; 4] = [
@@ -879,7 +1238,7 @@ const AGE_SIGNALS: [&SignalSpec; 4] = [
 ];
 
 impl NodeStatus {
-    /// The multiplexer page of this variant, 0..=4.
+    /// The multiplexer page of this variant, 0..=5.
     pub const fn page(&self) -> u8 {
         match self {
             NodeStatus::Health { .. } => 0,
@@ -887,6 +1246,7 @@ impl NodeStatus {
             NodeStatus::RxRejects { .. } => 2,
             NodeStatus::Platform { .. } => 3,
             NodeStatus::Ages { .. } => 4,
+            NodeStatus::Model(_) => 5,
         }
     }
 
@@ -953,6 +1313,11 @@ impl NodeStatus {
                 }
                 w.count_or_na(&sig::STACK_HIGH_WATER_BYTES, stack_high_water_bytes);
             }
+            NodeStatus::Model(m) => {
+                w.phys(&sig::SPEED_MODEL_MPS, m.speed_model_mps);
+                w.phys(&sig::DXDT_MODEL_MPS, m.dxdt_model_mps);
+                w.phys(&sig::LAT_ACCEL_MPS2, m.lat_accel_mps2);
+            }
         }
         w.finish_into(spec::NODE_STATUS.id, counter, out)
     }
@@ -987,6 +1352,11 @@ impl NodeStatus {
                 tick_count: r.count(&sig::TICK_COUNT)?,
                 rx_queue_drops: r.count(&sig::RX_QUEUE_DROPS)?,
             },
+            5 => NodeStatus::Model(ModelOutputs {
+                speed_model_mps: r.phys(&sig::SPEED_MODEL_MPS)?,
+                dxdt_model_mps: r.phys(&sig::DXDT_MODEL_MPS)?,
+                lat_accel_mps2: r.phys(&sig::LAT_ACCEL_MPS2)?,
+            }),
             _ => {
                 let mut ages_10ms = [0u8; 4];
                 for (a, s) in ages_10ms.iter_mut().zip(AGE_SIGNALS) {

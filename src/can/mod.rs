@@ -6,7 +6,8 @@
 //! - [`spec`]: the descriptor table (one [`spec::MessageSpec`] per DBC message) and the generic
 //!   little-endian bit packer; `host-tests/tests/dbc.rs` checks it against the DBC.
 //! - [`codec`]: one typed struct per message with `encode(&self, counter) -> CanFrame` and
-//!   `decode(&CanFrame) -> Result<(Self, counter), DecodeError>`; [`codec::decode_input`].
+//!   `decode(&CanFrame) -> Result<(Self, counter), DecodeError>`; [`codec::decode_input`] (the
+//!   vehicle's reports) and [`codec::decode_planner`] (paths, obstacles, origin).
 //! - [`crc`]: [`crc8_sae_j1850`] and the per-frame CRC of byte 7.
 //! - [`counter`]: rolling-counter checking of the inputs.
 //! - [`freshness`]: timeouts and ages of the inputs.
@@ -23,9 +24,11 @@ pub mod freshness;
 pub mod spec;
 
 pub use codec::{
-    decode_input, DecodeError, EncodeReport, GnssCogSog, GnssPosition, HealthFlags, InputMessage,
-    ModelMode, NodeStatus, PedalReport, Prediction, PredictionPoint, SpeedReport, StateModel,
-    StateMotion, StatePosition, SteeringReport,
+    decode_input, decode_planner, ControlCommand, ControlStatus, DecodeError, EncodeReport,
+    GnssCogSog, GnssPosition, HealthFlags, InputMessage, LocalOrigin, ModelMode, ModelOutputs,
+    NodeStatus, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint, PedalReport,
+    PlannerMessage, Prediction, PredictionPoint, SpeedReport, StateMotion, StatePosition,
+    SteeringReport,
 };
 pub use crc::crc8_sae_j1850;
 pub use frame::{CanFrame, CanId, TimedFrame};

@@ -369,22 +369,6 @@ pub mod sig {
         .raw_range(-32_767, 32_767)
         .na(-32_768);
 
-    /// Velocity-model output (eq 5), 0.01 m/s; 0xFFFF = not available.
-    pub const SPEED_MODEL_MPS: SignalSpec = SignalSpec::uint("speed_model_mps", 8, 16)
-        .scaled(0.01, "m/s")
-        .raw_range(0, 65_534)
-        .na(0xFFFF);
-    /// dx/dt model output (eq 7), 0.01 m/s; -32768 = not available.
-    pub const DXDT_MODEL_MPS: SignalSpec = SignalSpec::int("dxdt_model_mps", 24, 16)
-        .scaled(0.01, "m/s")
-        .raw_range(-32_767, 32_767)
-        .na(-32_768);
-    /// Lateral acceleration, 0.01 m/s^2, positive = right; -32768 = not available.
-    pub const LAT_ACCEL_MPS2: SignalSpec = SignalSpec::int("lat_accel_mps2", 40, 16)
-        .scaled(0.01, "m/s^2")
-        .raw_range(-32_767, 32_767)
-        .na(-32_768);
-
     /// Prediction: east displacement from the tick's STATE_POSITION, 0.01 m.
     pub const DX_M: SignalSpec = SignalSpec::int("dx_m", 4, 14)
         .scaled(0.01, "m")
@@ -406,8 +390,91 @@ pub mod sig {
         .raw_range(0, 4_094)
         .na(0xFFF);
 
+    /// Planner messages: which path, 0..15 (a new id replaces the path once complete).
+    pub const PATH_ID: SignalSpec = SignalSpec::uint("path_id", 4, 4);
+    /// PATH_HEADER: number of points of the path, 2..=256.
+    pub const PATH_COUNT: SignalSpec =
+        SignalSpec::uint("count", 8, 9).raw_range(2, super::MAX_PATH_POINTS as i64);
+    /// PATH_POINT / PATH_LIMITS: index of the point, 0..count-1.
+    pub const PATH_INDEX: SignalSpec = SignalSpec::uint("index", 8, 8);
+    /// PATH_POINT: rear-axle path point east of the local origin, 0.02 m, +-10.49 km.
+    pub const PATH_EAST_M: SignalSpec = SignalSpec::int("east_m", 16, 20)
+        .scaled(0.02, "m")
+        .raw_range(-524_287, 524_287)
+        .na(-524_288);
+    /// PATH_POINT: north of the local origin, 0.02 m.
+    pub const PATH_NORTH_M: SignalSpec = SignalSpec::int("north_m", 36, 20)
+        .scaled(0.02, "m")
+        .raw_range(-524_287, 524_287)
+        .na(-524_288);
+    /// PATH_LIMITS: target speed at the point, 0.01 m/s; 0xFFF = not available (rejected).
+    pub const PATH_SPEED_MPS: SignalSpec = SignalSpec::uint("speed_mps", 16, 12)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 4_094)
+        .na(0xFFF);
+    /// PATH_LIMITS: how far the body may stray left of the point, 0.01 m.
+    pub const PATH_LEFT_M: SignalSpec = SignalSpec::uint("left_m", 28, 14)
+        .scaled(0.01, "m")
+        .raw_range(0, 16_382)
+        .na(0x3FFF);
+    /// PATH_LIMITS: how far the body may stray right of the point, 0.01 m.
+    pub const PATH_RIGHT_M: SignalSpec = SignalSpec::uint("right_m", 42, 14)
+        .scaled(0.01, "m")
+        .raw_range(0, 16_382)
+        .na(0x3FFF);
+
+    /// OBSTACLE: slot, 0..3.
+    pub const OBSTACLE_ID: SignalSpec = SignalSpec::uint("obstacle_id", 4, 2);
+    /// OBSTACLE: 1 = the slot holds an obstacle, 0 = the slot is cleared.
+    pub const OBSTACLE_ACTIVE: SignalSpec = SignalSpec::uint("active", 6, 1);
+    /// OBSTACLE: centre east of the local origin, 0.02 m.
+    pub const OBSTACLE_EAST_M: SignalSpec = SignalSpec::int("east_m", 8, 20)
+        .scaled(0.02, "m")
+        .raw_range(-524_287, 524_287)
+        .na(-524_288);
+    /// OBSTACLE: centre north of the local origin, 0.02 m.
+    pub const OBSTACLE_NORTH_M: SignalSpec = SignalSpec::int("north_m", 28, 20)
+        .scaled(0.02, "m")
+        .raw_range(-524_287, 524_287)
+        .na(-524_288);
+    /// OBSTACLE: radius of the circle the body keeps clear of, 0.05 m, 0..12.7 m; 0xFF = not
+    /// available.
+    pub const OBSTACLE_RADIUS_M: SignalSpec = SignalSpec::uint("radius_m", 48, 8)
+        .scaled(0.05, "m")
+        .raw_range(0, 254)
+        .na(0xFF);
+
+    /// LOCAL_ORIGIN page: 0 latitude, 1 longitude (multiplexer switch).
+    pub const ORIGIN_PAGE: SignalSpec = SignalSpec::uint("page", 4, 1).switch();
+    /// LOCAL_ORIGIN page 0: latitude of the planner's map origin, 1e-7 deg (as PGN 129025).
+    pub const ORIGIN_LATITUDE_DEG: SignalSpec = SignalSpec::int("latitude_deg", 8, 32)
+        .scaled(1e-7, "deg")
+        .raw_range(-900_000_000, 900_000_000)
+        .na(0x7FFF_FFFF)
+        .on_page(0);
+    /// LOCAL_ORIGIN page 1: longitude of the planner's map origin, 1e-7 deg.
+    pub const ORIGIN_LONGITUDE_DEG: SignalSpec = SignalSpec::int("longitude_deg", 8, 32)
+        .scaled(1e-7, "deg")
+        .raw_range(-1_800_000_000, 1_800_000_000)
+        .na(0x7FFF_FFFF)
+        .on_page(1);
+
+    /// CONTROL_COMMAND: 0 no path, 1 tracking, 2 avoiding, 3 fallback.
+    pub const COMMAND_STATUS: SignalSpec = SignalSpec::uint("status", 4, 2);
+    /// CONTROL_COMMAND: steering command, % of full lock, positive = right (as
+    /// STEERING_REPORT); -32768 = not available.
+    pub const STEER_CMD_PCT: SignalSpec = SignalSpec::int("steer_cmd_pct", 8, 16)
+        .scaled(0.01, "%")
+        .raw_range(-10_000, 10_000)
+        .na(-32_768);
+    /// CONTROL_COMMAND: speed command, 0.01 m/s; 0xFFFF = not available.
+    pub const COMMAND_SPEED_MPS: SignalSpec = SignalSpec::uint("speed_cmd_mps", 24, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF);
+
     /// NODE_STATUS page number (multiplexer switch).
-    pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 4).switch();
+    pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 5).switch();
     /// Page 0: model in use, 0 kinematic, 1 dynamic.
     pub const STATUS_MODE: SignalSpec = SignalSpec::uint("mode", 8, 1).on_page(0);
     /// Page 0 health bit.
@@ -490,12 +557,38 @@ pub mod sig {
             .raw_range(0, 0xFFFE)
             .na(0xFFFF)
             .on_page(4);
+    /// Page 5: velocity-model output (eq 5), 0.01 m/s; 0xFFFF = not available.
+    pub const SPEED_MODEL_MPS: SignalSpec = SignalSpec::uint("speed_model_mps", 8, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(0, 65_534)
+        .na(0xFFFF)
+        .on_page(5);
+    /// Page 5: dx/dt model output (eq 7), 0.01 m/s; -32768 = not available.
+    pub const DXDT_MODEL_MPS: SignalSpec = SignalSpec::int("dxdt_model_mps", 24, 16)
+        .scaled(0.01, "m/s")
+        .raw_range(-32_767, 32_767)
+        .na(-32_768)
+        .on_page(5);
+    /// Page 5: lateral acceleration, 0.01 m/s^2, positive = right; -32768 = not available.
+    pub const LAT_ACCEL_MPS2: SignalSpec = SignalSpec::int("lat_accel_mps2", 40, 16)
+        .scaled(0.01, "m/s^2")
+        .raw_range(-32_767, 32_767)
+        .na(-32_768)
+        .on_page(5);
 }
 
 use sig::*;
 
 const TO_NODE: &[&str] = &[NODE_CATMODEL];
 const TO_PLANNER: &[&str] = &[NODE_PLANNER];
+const TO_DBW_AND_PLANNER: &[&str] = &[NODE_DBW, NODE_PLANNER];
+
+/// Most points a path may have: the 8-bit `index` of PATH_POINT / PATH_LIMITS (0..=255).
+/// At 0.5-1 m spacing that is 128-256 m of path, more than the 2 s horizon needs at any speed
+/// the car reaches; the node holds two paths (the active one and the one arriving).
+pub const MAX_PATH_POINTS: usize = 256;
+/// Obstacle slots of OBSTACLE (`obstacle_id` 0..=3).
+pub const OBSTACLE_SLOTS: usize = 4;
 
 /// NMEA 2000 priority our GNSS identifiers carry (the PGNs' default).
 pub const N2K_PRIORITY: u32 = 2;
@@ -598,6 +691,91 @@ pub const GNSS_COG_SOG_RAPID: MessageSpec = MessageSpec {
     signals: &[SID, COG_REFERENCE, COG_RAD, SOG_MPS],
     integrity: Integrity::RangeOnly,
 };
+/// Input 0x200 from the planner, on a new path: announces `path_id` and its point count.
+pub const PATH_HEADER: MessageSpec = MessageSpec {
+    name: "PATH_HEADER",
+    id: CanId::Standard(0x200),
+    dlc: 8,
+    cycle_ms: 0,
+    transmitter: NODE_PLANNER,
+    receivers: TO_NODE,
+    signals: &[COUNTER_OUT, PATH_ID, PATH_COUNT, CRC],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Input 0x201 from the planner: one point of the path (the rear axle's), in index order.
+pub const PATH_POINT: MessageSpec = MessageSpec {
+    name: "PATH_POINT",
+    id: CanId::Standard(0x201),
+    dlc: 8,
+    cycle_ms: 0,
+    transmitter: NODE_PLANNER,
+    receivers: TO_NODE,
+    signals: &[
+        COUNTER_OUT,
+        PATH_ID,
+        PATH_INDEX,
+        PATH_EAST_M,
+        PATH_NORTH_M,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Input 0x202 from the planner: target speed and corridor at one point, in index order.
+pub const PATH_LIMITS: MessageSpec = MessageSpec {
+    name: "PATH_LIMITS",
+    id: CanId::Standard(0x202),
+    dlc: 8,
+    cycle_ms: 0,
+    transmitter: NODE_PLANNER,
+    receivers: TO_NODE,
+    signals: &[
+        COUNTER_OUT,
+        PATH_ID,
+        PATH_INDEX,
+        PATH_SPEED_MPS,
+        PATH_LEFT_M,
+        PATH_RIGHT_M,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Input 0x203 from the planner: one obstacle slot, set or cleared.
+pub const OBSTACLE: MessageSpec = MessageSpec {
+    name: "OBSTACLE",
+    id: CanId::Standard(0x203),
+    dlc: 8,
+    cycle_ms: 0,
+    transmitter: NODE_PLANNER,
+    receivers: TO_NODE,
+    signals: &[
+        COUNTER_OUT,
+        OBSTACLE_ID,
+        OBSTACLE_ACTIVE,
+        OBSTACLE_EAST_M,
+        OBSTACLE_NORTH_M,
+        OBSTACLE_RADIUS_M,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+/// Input 0x204 from the planner: its map origin, latitude then longitude (two pages with
+/// consecutive counters: 32-bit coordinates, counter and CRC do not fit one frame).
+pub const LOCAL_ORIGIN: MessageSpec = MessageSpec {
+    name: "LOCAL_ORIGIN",
+    id: CanId::Standard(0x204),
+    dlc: 8,
+    cycle_ms: 0,
+    transmitter: NODE_PLANNER,
+    receivers: TO_NODE,
+    signals: &[
+        COUNTER_OUT,
+        ORIGIN_PAGE,
+        ORIGIN_LATITUDE_DEG,
+        ORIGIN_LONGITUDE_DEG,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
 /// Output 0x300, every tick.
 pub const STATE_POSITION: MessageSpec = MessageSpec {
     name: "STATE_POSITION",
@@ -635,24 +813,6 @@ pub const STATE_MOTION: MessageSpec = MessageSpec {
     ],
     integrity: Integrity::CounterCrc(COUNTER_OUT),
 };
-/// Output 0x302, every tick.
-pub const STATE_MODEL: MessageSpec = MessageSpec {
-    name: "STATE_MODEL",
-    id: CanId::Standard(0x302),
-    dlc: 8,
-    cycle_ms: 20,
-    transmitter: NODE_CATMODEL,
-    receivers: TO_PLANNER,
-    signals: &[
-        COUNTER_OUT,
-        SPEED_MODEL_MPS,
-        DXDT_MODEL_MPS,
-        LAT_ACCEL_MPS2,
-        CRC,
-    ],
-    integrity: Integrity::CounterCrc(COUNTER_OUT),
-};
-
 /// Number of prediction points (PREDICTION_1..PREDICTION_10, point k at k * 0.2 s).
 pub const PREDICTION_POINTS: usize = 10;
 /// Identifier of PREDICTION_1; PREDICTION_k is `PREDICTION_BASE_ID + k - 1`.
@@ -690,8 +850,26 @@ pub static PREDICTIONS: [MessageSpec; PREDICTION_POINTS] = [
     prediction("PREDICTION_10", 10),
 ];
 
+/// Output 0x320, every tick: the controller's commands to the drive-by-wire kit.
+pub const CONTROL_COMMAND: MessageSpec = MessageSpec {
+    name: "CONTROL_COMMAND",
+    id: CanId::Standard(0x320),
+    dlc: 8,
+    cycle_ms: 20,
+    transmitter: NODE_CATMODEL,
+    receivers: TO_DBW_AND_PLANNER,
+    signals: &[
+        COUNTER_OUT,
+        COMMAND_STATUS,
+        STEER_CMD_PCT,
+        COMMAND_SPEED_MPS,
+        CRC,
+    ],
+    integrity: Integrity::CounterCrc(COUNTER_OUT),
+};
+
 /// Number of NODE_STATUS pages; page `tick % STATUS_PAGES` goes out each tick.
-pub const STATUS_PAGES: u8 = 5;
+pub const STATUS_PAGES: u8 = 6;
 
 /// Output 0x3F0, every tick, one multiplexed page per tick.
 pub const NODE_STATUS: MessageSpec = MessageSpec {
@@ -731,21 +909,28 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
         PEDAL_AGE,
         GNSS_AGE,
         STACK_HIGH_WATER_BYTES,
+        SPEED_MODEL_MPS,
+        DXDT_MODEL_MPS,
+        LAT_ACCEL_MPS2,
         CRC,
     ],
     integrity: Integrity::CounterCrc(COUNTER_OUT),
 };
 
 /// Every message of `catmodel.dbc`, inputs first, in DBC order.
-pub static MESSAGES: [&MessageSpec; 19] = [
+pub static MESSAGES: [&MessageSpec; 24] = [
     &STEERING_REPORT,
     &SPEED_REPORT,
     &PEDAL_REPORT,
     &GNSS_POSITION_RAPID,
     &GNSS_COG_SOG_RAPID,
+    &PATH_HEADER,
+    &PATH_POINT,
+    &PATH_LIMITS,
+    &OBSTACLE,
+    &LOCAL_ORIGIN,
     &STATE_POSITION,
     &STATE_MOTION,
-    &STATE_MODEL,
     &PREDICTIONS[0],
     &PREDICTIONS[1],
     &PREDICTIONS[2],
@@ -756,6 +941,7 @@ pub static MESSAGES: [&MessageSpec; 19] = [
     &PREDICTIONS[7],
     &PREDICTIONS[8],
     &PREDICTIONS[9],
+    &CONTROL_COMMAND,
     &NODE_STATUS,
 ];
 

@@ -25,12 +25,16 @@
 //! Configuration ([`NodeConfig`]) is everything about the car: built from the model file by
 //! `catmodel-model-file` (host) or read from the image the firmware build baked
 //! ([`NodeConfig::from_image`]); nothing about a particular car lives in this crate.
+pub mod drive;
 pub mod estimator;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
 pub mod stage;
 
+use core::borrow::BorrowMut;
+
+use crate::can::codec::ControlStatus;
 use crate::can::freshness::{FreshnessConfig, Input};
 use crate::can::TimedFrame;
 use crate::image::{self, Image, ImageError, ImageReader, ImageWriter};
@@ -41,16 +45,18 @@ use crate::model::kinematic::Pose;
 use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStart};
 use crate::vehicle::{Body, VehicleParams};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
+use drive::{Controller, Drive, DriveInputs, DriveOutput};
 use estimator::EstimatorConfig;
 use gnss::Gnss;
-use inputs::{GnssMessage, Inputs, Snapshot};
+use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
 pub use stage::{
     NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK,
     MAX_RX_FRAMES_PER_TICK, TICK_STAGES,
 };
 
-/// Most frames one tick can send: 3 state frames, 10 predictions, 1 status page.
+/// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
+/// controller's command are 14; 16 leaves room.
 pub const MAX_TX_FRAMES: usize = 16;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
@@ -134,6 +140,11 @@ pub struct NodeConfig {
     pub max_speed_mps: f32,
     /// Fastest steering change the car's actuator makes, % per second.
     pub max_steer_rate_pct_per_s: f32,
+    /// The controller that follows the planner's path.
+    pub controller: Controller,
+    /// Bound on the error of the node's position estimate with this receiver (2 sigma), m:
+    /// the controller inflates obstacles by it.
+    pub position_uncertainty_m: f32,
 }
 
 impl Image for FreshnessConfig {
@@ -166,6 +177,8 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes,
             max_speed_mps,
             max_steer_rate_pct_per_s,
+            controller,
+            position_uncertainty_m,
         } = self;
         vehicle.write(w);
         body.write(w);
@@ -183,6 +196,8 @@ impl Image for NodeConfig {
         gnss_reacquire_fixes.write(w);
         max_speed_mps.write(w);
         max_steer_rate_pct_per_s.write(w);
+        controller.write(w);
+        position_uncertainty_m.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         Ok(Self {
@@ -202,6 +217,8 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes: Image::read(r)?,
             max_speed_mps: Image::read(r)?,
             max_steer_rate_pct_per_s: Image::read(r)?,
+            controller: Image::read(r)?,
+            position_uncertainty_m: Image::read(r)?,
         })
     }
 }
@@ -259,6 +276,8 @@ pub struct TickEstimate {
     pub speed_mps: f32,
     /// Lateral model in use.
     pub mode: Mode,
+    /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
+    pub control: ControlStatus,
 }
 
 /// The models' state (stage 2).
@@ -297,20 +316,25 @@ struct Estimate {
     dxdt_mps: Option<f32>,
 }
 
-/// The node's mutable state, one part per stage.
+/// The node's mutable state, one part per stage. The drive stage's state is large (see
+/// [`drive`]) and lives where the platform put it: `D` is a `&'static mut Drive` in a static
+/// on the MCU, a `Box<Drive>` on the host.
 #[derive(Clone, Debug)]
-pub struct Node {
+pub struct Node<D: BorrowMut<Drive>> {
     config: NodeConfig,
     inputs: Inputs,
     gnss: Gnss,
     models: Models,
+    drive: D,
     health: Health,
     last_tick_us: Option<u64>,
 }
 
-impl Node {
-    /// A node with fresh state.
-    pub fn new(config: NodeConfig) -> Self {
+impl<D: BorrowMut<Drive>> Node<D> {
+    /// A node with fresh state for the car of `config`, driving with `drive` (reset and
+    /// configured for that car here).
+    pub fn new(config: NodeConfig, mut drive: D) -> Self {
+        drive.borrow_mut().configure(&config);
         let models = Models {
             velocity: None,
             dxdt: config.dxdt.zero_state(),
@@ -324,9 +348,21 @@ impl Node {
             inputs: Inputs::default(),
             gnss: Gnss::default(),
             models,
+            drive,
             health: Health::default(),
             last_tick_us: None,
         }
+    }
+
+    /// The drive stage: what the planner sent so far (paths, obstacles), the last command.
+    pub fn drive(&self) -> &Drive {
+        self.drive.borrow()
+    }
+
+    /// The drive stage, for host tools that tune the reference controller
+    /// ([`Drive::tune_pursuit`]).
+    pub fn drive_mut(&mut self) -> &mut Drive {
+        self.drive.borrow_mut()
     }
 
     /// The configuration.
@@ -375,16 +411,26 @@ impl Node {
         probe.lap(Stage::Models);
         let estimate = self.estimate(now, &motion);
         probe.lap(Stage::Estimate);
+        let drive = self.run_drive(&motion, &estimate);
+        probe.lap(Stage::Drive);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
-        let predicted = self.predict(&snapshot, &motion, &estimate, &mut points);
+        let predicted = match drive.plan {
+            // While the model-predictive controller drives, the path ahead is its plan.
+            Some(plan) if estimate.pose.is_some() => {
+                points = plan;
+                PREDICTION_POINTS
+            }
+            _ => self.predict(&snapshot, &motion, &estimate, &mut points),
+        };
         let horizon = points.get(..predicted).unwrap_or(&[]);
         probe.lap(Stage::Predict);
-        self.publish(tick, &snapshot, &motion, &estimate, horizon, tx);
+        self.publish(tick, &snapshot, &motion, &estimate, horizon, &drive, tx);
         probe.lap(Stage::Publish);
         TickEstimate {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
             mode: motion.mode,
+            control: drive.command.status,
         }
     }
 
@@ -407,10 +453,14 @@ impl Node {
     }
 
     /// Stage 1: every received frame (the first [`MAX_RX_FRAMES_PER_TICK`]) decoded, validated
-    /// and applied, or counted as rejected; then the tick's GNSS fixes (the first
-    /// [`GNSS_FIXES_PER_TICK`], in arrival order) through the GNSS stage. The reports change
-    /// nothing the GNSS stage reads (it uses last tick's speed), so handling the fixes after
-    /// the frames is the same as handling them in between.
+    /// and applied, or counted as rejected: the vehicle's reports here, the planner's to the
+    /// drive stage; then the planner's map origin, if a LOCAL_ORIGIN completed this tick (the
+    /// last one, once per tick); then the tick's GNSS fixes (the first
+    /// [`GNSS_FIXES_PER_TICK`], in arrival order) through the GNSS stage, in the tick's frame.
+    /// The reports change nothing the GNSS stage reads (it uses last tick's speed), so handling
+    /// the fixes after the frames is the same as handling them in between; a fix received
+    /// before a LOCAL_ORIGIN of the same tick goes into the new frame (the old frame's filters
+    /// are reset by the change anyway).
     fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) {
         let (frames, over_cap) = rx.split_at(rx.len().min(MAX_RX_FRAMES_PER_TICK));
         let c = &mut self.inputs.counters;
@@ -418,20 +468,33 @@ impl Node {
             .rx_over_cap
             .saturating_add(u32::try_from(over_cap.len()).unwrap_or(u32::MAX));
         let mut fixes = gnss::TickFixes::new();
+        let mut origin = None;
         for frame in frames {
             match self.inputs.receive(&self.config, now_us, frame) {
-                Some(GnssMessage::Fix(fix)) => {
+                Some(Routed::Gnss(GnssMessage::Fix(fix))) => {
                     if let Err(over) = fixes.push(fix) {
                         bump(&mut self.inputs.counters.gnss_gate_rejects);
                         self.gnss.rejected(over.t_us);
                     }
                 }
-                Some(GnssMessage::Course(course)) => {
+                Some(Routed::Gnss(GnssMessage::Course(course))) => {
                     self.gnss.receive_course(&self.config, &course);
+                }
+                Some(Routed::Planner(message)) => {
+                    if let Some(o) = self.drive.borrow_mut().receive(&message) {
+                        origin = Some(o);
+                    }
                 }
                 None => {}
             }
             probe.lap(Stage::Frame);
+        }
+        if let Some(origin) = origin {
+            // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
+            if self.gnss.set_origin(origin) {
+                self.drive.borrow_mut().frame_changed();
+            }
+            probe.lap(Stage::Origin);
         }
         self.gnss.receive_fixes(
             &self.config,
@@ -465,7 +528,7 @@ impl Node {
                 .unwrap_or(m.speed_mps);
             cfg.velocity.step(state, u)
         });
-        let speed_mps = clamp_finite(
+        let speed_mps = math::clamp_finite(
             inputs
                 .speeds
                 .map(|(v, _)| v)
@@ -536,7 +599,20 @@ impl Node {
         }
     }
 
-    /// Stage 4: the horizon into `points`; returns how many were predicted. Without fresh
+    /// Stage 4: the controller's commands (CONTROL_COMMAND), and its plan while it drives.
+    fn run_drive(&mut self, motion: &Motion, estimate: &Estimate) -> DriveOutput {
+        let inputs = DriveInputs {
+            pose: estimate.pose,
+            speed_mps: motion.speed_mps,
+            lateral: self.models.lateral,
+            steer_rad: motion.center_steer_rad,
+            mode: motion.mode,
+            speed_model: self.models.velocity.as_ref(),
+        };
+        self.drive.borrow_mut().tick(&self.config, &inputs)
+    }
+
+    /// Stage 5: the horizon into `points`; returns how many were predicted. Without fresh
     /// steering the path ahead is unknown: no predictions (the state still goes out, flagged
     /// `steer_stale`).
     fn predict(
@@ -576,7 +652,8 @@ impl Node {
         )
     }
 
-    /// Stage 5: this tick's frames.
+    /// Stage 6: this tick's frames.
+    #[allow(clippy::too_many_arguments)]
     fn publish(
         &mut self,
         tick: &Tick,
@@ -584,6 +661,7 @@ impl Node {
         motion: &Motion,
         estimate: &Estimate,
         predictions: &[PredictedPoint],
+        drive: &DriveOutput,
         tx: &mut TxFrames,
     ) {
         let out = publish::Outputs {
@@ -596,6 +674,7 @@ impl Node {
             speed_model_mps: motion.speed_model_mps,
             dxdt_mps: estimate.dxdt_mps,
             predictions,
+            command: drive.command,
         };
         self.health
             .publish(tick, inputs, &mut self.inputs.counters, &out, tx);
@@ -610,20 +689,4 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
-}
-
-/// `v` limited to [lo, hi], `lo` if not finite. Comparisons only: `f32::clamp` asserts
-/// `lo <= hi` with a formatted panic message, which links float formatting (~20 KiB of flash).
-fn clamp_finite(v: f32, lo: f32, hi: f32) -> f32 {
-    if !v.is_finite() {
-        return lo;
-    }
-    let mut x = v;
-    if x < lo {
-        x = lo;
-    }
-    if x > hi {
-        x = hi;
-    }
-    x
 }

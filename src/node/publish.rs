@@ -1,11 +1,11 @@
-//! Stage 5, publish: the tick's frames in transmit order: STATE_POSITION, STATE_MOTION,
-//! STATE_MODEL, PREDICTION_1..10 (relative to the current pose) and one NODE_STATUS page (the
-//! five pages cycle). All share the tick's rolling counter. Every value is checked finite and
+//! Stage 6, publish: the tick's frames in transmit order: STATE_POSITION, STATE_MOTION,
+//! PREDICTION_1..10 (relative to the current pose), one NODE_STATUS page (the pages cycle;
+//! page 5 carries the models' outputs) and CONTROL_COMMAND. All share the tick's rolling counter. Every value is checked finite and
 //! saturated to its field by the codec; what was substituted is counted and flagged in the next
 //! health page.
 use crate::can::codec::{
-    EncodeReport, HealthFlags, ModelMode, NodeStatus, Prediction, PredictionPoint, StateModel,
-    StateMotion, StatePosition,
+    ControlCommand, EncodeReport, HealthFlags, ModelMode, ModelOutputs, NodeStatus, Prediction,
+    PredictionPoint, StateMotion, StatePosition,
 };
 use crate::can::CanFrame;
 use crate::math;
@@ -17,7 +17,7 @@ use super::inputs::Snapshot;
 use super::{Counters, Tick, TxFrames};
 
 /// Status pages, one per tick, cycling.
-const STATUS_PAGES: u32 = 5;
+const STATUS_PAGES: u32 = crate::can::spec::STATUS_PAGES as u32;
 /// "Recently" in the health bits: within the last second, us.
 const RECENT_US: u64 = 1_000_000;
 
@@ -47,6 +47,8 @@ pub struct Outputs<'a> {
     pub dxdt_mps: Option<f32>,
     /// The predicted points (empty without a prediction).
     pub predictions: &'a [PredictedPoint],
+    /// The controller's command.
+    pub command: ControlCommand,
 }
 
 /// The publishing stage's state: the tick counter and what the health bits remember.
@@ -91,7 +93,6 @@ impl Health {
             position_frame(out, gnss_rejected).encode_into(counter, f)
         });
         put(tx, r, |f| motion_frame(out).encode_into(counter, f));
-        put(tx, r, |f| model_frame(out).encode_into(counter, f));
         for (i, point) in PredictionPoint::all().enumerate() {
             let predicted = match (out.pose, out.predictions.get(i)) {
                 (Some(p), Some(q)) => Some((p, q)),
@@ -108,6 +109,7 @@ impl Health {
         }
         let status = self.status_page(tick, inputs, counters, out, gnss_rejected);
         put(tx, r, |f| status.encode_into(counter, f));
+        put(tx, r, |f| out.command.encode_into(counter, f));
         counters.nonfinite = counters
             .nonfinite
             .saturating_add(u32::from(report.non_finite));
@@ -164,10 +166,15 @@ impl Health {
                 tick_count: self.tick_count,
                 rx_queue_drops: tick.platform.rx_queue_drops.saturating_add(c.rx_over_cap),
             },
-            _ => NodeStatus::Ages {
+            4 => NodeStatus::Ages {
                 ages_10ms: inputs.ages_10ms,
                 stack_high_water_bytes: tick.platform.stack_high_water_bytes,
             },
+            _ => NodeStatus::Model(ModelOutputs {
+                speed_model_mps: out.speed_model_mps,
+                dxdt_model_mps: out.dxdt_mps,
+                lat_accel_mps2: Some(out.speed_mps * out.yaw_rate_rps),
+            }),
         }
     }
 }
@@ -187,7 +194,7 @@ fn put(
     report: &mut EncodeReport,
     encode: impl FnOnce(&mut CanFrame) -> EncodeReport,
 ) {
-    // Note: capacity 16 >= 3 + 10 + 1 frames, so no slot is ever refused.
+    // Note: capacity 16 >= 2 + 10 + 1 + 1 frames, so no slot is ever refused.
     if tx.push(CanFrame::EMPTY).is_ok() {
         if let Some(frame) = tx.last_mut() {
             report.merge(&encode(frame));
@@ -213,14 +220,5 @@ fn motion_frame(out: &Outputs<'_>) -> StateMotion {
         heading_rad: out.pose.map(|p| p.heading_rad),
         speed_mps: Some(out.speed_mps),
         yaw_rate_radps: Some(out.yaw_rate_rps),
-    }
-}
-
-/// STATE_MODEL.
-fn model_frame(out: &Outputs<'_>) -> StateModel {
-    StateModel {
-        speed_model_mps: out.speed_model_mps,
-        dxdt_model_mps: out.dxdt_mps,
-        lat_accel_mps2: Some(out.speed_mps * out.yaw_rate_rps),
     }
 }

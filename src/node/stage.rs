@@ -45,7 +45,10 @@ pub enum Stage {
     /// One received frame decoded, validated and applied (a GNSS fix is kept for the GNSS
     /// stages).
     Frame,
-    /// The local frame built at the first fix (f64 set-up, once in the node's life).
+    /// The planner's map origin (LOCAL_ORIGIN) made the local frame: the frame built, the
+    /// filters and the controller's path reset when it moved.
+    Origin,
+    /// The local frame built at the first fix (once in the node's life).
     GnssOrigin,
     /// One fix into the local frame and through the plausibility gate (with the filters'
     /// restart after repeated rejections).
@@ -60,6 +63,9 @@ pub enum Stage {
     Models,
     /// Heading, filtered rear-axle position, eq 7.
     Estimate,
+    /// The controller's commands (CONTROL_COMMAND; the model-predictive controller's solve
+    /// while it drives, the pure pursuit's step, or holding without a path).
+    Drive,
     /// The 2 s horizon roll-out.
     Predict,
     /// The tick's frames encoded.
@@ -96,7 +102,7 @@ pub struct StageBound {
 
 /// The tick's structure, in the order the stages run. Each stage's `max_per_tick` is enforced
 /// by the code it names.
-pub const TICK_STAGES: [StageBound; 11] = [
+pub const TICK_STAGES: [StageBound; 13] = [
     StageBound {
         stage: Stage::Advance,
         key: "advance",
@@ -108,6 +114,12 @@ pub const TICK_STAGES: [StageBound; 11] = [
         key: "frame",
         max_per_tick: MAX_RX_FRAMES_PER_TICK as u32,
         because: "MAX_RX_FRAMES_PER_TICK",
+    },
+    StageBound {
+        stage: Stage::Origin,
+        key: "origin",
+        max_per_tick: 1,
+        because: "the tick's last LOCAL_ORIGIN only, after the frames",
     },
     StageBound {
         stage: Stage::GnssOrigin,
@@ -148,6 +160,12 @@ pub const TICK_STAGES: [StageBound; 11] = [
     StageBound {
         stage: Stage::Estimate,
         key: "estimate",
+        max_per_tick: 1,
+        because: "once per tick",
+    },
+    StageBound {
+        stage: Stage::Drive,
+        key: "drive",
         max_per_tick: 1,
         because: "once per tick",
     },

@@ -6,6 +6,12 @@
 //!
 //! `bound = sum over rows of max_per_tick x max`
 //!
+//! Two bounds: `worst_case_bound_instructions` over the ticks in which no controller plans
+//! (each stage's maximum over such ticks; budget `TICK_BUDGET_INSTRUCTIONS`) and
+//! `worst_case_bound_controller_instructions` over any tick (each stage's maximum over every
+//! tick, the controller's solve on its most expensive path included; budget
+//! `CONTROL_TICK_BUDGET_INSTRUCTIONS`).
+//!
 //! It holds for any input as far as (1) the counts are bounded by the code (a stage that runs
 //! more often than its row says fails the measurement), (2) no stage's cost depends on the data
 //! beyond the paths the dedicated drives take (every loop has a fixed count; the branches are
@@ -17,7 +23,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use catmodel::node::NodeConfig;
-use catmodel_app::budget::{CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS};
+use catmodel_app::budget::{
+    CONTROL_TICK_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS,
+};
 
 use super::{cargo_build, drives, qemu_command, root, INSTALL_QEMU};
 
@@ -30,10 +38,14 @@ pub struct Row {
     pub max_per_tick: u32,
     /// Runs measured.
     pub runs: u32,
-    /// Most expensive run measured, instructions.
+    /// Most expensive run measured in a tick without a controller planning, instructions.
     pub max: u32,
     /// The drive that showed it.
     pub drive: String,
+    /// Most expensive run measured in any tick, instructions.
+    pub max_control: u32,
+    /// The drive that showed it.
+    pub drive_control: String,
     /// Why no more runs.
     pub because: String,
 }
@@ -42,6 +54,11 @@ impl Row {
     /// This row's part of the bound.
     pub fn part(&self) -> u64 {
         u64::from(self.max_per_tick) * u64::from(self.max)
+    }
+
+    /// This row's part of the controller's bound.
+    pub fn part_control(&self) -> u64 {
+        u64::from(self.max_per_tick) * u64::from(self.max_control)
     }
 }
 
@@ -52,8 +69,11 @@ pub struct Bound {
     pub rows: Vec<Row>,
     /// Ticks measured over the dedicated drives.
     pub ticks: u32,
-    /// The largest whole tick among them (drain + plain step + handoff), and its drive.
+    /// The largest whole tick among them (drain + plain step + handoff) without a controller
+    /// planning, and its drive.
     pub max_tick: (u32, String),
+    /// The largest whole tick among them, any tick, and its drive.
+    pub max_tick_control: (u32, String),
     /// The drives.
     pub drives: Vec<String>,
 }
@@ -62,6 +82,37 @@ impl Bound {
     /// The tick's bound, instructions.
     pub fn total(&self) -> u64 {
         self.rows.iter().map(Row::part).sum()
+    }
+
+    /// The bound of a tick in which a controller plans, instructions.
+    pub fn total_control(&self) -> u64 {
+        self.rows.iter().map(Row::part_control).sum()
+    }
+
+    /// The failures of a run whose slowest ticks were `max_plain` (no controller planning) and
+    /// `max_control`: a measured tick over its bound means the bound is wrong (a stage costs
+    /// more than measured, or runs more often than its row says). The dedicated drives' own
+    /// largest ticks are checked too.
+    pub fn check(&self, max_plain: u32, max_control: Option<u32>) -> Vec<String> {
+        let mut failures = Vec::new();
+        let (bound, bound_control) = (self.total(), self.total_control());
+        for (what, tick, limit) in [
+            ("a tick", Some(max_plain), bound),
+            ("a controller tick", max_control, bound_control),
+            ("a dedicated drive's tick", Some(self.max_tick.0), bound),
+            (
+                "a dedicated drive's controller tick",
+                Some(self.max_tick_control.0),
+                bound_control,
+            ),
+        ] {
+            if let Some(t) = tick.filter(|&t| u64::from(t) > limit) {
+                failures.push(format!(
+                    "{what} took {t} instructions, over its worst-case bound of {limit}: the bound is wrong"
+                ));
+            }
+        }
+        failures
     }
 
     /// The table printed by `cargo qemu` and `cargo xtask bench-target`.
@@ -75,22 +126,35 @@ impl Bound {
             self.ticks,
             self.drives.len()
         );
+        let total_control = self.total_control();
         let _ = writeln!(
             t,
-            "  {:<18}{:>10}{:>8}{:>9}{:>8}  {:<28}bounded by",
-            "stage", "max/tick", "max", "part", "share", "max seen on"
+            "  {:<18}{:>9}{:>8}{:>9}{:>7}{:>9}{:>10}{:>7}  {:<26}bounded by",
+            "stage",
+            "max/tick",
+            "max",
+            "part",
+            "share",
+            "max ctl",
+            "part ctl",
+            "share",
+            "max seen on (ctl)"
         );
         for r in &self.rows {
             let share = r.part() as f64 / total.max(1) as f64 * 100.0;
+            let share_control = r.part_control() as f64 / total_control.max(1) as f64 * 100.0;
             let _ = writeln!(
                 t,
-                "  {:<18}{:>10}{:>8}{:>9}{:>7.1}%  {:<28}{}",
+                "  {:<18}{:>9}{:>8}{:>9}{:>6.1}%{:>9}{:>10}{:>6.1}%  {:<26}{}",
                 r.key,
                 r.max_per_tick,
                 r.max,
                 r.part(),
                 share,
-                r.drive,
+                r.max_control,
+                r.part_control(),
+                share_control,
+                format!("{} ({})", r.drive, r.drive_control),
                 r.because
             );
         }
@@ -99,6 +163,12 @@ impl Bound {
             "  bound {total} instructions (budget {TICK_BUDGET_INSTRUCTIONS}; {:.3} % of a 20 ms tick at 168 MHz if one instruction took one cycle); largest tick of these drives {}",
             total as f64 / CYCLES_PER_TICK as f64 * 100.0,
             self.max_tick.0
+        );
+        let _ = writeln!(
+            t,
+            "  controller bound {total_control} instructions (budget {CONTROL_TICK_BUDGET_INSTRUCTIONS}; {:.3} % of the tick); largest controller tick of these drives {}",
+            total_control as f64 / CYCLES_PER_TICK as f64 * 100.0,
+            self.max_tick_control.0
         );
         t
     }
@@ -109,23 +179,27 @@ impl Bound {
         let mut t = String::new();
         let _ = writeln!(
             t,
-            "| stage | runs per tick, at most | bounded by | most expensive run | on drive | part of the bound | share |"
+            "| stage | runs per tick, at most | bounded by | most expensive run | share of the bound | most expensive run, controller ticks | share of the controller bound |"
         );
-        let _ = writeln!(t, "|---|---:|---|---:|---|---:|---:|");
+        let _ = writeln!(t, "|---|---:|---|---:|---:|---:|---:|");
+        let total_control = self.total_control();
         for r in &self.rows {
             let _ = writeln!(
                 t,
-                "| {} | {} | {} | {} | {} | {} | {:.1} % |",
+                "| {} | {} | {} | {} | {:.1} % | {} | {:.1} % |",
                 r.key,
                 r.max_per_tick,
                 r.because,
                 r.max,
-                r.drive,
-                r.part(),
-                r.part() as f64 / total.max(1) as f64 * 100.0
+                r.part() as f64 / total.max(1) as f64 * 100.0,
+                r.max_control,
+                r.part_control() as f64 / total_control.max(1) as f64 * 100.0
             );
         }
-        let _ = writeln!(t, "| **tick** | | | | | **{total}** | 100 % |");
+        let _ = writeln!(
+            t,
+            "| **bound** | | | **{total}** | 100 % | **{total_control}** | 100 % |"
+        );
         t
     }
 
@@ -137,6 +211,8 @@ impl Bound {
             "ticks_measured": self.ticks,
             "largest_tick_measured": self.max_tick.0,
             "largest_tick_drive": self.max_tick.1,
+            "largest_controller_tick_measured": self.max_tick_control.0,
+            "largest_controller_tick_drive": self.max_tick_control.1,
             "stages": self.rows.iter().map(|r| serde_json::json!({
                 "stage": r.key,
                 "max_per_tick": r.max_per_tick,
@@ -144,6 +220,9 @@ impl Bound {
                 "max_instructions": r.max,
                 "max_on_drive": r.drive,
                 "part_instructions": r.part(),
+                "max_controller_instructions": r.max_control,
+                "max_controller_on_drive": r.drive_control,
+                "part_controller_instructions": r.part_control(),
                 "bounded_by": r.because,
             })).collect::<Vec<_>>(),
         })
@@ -190,16 +269,24 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
     for line in stderr.lines() {
         let fields: Vec<&str> = line.split('\t').collect();
         match fields.as_slice() {
-            ["stage", key, max_per_tick, runs, max, drive, because] => rows.push(Row {
-                key: key.to_string(),
-                max_per_tick: max_per_tick.parse()?,
-                runs: runs.parse()?,
-                max: max.parse()?,
-                drive: name(drive)?,
-                because: because.to_string(),
-            }),
-            ["stage-ticks", n, max, drive] => {
-                ticks = Some((n.parse()?, (max.parse()?, name(drive)?)))
+            ["stage", key, max_per_tick, runs, max, drive, max_control, drive_control, because] => {
+                rows.push(Row {
+                    key: key.to_string(),
+                    max_per_tick: max_per_tick.parse()?,
+                    runs: runs.parse()?,
+                    max: max.parse()?,
+                    drive: name(drive)?,
+                    max_control: max_control.parse()?,
+                    drive_control: name(drive_control)?,
+                    because: because.to_string(),
+                })
+            }
+            ["stage-ticks", n, max, drive, max_control, drive_control] => {
+                ticks = Some((
+                    n.parse()?,
+                    (max.parse()?, name(drive)?),
+                    (max_control.parse()?, name(drive_control)?),
+                ))
             }
             ["stage-done"] => done = true,
             _ => {}
@@ -208,11 +295,13 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
     if !done || rows.is_empty() {
         bail!("the stage measurement did not finish:\n{stderr}");
     }
-    let (ticks, max_tick) = ticks.ok_or_else(|| anyhow!("no stage-ticks line"))?;
+    let (ticks, max_tick, max_tick_control) =
+        ticks.ok_or_else(|| anyhow!("no stage-ticks line"))?;
     Ok(Bound {
         rows,
         ticks,
         max_tick,
+        max_tick_control,
         drives,
     })
 }
@@ -258,17 +347,25 @@ mod tests {
 
     #[test]
     fn bound_is_the_sum_of_runs_times_maxima() {
-        let text =
-            "noise\nstage\tframe\t16\t100\t200\t0\tMAX\nstage\tpredict\t1\t9\t5000\t1\tonce\n\
-                    stage-ticks\t9\t7000\t1\nstage-done\n";
+        let text = "noise\nstage\tframe\t16\t100\t200\t0\t300\t1\tMAX\n\
+                    stage\tpredict\t1\t9\t5000\t1\t90000\t0\tonce\n\
+                    stage-ticks\t9\t7000\t1\t80000\t0\nstage-done\n";
         let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
         assert_eq!(b.total(), 16 * 200 + 5000);
+        assert_eq!(b.total_control(), 16 * 300 + 90_000);
         assert_eq!(
             (b.ticks, b.max_tick.0, b.max_tick.1.as_str()),
             (9, 7000, "b")
         );
-        assert_eq!(b.rows[1].drive, "b");
+        assert_eq!(b.max_tick_control, (80_000, "a".to_string()));
+        assert_eq!(
+            (b.rows[1].drive.as_str(), b.rows[0].drive_control.as_str()),
+            ("b", "b")
+        );
         assert!(b.table().contains("bound 8200 instructions"));
+        assert!(b.table().contains("controller bound 94800 instructions"));
+        assert!(b.check(8200, Some(94_800)).is_empty());
+        assert_eq!(b.check(8201, Some(94_801)).len(), 2);
         assert!(parse("stage\tx\t1\t1\t1\tw\n", vec![]).is_err());
     }
 }

@@ -1,9 +1,11 @@
 //! catmodel automation.
 //!
-//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): builds the QEMU firmware (release, the
-//!   profile we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
-//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table, and
-//!   fails if the run failed or a tick exceeded the instruction budget.
+//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): checks the MCU target and
+//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (release, the profile we ship),
+//!   runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table and
+//!   one summary line (drive, machine, PASS or FAIL, slowest tick against the budget, bound),
+//!   and fails if the run failed or a tick exceeded the instruction budget.
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid; then a 500 ms stall that overflows the receive queue: every
@@ -35,14 +37,16 @@ mod bound;
 mod corpus;
 mod drives;
 mod nopanic;
+mod prereq;
 mod schedule;
 mod txcompare;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
 use catmodel::SAMPLE_PERIOD_US as TICK_US;
 use catmodel_app::budget::{
-    CYCLES_PER_TICK, FLASH_BUDGET_BYTES as FLASH_BUDGET, RAM_BUDGET_BYTES as RAM_BUDGET,
-    STACK_USE_LIMIT, TICK_BUDGET_INSTRUCTIONS as BUDGET_INSTRUCTIONS,
+    CONTROL_TICK_BUDGET_INSTRUCTIONS as CONTROL_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK,
+    FLASH_BUDGET_BYTES as FLASH_BUDGET, RAM_BUDGET_BYTES as RAM_BUDGET, STACK_USE_LIMIT,
+    TICK_BUDGET_INSTRUCTIONS as BUDGET_INSTRUCTIONS,
 };
 use catmodel_app::record::{self, TickRecord, Trailer};
 /// Instructions available in one 20 ms tick at the board's 168 MHz, if one instruction took one
@@ -71,6 +75,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(error) if error.is::<Reported>() => ExitCode::FAILURE,
         Err(error) => {
             eprintln!("xtask: error: {error:#}");
             ExitCode::FAILURE
@@ -86,6 +91,11 @@ fn root() -> PathBuf {
 }
 
 fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
+    // Said before minutes of building, not after.
+    prereq::ensure_target()?;
+    if features == "qemu" {
+        prereq::ensure_qemu()?;
+    }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(root())
@@ -154,13 +164,6 @@ fn qemu_command(elf: &Path) -> Command {
 
 /// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
 fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) -> Result<QemuRun> {
-    if Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}");
-    }
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let tx = out_dir.join("tx.log");
     let ticks = out_dir.join("ticks.bin");
@@ -189,10 +192,12 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
     // The firmware reports in text on stderr; defmt output (if any dependency logs) goes to
     // stdout as binary frames: keep it for `defmt-print -e ELF`.
     let _ = std::fs::write(out_dir.join("defmt.bin"), &output.stdout);
-    eprint!("{}", String::from_utf8_lossy(&output.stderr));
     if !output.status.success() {
+        eprint!("{}", String::from_utf8_lossy(&output.stderr));
         bail!("the QEMU firmware failed ({})", output.status);
     }
+    // On success the firmware's one line of counts repeats the trailer, which the callers
+    // print: not echoed.
     let bytes = std::fs::read(&ticks).with_context(|| format!("reading {}", ticks.display()))?;
     let (records, trailer) = parse_ticks(&bytes)?;
     if records.len() as u64 != trailer.ticks {
@@ -234,6 +239,88 @@ fn stats_json(values: &[u32]) -> serde_json::Value {
     serde_json::json!({ "min": min, "median": median, "p99": p99, "max": max })
 }
 
+/// The machine `cargo qemu` runs on, as its summary line names it.
+const QEMU_MACHINE: &str = "QEMU netduinoplus2 (STM32F405, Cortex-M4F)";
+
+/// An error the command has already reported (its summary line says FAIL).
+#[derive(Debug)]
+struct Reported;
+
+impl std::fmt::Display for Reported {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("reported above")
+    }
+}
+
+impl std::error::Error for Reported {}
+
+/// What one `cargo qemu` run found: the slowest tick, the bound if `timing.json` has one, and
+/// what failed.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Verdict {
+    /// The slowest tick in which no controller planned.
+    max_instructions: u32,
+    /// The slowest tick in which a controller planned, if any did.
+    max_control_instructions: Option<u32>,
+    /// The worst-case bound of ticks in which no controller plans.
+    bound_instructions: Option<u64>,
+    /// The worst-case bound of ticks in which a controller plans.
+    control_bound_instructions: Option<u64>,
+    failures: Vec<String>,
+    /// Checks turned into warnings (CATMODEL_BUDGET_WARN_ONLY).
+    waived: Vec<String>,
+}
+
+/// `21267` -> `21 267`: figures as the README writes them.
+fn grouped(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// The one line `cargo qemu` ends with: the drive, the machine, PASS or FAIL, the slowest tick
+/// against the budget, and the worst-case bound.
+fn summary_line(drive: &str, v: &Verdict) -> String {
+    let verdict = if v.failures.is_empty() {
+        if v.waived.is_empty() {
+            "PASS".to_string()
+        } else {
+            format!("PASS with checks waived ({})", v.waived.join("; "))
+        }
+    } else {
+        format!("FAIL ({})", v.failures.join("; "))
+    };
+    let share = f64::from(v.max_instructions) / f64::from(BUDGET_INSTRUCTIONS) * 100.0;
+    let control = v.max_control_instructions.map_or(String::new(), |c| {
+        format!(
+            ", slowest controller tick {} = {:.0} % of the {} budget",
+            grouped(u64::from(c)),
+            f64::from(c) / f64::from(CONTROL_BUDGET_INSTRUCTIONS) * 100.0,
+            grouped(u64::from(CONTROL_BUDGET_INSTRUCTIONS)),
+        )
+    });
+    let bound = match (v.bound_instructions, v.control_bound_instructions) {
+        (Some(b), Some(c)) => format!(
+            "bound {} instructions (controller ticks: {})",
+            grouped(b),
+            grouped(c)
+        ),
+        (Some(b), None) => format!("bound {} instructions", grouped(b)),
+        _ => "bound: not computed".to_string(),
+    };
+    format!(
+        "cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, slowest tick {} instructions = {share:.0} % of the {} budget{control}, {bound}",
+        grouped(u64::from(v.max_instructions)),
+        grouped(u64::from(BUDGET_INSTRUCTIONS)),
+    )
+}
+
 fn qemu(args: &[String]) -> Result<()> {
     let input = match args {
         [] => None,
@@ -242,9 +329,33 @@ fn qemu(args: &[String]) -> Result<()> {
         [file] => Some(PathBuf::from(file)),
         _ => bail!("usage: cargo qemu [-- FILE.log]"),
     };
+    let drive = input.as_ref().map_or_else(
+        || "data/bundled.can.log".to_string(),
+        |p| p.display().to_string(),
+    );
+    match qemu_run(input.as_deref()) {
+        Ok(verdict) => {
+            println!("{}", summary_line(&drive, &verdict));
+            if verdict.failures.is_empty() {
+                Ok(())
+            } else {
+                Err(Reported.into())
+            }
+        }
+        Err(error) => {
+            eprintln!("xtask: error: {error:#}");
+            println!("cargo qemu: {drive} on {QEMU_MACHINE}: FAIL (the run did not complete: see the error above)");
+            Err(Reported.into())
+        }
+    }
+}
+
+/// Builds and runs the QEMU firmware over `input` (default: the bundled drive), writes
+/// `target/qemu/timing.json`, prints the table, and checks the run.
+fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
     let elf = cargo_build("qemu", "catmodel-qemu")?;
     let out_dir = root().join("target").join("qemu");
-    let run = run_qemu(&elf, &out_dir, input.as_deref(), &[])?;
+    let run = run_qemu(&elf, &out_dir, input, &[])?;
 
     let whole: Vec<u32> = run.records.iter().map(|r| r.tick).collect();
     let drain: Vec<u32> = run.records.iter().map(|r| r.drain).collect();
@@ -254,6 +365,20 @@ fn qemu(args: &[String]) -> Result<()> {
         .iter()
         .map(|r| r.tick.saturating_sub(r.drain).saturating_sub(r.step))
         .collect();
+    let plain: Vec<u32> = run
+        .records
+        .iter()
+        .filter(|r| !r.controller())
+        .map(|r| r.tick)
+        .collect();
+    let control: Vec<u32> = run
+        .records
+        .iter()
+        .filter(|r| r.controller())
+        .map(|r| r.tick)
+        .collect();
+    let [_, _, _, max_plain] = stats(&plain);
+    let max_control = control.iter().copied().max();
     let [_, _, _, max] = stats(&whole);
     let share = f64::from(max) / INSTRUCTIONS_PER_TICK_AT_168MHZ * 100.0;
     let bound = bound::measure()?;
@@ -263,8 +388,12 @@ fn qemu(args: &[String]) -> Result<()> {
         "unit": "instructions (QEMU -icount shift=0: TIM2 counts one per executed instruction); not Cortex-M4 cycles",
         "instructions": stats_json(&whole),
         "budget_instructions": BUDGET_INSTRUCTIONS,
-        "worst_case_bound_instructions": bound_total,
+        "worst_case_bound_instructions": bound.total(),
+        "worst_case_bound_controller_instructions": bound.total_control(),
         "worst_case": bound.json(),
+        "controller_ticks": control.len(),
+        "controller_instructions": stats_json(&control),
+        "controller_budget_instructions": CONTROL_BUDGET_INSTRUCTIONS,
         "share_of_tick_percent": (share * 1000.0).round() / 1000.0,
         "share_of_tick_basis": "max instructions / (0.02 s * 168e6), i.e. as if one instruction took one 168 MHz cycle",
         "components": {
@@ -322,6 +451,13 @@ fn qemu(args: &[String]) -> Result<()> {
         table,
         "budget {BUDGET_INSTRUCTIONS} instructions; slowest tick = {share:.3} % of a 20 ms tick at 168 MHz"
     );
+    if let Some(c) = max_control {
+        let _ = writeln!(
+            table,
+            "{} ticks in which a controller planned: slowest {c} instructions, budget {CONTROL_BUDGET_INSTRUCTIONS}",
+            control.len()
+        );
+    }
     let _ = writeln!(
         table,
         "overruns {}, skipped slots {}, rx queue drops {}",
@@ -345,33 +481,68 @@ fn qemu(args: &[String]) -> Result<()> {
     table.push_str(&bound.table());
     let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
     print!("{table}");
-    if run.trailer.stack_high_water == 0 || stack_share > STACK_USE_LIMIT {
-        bail!("stack high-water mark out of bounds (0: the stack was not painted; or too little headroom)");
-    }
 
-    if u64::from(max) > bound_total {
-        bail!(
-            "a tick took {max} instructions, over the worst-case bound of {bound_total}: the bound is wrong (a stage costs more than measured, or runs more often than TICK_STAGES says)"
-        );
+    let mut verdict = Verdict {
+        max_instructions: max_plain,
+        max_control_instructions: max_control,
+        bound_instructions: timing["worst_case_bound_instructions"].as_u64(),
+        control_bound_instructions: timing["worst_case_bound_controller_instructions"].as_u64(),
+        ..Verdict::default()
+    };
+    if run.trailer.stack_high_water == 0 {
+        verdict
+            .failures
+            .push("stack high-water mark 0: the stack was not painted".into());
+    } else if stack_share > STACK_USE_LIMIT {
+        verdict.failures.push(format!(
+            "stack high-water mark {:.0} % of the stack, over {:.0} %",
+            stack_share * 100.0,
+            STACK_USE_LIMIT * 100.0
+        ));
     }
-    if bound_total > u64::from(BUDGET_INSTRUCTIONS) || max > BUDGET_INSTRUCTIONS {
+    verdict.failures.extend(bound.check(max_plain, max_control));
+    let over_control = max_control.filter(|&c| c > CONTROL_BUDGET_INSTRUCTIONS);
+    if let Some(c) = over_control {
+        verdict.failures.push(format!(
+            "a controller tick took {}, over its budget",
+            grouped(u64::from(c))
+        ));
+    }
+    if bound.total_control() > u64::from(CONTROL_BUDGET_INSTRUCTIONS) {
+        verdict.failures.push(format!(
+            "the controller's worst-case bound {} is over its budget",
+            grouped(bound.total_control())
+        ));
+    }
+    if max_plain > BUDGET_INSTRUCTIONS || bound.total() > u64::from(BUDGET_INSTRUCTIONS) {
         // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
         // the run, its outputs and every other check still count.
+        let over = format!(
+            "worst-case bound {} (slowest tick {}), over the budget",
+            grouped(bound_total),
+            grouped(u64::from(max_plain))
+        );
         if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
-            eprintln!(
-                "xtask: WARNING: worst-case bound {bound_total} (slowest tick {max}) instructions, over the budget of {BUDGET_INSTRUCTIONS} (not fatal: CATMODEL_BUDGET_WARN_ONLY)"
-            );
+            verdict
+                .waived
+                .push(format!("{over}: CATMODEL_BUDGET_WARN_ONLY"));
         } else {
-            bail!("worst-case bound {bound_total} (slowest tick {max}) instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+            verdict.failures.push(over);
         }
     }
     if run.trailer.overruns != 0 || run.trailer.rx_queue_drops != 0 {
-        bail!("the run had overruns or receive-queue drops");
+        verdict.failures.push(format!(
+            "{} overruns, {} receive-queue drops",
+            run.trailer.overruns, run.trailer.rx_queue_drops
+        ));
     }
     if run.trailer.tx_queue_drops != 0 || run.trailer.tx_bus_errors != 0 {
-        bail!("transmit frames were lost");
+        verdict.failures.push(format!(
+            "{} transmit frames lost",
+            u64::from(run.trailer.tx_queue_drops) + u64::from(run.trailer.tx_bus_errors)
+        ));
     }
-    Ok(())
+    Ok(verdict)
 }
 
 /// Parses the timestamps of a candump file, us.
@@ -689,8 +860,8 @@ mod tests {
     #[test]
     fn tick_records_round_trip_and_truncation_is_an_error() {
         let mut bytes = b"CMQT".to_vec();
-        bytes.extend(3u32.to_le_bytes());
-        bytes.extend(40u32.to_le_bytes());
+        bytes.extend(4u32.to_le_bytes());
+        bytes.extend(44u32.to_le_bytes());
         for field in [
             &1_000u64.to_le_bytes()[..],
             &2u64.to_le_bytes(),
@@ -701,7 +872,7 @@ mod tests {
         bytes.extend(4u32.to_le_bytes());
         bytes.extend(5u16.to_le_bytes());
         bytes.extend(6u16.to_le_bytes());
-        for v in [7u32, 8, 9] {
+        for v in [7u32, 8, 9, 1] {
             bytes.extend(v.to_le_bytes());
         }
         bytes.extend(b"END!");
@@ -724,6 +895,7 @@ mod tests {
             (1_000, 2, 3, 4, 5, 6)
         );
         assert_eq!((r.drain, r.step, r.tick), (7, 8, 9));
+        assert!(r.controller());
         assert_eq!(
             (trailer.ticks, trailer.overruns, trailer.input_unsupported),
             (1, 10, 18)
@@ -735,6 +907,52 @@ mod tests {
         let mut old = bytes.clone();
         old[4] = 1;
         assert!(parse_ticks(&old).is_err());
+    }
+
+    #[test]
+    fn summary_line_names_drive_machine_verdict_and_budget() {
+        assert_eq!(grouped(21_267), "21 267");
+        assert_eq!(grouped(999), "999");
+        assert_eq!(grouped(1_000_000), "1 000 000");
+        let pass = Verdict {
+            max_instructions: 21_267,
+            ..Verdict::default()
+        };
+        let driving = Verdict {
+            max_instructions: 21_267,
+            max_control_instructions: Some(474_256),
+            ..Verdict::default()
+        };
+        assert!(
+            summary_line("s.log", &driving).contains(
+                "slowest tick 21 267 instructions = 85 % of the 25 000 budget, slowest controller \
+                 tick 474 256 = 79 % of the 600 000 budget, bound: not computed"
+            ),
+            "{}",
+            summary_line("s.log", &driving)
+        );
+        assert_eq!(
+            summary_line("data/bundled.can.log", &pass),
+            "cargo qemu: data/bundled.can.log on QEMU netduinoplus2 (STM32F405, Cortex-M4F): PASS, \
+             slowest tick 21 267 instructions = 85 % of the 25 000 budget, bound: not computed"
+        );
+        let fail = Verdict {
+            max_instructions: 31_000,
+            bound_instructions: Some(45_000),
+            control_bound_instructions: Some(500_000),
+            max_control_instructions: None,
+            failures: vec![
+                "a tick took 31 000, over the budget".into(),
+                "1 overruns".into(),
+            ],
+            waived: Vec::new(),
+        };
+        let line = summary_line("d.log", &fail);
+        assert!(
+            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 124 % of the 25 000 budget, bound 45 000 instructions (controller ticks: 500 000)"),
+            "{line}"
+        );
+        assert_eq!(line.lines().count(), 1);
     }
 
     #[test]

@@ -23,8 +23,8 @@
 use core::hint::black_box;
 
 use catmodel::can::codec::{
-    decode_input, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction, StateModel,
-    StateMotion, StatePosition,
+    decode_input, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction, StateMotion,
+    StatePosition,
 };
 use catmodel::can::{candump, CanFrame, TimedFrame};
 use catmodel::geodesy::LocalFrame;
@@ -90,7 +90,7 @@ impl<const N: usize> Samples<N> {
 
 /// A `&'static mut` to a fresh, zeroed sample store of type `$t`, one static per use site.
 /// The stores (3 KiB each, 81 KiB in all) live in .bss: on the stack they would not fit its
-/// 12 KiB region (memory.x). Each use site runs once (one call per benchmark group).
+/// 16 KiB region (memory.x). Each use site runs once (one call per benchmark group).
 macro_rules! samples {
     ($t:ty) => {{
         static mut STORE: $t = zeroed_store();
@@ -114,23 +114,8 @@ static mut OVERHEAD: u32 = 0;
 /// instructions it took (minus the timing overhead).
 #[inline(always)]
 fn timed<R>(f: impl FnOnce() -> R) -> (R, u32) {
-    let t0 = icount::now();
-    let r = black_box(f());
-    let t1 = icount::now();
     // Safety: written once in `main` before any measurement; single-threaded, no interrupts.
-    let overhead = unsafe { OVERHEAD };
-    (r, t1.wrapping_sub(t0).saturating_sub(overhead))
-}
-
-fn calibrate() -> u32 {
-    let mut min = u32::MAX;
-    for i in 0..64u32 {
-        let t0 = icount::now();
-        black_box(black_box(i));
-        let t1 = icount::now();
-        min = min.min(t1.wrapping_sub(t0));
-    }
-    min
+    icount::timed(unsafe { OVERHEAD }, f)
 }
 
 /// The latest measured inputs, decoded from the received frames (not timed).
@@ -172,7 +157,7 @@ impl View<'_> {
 /// 20 ms grid from the first frame, each given the frames stamped at or before it); `step`
 /// runs `Node::step`, `each` sees every tick after it.
 fn replay(
-    mut step: impl FnMut(&mut Node, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
+    mut step: impl FnMut(&mut FirmwareNode, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
     mut each: impl FnMut(&View),
 ) {
     let Ok(mut node) = catmodel_firmware::baked::node() else {
@@ -183,33 +168,34 @@ fn replay(
     let mut inputs = Inputs::default();
     let mut tick_us: Option<u64> = None;
     let mut index = 0u32;
-    let mut run_tick = |node: &mut Node, now_us: u64, rx: &[TimedFrame], inputs: &mut Inputs| {
-        for f in rx {
-            match decode_input(&f.frame, config.gnss_source) {
-                Ok(InputMessage::Steering(m, _)) => inputs.steer_pct = m.steer_pct,
-                Ok(InputMessage::Speed(m, _)) => {
-                    inputs.speed_mps = m.speed_mps;
-                    inputs.speed_cmd_mps = m.speed_cmd_mps;
+    let mut run_tick =
+        |node: &mut FirmwareNode, now_us: u64, rx: &[TimedFrame], inputs: &mut Inputs| {
+            for f in rx {
+                match decode_input(&f.frame, config.gnss_source) {
+                    Ok(InputMessage::Steering(m, _)) => inputs.steer_pct = m.steer_pct,
+                    Ok(InputMessage::Speed(m, _)) => {
+                        inputs.speed_mps = m.speed_mps;
+                        inputs.speed_cmd_mps = m.speed_cmd_mps;
+                    }
+                    _ => {}
                 }
-                _ => {}
             }
-        }
-        let tick = Tick {
-            now_us,
-            platform: PlatformStats::default(),
+            let tick = Tick {
+                now_us,
+                platform: PlatformStats::default(),
+            };
+            let mut tx = TxFrames::new();
+            let estimate = step(node, &tick, rx, &mut tx);
+            each(&View {
+                index,
+                config: &config,
+                rx,
+                tx: &tx,
+                estimate,
+                inputs: *inputs,
+            });
+            index += 1;
         };
-        let mut tx = TxFrames::new();
-        let estimate = step(node, &tick, rx, &mut tx);
-        each(&View {
-            index,
-            config: &config,
-            rx,
-            tx: &tx,
-            estimate,
-            inputs: *inputs,
-        });
-        index += 1;
-    };
     for line in BUNDLED_DRIVE.split(|&b| b == b'\n') {
         let Some(frame) = core::str::from_utf8(line)
             .ok()
@@ -234,7 +220,12 @@ fn replay(
     }
 }
 
-fn node_step(node: &mut Node, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
+fn node_step(
+    node: &mut FirmwareNode,
+    tick: &Tick,
+    rx: &[TimedFrame],
+    tx: &mut TxFrames,
+) -> TickEstimate {
     node.step(tick, rx, tx)
 }
 
@@ -564,7 +555,6 @@ fn bench_decode() {
 enum Output {
     Position(StatePosition),
     Motion(StateMotion),
-    Model(StateModel),
     Prediction(Prediction),
     Status(NodeStatus),
 }
@@ -576,9 +566,6 @@ impl Output {
         }
         if let Ok((m, c)) = StateMotion::decode(frame) {
             return Some((Self::Motion(m), c));
-        }
-        if let Ok((m, c)) = StateModel::decode(frame) {
-            return Some((Self::Model(m), c));
         }
         if let Ok((m, c)) = Prediction::decode(frame) {
             return Some((Self::Prediction(m), c));
@@ -593,7 +580,6 @@ impl Output {
         match self {
             Self::Position(m) => m.encode_with_report(counter),
             Self::Motion(m) => m.encode_with_report(counter),
-            Self::Model(m) => m.encode_with_report(counter),
             Self::Prediction(m) => m.encode_with_report(counter),
             Self::Status(m) => m.encode_with_report(counter),
         }
@@ -603,7 +589,7 @@ impl Output {
 /// Frame encode of every output kind (`encode_with_report`, as the node calls it), on the
 /// messages the node sent, and the whole set of one tick.
 fn bench_encode() {
-    let kinds = samples!([Calls; 4]);
+    let kinds = samples!([Calls; 3]);
     // Ten a tick.
     let predictions = samples!(Samples<{ 10 * CAP / 2 }>);
     let set = samples!(Calls);
@@ -618,7 +604,7 @@ fn bench_encode() {
                 let _ = outputs.push(out);
             }
         }
-        let [position, motion, model, status] = &mut *kinds;
+        let [position, motion, status] = &mut *kinds;
         for (out, counter) in &outputs {
             // Each kind's own encoder, called directly.
             let c = *counter;
@@ -628,9 +614,6 @@ fn bench_encode() {
                 }
                 Output::Motion(m) => {
                     motion.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
-                }
-                Output::Model(m) => {
-                    model.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
                 }
                 Output::Prediction(m) => {
                     predictions.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
@@ -657,14 +640,13 @@ fn bench_encode() {
         }
     });
     const WHAT: &str = "encode_with_report on a running tick's message: finite check, scale, round and saturate each signal, pack bits, counter, CRC-8";
-    let [position, motion, model, status] = &mut *kinds;
+    let [position, motion, status] = &mut *kinds;
     position.report(
         "encode_state_position",
         "encode STATE_POSITION (0x300)",
         WHAT,
     );
     motion.report("encode_state_motion", "encode STATE_MOTION (0x301)", WHAT);
-    model.report("encode_state_model", "encode STATE_MODEL (0x302)", WHAT);
     predictions.report(
         "encode_prediction",
         "encode PREDICTION_k (0x310..0x319)",
@@ -672,7 +654,7 @@ fn bench_encode() {
     );
     status.report(
         "encode_node_status",
-        "encode NODE_STATUS (0x3F0, 5 pages)",
+        "encode NODE_STATUS (0x3F0, 6 pages)",
         WHAT,
     );
     set.report(
@@ -746,7 +728,7 @@ fn stage_mode() {
 fn main() -> ! {
     icount::init();
     stage_mode();
-    let overhead = calibrate();
+    let overhead = icount::calibrate();
     // Safety: the only write, before any read; single-threaded, no interrupts enabled.
     unsafe { OVERHEAD = overhead };
     semihosting::eprintln!("bench-overhead\t{overhead}");

@@ -11,6 +11,8 @@ use std::path::Path;
 pub struct VehicleConfig {
     /// Rigid body and geometry.
     pub chassis: Chassis,
+    /// The body's outline, for clearance to cones and obstacles.
+    pub body: Body,
     /// Front axle tyres (both tyres lumped: single-track model).
     pub tyre_front: Tyre,
     /// Rear axle tyres.
@@ -49,6 +51,19 @@ pub struct Chassis {
     pub max_steer_deg: f64,
     /// Share of the brake force on the front axle, 0..1.
     pub brake_front_share: f64,
+}
+
+/// The body seen from above: a rectangle around the centreline, placed by its rear overhang
+/// behind the rear axle (mirrors not included, as in the published width).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Body {
+    /// Overall width, m (ISO 3888-2's `b`).
+    pub width_m: f64,
+    /// Overall length, m.
+    pub length_m: f64,
+    /// Rear bumper behind the rear axle, m.
+    pub rear_overhang_m: f64,
 }
 
 /// Simplified Pacejka magic formula for one axle (both tyres):
@@ -154,7 +169,7 @@ pub struct BusSensors {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Gnss {
-    /// Fix period, s (paper II-B: 0.01 s).
+    /// Fix period, s (paper II-B: 0.01 s); 0.01..1 s (100 Hz down to 1 Hz).
     pub period_s: f64,
     /// Clock rate error, drawn uniformly in +-this, parts per million.
     pub clock_error_ppm: f64,
@@ -204,6 +219,11 @@ impl Default for VehicleConfig {
                 cg_height_m: 0.65,
                 max_steer_deg: 35.5,
                 brake_front_share: 0.6,
+            },
+            body: Body {
+                width_m: 1.806,
+                length_m: 4.437,
+                rear_overhang_m: 0.909,
             },
             tyre_front: Tyre {
                 cornering_stiffness_n_per_rad: 80_000.0,
@@ -272,6 +292,9 @@ impl Default for VehicleConfig {
     }
 }
 
+/// GNSS fix periods the simulator (and the node) support, s: 100 Hz down to 1 Hz.
+pub const GNSS_PERIOD_RANGE_S: (f64, f64) = (0.01, 1.0);
+
 /// A vehicle file that cannot be used.
 #[derive(Debug)]
 pub enum ConfigError {
@@ -335,6 +358,8 @@ impl VehicleConfig {
             ("chassis.cg_to_rear_m", c.cg_to_rear_m),
             ("chassis.yaw_inertia_kg_m2", c.yaw_inertia_kg_m2),
             ("chassis.max_steer_deg", c.max_steer_deg),
+            ("body.width_m", self.body.width_m),
+            ("body.length_m", self.body.length_m),
             (
                 "tyre_front.cornering_stiffness_n_per_rad",
                 self.tyre_front.cornering_stiffness_n_per_rad,
@@ -386,6 +411,7 @@ impl VehicleConfig {
         }
         let non_negative = [
             ("chassis.cg_height_m", c.cg_height_m),
+            ("body.rear_overhang_m", self.body.rear_overhang_m),
             ("steering.lag_s", self.steering.lag_s),
             (
                 "speed_controller.command_delay_s",
@@ -477,6 +503,11 @@ impl VehicleConfig {
                 c.wheelbase_m
             )));
         }
+        if self.body.rear_overhang_m + c.wheelbase_m >= self.body.length_m {
+            return Err(ConfigError::Invalid(
+                "body.length_m must exceed body.rear_overhang_m + chassis.wheelbase_m".into(),
+            ));
+        }
         if !(0.0..=1.0).contains(&c.brake_front_share) {
             return Err(ConfigError::Invalid(
                 "chassis.brake_front_share must be in 0..1".into(),
@@ -499,6 +530,12 @@ impl VehicleConfig {
         }
         let b = &self.sensors.bus;
         let g = &self.sensors.gnss;
+        if !(GNSS_PERIOD_RANGE_S.0..=GNSS_PERIOD_RANGE_S.1).contains(&g.period_s) {
+            return Err(ConfigError::Invalid(format!(
+                "sensors.gnss.period_s = {} s: receivers from 1 to 100 Hz are supported (0.01..1 s)",
+                g.period_s
+            )));
+        }
         if !(b.timestamp_delay_max_s >= b.timestamp_delay_min_s
             && b.timestamp_delay_max_s - b.timestamp_delay_min_s < b.period_s)
         {

@@ -24,6 +24,7 @@ pub struct SpeedOutput {
 
 /// The car's speed controller, stepped at the plant rate; the PI part updates every
 /// `period_s`.
+#[derive(Debug, Clone)]
 pub struct SpeedController {
     params: SpeedParams,
     mass_kg: f64,
@@ -103,6 +104,7 @@ impl SpeedController {
 }
 
 /// Steering actuator.
+#[derive(Debug, Clone)]
 pub struct SteeringActuator {
     rate_pct_per_step: f64,
     lag_alpha: f64,

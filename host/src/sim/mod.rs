@@ -26,7 +26,7 @@ use config::VehicleConfig;
 use controller::{SpeedController, SteeringActuator};
 use plant::{Plant, PlantInput, PlantState};
 use rng::{SimRng, Stream};
-use scenario::Scenario;
+use scenario::{Command, Scenario};
 use sensors::{Held, SensorSuite, Snapshot};
 use std::path::{Path, PathBuf};
 
@@ -146,6 +146,161 @@ fn round_to(x: f64, inv_resolution: f64) -> f64 {
     libm::round(x * inv_resolution) / inv_resolution
 }
 
+/// The car as its bus sees it: the plant behind its steering actuator and speed controller,
+/// and the sensors on their own clocks, stepped [`PLANT_STEP_S`] at a time with the commands
+/// the car holds. [`simulate`] drives it from a scenario's command list; the closed loop
+/// (`crate::closed_loop`) from the controller's CONTROL_COMMAND frames.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    plant: Plant,
+    state: PlantState,
+    steering: SteeringActuator,
+    speed_ctl: SpeedController,
+    /// `None`: a rig without sensors (the offline optimiser knows the state exactly).
+    sensors: Option<SensorSuite>,
+    cg_to_rear_m: f64,
+    antenna_ahead_m: f64,
+    max_steer_rad: f64,
+    ax_mps2: f64,
+    steer_pct: f64,
+    snapshot: Snapshot,
+    step: u64,
+}
+
+impl Rig {
+    /// The car at rest at `initial` (CG state), steering at `steer_pct`, the clock at 0.
+    /// `cfg` should have passed [`VehicleConfig::validate`].
+    pub fn new(
+        cfg: &VehicleConfig,
+        options: &SimOptions,
+        initial: PlantState,
+        steer_pct: f64,
+    ) -> Self {
+        let dt = PLANT_STEP_S;
+        let plant = Plant::new(cfg);
+        let cg_to_rear_m = plant.cg_to_rear_m();
+        let mut rig = Self {
+            plant,
+            state: initial,
+            steering: SteeringActuator::new(&cfg.steering, dt, steer_pct),
+            speed_ctl: SpeedController::new(&cfg.speed_controller, cfg.chassis.mass_kg, dt),
+            sensors: Some(SensorSuite::new(
+                &cfg.sensors.bus,
+                &cfg.sensors.gnss,
+                options.faults.then_some(&cfg.faults),
+                options.seed,
+                options.origin_deg,
+            )),
+            cg_to_rear_m,
+            antenna_ahead_m: cfg.sensors.gnss.antenna_ahead_of_rear_axle_m,
+            max_steer_rad: cfg.chassis.max_steer_deg.to_radians(),
+            ax_mps2: 0.0,
+            steer_pct,
+            snapshot: Snapshot::default(),
+            step: 0,
+        };
+        rig.snapshot = rig.snapshot_now();
+        rig
+    }
+
+    fn snapshot_now(&self) -> Snapshot {
+        let s = &self.state;
+        let (sin_h, cos_h) = (libm::sin(s.heading_rad), libm::cos(s.heading_rad));
+        let ahead = self.antenna_ahead_m - self.cg_to_rear_m;
+        Snapshot {
+            speed_mps: s.vx_mps,
+            steer_pct: self.steer_pct,
+            antenna_east_m: s.x_m + ahead * sin_h,
+            antenna_north_m: s.y_m + ahead * cos_h,
+        }
+    }
+
+    /// Steps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+
+    /// Time of the next step's start, s.
+    pub fn time_s(&self) -> f64 {
+        self.step as f64 * PLANT_STEP_S
+    }
+
+    /// The plant's state (CG motion).
+    pub fn state(&self) -> &PlantState {
+        &self.state
+    }
+
+    /// The steering actuator's position, %.
+    pub fn steer_pct(&self) -> f64 {
+        self.steer_pct
+    }
+
+    /// Distance from the CG to the rear axle, m.
+    pub fn cg_to_rear_m(&self) -> f64 {
+        self.cg_to_rear_m
+    }
+
+    /// Ground truth now: rear-axle centre, heading, yaw rate, speed over ground there.
+    pub fn truth(&self) -> TruthRow {
+        let state = &self.state;
+        let b = self.cg_to_rear_m;
+        let (sin_h, cos_h) = (libm::sin(state.heading_rad), libm::cos(state.heading_rad));
+        let v_lat_rear = state.vy_mps - b * state.yaw_rate_rps;
+        let micro = 1e6;
+        TruthRow {
+            t: round_to(self.time_s(), micro),
+            x: round_to(state.x_m - b * sin_h, micro),
+            y: round_to(state.y_m - b * cos_h, micro),
+            heading: round_to(wrap_pi(state.heading_rad), micro),
+            yaw_rate: round_to(state.yaw_rate_rps, micro),
+            speed: round_to(
+                libm::sqrt(state.vx_mps * state.vx_mps + v_lat_rear * v_lat_rear),
+                micro,
+            ),
+        }
+    }
+
+    /// One plant step with `command` held (speed command as sent, before the car's delay).
+    pub fn step(&mut self, command: &Command) {
+        let dt = PLANT_STEP_S;
+        let t0 = self.time_s();
+        self.steer_pct = self.steering.step(command.steer_pct);
+        let drive = self.speed_ctl.step(command.speed_mps, self.state.vx_mps);
+        let input = PlantInput {
+            steer_rad: self.steer_pct / 100.0 * self.max_steer_rad,
+            drive_force_n: drive.drive_force_n,
+            brake_force_n: drive.brake_force_n,
+        };
+        self.ax_mps2 = self.plant.step(&mut self.state, &input, self.ax_mps2, dt);
+        let s1 = self.snapshot_now();
+        let held = Held {
+            command_mps: command.speed_mps,
+            accel_pct: drive.accel_pct,
+            brake_pct: drive.brake_pct,
+        };
+        if let Some(sensors) = self.sensors.as_mut() {
+            sensors.observe(t0, t0 + dt, &self.snapshot, &s1, &held);
+        }
+        self.snapshot = s1;
+        self.step += 1;
+    }
+
+    /// Takes the sensor reports produced so far, in production order (each stream in time
+    /// order), with their log times in microseconds.
+    pub fn take_reports(&mut self) -> Vec<(i64, LogRow)> {
+        self.sensors
+            .as_mut()
+            .map(|s| std::mem::take(&mut s.rows))
+            .unwrap_or_default()
+    }
+
+    /// The same rig without its sensors: nothing is measured, the state is known exactly.
+    pub fn without_sensors(mut self) -> Self {
+        self.sensors = None;
+        self
+    }
+}
+
 /// Runs `base` (varied by the seed unless `options.vary_commands` is false) on the car `cfg`.
 /// `cfg` should have passed [`VehicleConfig::validate`] (what [`VehicleConfig::load`] does).
 pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> SimOutput {
@@ -155,81 +310,25 @@ pub fn simulate(base: &Scenario, cfg: &VehicleConfig, options: &SimOptions) -> S
         base.clone()
     };
     let dt = PLANT_STEP_S;
-    let plant = Plant::new(cfg);
-    let b = plant.cg_to_rear_m();
-    let antenna_ahead = cfg.sensors.gnss.antenna_ahead_of_rear_axle_m;
-    let max_steer_rad = cfg.chassis.max_steer_deg.to_radians();
-    let mut state = PlantState {
+    let initial = PlantState {
         heading_rad: scenario.initial_heading_rad,
         ..Default::default()
     };
     let first = scenario.command_at(0.0);
-    let mut steering = SteeringActuator::new(&cfg.steering, dt, first.steer_pct);
-    let mut speed_ctl = SpeedController::new(&cfg.speed_controller, cfg.chassis.mass_kg, dt);
-    let mut sensors = SensorSuite::new(
-        &cfg.sensors.bus,
-        &cfg.sensors.gnss,
-        options.faults.then_some(&cfg.faults),
-        options.seed,
-        options.origin_deg,
-    );
+    let mut rig = Rig::new(cfg, options, initial, first.steer_pct);
     let n_steps = libm::round(scenario.duration_s() / dt) as usize;
     let mut truth = Vec::with_capacity(n_steps / TRUTH_EVERY_STEPS + 1);
-    let mut ax_mps2 = 0.0;
-    let mut steer_pct = first.steer_pct;
-
-    let snapshot = |s: &PlantState, steer_pct: f64| {
-        let (sin_h, cos_h) = (libm::sin(s.heading_rad), libm::cos(s.heading_rad));
-        let ahead = antenna_ahead - b;
-        Snapshot {
-            speed_mps: s.vx_mps,
-            steer_pct,
-            antenna_east_m: s.x_m + ahead * sin_h,
-            antenna_north_m: s.y_m + ahead * cos_h,
-        }
-    };
-
-    let mut s0 = snapshot(&state, steer_pct);
     for k in 0..n_steps {
-        let t0 = k as f64 * dt;
         if k % TRUTH_EVERY_STEPS == 0 {
-            let (sin_h, cos_h) = (libm::sin(state.heading_rad), libm::cos(state.heading_rad));
-            let v_lat_rear = state.vy_mps - b * state.yaw_rate_rps;
-            let micro = 1e6;
-            truth.push(TruthRow {
-                t: round_to(t0, micro),
-                x: round_to(state.x_m - b * sin_h, micro),
-                y: round_to(state.y_m - b * cos_h, micro),
-                heading: round_to(wrap_pi(state.heading_rad), micro),
-                yaw_rate: round_to(state.yaw_rate_rps, micro),
-                speed: round_to(
-                    libm::sqrt(state.vx_mps * state.vx_mps + v_lat_rear * v_lat_rear),
-                    micro,
-                ),
-            });
+            truth.push(rig.truth());
         }
-        let command = scenario.command_at(t0);
-        steer_pct = steering.step(command.steer_pct);
-        let drive = speed_ctl.step(command.speed_mps, state.vx_mps);
-        let input = PlantInput {
-            steer_rad: steer_pct / 100.0 * max_steer_rad,
-            drive_force_n: drive.drive_force_n,
-            brake_force_n: drive.brake_force_n,
-        };
-        ax_mps2 = plant.step(&mut state, &input, ax_mps2, dt);
-        let s1 = snapshot(&state, steer_pct);
-        let held = Held {
-            command_mps: command.speed_mps,
-            accel_pct: drive.accel_pct,
-            brake_pct: drive.brake_pct,
-        };
-        sensors.observe(t0, t0 + dt, &s0, &s1, &held);
-        s0 = s1;
+        let command = scenario.command_at(rig.time_s());
+        rig.step(&command);
     }
 
     SimOutput {
         scenario,
-        log: merge_rows(sensors.rows),
+        log: merge_rows(rig.take_reports()),
         truth,
     }
 }

@@ -5,6 +5,7 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// One independent random stream of a run.
+#[derive(Debug, Clone)]
 pub struct SimRng {
     rng: ChaCha8Rng,
     spare_normal: Option<f64>,

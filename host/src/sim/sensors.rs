@@ -46,6 +46,7 @@ pub struct Held {
     pub brake_pct: f64,
 }
 
+#[derive(Debug, Clone)]
 struct Clock {
     next_sample_s: f64,
     period_s: f64,
@@ -88,18 +89,21 @@ fn us_to_s(us: i64) -> f64 {
     us as f64 / 1e6
 }
 
+#[derive(Debug, Clone)]
 enum Kind {
     Speed,
     Steer,
     Pedals,
 }
 
+#[derive(Debug, Clone)]
 struct BusReport {
     kind: Kind,
     clock: Clock,
     rng: SimRng,
 }
 
+#[derive(Debug, Clone)]
 struct GnssReceiver {
     clock: Clock,
     rng: SimRng,
@@ -110,6 +114,7 @@ struct GnssReceiver {
 }
 
 /// All sensors of the car, producing log rows (one per report, unmerged).
+#[derive(Debug, Clone)]
 pub struct SensorSuite {
     bus: BusSensors,
     gnss_params: Gnss,

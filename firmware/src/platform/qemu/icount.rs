@@ -38,3 +38,27 @@ pub fn now() -> u32 {
     // Safety: a read of TIM2_CNT, a read-only-in-effect MMIO register with no side effects.
     unsafe { TIM2_CNT.read_volatile() }
 }
+
+/// Instructions of an empty timed call (two counter reads around a `black_box`): the least of
+/// 64 tries. The benchmarks subtract it from every measurement.
+pub fn calibrate() -> u32 {
+    let mut min = u32::MAX;
+    for i in 0..64u32 {
+        let t0 = now();
+        core::hint::black_box(core::hint::black_box(i));
+        let t1 = now();
+        min = min.min(t1.wrapping_sub(t0));
+    }
+    min
+}
+
+/// Runs `f` between two reads of the counter: its result and the instructions it took, minus
+/// `overhead` (from [`calibrate`]). Inputs and outputs go through `black_box`, so nothing is
+/// constant-folded or moved out of the window.
+#[inline(always)]
+pub fn timed<R>(overhead: u32, f: impl FnOnce() -> R) -> (R, u32) {
+    let t0 = now();
+    let r = core::hint::black_box(f());
+    let t1 = now();
+    (r, t1.wrapping_sub(t0).saturating_sub(overhead))
+}

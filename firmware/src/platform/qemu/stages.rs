@@ -9,16 +9,22 @@
 //! what the probed run cannot see (the difference between the two builds of the step) is
 //! reported as its own row. Every count is TIM2's, one per instruction under `-icount shift=0`.
 //!
-//! Output (semihosting stderr), tab-separated: one `stage KEY MAX_PER_TICK RUNS MAX DRIVE WHY`
-//! line per row (the node's rows of `TICK_STAGES`, then the app's; DRIVE is the index of the
-//! drive that showed the maximum), one `stage-ticks TICKS MAX_TICK DRIVE` line (the largest
-//! whole tick measured), and `stage-done`.
+//! Output (semihosting stderr), tab-separated: one
+//! `stage KEY MAX_PER_TICK RUNS MAX DRIVE MAX_CONTROL DRIVE_CONTROL WHY` line per row (the
+//! node's rows of `TICK_STAGES`, then the app's; MAX over the ticks in which no controller
+//! planned, MAX_CONTROL over every tick; DRIVE is the index of the drive that showed the
+//! maximum), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
+//! largest whole ticks measured, without and with a controller planning), and `stage-done`.
+//! A tick is a controller tick when `Node::step` returns a control status other than "no
+//! path", as the app flags it (`TickReport::controller`).
 //! `cargo qemu` and `cargo xtask bench-target` turn them into the bound.
 use core::ffi::CStr;
 use core::sync::atomic::{compiler_fence, Ordering};
 
+use catmodel::can::codec::ControlStatus;
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, TimedFrame};
+use catmodel::node::drive::Drive;
 use catmodel::node::{
     first_tick_us, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
 };
@@ -31,17 +37,21 @@ use super::replay::{LineReader, Source, LINE_MAX};
 /// Rows of the node's structure.
 const NODE_ROWS: usize = TICK_STAGES.len();
 
-/// The largest run of each stage, and how often each ran in the current tick.
+/// The largest run of each stage (in ticks without and with a controller planning), and how
+/// often each ran in the current tick.
 pub struct Laps {
     last: u32,
     overhead: u32,
     /// The drive being measured (index into the paths).
     drive: u32,
-    max: [u32; NODE_ROWS],
-    /// The drive that set each maximum.
-    max_by: [u32; NODE_ROWS],
+    /// Largest run in a tick without a controller planning, and the drive that showed it.
+    plain: [(u32, u32); NODE_ROWS],
+    /// Largest run in any tick, and the drive that showed it.
+    any: [(u32, u32); NODE_ROWS],
     runs: [u32; NODE_ROWS],
     this_tick: [u32; NODE_ROWS],
+    /// Largest run of each stage in the current tick.
+    tick_max: [u32; NODE_ROWS],
     tick_sum: u32,
     /// A stage ran more often in one tick than its row allows (the structure is wrong).
     pub over_structure: Option<Stage>,
@@ -53,10 +63,11 @@ impl Laps {
             last: 0,
             overhead: 0,
             drive: 0,
-            max: [0; NODE_ROWS],
-            max_by: [0; NODE_ROWS],
+            plain: [(0, 0); NODE_ROWS],
+            any: [(0, 0); NODE_ROWS],
             runs: [0; NODE_ROWS],
             this_tick: [0; NODE_ROWS],
+            tick_max: [0; NODE_ROWS],
             tick_sum: 0,
             over_structure: None,
         }
@@ -66,9 +77,26 @@ impl Laps {
     #[inline(always)]
     fn start(&mut self) {
         self.this_tick = [0; NODE_ROWS];
+        self.tick_max = [0; NODE_ROWS];
         self.tick_sum = 0;
         compiler_fence(Ordering::SeqCst);
         self.last = icount::now();
+    }
+
+    /// Ends a tick: its stages' runs count towards the plain maxima unless a controller
+    /// planned in it, and towards the maxima of any tick.
+    fn end_tick(&mut self, controller: bool) {
+        let drive = self.drive;
+        for (i, &n) in self.tick_max.iter().enumerate() {
+            if let Some(slot) = self.any.get_mut(i) {
+                keep_max(slot, n, drive);
+            }
+            if !controller {
+                if let Some(slot) = self.plain.get_mut(i) {
+                    keep_max(slot, n, drive);
+                }
+            }
+        }
     }
 
     /// Instructions since the last lap (the probe's own are excluded).
@@ -85,17 +113,13 @@ impl StageProbe for Laps {
         let now = icount::now();
         let n = self.since_last(now);
         if let Some(i) = TICK_STAGES.iter().position(|row| row.stage == stage) {
-            if let (Some(max), Some(by), Some(runs), Some(this), Some(row)) = (
-                self.max.get_mut(i),
-                self.max_by.get_mut(i),
+            if let (Some(max), Some(runs), Some(this), Some(row)) = (
+                self.tick_max.get_mut(i),
                 self.runs.get_mut(i),
                 self.this_tick.get_mut(i),
                 TICK_STAGES.get(i),
             ) {
-                if n > *max {
-                    *max = n;
-                    *by = self.drive;
-                }
+                *max = (*max).max(n);
                 *runs += 1;
                 *this += 1;
                 if *this > row.max_per_tick {
@@ -110,15 +134,25 @@ impl StageProbe for Laps {
 }
 
 /// The app's part of the tick, and what the probe cannot attribute: each the largest seen,
-/// with the drive that showed it.
+/// with the drive that showed it, in ticks without a controller planning (`.0`) and in any
+/// tick (`.1`).
 #[derive(Default)]
 struct AppMax {
-    drain: (u32, u32),
-    handoff: (u32, u32),
-    step_return: (u32, u32),
-    unattributed: (u32, u32),
-    whole_tick: (u32, u32),
+    drain: [(u32, u32); 2],
+    handoff: [(u32, u32); 2],
+    step_return: [(u32, u32); 2],
+    unattributed: [(u32, u32); 2],
+    whole_tick: [(u32, u32); 2],
     ticks: u32,
+}
+
+/// Keeps `n` in the plain slot (unless `controller`) and in the any-tick slot.
+fn keep_both(slots: &mut [(u32, u32); 2], n: u32, drive: u32, controller: bool) {
+    let [plain, any] = slots;
+    if !controller {
+        keep_max(plain, n, drive);
+    }
+    keep_max(any, n, drive);
 }
 
 /// Keeps the larger of `(max, drive)` and `(n, drive)`.
@@ -131,10 +165,13 @@ fn keep_max(slot: &mut (u32, u32), n: u32, drive: u32) {
 static RX: RxQueue = RxQueue::new();
 static TX: TxQueue = TxQueue::new();
 static COUNTERS: LinkCounters = LinkCounters::new();
-/// The two nodes and the drive's reader live in statics: two nodes (2.6 KiB each) and a reader
-/// (1 KiB) on the 12 KiB stack would leave too little for the ticks themselves.
-static mut PROBED: Option<Node> = None;
-static mut PLAIN: Option<Node> = None;
+/// The two nodes, their drive stages and the drive's reader live in statics: two nodes
+/// (2.6 KiB each), two drive stages (23 KiB each) and a reader (1 KiB) on the 16 KiB stack
+/// would leave too little for the ticks themselves.
+static mut PROBED: Option<Node<&'static mut Drive>> = None;
+static mut PLAIN: Option<Node<&'static mut Drive>> = None;
+static mut PROBED_DRIVE: Drive = Drive::new();
+static mut PLAIN_DRIVE: Drive = Drive::new();
 static mut READER: Option<LineReader> = None;
 
 /// Why a drive could not be measured.
@@ -180,8 +217,21 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
         laps.drive = index as u32;
         let file = semihosting::fs::File::open(path).map_err(|_| StageError::Io)?;
         *reader = Some(LineReader::new(Source::File(file)));
-        *probed = Some(crate::baked::node().map_err(|_| StageError::Model)?);
-        *plain = probed.clone();
+        let config = crate::baked::node_config().map_err(|_| StageError::Model)?;
+        // The previous drive's nodes go first: they hold the only references to the drive
+        // stages.
+        *probed = None;
+        *plain = None;
+        // SAFETY: the nodes that held these references were dropped just above; the new
+        // nodes are the only holders until the next drive drops them again.
+        let (probed_drive, plain_drive) = unsafe {
+            (
+                &mut *core::ptr::addr_of_mut!(PROBED_DRIVE),
+                &mut *core::ptr::addr_of_mut!(PLAIN_DRIVE),
+            )
+        };
+        *probed = Some(Node::new(config.clone(), probed_drive));
+        *plain = Some(Node::new(config, plain_drive));
         if let (Some(reader), Some(probed), Some(plain)) =
             (reader.as_mut(), probed.as_mut(), plain.as_mut())
         {
@@ -192,13 +242,19 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
         return Err(StageError::Structure(stage));
     }
     for (i, row) in TICK_STAGES.iter().enumerate() {
+        let (plain, any) = (
+            laps.plain.get(i).copied().unwrap_or((0, 0)),
+            laps.any.get(i).copied().unwrap_or((0, 0)),
+        );
         semihosting::eprintln!(
-            "stage\t{}\t{}\t{}\t{}\t{}\t{}",
+            "stage\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
             row.key,
             row.max_per_tick,
             laps.runs.get(i).copied().unwrap_or(0),
-            laps.max.get(i).copied().unwrap_or(0),
-            laps.max_by.get(i).copied().unwrap_or(0),
+            plain.0,
+            plain.1,
+            any.0,
+            any.1,
             row.because
         );
     }
@@ -220,18 +276,24 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
             "Node::step without probes minus the sum of the probed stages, when positive",
         ),
     ] {
+        let [plain, any] = max;
         semihosting::eprintln!(
-            "stage\t{key}\t1\t{}\t{}\t{}\t{why}",
+            "stage\t{key}\t1\t{}\t{}\t{}\t{}\t{}\t{why}",
             app.ticks,
-            max.0,
-            max.1
+            plain.0,
+            plain.1,
+            any.0,
+            any.1
         );
     }
+    let [plain, any] = app.whole_tick;
     semihosting::eprintln!(
-        "stage-ticks\t{}\t{}\t{}",
+        "stage-ticks\t{}\t{}\t{}\t{}\t{}",
         app.ticks,
-        app.whole_tick.0,
-        app.whole_tick.1
+        plain.0,
+        plain.1,
+        any.0,
+        any.1
     );
     semihosting::eprintln!("stage-done");
     Ok(())
@@ -240,8 +302,8 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
 /// One drive, on fresh nodes.
 fn drive(
     reader: &mut LineReader,
-    probed: &mut Node,
-    plain: &mut Node,
+    probed: &mut Node<&'static mut Drive>,
+    plain: &mut Node<&'static mut Drive>,
     laps: &mut Laps,
     app: &mut AppMax,
 ) -> Result<(), StageError> {
@@ -284,7 +346,8 @@ fn drive(
         RX.drain_due(now, core::hint::black_box(&mut batch));
         let t1 = icount::now();
         laps.start();
-        core::hint::black_box(probed.step_probed(&tick, &batch, &mut out.frames, laps));
+        let estimate =
+            core::hint::black_box(probed.step_probed(&tick, &batch, &mut out.frames, laps));
         let t2 = icount::now();
         let step_return = laps.since_last(t2);
         let t3 = icount::now();
@@ -308,15 +371,23 @@ fn drive(
         let plain_step = t4.wrapping_sub(t3).saturating_sub(overhead);
         let handoff = t5.wrapping_sub(t4).saturating_sub(overhead);
         let d = laps.drive;
-        keep_max(&mut app.drain, drain, d);
-        keep_max(&mut app.handoff, handoff, d);
-        keep_max(&mut app.step_return, step_return, d);
-        keep_max(
+        let controller = estimate.control != ControlStatus::NoPath;
+        laps.end_tick(controller);
+        keep_both(&mut app.drain, drain, d, controller);
+        keep_both(&mut app.handoff, handoff, d, controller);
+        keep_both(&mut app.step_return, step_return, d, controller);
+        keep_both(
             &mut app.unattributed,
             plain_step.saturating_sub(laps.tick_sum + step_return),
             d,
+            controller,
         );
-        keep_max(&mut app.whole_tick, drain + plain_step + handoff, d);
+        keep_both(
+            &mut app.whole_tick,
+            drain + plain_step + handoff,
+            d,
+            controller,
+        );
         app.ticks += 1;
         if let Some(stage) = laps.over_structure {
             return Err(StageError::Structure(stage));

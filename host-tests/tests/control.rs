@@ -1,0 +1,729 @@
+//! The controller's core parts (`catmodel::control`): path geometry against hand-derived cases
+//! and properties, path assembly from the planner's frames with every rejection rule, and the
+//! reference controller (pure pursuit + PI) against hand-derived steering.
+use catmodel::can::codec::{
+    ControlStatus, LocalOrigin, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint,
+    PlannerMessage,
+};
+use catmodel::control::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
+use catmodel::control::planner::{PlannerEvent, PlannerInputs};
+use catmodel::control::pure_pursuit::{
+    CarState, PurePursuitConfig, PurePursuitState, DEFAULT_PURE_PURSUIT,
+};
+use catmodel::model::kinematic::Pose;
+use catmodel::vehicle::VehicleParams;
+use proptest::prelude::*;
+use std::f64::consts::PI;
+
+/// The CAT Vehicle's steering geometry (models/paper.toml's `[vehicle]`): L 2.62 m, T 1.55 m,
+/// 35.5 deg at 100 %, K 0.0015 s^2/m^2 (paper II-C, CAT Vehicle ROS package).
+const CAT_VEHICLE: VehicleParams = VehicleParams {
+    wheelbase_m: 2.62,
+    track_m: 1.55,
+    max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
+    understeer_s2_per_m2: 0.0015,
+};
+
+fn wp(east: f64, north: f64) -> Waypoint {
+    Waypoint {
+        east_m: east as f32,
+        north_m: north as f32,
+        speed_mps: 5.0,
+        left_m: 1.0,
+        right_m: 1.5,
+    }
+}
+
+fn path_of(points: &[Waypoint]) -> Path {
+    let mut p = Path::new();
+    p.load(points).expect("valid path");
+    p
+}
+
+/// Straight path from `(e0, n0)` with heading `h` (clockwise from north), `n` points `d` apart.
+fn straight(e0: f64, n0: f64, h: f64, n: usize, d: f64) -> Vec<Waypoint> {
+    (0..n)
+        .map(|i| wp(e0 + i as f64 * d * h.sin(), n0 + i as f64 * d * h.cos()))
+        .collect()
+}
+
+/// Circle of radius `r` centred at the origin, driven clockwise (a right turn) from north
+/// of... `n` points, arc spacing `d`, starting at angle 0 (the point (0, r), heading east).
+fn clockwise_circle(r: f64, n: usize, d: f64) -> Vec<Waypoint> {
+    (0..n)
+        .map(|i| {
+            let a = i as f64 * d / r;
+            wp(r * a.sin(), r * a.cos())
+        })
+        .collect()
+}
+
+// ------------------------------------------------------------------------------------------
+// Geometry, hand-derived
+
+#[test]
+fn straight_path_north_projection_and_reference() {
+    let p = path_of(&straight(0.0, 0.0, 0.0, 11, 1.0));
+    assert_eq!(p.len(), 11);
+    assert_eq!(p.length_m(), 10.0);
+    // Heading north: right of the path is east.
+    let q = p.project(0.7, 4.25, None).unwrap();
+    assert!((q.station_m - 4.25).abs() < 1e-6 && (q.lateral_m - 0.7).abs() < 1e-6);
+    let q = p.project(-2.0, 9.5, None).unwrap();
+    assert!((q.station_m - 9.5).abs() < 1e-6 && (q.lateral_m + 2.0).abs() < 1e-6);
+    // The end segments extend: before the start and beyond the end.
+    let q = p.project(0.0, -3.0, None).unwrap();
+    assert!((q.station_m + 3.0).abs() < 1e-6);
+    let q = p.project(0.5, 12.0, None).unwrap();
+    assert!((q.station_m - 12.0).abs() < 1e-6 && (q.lateral_m - 0.5).abs() < 1e-6);
+    let s = p.sample(4.5, 0).unwrap();
+    assert_eq!((s.east_m, s.north_m, s.heading_rad), (0.0, 4.5, 0.0));
+    assert_eq!((s.curvature_per_m, s.speed_mps, s.left_m), (0.0, 5.0, 1.0));
+    // Beyond the end: straight on, at speed 0; before the start: the first point.
+    let s = p.sample(13.0, 0).unwrap();
+    assert_eq!((s.north_m, s.station_m, s.speed_mps), (13.0, 13.0, 0.0));
+    let s = p.sample(-1.0, 5).unwrap();
+    assert_eq!((s.north_m, s.station_m, s.speed_mps), (0.0, 0.0, 5.0));
+}
+
+#[test]
+fn corner_reference_is_continuous_and_its_curvature_hand_derived() {
+    // East 10 m then a 30 deg turn to the right (heading pi/2 -> pi/2 + pi/6), 1 m points.
+    let mut pts = straight(0.0, 0.0, PI / 2.0, 6, 1.0);
+    let h2 = PI / 2.0 + PI / 6.0;
+    for i in 1..6 {
+        pts.push(wp(5.0 + i as f64 * h2.sin(), i as f64 * h2.cos()));
+    }
+    let p = path_of(&pts);
+    // Between the midpoints of the segments around the corner (stations 4.5 .. 5.5) the
+    // curvature is (pi/6) / 1 m, positive (right turn); elsewhere 0.
+    for (s, k) in [
+        (3.0, 0.0),
+        (4.6, PI / 6.0),
+        (5.0, PI / 6.0),
+        (5.4, PI / 6.0),
+        (6.0, 0.0),
+    ] {
+        let sample = p.sample(s as f32, 0).unwrap();
+        assert!(
+            (f64::from(sample.curvature_per_m) - k).abs() < 1e-5,
+            "{s}: {}",
+            sample.curvature_per_m
+        );
+    }
+    // Heading: linear from pi/2 at 4.5 to pi/2 + pi/6 at 5.5.
+    let h = |s: f32| f64::from(p.sample(s, 0).unwrap().heading_rad);
+    assert!((h(4.5) - PI / 2.0).abs() < 1e-5);
+    assert!((h(5.0) - (PI / 2.0 + PI / 12.0)).abs() < 1e-5);
+    assert!((h(5.5) - h2).abs() < 1e-5);
+    // Continuity: no step anywhere along the path.
+    let mut prev = h(0.0);
+    for k in 1..=1000 {
+        let now = h(k as f32 * 0.01);
+        assert!(
+            (now - prev).abs() < 0.01,
+            "heading step at {}",
+            k as f32 * 0.01
+        );
+        prev = now;
+    }
+    // A point outside the corner projects onto the corner itself: its offset is the distance.
+    let q = p.project(5.0 - 0.3, 1.0, None).unwrap();
+    assert!(q.lateral_m < 0.0, "left of the path: {q:?}");
+}
+
+#[test]
+fn circle_curvature_within_the_documented_bound() {
+    // The car's tightest circle, R = 5.58 m, points 1 m of arc apart (chords c = 2 R sin(phi/2)).
+    let r = 5.58;
+    let p = path_of(&clockwise_circle(r, 30, 1.0));
+    let phi: f64 = 1.0 / r;
+    let c = 2.0 * r * (phi / 2.0).sin();
+    let expected = phi / c;
+    assert!((expected * r - 1.0).abs() <= c * c / (24.0 * r * r) * 1.01);
+    for s in [3.0f32, 7.7, 12.2, 20.0] {
+        let k = f64::from(p.sample(s, 0).unwrap().curvature_per_m);
+        assert!(
+            (k - expected).abs() < 1e-5 * expected,
+            "{s}: {k} vs {expected}"
+        );
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Properties
+
+fn arb_path() -> impl Strategy<Value = Vec<Waypoint>> {
+    // A random path a car can drive: start, heading, then per point a spacing of 0.3..3 m and
+    // a curvature within +-0.15 1/m (radius >= 6.7 m; the CAT Vehicle's tightest is 5.6 m).
+    (
+        -500.0f64..500.0,
+        -500.0f64..500.0,
+        -PI..PI,
+        prop::collection::vec((-0.15f64..0.15, 0.3f64..3.0), 2..120),
+    )
+        .prop_map(|(e, n, h0, steps)| {
+            let mut pts = vec![wp(e, n)];
+            let (mut e, mut n, mut h) = (e, n, h0);
+            for (curvature, d) in steps {
+                h += curvature * d;
+                e += d * h.sin();
+                n += d * h.cos();
+                pts.push(wp(e, n));
+            }
+            pts
+        })
+}
+
+proptest! {
+    /// A point of the path projects onto itself: zero lateral error, its own station.
+    #[test]
+    fn a_point_on_the_path_projects_to_itself(pts in arb_path(), f in 0.0f32..1.0) {
+        let p = path_of(&pts);
+        let s = f * p.length_m();
+        let on = p.sample(s, 0).unwrap();
+        let q = p.project(on.east_m, on.north_m, None).unwrap();
+        prop_assert!(q.lateral_m.abs() < 2e-3, "{q:?}");
+        // The path may pass near itself elsewhere; the point found is as near (0 m).
+        let back = p.sample(q.station_m, q.segment).unwrap();
+        let d = ((back.east_m - on.east_m).powi(2) + (back.north_m - on.north_m).powi(2)).sqrt();
+        prop_assert!(d < 2e-3, "{d}");
+    }
+
+    /// Walking along the path (or beside it, closer than its radius of curvature), the tracked
+    /// projection's station never goes back.
+    #[test]
+    fn station_is_monotone_along_the_path(pts in arb_path(), offset in -0.5f32..0.5) {
+        let p = path_of(&pts);
+        let mut prev = None;
+        let mut last_station = f32::NEG_INFINITY;
+        let n = 200;
+        for k in 0..=n {
+            let s = p.length_m() * k as f32 / n as f32;
+            let on = p.sample(s, 0).unwrap();
+            let (sin_h, cos_h) = (on.heading_rad.sin(), on.heading_rad.cos());
+            // A car beside the path (its right normal is (cos h, -sin h)).
+            let (e, nn) = (on.east_m + offset * cos_h, on.north_m - offset * sin_h);
+            let q = p.project(e, nn, prev.as_ref()).unwrap();
+            prop_assert!(q.station_m >= last_station - 0.05, "{} after {}", q.station_m, last_station);
+            last_station = q.station_m;
+            prev = Some(q);
+        }
+    }
+
+    /// On a straight path in any direction, an offset along the right normal is the lateral
+    /// error, exactly (to f32 rounding at the path's distance from the origin).
+    #[test]
+    fn lateral_error_is_the_offset_on_straight_paths(
+        e0 in -1000.0f64..1000.0, n0 in -1000.0f64..1000.0, h in -PI..PI,
+        f in 0.05f64..0.95, offset in -5.0f64..5.0,
+    ) {
+        let p = path_of(&straight(e0, n0, h, 20, 1.0));
+        let s = 19.0 * f;
+        let (e, n) = (e0 + s * h.sin() + offset * h.cos(), n0 + s * h.cos() - offset * h.sin());
+        let q = p.project(e as f32, n as f32, None).unwrap();
+        prop_assert!((f64::from(q.lateral_m) - offset).abs() < 1e-3, "{q:?} vs {offset}");
+        prop_assert!((f64::from(q.station_m) - s).abs() < 1e-3);
+    }
+
+    /// Sampling many stations at once equals sampling each alone.
+    #[test]
+    fn sample_stations_equals_single_samples(pts in arb_path(), fs in prop::collection::vec(0.0f32..1.2, 1..20)) {
+        let p = path_of(&pts);
+        let mut stations: Vec<f32> = fs.iter().map(|f| f * p.length_m()).collect();
+        stations.sort_by(f32::total_cmp);
+        let mut out = vec![Default::default(); stations.len()];
+        prop_assert_eq!(p.sample_stations(&stations, 0, &mut out), stations.len());
+        for (s, o) in stations.iter().zip(&out) {
+            prop_assert_eq!(*o, p.sample(*s, 0).unwrap());
+        }
+    }
+}
+
+#[test]
+fn a_loop_is_followed_in_order_where_it_meets_itself() {
+    // A full circle whose last point is next to its first: without history the start is
+    // ambiguous; with the previous projection the car at the end stays at the end.
+    let r = 10.0;
+    let n = (2.0 * PI * r / 0.5) as usize;
+    let p = path_of(&clockwise_circle(r, n + 1, 0.5));
+    let length = p.length_m();
+    let mut prev = None;
+    for k in 0..=400 {
+        let s = length * k as f32 / 400.0;
+        let on = p.sample(s, 0).unwrap();
+        let q = p.project(on.east_m, on.north_m, prev.as_ref()).unwrap();
+        assert!((q.station_m - s).abs() < 0.01, "{} vs {s}", q.station_m);
+        prev = Some(q);
+    }
+}
+
+#[test]
+fn invalid_paths_are_refused_with_the_reason_and_the_old_path_stays() {
+    let good = straight(0.0, 0.0, 0.0, 5, 1.0);
+    let mut p = path_of(&good);
+    let mut bad = good.clone();
+    bad[2].north_m = bad[1].north_m + 0.01;
+    assert_eq!(p.load(&bad), Err(PathError::SegmentLength(1)));
+    let mut far = good.clone();
+    far[4].north_m = 100.0;
+    assert_eq!(Path::validate(&far), Err(PathError::SegmentLength(3)));
+    let mut sharp = good.clone();
+    sharp[3] = wp(1.0, 2.0); // 90 degrees at point 2
+    assert_eq!(Path::validate(&sharp), Err(PathError::Turn(2)));
+    let mut nan = good.clone();
+    nan[1].east_m = f32::NAN;
+    assert_eq!(Path::validate(&nan), Err(PathError::BadValue(1)));
+    let mut negative = good.clone();
+    negative[0].speed_mps = -1.0;
+    assert_eq!(Path::validate(&negative), Err(PathError::BadValue(0)));
+    assert_eq!(Path::validate(&good[..1]), Err(PathError::PointCount));
+    let too_many = straight(0.0, 0.0, 0.0, MAX_PATH_POINTS + 1, 0.5);
+    assert_eq!(Path::validate(&too_many), Err(PathError::PointCount));
+    assert!(Path::validate(&too_many[..MAX_PATH_POINTS]).is_ok());
+    // Every refusal left the first path in place.
+    assert_eq!(p.points(), &good[..]);
+    assert!(p.project(f32::NAN, 0.0, None).is_none());
+    assert!(Path::new().project(0.0, 0.0, None).is_none());
+    assert!(Path::new().sample(0.0, 0).is_none());
+}
+
+// ------------------------------------------------------------------------------------------
+// Assembly from the planner's frames
+
+/// The frames of a path, each message with its own counter starting at `c0`.
+fn path_messages(path_id: u8, pts: &[Waypoint], c0: u8) -> Vec<PlannerMessage> {
+    let mut out = vec![PlannerMessage::PathHeader(
+        PathHeader {
+            path_id,
+            count: pts.len() as u16,
+        },
+        c0,
+    )];
+    for (i, w) in pts.iter().enumerate() {
+        let c = (c0 + 1 + i as u8) & 0x0F;
+        out.push(PlannerMessage::PathPoint(
+            PathPoint {
+                path_id,
+                index: i as u8,
+                east_m: w.east_m,
+                north_m: w.north_m,
+            },
+            c,
+        ));
+        out.push(PlannerMessage::PathLimits(
+            PathLimits {
+                path_id,
+                index: i as u8,
+                speed_mps: w.speed_mps,
+                left_m: w.left_m,
+                right_m: w.right_m,
+            },
+            c,
+        ));
+    }
+    out
+}
+
+fn feed(inputs: &mut PlannerInputs, messages: &[PlannerMessage]) -> Vec<PlannerEvent> {
+    messages
+        .iter()
+        .map(|m| inputs.receive(m))
+        .filter(|e| *e != PlannerEvent::None)
+        .collect()
+}
+
+#[test]
+fn a_complete_path_becomes_active_only_when_complete() {
+    let mut inputs = PlannerInputs::new();
+    let pts = straight(0.0, 0.0, 0.0, 40, 1.0);
+    let messages = path_messages(3, &pts, 0);
+    // All but the last frame: still no path.
+    assert!(feed(&mut inputs, &messages[..messages.len() - 1]).is_empty());
+    assert!(inputs.path().is_none());
+    assert_eq!(inputs.receiving(), Some((3, 40, 39)));
+    assert_eq!(
+        feed(&mut inputs, &messages[messages.len() - 1..]),
+        [PlannerEvent::PathActivated(3)]
+    );
+    assert_eq!(inputs.path().unwrap().points(), &pts[..]);
+    assert_eq!(inputs.path_id(), Some(3));
+    // A second path: the first stays active until the second is complete.
+    let pts2 = straight(5.0, 0.0, 0.0, 10, 2.0);
+    let messages2 = path_messages(4, &pts2, 9);
+    feed(&mut inputs, &messages2[..5]);
+    assert_eq!(inputs.path().unwrap().points(), &pts[..]);
+    assert_eq!(
+        feed(&mut inputs, &messages2[5..]),
+        [PlannerEvent::PathActivated(4)]
+    );
+    assert_eq!(inputs.path().unwrap().points(), &pts2[..]);
+    assert_eq!(inputs.counters().paths_activated, 2);
+}
+
+#[test]
+fn points_then_limits_in_separate_runs_also_assemble() {
+    // The two streams each in order, but not interleaved.
+    let mut inputs = PlannerInputs::new();
+    let pts = straight(0.0, 0.0, 1.0, 8, 1.0);
+    let m = path_messages(0, &pts, 0);
+    let (points, limits): (Vec<_>, Vec<_>) = m[1..]
+        .iter()
+        .partition(|x| matches!(x, PlannerMessage::PathPoint(..)));
+    feed(&mut inputs, &m[..1]);
+    feed(&mut inputs, &points);
+    assert_eq!(feed(&mut inputs, &limits), [PlannerEvent::PathActivated(0)]);
+}
+
+#[test]
+fn a_lost_frame_abandons_the_assembly_and_duplicates_are_counted() {
+    let mut inputs = PlannerInputs::new();
+    let pts = straight(0.0, 0.0, 0.0, 10, 1.0);
+    let m = path_messages(1, &pts, 0);
+    // Duplicate of point 2 (same index again, next counter): counted, assembly continues.
+    let mut with_dup = m[..7].to_vec();
+    if let PlannerMessage::PathPoint(p, _) = m[5] {
+        with_dup.push(PlannerMessage::PathPoint(p, 4));
+    }
+    feed(&mut inputs, &with_dup);
+    assert_eq!(inputs.counters().duplicates, 1);
+    assert!(inputs.receiving().is_some());
+    // Skip point 3's PATH_POINT (index 4 arrives): a lost frame.
+    if let PlannerMessage::PathPoint(p, _) = m[9] {
+        inputs.receive(&PlannerMessage::PathPoint(p, 5));
+    }
+    assert_eq!(inputs.counters().paths_abandoned, 1);
+    assert!(inputs.receiving().is_none() && inputs.path().is_none());
+    // The rest of that path is stray now.
+    feed(&mut inputs, &m[10..12]);
+    assert!(inputs.counters().stray_frames >= 1);
+    // The planner sends it again with a new header: it completes.
+    assert_eq!(
+        feed(&mut inputs, &path_messages(2, &pts, 7)),
+        [PlannerEvent::PathActivated(2)]
+    );
+}
+
+#[test]
+fn a_header_change_midway_abandons_and_restarts() {
+    let mut inputs = PlannerInputs::new();
+    let a = straight(0.0, 0.0, 0.0, 10, 1.0);
+    let b = straight(3.0, 0.0, 0.0, 6, 1.0);
+    feed(&mut inputs, &path_messages(5, &a, 0)[..9]);
+    let events = feed(&mut inputs, &path_messages(6, &b, 1));
+    assert_eq!(events, [PlannerEvent::PathActivated(6)]);
+    assert_eq!(inputs.counters().paths_abandoned, 1);
+    assert_eq!(inputs.path().unwrap().points(), &b[..]);
+}
+
+#[test]
+fn an_invalid_path_is_refused_and_the_active_one_stays() {
+    let mut inputs = PlannerInputs::new();
+    let good = straight(0.0, 0.0, 0.0, 10, 1.0);
+    feed(&mut inputs, &path_messages(1, &good, 0));
+    let mut bad = good.clone();
+    bad[5] = bad[4]; // zero-length segment
+    let events = feed(&mut inputs, &path_messages(2, &bad, 3));
+    assert_eq!(
+        events,
+        [PlannerEvent::PathInvalid(2, PathError::SegmentLength(4))]
+    );
+    assert_eq!(inputs.path_id(), Some(1));
+    assert_eq!(inputs.path().unwrap().points(), &good[..]);
+    assert_eq!(inputs.counters().paths_invalid, 1);
+}
+
+#[test]
+fn stuck_counters_obstacles_and_origin_pairing() {
+    let mut inputs = PlannerInputs::new();
+    let circle = ObstacleCircle {
+        east_m: 3.0,
+        north_m: 20.0,
+        radius_m: 0.5,
+    };
+    let set = |id, c| {
+        PlannerMessage::Obstacle(
+            Obstacle {
+                obstacle_id: id,
+                circle: Some(circle),
+            },
+            c,
+        )
+    };
+    inputs.receive(&set(2, 0));
+    assert_eq!(inputs.obstacles()[2], Some(circle));
+    // The same counter again: a stuck sender, rejected (slot 1 stays empty).
+    inputs.receive(&set(1, 0));
+    assert_eq!(inputs.obstacles()[1], None);
+    assert_eq!(inputs.counters().stuck_counters, 1);
+    inputs.receive(&PlannerMessage::Obstacle(
+        Obstacle {
+            obstacle_id: 2,
+            circle: None,
+        },
+        1,
+    ));
+    assert_eq!(inputs.obstacles(), &[None; 4]);
+    // Origin: latitude then longitude with the next counter.
+    let lat = PlannerMessage::LocalOrigin(
+        LocalOrigin::Latitude {
+            lat_e7: 322_319_000,
+        },
+        14,
+    );
+    let lon = |c| {
+        PlannerMessage::LocalOrigin(
+            LocalOrigin::Longitude {
+                lon_e7: -1_109_501_000,
+            },
+            c,
+        )
+    };
+    assert_eq!(inputs.receive(&lat), PlannerEvent::None);
+    assert_eq!(
+        inputs.receive(&lon(15)),
+        PlannerEvent::Origin {
+            lat_e7: 322_319_000,
+            lon_e7: -1_109_501_000
+        }
+    );
+    // A longitude page on its own (its latitude lost): a counted mismatch, no origin.
+    assert_eq!(inputs.receive(&lon(0)), PlannerEvent::None);
+    assert_eq!(inputs.counters().origin_mismatches, 1);
+}
+
+proptest! {
+    /// Whatever frames arrive, in whatever order, assembly never panics, and an active path is
+    /// always one that passes validation.
+    #[test]
+    fn assembly_never_panics_and_only_valid_paths_activate(
+        ops in prop::collection::vec((0u8..3, 0u8..4, 0u8..12, -20.0f32..20.0, 0u8..16, 1u16..14), 0..300)
+    ) {
+        let mut inputs = PlannerInputs::new();
+        for (kind, id, index, v, counter, count) in ops {
+            let m = match kind {
+                0 => PlannerMessage::PathHeader(PathHeader { path_id: id, count: count.max(2) }, counter),
+                1 => PlannerMessage::PathPoint(PathPoint { path_id: id, index, east_m: v, north_m: f32::from(index) * 1.5 }, counter),
+                _ => PlannerMessage::PathLimits(PathLimits { path_id: id, index, speed_mps: v.abs(), left_m: 1.0, right_m: 1.0 }, counter),
+            };
+            inputs.receive(&m);
+            if let Some(p) = inputs.path() {
+                prop_assert!(Path::validate(p.points()).is_ok());
+            }
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// Pure pursuit
+
+fn car(east: f32, north: f32, heading: f32, speed: f32) -> CarState {
+    CarState {
+        pose: Some(Pose::new(east, north, heading)),
+        speed_mps: speed,
+    }
+}
+
+#[test]
+fn pure_pursuit_steering_hand_derived() {
+    // Path north along east = 0; the car 1 m to the right, heading north, at standstill:
+    // lookahead 3 m, goal (0, 3): right = -1, d^2 = 10, kappa = 2 (-1) / 10 = -0.2 1/m;
+    // delta = atan(-0.2 * 2.62) = -0.48255 rad = -77.88 % of 35.5 deg.
+    let path = path_of(&straight(0.0, 0.0, 0.0, 30, 1.0));
+    let cfg = DEFAULT_PURE_PURSUIT;
+    assert_eq!(cfg.lookahead_m(0.0), 3.0);
+    let mut state = PurePursuitState::default();
+    let out = cfg.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(1.0, 0.0, 0.0, 0.0),
+    );
+    let expected_pct = (-0.2f64 * 2.62).atan() / 35.5f64.to_radians() * 100.0;
+    assert_eq!(out.status, ControlStatus::Tracking);
+    assert!(
+        (f64::from(out.steer_cmd_pct) - expected_pct).abs() < 1e-3,
+        "{} vs {expected_pct}",
+        out.steer_cmd_pct
+    );
+    assert_eq!(out.goal, Some((0.0, 3.0)));
+    let t = out.tracking.unwrap();
+    assert!((t.projection.lateral_m - 1.0).abs() < 1e-6);
+    // Mirror image: 1 m to the left steers right by the same amount.
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(-1.0, 0.0, 0.0, 0.0),
+    );
+    assert!((f64::from(out.steer_cmd_pct) + expected_pct).abs() < 1e-3);
+}
+
+#[test]
+fn pure_pursuit_on_a_circle_steers_for_its_curvature() {
+    // On a circle with the car on it and tangent, the goal lies on the same circle, so the
+    // pure-pursuit arc is the circle: kappa = 1/R, steering = atan(L / R) (1 + K v^2).
+    // With the car at a point and the goal at a point (lookaheads 4.0 and 5.5 m on 0.5 m
+    // chords), both lie exactly on the circle and the reference heading at a point is the
+    // circle's tangent there, so this holds to rounding.
+    let r = 20.0;
+    let path = path_of(&clockwise_circle(r, 120, 0.5));
+    let cfg = PurePursuitConfig {
+        lookahead_time_s: 0.5,
+        ..DEFAULT_PURE_PURSUIT
+    };
+    for v in [2.0f32, 5.0] {
+        let s = path.station_of(20).unwrap();
+        let on = path.sample(s, 0).unwrap();
+        let out = cfg.process(
+            &mut PurePursuitState::default(),
+            &CAT_VEHICLE,
+            Some(&path),
+            &[],
+            &car(on.east_m, on.north_m, on.heading_rad, v),
+        );
+        let expected =
+            (2.62f64 / r).atan() * (1.0 + 0.0015 * f64::from(v * v)) / 35.5f64.to_radians() * 100.0;
+        assert!(
+            (f64::from(out.steer_cmd_pct) - expected).abs() < 1e-4 * expected,
+            "{v}: {} vs {expected}",
+            out.steer_cmd_pct
+        );
+    }
+}
+
+#[test]
+fn pure_pursuit_speed_loop_and_stops() {
+    let cfg = PurePursuitConfig {
+        speed_preview_s: 0.0,
+        ..DEFAULT_PURE_PURSUIT
+    };
+    let path = path_of(&straight(0.0, 0.0, 0.0, 200, 1.0));
+    // At the target speed: the command is the target (plus the integral, zero here).
+    let mut state = PurePursuitState::default();
+    let out = cfg.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 10.0, 0.0, 5.0),
+    );
+    assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
+    // 1 m/s slow: kp * 1 + ki * 1 * dt above the target, and the integral grows each tick.
+    let mut state = PurePursuitState::default();
+    let a = cfg.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 10.0, 0.0, 4.0),
+    );
+    let expected = 5.0 + cfg.speed_kp + cfg.speed_ki_per_s * cfg.period_s;
+    assert!(
+        (a.speed_cmd_mps - expected).abs() < 1e-5,
+        "{}",
+        a.speed_cmd_mps
+    );
+    let b = cfg.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 10.0, 0.0, 4.0),
+    );
+    assert!(b.speed_cmd_mps > a.speed_cmd_mps);
+    // Near the end: the stopping limit sqrt(2 a d) (d = 199 - 195 = 4 m -> 4.47 m/s).
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 195.0, 0.0, 4.47),
+    );
+    let limit = (2.0 * cfg.stop_decel_mps2 * 4.0).sqrt();
+    assert!(out.speed_cmd_mps <= limit + cfg.speed_kp * 0.01 + 1e-3);
+    // An obstacle on the path 10 m ahead of the rear axle: the target drops so that the front
+    // bumper stops a margin short of it: free distance = 20 - 0.5 - margin - front - 10.
+    let obstacle = [Some(ObstacleCircle {
+        east_m: 0.2,
+        north_m: 20.0,
+        radius_m: 0.5,
+    })];
+    let free = 20.0 - 0.5 - cfg.obstacle_margin_m - cfg.front_m - 10.0;
+    let limit = (2.0 * cfg.stop_decel_mps2 * free).sqrt();
+    assert!(limit < 5.0);
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &obstacle,
+        &car(0.0, 10.0, 0.0, limit),
+    );
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-3,
+        "{} vs {limit}",
+        out.speed_cmd_mps
+    );
+    // Stopped at the margin (and past it): it stays stopped while the obstacle is there.
+    for north in [10.0 + free, 10.0 + free + 1.0] {
+        let out = cfg.process(
+            &mut PurePursuitState::default(),
+            &CAT_VEHICLE,
+            Some(&path),
+            &obstacle,
+            &car(0.0, north, 0.0, 0.0),
+        );
+        assert_eq!(out.speed_cmd_mps, 0.0, "{north}");
+    }
+    // Beside the path (2.7 m off, beyond half the width plus margin and radius): no stop.
+    let beside = [Some(ObstacleCircle {
+        east_m: 2.7,
+        north_m: 20.0,
+        radius_m: 0.5,
+    })];
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &beside,
+        &car(0.0, 10.0, 0.0, 5.0),
+    );
+    assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
+}
+
+#[test]
+fn pure_pursuit_without_path_or_position_holds_the_car() {
+    let mut state = PurePursuitState::default();
+    let out = DEFAULT_PURE_PURSUIT.process(
+        &mut state,
+        &CAT_VEHICLE,
+        None,
+        &[],
+        &car(0.0, 0.0, 0.0, 3.0),
+    );
+    assert_eq!(
+        (out.status, out.speed_cmd_mps),
+        (ControlStatus::NoPath, 0.0)
+    );
+    let path = path_of(&straight(0.0, 0.0, 0.0, 10, 1.0));
+    let lost = CarState {
+        pose: None,
+        speed_mps: 3.0,
+    };
+    let out = DEFAULT_PURE_PURSUIT.process(&mut state, &CAT_VEHICLE, Some(&path), &[], &lost);
+    assert_eq!(
+        (out.status, out.speed_cmd_mps),
+        (ControlStatus::Fallback, 0.0)
+    );
+    // Non-finite speed never leaks into the command.
+    let out = DEFAULT_PURE_PURSUIT.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 1.0, 0.0, f32::NAN),
+    );
+    assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
+}

@@ -1,0 +1,100 @@
+//! What sits on the bus in the node's place during a closed-loop run or a SIL session: one
+//! tick in (the frames received since the previous tick), the tick's frames out.
+//!
+//! [`NodeDriver`] is the very same `catmodel::node::Node` the firmware runs, controller
+//! included: the node assembles the planner's path, runs the controller its configuration
+//! names (`[control]` of the model file) and sends CONTROL_COMMAND itself. The closed-loop
+//! tools may drive with another controller than the model file's ([`Controller`]), and tune
+//! the reference controller; a SIL session runs the node exactly as configured.
+use catmodel::can::codec::{ControlCommand, ControlStatus};
+use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::control::path::Tracking;
+use catmodel::control::pure_pursuit::PurePursuitConfig;
+use catmodel::model::kinematic::Pose;
+use catmodel::node::drive::Controller as NodeController;
+use catmodel::node::{NodeConfig, PlatformStats, Tick, TxFrames};
+
+use crate::HostNode;
+
+/// A node on the bus: one tick at a time.
+pub trait Driver {
+    /// Runs the tick at `now_us` over `rx` (frames stamped at or before it, in arrival order)
+    /// and appends the frames it sends to `tx`.
+    fn tick(&mut self, now_us: u64, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport;
+}
+
+/// What a tick did, for the closed loop's records (never on the bus).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickReport {
+    /// The node's estimate of the rear axle, in its local frame (the planner's).
+    pub pose: Option<Pose>,
+    /// The node's speed, m/s.
+    pub speed_mps: f32,
+    /// The command sent.
+    pub command: ControlCommand,
+    /// Where the controller saw the car relative to its path.
+    pub tracking: Option<Tracking>,
+}
+
+/// Which controller drives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Controller {
+    /// The one the model file names.
+    FromModel,
+    /// The model-predictive controller.
+    Mpc,
+    /// The reference controller with this tuning.
+    PurePursuit(PurePursuitConfig),
+}
+
+/// The node, controller included.
+pub struct NodeDriver {
+    node: HostNode,
+}
+
+impl NodeDriver {
+    /// A fresh node with `config`, driving with `controller`.
+    pub fn new(mut config: NodeConfig, controller: Controller) -> Self {
+        match controller {
+            Controller::FromModel => {}
+            Controller::Mpc => config.controller = NodeController::Mpc,
+            Controller::PurePursuit(_) => config.controller = NodeController::PurePursuit,
+        }
+        let mut node = crate::new_node(config);
+        if let Controller::PurePursuit(tuning) = controller {
+            node.drive_mut().tune_pursuit(tuning);
+        }
+        Self { node }
+    }
+
+    /// The node.
+    pub fn node(&self) -> &HostNode {
+        &self.node
+    }
+}
+
+impl Driver for NodeDriver {
+    fn tick(&mut self, now_us: u64, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
+        let mut node_tx = TxFrames::new();
+        let tick = Tick {
+            now_us,
+            platform: PlatformStats::default(),
+        };
+        let estimate = self.node.step(&tick, rx, &mut node_tx);
+        tx.extend_from_slice(&node_tx);
+        let drive = self.node.drive();
+        TickReport {
+            pose: estimate.pose,
+            speed_mps: estimate.speed_mps,
+            command: drive.last_command(),
+            tracking: drive.last_tracking(),
+        }
+    }
+}
+
+/// The command a driver sends when it has nothing (for records before the first tick).
+pub const IDLE_COMMAND: ControlCommand = ControlCommand {
+    status: ControlStatus::NoPath,
+    steer_cmd_pct: Some(0.0),
+    speed_cmd_mps: Some(0.0),
+};

@@ -1,0 +1,612 @@
+//! The closed loop on the host: the plant simulator (`crate::sim`: single-track plant,
+//! magic-formula tyres, the car's delayed speed loop and steering actuator, sensors on their
+//! own clocks) driven by the controller's CONTROL_COMMAND frames through the bus, the node in
+//! the loop ([`driver`]), and a simulated planner sending the course's path and obstacles
+//! ([`planner`]). Everything between the car and the node is CAN frames, exactly what the node
+//! sees on a real bus, and the node's input is recorded as candump so that the very same run
+//! replays in QEMU.
+//!
+//! The tick schedule is the replay's: the first frame (the planner's, at 0.5 ms) puts the first
+//! tick at 20 ms, then every 20 ms; a tick gets every frame stamped since the previous one.
+//! The car starts at rest at the path's start; a launch (3 m/s, straight ahead) moves it until
+//! the node has held a valid position for [`ENGAGE_AFTER_VALID_S`] (a single GNSS antenna gives
+//! a heading only in motion) and the controller is tracking: then the drive-by-wire follows
+//! CONTROL_COMMAND, with the usual 100 ms command timeout.
+pub mod driver;
+pub mod limits;
+pub mod metrics;
+pub mod optimal;
+pub mod planner;
+pub mod plots;
+pub mod scenario;
+
+use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
+use catmodel::can::counter::CounterChecker;
+use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::control::path::{Path, Projection, Waypoint};
+use catmodel::node::NodeConfig;
+
+use crate::csv2can::LogEncoder;
+use crate::logcsv::{LogRow, TruthRow};
+use crate::sim::config::{Body, Gnss, VehicleConfig};
+use crate::sim::plant::PlantState;
+use crate::sim::scenario::Command;
+use crate::sim::{Rig, SimOptions};
+use driver::{Driver, TickReport, IDLE_COMMAND};
+use metrics::{Metrics, Scorer};
+use scenario::Course;
+
+/// The tick period, us (the node's 20 ms).
+const TICK_US: u64 = catmodel::SAMPLE_PERIOD_US;
+/// The plant's step, us ([`crate::sim::PLANT_STEP_S`]).
+const PLANT_STEP_US: u64 = 1_000;
+/// Plant steps per tick.
+const STEPS_PER_TICK: u64 = TICK_US / PLANT_STEP_US;
+/// Launch speed before the controller is engaged, m/s.
+pub const LAUNCH_SPEED_MPS: f64 = 3.0;
+/// The controller is engaged once the node has reported a valid position this long, s.
+pub const ENGAGE_AFTER_VALID_S: f64 = 1.0;
+/// Without a valid CONTROL_COMMAND this long the drive-by-wire brakes (speed 0, steering
+/// held), us: Dataspeed's command timeout.
+pub const COMMAND_TIMEOUT_US: u64 = 100_000;
+/// A command applies this many plant steps after its tick (computation and bus latency, 1 ms).
+const COMMAND_LATENCY_STEPS: u64 = 1;
+/// A run ends this long after the car came to rest while engaged, s.
+const STOPPED_END_S: f64 = 3.0;
+
+/// The GNSS receiver on the car.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Receiver {
+    /// Survey grade, RTK fixed: 1 cm white noise and 1 cm bias per axis (NovAtel OEM7
+    /// datasheet, RTK: 1 cm + 1 ppm RMS horizontal).
+    Rtk,
+    /// The vehicle file's receiver (the CAT Vehicle's: 1.2 m RMS horizontal, paper II-A).
+    Standard,
+}
+
+impl Receiver {
+    /// From `rtk` / `standard`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "rtk" => Some(Receiver::Rtk),
+            "standard" => Some(Receiver::Standard),
+            _ => None,
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Receiver::Rtk => "rtk",
+            Receiver::Standard => "standard",
+        }
+    }
+
+    /// The receiver's error model applied to `gnss`.
+    pub fn apply(self, gnss: &mut Gnss) {
+        if self == Receiver::Rtk {
+            gnss.white_noise_m = 0.01;
+            gnss.bias_sigma_m = 0.01;
+        }
+    }
+}
+
+/// How to run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunOptions {
+    /// Sensor noise and clocks.
+    pub seed: u64,
+    /// GNSS receiver.
+    pub receiver: Receiver,
+    /// Stop after this much simulated time, s.
+    pub max_time_s: f64,
+}
+
+/// One tick of a run, for plots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Tick time, s.
+    pub t_s: f64,
+    /// Ground truth (rear axle).
+    pub truth: TruthRow,
+    /// The node's estimate (east, north, heading).
+    pub estimate: Option<(f64, f64, f64)>,
+    /// The command the drive-by-wire applies after this tick.
+    pub command: ControlCommand,
+    /// Whether the controller drives.
+    pub engaged: bool,
+    /// Steering actuator position, %.
+    pub steer_pct: f64,
+    /// Truth: station of the rear axle on the path, m.
+    pub station_m: f64,
+    /// Truth: lateral error of the rear axle from the path, m, positive right.
+    pub lateral_m: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct RunOutput {
+    /// The course driven.
+    pub course: Course,
+    /// Every frame the node received, in order (sensors and planner): the session's candump.
+    pub inputs: Vec<TimedFrame>,
+    /// Every frame sent from the node's place, stamped with its tick time.
+    pub outputs: Vec<TimedFrame>,
+    /// One record per tick.
+    pub samples: Vec<Sample>,
+    /// The scores.
+    pub metrics: Metrics,
+}
+
+/// The node's configuration for `vehicle` (antenna, dynamics, and, without a model file,
+/// geometry and steering), on top of `base` (the published models or a model file's).
+pub fn node_config_for(
+    base: NodeConfig,
+    vehicle: &VehicleConfig,
+    geometry_from_vehicle: bool,
+) -> anyhow::Result<NodeConfig> {
+    let c = &vehicle.chassis;
+    let mut config = base;
+    if geometry_from_vehicle {
+        config.vehicle.wheelbase_m = c.wheelbase_m as f32;
+        config.vehicle.track_m = c.track_m as f32;
+        config.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
+        config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
+    }
+    config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
+    config.dynamics = Some(catmodel::model::dynamic::DynamicParams {
+        mass_kg: c.mass_kg as f32,
+        yaw_inertia_kg_m2: c.yaw_inertia_kg_m2 as f32,
+        cg_to_front_m: c.cg_to_front_m as f32,
+        cg_to_rear_m: c.cg_to_rear_m as f32,
+        cornering_front_n_per_rad: vehicle.tyre_front.cornering_stiffness_n_per_rad as f32,
+        cornering_rear_n_per_rad: vehicle.tyre_rear.cornering_stiffness_n_per_rad as f32,
+        min_speed_mps: catmodel::model::dynamic::MIN_SPEED_MPS,
+    });
+    Ok(config)
+}
+
+/// The planner's path as the core's `Path` (for scoring lateral error on truth).
+pub fn core_path(course: &Course) -> Path {
+    let waypoints: Vec<Waypoint> = course
+        .path
+        .iter()
+        .map(|p| Waypoint {
+            east_m: p.east_m as f32,
+            north_m: p.north_m as f32,
+            speed_mps: p.speed_mps as f32,
+            left_m: p.left_m as f32,
+            right_m: p.right_m as f32,
+        })
+        .collect();
+    let mut path = Path::new();
+    // Note: the scenarios build valid paths (host tests check every one).
+    let _ = path.load(&waypoints);
+    path
+}
+
+/// The drive-by-wire kit's command side: what the car does with CONTROL_COMMAND.
+struct DriveByWire {
+    engaged: bool,
+    valid_since_us: Option<u64>,
+    counter: CounterChecker,
+    last_valid_us: Option<u64>,
+    /// (steer %, speed m/s) in force, and the pending one with the step it applies from.
+    current: Command,
+    pending: Option<(u64, Command)>,
+    status_ticks: [u64; 4],
+    engaged_at_s: Option<f64>,
+}
+
+impl DriveByWire {
+    fn new() -> Self {
+        Self {
+            engaged: false,
+            valid_since_us: None,
+            counter: CounterChecker::new(),
+            last_valid_us: None,
+            current: Command {
+                speed_mps: 0.0,
+                steer_pct: 0.0,
+            },
+            pending: None,
+            status_ticks: [0; 4],
+            engaged_at_s: None,
+        }
+    }
+
+    /// Reads this tick's frames from the node's place.
+    fn receive(&mut self, now_us: u64, step: u64, frames: &[CanFrame]) -> ControlCommand {
+        let mut seen = IDLE_COMMAND;
+        for f in frames {
+            if let Ok((p, _)) = StatePosition::decode(f) {
+                if !p.position_valid {
+                    self.valid_since_us = None;
+                } else if self.valid_since_us.is_none() {
+                    self.valid_since_us = Some(now_us);
+                }
+            }
+            let Ok((command, counter)) = ControlCommand::decode(f) else {
+                continue;
+            };
+            if !self.counter.check(counter).accepted() {
+                continue;
+            }
+            seen = command;
+            let tracking = matches!(
+                command.status,
+                ControlStatus::Tracking | ControlStatus::Avoiding
+            );
+            let settled = self
+                .valid_since_us
+                .is_some_and(|t| now_us.saturating_sub(t) as f64 >= ENGAGE_AFTER_VALID_S * 1e6);
+            if !self.engaged && tracking && settled {
+                self.engaged = true;
+                self.engaged_at_s = Some(now_us as f64 * 1e-6);
+            }
+            if self.engaged {
+                self.last_valid_us = Some(now_us);
+                let steer = command
+                    .steer_cmd_pct
+                    .map_or(self.current.steer_pct, f64::from);
+                let speed = command.speed_cmd_mps.map_or(0.0, f64::from);
+                self.pending = Some((
+                    step + COMMAND_LATENCY_STEPS,
+                    Command {
+                        speed_mps: speed,
+                        steer_pct: steer,
+                    },
+                ));
+                if let Some(n) = self.status_ticks.get_mut(command.status as usize) {
+                    *n += 1;
+                }
+            }
+        }
+        seen
+    }
+
+    /// The command the car holds during plant step `step` at `t_us`.
+    fn command(&mut self, step: u64, t_us: u64) -> Command {
+        if let Some((from, c)) = self.pending {
+            if step >= from {
+                self.current = c;
+                self.pending = None;
+            }
+        }
+        if !self.engaged {
+            return Command {
+                speed_mps: LAUNCH_SPEED_MPS,
+                steer_pct: 0.0,
+            };
+        }
+        if self
+            .last_valid_us
+            .is_none_or(|t| t_us.saturating_sub(t) > COMMAND_TIMEOUT_US)
+        {
+            self.current.speed_mps = 0.0;
+        }
+        self.current
+    }
+}
+
+/// Runs `course` with `vehicle` (its sensors set for `options.receiver`) and `driver` in the
+/// node's place.
+pub fn run(
+    vehicle: &VehicleConfig,
+    course: &Course,
+    driver: &mut dyn Driver,
+    controller_name: &str,
+    options: &RunOptions,
+) -> RunOutput {
+    let mut vehicle = vehicle.clone();
+    options.receiver.apply(&mut vehicle.sensors.gnss);
+    let start = &course.path[0];
+    let heading0 = {
+        let next = &course.path[1];
+        (next.east_m - start.east_m).atan2(next.north_m - start.north_m)
+    };
+    let b = vehicle.chassis.cg_to_rear_m;
+    let initial = PlantState {
+        x_m: start.east_m + b * heading0.sin(),
+        y_m: start.north_m + b * heading0.cos(),
+        heading_rad: heading0,
+        ..PlantState::default()
+    };
+    let sim_options = SimOptions {
+        seed: options.seed,
+        faults: false,
+        vary_commands: false,
+        ..SimOptions::default()
+    };
+    let mut rig = Rig::new(&vehicle, &sim_options, initial, 0.0);
+    let mut planner = planner::Planner::new();
+    planner.send_origin(sim_options.origin_deg.0, sim_options.origin_deg.1);
+    // Note: the scenarios' paths have 2..=256 points and at most 4 obstacles (host tests).
+    let _ = planner.send_path(&course.path);
+    let _ = planner.send_obstacles(&course.obstacles);
+
+    let path = core_path(course);
+    let mut scorer = Scorer::new(&vehicle.body, course);
+    let mut dbw = DriveByWire::new();
+    let mut encoder = LogEncoder::new();
+    let mut pending_rows: Vec<(i64, LogRow)> = Vec::new();
+    let mut inputs = Vec::new();
+    let mut outputs = Vec::new();
+    let mut samples: Vec<Sample> = Vec::new();
+    let mut projection: Option<Projection> = None;
+    let (scored_from, scored_to) = course.scored_stations_m;
+    let mut entry_speed = None;
+    let mut scored_span: (Option<f64>, Option<f64>) = (None, None);
+    let mut stopped_since: Option<f64> = None;
+    let front_ahead = vehicle.body.length_m - vehicle.body.rear_overhang_m;
+    let max_ticks = (options.max_time_s * 1e6 / TICK_US as f64).ceil() as u64;
+
+    for n in 1..=max_ticks {
+        let t_tick_us = n * TICK_US;
+        // The plant over (T_{n-1}, T_n] with the commands in force.
+        for _ in 0..STEPS_PER_TICK {
+            let step = rig.steps();
+            let t_us = step * PLANT_STEP_US;
+            let command = dbw.command(step, t_us);
+            rig.step(&command);
+            let truth = rig.truth();
+            scorer.observe(truth.x, truth.y, truth.heading);
+        }
+        // The frames of this tick: the sensors' (logged by now) and the planner's.
+        pending_rows.extend(rig.take_reports());
+        pending_rows.sort_by_key(|(t, _)| *t);
+        let due = pending_rows.partition_point(|(t, _)| *t as u64 <= t_tick_us);
+        let mut rx: Vec<TimedFrame> = Vec::new();
+        for (_, row) in pending_rows.drain(..due) {
+            // Note: the simulator's clock starts at 0 and only counts up, so a row's time is
+            // never negative (the only error encode_row reports).
+            let _ = encoder.encode_row(&row, &mut rx);
+        }
+        let tick_start = t_tick_us - TICK_US;
+        for (i, frame) in planner.take_tick_frames().into_iter().enumerate() {
+            rx.push(TimedFrame {
+                t_us: tick_start + 500 * (i as u64 + 1),
+                frame,
+            });
+        }
+        rx.sort_by_key(|f| f.t_us);
+        let mut tx = Vec::new();
+        let report: TickReport = driver.tick(t_tick_us, &rx, &mut tx);
+        let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
+        inputs.extend_from_slice(&rx);
+        outputs.extend(tx.iter().map(|&frame| TimedFrame {
+            t_us: t_tick_us,
+            frame,
+        }));
+
+        // Records and scores on truth.
+        let truth = rig.truth();
+        projection = path.project(truth.x as f32, truth.y as f32, projection.as_ref());
+        let (station, lateral) = projection.map_or((f64::NAN, f64::NAN), |p| {
+            (f64::from(p.station_m), f64::from(p.lateral_m))
+        });
+        let t_s = t_tick_us as f64 * 1e-6;
+        if entry_speed.is_none() && station + front_ahead >= scored_from {
+            entry_speed = Some(truth.speed);
+        }
+        if station >= scored_from && scored_span.0.is_none() {
+            scored_span.0 = Some(t_s);
+        }
+        if station >= scored_to && scored_span.1.is_none() {
+            scored_span.1 = Some(t_s);
+        }
+        samples.push(Sample {
+            t_s,
+            truth,
+            estimate: report
+                .pose
+                .map(|p| (f64::from(p.x_m), f64::from(p.y_m), f64::from(p.heading_rad))),
+            command: seen,
+            engaged: dbw.engaged,
+            steer_pct: rig.steer_pct(),
+            station_m: station,
+            lateral_m: lateral,
+        });
+        // The end: past the scored range with room to spare, or at rest while engaged.
+        if dbw.engaged && truth.speed < 0.05 {
+            let since = *stopped_since.get_or_insert(t_s);
+            if t_s - since >= STOPPED_END_S {
+                break;
+            }
+        } else {
+            stopped_since = None;
+        }
+        if station >= scored_to + front_ahead + 5.0 {
+            break;
+        }
+    }
+
+    let (cone_hits, min_cone) = scorer.cones();
+    let scored: Vec<f64> = samples
+        .iter()
+        .filter(|s| s.station_m >= scored_from && s.station_m <= scored_to)
+        .map(|s| s.lateral_m)
+        .collect();
+    let lateral_rms = (!scored.is_empty())
+        .then(|| (scored.iter().map(|e| e * e).sum::<f64>() / scored.len() as f64).sqrt());
+    let lateral_max = scored.iter().map(|e| e.abs()).reduce(f64::max);
+    let completed = scored_span.1.is_some();
+    let min_obstacle = scorer.obstacle_clearance_m();
+    let total_time_s = samples.last().map_or(0.0, |s| s.t_s);
+    let metrics = Metrics {
+        scenario: course.kind.name().to_string(),
+        controller: controller_name.to_string(),
+        receiver: options.receiver.name().to_string(),
+        target_speed_mps: course.speed_mps,
+        entry_speed_mps: entry_speed,
+        cone_hits,
+        gates_missed: scorer.gates_missed(),
+        min_cone_clearance_m: min_cone,
+        min_obstacle_clearance_m: min_obstacle,
+        completed,
+        lateral_rms_m: lateral_rms,
+        lateral_max_m: lateral_max,
+        scored_time_s: match scored_span {
+            (Some(a), Some(b)) => Some(b - a),
+            _ => None,
+        },
+        driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
+        total_time_s,
+        status_ticks: dbw.status_ticks,
+        clean: completed
+            && cone_hits == 0
+            && scorer.gates_missed() == 0
+            && min_obstacle.is_none_or(|d| d > 0.0),
+    };
+    RunOutput {
+        course: course.clone(),
+        inputs,
+        outputs,
+        samples,
+        metrics,
+    }
+}
+
+/// `catmodel closed-loop`'s arguments.
+#[derive(Debug, Clone)]
+pub struct ClosedLoopArgs {
+    /// Scenario name ([`scenario::SCENARIO_NAMES`]).
+    pub scenario: String,
+    /// `mpc` or `pure-pursuit`.
+    pub controller: String,
+    /// Vehicle file for the plant (default: the CAT Vehicle).
+    pub vehicle: Option<std::path::PathBuf>,
+    /// Model file for the node (default: the published models).
+    pub model: Option<std::path::PathBuf>,
+    /// `rtk` or `standard`.
+    pub receiver: String,
+    /// Target speed, m/s (default: the scenario's).
+    pub speed_mps: Option<f64>,
+    /// Sensor noise seed.
+    pub seed: u64,
+    /// Output directory.
+    pub out: std::path::PathBuf,
+}
+
+/// The controller called `name` for a car with `body`.
+pub fn controller_named(name: &str, body: &Body) -> anyhow::Result<driver::Controller> {
+    match name {
+        "pure-pursuit" => Ok(driver::Controller::PurePursuit(
+            catmodel::control::pure_pursuit::PurePursuitConfig {
+                half_width_m: (0.5 * body.width_m) as f32,
+                front_m: (body.length_m - body.rear_overhang_m) as f32,
+                ..catmodel::control::pure_pursuit::DEFAULT_PURE_PURSUIT
+            },
+        )),
+        "mpc" => Ok(driver::Controller::Mpc),
+        other => anyhow::bail!("unknown controller `{other}`; known: mpc, pure-pursuit"),
+    }
+}
+
+/// Loads the plant's vehicle and the node's configuration the way the CLI does.
+pub fn load_setup(
+    vehicle: Option<&std::path::Path>,
+    model: Option<&std::path::Path>,
+) -> anyhow::Result<(VehicleConfig, NodeConfig)> {
+    let cfg = match vehicle {
+        Some(p) => VehicleConfig::load(p).map_err(|e| anyhow::anyhow!("{e}"))?,
+        None => VehicleConfig::default(),
+    };
+    let base = crate::node_config(model)?;
+    // The node takes its first fix as its origin, as the firmware does (see `driver`).
+    let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
+    Ok((cfg, node))
+}
+
+/// `catmodel closed-loop`: runs the scenario and writes `session.can.log` (every frame the node
+/// received), `session.tx.log` (every frame sent from the node's place), `metrics.json` and the
+/// plots into `out`; returns the metrics and the files written.
+pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path::PathBuf>)> {
+    let kind = scenario::Kind::from_name(&args.scenario).ok_or_else(|| {
+        anyhow::anyhow!(
+            "unknown scenario `{}`; known: {}",
+            args.scenario,
+            scenario::SCENARIO_NAMES.join(", ")
+        )
+    })?;
+    let receiver = Receiver::from_name(&args.receiver).ok_or_else(|| {
+        anyhow::anyhow!("unknown receiver `{}`; known: rtk, standard", args.receiver)
+    })?;
+    let (vehicle, node) = load_setup(args.vehicle.as_deref(), args.model.as_deref())?;
+    let controller = controller_named(&args.controller, &vehicle.body)?;
+    let speed = args.speed_mps.unwrap_or(kind.default_speed_mps());
+    if !(speed.is_finite() && speed > 0.0 && speed <= 40.0) {
+        anyhow::bail!("--speed {speed}: a target speed is in (0, 40] m/s");
+    }
+    let course = scenario::course(kind, &vehicle.body, speed);
+    let mut driver = driver::NodeDriver::new(node, controller);
+    let options = RunOptions {
+        seed: args.seed,
+        receiver,
+        max_time_s: 300.0,
+    };
+    let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
+    let mut files = write_session(&args.out, &output)?;
+    files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
+    Ok((output.metrics, files))
+}
+
+/// Writes a run's files into `dir` (created).
+pub fn write_session(
+    dir: &std::path::Path,
+    output: &RunOutput,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+    let mut written = Vec::new();
+    let inputs = dir.join("session.can.log");
+    crate::replay::write_file(&inputs, &crate::csv2can::to_candump(&output.inputs))?;
+    written.push(inputs);
+    let tx = dir.join("session.tx.log");
+    crate::replay::write_file(&tx, &crate::csv2can::to_candump(&output.outputs))?;
+    written.push(tx);
+    let samples = dir.join("samples.csv");
+    crate::replay::write_file(&samples, &samples_csv(&output.samples))?;
+    written.push(samples);
+    let metrics = dir.join("metrics.json");
+    crate::replay::write_file(&metrics, &serde_json::to_string_pretty(&output.metrics)?)?;
+    written.push(metrics);
+    Ok(written)
+}
+
+/// The per-tick records as CSV: `t,x,y,heading,speed,est_x,est_y,est_heading,status,
+/// steer_cmd,speed_cmd,steer,engaged,station,lateral` (truth rear axle; the node's estimate;
+/// the command the drive-by-wire received; the actuator's steering; truth station and lateral
+/// error on the path; empty where not available).
+pub fn samples_csv(samples: &[Sample]) -> String {
+    use std::fmt::Write;
+    let mut out = String::from(
+        "t,x,y,heading,speed,est_x,est_y,est_heading,status,steer_cmd,speed_cmd,steer,engaged,station,lateral\n",
+    );
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+    for s in samples {
+        let (ex, ey, eh) = match s.estimate {
+            Some((x, y, h)) => (Some(x), Some(y), Some(h)),
+            None => (None, None, None),
+        };
+        let _ = writeln!(
+            out,
+            "{:.2},{:.4},{:.4},{:.5},{:.3},{},{},{},{},{},{},{:.2},{},{},{}",
+            s.t_s,
+            s.truth.x,
+            s.truth.y,
+            s.truth.heading,
+            s.truth.speed,
+            opt(ex),
+            opt(ey),
+            opt(eh),
+            s.command.status as u8,
+            opt(s.command.steer_cmd_pct.map(f64::from)),
+            opt(s.command.speed_cmd_mps.map(f64::from)),
+            s.steer_pct,
+            u8::from(s.engaged),
+            opt(s.station_m.is_finite().then_some(s.station_m)),
+            opt(s.lateral_m.is_finite().then_some(s.lateral_m)),
+        );
+    }
+    out
+}

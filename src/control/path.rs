@@ -1,0 +1,472 @@
+//! A planned path in fixed-capacity storage, and its geometry: the rear axle's projection onto
+//! it (station, lateral and heading error), and the reference (pose, curvature, target speed,
+//! corridor) at any station, which is what a controller tracks.
+//!
+//! The path is a polyline of up to [`MAX_PATH_POINTS`] points in the node's local frame (east,
+//! north, m), each with a target speed and a corridor (how far the body may stray to the left
+//! and to the right). Conventions, as everywhere in catmodel: heading clockwise from north,
+//! curvature and lateral offsets positive to the right.
+//!
+//! The reference is continuous where a polyline is not: segment `i` (point `i` to `i + 1`) has
+//! the constant heading `h_i`; the reference heading is linear in station between segment
+//! midpoints, so its derivative, the curvature, is constant between midpoints and equals the
+//! heading change at the point divided by the distance between the midpoints. On points of a
+//! circle of radius R, `c` metres apart (chords), this is `2 asin(c / 2R) / c`, within a
+//! relative `c^2 / 24 R^2` of `1 / R` (0.13 % at c = 1 m on the car's tightest circle,
+//! R = 5.6 m).
+//!
+//! Never allocates, never panics; every loop runs at most [`MAX_PATH_POINTS`] times.
+use crate::math;
+use crate::model::kinematic::Pose;
+
+/// Most points of a path: the bus carries an 8-bit point index (docs/bus.md).
+pub const MAX_PATH_POINTS: usize = crate::can::spec::MAX_PATH_POINTS;
+/// Consecutive points at least this far apart, m: the heading of a shorter segment is
+/// dominated by the 0.02 m quantisation of the bus (0.02 m over 0.05 m is 0.4 rad).
+pub const MIN_SEGMENT_M: f32 = 0.05;
+/// Consecutive points at most this far apart, m: a longer gap is a lost or corrupt point, not a
+/// plan (a planner samples curves far more densely).
+pub const MAX_SEGMENT_M: f32 = 50.0;
+/// Largest heading change at one point, rad (60 deg): a sharper corner is not a path a car can
+/// follow (and reverses are not planned).
+pub const MAX_TURN_RAD: f32 = core::f32::consts::FRAC_PI_3;
+/// How far ahead of the previous station a projection looks for the nearest segment, m: one
+/// 20 ms tick at 40 m/s is 0.8 m, and the node propagates at most 0.1 s at a time (4 m).
+pub const PROJECTION_AHEAD_M: f32 = 10.0;
+/// How far behind the previous station a projection looks, m (noise moves the estimate back).
+pub const PROJECTION_BEHIND_M: f32 = 3.0;
+/// A windowed projection farther than this from the path falls back to a search of the whole
+/// path, m (the car was moved, or the path changed under it).
+pub const PROJECTION_RESEARCH_M: f32 = 5.0;
+
+/// One point of a path as the planner sends it: PATH_POINT and PATH_LIMITS of one index.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Waypoint {
+    /// Rear-axle position east of the local origin, m.
+    pub east_m: f32,
+    /// North of the local origin, m.
+    pub north_m: f32,
+    /// Target speed there, m/s.
+    pub speed_mps: f32,
+    /// How far the body may stray left of the point, m.
+    pub left_m: f32,
+    /// How far the body may stray right of the point, m.
+    pub right_m: f32,
+}
+
+/// Why a set of waypoints is not a path.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PathError {
+    /// Fewer than 2 or more than [`MAX_PATH_POINTS`] points.
+    PointCount,
+    /// A value is not finite, or a speed or corridor is negative (index of the point).
+    BadValue(u16),
+    /// Segment `index` -> `index + 1` is shorter than [`MIN_SEGMENT_M`] or longer than
+    /// [`MAX_SEGMENT_M`].
+    SegmentLength(u16),
+    /// The heading changes by more than [`MAX_TURN_RAD`] at point `index`.
+    Turn(u16),
+}
+
+/// The reference at one station.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PathSample {
+    /// Station (distance along the path from its first point), m; clamped to the path.
+    pub station_m: f32,
+    /// Reference position east, m.
+    pub east_m: f32,
+    /// Reference position north, m.
+    pub north_m: f32,
+    /// Reference heading, clockwise from north, rad, in [-pi, pi).
+    pub heading_rad: f32,
+    /// Curvature, 1/m, positive = turning right.
+    pub curvature_per_m: f32,
+    /// Target speed, m/s (0 beyond the last point: the path ends there).
+    pub speed_mps: f32,
+    /// Corridor to the left, m.
+    pub left_m: f32,
+    /// Corridor to the right, m.
+    pub right_m: f32,
+}
+
+/// Where a point is relative to the path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Projection {
+    /// The segment the point projects onto (index of its first point).
+    pub segment: usize,
+    /// Station of the foot of the perpendicular, m: below 0 before the first point, above the
+    /// length beyond the last (the end segments extend straight).
+    pub station_m: f32,
+    /// Signed distance from the path, m, positive = the point is to the right of the path.
+    pub lateral_m: f32,
+}
+
+/// A car's pose relative to the path: what a tracking controller needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tracking {
+    /// Where the rear axle projects.
+    pub projection: Projection,
+    /// Car heading minus reference heading, rad, in [-pi, pi), positive = turned right of it.
+    pub heading_error_rad: f32,
+    /// The reference at the projection's station.
+    pub reference: PathSample,
+}
+
+/// A path: up to [`MAX_PATH_POINTS`] waypoints with their stations and segment headings.
+/// 7 f32 per point: 7 KiB at 256 points.
+#[derive(Clone, Debug)]
+pub struct Path {
+    len: usize,
+    points: [Waypoint; MAX_PATH_POINTS],
+    /// Distance along the path from point 0 to point `i`, m.
+    station_m: [f32; MAX_PATH_POINTS],
+    /// Heading of segment `i` (point `i` to `i + 1`), rad; the last entry repeats the last
+    /// segment's.
+    heading_rad: [f32; MAX_PATH_POINTS],
+}
+
+impl Default for Path {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Path {
+    /// An empty path (no points: every query returns `None`).
+    pub const fn new() -> Self {
+        Self {
+            len: 0,
+            points: [Waypoint {
+                east_m: 0.0,
+                north_m: 0.0,
+                speed_mps: 0.0,
+                left_m: 0.0,
+                right_m: 0.0,
+            }; MAX_PATH_POINTS],
+            station_m: [0.0; MAX_PATH_POINTS],
+            heading_rad: [0.0; MAX_PATH_POINTS],
+        }
+    }
+
+    /// Checks `waypoints` without changing anything: the rules a path must follow.
+    pub fn validate(waypoints: &[Waypoint]) -> Result<(), PathError> {
+        if waypoints.len() < 2 || waypoints.len() > MAX_PATH_POINTS {
+            return Err(PathError::PointCount);
+        }
+        for (i, w) in waypoints.iter().enumerate() {
+            let finite = [w.east_m, w.north_m, w.speed_mps, w.left_m, w.right_m]
+                .iter()
+                .all(|v| v.is_finite());
+            if !finite || w.speed_mps < 0.0 || w.left_m < 0.0 || w.right_m < 0.0 {
+                return Err(PathError::BadValue(i as u16));
+            }
+        }
+        let mut previous_heading: Option<f32> = None;
+        for (i, w) in waypoints.iter().enumerate() {
+            let Some(next) = waypoints.get(i + 1) else {
+                break;
+            };
+            let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
+            let length = math::sqrt(dx * dx + dy * dy);
+            if !(MIN_SEGMENT_M..=MAX_SEGMENT_M).contains(&length) {
+                return Err(PathError::SegmentLength(i as u16));
+            }
+            let heading = math::atan2(dx, dy);
+            if let Some(h) = previous_heading {
+                if math::wrap_pi(heading - h).abs() > MAX_TURN_RAD {
+                    return Err(PathError::Turn(i as u16));
+                }
+            }
+            previous_heading = Some(heading);
+        }
+        Ok(())
+    }
+
+    /// Replaces this path by `waypoints` if they pass [`Path::validate`]; on an error the path
+    /// is left as it was.
+    pub fn load(&mut self, waypoints: &[Waypoint]) -> Result<(), PathError> {
+        Self::validate(waypoints)?;
+        let n = waypoints.len();
+        let mut station = 0.0;
+        for i in 0..n {
+            let (Some(w), Some(s), Some(h), Some(p)) = (
+                waypoints.get(i),
+                self.station_m.get_mut(i),
+                self.heading_rad.get_mut(i),
+                self.points.get_mut(i),
+            ) else {
+                break;
+            };
+            *p = *w;
+            *s = station;
+            if let Some(next) = waypoints.get(i + 1) {
+                let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
+                *h = math::atan2(dx, dy);
+                station += math::sqrt(dx * dx + dy * dy);
+            }
+        }
+        // The last point has no segment of its own: it keeps the last segment's heading.
+        let last = self.heading_rad.get(n - 2).copied().unwrap_or(0.0);
+        if let Some(h) = self.heading_rad.get_mut(n - 1) {
+            *h = last;
+        }
+        self.len = n;
+        Ok(())
+    }
+
+    /// Forgets every point.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Number of points (0 = no path).
+    pub const fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the path has no points.
+    pub const fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The waypoints.
+    pub fn points(&self) -> &[Waypoint] {
+        self.points.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Station of point `i`, m.
+    pub fn station_of(&self, i: usize) -> Option<f32> {
+        self.station_m.get(..self.len)?.get(i).copied()
+    }
+
+    /// Length along the path, m.
+    pub fn length_m(&self) -> f32 {
+        self.station_of(self.len.saturating_sub(1)).unwrap_or(0.0)
+    }
+
+    /// Segment `i`: its start point, heading and length.
+    fn segment(&self, i: usize) -> Option<(Waypoint, f32, f32)> {
+        if i + 1 >= self.len {
+            return None;
+        }
+        let a = *self.points.get(i)?;
+        let h = *self.heading_rad.get(i)?;
+        let length = self.station_m.get(i + 1)? - self.station_m.get(i)?;
+        Some((a, h, length))
+    }
+
+    /// Projects `(east, north)` onto segment `i` (the end segments extend beyond the path's
+    /// ends): `(station, lateral, squared distance to the segment itself, whether the foot was
+    /// clamped to an end point)`. `lateral` is the offset from the segment's line.
+    fn project_on(&self, i: usize, east_m: f32, north_m: f32) -> Option<(f32, f32, f32, bool)> {
+        let (a, h, length) = self.segment(i)?;
+        let (sin_h, cos_h) = math::sin_cos(h);
+        let (px, py) = (east_m - a.east_m, north_m - a.north_m);
+        // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
+        let along = px * sin_h + py * cos_h;
+        let lateral = px * cos_h - py * sin_h;
+        let first = i == 0;
+        let last = i + 2 == self.len;
+        let t = match (along < 0.0 && !first, along > length && !last) {
+            (true, _) => 0.0,
+            (_, true) => length,
+            _ => along,
+        };
+        let (ex, ey) = (along - t, lateral);
+        let station = self.station_m.get(i)? + t;
+        Some((station, lateral, ex * ex + ey * ey, t != along))
+    }
+
+    /// The nearest point of the path to `(east, north)` among segments `range`.
+    fn nearest_in(
+        &self,
+        range: core::ops::Range<usize>,
+        east_m: f32,
+        north_m: f32,
+    ) -> Option<(Projection, f32)> {
+        let mut best: Option<(Projection, f32)> = None;
+        for i in range {
+            let Some((station_m, lateral, d2, clamped)) = self.project_on(i, east_m, north_m)
+            else {
+                break;
+            };
+            if best.is_none_or(|(_, b)| d2 < b) {
+                // At a corner the nearest point is the corner itself: the offset is the
+                // distance to it, with the side of the segment's line.
+                let lateral_m = if clamped {
+                    math::sqrt(d2).copysign(lateral)
+                } else {
+                    lateral
+                };
+                best = Some((
+                    Projection {
+                        segment: i,
+                        station_m,
+                        lateral_m,
+                    },
+                    d2,
+                ));
+            }
+        }
+        best
+    }
+
+    /// The projection of `(east, north)` onto the path. With `previous` (last tick's
+    /// projection) only segments from [`PROJECTION_BEHIND_M`] behind to [`PROJECTION_AHEAD_M`]
+    /// ahead of it are searched, so that a path that passes near itself (a loop) is followed in
+    /// order; the whole path is searched without it, or when the windowed result is farther
+    /// than [`PROJECTION_RESEARCH_M`]. `None` without a path or for non-finite input.
+    pub fn project(
+        &self,
+        east_m: f32,
+        north_m: f32,
+        previous: Option<&Projection>,
+    ) -> Option<Projection> {
+        if self.len < 2 || !east_m.is_finite() || !north_m.is_finite() {
+            return None;
+        }
+        let segments = self.len - 1;
+        if let Some(prev) = previous.filter(|p| p.segment < segments) {
+            let mut lo = prev.segment;
+            while lo > 0
+                && self
+                    .station_of(lo)
+                    .is_some_and(|s| s > prev.station_m - PROJECTION_BEHIND_M)
+            {
+                lo -= 1;
+            }
+            let mut hi = prev.segment + 1;
+            while hi < segments
+                && self
+                    .station_of(hi)
+                    .is_some_and(|s| s < prev.station_m + PROJECTION_AHEAD_M)
+            {
+                hi += 1;
+            }
+            if let Some((p, d2)) = self.nearest_in(lo..hi, east_m, north_m) {
+                if d2 <= PROJECTION_RESEARCH_M * PROJECTION_RESEARCH_M {
+                    return Some(p);
+                }
+            }
+        }
+        self.nearest_in(0..segments, east_m, north_m)
+            .map(|(p, _)| p)
+    }
+
+    /// Index of the segment whose span holds `station_m`, searching forward from `hint` (then
+    /// backward): stations that grow from call to call cost one step each.
+    fn segment_at(&self, station_m: f32, hint: usize) -> usize {
+        let last_segment = self.len.saturating_sub(2);
+        let mut i = hint.min(last_segment);
+        while i < last_segment && self.station_of(i + 1).is_some_and(|s| s <= station_m) {
+            i += 1;
+        }
+        while i > 0 && self.station_of(i).is_some_and(|s| s > station_m) {
+            i -= 1;
+        }
+        i
+    }
+
+    /// The reference at `station_m` (clamped to the path: before its start the first point's
+    /// values, beyond its end the last point extended straight ahead at speed 0). `hint` is a
+    /// segment index to start searching from (e.g. the projection's); `None` without a path.
+    pub fn sample(&self, station_m: f32, hint: usize) -> Option<PathSample> {
+        if self.len < 2 || !station_m.is_finite() {
+            return None;
+        }
+        let length = self.length_m();
+        let s = math::clamp(station_m, 0.0, length);
+        let i = self.segment_at(s, hint);
+        let (a, h, seg_len) = self.segment(i)?;
+        let b = *self.points.get(i + 1)?;
+        let s_a = *self.station_m.get(i)?;
+        let t = s - s_a;
+        let f = if seg_len > 0.0 { t / seg_len } else { 0.0 };
+        let lerp = |x: f32, y: f32| x + (y - x) * f;
+        let (sin_h, cos_h) = math::sin_cos(h);
+        // Beyond the end, the last segment extends straight: position moves on, speed is 0.
+        let beyond = (station_m - length).max(0.0);
+        let (heading_rad, curvature_per_m) = self.heading_and_curvature(i, t, seg_len);
+        Some(PathSample {
+            station_m: s + beyond,
+            east_m: a.east_m + (t + beyond) * sin_h,
+            north_m: a.north_m + (t + beyond) * cos_h,
+            heading_rad,
+            curvature_per_m: if beyond > 0.0 { 0.0 } else { curvature_per_m },
+            speed_mps: if beyond > 0.0 {
+                0.0
+            } else {
+                lerp(a.speed_mps, b.speed_mps)
+            },
+            left_m: lerp(a.left_m, b.left_m),
+            right_m: lerp(a.right_m, b.right_m),
+        })
+    }
+
+    /// Heading and curvature `t` metres into segment `i` of length `seg_len`: the heading is
+    /// linear between segment midpoints (see the module doc).
+    fn heading_and_curvature(&self, i: usize, t: f32, seg_len: f32) -> (f32, f32) {
+        let h = self.heading_rad.get(i).copied().unwrap_or(0.0);
+        let half = 0.5 * seg_len;
+        // The neighbouring segment on the side of the midpoint that `t` is on.
+        let neighbour = if t < half {
+            i.checked_sub(1)
+        } else if i + 2 < self.len {
+            Some(i + 1)
+        } else {
+            None
+        };
+        let Some(j) = neighbour else {
+            return (h, 0.0);
+        };
+        let (Some(&hj), Some(len_j)) = (self.heading_rad.get(j), self.segment(j).map(|s| s.2))
+        else {
+            return (h, 0.0);
+        };
+        // Signed heading change from segment min(i, j) to max(i, j), over the distance
+        // between their midpoints.
+        let (turn, span) = if j < i {
+            (math::wrap_pi(h - hj), 0.5 * (len_j + seg_len))
+        } else {
+            (math::wrap_pi(hj - h), 0.5 * (seg_len + len_j))
+        };
+        let curvature = if span > 0.0 { turn / span } else { 0.0 };
+        // Distance from this segment's midpoint, signed along the path.
+        let heading = math::wrap_pi(h + curvature * (t - half));
+        (heading, curvature)
+    }
+
+    /// The car's pose relative to the path (projection of the rear axle, heading error, the
+    /// reference there); `previous` as in [`Path::project`].
+    pub fn track(&self, pose: &Pose, previous: Option<&Projection>) -> Option<Tracking> {
+        let projection = self.project(pose.x_m, pose.y_m, previous)?;
+        let reference = self.sample(projection.station_m, projection.segment)?;
+        Some(Tracking {
+            projection,
+            heading_error_rad: math::wrap_pi(pose.heading_rad - reference.heading_rad),
+            reference,
+        })
+    }
+
+    /// The reference at each of `stations_m` (ascending for the cheapest search), into `out`;
+    /// returns how many were written (the shorter of the two slices, 0 without a path).
+    pub fn sample_stations(
+        &self,
+        stations_m: &[f32],
+        hint: usize,
+        out: &mut [PathSample],
+    ) -> usize {
+        let mut hint = hint;
+        let mut written = 0;
+        for (s, o) in stations_m.iter().zip(out.iter_mut()) {
+            let Some(sample) = self.sample(*s, hint) else {
+                break;
+            };
+            hint = self.segment_at(sample.station_m.min(self.length_m()), hint);
+            *o = sample;
+            written += 1;
+        }
+        written
+    }
+}

@@ -1,0 +1,322 @@
+//! What the planner tells the node, assembled from its frames: the active path, the path being
+//! received, the four obstacle slots and the map origin (docs/bus.md, "Sending a path").
+//!
+//! Rules: a PATH_HEADER starts assembling a path; its PATH_POINT and PATH_LIMITS frames arrive
+//! each in index order; the path replaces the active one only when every point and limit is in
+//! and the whole passes [`Path::validate`]. Everything else is a counted rejection, never a
+//! panic: duplicates, gaps (a lost frame abandons the assembly), frames of a path not being
+//! assembled, a header change mid-way (abandons the old assembly), stuck rolling counters, a
+//! longitude page of LOCAL_ORIGIN that does not follow its latitude page.
+//!
+//! No configuration; the state is [`PlannerInputs`]: the active [`Path`] (7 KiB) and the
+//! assembly buffer (5 KiB) at 256 points. Never allocates; every call is O(1) except the one
+//! that completes a path (one pass over its points to validate, one to load).
+use crate::can::codec::{LocalOrigin, ObstacleCircle, PlannerMessage};
+use crate::can::counter::CounterChecker;
+use crate::can::spec::OBSTACLE_SLOTS;
+
+use super::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
+
+/// Rejection and event counters since start (saturating).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PlannerCounters {
+    /// Paths that became active.
+    pub paths_activated: u32,
+    /// Assemblies abandoned: a lost frame, or a new header before completion.
+    pub paths_abandoned: u32,
+    /// Complete paths refused by [`Path::validate`] (the active path stays).
+    pub paths_invalid: u32,
+    /// PATH_POINT / PATH_LIMITS with an index already received (duplicates).
+    pub duplicates: u32,
+    /// PATH_POINT / PATH_LIMITS of a path id not being assembled (stray, or after an abandon).
+    pub stray_frames: u32,
+    /// Frames whose rolling counter did not change (a stuck sender), rejected.
+    pub stuck_counters: u32,
+    /// Counter jumps (frames of a planner message lost on the bus), counted.
+    pub counter_jumps: u32,
+    /// LOCAL_ORIGIN longitude pages that did not follow a latitude page.
+    pub origin_mismatches: u32,
+}
+
+fn bump(c: &mut u32) {
+    *c = c.saturating_add(1);
+}
+
+/// What a received frame changed, for the caller to act on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PlannerEvent {
+    /// Nothing the caller needs to act on (the frame was stored, or rejected and counted).
+    None,
+    /// Path `path_id` is complete and now the active path.
+    PathActivated(u8),
+    /// A complete path was refused; the previous path stays active.
+    PathInvalid(u8, PathError),
+    /// The planner set its map origin (1e-7 deg): the node's local frame.
+    Origin {
+        /// Latitude, 1e-7 deg.
+        lat_e7: i32,
+        /// Longitude, 1e-7 deg.
+        lon_e7: i32,
+    },
+}
+
+/// A path being received. Always allocated (in place, in the node's static drive state), so
+/// that starting or completing a path never moves its 5 KiB of waypoints through the stack.
+#[derive(Clone, Debug)]
+struct Assembly {
+    /// A path is being received (the other fields mean nothing otherwise).
+    active: bool,
+    path_id: u8,
+    count: usize,
+    next_point: usize,
+    next_limits: usize,
+    waypoints: [Waypoint; MAX_PATH_POINTS],
+}
+
+/// Rolling-counter slots, one per planner message.
+const MESSAGES: usize = 5;
+
+/// The two halves of a waypoint, each arriving in index order.
+#[derive(Clone, Copy)]
+enum Stream {
+    /// PATH_POINT: position.
+    Points,
+    /// PATH_LIMITS: target speed and corridor.
+    Limits,
+}
+
+/// The node's view of the planner: active path, assembly, obstacles, origin pairing.
+#[derive(Clone, Debug)]
+pub struct PlannerInputs {
+    path: Path,
+    path_id: Option<u8>,
+    assembly: Assembly,
+    obstacles: [Option<ObstacleCircle>; OBSTACLE_SLOTS],
+    /// Latitude page waiting for its longitude page: (lat_e7, counter).
+    origin_latitude: Option<(i32, u8)>,
+    counters: [CounterChecker; MESSAGES],
+    stats: PlannerCounters,
+}
+
+impl Default for PlannerInputs {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl PlannerInputs {
+    /// Nothing received yet: no path, no obstacles.
+    pub const fn new() -> Self {
+        Self {
+            path: Path::new(),
+            path_id: None,
+            assembly: Assembly {
+                active: false,
+                path_id: 0,
+                count: 0,
+                next_point: 0,
+                next_limits: 0,
+                waypoints: [Waypoint {
+                    east_m: 0.0,
+                    north_m: 0.0,
+                    speed_mps: 0.0,
+                    left_m: 0.0,
+                    right_m: 0.0,
+                }; MAX_PATH_POINTS],
+            },
+            obstacles: [None; OBSTACLE_SLOTS],
+            origin_latitude: None,
+            counters: [CounterChecker::new(); MESSAGES],
+            stats: PlannerCounters {
+                paths_activated: 0,
+                paths_abandoned: 0,
+                paths_invalid: 0,
+                duplicates: 0,
+                stray_frames: 0,
+                stuck_counters: 0,
+                counter_jumps: 0,
+                origin_mismatches: 0,
+            },
+        }
+    }
+
+    /// The active path, if one is complete.
+    pub fn path(&self) -> Option<&Path> {
+        (!self.path.is_empty()).then_some(&self.path)
+    }
+
+    /// The active path's id.
+    pub const fn path_id(&self) -> Option<u8> {
+        self.path_id
+    }
+
+    /// The id of the path being received, and how many of its points and limits are in.
+    pub fn receiving(&self) -> Option<(u8, usize, usize)> {
+        let a = &self.assembly;
+        a.active.then_some((a.path_id, a.next_point, a.next_limits))
+    }
+
+    /// The obstacle slots (`None` = cleared).
+    pub const fn obstacles(&self) -> &[Option<ObstacleCircle>; OBSTACLE_SLOTS] {
+        &self.obstacles
+    }
+
+    /// Counters since start.
+    pub const fn counters(&self) -> &PlannerCounters {
+        &self.stats
+    }
+
+    /// Forgets everything received (in place), counters included.
+    pub fn reset(&mut self) {
+        self.path.clear();
+        self.path_id = None;
+        self.assembly.active = false;
+        self.obstacles = [None; OBSTACLE_SLOTS];
+        self.origin_latitude = None;
+        self.counters = [CounterChecker::new(); MESSAGES];
+        self.stats = PlannerCounters::default();
+    }
+
+    /// Forgets the active path (e.g. the local frame changed under it); the counters stay.
+    pub fn drop_path(&mut self) {
+        self.path.clear();
+        self.path_id = None;
+    }
+
+    /// Applies one decoded planner message (see the module doc for the rules).
+    pub fn receive(&mut self, message: &PlannerMessage) -> PlannerEvent {
+        let (slot, counter) = match *message {
+            PlannerMessage::PathHeader(_, c) => (0, c),
+            PlannerMessage::PathPoint(_, c) => (1, c),
+            PlannerMessage::PathLimits(_, c) => (2, c),
+            PlannerMessage::Obstacle(_, c) => (3, c),
+            PlannerMessage::LocalOrigin(_, c) => (4, c),
+        };
+        if let Some(checker) = self.counters.get_mut(slot) {
+            let verdict = checker.check(counter);
+            if !verdict.accepted() {
+                bump(&mut self.stats.stuck_counters);
+                return PlannerEvent::None;
+            }
+            if verdict.is_error() {
+                bump(&mut self.stats.counter_jumps);
+            }
+        }
+        match *message {
+            PlannerMessage::PathHeader(h, _) => {
+                if self.assembly.active {
+                    bump(&mut self.stats.paths_abandoned);
+                }
+                self.start_assembly(h.path_id, usize::from(h.count));
+                PlannerEvent::None
+            }
+            PlannerMessage::PathPoint(p, _) => {
+                self.store(p.path_id, usize::from(p.index), Stream::Points, |w| {
+                    w.east_m = p.east_m;
+                    w.north_m = p.north_m;
+                })
+            }
+            PlannerMessage::PathLimits(l, _) => {
+                self.store(l.path_id, usize::from(l.index), Stream::Limits, |w| {
+                    w.speed_mps = l.speed_mps;
+                    w.left_m = l.left_m;
+                    w.right_m = l.right_m;
+                })
+            }
+            PlannerMessage::Obstacle(o, _) => {
+                if let Some(slot) = self.obstacles.get_mut(usize::from(o.obstacle_id)) {
+                    *slot = o.circle;
+                }
+                PlannerEvent::None
+            }
+            PlannerMessage::LocalOrigin(page, c) => self.origin_page(page, c),
+        }
+    }
+
+    fn start_assembly(&mut self, path_id: u8, count: usize) {
+        let a = &mut self.assembly;
+        a.active = true;
+        a.path_id = path_id;
+        a.count = count.min(MAX_PATH_POINTS);
+        a.next_point = 0;
+        a.next_limits = 0;
+    }
+
+    /// Stores one half of waypoint `index` (`fill` writes it) if it is the next one expected
+    /// on its stream of the path being assembled; completes the path after its last half.
+    fn store(
+        &mut self,
+        path_id: u8,
+        index: usize,
+        stream: Stream,
+        fill: impl FnOnce(&mut Waypoint),
+    ) -> PlannerEvent {
+        let a = &mut self.assembly;
+        if !a.active || a.path_id != path_id {
+            bump(&mut self.stats.stray_frames);
+            return PlannerEvent::None;
+        }
+        let expected = match stream {
+            Stream::Points => &mut a.next_point,
+            Stream::Limits => &mut a.next_limits,
+        };
+        if index < *expected {
+            bump(&mut self.stats.duplicates);
+            return PlannerEvent::None;
+        }
+        if index > *expected || index >= a.count {
+            // A lost frame (or an index beyond the count): this path can never complete.
+            a.active = false;
+            bump(&mut self.stats.paths_abandoned);
+            return PlannerEvent::None;
+        }
+        *expected += 1;
+        if let Some(w) = a.waypoints.get_mut(index) {
+            fill(w);
+        }
+        if a.next_point == a.count && a.next_limits == a.count {
+            return self.complete();
+        }
+        PlannerEvent::None
+    }
+
+    fn complete(&mut self) -> PlannerEvent {
+        let a = &mut self.assembly;
+        if !a.active {
+            return PlannerEvent::None;
+        }
+        a.active = false;
+        let waypoints = a.waypoints.get(..a.count).unwrap_or(&[]);
+        match self.path.load(waypoints) {
+            Ok(()) => {
+                self.path_id = Some(a.path_id);
+                bump(&mut self.stats.paths_activated);
+                PlannerEvent::PathActivated(a.path_id)
+            }
+            Err(e) => {
+                bump(&mut self.stats.paths_invalid);
+                PlannerEvent::PathInvalid(a.path_id, e)
+            }
+        }
+    }
+
+    fn origin_page(&mut self, page: LocalOrigin, counter: u8) -> PlannerEvent {
+        match page {
+            LocalOrigin::Latitude { lat_e7 } => {
+                self.origin_latitude = Some((lat_e7, counter));
+                PlannerEvent::None
+            }
+            LocalOrigin::Longitude { lon_e7 } => match self.origin_latitude.take() {
+                Some((lat_e7, c)) if (c + 1) & 0x0F == counter & 0x0F => {
+                    PlannerEvent::Origin { lat_e7, lon_e7 }
+                }
+                _ => {
+                    bump(&mut self.stats.origin_mismatches);
+                    PlannerEvent::None
+                }
+            },
+        }
+    }
+}

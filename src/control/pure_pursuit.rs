@@ -1,0 +1,249 @@
+//! The reference controller: pure pursuit (Coulter, "Implementation of the Pure Pursuit Path
+//! Tracking Algorithm", CMU-RI-TR-92-01, 1992) with a lookahead that grows with speed, and a PI
+//! speed loop around the car's own speed controller. It reads the same path and obstacles and
+//! writes the same CONTROL_COMMAND as the model-predictive controller, which is measured
+//! against it (docs/controller.md).
+//!
+//! Steering: the goal point is the path point `lookahead` metres of station ahead of the rear
+//! axle's projection; the arc from the rear axle, tangent to the car's heading, through the
+//! goal has curvature `kappa = 2 sin(alpha) / d` (alpha the goal's bearing from the heading, d
+//! its distance); the steering is eq 2 inverted for that curvature at the current speed:
+//! `delta = atan(kappa L) (1 + K v^2)`.
+//!
+//! Speed: the path's target speed a preview time ahead (the car's speed loop lags by its 0.4 s
+//! input delay), limited so that the car can stop at `stop_decel_mps2` before the path's end
+//! and with its front bumper a margin short of any obstacle whose circle, grown by half the
+//! body width and the margin, reaches the path ahead (pure pursuit cannot steer around one: it
+//! stops, and stays stopped while the obstacle is there); then a PI loop on the speed error,
+//! its integral clamped (anti-windup).
+//!
+//! Never panics, never returns a non-finite command: a non-finite intermediate falls back to
+//! the previous steering and zero speed (status fallback).
+use crate::can::codec::{ControlStatus, ObstacleCircle};
+use crate::math;
+use crate::model::kinematic::Pose;
+use crate::vehicle::{VehicleParams, STEER_PCT_LIMIT};
+
+use super::path::{Path, Projection, Tracking};
+
+/// Tuning (immutable). [`DEFAULT_PURE_PURSUIT`] is the tuned set (docs/controller.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PurePursuitConfig {
+    /// Lookahead at standstill, m.
+    pub lookahead_min_m: f32,
+    /// Lookahead growth with speed, s: lookahead = min + this * speed.
+    pub lookahead_time_s: f32,
+    /// Longest lookahead, m.
+    pub lookahead_max_m: f32,
+    /// Speed loop proportional gain, (m/s) of command per (m/s) of error.
+    pub speed_kp: f32,
+    /// Speed loop integral gain, 1/s.
+    pub speed_ki_per_s: f32,
+    /// The speed loop's integral stays within +- this, m/s (anti-windup).
+    pub speed_integral_limit_mps: f32,
+    /// The target speed is read this far ahead of the car (at its speed), s.
+    pub speed_preview_s: f32,
+    /// Deceleration the speed limit plans with, to stop at the path's end or before an
+    /// obstacle, m/s^2.
+    pub stop_decel_mps2: f32,
+    /// Largest speed command, m/s.
+    pub max_speed_mps: f32,
+    /// Half the car's body width, m (obstacle check).
+    pub half_width_m: f32,
+    /// The body's front ahead of the rear axle, m (obstacle check).
+    pub front_m: f32,
+    /// Clearance kept from an obstacle when stopping, m.
+    pub obstacle_margin_m: f32,
+    /// Control period, s.
+    pub period_s: f32,
+}
+
+/// The tuned reference controller (docs/controller.md, "Pure pursuit tuning": a sweep of the
+/// lookahead's two parameters on the double lane change for the highest clean speed; the best,
+/// 8.5 m/s, lies on a ridge of lookaheads near 7.5 m at that speed, and this is its middle).
+pub const DEFAULT_PURE_PURSUIT: PurePursuitConfig = PurePursuitConfig {
+    lookahead_min_m: 3.0,
+    lookahead_time_s: 0.55,
+    lookahead_max_m: 30.0,
+    speed_kp: 0.5,
+    speed_ki_per_s: 0.2,
+    speed_integral_limit_mps: 2.0,
+    speed_preview_s: 0.6,
+    stop_decel_mps2: 2.5,
+    max_speed_mps: 40.0,
+    half_width_m: 0.903,
+    front_m: 3.528,
+    obstacle_margin_m: 1.0,
+    period_s: crate::SAMPLE_PERIOD_S,
+};
+
+/// The state between ticks.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PurePursuitState {
+    /// Integral of the speed error, m/s.
+    pub integral_mps: f32,
+    /// Last tick's projection (keeps the projection in order along a looping path).
+    pub projection: Option<Projection>,
+    /// Last steering command, %.
+    pub steer_cmd_pct: f32,
+}
+
+/// What the controller knows of the car this tick: the node's estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarState {
+    /// Rear-axle pose, local frame; `None` while the node has no valid position.
+    pub pose: Option<Pose>,
+    /// Speed, m/s.
+    pub speed_mps: f32,
+}
+
+/// One tick's output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PursuitOutput {
+    /// What CONTROL_COMMAND says.
+    pub status: ControlStatus,
+    /// Steering command, %, -100..=100, positive = right.
+    pub steer_cmd_pct: f32,
+    /// Speed command, m/s, >= 0.
+    pub speed_cmd_mps: f32,
+    /// The car relative to the path, when tracking.
+    pub tracking: Option<Tracking>,
+    /// The goal point (east, north), when tracking.
+    pub goal: Option<(f32, f32)>,
+}
+
+impl PurePursuitConfig {
+    /// Lookahead at `speed_mps`, m.
+    pub fn lookahead_m(&self, speed_mps: f32) -> f32 {
+        (self.lookahead_min_m + self.lookahead_time_s * speed_mps.max(0.0))
+            .min(self.lookahead_max_m)
+    }
+
+    /// One tick: steering and speed commands for `car` on `path` (`None`: no path), with the
+    /// active `obstacles`.
+    pub fn process(
+        &self,
+        state: &mut PurePursuitState,
+        vehicle: &VehicleParams,
+        path: Option<&Path>,
+        obstacles: &[Option<ObstacleCircle>],
+        car: &CarState,
+    ) -> PursuitOutput {
+        let hold = |state: &mut PurePursuitState, status| {
+            state.integral_mps = 0.0;
+            PursuitOutput {
+                status,
+                steer_cmd_pct: state.steer_cmd_pct,
+                speed_cmd_mps: 0.0,
+                tracking: None,
+                goal: None,
+            }
+        };
+        let Some(path) = path.filter(|p| !p.is_empty()) else {
+            state.projection = None;
+            return hold(state, ControlStatus::NoPath);
+        };
+        let Some(pose) = car.pose else {
+            return hold(state, ControlStatus::Fallback);
+        };
+        let speed = if car.speed_mps.is_finite() {
+            car.speed_mps.max(0.0)
+        } else {
+            0.0
+        };
+        let Some(tracking) = path.track(&pose, state.projection.as_ref()) else {
+            return hold(state, ControlStatus::Fallback);
+        };
+        let station = tracking.projection.station_m;
+        let segment = tracking.projection.segment;
+
+        // Steering: the arc through the goal point.
+        let lookahead = self.lookahead_m(speed);
+        let Some(goal) = path.sample(station + lookahead, segment) else {
+            return hold(state, ControlStatus::Fallback);
+        };
+        let (dx, dy) = (goal.east_m - pose.x_m, goal.north_m - pose.y_m);
+        let forward = dx * pose.sin_heading + dy * pose.cos_heading;
+        let right = dx * pose.cos_heading - dy * pose.sin_heading;
+        let d2 = dx * dx + dy * dy;
+        // 2 sin(alpha) / d = 2 right / d^2.
+        let curvature = if d2 > 1e-6 { 2.0 * right / d2 } else { 0.0 };
+        let curvature = if forward < 0.0 {
+            // The goal is behind (the car overshot the path's end): steer towards it fully.
+            curvature.signum() * 2.0 / lookahead.max(1e-3)
+        } else {
+            curvature
+        };
+        let center_rad = math::atan(curvature * vehicle.wheelbase_m)
+            * (1.0 + vehicle.understeer_s2_per_m2 * speed * speed);
+        let steer_pct = (center_rad / vehicle.max_steer_rad * STEER_PCT_LIMIT)
+            .clamp(-STEER_PCT_LIMIT, STEER_PCT_LIMIT);
+
+        // Speed: previewed target, limited by stopping distance, then PI.
+        let preview = path.sample(station + speed * self.speed_preview_s, segment);
+        let mut target = preview.map_or(0.0, |p| p.speed_mps);
+        let mut stop_at_m = path.length_m() - station;
+        if let Some(d) = self.obstacle_ahead_m(path, station, obstacles) {
+            stop_at_m = stop_at_m.min(d);
+        }
+        let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * stop_at_m.max(0.0));
+        target = target.min(stop_limit).min(self.max_speed_mps);
+        let error = target - speed;
+        let integral = math::clamp(
+            state.integral_mps + self.speed_ki_per_s * error * self.period_s,
+            -self.speed_integral_limit_mps,
+            self.speed_integral_limit_mps,
+        );
+        let speed_cmd = if target <= 0.0 {
+            0.0
+        } else {
+            math::clamp(
+                target + self.speed_kp * error + integral,
+                0.0,
+                self.max_speed_mps,
+            )
+        };
+
+        if !(steer_pct.is_finite() && speed_cmd.is_finite() && integral.is_finite()) {
+            return hold(state, ControlStatus::Fallback);
+        }
+        state.integral_mps = if target <= 0.0 { 0.0 } else { integral };
+        state.projection = Some(tracking.projection);
+        state.steer_cmd_pct = steer_pct;
+        PursuitOutput {
+            status: ControlStatus::Tracking,
+            steer_cmd_pct: steer_pct,
+            speed_cmd_mps: speed_cmd,
+            tracking: Some(tracking),
+            goal: Some((goal.east_m, goal.north_m)),
+        }
+    }
+
+    /// How far the rear axle may still travel along the path before the body's front comes
+    /// within the margin of an active obstacle that reaches the path (its circle, grown by half
+    /// the body width and the margin, overlaps the path), m; 0 when already there. Obstacles
+    /// behind the car's front are ignored once the rear axle has passed them. `None` if no
+    /// obstacle blocks the path.
+    fn obstacle_ahead_m(
+        &self,
+        path: &Path,
+        station: f32,
+        obstacles: &[Option<ObstacleCircle>],
+    ) -> Option<f32> {
+        let mut nearest: Option<f32> = None;
+        for o in obstacles.iter().flatten() {
+            let Some(p) = path.project(o.east_m, o.north_m, None) else {
+                continue;
+            };
+            let reach = o.radius_m + self.half_width_m + self.obstacle_margin_m;
+            if p.lateral_m.abs() > reach || p.station_m < station {
+                continue;
+            }
+            // The front bumper stops `margin` short of the circle's near side.
+            let free = p.station_m - o.radius_m - self.obstacle_margin_m - self.front_m - station;
+            let d = free.max(0.0);
+            nearest = Some(nearest.map_or(d, |n: f32| n.min(d)));
+        }
+        nearest
+    }
+}
