@@ -49,7 +49,6 @@ use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
 use heapless::Deque;
 
-use catmodel::can::codec::ControlStatus;
 use catmodel::can::spec::is_node_input;
 use catmodel::can::TimedFrame;
 use core::borrow::BorrowMut;
@@ -277,7 +276,8 @@ pub struct TickReport {
     pub step_counts: u32,
     /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
     pub tick_counts: u32,
-    /// A controller planned in this tick (its budget differs: `budget`).
+    /// A controller planned in this tick, or a planner path was completed in it
+    /// (`TickEstimate::controller_tick`; its budget differs: `budget`).
     pub controller: bool,
 }
 
@@ -382,7 +382,7 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
             drain_counts: c1.wrapping_sub(c0),
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
-            controller: estimate.control != ControlStatus::NoPath,
+            controller: estimate.controller_tick(),
         });
         stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());

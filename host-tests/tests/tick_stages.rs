@@ -4,7 +4,7 @@
 //! times the receiver's rate, gaps of every length, jumps beyond the gate), and no stage may
 //! ever run more often than its row says. The second factor, each stage's most expensive run,
 //! is measured in QEMU (`cargo xtask bench-target`, docs/firmware.md "Worst-case tick").
-use catmodel::can::codec::{LocalOrigin, SteeringReport};
+use catmodel::can::codec::{LocalOrigin, PathHeader, PathLimits, PathPoint, SteeringReport};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::node::{
     first_tick_us, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
@@ -106,7 +106,75 @@ fn heavy_drive() -> Vec<TimedFrame> {
         }
     }
     frames.sort_by_key(|f| f.t_us);
+    planner_bursts(&mut frames);
     frames
+}
+
+/// Paths completing at the most one tick allows: a 6-point path begun two ticks earlier and
+/// two 2-point paths in one tick (one long, two short completions), then a short path begun a
+/// tick earlier and two more (three short completions). Each tick's planner frames come first
+/// in it, so the cap leaves them all to the node.
+fn planner_bursts(frames: &mut Vec<TimedFrame>) {
+    let t0 = first_tick_us(frames[0].t_us);
+    let mut counters = [0u8; 3];
+    let mut next = |slot: usize| {
+        let c = counters[slot];
+        counters[slot] = (c + 1) & 0x0F;
+        c
+    };
+    let mut path = |path_id: u8, points: usize| -> Vec<CanFrame> {
+        let mut out = vec![PathHeader {
+            path_id,
+            count: points as u16,
+        }
+        .encode(next(0))];
+        for i in 0..points {
+            out.push(
+                PathPoint {
+                    path_id,
+                    index: i as u8,
+                    east_m: i as f32,
+                    north_m: 0.0,
+                }
+                .encode(next(1)),
+            );
+        }
+        for i in 0..points {
+            out.push(
+                PathLimits {
+                    path_id,
+                    index: i as u8,
+                    speed_mps: 5.0,
+                    left_m: 3.0,
+                    right_m: 3.0,
+                }
+                .encode(next(2)),
+            );
+        }
+        out
+    };
+    let long = path(1, 6);
+    let (a, b) = (path(2, 2), path(3, 2));
+    let carried = path(4, 2);
+    let (c, d) = (path(5, 2), path(6, 2));
+    let ticks: [(u64, Vec<CanFrame>); 5] = [
+        (148, long[..7].to_vec()),
+        (149, long[7..12].to_vec()),
+        (150, [&long[12..], &a[..], &b[..]].concat()),
+        (159, carried[..4].to_vec()),
+        (160, [&carried[4..], &c[..], &d[..]].concat()),
+    ];
+    for (k, burst) in ticks {
+        assert!(burst.len() <= catmodel::node::MAX_RX_FRAMES_PER_TICK);
+        let start = t0 + (k - 1) * 20_000;
+        for (i, frame) in burst.into_iter().enumerate() {
+            frames.push(TimedFrame {
+                t_us: start + 1 + i as u64,
+                frame,
+            });
+        }
+    }
+    frames.sort_by_key(|f| f.t_us);
 }
 
 /// Steps a probed and a plain node over `frames` (every due frame handed to the tick: more
@@ -150,6 +218,8 @@ fn every_stage_has_one_row() {
         | Stage::GnssFixFilter
         | Stage::Models
         | Stage::Origin
+        | Stage::PathComplete
+        | Stage::PathCompleteShort
         | Stage::Estimate
         | Stage::Drive
         | Stage::Predict
@@ -158,6 +228,8 @@ fn every_stage_has_one_row() {
     let all = [
         Stage::Advance,
         Stage::Frame,
+        Stage::PathComplete,
+        Stage::PathCompleteShort,
         Stage::Origin,
         Stage::GnssOrigin,
         Stage::GnssFixCheck,

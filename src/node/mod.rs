@@ -52,7 +52,7 @@ use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
 pub use stage::{
     NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK,
-    MAX_RX_FRAMES_PER_TICK, TICK_STAGES,
+    MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS, TICK_STAGES,
 };
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
@@ -278,6 +278,18 @@ pub struct TickEstimate {
     pub mode: Mode,
     /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
     pub control: ControlStatus,
+    /// A planner path was completed this tick (made active, or refused): its validation and
+    /// load ran in stage 1.
+    pub path_completed: bool,
+}
+
+impl TickEstimate {
+    /// Whether this tick is one of the controller's (its budget and bound,
+    /// `CONTROL_TICK_BUDGET_INSTRUCTIONS`): a controller planned in it, or a path was completed
+    /// in it. Every other tick is under the 25 000-instruction budget.
+    pub fn controller_tick(&self) -> bool {
+        self.control != ControlStatus::NoPath || self.path_completed
+    }
 }
 
 /// The models' state (stage 2).
@@ -405,7 +417,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let now = tick.now_us;
         let dt_s = self.advance(now);
         probe.lap(Stage::Advance);
-        self.receive(now, rx, probe);
+        let path_completed = self.receive(now, rx, probe);
         let snapshot = self.inputs.snapshot(&self.config, now);
         let motion = self.run_models(&snapshot, dt_s);
         probe.lap(Stage::Models);
@@ -431,6 +443,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             speed_mps: motion.speed_mps,
             mode: motion.mode,
             control: drive.command.status,
+            path_completed,
         }
     }
 
@@ -461,7 +474,11 @@ impl<D: BorrowMut<Drive>> Node<D> {
     /// the fixes after the frames is the same as handling them in between; a fix received
     /// before a LOCAL_ORIGIN of the same tick goes into the new frame (the old frame's filters
     /// are reset by the change anyway).
-    fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) {
+    ///
+    /// A planner frame that completes a path (validation and load over its points) is a stage
+    /// of its own ([`Stage::PathComplete`], [`Stage::PathCompleteShort`]). Returns whether a
+    /// path was completed.
+    fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) -> bool {
         let (frames, over_cap) = rx.split_at(rx.len().min(MAX_RX_FRAMES_PER_TICK));
         let c = &mut self.inputs.counters;
         c.rx_over_cap = c
@@ -469,7 +486,9 @@ impl<D: BorrowMut<Drive>> Node<D> {
             .saturating_add(u32::try_from(over_cap.len()).unwrap_or(u32::MAX));
         let mut fixes = gnss::TickFixes::new();
         let mut origin = None;
+        let mut path_completed = false;
         for frame in frames {
+            let mut stage = Stage::Frame;
             match self.inputs.receive(&self.config, now_us, frame) {
                 Some(Routed::Gnss(GnssMessage::Fix(fix))) => {
                     if let Err(over) = fixes.push(fix) {
@@ -481,13 +500,26 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     self.gnss.receive_course(&self.config, &course);
                 }
                 Some(Routed::Planner(message)) => {
-                    if let Some(o) = self.drive.borrow_mut().receive(&message) {
+                    let drive = self.drive.borrow_mut();
+                    let completed_before = paths_completed(drive);
+                    // The points of the path being assembled: a frame that completes it has
+                    // its whole stream in, so this is the path's length.
+                    let points = drive.planner().receiving().map_or(0, |(_, p, l)| p.max(l));
+                    if let Some(o) = drive.receive(&message) {
                         origin = Some(o);
+                    }
+                    if paths_completed(drive) != completed_before {
+                        path_completed = true;
+                        stage = if points > SHORT_PATH_POINTS {
+                            Stage::PathComplete
+                        } else {
+                            Stage::PathCompleteShort
+                        };
                     }
                 }
                 None => {}
             }
-            probe.lap(Stage::Frame);
+            probe.lap(stage);
         }
         if let Some(origin) = origin {
             // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
@@ -504,6 +536,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             &mut self.inputs,
             probe,
         );
+        path_completed
     }
 
     /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.
@@ -689,4 +722,11 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
+}
+
+/// Paths the planner side completed so far (made active or refused): a change tells the
+/// receive stage that a frame ran a path's validation and load.
+fn paths_completed(drive: &Drive) -> u64 {
+    let c = drive.planner().counters();
+    u64::from(c.paths_activated) + u64::from(c.paths_invalid)
 }

@@ -27,6 +27,21 @@
 /// `Node::step` more has the rest counted (`Counters::rx_over_cap`, NODE_STATUS page 3) and not
 /// used.
 pub const MAX_RX_FRAMES_PER_TICK: usize = 12;
+/// Frames a conforming planner sends per 20 ms at most: 4. With the vehicle's inputs at their
+/// highest rates (7 frames per tick, see [`MAX_RX_FRAMES_PER_TICK`]) that is 11 of the 12 a
+/// tick takes, so a path transfer never builds a backlog that grows from tick to tick (the
+/// spare frame drains what jitter bunches). A 256-point path (513 frames) then takes 129
+/// ticks, 2.6 s. A planner that sends faster has its excess wait in the receive queue, and
+/// what the queue cannot hold is dropped and counted (NODE_STATUS page 3).
+pub const PLANNER_FRAMES_PER_TICK: usize = 4;
+/// Paths of at most this many points are "short": 5, the most a path can have whose
+/// 2 x points + 1 frames (header, points, limits) all fit in one tick's
+/// [`MAX_RX_FRAMES_PER_TICK`] (12). A longer path must have started in an earlier tick, and
+/// the planner side assembles one path at a time (a new header abandons the old assembly), so
+/// one tick completes at most one path that is not short ([`Stage::PathComplete`]) and at most
+/// three short ones ([`Stage::PathCompleteShort`]: the one carried over, and two more of at
+/// least 5 frames each in the remaining 11).
+pub const SHORT_PATH_POINTS: usize = (MAX_RX_FRAMES_PER_TICK - 1) / 2;
 /// GNSS fixes one tick filters at most: 3, one more than a 100 Hz receiver (the fastest the
 /// node is designed for, the paper's) delivers per 20 ms, for timing jitter. Further fixes in
 /// the same tick are rejected and counted (`gnss_gate_rejects`).
@@ -45,6 +60,11 @@ pub enum Stage {
     /// One received frame decoded, validated and applied (a GNSS fix is kept for the GNSS
     /// stages).
     Frame,
+    /// A planner frame that completed a path of more than [`SHORT_PATH_POINTS`] points: the
+    /// frame, the path's validation and load over its points, the controller's restart.
+    PathComplete,
+    /// A planner frame that completed a path of at most [`SHORT_PATH_POINTS`] points.
+    PathCompleteShort,
     /// The planner's map origin (LOCAL_ORIGIN) made the local frame: the frame built, the
     /// filters and the controller's path reset when it moved.
     Origin,
@@ -102,7 +122,7 @@ pub struct StageBound {
 
 /// The tick's structure, in the order the stages run. Each stage's `max_per_tick` is enforced
 /// by the code it names.
-pub const TICK_STAGES: [StageBound; 13] = [
+pub const TICK_STAGES: [StageBound; 15] = [
     StageBound {
         stage: Stage::Advance,
         key: "advance",
@@ -114,6 +134,18 @@ pub const TICK_STAGES: [StageBound; 13] = [
         key: "frame",
         max_per_tick: MAX_RX_FRAMES_PER_TICK as u32,
         because: "MAX_RX_FRAMES_PER_TICK",
+    },
+    StageBound {
+        stage: Stage::PathComplete,
+        key: "path_complete",
+        max_per_tick: 1,
+        because: "one path assembled at a time; only a path begun in an earlier tick is long",
+    },
+    StageBound {
+        stage: Stage::PathCompleteShort,
+        key: "path_complete_short",
+        max_per_tick: 3,
+        because: "SHORT_PATH_POINTS: the carried-over path and 2 x 5 frames of the 12",
     },
     StageBound {
         stage: Stage::Origin,

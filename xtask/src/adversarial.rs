@@ -17,17 +17,21 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 use catmodel::node::NodeConfig;
-use catmodel_app::budget::TICK_BUDGET_INSTRUCTIONS;
+use catmodel_app::budget::{CONTROL_TICK_BUDGET_INSTRUCTIONS, TICK_BUDGET_INSTRUCTIONS};
 
 use super::drives::{self, Periodic, Profile, Rng, Spec};
 use super::{bound, cargo_build, root, run_qemu, txcompare};
+use catmodel::can::spec::MAX_PATH_POINTS;
 
 /// One drive's result.
 struct Outcome {
     spec: Spec,
     ticks: usize,
+    /// Slowest tick in which no controller planned (and no path completed).
     max_tick: u32,
     max_slot: u64,
+    /// Slowest controller tick, if any.
+    max_control_tick: Option<u32>,
     rx_queue_drops: u32,
     overruns: u32,
     /// Frames compared with host replay (drives without receive-queue drops).
@@ -76,6 +80,7 @@ fn targeted(car: &NodeConfig) -> Vec<Spec> {
         }),
         corrupt_per_tick: 8,
         unknown_per_tick: 30,
+        path_points: MAX_PATH_POINTS,
         ..Spec::plain("everything-at-once")
     });
     // Bursts the cap holds back and the receive queue still holds: QEMU and host replay must
@@ -158,6 +163,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         burst: window(rng, 0.25),
         corrupt_per_tick: rng.below(16) as u32,
         unknown_per_tick: rng.below(60) as u32,
+        path_points: [0, 0, 2, 5, 40, 256][rng.below(6) as usize],
     }
 }
 
@@ -170,7 +176,7 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
         ..spec.clone()
     };
     for _ in 0..1 + rng.below(2) {
-        match rng.below(9) {
+        match rng.below(10) {
             0 => out.speed = fresh.speed,
             1 => out.steer = fresh.steer,
             2 => out.gnss_hz = fresh.gnss_hz,
@@ -182,24 +188,11 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
             }
             6 => out.burst = fresh.burst,
             7 => out.corrupt_per_tick = fresh.corrupt_per_tick,
+            8 => out.path_points = fresh.path_points,
             _ => out.unknown_per_tick = fresh.unknown_per_tick,
         }
     }
     out
-}
-
-/// The host CLI (release), for the comparison with replay.
-fn host_binary() -> Result<PathBuf> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .current_dir(root())
-        .args(["build", "--release", "--quiet", "-p", "catmodel-host"])
-        .status()
-        .context("running cargo build")?;
-    if !status.success() {
-        bail!("building catmodel-host failed");
-    }
-    Ok(root().join("target").join("release").join("catmodel"))
 }
 
 /// Runs one drive in QEMU (and, without receive-queue drops, host replay beside it).
@@ -236,14 +229,22 @@ fn run(elf: &Path, host: &Path, car: &NodeConfig, spec: Spec) -> Result<Outcome>
     let (max_slot, max_tick) = run
         .records
         .iter()
+        .filter(|r| !r.controller())
         .map(|r| (r.slot, r.tick))
         .max_by_key(|(_, tick)| *tick)
         .unwrap_or((0, 0));
+    let max_control_tick = run
+        .records
+        .iter()
+        .filter(|r| r.controller())
+        .map(|r| r.tick)
+        .max();
     Ok(Outcome {
         spec,
         ticks: run.records.len(),
         max_tick,
         max_slot,
+        max_control_tick,
         rx_queue_drops: run.trailer.rx_queue_drops,
         overruns: run.trailer.overruns,
         replay_frames,
@@ -266,7 +267,7 @@ pub fn adversarial(args: &[String]) -> Result<()> {
     let total = bound.total();
     let car = bound::baked_car()?;
     let elf = cargo_build("qemu", "catmodel-qemu")?;
-    let host = host_binary()?;
+    let host = bound::host_binary()?;
     let mut rng = Rng::new(seed);
     let mut outcomes: Vec<Outcome> = Vec::new();
     for spec in targeted(&car) {
@@ -290,17 +291,19 @@ pub fn adversarial(args: &[String]) -> Result<()> {
 
     outcomes.sort_by_key(|o| std::cmp::Reverse(o.max_tick));
     println!(
-        "\n{:<34}{:>7}{:>10}{:>9}{:>8}{:>10}  QEMU == replay",
-        "drive", "ticks", "max tick", "of bound", "slot", "rx drops"
+        "\n{:<34}{:>7}{:>10}{:>9}{:>8}{:>12}{:>10}  QEMU == replay",
+        "drive", "ticks", "max tick", "of bound", "slot", "max ctl tick", "rx drops"
     );
     for o in &outcomes {
         println!(
-            "{:<34}{:>7}{:>10}{:>8.1}%{:>8}{:>10}  {}",
+            "{:<34}{:>7}{:>10}{:>8.1}%{:>8}{:>12}{:>10}  {}",
             o.spec.name,
             o.ticks,
             o.max_tick,
             f64::from(o.max_tick) / total as f64 * 100.0,
             o.max_slot,
+            o.max_control_tick
+                .map_or_else(|| "-".to_string(), |t| t.to_string()),
             o.rx_queue_drops,
             match o.replay_frames {
                 Some(n) => format!("{n} frames identical"),
@@ -325,6 +328,7 @@ pub fn adversarial(args: &[String]) -> Result<()> {
             "ticks": o.ticks,
             "max_tick_instructions": o.max_tick,
             "max_tick_slot": o.max_slot,
+            "max_controller_tick_instructions": o.max_control_tick,
             "rx_queue_drops": o.rx_queue_drops,
             "overruns": o.overruns,
             "replay_identical_frames": o.replay_frames,
@@ -343,6 +347,21 @@ pub fn adversarial(args: &[String]) -> Result<()> {
             o.max_tick,
             o.spec.name
         );
+    }
+    let total_control = bound.total_control();
+    if let Some(o) = outcomes.iter().find(|o| {
+        o.max_control_tick
+            .is_some_and(|t| u64::from(t) > total_control)
+    }) {
+        bail!(
+            "drive {} had a controller tick of {:?} instructions, over the controller's worst-case bound of {total_control}: the bound is wrong (target/adversarial/{}.log reproduces it)",
+            o.spec.name,
+            o.max_control_tick,
+            o.spec.name
+        );
+    }
+    if total_control > u64::from(CONTROL_TICK_BUDGET_INSTRUCTIONS) {
+        bail!("the controller's worst-case bound {total_control} exceeds its budget {CONTROL_TICK_BUDGET_INSTRUCTIONS}");
     }
     if let Some(o) = outcomes.iter().find(|o| o.overruns > 0) {
         bail!("drive {} overran its 20 ms slots", o.spec.name);

@@ -1,7 +1,7 @@
 //! The tick's worst-case bound: the structure written down next to the code
 //! (`catmodel::node::stage::TICK_STAGES`, each stage's runs per tick at most; the app's drain,
 //! handoff and the step's return once each) times each stage's most expensive run, measured
-//! in QEMU by `catmodel-qemu-bench --stages` over the dedicated drives of
+//! in QEMU by `catmodel-qemu-stages --stages` over the dedicated drives of
 //! [`crate::drives::stage_corpus`]:
 //!
 //! `bound = sum over rows of max_per_tick x max`
@@ -20,6 +20,7 @@
 //! it on whole ticks. The table is data: a new stage is a new row, nothing here changes.
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use anyhow::{anyhow, bail, Context, Result};
 use catmodel::node::NodeConfig;
@@ -306,13 +307,64 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
     })
 }
 
-/// Generates the dedicated drives, builds the bench firmware and measures every stage in QEMU.
+/// Closed-loop scenarios whose recorded bus input (the vehicle's sensors and the planner's path,
+/// obstacles and origin, with the node's own controller driving) are stage drives: the drive
+/// stage planning on a real path, with and without an obstacle.
+const CLOSED_LOOP_SCENARIOS: [&str; 2] = ["dlc", "obstacle"];
+
+/// The release host binary (`catmodel`), built if needed.
+pub fn host_binary() -> Result<PathBuf> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args(["build", "--release", "--quiet", "-p", "catmodel-host"])
+        .status()
+        .context("running cargo build")?;
+    if !status.success() {
+        bail!("building catmodel-host failed");
+    }
+    Ok(root().join("target").join("release").join("catmodel"))
+}
+
+/// Records the closed-loop sessions into `dir` (`catmodel closed-loop --scenario S --out
+/// DIR/closed-loop-S`); returns their bus inputs' paths relative to the repository.
+pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
+    let host = host_binary()?;
+    let mut paths = Vec::new();
+    for scenario in CLOSED_LOOP_SCENARIOS {
+        let out = dir.join(format!("closed-loop-{scenario}"));
+        let output = Command::new(&host)
+            .current_dir(root())
+            .args(["closed-loop", "--scenario", scenario, "--out"])
+            .arg(&out)
+            .output()
+            .context("running catmodel closed-loop")?;
+        if !output.status.success() {
+            bail!(
+                "catmodel closed-loop --scenario {scenario} failed:\n{}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        let log = out.join("session.can.log");
+        paths.push(
+            log.strip_prefix(root())
+                .unwrap_or(&log)
+                .to_string_lossy()
+                .into_owned(),
+        );
+    }
+    Ok(paths)
+}
+
+/// Generates the dedicated drives and records the closed-loop sessions, builds the stage
+/// firmware and measures every stage in QEMU.
 pub fn measure() -> Result<Bound> {
     let car = baked_car()?;
     let dir = root().join("target").join("qemu").join("stages");
-    let drives = write_stage_corpus(&car, &dir)?;
-    let elf = cargo_build("qemu", "catmodel-qemu-bench")?;
-    let mut append = vec!["catmodel-qemu-bench".to_string(), "--stages".to_string()];
+    let mut drives = write_stage_corpus(&car, &dir)?;
+    drives.extend(write_closed_loop_sessions(&dir)?);
+    let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
+    let mut append = vec!["catmodel-qemu-stages".to_string(), "--stages".to_string()];
     append.extend(drives.iter().cloned());
     let output = qemu_command(&elf)
         .args(["-append", &append.join(" ")])
@@ -330,12 +382,17 @@ pub fn measure() -> Result<Bound> {
             output.status
         );
     }
+    // A drive's name: its file's stem, or its directory's for a closed-loop session.
     let names = drives
         .iter()
         .map(|p| {
-            Path::new(p)
-                .file_stem()
-                .map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
+            let path = Path::new(p);
+            let named = if p.ends_with("session.can.log") {
+                path.parent().and_then(Path::file_name)
+            } else {
+                path.file_stem()
+            };
+            named.map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
         })
         .collect();
     parse(&stderr, names)

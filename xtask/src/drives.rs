@@ -13,10 +13,15 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use catmodel::can::codec::{GnssCogSog, GnssPosition, PedalReport, SpeedReport, SteeringReport};
+use catmodel::can::codec::{
+    GnssCogSog, GnssPosition, LocalOrigin, PathHeader, PathLimits, PathPoint, PedalReport,
+    SpeedReport, SteeringReport,
+};
+use catmodel::can::spec::MAX_PATH_POINTS;
 use catmodel::can::{candump, CanFrame, CanId, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::NodeConfig;
+use catmodel::node::{PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS};
 
 /// A value over time.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -112,6 +117,11 @@ pub struct Spec {
     pub corrupt_per_tick: u32,
     /// Frames per tick that are not node inputs (the acceptance filter refuses them).
     pub unknown_per_tick: u32,
+    /// Points of the path a planner sends over and over (0: no planner): LOCAL_ORIGIN at the
+    /// drive's origin first, then the path (a straight line east of the origin, 1 m between
+    /// points, 5 m/s, 3 m corridors: valid, so every completion activates it) paced at the
+    /// node's rule for a conforming planner (`PLANNER_FRAMES_PER_TICK`).
+    pub path_points: usize,
 }
 
 impl Spec {
@@ -137,8 +147,83 @@ impl Spec {
             burst: None,
             corrupt_per_tick: 0,
             unknown_per_tick: 0,
+            path_points: 0,
         }
     }
+}
+
+/// The planner's frames of `spec` (see [`Spec::path_points`]).
+fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
+    let mut out = Vec::new();
+    if spec.path_points < 2 {
+        return out;
+    }
+    let points = spec.path_points.min(MAX_PATH_POINTS);
+    let mut counters = [0u8; 5];
+    let mut next = |slot: usize| {
+        let c = counters[slot];
+        counters[slot] = (c + 1) & 0x0F;
+        c
+    };
+    let mut frames: Vec<CanFrame> = vec![
+        LocalOrigin::Latitude {
+            lat_e7: origin_e7.0,
+        }
+        .encode(next(4)),
+        LocalOrigin::Longitude {
+            lon_e7: origin_e7.1,
+        }
+        .encode(next(4)),
+    ];
+    let per_path = 2 * points + 1;
+    let ticks = (spec.seconds / 0.02) as usize;
+    let paths = ticks * PLANNER_FRAMES_PER_TICK / per_path + 1;
+    for k in 0..paths {
+        let path_id = (k % 16) as u8;
+        frames.push(
+            PathHeader {
+                path_id,
+                count: points as u16,
+            }
+            .encode(next(0)),
+        );
+        for i in 0..points {
+            let index = i as u8;
+            frames.push(
+                PathPoint {
+                    path_id,
+                    index,
+                    east_m: i as f32,
+                    north_m: 0.0,
+                }
+                .encode(next(1)),
+            );
+            frames.push(
+                PathLimits {
+                    path_id,
+                    index,
+                    speed_mps: 5.0,
+                    left_m: 3.0,
+                    right_m: 3.0,
+                }
+                .encode(next(2)),
+            );
+        }
+    }
+    // PLANNER_FRAMES_PER_TICK per 20 ms, 0.5 ms apart, from the first tick on.
+    for (i, frame) in frames.into_iter().enumerate() {
+        let tick = (i / PLANNER_FRAMES_PER_TICK) as f64;
+        let slot = (i % PLANNER_FRAMES_PER_TICK) as f64;
+        let t_s = 0.0015 + tick * 0.02 + slot * 0.0005;
+        if t_s >= spec.seconds {
+            break;
+        }
+        out.push(TimedFrame {
+            t_us: us(t_s),
+            frame,
+        });
+    }
+    out
 }
 
 /// splitmix64: small, fast and good enough to choose faults and noise reproducibly.
@@ -244,7 +329,7 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
     let frame = LocalFrame::new(origin_e7.0, origin_e7.1).ok();
     let source = car.gnss_source;
     let lever = f64::from(car.estimator.antenna_ahead_m);
-    let mut out: Vec<TimedFrame> = Vec::new();
+    let mut out: Vec<TimedFrame> = planner_frames(spec, origin_e7);
     let mut push = |t_s: f64, frame: CanFrame| {
         out.push(TimedFrame {
             t_us: us(t_s),
@@ -568,6 +653,18 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             seconds: 2.0,
             origin_deg: (-45.0, -179.99),
             ..Spec::plain("stages-origin-south")
+        },
+        // The planner's paths completing: the longest path the bus carries (validation and
+        // load over 256 points), and short ones completing every few ticks.
+        Spec {
+            seconds: 9.0,
+            path_points: MAX_PATH_POINTS,
+            ..Spec::plain("stages-path-long")
+        },
+        Spec {
+            seconds: 4.0,
+            path_points: SHORT_PATH_POINTS,
+            ..Spec::plain("stages-path-short")
         },
     ]
 }

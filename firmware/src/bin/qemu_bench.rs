@@ -34,12 +34,12 @@ use catmodel::model::kinematic::{self, Pose};
 use catmodel::model::predictor::{self, PredictedPoint, PredictorStart};
 use catmodel::model::{MisoBlockState, SsBlockState};
 use catmodel::node::{
-    first_tick_us, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
-    PREDICTION_POINTS, VELOCITY_DELAY_CAP,
+    first_tick_us, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames, PREDICTION_POINTS,
+    VELOCITY_DELAY_CAP,
 };
 use catmodel::signal::{FirState, MovingAverageState};
 use catmodel::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
-use catmodel_firmware::platform::qemu::stages::{self, StageError};
+use catmodel_firmware::baked::FirmwareNode;
 use catmodel_firmware::platform::qemu::{icount, run::BUNDLED_DRIVE};
 use cortex_m_rt::entry;
 // The `defmt` feature is on for the core's types; nothing here logs through it, but a global
@@ -664,70 +664,9 @@ fn bench_encode() {
     );
 }
 
-/// Most drives of one `--stages` run, and the longest path of one.
-const STAGE_DRIVES: usize = 24;
-const STAGE_PATH: usize = 96;
-
-/// The `--stages` paths, NUL-terminated (a static: the stack is for the nodes' ticks).
-static mut STAGE_PATHS: heapless::Vec<heapless::Vec<u8, STAGE_PATH>, STAGE_DRIVES> =
-    heapless::Vec::new();
-
-/// The command line's `--stages` paths into `paths`; false without `--stages`. Not inlined: the
-/// command line's buffer is gone before the measurement runs.
-#[inline(never)]
-fn stage_paths(paths: &mut heapless::Vec<heapless::Vec<u8, STAGE_PATH>, STAGE_DRIVES>) -> bool {
-    let Ok(args) = semihosting::experimental::env::args::<1024>() else {
-        return false;
-    };
-    let mut args = (&args).filter_map(Result::ok);
-    if !args.any(|a| a == "--stages") {
-        return false;
-    }
-    for arg in args {
-        let mut bytes = heapless::Vec::new();
-        if bytes.extend_from_slice(arg.as_bytes()).is_err()
-            || bytes.push(0).is_err()
-            || paths.push(bytes).is_err()
-        {
-            fail("--stages: too many or too long paths");
-        }
-    }
-    true
-}
-
-/// `--stages FILE...`: the stage measurement over those drives instead of the component table.
-fn stage_mode() {
-    // SAFETY: the only reference to STAGE_PATHS; single-threaded, no interrupts.
-    let paths = unsafe { &mut *core::ptr::addr_of_mut!(STAGE_PATHS) };
-    if !stage_paths(paths) {
-        return;
-    }
-    let mut cstrs: heapless::Vec<&core::ffi::CStr, STAGE_DRIVES> = heapless::Vec::new();
-    for bytes in paths.iter() {
-        match core::ffi::CStr::from_bytes_with_nul(bytes) {
-            Ok(c) => {
-                let _ = cstrs.push(c);
-            }
-            Err(_) => fail("--stages: bad path"),
-        }
-    }
-    match stages::measure(&cstrs) {
-        Ok(()) => semihosting::process::exit(0),
-        Err(StageError::Io) => fail("--stages: cannot read a drive"),
-        Err(StageError::Model) => fail("the baked model does not build"),
-        Err(StageError::Structure(stage)) => {
-            semihosting::eprintln!(
-                "catmodel-qemu-bench: error: stage {stage:?} ran more often in one tick than TICK_STAGES allows"
-            );
-            semihosting::process::exit(3)
-        }
-    }
-}
-
 #[entry]
 fn main() -> ! {
     icount::init();
-    stage_mode();
     let overhead = icount::calibrate();
     // Safety: the only write, before any read; single-threaded, no interrupts enabled.
     unsafe { OVERHEAD = overhead };

@@ -15,13 +15,12 @@
 //! planned, MAX_CONTROL over every tick; DRIVE is the index of the drive that showed the
 //! maximum), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
 //! largest whole ticks measured, without and with a controller planning), and `stage-done`.
-//! A tick is a controller tick when `Node::step` returns a control status other than "no
-//! path", as the app flags it (`TickReport::controller`).
+//! A tick is a controller tick when a controller planned in it or a planner path was completed
+//! in it (`TickEstimate::controller_tick`), as the app flags it (`TickReport::controller`).
 //! `cargo qemu` and `cargo xtask bench-target` turn them into the bound.
 use core::ffi::CStr;
 use core::sync::atomic::{compiler_fence, Ordering};
 
-use catmodel::can::codec::ControlStatus;
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, TimedFrame};
 use catmodel::node::drive::Drive;
@@ -371,7 +370,7 @@ fn drive(
         let plain_step = t4.wrapping_sub(t3).saturating_sub(overhead);
         let handoff = t5.wrapping_sub(t4).saturating_sub(overhead);
         let d = laps.drive;
-        let controller = estimate.control != ControlStatus::NoPath;
+        let controller = estimate.controller_tick();
         laps.end_tick(controller);
         keep_both(&mut app.drain, drain, d, controller);
         keep_both(&mut app.handoff, handoff, d, controller);
