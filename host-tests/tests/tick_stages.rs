@@ -96,7 +96,7 @@ fn heavy_drive() -> Vec<TimedFrame> {
             }
         }
         // Every 0.5 s a burst of 30 frames the node must decode and reject.
-        if fix_index % 50 == 0 {
+        if fix_index.is_multiple_of(50) {
             for _ in 0..30 {
                 frames.push(TimedFrame {
                     t_us: fix.t_us,

@@ -402,7 +402,8 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
             GnssCogSog {
                 sid: k as u8,
                 cog_reference: 0,
-                cog_rad: Some(h.rem_euclid(std::f64::consts::TAU).min(6.2831) as f32),
+                // The field's top (raw 62 832 x 1e-4 rad, catmodel.dbc), just below 2 pi.
+                cog_rad: Some(h.rem_euclid(std::f64::consts::TAU).min(62_831.0 * 1e-4) as f32),
                 sog_mps: Some(v.min(655.0) as f32),
             }
             .encode(source),
