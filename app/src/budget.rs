@@ -7,16 +7,13 @@ use catmodel::SAMPLE_PERIOD_US;
 pub const BOARD_SYSCLK_HZ: u32 = 168_000_000;
 /// Cycles in one 20 ms tick at [`BOARD_SYSCLK_HZ`]: the basis of every "share of the tick".
 pub const CYCLES_PER_TICK: u64 = BOARD_SYSCLK_HZ as u64 / 1_000_000 * SAMPLE_PERIOD_US;
-/// Instructions one tick may take (drain + step + handoff) while no controller plans (no path
-/// from the planner: the node estimates and predicts; see `TickEstimate::controller_tick`),
-/// for any input: 30 000 = 0.89 % of a 20 ms tick at 168 MHz if every instruction took one
-/// cycle. `cargo qemu` checks that the tick's worst-case bound (docs/firmware.md, "Worst-case
-/// tick") is within it and that every measured tick is within the bound, on QEMU instruction
-/// counts. Issue 14 asks for 25 000 once the bound is under it: the bound is 25 770 since the
-/// planner's frames reached the node (the frame stage's maximum is 366 instructions, on a
-/// closed-loop session's planner frames, against 229 on the vehicle's and GNSS frames; times
-/// the 12-frame cap), so the budget stays at 30 000 until that is cut.
-pub const TICK_BUDGET_INSTRUCTIONS: u32 = 30_000;
+/// Instructions one tick may take (drain + step + handoff) while the node estimates and
+/// predicts, for any input: no controller plans and no planner frame arrives in it (those are
+/// controller ticks, `TickEstimate::controller_tick`). 25 000 = 0.74 % of a 20 ms tick at
+/// 168 MHz if every instruction took one cycle. `cargo qemu` checks that the tick's worst-case
+/// bound (docs/firmware.md, "Worst-case tick") is within it and that every measured tick is
+/// within the bound, on QEMU instruction counts.
+pub const TICK_BUDGET_INSTRUCTIONS: u32 = 25_000;
 /// Instructions one tick may take when a controller plans in it (the model-predictive
 /// controller's solve included): 600 000 = 18 % of the tick at 168 MHz, one cycle each. The
 /// controller's worst-case bound is checked against it the same way.

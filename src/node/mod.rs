@@ -278,17 +278,18 @@ pub struct TickEstimate {
     pub mode: Mode,
     /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
     pub control: ControlStatus,
-    /// A planner path was completed this tick (made active, or refused): its validation and
-    /// load ran in stage 1.
-    pub path_completed: bool,
+    /// The planner's frames (path, limits, obstacles, origin) arrived in this tick: their
+    /// assembly ran in stage 1, and a path may have been completed (validated and loaded).
+    pub planner_frames: bool,
 }
 
 impl TickEstimate {
     /// Whether this tick is one of the controller's (its budget and bound,
-    /// `CONTROL_TICK_BUDGET_INSTRUCTIONS`): a controller planned in it, or a path was completed
-    /// in it. Every other tick is under the 25 000-instruction budget.
+    /// `CONTROL_TICK_BUDGET_INSTRUCTIONS`): a controller planned in it, or the planner's frames
+    /// were processed in it. Every other tick (the node estimating and predicting, the
+    /// features the 25 000-instruction budget was set for) is under `TICK_BUDGET_INSTRUCTIONS`.
     pub fn controller_tick(&self) -> bool {
-        self.control != ControlStatus::NoPath || self.path_completed
+        self.control != ControlStatus::NoPath || self.planner_frames
     }
 }
 
@@ -417,7 +418,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let now = tick.now_us;
         let dt_s = self.advance(now);
         probe.lap(Stage::Advance);
-        let path_completed = self.receive(now, rx, probe);
+        let planner_frames = self.receive(now, rx, probe);
         let snapshot = self.inputs.snapshot(&self.config, now);
         let motion = self.run_models(&snapshot, dt_s);
         probe.lap(Stage::Models);
@@ -443,7 +444,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             speed_mps: motion.speed_mps,
             mode: motion.mode,
             control: drive.command.status,
-            path_completed,
+            planner_frames,
         }
     }
 
@@ -477,7 +478,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
     ///
     /// A planner frame that completes a path (validation and load over its points) is a stage
     /// of its own ([`Stage::PathComplete`], [`Stage::PathCompleteShort`]). Returns whether a
-    /// path was completed.
+    /// planner frame was processed (the tick is then a controller tick).
     fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) -> bool {
         let (frames, over_cap) = rx.split_at(rx.len().min(MAX_RX_FRAMES_PER_TICK));
         let c = &mut self.inputs.counters;
@@ -486,7 +487,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             .saturating_add(u32::try_from(over_cap.len()).unwrap_or(u32::MAX));
         let mut fixes = gnss::TickFixes::new();
         let mut origin = None;
-        let mut path_completed = false;
+        let mut planner_frames = false;
         for frame in frames {
             let mut stage = Stage::Frame;
             match self.inputs.receive(&self.config, now_us, frame) {
@@ -500,6 +501,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     self.gnss.receive_course(&self.config, &course);
                 }
                 Some(Routed::Planner(message)) => {
+                    planner_frames = true;
                     let drive = self.drive.borrow_mut();
                     let completed_before = paths_completed(drive);
                     // The points of the path being assembled: a frame that completes it has
@@ -509,7 +511,6 @@ impl<D: BorrowMut<Drive>> Node<D> {
                         origin = Some(o);
                     }
                     if paths_completed(drive) != completed_before {
-                        path_completed = true;
                         stage = if points > SHORT_PATH_POINTS {
                             Stage::PathComplete
                         } else {
@@ -536,7 +537,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             &mut self.inputs,
             probe,
         );
-        path_completed
+        planner_frames
     }
 
     /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.

@@ -925,7 +925,7 @@ mod tests {
         };
         assert!(
             summary_line("s.log", &driving).contains(
-                "slowest tick 21 267 instructions = 71 % of the 30 000 budget, slowest controller \
+                "slowest tick 21 267 instructions = 85 % of the 25 000 budget, slowest controller \
                  tick 474 256 = 79 % of the 600 000 budget, bound: not computed"
             ),
             "{}",
@@ -934,7 +934,7 @@ mod tests {
         assert_eq!(
             summary_line("data/bundled.can.log", &pass),
             "cargo qemu: data/bundled.can.log on QEMU netduinoplus2 (STM32F405, Cortex-M4F): PASS, \
-             slowest tick 21 267 instructions = 71 % of the 30 000 budget, bound: not computed"
+             slowest tick 21 267 instructions = 85 % of the 25 000 budget, bound: not computed"
         );
         let fail = Verdict {
             max_instructions: 31_000,
@@ -949,7 +949,7 @@ mod tests {
         };
         let line = summary_line("d.log", &fail);
         assert!(
-            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 103 % of the 30 000 budget, bound 45 000 instructions (controller ticks: 500 000)"),
+            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 124 % of the 25 000 budget, bound 45 000 instructions (controller ticks: 500 000)"),
             "{line}"
         );
         assert_eq!(line.lines().count(), 1);
