@@ -14,7 +14,7 @@ use catmodel::can::codec::{
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
-use catmodel::node::{Counters, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{Counters, NodeConfig, PlatformStats, Tick, TxFrames};
 use catmodel_fuzz::RawFrame;
 use libfuzzer_sys::fuzz_target;
 
