@@ -602,16 +602,17 @@ fn pure_pursuit_speed_loop_and_stops() {
         &car(0.0, 10.0, 0.0, 5.0),
     );
     assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
-    // 1 m/s slow: kp * 1 + ki * 1 * dt above the target, and the integral grows each tick.
+    // 0.5 m/s slow: kp * 0.5 + ki * 0.5 * dt above the target, and the integral grows each
+    // tick.
     let mut state = PurePursuitState::default();
     let a = cfg.process(
         &mut state,
         &CAT_VEHICLE,
         Some(&path),
         &[],
-        &car(0.0, 10.0, 0.0, 4.0),
+        &car(0.0, 10.0, 0.0, 4.5),
     );
-    let expected = 5.0 + cfg.speed_kp + cfg.speed_ki_per_s * cfg.period_s;
+    let expected = 5.0 + 0.5 * cfg.speed_kp + 0.5 * cfg.speed_ki_per_s * cfg.period_s;
     assert!(
         (a.speed_cmd_mps - expected).abs() < 1e-5,
         "{}",
@@ -622,19 +623,49 @@ fn pure_pursuit_speed_loop_and_stops() {
         &CAT_VEHICLE,
         Some(&path),
         &[],
-        &car(0.0, 10.0, 0.0, 4.0),
+        &car(0.0, 10.0, 0.0, 4.5),
     );
     assert!(b.speed_cmd_mps > a.speed_cmd_mps);
-    // Near the end: the stopping limit sqrt(2 a d) (d = 199 - 195 = 4 m -> 4.47 m/s).
+    // At rest (a launch): the correction is capped, the integral does not run.
+    let mut state = PurePursuitState::default();
+    let out = cfg.process(
+        &mut state,
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 10.0, 0.0, 0.0),
+    );
+    assert!((out.speed_cmd_mps - (5.0 + cfg.speed_correction_limit_mps)).abs() < 1e-6);
+    assert_eq!(state.integral_mps, 0.0);
+    // Near the end: at rest 4 m before it, the stopping limit is sqrt(2 a 4), and the
+    // correction never goes past it; at speed, the response time's travel comes off.
     let out = cfg.process(
         &mut PurePursuitState::default(),
         &CAT_VEHICLE,
         Some(&path),
         &[],
-        &car(0.0, 195.0, 0.0, 4.47),
+        &car(0.0, 195.0, 0.0, 0.0),
     );
     let limit = (2.0 * cfg.stop_decel_mps2 * 4.0).sqrt();
-    assert!(out.speed_cmd_mps <= limit + cfg.speed_kp * 0.01 + 1e-3);
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-5,
+        "{}",
+        out.speed_cmd_mps
+    );
+    let v = 1.5;
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        &CAT_VEHICLE,
+        Some(&path),
+        &[],
+        &car(0.0, 195.0, 0.0, v),
+    );
+    let limit = (2.0 * cfg.stop_decel_mps2 * (4.0 - v * cfg.speed_response_s)).sqrt();
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-5,
+        "{}",
+        out.speed_cmd_mps
+    );
     // An obstacle on the path 10 m ahead of the rear axle: the target drops so that the front
     // bumper stops a margin short of it: free distance = 20 - 0.5 - margin - front - 10.
     let obstacle = [Some(ObstacleCircle {
@@ -650,7 +681,7 @@ fn pure_pursuit_speed_loop_and_stops() {
         &CAT_VEHICLE,
         Some(&path),
         &obstacle,
-        &car(0.0, 10.0, 0.0, limit),
+        &car(0.0, 10.0, 0.0, 0.0),
     );
     assert!(
         (out.speed_cmd_mps - limit).abs() < 1e-3,

@@ -145,6 +145,26 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The ISO 3888-2 double lane change's speeds for one car: each controller's highest clean
+    /// speed (3 seeds, RTK receiver) and the offline optimiser's limit (perfect plant
+    /// knowledge); prints JSON.
+    DlcLimits {
+        /// Controllers to measure (pure-pursuit, mpc), comma-separated.
+        #[arg(long, default_value = "pure-pursuit", value_delimiter = ',')]
+        controllers: Vec<String>,
+        /// Also run the offline optimiser (minutes).
+        #[arg(long)]
+        optimal: bool,
+        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Model file for the node (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Also write the result as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
     /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
     /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
@@ -404,6 +424,26 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Command::DlcLimits {
+            controllers,
+            optimal,
+            vehicle,
+            model,
+            json,
+        } => {
+            let progress = Progress::spinner("searching the double lane change's limits");
+            let (cfg, node) =
+                catmodel_host::closed_loop::load_setup(vehicle.as_deref(), model.as_deref())?;
+            let limits =
+                catmodel_host::closed_loop::limits::dlc_limits(&cfg, &node, &controllers, optimal)?;
+            progress.finish();
+            let text = serde_json::to_string_pretty(&limits)?;
+            println!("{text}");
+            if let Some(path) = json {
+                replay::write_file(&path, &text)?;
+            }
+            Ok(())
+        }
         Command::Sil {
             stdio: _,
             model,
@@ -412,8 +452,11 @@ fn run(cli: Cli) -> Result<()> {
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
             let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
-            let controller =
-                catmodel_host::closed_loop::controller_named("pure-pursuit", &vehicle.body)?;
+            let controller = catmodel_host::closed_loop::controller_named(
+                "pure-pursuit",
+                &vehicle,
+                catmodel_host::closed_loop::Receiver::Standard,
+            )?;
             let mut driver =
                 catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
             let stdin = std::io::stdin().lock();

@@ -11,11 +11,13 @@
 //! `delta = atan(kappa L) (1 + K v^2)`.
 //!
 //! Speed: the path's target speed a preview time ahead (the car's speed loop lags by its 0.4 s
-//! input delay), limited so that the car can stop at `stop_decel_mps2` before the path's end
-//! and with its front bumper a margin short of any obstacle whose circle, grown by half the
-//! body width and the margin, reaches the path ahead (pure pursuit cannot steer around one: it
-//! stops, and stays stopped while the obstacle is there); then a PI loop on the speed error,
-//! its integral clamped (anti-windup).
+//! input delay), limited so that the car can stop at `stop_decel_mps2`, after its response
+//! time, before the path's end and with its front bumper a margin short of any obstacle whose
+//! circle, grown by half the body width and the margin, reaches the path ahead (pure pursuit
+//! cannot steer around one: it stops, and stays stopped while the obstacle is there). The car
+//! tracks a speed command itself; a PI loop on the speed error trims its steady-state error
+//! only: the correction is limited to `speed_correction_limit_mps`, and the integral runs only
+//! while the error is within that limit (integral separation, so a launch winds nothing up).
 //!
 //! Never panics, never returns a non-finite command: a non-finite intermediate falls back to
 //! the previous steering and zero speed (status fallback).
@@ -39,8 +41,12 @@ pub struct PurePursuitConfig {
     pub speed_kp: f32,
     /// Speed loop integral gain, 1/s.
     pub speed_ki_per_s: f32,
-    /// The speed loop's integral stays within +- this, m/s (anti-windup).
-    pub speed_integral_limit_mps: f32,
+    /// The PI correction (and its integral) stays within +- this, m/s; the integral only runs
+    /// while the error is within it.
+    pub speed_correction_limit_mps: f32,
+    /// The car's speed response to a command, s: the input delay and the lag of its speed loop
+    /// (eq 5: 0.42 s delay, poles near 1.2 s^-1); a stop is planned after this much travel.
+    pub speed_response_s: f32,
     /// The target speed is read this far ahead of the car (at its speed), s.
     pub speed_preview_s: f32,
     /// Deceleration the speed limit plans with, to stop at the path's end or before an
@@ -65,11 +71,12 @@ pub const DEFAULT_PURE_PURSUIT: PurePursuitConfig = PurePursuitConfig {
     lookahead_min_m: 3.0,
     lookahead_time_s: 0.55,
     lookahead_max_m: 30.0,
-    speed_kp: 0.5,
-    speed_ki_per_s: 0.2,
-    speed_integral_limit_mps: 2.0,
+    speed_kp: 0.3,
+    speed_ki_per_s: 0.1,
+    speed_correction_limit_mps: 1.0,
+    speed_response_s: 1.0,
     speed_preview_s: 0.6,
-    stop_decel_mps2: 2.5,
+    stop_decel_mps2: 1.5,
     max_speed_mps: 40.0,
     half_width_m: 0.903,
     front_m: 3.528,
@@ -186,17 +193,24 @@ impl PurePursuitConfig {
         if let Some(d) = self.obstacle_ahead_m(path, station, obstacles) {
             stop_at_m = stop_at_m.min(d);
         }
-        let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * stop_at_m.max(0.0));
+        let braking_room = stop_at_m - speed * self.speed_response_s;
+        let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * braking_room.max(0.0));
         target = target.min(stop_limit).min(self.max_speed_mps);
         let error = target - speed;
-        let integral = (state.integral_mps + self.speed_ki_per_s * error * self.period_s).clamp(
-            -self.speed_integral_limit_mps,
-            self.speed_integral_limit_mps,
-        );
+        let limit = self.speed_correction_limit_mps;
+        let integral = if error.abs() < limit {
+            (state.integral_mps + self.speed_ki_per_s * error * self.period_s).clamp(-limit, limit)
+        } else {
+            state.integral_mps
+        };
         let speed_cmd = if target <= 0.0 {
             0.0
         } else {
-            (target + self.speed_kp * error + integral).clamp(0.0, self.max_speed_mps)
+            let correction = (self.speed_kp * error + integral).clamp(-limit, limit);
+            // The correction never commands past what still stops in time.
+            (target + correction)
+                .min(stop_limit)
+                .clamp(0.0, self.max_speed_mps)
         };
 
         if !(steer_pct.is_finite() && speed_cmd.is_finite() && integral.is_finite()) {

@@ -70,3 +70,87 @@ pub fn highest_clean_speed(mut clean: impl FnMut(f64) -> bool, from: f64, to: f6
     }
     Some(good)
 }
+
+/// The three speeds of the double lane change for one car (`catmodel dlc-limits`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DlcLimits {
+    /// Vehicle width `b`, m.
+    pub vehicle_width_m: f64,
+    /// Each controller's highest clean speed (speed command; every seed of [`SEEDS`] clean),
+    /// m/s; `None` if it is not clean even at the scan's start.
+    pub controllers: Vec<(String, Option<f64>)>,
+    /// The offline optimiser's limit (speed command held), m/s.
+    pub optimal_mps: Option<f64>,
+    /// The truth speed at the track's entry of the optimiser's limit, m/s.
+    pub optimal_entry_mps: Option<f64>,
+    /// Every speed the optimiser searched: (speed, passable, smallest cone clearance).
+    pub optimal_search: Vec<(f64, bool, f64)>,
+    /// The optimiser's steering command profile at its limit, % per knot of
+    /// [`super::optimal::KNOT_S`].
+    pub optimal_profile_pct: Vec<f64>,
+}
+
+/// Scan start of the controllers' search, m/s (a walking pace through the cones).
+pub const SCAN_FROM_MPS: f64 = 4.0;
+/// Scan end, m/s.
+pub const SCAN_TO_MPS: f64 = 25.0;
+
+/// Computes the limits of `controllers` (by name) and, with `optimise`, the optimiser's,
+/// on the car `vehicle` with the node `node`.
+pub fn dlc_limits(
+    vehicle: &VehicleConfig,
+    node: &NodeConfig,
+    controllers: &[String],
+    optimise: bool,
+) -> anyhow::Result<DlcLimits> {
+    let mut speeds = Vec::new();
+    let mut pursuit = None;
+    for name in controllers {
+        let controller = super::controller_named(name, vehicle, Receiver::Rtk)?;
+        let super::driver::Controller::PurePursuit(cfg) = controller;
+        pursuit.get_or_insert(cfg);
+        let v = highest_clean_speed(
+            |v| clean_at(vehicle, node, controller, Receiver::Rtk, v),
+            SCAN_FROM_MPS,
+            SCAN_TO_MPS,
+        );
+        speeds.push((name.clone(), v));
+    }
+    let mut out = DlcLimits {
+        vehicle_width_m: vehicle.body.width_m,
+        controllers: speeds,
+        optimal_mps: None,
+        optimal_entry_mps: None,
+        optimal_search: Vec::new(),
+        optimal_profile_pct: Vec::new(),
+    };
+    if optimise {
+        let pursuit = match pursuit {
+            Some(p) => p,
+            None => {
+                let super::driver::Controller::PurePursuit(cfg) =
+                    super::controller_named("pure-pursuit", vehicle, Receiver::Rtk)?;
+                cfg
+            }
+        };
+        // The search starts where the slowest controller was still clean (or at the scan's
+        // start): a speed where a profile is known to pass.
+        let from = out
+            .controllers
+            .iter()
+            .filter_map(|(_, v)| *v)
+            .fold(SCAN_FROM_MPS, f64::max);
+        let (best, log) =
+            super::optimal::limit(vehicle, &node.vehicle, &pursuit, from, SCAN_TO_MPS);
+        out.optimal_search = log
+            .iter()
+            .map(|r| (r.speed_mps, r.passable, r.min_clearance_m))
+            .collect();
+        if let Some(b) = best {
+            out.optimal_mps = Some(b.speed_mps);
+            out.optimal_entry_mps = Some(b.entry_speed_mps);
+            out.optimal_profile_pct = b.profile;
+        }
+    }
+    Ok(out)
+}
