@@ -21,6 +21,7 @@
 //!   controller (pure pursuit).
 //! - [`can`]: the bus protocol of `catmodel.dbc`: frame codecs, CRC-8/SAE-J1850, rolling
 //!   counters, freshness, candump text.
+//! - [`control`]: the model-predictive controller (speed and steering plans over 2 s).
 //! - [`node`]: `Node::step`, the pure 20 ms tick that the board, QEMU and host replay all run.
 #![cfg_attr(not(test), no_std)]
 #![cfg_attr(
@@ -37,23 +38,23 @@
 )]
 #![warn(missing_docs)]
 
-#[cfg(all(target_os = "none", any(feature = "board", feature = "qemu")))]
-pub mod app;
 pub mod can;
 pub mod control;
 pub mod geodesy;
-pub mod health;
+pub mod image;
 pub mod math;
 pub mod metrics;
 pub mod model;
 pub mod node;
-#[cfg(all(target_os = "none", any(feature = "board", feature = "qemu")))]
-pub mod platform;
 pub mod signal;
 pub mod vehicle;
 
-/// Sample period of the vehicle bus and of every model: 20 ms = 50 Hz (paper II-B: "the vehicle
-/// collects data ... every 0.02 seconds").
-pub const SAMPLE_PERIOD_S: f32 = 0.02;
-/// [`SAMPLE_PERIOD_S`] in microseconds, the unit of every timestamp in the node.
+/// Sample period of the vehicle bus, of every model and of the node's tick, us: 20 ms = 50 Hz
+/// (paper II-B: "the vehicle collects data ... every 0.02 seconds"). The one definition of the
+/// period: everything else (the seconds below, the firmware's tick, the model file's
+/// `sample_time_s` check, xtask's timing) derives from it. Timestamps in the node are us.
 pub const SAMPLE_PERIOD_US: u64 = 20_000;
+/// [`SAMPLE_PERIOD_US`] in seconds, f32 (the node's arithmetic): exactly the f32 nearest 0.02.
+pub const SAMPLE_PERIOD_S: f32 = SAMPLE_PERIOD_US as f32 / 1_000_000.0;
+/// [`SAMPLE_PERIOD_US`] in seconds, f64 (offline work: discretization, identification).
+pub const SAMPLE_PERIOD_S_F64: f64 = SAMPLE_PERIOD_US as f64 / 1_000_000.0;

@@ -11,6 +11,7 @@
 //! `R = L / tan(delta / (1 + 0.0015 v^2))`. We implement the physically consistent form, where
 //! the speed term is an understeer correction: the faster the car, the larger the radius for the
 //! same steering.
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 use crate::math;
 
 /// Geometry and steering of a car. Immutable configuration.
@@ -27,14 +28,71 @@ pub struct VehicleParams {
     pub understeer_s2_per_m2: f32,
 }
 
-/// The CAT Vehicle (Ford Escape Hybrid): L = 2.62 m and T = 1.55 m (CAT Vehicle ROS package),
-/// 100 % = 35.5 deg at the imaginary centre tyre and K = 0.0015 s^2/m^2 (paper II-C, eq 2).
-pub const CAT_VEHICLE: VehicleParams = VehicleParams {
+/// The CAT Vehicle (Ford Escape Hybrid), as a test reference: L = 2.62 m and T = 1.55 m
+/// (CAT Vehicle ROS package), 100 % = 35.5 deg at the imaginary centre tyre and
+/// K = 0.0015 s^2/m^2 (paper II-C, eq 2). The node's numbers come from the model file.
+#[cfg(test)]
+pub(crate) const CAT_VEHICLE: VehicleParams = VehicleParams {
     wheelbase_m: 2.62,
     track_m: 1.55,
     max_steer_rad: 35.5 * core::f32::consts::PI / 180.0,
     understeer_s2_per_m2: 0.0015,
 };
+
+/// The car's body around the rear axle (the reference point of eq 8): what must stay inside a
+/// corridor and clear of obstacles. Immutable configuration, from the model file's `[vehicle]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Body {
+    /// Overall width, m (mirrors folded).
+    pub width_m: f32,
+    /// Overall length, m.
+    pub length_m: f32,
+    /// Rear bumper behind the rear axle, m.
+    pub rear_overhang_m: f32,
+}
+
+impl Image for VehicleParams {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            wheelbase_m,
+            track_m,
+            max_steer_rad,
+            understeer_s2_per_m2,
+        } = self;
+        for v in [wheelbase_m, track_m, max_steer_rad, understeer_s2_per_m2] {
+            v.write(w);
+        }
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            wheelbase_m: f32::read(r)?,
+            track_m: f32::read(r)?,
+            max_steer_rad: f32::read(r)?,
+            understeer_s2_per_m2: f32::read(r)?,
+        })
+    }
+}
+
+impl Image for Body {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            width_m,
+            length_m,
+            rear_overhang_m,
+        } = self;
+        for v in [width_m, length_m, rear_overhang_m] {
+            v.write(w);
+        }
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            width_m: f32::read(r)?,
+            length_m: f32::read(r)?,
+            rear_overhang_m: f32::read(r)?,
+        })
+    }
+}
 
 /// Steering percent accepted by [`VehicleParams::steer_pct_to_center_rad`]: the car reports
 /// -100..100 %.

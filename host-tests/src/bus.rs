@@ -12,9 +12,7 @@ use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::{
     first_tick_us, Counters, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
-    CAT_VEHICLE_ANTENNA_AHEAD_M,
 };
-use catmodel::vehicle::CAT_VEHICLE;
 
 /// Origin of the local frame, 1e-7 deg.
 pub const ORIGIN: (i32, i32) = (322_319_000, -1_109_501_000);
@@ -58,16 +56,18 @@ pub fn rear_axle(v: f64, curvature: f64, t_s: f64) -> (f64, f64, f64) {
     )
 }
 
-/// Path curvature of the CAT Vehicle at `steer_pct` and `v` (eq 2 with understeer).
+/// Path curvature of the published car (`models/paper.toml`) at `steer_pct` and `v` (eq 2 with
+/// understeer).
 pub fn curvature(v: f32, steer_pct: f32) -> f64 {
-    let center = CAT_VEHICLE.steer_pct_to_center_rad(steer_pct);
-    f64::from(CAT_VEHICLE.curvature_per_m(center, v))
+    let vehicle = config().vehicle;
+    let center = vehicle.steer_pct_to_center_rad(steer_pct);
+    f64::from(vehicle.curvature_per_m(center, v))
 }
 
 /// `seconds` of driving at `v` m/s with steering `steer_pct`, first fix at [`START_US`].
 pub fn drive(v: f32, steer_pct: f32, seconds: f32) -> Vec<Labelled> {
     let k = curvature(v, steer_pct);
-    let lever = f64::from(CAT_VEHICLE_ANTENNA_AHEAD_M);
+    let lever = f64::from(config().estimator.antenna_ahead_m);
     let frame = LocalFrame::new(ORIGIN.0, ORIGIN.1).expect("origin");
     let mut out = Vec::new();
     let n = (seconds * 100.0) as u64;
@@ -178,9 +178,9 @@ impl TickOut {
     }
 }
 
-/// The published configuration with the test origin.
+/// The published configuration (`models/paper.toml`) with the test origin.
 pub fn config() -> NodeConfig {
-    let mut c = NodeConfig::paper().expect("published configuration");
+    let mut c = catmodel_model_file::paper().node_config();
     c.origin_e7 = Some(ORIGIN);
     c
 }

@@ -1,8 +1,13 @@
-//! Shared helpers of the integration tests: loading committed reference values and comparing
-//! numbers with stated tolerances.
+//! Shared helpers of the integration tests: loading committed reference values, comparing
+//! numbers with stated tolerances, simulated drives as identification experiments.
 use std::path::PathBuf;
 
+use catmodel_host::identify::preprocess::{preprocess_rows, Experiment, PreprocessOptions};
+use catmodel_host::model_file;
+use catmodel_host::sim::{self, SimOptions};
+
 pub mod bus;
+pub mod mpc_sim;
 
 /// Path of a file under `host-tests/reference/`.
 pub fn reference_path(name: &str) -> PathBuf {
@@ -34,4 +39,26 @@ pub fn assert_allclose(actual: &[f64], expected: &[f64], rtol: f64, atol: f64, w
             "{what}[{i}]: {a} vs reference {b} (rtol {rtol}, atol {atol})"
         );
     }
+}
+
+/// One drive of the built-in simulator (`scenario`, `seed`) preprocessed as `identify` does,
+/// named `SCENARIO-SEED`.
+pub fn sim_experiment(scenario: &str, seed: u64) -> Experiment {
+    let out = sim::run_named(
+        scenario,
+        None,
+        &SimOptions {
+            seed,
+            ..SimOptions::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("simulating {scenario}: {e}"));
+    let base = model_file::load(&model_file::paper_path()).expect("models/paper.toml");
+    preprocess_rows(
+        &format!("{scenario}-{seed}"),
+        &out.log,
+        &base.vehicle,
+        &PreprocessOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("preprocessing {scenario}: {e:#}"))
 }

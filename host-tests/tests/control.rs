@@ -8,10 +8,10 @@ use catmodel::can::codec::{
 use catmodel::control::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
-    CarState, PurePursuitConfig, PurePursuitState, DEFAULT_PURE_PURSUIT,
+    CarState, PurePursuitConfig, PurePursuitState, PurePursuitTuning, DEFAULT_TUNING,
 };
 use catmodel::model::kinematic::Pose;
-use catmodel::vehicle::CAT_VEHICLE;
+use catmodel::vehicle::{Body, VehicleParams};
 use proptest::prelude::*;
 use std::f64::consts::PI;
 
@@ -508,6 +508,29 @@ proptest! {
 // ------------------------------------------------------------------------------------------
 // Pure pursuit
 
+/// The CAT Vehicle as the hand derivations below use it: L = 2.62 m, 35.5 deg at 100 %,
+/// K = 0.0015 s^2/m^2; body 1.806 x 4.437 m, rear overhang 0.85 m.
+const CAT: VehicleParams = VehicleParams {
+    wheelbase_m: 2.62,
+    track_m: 1.55,
+    max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
+    understeer_s2_per_m2: 0.0015,
+};
+
+fn pursuit(tuning: PurePursuitTuning) -> PurePursuitConfig {
+    PurePursuitConfig {
+        tuning,
+        vehicle: CAT,
+        body: Body {
+            width_m: 1.806,
+            length_m: 4.437,
+            rear_overhang_m: 0.85,
+        },
+        max_speed_mps: 40.0,
+        period_s: 0.02,
+    }
+}
+
 fn car(east: f32, north: f32, heading: f32, speed: f32) -> CarState {
     CarState {
         pose: Some(Pose::new(east, north, heading)),
@@ -521,16 +544,10 @@ fn pure_pursuit_steering_hand_derived() {
     // lookahead 3 m, goal (0, 3): right = -1, d^2 = 10, kappa = 2 (-1) / 10 = -0.2 1/m;
     // delta = atan(-0.2 * 2.62) = -0.48255 rad = -77.88 % of 35.5 deg.
     let path = path_of(&straight(0.0, 0.0, 0.0, 30, 1.0));
-    let cfg = DEFAULT_PURE_PURSUIT;
+    let cfg = pursuit(DEFAULT_TUNING);
     assert_eq!(cfg.lookahead_m(0.0), 3.0);
     let mut state = PurePursuitState::default();
-    let out = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(1.0, 0.0, 0.0, 0.0),
-    );
+    let out = cfg.process(&mut state, Some(&path), &[], &car(1.0, 0.0, 0.0, 0.0));
     let expected_pct = (-0.2f64 * 2.62).atan() / 35.5f64.to_radians() * 100.0;
     assert_eq!(out.status, ControlStatus::Tracking);
     assert!(
@@ -544,7 +561,6 @@ fn pure_pursuit_steering_hand_derived() {
     // Mirror image: 1 m to the left steers right by the same amount.
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(-1.0, 0.0, 0.0, 0.0),
@@ -561,16 +577,15 @@ fn pure_pursuit_on_a_circle_steers_for_its_curvature() {
     // circle's tangent there, so this holds to rounding.
     let r = 20.0;
     let path = path_of(&clockwise_circle(r, 120, 0.5));
-    let cfg = PurePursuitConfig {
+    let cfg = pursuit(PurePursuitTuning {
         lookahead_time_s: 0.5,
-        ..DEFAULT_PURE_PURSUIT
-    };
+        ..DEFAULT_TUNING
+    });
     for v in [2.0f32, 5.0] {
         let s = path.station_of(20).unwrap();
         let on = path.sample(s, 0).unwrap();
         let out = cfg.process(
             &mut PurePursuitState::default(),
-            &CAT_VEHICLE,
             Some(&path),
             &[],
             &car(on.east_m, on.north_m, on.heading_rad, v),
@@ -587,66 +602,43 @@ fn pure_pursuit_on_a_circle_steers_for_its_curvature() {
 
 #[test]
 fn pure_pursuit_speed_loop_and_stops() {
-    let cfg = PurePursuitConfig {
+    let cfg = pursuit(PurePursuitTuning {
         speed_preview_s: 0.0,
-        ..DEFAULT_PURE_PURSUIT
-    };
+        ..DEFAULT_TUNING
+    });
+    let t = cfg.tuning;
+    let front = cfg.body.length_m - cfg.body.rear_overhang_m;
     let path = path_of(&straight(0.0, 0.0, 0.0, 200, 1.0));
     // At the target speed: the command is the target (plus the integral, zero here).
     let mut state = PurePursuitState::default();
-    let out = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 5.0),
-    );
+    let out = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 5.0));
     assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
     // 0.5 m/s slow: kp * 0.5 + ki * 0.5 * dt above the target, and the integral grows each
     // tick.
     let mut state = PurePursuitState::default();
-    let a = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 4.5),
-    );
-    let expected = 5.0 + 0.5 * cfg.speed_kp + 0.5 * cfg.speed_ki_per_s * cfg.period_s;
+    let a = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 4.5));
+    let expected = 5.0 + 0.5 * t.speed_kp + 0.5 * t.speed_ki_per_s * cfg.period_s;
     assert!(
         (a.speed_cmd_mps - expected).abs() < 1e-5,
         "{}",
         a.speed_cmd_mps
     );
-    let b = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 4.5),
-    );
+    let b = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 4.5));
     assert!(b.speed_cmd_mps > a.speed_cmd_mps);
     // At rest (a launch): the correction is capped, the integral does not run.
     let mut state = PurePursuitState::default();
-    let out = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 0.0),
-    );
-    assert!((out.speed_cmd_mps - (5.0 + cfg.speed_correction_limit_mps)).abs() < 1e-6);
+    let out = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 0.0));
+    assert!((out.speed_cmd_mps - (5.0 + t.speed_correction_limit_mps)).abs() < 1e-6);
     assert_eq!(state.integral_mps, 0.0);
     // Near the end: at rest 4 m before it, the stopping limit is sqrt(2 a 4), and the
     // correction never goes past it; at speed, the response time's travel comes off.
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(0.0, 195.0, 0.0, 0.0),
     );
-    let limit = (2.0 * cfg.stop_decel_mps2 * 4.0).sqrt();
+    let limit = (2.0 * t.stop_decel_mps2 * 4.0).sqrt();
     assert!(
         (out.speed_cmd_mps - limit).abs() < 1e-5,
         "{}",
@@ -655,12 +647,11 @@ fn pure_pursuit_speed_loop_and_stops() {
     let v = 1.5;
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(0.0, 195.0, 0.0, v),
     );
-    let limit = (2.0 * cfg.stop_decel_mps2 * (4.0 - v * cfg.speed_response_s)).sqrt();
+    let limit = (2.0 * t.stop_decel_mps2 * (4.0 - v * t.speed_response_s)).sqrt();
     assert!(
         (out.speed_cmd_mps - limit).abs() < 1e-5,
         "{}",
@@ -673,12 +664,11 @@ fn pure_pursuit_speed_loop_and_stops() {
         north_m: 20.0,
         radius_m: 0.5,
     })];
-    let free = 20.0 - 0.5 - cfg.obstacle_margin_m - cfg.front_m - 10.0;
-    let limit = (2.0 * cfg.stop_decel_mps2 * free).sqrt();
+    let free = 20.0 - 0.5 - t.obstacle_margin_m - front - 10.0;
+    let limit = (2.0 * t.stop_decel_mps2 * free).sqrt();
     assert!(limit < 5.0);
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &obstacle,
         &car(0.0, 10.0, 0.0, 0.0),
@@ -692,7 +682,6 @@ fn pure_pursuit_speed_loop_and_stops() {
     for north in [10.0 + free, 10.0 + free + 1.0] {
         let out = cfg.process(
             &mut PurePursuitState::default(),
-            &CAT_VEHICLE,
             Some(&path),
             &obstacle,
             &car(0.0, north, 0.0, 0.0),
@@ -707,7 +696,6 @@ fn pure_pursuit_speed_loop_and_stops() {
     })];
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &beside,
         &car(0.0, 10.0, 0.0, 5.0),
@@ -718,13 +706,7 @@ fn pure_pursuit_speed_loop_and_stops() {
 #[test]
 fn pure_pursuit_without_path_or_position_holds_the_car() {
     let mut state = PurePursuitState::default();
-    let out = DEFAULT_PURE_PURSUIT.process(
-        &mut state,
-        &CAT_VEHICLE,
-        None,
-        &[],
-        &car(0.0, 0.0, 0.0, 3.0),
-    );
+    let out = pursuit(DEFAULT_TUNING).process(&mut state, None, &[], &car(0.0, 0.0, 0.0, 3.0));
     assert_eq!(
         (out.status, out.speed_cmd_mps),
         (ControlStatus::NoPath, 0.0)
@@ -734,15 +716,14 @@ fn pure_pursuit_without_path_or_position_holds_the_car() {
         pose: None,
         speed_mps: 3.0,
     };
-    let out = DEFAULT_PURE_PURSUIT.process(&mut state, &CAT_VEHICLE, Some(&path), &[], &lost);
+    let out = pursuit(DEFAULT_TUNING).process(&mut state, Some(&path), &[], &lost);
     assert_eq!(
         (out.status, out.speed_cmd_mps),
         (ControlStatus::Fallback, 0.0)
     );
     // Non-finite speed never leaks into the command.
-    let out = DEFAULT_PURE_PURSUIT.process(
+    let out = pursuit(DEFAULT_TUNING).process(
         &mut state,
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(0.0, 1.0, 0.0, f32::NAN),

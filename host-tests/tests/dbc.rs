@@ -1,16 +1,14 @@
-//! `catmodel.dbc` is the single source of truth: parse it with `can-dbc` and compare every
-//! message and every signal with the Rust descriptor table (`catmodel::can::spec`), which all
-//! typed codecs go through. Then check the table's own invariants (no overlapping signals, every
-//! signal inside its DLC) and round-trip every signal at its raw limits and its sentinel through
-//! the generic bit packer.
+//! `catmodel.dbc` is the single source of truth: read it with the project's DBC reader
+//! (`catmodel_host::dbc`, the one `catmodel decode` uses) and compare every message and every
+//! signal with the Rust descriptor table (`catmodel::can::spec`), which all typed codecs go
+//! through. Then check the table's own invariants (no overlapping signals, every signal inside
+//! its DLC) and round-trip every signal at its raw limits and its sentinel through the generic
+//! bit packer.
 use std::collections::{BTreeMap, BTreeSet};
 
-use can_dbc::{
-    AttributeValue, ByteOrder, Dbc, MessageId, MultiplexIndicator, NumericValue, ValueDescription,
-    ValueType,
-};
 use catmodel::can::spec::{self, Integrity, MessageSpec, Mux, SignalSpec};
 use catmodel::can::CanId;
+use catmodel_host::dbc::{ByteOrder, Dbc, Multiplex};
 use catmodel_host_tests::isclose;
 
 /// Relative tolerance for scale / offset / limits: the table stores scale as f32, the DBC as
@@ -18,40 +16,24 @@ use catmodel_host_tests::isclose;
 const RTOL: f64 = 1e-6;
 const ATOL: f64 = 1e-12;
 
+/// `catmodel.dbc` as it is on disk (the reader's built-in copy is the same file).
 fn load_dbc() -> Dbc {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../catmodel.dbc");
     let text = std::fs::read_to_string(&path).expect("reading catmodel.dbc");
-    Dbc::try_from(text.as_str()).unwrap_or_else(|e| panic!("parsing catmodel.dbc: {e}"))
+    let dbc = Dbc::parse(&text).unwrap_or_else(|e| panic!("catmodel.dbc: {e}"));
+    assert_eq!(Dbc::catmodel().unwrap(), dbc, "the built-in copy is stale");
+    dbc
 }
 
-/// The DBC form of an identifier: extended ids carry bit 31.
-fn dbc_raw_id(id: CanId) -> u32 {
-    match id {
-        CanId::Standard(id) => u32::from(id),
-        CanId::Extended(id) => id | 1 << 31,
-    }
-}
-
-fn numeric(v: &NumericValue) -> f64 {
-    match *v {
-        NumericValue::Uint(u) => u as f64,
-        NumericValue::Int(i) => i as f64,
-        NumericValue::Double(d) => d,
-    }
-}
-
-fn by_id() -> BTreeMap<u32, &'static MessageSpec> {
-    spec::MESSAGES
-        .iter()
-        .map(|m| (dbc_raw_id(m.id), *m))
-        .collect()
+fn by_id() -> BTreeMap<CanId, &'static MessageSpec> {
+    spec::MESSAGES.iter().map(|m| (m.id, *m)).collect()
 }
 
 #[test]
 fn the_same_messages_in_both() {
     let dbc = load_dbc();
-    let dbc_ids: BTreeSet<u32> = dbc.messages.iter().map(|m| m.id.raw()).collect();
-    let rust_ids: BTreeSet<u32> = by_id().keys().copied().collect();
+    let dbc_ids: BTreeSet<CanId> = dbc.messages.iter().map(|m| m.id).collect();
+    let rust_ids: BTreeSet<CanId> = by_id().keys().copied().collect();
     assert_eq!(
         dbc.messages.len(),
         dbc_ids.len(),
@@ -71,23 +53,14 @@ fn every_message_agrees() {
     let dbc = load_dbc();
     let table = by_id();
     for m in &dbc.messages {
-        let r = table[&m.id.raw()];
+        let r = table[&m.id];
         let what = &m.name;
         assert_eq!(m.name, r.name);
+        assert_eq!(m.dlc, r.dlc, "{what}: DLC");
+        assert_eq!(m.transmitter, r.transmitter, "{what}: transmitter");
         assert_eq!(
-            MessageId::try_from(dbc_raw_id(r.id)).unwrap(),
-            m.id,
-            "{what}: id"
-        );
-        assert_eq!(m.size, u64::from(r.dlc), "{what}: DLC");
-        assert_eq!(
-            m.transmitter.as_deref(),
-            Some(r.transmitter),
-            "{what}: transmitter"
-        );
-        assert_eq!(
-            dbc.message_attribute(m.id, "GenMsgCycleTime"),
-            Some(&AttributeValue::Uint(u64::from(r.cycle_ms))),
+            m.cycle_ms,
+            Some(u64::from(r.cycle_ms)),
             "{what}: cycle time"
         );
         let dbc_names: BTreeSet<&str> = m.signals.iter().map(|s| s.name.as_str()).collect();
@@ -107,19 +80,14 @@ fn every_signal_agrees() {
     let table = by_id();
     let mut checked = 0;
     for m in &dbc.messages {
-        let r = table[&m.id.raw()];
+        let r = table[&m.id];
         for s in &m.signals {
             let rs = r.signal(&s.name).unwrap();
             let what = format!("{}.{}", m.name, s.name);
-            assert_eq!(s.start_bit, u64::from(rs.start_bit), "{what}: start bit");
-            assert_eq!(s.size, u64::from(rs.len_bits), "{what}: length");
+            assert_eq!(s.start_bit, u16::from(rs.start_bit), "{what}: start bit");
+            assert_eq!(s.len_bits, u16::from(rs.len_bits), "{what}: length");
             assert_eq!(s.byte_order, ByteOrder::LittleEndian, "{what}: byte order");
-            let vt = if rs.signed {
-                ValueType::Signed
-            } else {
-                ValueType::Unsigned
-            };
-            assert_eq!(s.value_type, vt, "{what}: signedness");
+            assert_eq!(s.signed, rs.signed, "{what}: signedness");
             assert!(
                 isclose(f64::from(rs.scale), s.factor, RTOL, ATOL),
                 "{what}: scale {} vs {}",
@@ -133,25 +101,21 @@ fn every_signal_agrees() {
             let min = rs.raw_min as f64 * s.factor + s.offset;
             let max = rs.raw_max as f64 * s.factor + s.offset;
             assert!(
-                isclose(min, numeric(&s.min), RTOL, ATOL),
+                isclose(min, s.min, RTOL, ATOL),
                 "{what}: min {min} vs {}",
                 s.min
             );
             assert!(
-                isclose(max, numeric(&s.max), RTOL, ATOL),
+                isclose(max, s.max, RTOL, ATOL),
                 "{what}: max {max} vs {}",
                 s.max
             );
             assert_eq!(s.unit, rs.unit, "{what}: unit");
-            let receivers: Vec<&str> = s.receivers.iter().map(String::as_str).collect();
-            assert_eq!(receivers, r.receivers, "{what}: receivers");
-            let mux = match s.multiplexer_indicator {
-                MultiplexIndicator::Plain => Mux::Plain,
-                MultiplexIndicator::Multiplexor => Mux::Switch,
-                MultiplexIndicator::MultiplexedSignal(p) => Mux::Page(u8::try_from(p).unwrap()),
-                MultiplexIndicator::MultiplexorAndMultiplexedSignal(_) => {
-                    panic!("{what}: extended multiplexing is not used")
-                }
+            assert_eq!(s.receivers, r.receivers, "{what}: receivers");
+            let mux = match s.multiplex {
+                Multiplex::Plain => Mux::Plain,
+                Multiplex::Switch => Mux::Switch,
+                Multiplex::Page(p) => Mux::Page(u8::try_from(p).unwrap()),
             };
             assert_eq!(mux, rs.mux, "{what}: multiplexing");
             checked += 1;
@@ -168,31 +132,24 @@ fn sentinels_and_value_tables_agree() {
     let table = by_id();
     // Every "not_available" VAL_ entry is the table's sentinel, and vice versa.
     let mut from_dbc = BTreeSet::new();
-    for vd in &dbc.value_descriptions {
-        let ValueDescription::Signal {
-            message_id,
-            name,
-            value_descriptions,
-        } = vd
-        else {
-            continue;
-        };
-        let r = table[&message_id.raw()].signal(name).unwrap();
-        for d in value_descriptions {
-            if d.description == "not_available" {
-                from_dbc.insert((message_id.raw(), name.clone(), d.id));
-            } else {
-                assert!(r.in_range(d.id), "{name}: value {} outside range", d.id);
+    for m in &dbc.messages {
+        for s in &m.signals {
+            let r = table[&m.id].signal(&s.name).unwrap();
+            for (raw, description) in &s.values {
+                if description == "not_available" {
+                    from_dbc.insert((m.id, s.name.clone(), *raw));
+                } else {
+                    assert!(r.in_range(*raw), "{}: value {raw} outside range", s.name);
+                }
             }
         }
     }
-    let from_rust: BTreeSet<(u32, String, i64)> = spec::MESSAGES
+    let from_rust: BTreeSet<(CanId, String, i64)> = spec::MESSAGES
         .iter()
         .flat_map(|m| {
-            m.signals.iter().filter_map(|s| {
-                s.not_available_raw
-                    .map(|na| (dbc_raw_id(m.id), s.name.to_string(), na))
-            })
+            m.signals
+                .iter()
+                .filter_map(|s| s.not_available_raw.map(|na| (m.id, s.name.to_string(), na)))
         })
         .collect();
     assert_eq!(from_dbc, from_rust);
@@ -202,13 +159,8 @@ fn sentinels_and_value_tables_agree() {
 #[test]
 fn bus_level_attributes() {
     let dbc = load_dbc();
-    let baud = dbc
-        .attribute_values_database
-        .iter()
-        .find(|a| a.name == "Baudrate")
-        .map(|a| a.value.clone());
-    assert_eq!(baud, Some(AttributeValue::Uint(500_000)));
-    let nodes: BTreeSet<&str> = dbc.nodes.iter().map(|n| n.0.as_str()).collect();
+    assert_eq!(dbc.baudrate, Some(500_000));
+    let nodes: BTreeSet<&str> = dbc.nodes.iter().map(String::as_str).collect();
     let expected: BTreeSet<&str> = [
         spec::NODE_CATMODEL,
         spec::NODE_DBW,
@@ -227,6 +179,7 @@ fn bus_level_attributes() {
         };
         assert_eq!(spec::n2k_pgn_source(id), (pgn, spec::N2K_DEFAULT_SOURCE));
         assert_eq!(id >> 26, 2, "priority");
+        assert_eq!(dbc.message(m.name).and_then(|d| d.pgn()), Some(pgn));
     }
 }
 

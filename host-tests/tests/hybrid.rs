@@ -3,7 +3,7 @@
 //! it never chatters (a mode is held at least `min_dwell_ticks`), it only switches when the
 //! thresholds say so, it ignores non-finite inputs, it counts every switch, and it does switch
 //! when the conditions hold long enough (it cannot get stuck).
-use catmodel::model::hybrid::{HybridConfig, HybridState, Mode, DEFAULT_HYBRID};
+use catmodel::model::hybrid::{HybridConfig, HybridState, Mode};
 use proptest::prelude::*;
 
 /// Speeds and lateral accelerations around the thresholds, plus non-finite values.
@@ -115,7 +115,7 @@ fn a_dwell_of_one_tick_still_cannot_switch_twice_in_a_tick() {
     // but never more than one change per tick, and only on the side the input is on.
     let cfg = HybridConfig {
         min_dwell_ticks: 1,
-        ..DEFAULT_HYBRID
+        ..catmodel_model_file::paper().hybrid.config()
     };
     let inputs: Vec<(f32, f32)> = (0..50)
         .map(|i| if i % 2 == 0 { (7.0, 0.0) } else { (3.0, 0.0) })

@@ -9,7 +9,7 @@ use catmodel_host::identify::{self, simulate, IdentifyOptions};
 use catmodel_host::logcsv::LogRow;
 use catmodel_host::model_file;
 use catmodel_host::sim::scenario::PAPER_SIZED_TRAINING;
-use catmodel_host::sim::{self, SimOptions};
+use catmodel_host_tests::sim_experiment;
 
 fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
     let n = input_vel.len();
@@ -82,26 +82,6 @@ fn recovers_the_published_speed_model() {
     }
 }
 
-fn sim_experiment(name: &str, seed: u64) -> Experiment {
-    let out = sim::run_named(
-        name,
-        None,
-        &SimOptions {
-            seed,
-            ..SimOptions::default()
-        },
-    )
-    .unwrap();
-    let base = model_file::load(&model_file::paper_path()).unwrap();
-    preprocess_rows(
-        &format!("{name}-{seed}"),
-        &out.log,
-        &base.vehicle,
-        &PreprocessOptions::default(),
-    )
-    .unwrap()
-}
-
 /// Trained on the four straight-line experiments of the simulator, the speed model reaches at
 /// least 87 % fit (pure simulation) on the 5-minute validation drive; the paper-sized set
 /// (11 one-minute experiments + validation) is identified in under 5 s.
@@ -149,9 +129,8 @@ fn simulator_bars() {
         "paper-sized set identified in {secs:.2} s\n{}",
         identify::summary(&id)
     );
-    // The bar is < 5 s for the release CLI (measured 2.7 s); here other tests run in
-    // parallel threads on a shared machine, hence the margin.
-    assert!(secs < 10.0, "{secs:.2} s");
+    // Its run time is measured by the criterion bench `identify/paper_set` (README), not here:
+    // a wall-clock bound in a test fails on a loaded machine and proves nothing.
     let lateral = id
         .model
         .lateral

@@ -117,12 +117,44 @@ fn circle_is_tracked_at_the_rear_axle_with_the_true_heading() {
 }
 
 #[test]
-fn the_default_build_bakes_the_published_models() {
-    // build.rs bakes models/paper.toml unless CATMODEL_MODEL names another file.
+fn the_default_build_bakes_the_published_model_file_bit_for_bit() {
+    // The firmware's build script bakes models/paper.toml unless CATMODEL_MODEL names another
+    // file; what it baked must be exactly what the host reader makes of the same file.
     if std::env::var_os("CATMODEL_MODEL").is_some() {
         return;
     }
-    let baked = catmodel::node::baked::baked_models().unwrap();
-    assert_eq!(baked, catmodel::node::NodeModels::paper());
-    assert_eq!(catmodel::node::baked::BAKED_MODEL_PATH, "models/paper.toml");
+    assert_eq!(catmodel_firmware::baked::MODEL_PATH, "models/paper.toml");
+    let baked = catmodel_firmware::baked::node_config().unwrap();
+    let host = catmodel_model_file::paper().node_config();
+    assert_eq!(baked, host);
+    // Bit for bit, not only `==` (which equates 0.0 and -0.0).
+    let mut host_words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
+    let n = host.to_image(&mut host_words);
+    assert_eq!(
+        &host_words[..n],
+        &catmodel_firmware::baked::CONFIG_IMAGE[..]
+    );
+}
+
+#[test]
+fn a_configuration_image_round_trips_and_refuses_corruption() {
+    let config = catmodel_model_file::paper().node_config();
+    let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
+    let n = config.to_image(&mut words);
+    assert!(n <= catmodel::node::CONFIG_IMAGE_MAX_WORDS);
+    let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();
+    assert_eq!(back, config);
+    // Every single word turned into NaN is either refused or (for integer words) changes the
+    // configuration: nothing passes silently as the same car.
+    let mut refused = 0;
+    for k in 2..n {
+        let mut bad = words[..n].to_vec();
+        bad[k] = f32::NAN.to_bits();
+        match catmodel::node::NodeConfig::from_image(&bad) {
+            Err(_) => refused += 1,
+            Ok(other) => assert_ne!(other, config, "word {k}"),
+        }
+    }
+    assert!(refused > n / 2, "{refused} of {n} corrupt words refused");
+    assert!(catmodel::node::NodeConfig::from_image(&words[..n - 1]).is_err());
 }

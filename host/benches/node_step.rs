@@ -13,7 +13,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use catmodel::can::TimedFrame;
-use catmodel::node::{first_tick_us, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_host::replay::read_candump;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
@@ -48,7 +48,7 @@ fn bench_node_step(c: &mut Criterion) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/bundled.can.log");
     let frames = read_candump(&path).expect("data/bundled.can.log");
     let ticks = schedule(&frames);
-    let config = NodeConfig::paper().expect("published models");
+    let config = catmodel_host::model_file::paper().node_config();
 
     // State just before the middle tick.
     let mid = ticks.len() / 2;

@@ -31,7 +31,7 @@ fn validation_frames() -> Vec<TimedFrame> {
 }
 
 fn config() -> NodeConfig {
-    let mut config = NodeConfig::paper().expect("published models");
+    let mut config = catmodel_host::model_file::paper().node_config();
     config.origin_e7 = Some((
         (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
         (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,

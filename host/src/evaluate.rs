@@ -384,8 +384,15 @@ pub const PLOT_FILES: [&str; 4] = [
 
 /// Largest number of points per plotted series.
 const MAX_PLOT_POINTS: usize = 2000;
-/// Length of the zoomed GNSS window, s.
-const GNSS_WINDOW_S: f64 = 10.0;
+/// Prediction dots on the whole-drive path: few enough that the truth line shows between them.
+const MAX_PATH_DOTS: usize = 600;
+/// Prediction dots in the zoomed path window.
+const MAX_ZOOM_DOTS: usize = 120;
+/// Length of the zoomed windows (path and GNSS), s.
+const ZOOM_WINDOW_S: f64 = 10.0;
+/// Below this speed turning does not count towards picking the path's zoom window, m/s
+/// (a car turning its wheels at standstill shows nothing).
+const ZOOM_MIN_SPEED_MPS: f64 = 2.0;
 
 /// The horizon closest to `target_s` among the evaluated ones.
 fn nearest_horizon(predictions: &[Prediction], target_s: f64) -> Option<f64> {
@@ -395,9 +402,96 @@ fn nearest_horizon(predictions: &[Prediction], target_s: f64) -> Option<f64> {
         .min_by(|a, b| (a - target_s).abs().total_cmp(&(b - target_s).abs()))
 }
 
+/// The `len_s` window of the drive in which the car turns most (integral of |yaw rate| while
+/// moving at `ZOOM_MIN_SPEED_MPS` or more): where predictions and truth part most visibly.
+/// A drive without turns (or shorter than the window) gets its middle.
+fn turning_window(truth: &Truth, len_s: f64) -> (f64, f64) {
+    let s = truth.samples();
+    let (Some(first), Some(last)) = (s.first(), s.last()) else {
+        return (0.0, len_s);
+    };
+    let middle = || {
+        let mid = 0.5 * (first.t + last.t);
+        (
+            (mid - len_s / 2.0).max(first.t),
+            (mid + len_s / 2.0).min(last.t),
+        )
+    };
+    // Cumulative turning at each sample (trapezoid-free: the sample's rate over its step).
+    let mut turned = Vec::with_capacity(s.len());
+    let mut total = 0.0;
+    for (i, x) in s.iter().enumerate() {
+        let dt = i.checked_sub(1).map_or(0.0, |j| x.t - s[j].t);
+        if x.speed >= ZOOM_MIN_SPEED_MPS {
+            total += x.yaw_rate.abs() * dt;
+        }
+        turned.push(total);
+    }
+    let mut best = (0.0, middle());
+    let mut end = 0;
+    for (i, x) in s.iter().enumerate() {
+        while end + 1 < s.len() && s[end + 1].t <= x.t + len_s {
+            end += 1;
+        }
+        if s[end].t - x.t < 0.99 * len_s {
+            break;
+        }
+        let turn = turned[end] - turned[i];
+        if turn > best.0 {
+            best = (turn, (x.t, s[end].t));
+        }
+    }
+    best.1
+}
+
+#[cfg(test)]
+mod plot_window_tests {
+    use super::*;
+
+    /// 60 s at 5 m/s: straight, a 90 degree turn over t = 30 .. 36 s, straight again; and
+    /// the same turn taken at 1 m/s, which must not count.
+    fn drive(turn_speed_mps: f64) -> Truth {
+        let rate = std::f64::consts::FRAC_PI_2 / 6.0;
+        Truth::new(
+            (0..=6000)
+                .map(|i| {
+                    let t = i as f64 * 0.01;
+                    let turning = (30.0..36.0).contains(&t);
+                    TruthSample {
+                        t,
+                        x: 0.0,
+                        y: 0.0,
+                        heading: 0.0,
+                        yaw_rate: if turning { rate } else { 0.0 },
+                        speed: if turning { turn_speed_mps } else { 5.0 },
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn zoom_window_holds_the_turn() {
+        let (t0, t1) = turning_window(&drive(5.0), 10.0);
+        assert!((t1 - t0 - 10.0).abs() < 0.02, "{t0} .. {t1}");
+        // Every turning sample (30.00 .. 35.99 s) inside.
+        assert!(t0 <= 30.0 && t1 >= 35.99 - 1e-9, "{t0} .. {t1}");
+        // Turning at walking pace does not count: the middle of the drive.
+        let (t0, t1) = turning_window(&drive(1.0), 10.0);
+        assert!(
+            (t0 - 25.0).abs() < 1e-9 && (t1 - 35.0).abs() < 1e-9,
+            "{t0} .. {t1}"
+        );
+        // A drive shorter than the window: all of it.
+        let short = Truth::new(drive(5.0).samples()[..500].to_vec());
+        assert_eq!(turning_window(&short, 10.0), (0.0, 4.99));
+    }
+}
+
 /// Writes the evaluation's figures as SVG into `dir` (see [`PLOT_FILES`]):
-/// - `path.svg`: the true path of the whole drive, the node's predictions about 1 s ahead and
-///   the baseline's, placed where they predict the car (east/north, m, equal scale);
+/// - `path.svg`: two panels: the whole drive (truth, the node's and the baseline's predictions
+///   about 1 s ahead, placed where they predict the car; east/north, m, equal scale), with the
+///   10 s window in which the car turns most marked; and that window enlarged;
 /// - `error_vs_horizon.svg`: RMS position error against horizon, node vs kinematic baseline,
 ///   with the raw GNSS RMS error as a reference line;
 /// - `gnss_window.svg`: a 10 s window in the middle of the drive: raw GNSS fixes, the node's
@@ -405,6 +499,7 @@ fn nearest_horizon(predictions: &[Prediction], target_s: f64) -> Option<f64> {
 /// - `position_error_time.svg`: position error over time of the filtered position and of raw
 ///   GNSS.
 ///
+/// Every legend sits below its panels; the truth is drawn last, on top of the dots.
 /// Returns the paths written.
 pub fn write_plots(
     dir: &std::path::Path,
@@ -416,43 +511,114 @@ pub fn write_plots(
     evaluation: &Evaluation,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
     use crate::plot::{decimate, Figure, PALETTE};
-    let [truth_c, node_c, base_c, gnss_c, axle_c, ..] = PALETTE;
+    let [truth_c, node_c, base_c, gnss_c, axle_c, window_c] = PALETTE;
     let paths: Vec<_> = PLOT_FILES.iter().map(|f| dir.join(f)).collect();
     let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
+    let t0 = predictions.first().map_or(0.0, |p| p.t);
+    let t1 = predictions.last().map_or(0.0, |p| p.t);
 
-    // 1. Path with the ~1 s-ahead predictions.
+    // 1. Path with the ~1 s-ahead predictions, whole drive and the most turning window.
     let h1 = nearest_horizon(predictions, 1.0).unwrap_or(1.0);
-    let node_h1: Vec<(f64, f64)> = predictions
+    // (time the prediction is for, x, y)
+    let node_h1: Vec<(f64, f64, f64)> = predictions
         .iter()
         .filter(|p| (p.horizon_s - h1).abs() < 1e-6)
-        .map(|p| (p.x, p.y))
+        .map(|p| (p.t + h1, p.x, p.y))
         .collect();
     let ticks: Vec<(f64, Vec<f64>)> = {
         let mut t: Vec<f64> = predictions.iter().map(|p| p.t).collect();
         t.dedup();
         t.into_iter().map(|t| (t, vec![h1])).collect()
     };
-    let base_h1: Vec<(f64, f64)> = baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks)
-        .into_iter()
-        .map(|(_, _, (x, y, _, _))| (x, y))
+    let base_h1: Vec<(f64, f64, f64)> =
+        baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks)
+            .into_iter()
+            .map(|(t, _, (x, y, _, _))| (t + h1, x, y))
+            .collect();
+    let (z0, z1) = turning_window(truth, ZOOM_WINDOW_S);
+    let within = |pts: &[(f64, f64, f64)], max: usize| -> Vec<(f64, f64)> {
+        let xy: Vec<(f64, f64)> = pts
+            .iter()
+            .filter(|p| p.0 >= z0 && p.0 <= z1)
+            .map(|p| (p.1, p.2))
+            .collect();
+        decimate(&xy, max)
+    };
+    let all = |pts: &[(f64, f64, f64)]| -> Vec<(f64, f64)> {
+        decimate(
+            &pts.iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(),
+            MAX_PATH_DOTS,
+        )
+    };
+    let truth_zoom: Vec<(f64, f64)> = truth
+        .samples()
+        .iter()
+        .filter(|s| s.t >= z0 && s.t <= z1)
+        .map(|s| (s.x, s.y))
         .collect();
+    let (bx0, bx1, by0, by1) = truth_zoom.iter().fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+    );
+    let margin_m = 2.0;
+    let window_box = if bx0 <= bx1 {
+        vec![
+            (bx0 - margin_m, by0 - margin_m),
+            (bx1 + margin_m, by0 - margin_m),
+            (bx1 + margin_m, by1 + margin_m),
+            (bx0 - margin_m, by1 + margin_m),
+            (bx0 - margin_m, by0 - margin_m),
+        ]
+    } else {
+        Vec::new()
+    };
+    let base_label = format!("kinematic baseline (raw GNSS), {h1:.1} s ahead");
+    let node_label = format!("node, {h1:.1} s ahead");
+    let truth_label = "truth (rear axle)";
     Figure::new(
         &format!("Path: truth and predictions {h1:.1} s ahead"),
         "east (m)",
         "north (m)",
     )
-    .line("truth", decimate(&truth_xy, MAX_PLOT_POINTS))
-    .color(truth_c)
-    .scatter(
-        &format!("kinematic baseline (raw GNSS), {h1:.1} s ahead"),
-        decimate(&base_h1, MAX_PLOT_POINTS),
-    )
+    .size(1400, 720)
+    .subtitle(&format!("Whole drive, t = {t0:.1} .. {t1:.1} s"))
+    .scatter(&base_label, all(&base_h1))
     .color(base_c)
-    .scatter(
-        &format!("node, {h1:.1} s ahead"),
-        decimate(&node_h1, MAX_PLOT_POINTS),
-    )
+    .scatter(&node_label, all(&node_h1))
     .color(node_c)
+    .series(
+        truth_label,
+        decimate(&truth_xy, MAX_PLOT_POINTS),
+        crate::plot::Style::Line { width_px: 1 },
+    )
+    .color(truth_c)
+    .series(
+        "enlarged on the right",
+        window_box,
+        crate::plot::Style::Line { width_px: 2 },
+    )
+    .color(window_c)
+    .equal_aspect()
+    .panel(
+        &format!("Enlarged: t = {z0:.1} .. {z1:.1} s, where the car turns most"),
+        "east (m)",
+        "north (m)",
+    )
+    .scatter(&base_label, within(&base_h1, MAX_ZOOM_DOTS))
+    .color(base_c)
+    .scatter(&node_label, within(&node_h1, MAX_ZOOM_DOTS))
+    .color(node_c)
+    .series(
+        truth_label,
+        truth_zoom,
+        crate::plot::Style::Line { width_px: 1 },
+    )
+    .color(truth_c)
     .equal_aspect()
     .write_svg(&paths[0])?;
 
@@ -482,7 +648,7 @@ pub fn write_plots(
     .line("raw GNSS (horizon 0)", vec![(0.0, raw), (last_h, raw)])
     .color(gnss_c)
     .line(
-        "raw GNSS at the rear axle, true heading (horizon 0)",
+        "raw GNSS moved to the rear axle with the true heading (horizon 0)",
         vec![(0.0, raw_axle), (last_h, raw_axle)],
     )
     .color(axle_c)
@@ -490,12 +656,10 @@ pub fn write_plots(
     .write_svg(&paths[1])?;
 
     // 3. Zoomed window: raw vs filtered vs truth.
-    let t0 = predictions.first().map_or(0.0, |p| p.t);
-    let t1 = predictions.last().map_or(0.0, |p| p.t);
     let mid = 0.5 * (t0 + t1);
     let (w0, w1) = (
-        (mid - GNSS_WINDOW_S / 2.0).max(t0),
-        (mid + GNSS_WINDOW_S / 2.0).min(t1),
+        (mid - ZOOM_WINDOW_S / 2.0).max(t0),
+        (mid + ZOOM_WINDOW_S / 2.0).min(t1),
     );
     let in_window = |t: f64| t >= w0 && t <= w1;
     let raw_xy: Vec<(f64, f64)> = inputs
@@ -516,16 +680,22 @@ pub fn write_plots(
         .map(|s| (s.x, s.y))
         .collect();
     Figure::new(
-        &format!("GNSS raw vs filtered vs truth, t = {w0:.1} .. {w1:.1} s"),
+        "GNSS: raw fixes, filtered position and truth",
         "east (m)",
         "north (m)",
     )
-    .scatter("raw GNSS", raw_xy)
+    .subtitle(&format!(
+        "t = {w0:.1} .. {w1:.1} s, the middle of the drive"
+    ))
+    .scatter(
+        &format!("raw GNSS fixes (antenna, {antenna_ahead_m:.2} m ahead of the rear axle)"),
+        raw_xy,
+    )
     .color(gnss_c)
-    .line("truth", truth_window)
-    .color(truth_c)
-    .line("node, filtered (horizon 0)", filtered_xy)
+    .line("node, filtered (horizon 0, rear axle)", filtered_xy)
     .color(node_c)
+    .line(truth_label, truth_window)
+    .color(truth_c)
     .equal_aspect()
     .write_svg(&paths[2])?;
 
@@ -551,11 +721,16 @@ pub fn write_plots(
         "time (s)",
         "position error (m)",
     )
-    .line("raw GNSS", decimate(&raw_err, MAX_PLOT_POINTS))
+    .series(
+        "raw GNSS",
+        decimate(&raw_err, MAX_PLOT_POINTS),
+        crate::plot::Style::Line { width_px: 1 },
+    )
     .color(gnss_c)
-    .line(
+    .series(
         "node, filtered (horizon 0)",
         decimate(&filtered_err, MAX_PLOT_POINTS),
+        crate::plot::Style::Line { width_px: 1 },
     )
     .color(node_c)
     .y_from_zero()
@@ -566,6 +741,14 @@ pub fn write_plots(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The CAT Vehicle's geometry (test reference; the CLI takes it from the model file).
+    const CAT_VEHICLE: catmodel::vehicle::VehicleParams = catmodel::vehicle::VehicleParams {
+        wheelbase_m: 2.62,
+        track_m: 1.55,
+        max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
+        understeer_s2_per_m2: 0.0015,
+    };
 
     fn truth_line() -> Truth {
         // 10 m/s due north for 10 s.
@@ -609,7 +792,7 @@ mod tests {
             &preds,
             &truth,
             &BaselineInputs::default(),
-            &catmodel::vehicle::CAT_VEHICLE,
+            &CAT_VEHICLE,
             1.478,
         );
         assert_eq!(e.horizons.len(), 2);

@@ -2,21 +2,24 @@
 //! Links the same `catmodel` core for everything the node does.
 pub mod closed_loop;
 pub mod csv2can;
+pub mod dbc;
+pub mod decode;
 pub mod evaluate;
 pub mod identify;
 pub mod logcsv;
-pub mod model_file;
 pub mod plot;
 pub mod progress;
 pub mod replay;
 pub mod sil;
 pub mod sim;
 
+/// The model file reader (crate `catmodel-model-file`): the same one the firmware build uses.
+pub use catmodel_model_file as model_file;
+
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use catmodel::can::codec::{decode_input, InputMessage};
-use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::geodesy::LocalFrame;
 use evaluate::{BaselineInputs, Evaluation, Prediction, Truth};
 
@@ -142,9 +145,32 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     Ok(out)
 }
 
+/// What the evaluation needs to know about the car (from its model file): the kinematic
+/// baseline's geometry and where the GNSS antenna sits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Car {
+    /// Steering geometry (eq 2-4).
+    pub vehicle: catmodel::vehicle::VehicleParams,
+    /// GNSS antenna ahead of the rear axle, m.
+    pub antenna_ahead_m: f64,
+    /// NMEA 2000 source address of the GNSS receiver.
+    pub gnss_source: u8,
+}
+
+impl Car {
+    /// The car a model file describes.
+    pub fn from_model(file: &model_file::ModelFile) -> Self {
+        Self {
+            vehicle: file.vehicle.params(),
+            antenna_ahead_m: file.vehicle.antenna_ahead_m,
+            gnss_source: file.inputs.gnss_source_address,
+        }
+    }
+}
+
 /// The baseline's inputs from a candump of the node's input frames, GNSS in local metres
 /// around `origin_deg`. Frames the node would reject are skipped here too.
-pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64)) -> Result<BaselineInputs> {
+pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64), car: &Car) -> Result<BaselineInputs> {
     let frames = replay::read_candump(path)?;
     let frame = LocalFrame::new(
         (origin_deg.0 * 1e7).round() as i32,
@@ -154,7 +180,7 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64)) -> Result<BaselineIn
     let mut inputs = BaselineInputs::default();
     for f in frames {
         let t = f.t_us as f64 * 1e-6;
-        match decode_input(&f.frame, N2K_DEFAULT_SOURCE) {
+        match decode_input(&f.frame, car.gnss_source) {
             Ok(InputMessage::Steering(m, _)) => {
                 if let Some(p) = m.steer_pct {
                     inputs.steer.push((t, f64::from(p)));
@@ -186,6 +212,8 @@ pub struct EvaluationData {
     pub truth: Truth,
     /// Raw GNSS, speed and steering from the candump.
     pub inputs: BaselineInputs,
+    /// The car.
+    pub car: Car,
 }
 
 impl EvaluationData {
@@ -195,22 +223,24 @@ impl EvaluationData {
         truth: &Path,
         inputs: &Path,
         origin_deg: (f64, f64),
+        car: Car,
     ) -> Result<Self> {
         Ok(Self {
             predictions: read_predictions(predictions)?,
             truth: Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?),
-            inputs: baseline_inputs(inputs, origin_deg)?,
+            inputs: baseline_inputs(inputs, origin_deg, &car)?,
+            car,
         })
     }
 
-    /// Scores the predictions and the baseline (the CAT Vehicle's geometry for the baseline).
+    /// Scores the predictions and the baseline (the car's geometry for the baseline).
     pub fn evaluate(&self) -> Evaluation {
         evaluate::evaluate(
             &self.predictions,
             &self.truth,
             &self.inputs,
-            &catmodel::vehicle::CAT_VEHICLE,
-            f64::from(catmodel::node::CAT_VEHICLE_ANTENNA_AHEAD_M),
+            &self.car.vehicle,
+            self.car.antenna_ahead_m,
         )
     }
 
@@ -221,71 +251,29 @@ impl EvaluationData {
             &self.predictions,
             &self.truth,
             &self.inputs,
-            &catmodel::vehicle::CAT_VEHICLE,
-            f64::from(catmodel::node::CAT_VEHICLE_ANTENNA_AHEAD_M),
+            &self.car.vehicle,
+            self.car.antenna_ahead_m,
             evaluation,
         )
     }
 }
 
-/// `catmodel evaluate` on files.
+/// `catmodel evaluate` on files, for the car of `models/paper.toml`.
 pub fn evaluate_files(
     predictions: &Path,
     truth: &Path,
     inputs: &Path,
     origin_deg: (f64, f64),
 ) -> Result<Evaluation> {
-    Ok(EvaluationData::read(predictions, truth, inputs, origin_deg)?.evaluate())
+    let car = Car::from_model(&model_file::load(&model_file::paper_path())?);
+    Ok(EvaluationData::read(predictions, truth, inputs, origin_deg, car)?.evaluate())
 }
 
-/// The node configuration for a model file (`None`: the published models, exactly as the
-/// firmware's default). The file's vehicle, hybrid thresholds, speed model (one block) and
-/// dx/dt model (four blocks, inputs `[v_m, x, y, phi]`) replace the published ones; a lateral
-/// section's estimated steering gain scales the steering angle at 100 %. Everything else
-/// (GNSS lowpass, timeouts, gates) is the node's own.
+/// The node configuration for a model file (`None`: the published `models/paper.toml`, exactly
+/// as the firmware's default): the very configuration the firmware build bakes from that file.
 pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {
-    use catmodel::node::{NodeConfig, NodeModels};
-    let Some(path) = model else {
-        return NodeConfig::paper()
-            .map_err(|e| anyhow::anyhow!("building the published models: {e:?}"));
-    };
-    let file = model_file::load(path)?;
-    let velocity = match file.speed.blocks.as_slice() {
-        [b] => b.tf,
-        blocks => bail!(
-            "{}: the node runs a single-input speed model; [speed] has {} blocks",
-            path.display(),
-            blocks.len()
-        ),
-    };
-    let dxdt: [catmodel::model::tf::TransferFunction; 4] =
-        file.dx_dt.tfs().try_into().map_err(|v: Vec<_>| {
-            anyhow::anyhow!(
-                "{}: the node runs the dx/dt model with 4 inputs [v_m, x, y, phi]; [dx_dt] has {}",
-                path.display(),
-                v.len()
-            )
-        })?;
-    let mut vehicle = file.vehicle.params();
-    if let Some(lateral) = &file.lateral {
-        vehicle.max_steer_rad =
-            (file.vehicle.max_steer_deg.to_radians() * lateral.steer_gain) as f32;
-        vehicle.understeer_s2_per_m2 = lateral.understeer_s2_per_m2 as f32;
-    }
-    NodeConfig::with_models(&NodeModels {
-        vehicle,
-        hybrid: file.hybrid.config(),
-        velocity,
-        dxdt,
-        ts_s: file.sample_time_s,
-    })
-    .map_err(|e| {
-        anyhow::anyhow!(
-            "{}: the node cannot run these models: {}",
-            path.display(),
-            model_file::describe_model_error(&e)
-        )
-    })
+    let path = model.map_or_else(model_file::paper_path, Path::to_path_buf);
+    Ok(model_file::load(&path)?.node_config())
 }
 
 #[cfg(test)]

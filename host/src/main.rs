@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Result};
 use catmodel_host::progress::Progress;
-use catmodel_host::{csv2can, evaluate, identify, logcsv, model_file, replay, sim};
+use catmodel_host::{csv2can, decode, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -78,6 +78,10 @@ enum Command {
         /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
         #[arg(long, value_parser = parse_origin)]
         origin: Option<(f64, f64)>,
+        /// The car's model file (its geometry for the kinematic baseline, its GNSS antenna and
+        /// receiver address; default: models/paper.toml).
+        #[arg(long)]
+        model: Option<PathBuf>,
         /// Also write the evaluation as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -178,6 +182,17 @@ enum Command {
         /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
         #[arg(long, value_parser = parse_origin)]
         origin: Option<(f64, f64)>,
+    },
+    /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
+    Decode {
+        /// candump log.
+        log: PathBuf,
+        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        messages: Vec<String>,
+        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
+        #[arg(long)]
+        csv: bool,
     },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
@@ -305,16 +320,20 @@ fn run(cli: Cli) -> Result<()> {
             truth,
             inputs,
             origin,
+            model,
             json,
             plots,
         } => {
+            let model = model_file::load(&model.unwrap_or_else(model_file::paper_path))?;
+            let car = catmodel_host::Car::from_model(&model);
             let inputs = match inputs {
                 Some(p) => p,
                 None => sibling_candump(&truth)?,
             };
             let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
             let progress = Progress::spinner("reading");
-            let data = catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin)?;
+            let data =
+                catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
             progress.set_message("evaluating");
             let e = data.evaluate();
             let written = match &plots {
@@ -452,17 +471,27 @@ fn run(cli: Cli) -> Result<()> {
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
             let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
-            let controller = catmodel_host::closed_loop::controller_named(
-                "pure-pursuit",
+            // The receiver is unknown over SIL: plan for the vehicle file's standard one.
+            let rms = catmodel_host::closed_loop::receiver_rms_m(
                 &vehicle,
                 catmodel_host::closed_loop::Receiver::Standard,
-            )?;
+            );
+            let controller =
+                catmodel_host::closed_loop::controller_named("pure-pursuit", &config, rms)?;
             let mut driver =
                 catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
             let stdin = std::io::stdin().lock();
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             Ok(())
+        }
+        Command::Decode { log, messages, csv } => {
+            let format = if csv {
+                decode::Format::Csv
+            } else {
+                decode::Format::Table
+            };
+            decode::run(&log, &messages, format)
         }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;

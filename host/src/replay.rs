@@ -946,7 +946,7 @@ mod tests {
         // Ticks at 20 000 (first frame 1 us rounded up) .. 100 000 (last frame 80 001 us).
         let frames = [at(1), at(50_000), at(80_001)];
         assert_eq!(tick_count(&frames), 5);
-        let config = NodeConfig::paper().unwrap();
+        let config = crate::model_file::paper().node_config();
         let mut calls = Vec::new();
         let out = replay_with_progress(&frames, config, ReplayText::default(), |n| calls.push(n));
         assert_eq!(out.ticks, 5);
@@ -1152,7 +1152,7 @@ mod tests {
     fn replay_text_equals_the_format_reference_on_the_bundled_drive() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/bundled.can.log");
         let frames = read_candump(&path).unwrap();
-        let config = NodeConfig::paper().unwrap();
+        let config = crate::model_file::paper().node_config();
         let out = replay(&frames, config.clone());
         let mut csv = String::from(CSV_HEADER);
         let mut tx_log = String::new();
@@ -1203,7 +1203,7 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/bundled.can.log");
         let text = std::fs::read_to_string(&path).unwrap();
         let frames = read_candump(&path).unwrap();
-        let config = NodeConfig::paper().unwrap();
+        let config = crate::model_file::paper().node_config();
         let (mut csv_a, mut tx_a, mut csv_b, mut tx_b) = (vec![], vec![], vec![], vec![]);
         let a = replay_into(&frames, config.clone(), &mut csv_a, Some(&mut tx_a), |_| {}).unwrap();
         let b = replay_text_into(

@@ -12,7 +12,7 @@ use catmodel_host::closed_loop::scenario::{
     self, dlc_lanes, Kind, CONE_RADIUS_M, CONE_SPACING_M, DLC_PATH_MARGIN_M,
 };
 use catmodel_host::closed_loop::{
-    controller_named, core_path, load_setup, run, Receiver, RunOptions,
+    controller_named, core_path, load_setup, receiver_rms_m, run, Receiver, RunOptions,
 };
 use catmodel_host::sim::config::{Body, VehicleConfig};
 
@@ -204,7 +204,8 @@ fn run_pp(
 ) -> catmodel_host::closed_loop::RunOutput {
     let (vehicle, node) = load_setup(None, None).unwrap();
     let course = scenario::course(kind, &vehicle.body, speed);
-    let controller = controller_named("pure-pursuit", &vehicle, receiver).unwrap();
+    let controller =
+        controller_named("pure-pursuit", &node, receiver_rms_m(&vehicle, receiver)).unwrap();
     let mut driver = NodeDriver::new(node, controller);
     let options = RunOptions {
         seed,

@@ -85,29 +85,38 @@ fn published_model_file_identified_model_and_refusals() {
         "same ticks, same frames"
     );
     assert_ne!(a, b, "an identified model changes the predictions");
+}
 
-    // A model the node cannot run: a speed model of 3rd order (the node's block is 2nd order).
-    let text = std::fs::read_to_string(repo("models/paper.toml")).unwrap();
-    let third = text.replacen(
-        "den = [1.0, 1.629, 0.7522]",
-        "den = [1.0, 2.629, 2.3812, 0.7522]",
-        1,
-    );
-    assert_ne!(third, text);
-    let bad = format!("{d}/third.toml");
-    std::fs::write(&bad, third).unwrap();
-    let out = run(&[
-        "replay",
-        &bundled,
-        "--model",
-        &bad,
-        "--out",
-        &format!("{d}/x.csv"),
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("third.toml") && err.contains("cannot run"),
-        "{err}"
-    );
+/// Every file of the bad corpus (`models/bad/`) is refused by `replay --model` with exit status
+/// 1 and exactly the reader's message (the firmware build prints the same message: `cargo
+/// xtask model-corpus`).
+#[test]
+fn replay_refuses_the_bad_corpus_with_the_readers_message() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/bad");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let message = catmodel_host::model_file::load(&path).unwrap_err().message;
+        let out = run(&[
+            "replay",
+            &repo("data/bundled.can.log"),
+            "--model",
+            path.to_str().unwrap(),
+            "--out",
+            "/dev/null",
+        ]);
+        assert_eq!(out.status.code(), Some(1), "{}", path.display());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            err.trim_end(),
+            format!("catmodel: error: {}: {message}", path.display()),
+            "{}",
+            path.display()
+        );
+        checked += 1;
+    }
+    assert!(checked >= 20);
 }

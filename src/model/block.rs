@@ -18,6 +18,8 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
+
 use super::delay::{DelayLine, DelayLineState};
 use super::tf::{ModelError, TransferFunction};
 use super::zoh::{discretize, DiscreteStateSpace};
@@ -25,6 +27,44 @@ use super::zoh::{discretize, DiscreteStateSpace};
 /// Default input-delay capacity of a block, samples: 64 x 20 ms = 1.28 s, three times eq 5's
 /// 0.42 s (21 samples). Costs 256 bytes of state per block.
 pub const DEFAULT_DELAY_CAP: usize = 64;
+
+/// A, B, C, D, the delay, the equilibrium and the gain, as the f64 discretization rounded them.
+impl<const N: usize, const DELAY_CAP: usize> Image for SsBlock<N, DELAY_CAP> {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            a,
+            b,
+            c,
+            d,
+            delay,
+            x_eq_per_u,
+            dc_gain,
+        } = self;
+        a.write(w);
+        b.write(w);
+        c.write(w);
+        d.write(w);
+        delay.delay_samples().write(w);
+        x_eq_per_u.write(w);
+        dc_gain.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        let a = SMatrix::read(r)?;
+        let b = SVector::read(r)?;
+        let c = SVector::read(r)?;
+        let d = f32::read(r)?;
+        let delay = DelayLine::new(usize::read(r)?).map_err(|_| r.out_of_range())?;
+        Ok(Self {
+            a,
+            b,
+            c,
+            d,
+            delay,
+            x_eq_per_u: Option::read(r)?,
+            dc_gain: Option::read(r)?,
+        })
+    }
+}
 
 /// A discrete SISO LTI block of order `N` with an input delay of up to `DELAY_CAP` samples
 /// (configuration; immutable once built).
@@ -182,6 +222,21 @@ impl<const N: usize, const DELAY_CAP: usize> SsBlock<N, DELAY_CAP> {
     }
 }
 
+impl<const N: usize, const M: usize, const DELAY_CAP: usize> Image for MisoBlock<N, M, DELAY_CAP> {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        for block in &self.blocks {
+            block.write(w);
+        }
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        let mut blocks = [SsBlock::zeroed(); M];
+        for block in blocks.iter_mut() {
+            *block = SsBlock::read(r)?;
+        }
+        Ok(Self { blocks })
+    }
+}
+
 /// `M` SISO blocks of order `N`, one per input, outputs summed: `y = sum_i h_i(u_i)` (eq 7).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MisoBlock<const N: usize, const M: usize, const DELAY_CAP: usize = DEFAULT_DELAY_CAP> {
@@ -207,6 +262,11 @@ impl<const N: usize, const M: usize, const DELAY_CAP: usize> MisoBlock<N, M, DEL
             *block = SsBlock::from_tf(tf, ts_s)?;
         }
         Ok(Self { blocks })
+    }
+
+    /// The blocks of each input, in input order.
+    pub fn from_blocks(blocks: [SsBlock<N, DELAY_CAP>; M]) -> Self {
+        Self { blocks }
     }
 
     /// The SISO block of each input.

@@ -16,6 +16,7 @@
 //! stability at any speed. Below [`DynamicParams::min_speed_mps`] the 1/vx terms are
 //! meaningless and the model falls back to the kinematic steady state (the hybrid switch keeps
 //! it out of that range anyway).
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 
 /// Mass, geometry and tyre stiffness. Immutable configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,17 +38,59 @@ pub struct DynamicParams {
     pub min_speed_mps: f32,
 }
 
-/// The CAT Vehicle (facts.md): 1741 kg, lf 1.142 m, lr 1.478 m, Iz ~2500 kg m^2, Cf ~80 kN/rad,
-/// Cr ~91 kN/rad (a pair consistent with the 0.0015 understeer term of eq 2).
-pub const CAT_VEHICLE_DYNAMICS: DynamicParams = DynamicParams {
+/// The CAT Vehicle's figures, as a test reference (the node's come from the model file's
+/// `[dynamics]`): 1741 kg, lf 1.142 m, lr 1.478 m, Iz ~2500 kg m^2 (CAT Vehicle simulator body),
+/// Cf ~80 kN/rad, Cr ~91 kN/rad (a pair consistent with the 0.0015 understeer term of eq 2).
+#[cfg(test)]
+pub(crate) const CAT_VEHICLE_DYNAMICS: DynamicParams = DynamicParams {
     mass_kg: 1741.0,
     yaw_inertia_kg_m2: 2500.0,
     cg_to_front_m: 1.142,
     cg_to_rear_m: 1.478,
     cornering_front_n_per_rad: 80_000.0,
     cornering_rear_n_per_rad: 91_000.0,
-    min_speed_mps: 1.0,
+    min_speed_mps: MIN_SPEED_MPS,
 };
+
+/// Below this speed the single-track model's 1/vx terms make it meaningless and it is replaced
+/// by its kinematic limit, m/s (a property of the model, not of a car).
+pub const MIN_SPEED_MPS: f32 = 1.0;
+
+impl Image for DynamicParams {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            mass_kg,
+            yaw_inertia_kg_m2,
+            cg_to_front_m,
+            cg_to_rear_m,
+            cornering_front_n_per_rad,
+            cornering_rear_n_per_rad,
+            min_speed_mps,
+        } = self;
+        for v in [
+            mass_kg,
+            yaw_inertia_kg_m2,
+            cg_to_front_m,
+            cg_to_rear_m,
+            cornering_front_n_per_rad,
+            cornering_rear_n_per_rad,
+            min_speed_mps,
+        ] {
+            v.write(w);
+        }
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            mass_kg: f32::read(r)?,
+            yaw_inertia_kg_m2: f32::read(r)?,
+            cg_to_front_m: f32::read(r)?,
+            cg_to_rear_m: f32::read(r)?,
+            cornering_front_n_per_rad: f32::read(r)?,
+            cornering_rear_n_per_rad: f32::read(r)?,
+            min_speed_mps: f32::read(r)?,
+        })
+    }
+}
 
 /// Lateral state.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -5,6 +5,7 @@
 //!
 //! Hysteresis plus a minimum dwell make it impossible to chatter: the mode changes at most once
 //! per `min_dwell_ticks`, whatever the inputs (proved by a property test).
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 
 /// The lateral model in use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -33,15 +34,47 @@ pub struct HybridConfig {
     pub min_dwell_ticks: u16,
 }
 
-/// Kinematic below ~4 m/s and low lateral acceleration, dynamic above 6 m/s or |a_y| >= 2 m/s^2;
-/// a mode is kept for at least 0.5 s (25 ticks of 20 ms).
-pub const DEFAULT_HYBRID: HybridConfig = HybridConfig {
+/// A hybrid configuration as a test reference (the node's comes from the model file): kinematic
+/// below ~4 m/s and low lateral acceleration, dynamic above 6 m/s or |a_y| >= 2 m/s^2; a mode is
+/// kept for at least 0.5 s (25 ticks of 20 ms).
+#[cfg(test)]
+pub(crate) const DEFAULT_HYBRID: HybridConfig = HybridConfig {
     enter_dynamic_speed_mps: 6.0,
     enter_dynamic_lat_accel_mps2: 2.0,
     exit_dynamic_speed_mps: 4.0,
     exit_dynamic_lat_accel_mps2: 1.5,
     min_dwell_ticks: 25,
 };
+
+impl Image for HybridConfig {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            enter_dynamic_speed_mps,
+            enter_dynamic_lat_accel_mps2,
+            exit_dynamic_speed_mps,
+            exit_dynamic_lat_accel_mps2,
+            min_dwell_ticks,
+        } = self;
+        for v in [
+            enter_dynamic_speed_mps,
+            enter_dynamic_lat_accel_mps2,
+            exit_dynamic_speed_mps,
+            exit_dynamic_lat_accel_mps2,
+        ] {
+            v.write(w);
+        }
+        min_dwell_ticks.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            enter_dynamic_speed_mps: f32::read(r)?,
+            enter_dynamic_lat_accel_mps2: f32::read(r)?,
+            exit_dynamic_speed_mps: f32::read(r)?,
+            exit_dynamic_lat_accel_mps2: f32::read(r)?,
+            min_dwell_ticks: u16::read(r)?,
+        })
+    }
+}
 
 /// Switch state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

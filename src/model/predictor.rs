@@ -21,6 +21,7 @@
 use super::dynamic::{DynamicParams, LateralState, LateralStepper};
 use super::hybrid::Mode;
 use super::kinematic::Pose;
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 use crate::vehicle::VehicleParams;
 
 /// Horizon shape. Immutable configuration.
@@ -35,6 +36,29 @@ pub struct HorizonConfig {
     pub output_every: u16,
     /// Predicted speeds are clamped to [0, max_speed_mps].
     pub max_speed_mps: f32,
+}
+
+impl Image for HorizonConfig {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            steps,
+            dt_s,
+            output_every,
+            max_speed_mps,
+        } = self;
+        steps.write(w);
+        dt_s.write(w);
+        output_every.write(w);
+        max_speed_mps.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            steps: u16::read(r)?,
+            dt_s: f32::read(r)?,
+            output_every: u16::read(r)?,
+            max_speed_mps: f32::read(r)?,
+        })
+    }
 }
 
 /// 2.0 s ahead in 20 ms steps, a point every 0.2 s (10 points).
@@ -89,24 +113,18 @@ pub struct PredictedPoint {
 
 /// Rolls forward. `speed_model_step` advances a copy of the velocity model by one step with the
 /// given commanded speed and returns its output (m/s). Fills `out` with up to `out.len()`
-/// points and returns how many were written.
+/// points and returns how many were written. The dynamic model runs when the start's mode is
+/// dynamic and the car has one (`dynamics`); otherwise the kinematic model.
 pub fn rollout(
     horizon: &HorizonConfig,
     vehicle: &VehicleParams,
-    dynamics: &DynamicParams,
+    dynamics: Option<&DynamicParams>,
     start: &PredictorStart,
     speed_model_step: impl FnMut(f32) -> f32,
     out: &mut [PredictedPoint],
 ) -> usize {
-    match start.mode {
-        Mode::Kinematic => {
-            let segment = ArcSegment {
-                curvature_per_m: vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps),
-                arc_m: 0.0,
-            };
-            roll(horizon, start, segment, speed_model_step, out)
-        }
-        Mode::Dynamic => {
+    match (start.mode, dynamics) {
+        (Mode::Dynamic, Some(dynamics)) => {
             let segment = SlipSegment {
                 stepper: dynamics.stepper(start.center_steer_rad, horizon.dt_s),
                 lateral: start.lateral,
@@ -114,6 +132,13 @@ pub fn rollout(
                 side_m: 0.0,
                 turn_rad: 0.0,
                 moment_m: 0.0,
+            };
+            roll(horizon, start, segment, speed_model_step, out)
+        }
+        _ => {
+            let segment = ArcSegment {
+                curvature_per_m: vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps),
+                arc_m: 0.0,
             };
             roll(horizon, start, segment, speed_model_step, out)
         }
@@ -267,7 +292,7 @@ mod tests {
         let n = rollout(
             &DEFAULT_HORIZON,
             &CAT_VEHICLE,
-            &CAT_VEHICLE_DYNAMICS,
+            Some(&CAT_VEHICLE_DYNAMICS),
             &s,
             |_| 5.0,
             &mut out,
@@ -293,7 +318,7 @@ mod tests {
         rollout(
             &DEFAULT_HORIZON,
             &CAT_VEHICLE,
-            &CAT_VEHICLE_DYNAMICS,
+            Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Kinematic, steer, 8.0),
             |_| 8.0,
             &mut kin,
@@ -301,7 +326,7 @@ mod tests {
         rollout(
             &DEFAULT_HORIZON,
             &CAT_VEHICLE,
-            &CAT_VEHICLE_DYNAMICS,
+            Some(&CAT_VEHICLE_DYNAMICS),
             &start(Mode::Dynamic, steer, 8.0),
             |_| 8.0,
             &mut dynm,
@@ -339,7 +364,7 @@ mod tests {
             rollout(
                 &DEFAULT_HORIZON,
                 &CAT_VEHICLE,
-                &CAT_VEHICLE_DYNAMICS,
+                Some(&CAT_VEHICLE_DYNAMICS),
                 &s,
                 |_| {
                     k += 1;
@@ -375,7 +400,7 @@ mod tests {
         rollout(
             &DEFAULT_HORIZON,
             &CAT_VEHICLE,
-            &CAT_VEHICLE_DYNAMICS,
+            Some(&CAT_VEHICLE_DYNAMICS),
             &s,
             |_| f32::NAN,
             &mut out,

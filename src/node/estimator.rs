@@ -13,13 +13,15 @@
 //! and pulled towards the course of the filtered GNSS track (or the receiver's COG, PGN 129026,
 //! when it is fresh) while the car moves, by a complementary filter.
 //!
-//! Lever arm: the receiver measures its antenna, which sits `antenna_ahead_m` ahead of the
-//! reference point of eq 8 (the rear axle, whose velocity points along the heading). Everything
-//! inside the filter is the antenna's; [`EstimatorState::position`] moves the result back to the
-//! rear axle along the heading, and the antenna's course, which in a turn leads the heading by
-//! `atan(antenna_ahead * yaw_rate / v)`, is corrected before it steers the heading.
+//! Lever arm: the receiver measures its antenna, which sits `antenna_ahead_m` ahead of and
+//! `antenna_left_m` left of the reference point of eq 8 (the rear axle, whose velocity points
+//! along the heading). Everything inside the filter is the antenna's;
+//! [`EstimatorState::position`] moves the result back to the rear axle, and the antenna's course,
+//! which in a turn leads the heading by `atan(ahead * yaw_rate / (v + left * yaw_rate))` (rigid
+//! body, no side slip at the rear axle), is corrected before it steers the heading.
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 use crate::math;
-use crate::signal::fir::{Fir, FirState};
+use crate::signal::fir::{FilterError, Fir, FirState};
 use crate::signal::moving_average::{MovingAverage, MovingAverageState};
 
 /// GNSS lowpass length: 20th order (paper II-C).
@@ -51,6 +53,58 @@ pub struct EstimatorConfig {
     pub course_min_speed_mps: f32,
     /// GNSS antenna ahead of the rear axle (the reference point of eq 8), m; 0 = on the axle.
     pub antenna_ahead_m: f32,
+    /// GNSS antenna left of the car's centre line, m (negative: right).
+    pub antenna_left_m: f32,
+    /// The receiver's fix period, s: the rate the lowpass is designed for and the unit of the
+    /// gap logic.
+    pub gnss_period_s: f32,
+}
+
+/// Lowpass cutoff for GNSS, Hz: the paper's 2 Hz, which passes the car's motion (manoeuvres
+/// below 1 Hz) and removes the receiver's white noise; below a 5 Hz receiver rate it is
+/// lowered to 0.4 x the rate so that the design stays below Nyquist.
+pub const GNSS_CUTOFF_HZ: f64 = 2.0;
+
+impl Image for EstimatorConfig {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            fir,
+            ma,
+            group_delay_fixes,
+            course_min_baseline_m,
+            course_gain,
+            course_min_speed_mps,
+            antenna_ahead_m,
+            antenna_left_m,
+            gnss_period_s,
+        } = self;
+        fir.write(w);
+        ma.write(w);
+        for v in [
+            group_delay_fixes,
+            course_min_baseline_m,
+            course_gain,
+            course_min_speed_mps,
+            antenna_ahead_m,
+            antenna_left_m,
+            gnss_period_s,
+        ] {
+            v.write(w);
+        }
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            fir: Fir::read(r)?,
+            ma: MovingAverage::read(r)?,
+            group_delay_fixes: f32::read(r)?,
+            course_min_baseline_m: f32::read(r)?,
+            course_gain: f32::read(r)?,
+            course_min_speed_mps: f32::read(r)?,
+            antenna_ahead_m: f32::read(r)?,
+            antenna_left_m: f32::read(r)?,
+            gnss_period_s: f32::read(r)?,
+        })
+    }
 }
 
 /// Planar position, m (east, north).
@@ -108,17 +162,25 @@ impl Default for EstimatorState {
 }
 
 impl EstimatorConfig {
-    /// The paper's filter for a GNSS rate `gnss_hz`: 21-tap Hamming lowpass at `cutoff_hz`,
-    /// then a 10-sample moving average; the antenna `antenna_ahead_m` ahead of the rear axle.
-    /// `None` if the design is impossible (cutoff >= Nyquist) or the lever arm is not finite.
-    pub fn paper(gnss_hz: f64, cutoff_hz: f64, antenna_ahead_m: f32) -> Option<Self> {
-        if !antenna_ahead_m.is_finite() {
-            return None;
+    /// The paper's filter for a receiver at `gnss_rate_hz` (designed in f64: on the host or in
+    /// the firmware build, never on the MCU): a 21-tap Hamming lowpass at [`GNSS_CUTOFF_HZ`],
+    /// then a 10-sample moving average; the antenna `antenna_ahead_m` ahead of the rear axle and
+    /// `antenna_left_m` left of the centre line.
+    pub fn design(
+        gnss_rate_hz: f64,
+        antenna_ahead_m: f32,
+        antenna_left_m: f32,
+    ) -> Result<Self, FilterError> {
+        if !(gnss_rate_hz.is_finite() && gnss_rate_hz > 0.0) {
+            return Err(FilterError::InvalidSampleRate);
         }
-        let fir = Fir::lowpass(cutoff_hz, gnss_hz).ok()?;
+        if !(antenna_ahead_m.is_finite() && antenna_left_m.is_finite()) {
+            return Err(FilterError::NonFiniteTap);
+        }
+        let fir = Fir::lowpass(GNSS_CUTOFF_HZ.min(0.4 * gnss_rate_hz), gnss_rate_hz)?;
         let ma = MovingAverage::default();
         let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
-        Some(Self {
+        Ok(Self {
             fir,
             ma,
             group_delay_fixes,
@@ -126,6 +188,8 @@ impl EstimatorConfig {
             course_gain: 0.05,
             course_min_speed_mps: 1.5,
             antenna_ahead_m,
+            antenna_left_m,
+            gnss_period_s: (1.0 / gnss_rate_hz) as f32,
         })
     }
 }
@@ -151,7 +215,8 @@ impl EstimatorState {
 
     /// Dead reckoning of the antenna: the car moved `dt_s` at `speed_mps` (rear axle, along the
     /// heading) while turning at `yaw_rate_rps`; the antenna also swings sideways by
-    /// `antenna_ahead * yaw_rate`. Call once per tick, before the tick's fixes are applied with
+    /// `antenna_ahead * yaw_rate` and, off the centre line, moves `antenna_left * yaw_rate`
+    /// faster along (the outside of a turn travels farther). Call once per tick, before the tick's fixes are applied with
     /// their time offsets.
     pub fn propagate(
         &mut self,
@@ -165,7 +230,7 @@ impl EstimatorState {
         let (s, c) = math::sin_cos(mid);
         // Close enough to the end-of-step heading for the <= 20 ms look-backs of `add_fix`.
         self.heading_sin_cos = (s, c);
-        let along_m = speed_mps * dt_s;
+        let along_m = (speed_mps + cfg.antenna_left_m * yaw_rate_rps) * dt_s;
         // Right of the heading is (cos, -sin); positive yaw rate (clockwise) swings the antenna
         // to the right.
         let across_m = cfg.antenna_ahead_m * yaw_rate_rps * dt_s;
@@ -222,14 +287,15 @@ impl EstimatorState {
             .copied()
     }
 
-    /// The rear axle now: [`Self::antenna_position`] moved back by the lever arm along the
-    /// heading. `None` without a position or a heading.
+    /// The rear axle now: [`Self::antenna_position`] moved back by the lever arm (ahead along
+    /// the heading `(sin, cos)`, left along `(-cos, sin)`). `None` without a position or a
+    /// heading.
     pub fn position(&self, cfg: &EstimatorConfig) -> Option<Xy> {
         let antenna = self.antenna_position(cfg)?;
         let (s, c) = math::sin_cos(self.heading_rad?);
         Some(Xy {
-            x_m: antenna.x_m - cfg.antenna_ahead_m * s,
-            y_m: antenna.y_m - cfg.antenna_ahead_m * c,
+            x_m: antenna.x_m - cfg.antenna_ahead_m * s + cfg.antenna_left_m * c,
+            y_m: antenna.y_m - cfg.antenna_ahead_m * c - cfg.antenna_left_m * s,
         })
     }
 
@@ -275,8 +341,9 @@ impl EstimatorState {
 
     /// Pulls the heading towards the antenna's course (rad, clockwise from north) measured
     /// `age_s` ago, given the current speed (> 0) and yaw rate. The antenna's course leads the
-    /// heading by `atan(antenna_ahead * yaw_rate / v)` (rigid body, no side slip at the rear
-    /// axle); that is removed first. The first course initialises the heading.
+    /// heading by `atan(antenna_ahead * yaw_rate / (v + antenna_left * yaw_rate))` (rigid body,
+    /// no side slip at the rear axle); that is removed first. The first course initialises the
+    /// heading.
     pub fn correct_heading(
         &mut self,
         cfg: &EstimatorConfig,
@@ -285,8 +352,10 @@ impl EstimatorState {
         speed_mps: f32,
         yaw_rate_rps: f32,
     ) {
-        let lead_rad = if speed_mps > 0.0 {
-            math::atan(cfg.antenna_ahead_m * yaw_rate_rps / speed_mps)
+        // The antenna's speed along the heading; the course says nothing when it is not ahead.
+        let antenna_along_mps = speed_mps + cfg.antenna_left_m * yaw_rate_rps;
+        let lead_rad = if speed_mps > 0.0 && antenna_along_mps > 0.0 {
+            math::atan(cfg.antenna_ahead_m * yaw_rate_rps / antenna_along_mps)
         } else {
             0.0
         };
@@ -323,7 +392,7 @@ mod tests {
     /// output is on the car (the uncompensated one trails by ~1.45 m).
     #[test]
     fn compensation_removes_the_filter_lag() {
-        let cfg = EstimatorConfig::paper(100.0, 2.0, 0.0).unwrap();
+        let cfg = EstimatorConfig::design(100.0, 0.0, 0.0).unwrap();
         let mut st = EstimatorState::default();
         st.correct_heading(&cfg, core::f32::consts::FRAC_PI_2, 0.0, 10.0, 0.0);
         let v = 10.0;

@@ -2,42 +2,45 @@
 //! time, and returns the frames to send. The board, QEMU and host replay run exactly this code,
 //! so `catmodel replay --tx-out` and the QEMU run produce byte-identical frames.
 //!
-//! Each tick: decode and validate the received frames (CRC, rolling counter, DLC, range; GNSS
-//! range and a plausibility gate), every rejection counted; update freshness; feed GNSS fixes
-//! through the paper's lowpass with its group delay compensated ([`estimator`]); estimate the
-//! heading; step the velocity model (eq 5), the dx/dt model (eq 7) and the active lateral model
-//! (hybrid switch); roll the horizon forward; encode the output frames.
+//! A tick is five stages, each a function over its own part of the state; read [`Node::step`]
+//! top to bottom to follow a frame from the bus to a prediction:
+//! 1. **receive and validate** ([`inputs`]): decode each frame (DLC, CRC-8, rolling counter,
+//!    range; GNSS range and a plausibility gate), count every rejection, keep the latest valid
+//!    value of each input with its receive time; GNSS fixes go into the lowpass ([`gnss`]);
+//! 2. **models and hybrid switch**: the speed model (eq 5) driven by the commanded speed, the
+//!    active lateral model (kinematic eq 8, or the dynamic single-track model) chosen by the
+//!    hybrid switch;
+//! 3. **estimate**: the heading (receiver COG or the filtered track's course), the filtered,
+//!    delay-compensated rear-axle position ([`estimator`]), the dx/dt model (eq 7);
+//! 4. **predict**: the 2 s horizon rolled forward ([`crate::model::predictor`]);
+//! 5. **publish** ([`publish`]): the state, prediction and status frames, every value checked
+//!    finite before it is encoded (non-finite values go out as "not available" and are
+//!    counted, health bit `nonfinite_guard`).
 //!
-//! Never panics on bus data, never allocates, never reads a clock; every output value is
-//! checked finite before it is encoded (non-finite values go out as "not available" and are
-//! counted, health bit `nonfinite_guard`).
-pub mod baked {
-    //! The model file baked in at build time (build.rs: `models/paper.toml`, or
-    //! `$CATMODEL_MODEL`): what the firmware runs.
-    use super::NodeModels;
-    use crate::model::hybrid::HybridConfig;
-    use crate::model::tf::{ModelError, TransferFunction};
-    use crate::vehicle::VehicleParams;
-    include!(concat!(env!("OUT_DIR"), "/baked_model.rs"));
-}
+//! Never panics on bus data, never allocates, never reads a clock.
+//!
+//! Configuration ([`NodeConfig`]) is everything about the car: built from the model file by
+//! `catmodel-model-file` (host) or read from the image the firmware build baked
+//! ([`NodeConfig::from_image`]); nothing about a particular car lives in this crate.
 pub mod estimator;
+pub mod gnss;
+pub mod inputs;
+pub mod publish;
 
-use crate::can::codec::{
-    decode_input, DecodeError, EncodeReport, HealthFlags, InputMessage, ModelMode, ModelOutputs,
-    NodeStatus, Prediction, PredictionPoint, StateMotion, StatePosition,
-};
-use crate::can::{freshness, CanFrame, TimedFrame};
-use crate::geodesy::LocalFrame;
+use crate::can::freshness::{FreshnessConfig, Input};
+use crate::can::TimedFrame;
+use crate::image::{self, Image, ImageError, ImageReader, ImageWriter};
 use crate::model::block::{MisoBlock, MisoBlockState, SsBlock, SsBlockState};
-use crate::model::dynamic::{DynamicParams, LateralState, CAT_VEHICLE_DYNAMICS};
-use crate::model::hybrid::{HybridConfig, HybridState, Mode, DEFAULT_HYBRID};
+use crate::model::dynamic::{DynamicParams, LateralState};
+use crate::model::hybrid::{HybridConfig, HybridState, Mode};
 use crate::model::kinematic::Pose;
-use crate::model::paper;
 use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStart};
-use crate::model::tf::{ModelError, TransferFunction};
-use crate::vehicle::{VehicleParams, CAT_VEHICLE};
+use crate::vehicle::{Body, VehicleParams};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
-use estimator::{EstimatorConfig, EstimatorState, Xy};
+use estimator::EstimatorConfig;
+use gnss::Gnss;
+use inputs::{Inputs, Snapshot};
+use publish::Health;
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
 /// controller's command are 14; 16 leaves room.
@@ -48,11 +51,13 @@ pub const PREDICTION_POINTS: usize = 10;
 /// 21; models identified on the simulator's delayed, lagging speed loop reach ~48); the
 /// predictor copies this buffer every tick, so it is not larger.
 pub const VELOCITY_DELAY_CAP: usize = 64;
-/// Status pages, one per tick, cycling.
-const STATUS_PAGES: u32 = crate::can::spec::STATUS_PAGES as u32;
+/// Longest input delay of a dx/dt (eq 7) block, samples: eq 7 has none.
+pub const DXDT_DELAY_CAP: usize = 1;
+/// Words of a [`NodeConfig`] image, at most (the firmware's baked array is sized exactly).
+pub const CONFIG_IMAGE_MAX_WORDS: usize = 512;
 
 /// The frames one tick sends, in transmit order.
-pub type TxFrames = heapless::Vec<CanFrame, MAX_TX_FRAMES>;
+pub type TxFrames = heapless::Vec<crate::can::CanFrame, MAX_TX_FRAMES>;
 
 /// What only the platform can know; `None` where it cannot measure (sent as "not available").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -79,151 +84,133 @@ pub struct Tick {
     pub platform: PlatformStats,
 }
 
-/// The first tick's time for a stream whose first frame arrived at `first_frame_us`: rounded up
-/// to a whole multiple of the 20 ms period (docs/architecture.md, "Tick schedule").
+/// The first tick's time for a stream whose first frame arrived at `first_frame_us`: the first
+/// whole multiple of the 20 ms period at or after it (docs/architecture.md, "Tick schedule").
+/// Every platform derives its schedule from this one function.
 pub const fn first_tick_us(first_frame_us: u64) -> u64 {
     first_frame_us.div_ceil(SAMPLE_PERIOD_US) * SAMPLE_PERIOD_US
 }
 
-/// Input timeouts, us (PX4-style `is_timed_out`; Dataspeed: 100 ms for 50 Hz reports).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Timeouts {
-    /// Steering report.
-    pub steer_us: u64,
-    /// Speed report.
-    pub speed_us: u64,
-    /// Pedal report.
-    pub pedal_us: u64,
-    /// GNSS position: after this the position is dead-reckoned and flagged.
-    pub gnss_us: u64,
-    /// GNSS silent this long: the position is no longer trusted (invalid, filters restart).
-    pub gnss_lost_us: u64,
-}
-
-/// 100 ms for the 50 Hz reports (5 missed frames), 200 ms for 100 Hz GNSS, 2 s of dead
-/// reckoning at most.
-pub const DEFAULT_TIMEOUTS: Timeouts = Timeouts {
-    steer_us: 100_000,
-    speed_us: 100_000,
-    pedal_us: 100_000,
-    gnss_us: 200_000,
-    gnss_lost_us: 2_000_000,
-};
-
-/// Everything the node is configured with. Immutable.
-#[derive(Clone, Debug)]
+/// Everything the node is configured with: everything about the car. Immutable.
+#[derive(Clone, Debug, PartialEq)]
 pub struct NodeConfig {
     /// Geometry and steering conversion (eq 2-4).
     pub vehicle: VehicleParams,
-    /// Dynamic bicycle model.
-    pub dynamics: DynamicParams,
+    /// The body around the rear axle (corridor and obstacle clearance).
+    pub body: Body,
+    /// Dynamic single-track model; `None`: the car has none, the node stays kinematic.
+    pub dynamics: Option<DynamicParams>,
     /// Hybrid switching thresholds.
     pub hybrid: HybridConfig,
     /// Horizon shape.
     pub horizon: HorizonConfig,
-    /// GNSS lowpass, delay compensation, heading.
+    /// GNSS lowpass (designed for the receiver's rate), lever arm, heading.
     pub estimator: EstimatorConfig,
-    /// GNSS fix period, s (the rate the lowpass was designed for).
-    pub gnss_period_s: f32,
     /// Internal-controller model, commanded speed -> speed (eq 5), with its input delay.
     pub velocity: SsBlock<2, VELOCITY_DELAY_CAP>,
     /// dx/dt model with inputs [v_m, x, y, phi] (eq 7).
-    pub dxdt: MisoBlock<2, 4, 1>,
+    pub dxdt: MisoBlock<2, 4, DXDT_DELAY_CAP>,
     /// NMEA 2000 source address of the GNSS receiver.
     pub gnss_source: u8,
     /// Local frame origin (lat, lon in 1e-7 deg); `None` = the first valid fix.
     pub origin_e7: Option<(i32, i32)>,
-    /// Input timeouts.
-    pub timeouts: Timeouts,
+    /// Input timeouts (PX4-style `is_timed_out`): after this an input is stale. For GNSS the
+    /// position is then dead-reckoned and flagged.
+    pub freshness: FreshnessConfig,
+    /// GNSS silent this long: the position is no longer trusted (invalid, filters restart), us.
+    pub gnss_lost_us: u64,
     /// A fix farther than this from the predicted position is rejected, m.
     pub gnss_gate_m: f32,
     /// After this many consecutive gate rejections the fixes win: the filters restart there.
     pub gnss_reacquire_fixes: u16,
     /// Speeds are clamped to [0, this], m/s.
     pub max_speed_mps: f32,
+    /// Fastest steering change the car's actuator makes, % per second.
+    pub max_steer_rate_pct_per_s: f32,
 }
 
-/// What a model file carries (`models/paper.toml`, or one `catmodel identify` wrote): the
-/// vehicle, the hybrid thresholds and the identified continuous-time models, discretized
-/// (ZOH, f64) when the node is configured.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NodeModels {
-    /// Geometry and steering conversion (eq 2-4).
-    pub vehicle: VehicleParams,
-    /// Hybrid switching thresholds.
-    pub hybrid: HybridConfig,
-    /// Commanded speed -> speed, with its input delay (eq 5's role); at most 2nd order.
-    pub velocity: TransferFunction,
-    /// dx/dt from [v_m, x, y, phi] (eq 7's role).
-    pub dxdt: [TransferFunction; 4],
-    /// Sample time, s (0.02: a delay must be a whole number of samples).
-    pub ts_s: f64,
-}
-
-impl NodeModels {
-    /// The published models (eq 5, eq 7) on the CAT Vehicle.
-    pub const fn paper() -> Self {
-        Self {
-            vehicle: CAT_VEHICLE,
-            hybrid: DEFAULT_HYBRID,
-            velocity: paper::EQ5_INTERNAL_CONTROLLER,
-            dxdt: paper::EQ7_DX_DT,
-            // f64 0.02 exactly: f64::from(0.02f32) would make 0.42 s a fractional delay.
-            ts_s: paper::PAPER_TS_S,
-        }
+impl Image for FreshnessConfig {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        self.timeout_us.write(w);
     }
-}
-
-impl NodeConfig {
-    /// The models baked in at build time (see [`baked`]): the firmware's configuration.
-    pub fn baked() -> Result<Self, ModelError> {
-        Self::with_models(&baked::baked_models()?)
-    }
-
-    /// The published models (eq 5, eq 7) on the CAT Vehicle, the paper's GNSS lowpass (20th
-    /// order FIR, cutoff 2 Hz at the receiver's 100 Hz, then a 10-sample moving average).
-    pub fn paper() -> Result<Self, ModelError> {
-        Self::with_models(&NodeModels::paper())
-    }
-
-    /// The node for `models`, with the paper's GNSS lowpass and the default timeouts and
-    /// gates. Fails if a model cannot be realized in the node's fixed-size blocks (speed model
-    /// above 2nd order, delay beyond the delay line, not a whole number of samples, unstable
-    /// discretization producing non-finite matrices).
-    pub fn with_models(models: &NodeModels) -> Result<Self, ModelError> {
-        let velocity = SsBlock::from_tf(&models.velocity, models.ts_s)?;
-        let dxdt = MisoBlock::from_tfs(&models.dxdt, models.ts_s)?;
-        let estimator =
-            EstimatorConfig::paper(GNSS_RATE_HZ, GNSS_CUTOFF_HZ, CAT_VEHICLE_ANTENNA_AHEAD_M)
-                .ok_or(ModelError::NotFinite)?;
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         Ok(Self {
-            vehicle: models.vehicle,
-            dynamics: CAT_VEHICLE_DYNAMICS,
-            hybrid: models.hybrid,
-            horizon: predictor::DEFAULT_HORIZON,
-            estimator,
-            gnss_period_s: (1.0 / GNSS_RATE_HZ) as f32,
-            velocity,
-            dxdt,
-            gnss_source: crate::can::spec::N2K_DEFAULT_SOURCE,
-            origin_e7: None,
-            timeouts: DEFAULT_TIMEOUTS,
-            gnss_gate_m: 10.0,
-            gnss_reacquire_fixes: 100,
-            max_speed_mps: 60.0,
+            timeout_us: Image::read(r)?,
         })
     }
 }
 
-/// GNSS rate of the paper's receiver (NovAtel, "every 0.01 seconds", paper II-B), Hz.
-pub const GNSS_RATE_HZ: f64 = 100.0;
-/// GNSS antenna ahead of the rear axle on the CAT Vehicle, m: above the centre of gravity
-/// (CG to rear axle 1.478 m), where the simulator mounts it. The predicted positions are the
-/// rear axle's (eq 8's reference point).
-pub const CAT_VEHICLE_ANTENNA_AHEAD_M: f32 = 1.478;
-/// Lowpass cutoff for GNSS, Hz: passes the car's motion (manoeuvres < 1 Hz), removes the
-/// receiver's white noise.
-pub const GNSS_CUTOFF_HZ: f64 = 2.0;
+impl Image for NodeConfig {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self {
+            vehicle,
+            body,
+            dynamics,
+            hybrid,
+            horizon,
+            estimator,
+            velocity,
+            dxdt,
+            gnss_source,
+            origin_e7,
+            freshness,
+            gnss_lost_us,
+            gnss_gate_m,
+            gnss_reacquire_fixes,
+            max_speed_mps,
+            max_steer_rate_pct_per_s,
+        } = self;
+        vehicle.write(w);
+        body.write(w);
+        dynamics.write(w);
+        hybrid.write(w);
+        horizon.write(w);
+        estimator.write(w);
+        velocity.write(w);
+        dxdt.write(w);
+        gnss_source.write(w);
+        origin_e7.write(w);
+        freshness.write(w);
+        gnss_lost_us.write(w);
+        gnss_gate_m.write(w);
+        gnss_reacquire_fixes.write(w);
+        max_speed_mps.write(w);
+        max_steer_rate_pct_per_s.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self {
+            vehicle: Image::read(r)?,
+            body: Image::read(r)?,
+            dynamics: Image::read(r)?,
+            hybrid: Image::read(r)?,
+            horizon: Image::read(r)?,
+            estimator: Image::read(r)?,
+            velocity: Image::read(r)?,
+            dxdt: Image::read(r)?,
+            gnss_source: Image::read(r)?,
+            origin_e7: Image::read(r)?,
+            freshness: Image::read(r)?,
+            gnss_lost_us: Image::read(r)?,
+            gnss_gate_m: Image::read(r)?,
+            gnss_reacquire_fixes: Image::read(r)?,
+            max_speed_mps: Image::read(r)?,
+            max_steer_rate_pct_per_s: Image::read(r)?,
+        })
+    }
+}
+
+impl NodeConfig {
+    /// Reads a configuration image (see [`crate::image`]): what the firmware runs.
+    pub fn from_image(words: &[u32]) -> Result<Self, ImageError> {
+        image::decode(words)
+    }
+
+    /// This configuration as an image; returns the words used (at most
+    /// [`CONFIG_IMAGE_MAX_WORDS`] for every configuration this crate can describe).
+    pub fn to_image(&self, words: &mut [u32]) -> usize {
+        image::encode(self, words)
+    }
+}
 
 /// Rejection and event counters since boot (saturating: they never wrap).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -253,80 +240,6 @@ fn bump(c: &mut u32) {
     *c = c.saturating_add(1);
 }
 
-/// Latest value of a 50 Hz input with its time and rolling counter.
-#[derive(Clone, Copy, Debug, Default)]
-struct Latest<T> {
-    value: Option<T>,
-    t_us: Option<u64>,
-    counter: Option<u8>,
-}
-
-impl<T: Copy> Latest<T> {
-    /// Accepts a report unless its counter did not change (a stuck sender repeating itself);
-    /// a jump (missed frames) is counted but the value is used. Returns false if rejected.
-    fn accept(&mut self, value: T, counter: u8, t_us: u64, counters: &mut Counters) -> bool {
-        if let Some(prev) = self.counter {
-            if prev == counter {
-                bump(&mut counters.counter_errors);
-                return false;
-            }
-            if (prev + 1) & 0x0F != counter {
-                bump(&mut counters.counter_errors);
-            }
-        }
-        self.counter = Some(counter);
-        self.value = Some(value);
-        self.t_us = Some(t_us);
-        true
-    }
-
-    fn fresh(&self, now_us: u64, timeout_us: u64) -> Option<T> {
-        match self.t_us {
-            Some(t) if now_us.saturating_sub(t) <= timeout_us => self.value,
-            _ => None,
-        }
-    }
-}
-
-/// The node's mutable state.
-#[derive(Clone, Debug)]
-pub struct Node {
-    config: NodeConfig,
-    frame: Option<LocalFrame>,
-    estimator: EstimatorState,
-    velocity: Option<SsBlockState<2, VELOCITY_DELAY_CAP>>,
-    dxdt: MisoBlockState<2, 4, 1>,
-    lateral: LateralState,
-    hybrid: HybridState,
-    steer_pct: Latest<f32>,
-    speed: Latest<(f32, f32)>,
-    pedal: Latest<(f32, f32)>,
-    gnss_t_us: Option<u64>,
-    cog: Option<(f32, u64)>,
-    gnss_rejects_in_row: u16,
-    last_gnss_reject_us: Option<u64>,
-    yaw_rate_rps: f32,
-    speed_mps: f32,
-    last_tick_us: Option<u64>,
-    tick_count: u32,
-    counters: Counters,
-    last_report: EncodeReport,
-    /// Platform overrun count seen at the previous tick, and when it last grew.
-    overruns_seen: u32,
-    last_overrun_us: Option<u64>,
-    /// Range errors at the previous tick, and when they last grew.
-    range_errors_seen: u32,
-    last_range_error_us: Option<u64>,
-}
-
-/// "Recently" in the health bits: within the last second, us.
-const RECENT_US: u64 = 1_000_000;
-
-/// `Some(t)` within [`RECENT_US`] of `now`.
-fn recent(now_us: u64, t_us: Option<u64>) -> bool {
-    matches!(t_us, Some(t) if now_us.saturating_sub(t) <= RECENT_US)
-}
-
 /// What one tick estimated, for the host tools (replay writes it next to the frames).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TickEstimate {
@@ -338,35 +251,71 @@ pub struct TickEstimate {
     pub mode: Mode,
 }
 
+/// The models' state (stage 2).
+#[derive(Clone, Debug)]
+struct Models {
+    /// Eq 5's state; `None` until a first speed was measured (it starts at equilibrium there).
+    velocity: Option<SsBlockState<2, VELOCITY_DELAY_CAP>>,
+    /// Eq 7's state.
+    dxdt: MisoBlockState<2, 4, DXDT_DELAY_CAP>,
+    lateral: LateralState,
+    hybrid: HybridState,
+    /// The active lateral model's yaw rate, rad/s (dead reckoning uses last tick's).
+    yaw_rate_rps: f32,
+    /// The speed the node uses, m/s (dead reckoning uses last tick's).
+    speed_mps: f32,
+}
+
+/// What stage 2 produced this tick.
+#[derive(Clone, Copy, Debug)]
+struct Motion {
+    speed_mps: f32,
+    /// Eq 5's output, m/s.
+    speed_model_mps: Option<f32>,
+    /// The speed command the roll-out holds, m/s.
+    speed_cmd_mps: Option<f32>,
+    center_steer_rad: f32,
+    mode: Mode,
+}
+
+/// What stage 3 produced this tick.
+#[derive(Clone, Copy, Debug)]
+struct Estimate {
+    pose: Option<Pose>,
+    gnss_fresh: bool,
+    /// Eq 7's output, m/s.
+    dxdt_mps: Option<f32>,
+}
+
+/// The node's mutable state, one part per stage.
+#[derive(Clone, Debug)]
+pub struct Node {
+    config: NodeConfig,
+    inputs: Inputs,
+    gnss: Gnss,
+    models: Models,
+    health: Health,
+    last_tick_us: Option<u64>,
+}
+
 impl Node {
     /// A node with fresh state.
     pub fn new(config: NodeConfig) -> Self {
-        let dxdt = config.dxdt.zero_state();
-        Self {
-            config,
-            frame: None,
-            estimator: EstimatorState::default(),
+        let models = Models {
             velocity: None,
-            dxdt,
+            dxdt: config.dxdt.zero_state(),
             lateral: LateralState::default(),
             hybrid: HybridState::default(),
-            steer_pct: Latest::default(),
-            speed: Latest::default(),
-            pedal: Latest::default(),
-            gnss_t_us: None,
-            cog: None,
-            gnss_rejects_in_row: 0,
-            last_gnss_reject_us: None,
             yaw_rate_rps: 0.0,
             speed_mps: 0.0,
+        };
+        Self {
+            config,
+            inputs: Inputs::default(),
+            gnss: Gnss::default(),
+            models,
+            health: Health::default(),
             last_tick_us: None,
-            tick_count: 0,
-            counters: Counters::default(),
-            last_report: EncodeReport::default(),
-            overruns_seen: 0,
-            last_overrun_us: None,
-            range_errors_seen: 0,
-            last_range_error_us: None,
         }
     }
 
@@ -377,418 +326,238 @@ impl Node {
 
     /// Rejection counters since start.
     pub fn counters(&self) -> &Counters {
-        &self.counters
+        &self.inputs.counters
     }
 
     /// Ticks run.
     pub fn tick_count(&self) -> u32 {
-        self.tick_count
+        self.health.tick_count
     }
 
     /// The local frame's origin once known (lat, lon in 1e-7 deg).
     pub fn origin_e7(&self) -> Option<(i32, i32)> {
-        self.frame.map(|f| (f.origin_lat_e7(), f.origin_lon_e7()))
+        self.gnss.origin_e7()
     }
 
     /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order) and
     /// appends this tick's frames to `tx`. Returns what the tick estimated.
     pub fn step(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
         let now = tick.now_us;
+        let dt_s = self.advance(now);
+        self.receive(now, rx);
+        let snapshot = self.inputs.snapshot(&self.config, now);
+        let motion = self.run_models(&snapshot, dt_s);
+        let estimate = self.estimate(now, &motion);
+        let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
+        let predicted = self.predict(&snapshot, &motion, &estimate, &mut points);
+        let horizon = points.get(..predicted).unwrap_or(&[]);
+        self.publish(tick, &snapshot, &motion, &estimate, horizon, tx);
+        TickEstimate {
+            pose: estimate.pose,
+            speed_mps: motion.speed_mps,
+            mode: motion.mode,
+        }
+    }
+
+    /// The time since the last tick (missed ticks are propagated over the real elapsed time, at
+    /// most 0.1 s), and the dead reckoning moved over it with last tick's speed and yaw rate,
+    /// so that this tick's fixes can be placed against it.
+    fn advance(&mut self, now_us: u64) -> f32 {
         let dt_s = match self.last_tick_us {
-            // Missed ticks (overruns) are propagated over the real elapsed time, at most 0.1 s.
-            Some(prev) if now > prev => math::u64_to_f32((now - prev).min(100_000)) * 1e-6,
+            Some(prev) if now_us > prev => math::u64_to_f32((now_us - prev).min(100_000)) * 1e-6,
             _ => SAMPLE_PERIOD_S,
         };
-        self.last_tick_us = Some(now);
-        self.estimator.propagate(
+        self.last_tick_us = Some(now_us);
+        self.gnss.propagate(
             &self.config.estimator,
-            self.speed_mps,
-            self.yaw_rate_rps,
+            self.models.speed_mps,
+            self.models.yaw_rate_rps,
             dt_s,
         );
+        dt_s
+    }
 
-        for f in rx {
-            self.receive(now, f);
-        }
-
-        let cfg = &self.config;
-        let to = cfg.timeouts;
-        let steer_pct = self.steer_pct.fresh(now, to.steer_us);
-        let speeds = self.speed.fresh(now, to.speed_us);
-        let center_steer_rad = cfg
-            .vehicle
-            .steer_pct_to_center_rad(steer_pct.unwrap_or(0.0));
-
-        // Velocity model (eq 5): started at equilibrium on the first measured speed, then driven
-        // by the commanded speed (or, without a command, by the measured speed: hold).
-        if self.velocity.is_none() {
-            if let Some((v, _)) = speeds {
-                self.velocity = cfg.velocity.steady_state_for_output(v).ok();
+    /// Stage 1: every received frame decoded, validated and applied (or counted as rejected).
+    fn receive(&mut self, now_us: u64, rx: &[TimedFrame]) {
+        for frame in rx {
+            if let Some(gnss) = self.inputs.receive(&self.config, now_us, frame) {
+                self.gnss.receive(
+                    &self.config,
+                    now_us,
+                    &gnss,
+                    self.models.speed_mps,
+                    &mut self.inputs,
+                );
             }
         }
-        let speed_cmd = speeds.map(|(_, c)| c);
-        let mut speed_model = None;
-        if let Some(state) = self.velocity.as_mut() {
-            let u = speed_cmd
-                .or(speeds.map(|(v, _)| v))
-                .unwrap_or(self.speed_mps);
-            speed_model = Some(cfg.velocity.step(state, u));
+    }
+
+    /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.
+    fn run_models(&mut self, inputs: &Snapshot, dt_s: f32) -> Motion {
+        let cfg = &self.config;
+        let m = &mut self.models;
+        let center_steer_rad = cfg
+            .vehicle
+            .steer_pct_to_center_rad(inputs.steer_pct.unwrap_or(0.0));
+
+        // Eq 5: started at equilibrium on the first measured speed, then driven by the
+        // commanded speed (or, without a command, by the measured speed: hold).
+        if m.velocity.is_none() {
+            if let Some((v, _)) = inputs.speeds {
+                m.velocity = cfg.velocity.steady_state_for_output(v).ok();
+            }
         }
+        let speed_cmd_mps = inputs.speeds.map(|(_, c)| c);
+        let speed_model_mps = m.velocity.as_mut().map(|state| {
+            let u = speed_cmd_mps
+                .or(inputs.speeds.map(|(v, _)| v))
+                .unwrap_or(m.speed_mps);
+            cfg.velocity.step(state, u)
+        });
         let speed_mps = clamp_finite(
-            speeds.map(|(v, _)| v).or(speed_model).unwrap_or(0.0),
+            inputs
+                .speeds
+                .map(|(v, _)| v)
+                .or(speed_model_mps)
+                .unwrap_or(0.0),
             0.0,
             cfg.max_speed_mps,
         );
-        self.speed_mps = speed_mps;
+        m.speed_mps = speed_mps;
 
-        // Lateral model and hybrid switch.
         let yaw_kin = speed_mps * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
-        let mode = cfg
-            .hybrid
-            .update(&mut self.hybrid, speed_mps, speed_mps * self.yaw_rate_rps);
-        match mode {
-            Mode::Kinematic => {
-                self.lateral = cfg.dynamics.steady_state(speed_mps, center_steer_rad);
-                self.yaw_rate_rps = yaw_kin;
-            }
-            Mode::Dynamic => {
-                cfg.dynamics
-                    .step(&mut self.lateral, speed_mps, center_steer_rad, dt_s);
-                self.yaw_rate_rps = self.lateral.yaw_rate_rps;
-            }
-        }
-        if !self.yaw_rate_rps.is_finite() {
-            self.yaw_rate_rps = 0.0;
-            bump(&mut self.counters.nonfinite);
-        }
-
-        // Heading: receiver COG when fresh and moving, else the filtered track's course.
-        let moving = speed_mps >= cfg.estimator.course_min_speed_mps;
-        match self.cog {
-            Some((cog, t)) if moving && now.saturating_sub(t) <= to.gnss_us => {
-                let age_s = math::u64_to_f32(now.saturating_sub(t)) * 1e-6;
-                self.estimator.correct_heading(
-                    &cfg.estimator,
-                    cog,
-                    age_s,
-                    speed_mps,
-                    self.yaw_rate_rps,
-                );
-            }
-            _ if moving => {
-                if let Some((course, age_fixes)) = self.estimator.track_course(&cfg.estimator) {
-                    let age_s = age_fixes * cfg.gnss_period_s;
-                    self.estimator.correct_heading(
-                        &cfg.estimator,
-                        course,
-                        age_s,
-                        speed_mps,
-                        self.yaw_rate_rps,
-                    );
-                }
-            }
-            _ => {}
-        }
-
-        // Position: filtered and delay-compensated; dead-reckoned through short GNSS gaps.
-        let gnss_age = self.gnss_t_us.map(|t| now.saturating_sub(t));
-        let gnss_fresh = matches!(gnss_age, Some(a) if a <= to.gnss_us);
-        if matches!(gnss_age, Some(a) if a > to.gnss_lost_us) && self.estimator.fixes() > 0 {
-            self.estimator.reset();
-        }
-        let pose = match (
-            self.estimator.position(&cfg.estimator),
-            self.estimator.heading_rad(),
-        ) {
-            (Some(p), Some(h)) if p.x_m.is_finite() && p.y_m.is_finite() && h.is_finite() => {
-                Some(Pose::new(p.x_m, p.y_m, h))
-            }
-            _ => None,
+        let mode = match cfg.dynamics {
+            Some(_) => cfg
+                .hybrid
+                .update(&mut m.hybrid, speed_mps, speed_mps * m.yaw_rate_rps),
+            None => Mode::Kinematic,
         };
-
-        // dx/dt model (eq 7): inputs [v_m, x, y, phi] with phi the steering angle, rad.
-        let dxdt = pose.map(|p| {
-            cfg.dxdt
-                .step(&mut self.dxdt, &[speed_mps, p.x_m, p.y_m, center_steer_rad])
-        });
-
-        // Horizon.
-        let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
-        let mut n_points = 0;
-        // Without fresh steering the path ahead is unknown: no predictions (the state still
-        // goes out, flagged `steer_stale`).
-        let rollout_inputs = match (pose, self.velocity, speed_model, steer_pct) {
-            (Some(p), Some(v), Some(m), Some(_)) => Some((p, v, m)),
-            _ => None,
-        };
-        if let Some((p, vel_state, v_model)) = rollout_inputs {
-            let mut rollout_state = vel_state;
-            let start = PredictorStart {
-                pose: p,
-                speed_mps,
-                speed_bias_mps: speed_mps - v_model,
-                speed_cmd_mps: speed_cmd.unwrap_or(speed_mps),
-                center_steer_rad,
-                lateral: self.lateral,
-                mode,
-            };
-            let velocity = &cfg.velocity;
-            n_points = predictor::rollout(
-                &cfg.horizon,
-                &cfg.vehicle,
-                &cfg.dynamics,
-                &start,
-                |u| velocity.step(&mut rollout_state, u),
-                &mut points,
-            );
-        }
-
-        // Outputs.
-        let counter = (self.tick_count & 0x0F) as u8;
-        let mut report = EncodeReport::default();
-        let gnss_rejected = recent(now, self.last_gnss_reject_us);
-        if tick.platform.overruns > self.overruns_seen {
-            self.last_overrun_us = Some(now);
-        }
-        self.overruns_seen = tick.platform.overruns;
-        if self.counters.range_errors > self.range_errors_seen {
-            self.last_range_error_us = Some(now);
-        }
-        self.range_errors_seen = self.counters.range_errors;
-        let model_mode = match mode {
-            Mode::Kinematic => ModelMode::Kinematic,
-            Mode::Dynamic => ModelMode::Dynamic,
-        };
-        let mut push = |(frame, r): (CanFrame, EncodeReport), report: &mut EncodeReport| {
-            report.merge(&r);
-            // Note: capacity 16 >= 2 + 10 + 1 frames; a full buffer would only lose frames
-            // already counted in `MAX_TX_FRAMES`'s derivation.
-            let _ = tx.push(frame);
-        };
-        push(
-            StatePosition {
-                position_valid: pose.is_some(),
-                gnss_fresh,
-                gnss_rejected,
-                east_m: pose.map(|p| p.x_m),
-                north_m: pose.map(|p| p.y_m),
+        match (mode, &cfg.dynamics) {
+            (Mode::Dynamic, Some(dynamics)) => {
+                dynamics.step(&mut m.lateral, speed_mps, center_steer_rad, dt_s);
+                m.yaw_rate_rps = m.lateral.yaw_rate_rps;
             }
-            .encode_with_report(counter),
-            &mut report,
-        );
-        push(
-            StateMotion {
-                mode: model_mode,
-                heading_rad: pose.map(|p| p.heading_rad),
-                speed_mps: Some(speed_mps),
-                yaw_rate_radps: Some(self.yaw_rate_rps),
+            (_, dynamics) => {
+                m.lateral = match dynamics {
+                    Some(d) => d.steady_state(speed_mps, center_steer_rad),
+                    None => LateralState {
+                        vy_mps: 0.0,
+                        yaw_rate_rps: yaw_kin,
+                    },
+                };
+                m.yaw_rate_rps = yaw_kin;
             }
-            .encode_with_report(counter),
-            &mut report,
-        );
-        for (i, point) in PredictionPoint::all().enumerate() {
-            let predicted = match (pose, points.get(i)) {
-                (Some(p), Some(q)) if i < n_points => Some((p, q)),
-                _ => None,
-            };
-            push(
-                Prediction {
-                    point,
-                    dx_m: predicted.map(|(p, q)| q.x_m - p.x_m),
-                    dy_m: predicted.map(|(p, q)| q.y_m - p.y_m),
-                    dheading_rad: predicted
-                        .map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
-                    speed_mps: predicted.map(|(_, q)| q.speed_mps),
-                }
-                .encode_with_report(counter),
-                &mut report,
-            );
         }
-        let c = self.counters;
-        let ages = [
-            freshness::age_10ms(now, self.steer_pct.t_us),
-            freshness::age_10ms(now, self.speed.t_us),
-            freshness::age_10ms(now, self.pedal.t_us),
-            freshness::age_10ms(now, self.gnss_t_us),
-        ];
-        let status = match self.tick_count % STATUS_PAGES {
-            0 => NodeStatus::Health {
-                mode: model_mode,
-                health: HealthFlags {
-                    steer_stale: steer_pct.is_none(),
-                    speed_stale: speeds.is_none(),
-                    pedal_stale: self.pedal.fresh(now, to.pedal_us).is_none(),
-                    gnss_stale: !gnss_fresh,
-                    gnss_rejected_recently: gnss_rejected,
-                    position_invalid: pose.is_none(),
-                    prediction_saturated: self.last_report.saturated > 0,
-                    nonfinite_guard: self.last_report.non_finite > 0 || c.nonfinite > 0,
-                    watchdog_reset: tick.platform.watchdog_reset,
-                    overrun_recently: recent(now, self.last_overrun_us),
-                    input_invalid: recent(now, self.last_range_error_us),
-                },
-                overrun_count: tick.platform.overruns,
-                last_step_us: tick.platform.last_step_us,
-            },
-            1 => NodeStatus::RxErrors {
-                crc_errors: c.crc_errors,
-                counter_errors: c.counter_errors,
-                dlc_errors: c.dlc_errors,
-            },
-            2 => NodeStatus::RxRejects {
-                range_errors: c.range_errors,
-                gnss_gate_rejects: c.gnss_gate_rejects,
-                unknown_ids: c.unknown_ids,
-            },
-            3 => NodeStatus::Platform {
-                tick_count: self.tick_count,
-                rx_queue_drops: tick.platform.rx_queue_drops,
-            },
-            4 => NodeStatus::Ages {
-                ages_10ms: ages,
-                stack_high_water_bytes: tick.platform.stack_high_water_bytes,
-            },
-            _ => NodeStatus::Model(ModelOutputs {
-                speed_model_mps: speed_model,
-                dxdt_model_mps: dxdt,
-                lat_accel_mps2: Some(speed_mps * self.yaw_rate_rps),
-            }),
-        };
-        push(status.encode_with_report(counter), &mut report);
-        self.counters.nonfinite = self
-            .counters
-            .nonfinite
-            .saturating_add(u32::from(report.non_finite));
-        self.counters.saturated = self
-            .counters
-            .saturated
-            .saturating_add(u32::from(report.saturated));
-        self.last_report = report;
-        self.tick_count = self.tick_count.wrapping_add(1);
-        TickEstimate {
-            pose,
+        if !m.yaw_rate_rps.is_finite() {
+            m.yaw_rate_rps = 0.0;
+            bump(&mut self.inputs.counters.nonfinite);
+        }
+        Motion {
             speed_mps,
+            speed_model_mps,
+            speed_cmd_mps,
+            center_steer_rad,
             mode,
         }
     }
 
-    /// Decodes and applies one received frame; every rejection is counted.
-    fn receive(&mut self, now_us: u64, f: &TimedFrame) {
-        if f.t_us > now_us {
-            bump(&mut self.counters.time_errors);
-            return;
-        }
-        let msg = match decode_input(&f.frame, self.config.gnss_source) {
-            Ok(m) => m,
-            Err(e) => {
-                let c = &mut self.counters;
-                bump(match e {
-                    DecodeError::Crc { .. } => &mut c.crc_errors,
-                    DecodeError::Dlc { .. } => &mut c.dlc_errors,
-                    DecodeError::OutOfRange { .. } | DecodeError::Invalid { .. } => {
-                        &mut c.range_errors
-                    }
-                    DecodeError::UnknownId
-                    | DecodeError::WrongId
-                    | DecodeError::WrongSource { .. } => &mut c.unknown_ids,
-                });
-                return;
-            }
-        };
-        match msg {
-            InputMessage::Steering(m, counter) => match m.steer_pct {
-                Some(p) => {
-                    self.steer_pct
-                        .accept(p, counter, f.t_us, &mut self.counters);
-                }
-                None => bump(&mut self.counters.range_errors),
-            },
-            InputMessage::Speed(m, counter) => match (m.speed_mps, m.speed_cmd_mps) {
-                (Some(v), cmd) => {
-                    let cmd = cmd.unwrap_or(v);
-                    self.speed
-                        .accept((v, cmd), counter, f.t_us, &mut self.counters);
-                }
-                _ => bump(&mut self.counters.range_errors),
-            },
-            InputMessage::Pedal(m, counter) => {
-                let value = (m.accel_pct.unwrap_or(0.0), m.brake_pct.unwrap_or(0.0));
-                self.pedal
-                    .accept(value, counter, f.t_us, &mut self.counters);
-            }
-            InputMessage::GnssPosition(p) => self.receive_fix(now_us, f.t_us, p.lat_e7, p.lon_e7),
-            InputMessage::GnssCogSog(c) => {
-                if let (Some(cog), Some(sog)) = (c.cog_rad, c.sog_mps) {
-                    // COG is meaningless when standing still.
-                    if sog >= self.config.estimator.course_min_speed_mps && c.cog_reference == 0 {
-                        self.cog = Some((math::wrap_pi(cog), f.t_us));
-                    }
-                }
-            }
+    /// Stage 3: heading, filtered rear-axle position, and eq 7 on it.
+    fn estimate(&mut self, now_us: u64, motion: &Motion) -> Estimate {
+        let cfg = &self.config;
+        let (pose, gnss_fresh) = self.gnss.estimate(
+            cfg,
+            now_us,
+            motion.speed_mps,
+            self.models.yaw_rate_rps,
+            &self.inputs,
+        );
+        // Eq 7: inputs [v_m, x, y, phi] with phi the steering angle, rad.
+        let dxdt_mps = pose.map(|p| {
+            cfg.dxdt.step(
+                &mut self.models.dxdt,
+                &[motion.speed_mps, p.x_m, p.y_m, motion.center_steer_rad],
+            )
+        });
+        Estimate {
+            pose,
+            gnss_fresh,
+            dxdt_mps,
         }
     }
 
-    fn receive_fix(&mut self, now_us: u64, t_us: u64, lat_e7: i32, lon_e7: i32) {
-        if self.frame.is_none() {
-            let origin = self.config.origin_e7.unwrap_or((lat_e7, lon_e7));
-            match LocalFrame::new(origin.0, origin.1) {
-                Ok(frame) => self.frame = Some(frame),
-                Err(_) => {
-                    bump(&mut self.counters.gnss_gate_rejects);
-                    return;
-                }
-            }
-        }
-        let Some(enu) = self.frame.and_then(|fr| fr.to_local(lat_e7, lon_e7).ok()) else {
-            bump(&mut self.counters.gnss_gate_rejects);
-            self.last_gnss_reject_us = Some(t_us);
-            return;
-        };
-        let fix = Xy {
-            x_m: enu.east_m,
-            y_m: enu.north_m,
-        };
+    /// Stage 4: the horizon into `points`; returns how many were predicted. Without fresh
+    /// steering the path ahead is unknown: no predictions (the state still goes out, flagged
+    /// `steer_stale`).
+    fn predict(
+        &self,
+        inputs: &Snapshot,
+        motion: &Motion,
+        estimate: &Estimate,
+        points: &mut [PredictedPoint; PREDICTION_POINTS],
+    ) -> usize {
         let cfg = &self.config;
-        // Plausibility gate against where the car should be; repeated rejections mean the car
-        // really is there (e.g. after a long gap): restart the filters on the fixes.
-        if let Some(p) = self.estimator.antenna_position(&cfg.estimator) {
-            let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
-            if dx * dx + dy * dy > cfg.gnss_gate_m * cfg.gnss_gate_m {
-                self.gnss_rejects_in_row = self.gnss_rejects_in_row.saturating_add(1);
-                bump(&mut self.counters.gnss_gate_rejects);
-                self.last_gnss_reject_us = Some(t_us);
-                if self.gnss_rejects_in_row < cfg.gnss_reacquire_fixes {
-                    return;
-                }
-                self.estimator.reset();
-            }
-        }
-        self.gnss_rejects_in_row = 0;
-        let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
-        // The lowpass assumes one fix per period. Fixes missing since the last accepted one
-        // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
-        // the antenna at those instants, oldest first; no more than the filters remember.
-        if let Some(prev) = self.gnss_t_us {
-            let gap_periods =
-                math::u64_to_f32(t_us.saturating_sub(prev)) * 1e-6 / cfg.gnss_period_s;
-            let missing = ((gap_periods + 0.5) as u32)
-                .saturating_sub(1)
-                .min(estimator::GAP_FILL_MAX_FIXES);
-            for k in (1..=missing).rev() {
-                let age_k = age_s + k as f32 * cfg.gnss_period_s;
-                if let Some(p) =
-                    self.estimator
-                        .dead_reckoned_antenna(&cfg.estimator, age_k, self.speed_mps)
-                {
-                    self.estimator
-                        .add_fix(&cfg.estimator, p, age_k, self.speed_mps);
-                }
-            }
-        }
-        self.estimator
-            .add_fix(&cfg.estimator, fix, age_s, self.speed_mps);
-        self.gnss_t_us = Some(t_us);
+        let (Some(pose), Some(velocity), Some(v_model), Some(_)) = (
+            estimate.pose,
+            self.models.velocity.as_ref(),
+            motion.speed_model_mps,
+            inputs.steer_pct,
+        ) else {
+            return 0;
+        };
+        let mut rollout_state = *velocity;
+        let start = PredictorStart {
+            pose,
+            speed_mps: motion.speed_mps,
+            speed_bias_mps: motion.speed_mps - v_model,
+            speed_cmd_mps: motion.speed_cmd_mps.unwrap_or(motion.speed_mps),
+            center_steer_rad: motion.center_steer_rad,
+            lateral: self.models.lateral,
+            mode: motion.mode,
+        };
+        predictor::rollout(
+            &cfg.horizon,
+            &cfg.vehicle,
+            cfg.dynamics.as_ref(),
+            &start,
+            |u| cfg.velocity.step(&mut rollout_state, u),
+            points,
+        )
     }
+
+    /// Stage 5: this tick's frames.
+    fn publish(
+        &mut self,
+        tick: &Tick,
+        inputs: &Snapshot,
+        motion: &Motion,
+        estimate: &Estimate,
+        predictions: &[PredictedPoint],
+        tx: &mut TxFrames,
+    ) {
+        let out = publish::Outputs {
+            pose: estimate.pose,
+            gnss_fresh: estimate.gnss_fresh,
+            gnss_rejected_us: self.gnss.last_reject_us(),
+            mode: motion.mode,
+            speed_mps: motion.speed_mps,
+            yaw_rate_rps: self.models.yaw_rate_rps,
+            speed_model_mps: motion.speed_model_mps,
+            dxdt_mps: estimate.dxdt_mps,
+            predictions,
+        };
+        self.health
+            .publish(tick, inputs, &mut self.inputs.counters, &out, tx);
+    }
+}
+
+/// Whether `input` is fresh at `now_us` (see [`FreshnessConfig`]).
+fn fresh(
+    config: &NodeConfig,
+    freshness: &crate::can::freshness::Freshness,
+    input: Input,
+    now_us: u64,
+) -> bool {
+    freshness.is_fresh(&config.freshness, input, now_us)
 }
 
 /// `v` limited to [lo, hi], `lo` if not finite. Comparisons only: `f32::clamp` asserts

@@ -9,6 +9,7 @@
 //! The delay line is a doubled circular buffer: each sample is written twice, at `i` and
 //! `i + N`, so the last N samples are always the contiguous slice `[i, i + N)` and the dot
 //! product is one straight loop, with no modulo and no wrap test per tap.
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 
 /// Why a filter design or configuration was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,6 +85,17 @@ fn sinc(x: f64) -> f64 {
     } else {
         let y = core::f64::consts::PI * x;
         libm::sin(y) / y
+    }
+}
+
+/// The taps; [`Fir::from_taps`] checks them again on the way in.
+impl<const N: usize> Image for Fir<N> {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        self.taps.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        let taps = <[f32; N]>::read(r)?;
+        Self::from_taps(taps).map_err(|_| r.out_of_range())
     }
 }
 

@@ -6,11 +6,20 @@
 //! subtracts the oldest, whose rounding errors would accumulate without bound in `f32`.
 //! For the small N the node uses (about 10) this is as cheap as the running-sum bookkeeping,
 //! and the output depends only on the last N inputs, bit for bit.
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 
 /// Configuration of a causal moving average over N samples (N >= 1). Holds 1/N.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MovingAverage<const N: usize> {
     inv_n: f32,
+}
+
+/// Nothing to store: the span is the type's `N`.
+impl<const N: usize> Image for MovingAverage<N> {
+    fn write(&self, _w: &mut ImageWriter<'_>) {}
+    fn read(_r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        Ok(Self::new())
+    }
 }
 
 impl<const N: usize> Default for MovingAverage<N> {

@@ -1,9 +1,11 @@
 //! catmodel automation.
 //!
-//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): builds the QEMU firmware (release, the
-//!   profile we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
-//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table, and
-//!   fails if the run failed or a tick exceeded the instruction budget.
+//! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): checks the MCU target and
+//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (release, the profile we ship),
+//!   runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table and
+//!   one summary line (drive, machine, PASS or FAIL, slowest tick against the budget, bound),
+//!   and fails if the run failed or a tick exceeded the instruction budget.
 //! - `cargo xtask qemu-overrun-test`: a QEMU run with stalled ticks; checks that the overruns are
 //!   counted in `PlatformStats`, that the stale slot is skipped, and that every tick and every tx
 //!   frame stays on the 20 ms grid; then a 500 ms stall that overflows the receive queue: every
@@ -15,6 +17,11 @@
 //! - `cargo xtask tx-compare FW.log HOST.log`: firmware vs host replay output ([`txcompare`]).
 //! - `cargo xtask bench-target [--check]`: instructions per call of each firmware component in
 //!   QEMU ([`bench`]).
+//! - `cargo xtask tick-schedule`: QEMU and host replay tick at the same times on drives that
+//!   start at 0, on a tick boundary, just after and before one, and at an epoch time
+//!   ([`schedule`]).
+//! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
+//!   bad model file of `models/bad/` with the same message ([`corpus`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -23,26 +30,22 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 
 mod bench;
+mod corpus;
 mod nopanic;
+mod prereq;
+mod schedule;
 mod txcompare;
 
-#[cfg(test)]
-#[path = "../../src/app/schedule.rs"]
-#[allow(dead_code)]
-mod schedule;
-
 const TARGET: &str = "thumbv7em-none-eabihf";
-/// Instructions one tick may take (`catmodel::app::TICK_BUDGET_INSTRUCTIONS`).
-const BUDGET_INSTRUCTIONS: u32 = 30_000;
+use catmodel::SAMPLE_PERIOD_US as TICK_US;
+use catmodel_app::budget::{
+    CYCLES_PER_TICK, FLASH_BUDGET_BYTES as FLASH_BUDGET, RAM_BUDGET_BYTES as RAM_BUDGET,
+    STACK_USE_LIMIT, TICK_BUDGET_INSTRUCTIONS as BUDGET_INSTRUCTIONS,
+};
+use catmodel_app::record::{self, TickRecord, Trailer};
 /// Instructions available in one 20 ms tick at the board's 168 MHz, if one instruction took one
 /// cycle: the basis of `share_of_tick_percent`.
-const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = 0.02 * 168e6;
-const TICK_US: u64 = 20_000;
-const FLASH_BUDGET: u64 = 96 * 1024;
-const RAM_BUDGET: u64 = 24 * 1024;
-/// Share of the stack region the measured high-water mark may use (the rest is headroom for
-/// the board's interrupt handlers and code paths the drive does not take).
-const STACK_USE_LIMIT: f64 = 0.75;
+const INSTRUCTIONS_PER_TICK_AT_168MHZ: f64 = CYCLES_PER_TICK as f64;
 const INSTALL_QEMU: &str = "apt-get update && apt-get install -y qemu-system-arm";
 
 fn main() -> ExitCode {
@@ -55,14 +58,17 @@ fn main() -> ExitCode {
         Some("no-panic") => nopanic::no_panic(),
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
+        Some("model-corpus") => corpus::model_corpus(),
+        Some("tick-schedule") => schedule::tick_schedule(),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check]\n\
+             | bench-target [--check] | model-corpus | tick-schedule\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(error) if error.is::<Reported>() => ExitCode::FAILURE,
         Err(error) => {
             eprintln!("xtask: error: {error:#}");
             ExitCode::FAILURE
@@ -78,6 +84,11 @@ fn root() -> PathBuf {
 }
 
 fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
+    // Said before minutes of building, not after.
+    prereq::ensure_target()?;
+    if features == "qemu" {
+        prereq::ensure_qemu()?;
+    }
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
         .current_dir(root())
@@ -85,7 +96,7 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
             "build",
             "--release",
             "-p",
-            "catmodel",
+            "catmodel-firmware",
             "--features",
             features,
         ])
@@ -101,104 +112,26 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
 // ---------------------------------------------------------------------------------------------
 // QEMU runs
 
-/// One tick as recorded by the QEMU firmware (`src/platform/qemu/run.rs`).
-#[derive(Clone, Copy, Debug)]
-struct TickRecord {
-    tick_us: u64,
-    slot: u64,
-    overruns: u32,
-    rx_queue_drops: u32,
-    rx_frames: u16,
-    tx_frames: u16,
-    drain: u32,
-    step: u32,
-    tick: u32,
-}
-
-/// Totals the firmware writes after the last tick.
-#[derive(Clone, Copy, Debug)]
-struct Trailer {
-    ticks: u64,
-    overruns: u32,
-    skipped_slots: u32,
-    rx_queue_drops: u32,
-    rx_bus_errors: u32,
-    rx_unsupported: u32,
-    tx_queue_drops: u32,
-    tx_bus_errors: u32,
-    input_frames: u32,
-    input_unsupported: u32,
-    /// Deepest stack use of the run, bytes (painted-stack scan at the end).
-    stack_high_water: u32,
-    /// The stack region's size, bytes.
-    stack_size: u32,
-}
-
 fn u32_at(bytes: &[u8], at: usize) -> u32 {
     let mut b = [0u8; 4];
     b.copy_from_slice(&bytes[at..at + 4]);
     u32::from_le_bytes(b)
 }
 
-fn u64_at(bytes: &[u8], at: usize) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[at..at + 8]);
-    u64::from_le_bytes(b)
-}
-
+/// The QEMU firmware's tick records and trailer (`catmodel_app::record`, the format both ends
+/// share).
 fn parse_ticks(bytes: &[u8]) -> Result<(Vec<TickRecord>, Trailer)> {
-    const RECORD: usize = 40;
-    const TRAILER: usize = 56;
-    if bytes.len() < 12 || &bytes[..4] != b"CMQT" {
-        bail!("tick records: bad header");
+    match record::parse(bytes) {
+        Ok((records, trailer)) => Ok((records.collect(), trailer)),
+        Err(record::RecordError::BadHeader) => bail!("tick records: bad header"),
+        Err(record::RecordError::Version(v)) => bail!(
+            "tick records: format version {v} (expected {})",
+            record::FORMAT_VERSION
+        ),
+        Err(record::RecordError::Truncated) => {
+            bail!("tick records: truncated (the firmware did not finish)")
+        }
     }
-    if u32_at(bytes, 4) != 2 {
-        bail!(
-            "tick records: format version {} (expected 2)",
-            u32_at(bytes, 4)
-        );
-    }
-    if u32_at(bytes, 8) as usize != RECORD {
-        bail!("tick records: unexpected record size");
-    }
-    let body = &bytes[12..];
-    if body.len() < TRAILER || !(body.len() - TRAILER).is_multiple_of(RECORD) {
-        bail!("tick records: truncated (the firmware did not finish)");
-    }
-    let (records, trailer) = body.split_at(body.len() - TRAILER);
-    if &trailer[..4] != b"END!" {
-        bail!("tick records: no trailer (the firmware did not finish)");
-    }
-    let records = records
-        .chunks_exact(RECORD)
-        .map(|r| TickRecord {
-            tick_us: u64_at(r, 0),
-            slot: u64_at(r, 8),
-            overruns: u32_at(r, 16),
-            rx_queue_drops: u32_at(r, 20),
-            rx_frames: u16::from_le_bytes([r[24], r[25]]),
-            tx_frames: u16::from_le_bytes([r[26], r[27]]),
-            drain: u32_at(r, 28),
-            step: u32_at(r, 32),
-            tick: u32_at(r, 36),
-        })
-        .collect();
-    let t = &trailer[4..];
-    let trailer = Trailer {
-        ticks: u64_at(t, 0),
-        overruns: u32_at(t, 8),
-        skipped_slots: u32_at(t, 12),
-        rx_queue_drops: u32_at(t, 16),
-        rx_bus_errors: u32_at(t, 20),
-        rx_unsupported: u32_at(t, 24),
-        tx_queue_drops: u32_at(t, 28),
-        tx_bus_errors: u32_at(t, 32),
-        input_frames: u32_at(t, 36),
-        input_unsupported: u32_at(t, 40),
-        stack_high_water: u32_at(t, 44),
-        stack_size: u32_at(t, 48),
-    };
-    Ok((records, trailer))
 }
 
 struct QemuRun {
@@ -224,13 +157,6 @@ fn qemu_command(elf: &Path) -> Command {
 
 /// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
 fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) -> Result<QemuRun> {
-    if Command::new("qemu-system-arm")
-        .arg("--version")
-        .output()
-        .is_err()
-    {
-        bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}");
-    }
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let tx = out_dir.join("tx.log");
     let ticks = out_dir.join("ticks.bin");
@@ -259,10 +185,12 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
     // The firmware reports in text on stderr; defmt output (if any dependency logs) goes to
     // stdout as binary frames: keep it for `defmt-print -e ELF`.
     let _ = std::fs::write(out_dir.join("defmt.bin"), &output.stdout);
-    eprint!("{}", String::from_utf8_lossy(&output.stderr));
     if !output.status.success() {
+        eprint!("{}", String::from_utf8_lossy(&output.stderr));
         bail!("the QEMU firmware failed ({})", output.status);
     }
+    // On success the firmware's one line of counts repeats the trailer, which the callers
+    // print: not echoed.
     let bytes = std::fs::read(&ticks).with_context(|| format!("reading {}", ticks.display()))?;
     let (records, trailer) = parse_ticks(&bytes)?;
     if records.len() as u64 != trailer.ticks {
@@ -304,6 +232,70 @@ fn stats_json(values: &[u32]) -> serde_json::Value {
     serde_json::json!({ "min": min, "median": median, "p99": p99, "max": max })
 }
 
+/// The machine `cargo qemu` runs on, as its summary line names it.
+const QEMU_MACHINE: &str = "QEMU netduinoplus2 (STM32F405, Cortex-M4F)";
+
+/// An error the command has already reported (its summary line says FAIL).
+#[derive(Debug)]
+struct Reported;
+
+impl std::fmt::Display for Reported {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("reported above")
+    }
+}
+
+impl std::error::Error for Reported {}
+
+/// What one `cargo qemu` run found: the slowest tick, the bound if `timing.json` has one, and
+/// what failed.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Verdict {
+    max_instructions: u32,
+    bound_instructions: Option<u64>,
+    failures: Vec<String>,
+    /// Checks turned into warnings (CATMODEL_BUDGET_WARN_ONLY).
+    waived: Vec<String>,
+}
+
+/// `21267` -> `21 267`: figures as the README writes them.
+fn grouped(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(' ');
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// The one line `cargo qemu` ends with: the drive, the machine, PASS or FAIL, the slowest tick
+/// against the budget, and the worst-case bound.
+fn summary_line(drive: &str, v: &Verdict) -> String {
+    let verdict = if v.failures.is_empty() {
+        if v.waived.is_empty() {
+            "PASS".to_string()
+        } else {
+            format!("PASS with checks waived ({})", v.waived.join("; "))
+        }
+    } else {
+        format!("FAIL ({})", v.failures.join("; "))
+    };
+    let share = f64::from(v.max_instructions) / f64::from(BUDGET_INSTRUCTIONS) * 100.0;
+    let bound = v
+        .bound_instructions
+        .map_or("bound: not computed".to_string(), |b| {
+            format!("bound {} instructions", grouped(b))
+        });
+    format!(
+        "cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, slowest tick {} instructions = {share:.0} % of the {} budget, {bound}",
+        grouped(u64::from(v.max_instructions)),
+        grouped(u64::from(BUDGET_INSTRUCTIONS)),
+    )
+}
+
 fn qemu(args: &[String]) -> Result<()> {
     let input = match args {
         [] => None,
@@ -312,9 +304,33 @@ fn qemu(args: &[String]) -> Result<()> {
         [file] => Some(PathBuf::from(file)),
         _ => bail!("usage: cargo qemu [-- FILE.log]"),
     };
+    let drive = input.as_ref().map_or_else(
+        || "data/bundled.can.log".to_string(),
+        |p| p.display().to_string(),
+    );
+    match qemu_run(input.as_deref()) {
+        Ok(verdict) => {
+            println!("{}", summary_line(&drive, &verdict));
+            if verdict.failures.is_empty() {
+                Ok(())
+            } else {
+                Err(Reported.into())
+            }
+        }
+        Err(error) => {
+            eprintln!("xtask: error: {error:#}");
+            println!("cargo qemu: {drive} on {QEMU_MACHINE}: FAIL (the run did not complete: see the error above)");
+            Err(Reported.into())
+        }
+    }
+}
+
+/// Builds and runs the QEMU firmware over `input` (default: the bundled drive), writes
+/// `target/qemu/timing.json`, prints the table, and checks the run.
+fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
     let elf = cargo_build("qemu", "catmodel-qemu")?;
     let out_dir = root().join("target").join("qemu");
-    let run = run_qemu(&elf, &out_dir, input.as_deref(), &[])?;
+    let run = run_qemu(&elf, &out_dir, input, &[])?;
 
     let whole: Vec<u32> = run.records.iter().map(|r| r.tick).collect();
     let drain: Vec<u32> = run.records.iter().map(|r| r.drain).collect();
@@ -349,6 +365,7 @@ fn qemu(args: &[String]) -> Result<()> {
         "tx_frames": run.records.iter().map(|r| u64::from(r.tx_frames)).sum::<u64>(),
         "stack_high_water_bytes": run.trailer.stack_high_water,
         "stack_size_bytes": run.trailer.stack_size,
+        "node_boot_instructions": run.trailer.node_boot_instructions,
         "qemu_wall_seconds": (run.wall_s * 1000.0).round() / 1000.0,
     });
     std::fs::write(
@@ -392,6 +409,11 @@ fn qemu(args: &[String]) -> Result<()> {
         "overruns {}, skipped slots {}, rx queue drops {}",
         run.trailer.overruns, run.trailer.skipped_slots, run.trailer.rx_queue_drops
     );
+    let _ = writeln!(
+        table,
+        "node built at boot in {} instructions (configuration image checked and read)",
+        run.trailer.node_boot_instructions
+    );
     let stack_share =
         f64::from(run.trailer.stack_high_water) / f64::from(run.trailer.stack_size.max(1));
     let _ = writeln!(
@@ -404,28 +426,48 @@ fn qemu(args: &[String]) -> Result<()> {
     );
     let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
     print!("{table}");
-    if run.trailer.stack_high_water == 0 || stack_share > STACK_USE_LIMIT {
-        bail!("stack high-water mark out of bounds (0: the stack was not painted; or too little headroom)");
-    }
 
+    let mut verdict = Verdict {
+        max_instructions: max,
+        bound_instructions: timing["worst_case_bound_instructions"].as_u64(),
+        ..Verdict::default()
+    };
+    if run.trailer.stack_high_water == 0 {
+        verdict
+            .failures
+            .push("stack high-water mark 0: the stack was not painted".into());
+    } else if stack_share > STACK_USE_LIMIT {
+        verdict.failures.push(format!(
+            "stack high-water mark {:.0} % of the stack, over {:.0} %",
+            stack_share * 100.0,
+            STACK_USE_LIMIT * 100.0
+        ));
+    }
     if max > BUDGET_INSTRUCTIONS {
         // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
         // the run, its outputs and every other check still count.
+        let over = format!("a tick took {}, over the budget", grouped(u64::from(max)));
         if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
-            eprintln!(
-                "xtask: WARNING: a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS} (not fatal: CATMODEL_BUDGET_WARN_ONLY)"
-            );
+            verdict
+                .waived
+                .push(format!("{over}: CATMODEL_BUDGET_WARN_ONLY"));
         } else {
-            bail!("a tick took {max} instructions, over the budget of {BUDGET_INSTRUCTIONS}");
+            verdict.failures.push(over);
         }
     }
     if run.trailer.overruns != 0 || run.trailer.rx_queue_drops != 0 {
-        bail!("the run had overruns or receive-queue drops");
+        verdict.failures.push(format!(
+            "{} overruns, {} receive-queue drops",
+            run.trailer.overruns, run.trailer.rx_queue_drops
+        ));
     }
     if run.trailer.tx_queue_drops != 0 || run.trailer.tx_bus_errors != 0 {
-        bail!("transmit frames were lost");
+        verdict.failures.push(format!(
+            "{} transmit frames lost",
+            u64::from(run.trailer.tx_queue_drops) + u64::from(run.trailer.tx_bus_errors)
+        ));
     }
-    Ok(())
+    Ok(verdict)
 }
 
 /// Parses the timestamps of a candump file, us.
@@ -627,7 +669,7 @@ fn elf_flash_ram(bytes: &[u8]) -> Result<(u64, u64)> {
     Ok((flash, ram))
 }
 
-/// The stack guard (memory.x, src/platform/stack.rs) in action: the QEMU firmware recurses until
+/// The stack guard (memory.x, firmware/src/platform/stack.rs) in action: the QEMU firmware recurses until
 /// its stack runs out. The guard holds if the core faults with the stack pointer just below
 /// SRAM (0x2000_0000), i.e. after the whole stack region and before anything else: the fault
 /// cannot be stacked either, so the core locks up and QEMU stops ("Lockup") with the registers.
@@ -707,7 +749,7 @@ fn size() -> Result<()> {
         ram as f64 / 1024.0,
         stack as f64 / 1024.0
     );
-    // The overflow guard (memory.x, src/platform/stack.rs): the stack starts at the bottom of
+    // The overflow guard (memory.x, firmware/src/platform/stack.rs): the stack starts at the bottom of
     // SRAM and every static lies above its top, so an overflow faults below 0x2000_0000.
     if stack_bottom != 0x2000_0000 || stack_top > data_start {
         bail!(
@@ -743,7 +785,7 @@ mod tests {
     #[test]
     fn tick_records_round_trip_and_truncation_is_an_error() {
         let mut bytes = b"CMQT".to_vec();
-        bytes.extend(2u32.to_le_bytes());
+        bytes.extend(3u32.to_le_bytes());
         bytes.extend(40u32.to_le_bytes());
         for field in [
             &1_000u64.to_le_bytes()[..],
@@ -760,7 +802,7 @@ mod tests {
         }
         bytes.extend(b"END!");
         bytes.extend(1u64.to_le_bytes());
-        for v in 10u32..21 {
+        for v in 10u32..22 {
             bytes.extend(v.to_le_bytes());
         }
         let (records, trailer) = parse_ticks(&bytes).unwrap();
@@ -783,11 +825,43 @@ mod tests {
             (1, 10, 18)
         );
         assert_eq!((trailer.stack_high_water, trailer.stack_size), (19, 20));
+        assert_eq!(trailer.node_boot_instructions, 21);
         assert!(parse_ticks(&bytes[..bytes.len() - 1]).is_err());
-        assert!(parse_ticks(&bytes[..bytes.len() - 56]).is_err());
+        assert!(parse_ticks(&bytes[..bytes.len() - 60]).is_err());
         let mut old = bytes.clone();
         old[4] = 1;
         assert!(parse_ticks(&old).is_err());
+    }
+
+    #[test]
+    fn summary_line_names_drive_machine_verdict_and_budget() {
+        assert_eq!(grouped(21_267), "21 267");
+        assert_eq!(grouped(999), "999");
+        assert_eq!(grouped(1_000_000), "1 000 000");
+        let pass = Verdict {
+            max_instructions: 21_267,
+            ..Verdict::default()
+        };
+        assert_eq!(
+            summary_line("data/bundled.can.log", &pass),
+            "cargo qemu: data/bundled.can.log on QEMU netduinoplus2 (STM32F405, Cortex-M4F): PASS, \
+             slowest tick 21 267 instructions = 71 % of the 30 000 budget, bound: not computed"
+        );
+        let fail = Verdict {
+            max_instructions: 31_000,
+            bound_instructions: Some(45_000),
+            failures: vec![
+                "a tick took 31 000, over the budget".into(),
+                "1 overruns".into(),
+            ],
+            waived: Vec::new(),
+        };
+        let line = summary_line("d.log", &fail);
+        assert!(
+            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 103 % of the 30 000 budget, bound 45 000 instructions"),
+            "{line}"
+        );
+        assert_eq!(line.lines().count(), 1);
     }
 
     #[test]

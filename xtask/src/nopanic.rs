@@ -1,8 +1,8 @@
 //! `cargo xtask no-panic`: the link-time proof that the core has no panic path.
 //!
-//! Builds `src/bin/nopanic.rs` (release, fat LTO, thumbv7em-none-eabihf: the profile we ship),
+//! Builds `firmware/src/bin/nopanic.rs` (release, fat LTO, thumbv7em-none-eabihf: the profile we ship),
 //! whose panic handler calls a symbol that does not exist. It links only if no panic entry is
-//! reachable from `NodeConfig::baked`, `Node::new` and `Node::step` on inputs the optimiser cannot
+//! reachable from `baked::node` (`NodeConfig::from_image`, `Node::new`) and `Node::step` on inputs the optimiser cannot
 //! see. On failure it rebuilds with a harmless handler and lists the call sites of the panic
 //! entries with their source lines (needs `llvm-objdump`; `apt-get install -y llvm`).
 use std::path::PathBuf;
@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use crate::{root, TARGET};
 
 const BIN: &str = "catmodel-nopanic";
-/// The undefined symbol the check's panic handler calls (src/bin/nopanic.rs).
+/// The undefined symbol the check's panic handler calls (firmware/src/bin/nopanic.rs).
 const MARKER: &str = "catmodel_core_can_panic";
 /// Functions a panic goes through; a call to any of them from elsewhere is a panic site.
 const PANIC_ENTRIES: [&str; 7] = [
@@ -31,7 +31,7 @@ const PANIC_ENTRIES: [&str; 7] = [
 fn build(locate: bool) -> Result<(PathBuf, Option<String>)> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     // Only cortex-m-rt's linker script: defmt's keeps its default panic entry alive whether
-    // anything calls it or not (see src/bin/nopanic.rs). Its own target dir, so that these
+    // anything calls it or not (see firmware/src/bin/nopanic.rs). Its own target dir, so that these
     // flags do not invalidate the firmware builds'.
     let mut rustflags = String::from("-C link-arg=-Tlink.x -C target-cpu=cortex-m4");
     if locate {
@@ -45,7 +45,7 @@ fn build(locate: bool) -> Result<(PathBuf, Option<String>)> {
             "build",
             "--release",
             "-p",
-            "catmodel",
+            "catmodel-firmware",
             "--features",
             "nopanic-check",
         ])
@@ -119,7 +119,7 @@ pub fn no_panic() -> Result<()> {
     let Some(linker) = failure else {
         println!(
             "no-panic: {} linked with an undefined panic handler: no panic path from \
-             NodeConfig::baked / Node::new / Node::step (release, LTO, {TARGET})",
+             baked::node / Node::new / Node::step (release, LTO, {TARGET})",
             elf.display()
         );
         return Ok(());

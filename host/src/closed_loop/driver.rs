@@ -115,7 +115,6 @@ impl Driver for NodeDriver {
         }
         tx.extend_from_slice(&node_tx);
         let counter = (self.node.tick_count().wrapping_sub(1) & 0x0F) as u8;
-        let vehicle = self.node.config().vehicle;
         let offset = self.frame_offset();
         let pose = estimate
             .pose
@@ -129,7 +128,6 @@ impl Driver for NodeDriver {
             Controller::PurePursuit(cfg) => {
                 let out = cfg.process(
                     &mut self.pursuit,
-                    &vehicle,
                     self.planner.path(),
                     self.planner.obstacles(),
                     &car,

@@ -106,7 +106,8 @@ pub fn dlc_limits(
     let mut speeds = Vec::new();
     let mut pursuit = None;
     for name in controllers {
-        let controller = super::controller_named(name, vehicle, Receiver::Rtk)?;
+        let controller =
+            super::controller_named(name, node, super::receiver_rms_m(vehicle, Receiver::Rtk))?;
         let super::driver::Controller::PurePursuit(cfg) = controller;
         pursuit.get_or_insert(cfg);
         let v = highest_clean_speed(
@@ -128,8 +129,11 @@ pub fn dlc_limits(
         let pursuit = match pursuit {
             Some(p) => p,
             None => {
-                let super::driver::Controller::PurePursuit(cfg) =
-                    super::controller_named("pure-pursuit", vehicle, Receiver::Rtk)?;
+                let super::driver::Controller::PurePursuit(cfg) = super::controller_named(
+                    "pure-pursuit",
+                    node,
+                    super::receiver_rms_m(vehicle, Receiver::Rtk),
+                )?;
                 cfg
             }
         };

@@ -24,7 +24,7 @@ use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::path::{Path, Projection, Waypoint};
-use catmodel::node::{NodeConfig, NodeModels};
+use catmodel::node::NodeConfig;
 
 use crate::csv2can::LogEncoder;
 use crate::logcsv::{LogRow, TruthRow};
@@ -138,37 +138,6 @@ pub struct RunOutput {
     pub samples: Vec<Sample>,
     /// The scores.
     pub metrics: Metrics,
-}
-
-/// The node's configuration for `vehicle` (antenna, dynamics, and, without a model file,
-/// geometry and steering), on top of `base` (the published models or a model file's).
-pub fn node_config_for(
-    base: NodeConfig,
-    vehicle: &VehicleConfig,
-    geometry_from_vehicle: bool,
-) -> anyhow::Result<NodeConfig> {
-    let c = &vehicle.chassis;
-    let mut config = if geometry_from_vehicle {
-        let mut models = NodeModels::paper();
-        models.vehicle.wheelbase_m = c.wheelbase_m as f32;
-        models.vehicle.track_m = c.track_m as f32;
-        models.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
-        models.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
-        NodeConfig::with_models(&models)
-            .map_err(|e| anyhow::anyhow!("the node cannot run this vehicle: {e:?}"))?
-    } else {
-        base
-    };
-    config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
-    config.dynamics.mass_kg = c.mass_kg as f32;
-    config.dynamics.yaw_inertia_kg_m2 = c.yaw_inertia_kg_m2 as f32;
-    config.dynamics.cg_to_front_m = c.cg_to_front_m as f32;
-    config.dynamics.cg_to_rear_m = c.cg_to_rear_m as f32;
-    config.dynamics.cornering_front_n_per_rad =
-        vehicle.tyre_front.cornering_stiffness_n_per_rad as f32;
-    config.dynamics.cornering_rear_n_per_rad =
-        vehicle.tyre_rear.cornering_stiffness_n_per_rad as f32;
-    Ok(config)
 }
 
 /// The planner's path as the core's `Path` (for scoring lateral error on truth).
@@ -491,27 +460,26 @@ pub struct ClosedLoopArgs {
     pub out: std::path::PathBuf,
 }
 
-/// The controller called `name` for `vehicle` (its body) with `receiver`: obstacles are kept
-/// clear by [`OBSTACLE_MARGIN_M`] plus 2.5 times the receiver's horizontal RMS error (the
-/// estimate can be that far off; the node does not publish its uncertainty yet).
+/// The controller called `name` for the car the node knows (`node`: its model file's body)
+/// with a receiver of horizontal RMS error `receiver_rms_m`: obstacles are kept clear by
+/// [`OBSTACLE_MARGIN_M`] plus 2.5 times that (the estimate can be that far off; the node does
+/// not publish its uncertainty yet).
 pub fn controller_named(
     name: &str,
-    vehicle: &VehicleConfig,
-    receiver: Receiver,
+    node: &NodeConfig,
+    receiver_rms_m: f64,
 ) -> anyhow::Result<driver::Controller> {
-    let body = &vehicle.body;
-    let mut gnss = vehicle.sensors.gnss.clone();
-    receiver.apply(&mut gnss);
-    let rms = (2.0 * (gnss.white_noise_m.powi(2) + gnss.bias_sigma_m.powi(2))).sqrt();
     match name {
-        "pure-pursuit" => Ok(driver::Controller::PurePursuit(
-            catmodel::control::pure_pursuit::PurePursuitConfig {
-                half_width_m: (0.5 * body.width_m) as f32,
-                front_m: (body.length_m - body.rear_overhang_m) as f32,
-                obstacle_margin_m: (OBSTACLE_MARGIN_M + 2.5 * rms) as f32,
-                ..catmodel::control::pure_pursuit::DEFAULT_PURE_PURSUIT
-            },
-        )),
+        "pure-pursuit" => {
+            use catmodel::control::pure_pursuit::{PurePursuitConfig, PurePursuitTuning};
+            let tuning = PurePursuitTuning {
+                obstacle_margin_m: (OBSTACLE_MARGIN_M + 2.5 * receiver_rms_m) as f32,
+                ..catmodel::control::pure_pursuit::DEFAULT_TUNING
+            };
+            Ok(driver::Controller::PurePursuit(
+                PurePursuitConfig::for_node(node, tuning),
+            ))
+        }
         "mpc" => anyhow::bail!(
             "controller `mpc`: the model-predictive controller is not in this build yet; use \
              --controller pure-pursuit"
@@ -520,7 +488,9 @@ pub fn controller_named(
     }
 }
 
-/// Loads the plant's vehicle and the node's configuration the way the CLI does.
+/// Loads the plant's vehicle (`vehicle`, default the CAT Vehicle) and the node's configuration
+/// from the car's model file (`model`, default `models/paper.toml`, the CAT Vehicle's). A plant
+/// vehicle needs its own model file: the node knows a car only from one.
 pub fn load_setup(
     vehicle: Option<&std::path::Path>,
     model: Option<&std::path::Path>,
@@ -529,10 +499,23 @@ pub fn load_setup(
         Some(p) => VehicleConfig::load(p).map_err(|e| anyhow::anyhow!("{e}"))?,
         None => VehicleConfig::default(),
     };
-    let base = crate::node_config(model)?;
+    if let (Some(v), None) = (vehicle, model) {
+        anyhow::bail!(
+            "--vehicle {} needs --model: the node knows a car only from its model file \
+             (e.g. models/hatchback.toml for host/vehicles/hatchback.toml)",
+            v.display()
+        );
+    }
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
-    let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
+    let node = crate::node_config(model)?;
     Ok((cfg, node))
+}
+
+/// The horizontal RMS error of `vehicle`'s GNSS receiver with `receiver`, m.
+pub fn receiver_rms_m(vehicle: &VehicleConfig, receiver: Receiver) -> f64 {
+    let mut gnss = vehicle.sensors.gnss.clone();
+    receiver.apply(&mut gnss);
+    (2.0 * (gnss.white_noise_m.powi(2) + gnss.bias_sigma_m.powi(2))).sqrt()
 }
 
 /// `catmodel closed-loop`: runs the scenario and writes `session.can.log` (every frame the node
@@ -550,7 +533,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         anyhow::anyhow!("unknown receiver `{}`; known: rtk, standard", args.receiver)
     })?;
     let (vehicle, node) = load_setup(args.vehicle.as_deref(), args.model.as_deref())?;
-    let controller = controller_named(&args.controller, &vehicle, receiver)?;
+    let controller = controller_named(&args.controller, &node, receiver_rms_m(&vehicle, receiver))?;
     let speed = args.speed_mps.unwrap_or(kind.default_speed_mps());
     if !(speed.is_finite() && speed > 0.0 && speed <= 40.0) {
         anyhow::bail!("--speed {speed}: a target speed is in (0, 40] m/s");

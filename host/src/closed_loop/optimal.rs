@@ -264,11 +264,7 @@ impl TrackAtSpeed {
 
     /// Pure pursuit with `config` on the exact state: the steering it commands at each knot time
     /// (a start for the search), and its own trial.
-    pub fn pursuit(
-        &self,
-        config: &PurePursuitConfig,
-        vehicle: &VehicleParams,
-    ) -> (Vec<f64>, Trial) {
+    pub fn pursuit(&self, config: &PurePursuitConfig) -> (Vec<f64>, Trial) {
         let path = core_path(&self.course);
         let mut state = PurePursuitState::default();
         let mut profile = vec![0.0; self.knots];
@@ -280,7 +276,7 @@ impl TrackAtSpeed {
                     pose: Some(Pose::new(x as f32, y as f32, heading as f32)),
                     speed_mps: rig.state().vx_mps as f32,
                 };
-                let out = config.process(&mut state, vehicle, Some(&path), &[], &car);
+                let out = config.process(&mut state, Some(&path), &[], &car);
                 let steer = f64::from(out.steer_cmd_pct);
                 let k = (t / KNOT_S).round() as usize;
                 if (t - k as f64 * KNOT_S).abs() < 0.011 {
@@ -504,7 +500,7 @@ pub fn search_speed(
         let stretched = stretch(&p.profile, p.speed_mps, speed_mps, n);
         starts.extend(VARIANTS.iter().map(|&(s, g)| variant(&stretched, s, g)));
     }
-    let (pp_profile, pp_trial) = track.pursuit(pursuit, params);
+    let (pp_profile, pp_trial) = track.pursuit(pursuit);
     let mut best: Option<(Vec<f64>, Trial)> = pp_trial
         .clean()
         .then(|| (pp_profile.clone(), pp_trial.clone()));

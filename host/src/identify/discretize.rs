@@ -42,21 +42,39 @@ pub struct Discretized {
     pub models: Vec<DiscreteBlock>,
 }
 
+/// One transfer function, ZOH-discretized at `ts` (any order up to the core's
+/// `MAX_ORDER`), named `name`.
+pub fn discretize_tf(
+    name: String,
+    input: String,
+    output: String,
+    tf: &catmodel::model::tf::TransferFunction,
+    ts: f64,
+) -> Result<DiscreteBlock> {
+    let dss =
+        zoh::discretize(tf, ts).map_err(|e| anyhow!("{name}: {}", describe_model_error(&e)))?;
+    let n = dss.n;
+    Ok(DiscreteBlock {
+        name,
+        input,
+        output,
+        a: (0..n).map(|i| dss.ad[i][..n].to_vec()).collect(),
+        b: (0..n).map(|i| vec![dss.bd[i]]).collect(),
+        c: vec![dss.cd[..n].to_vec()],
+        d: vec![vec![dss.dd]],
+        delay_samples: dss.delay_samples,
+    })
+}
+
 fn blocks(key: &str, m: &Model, ts: f64, out: &mut Vec<DiscreteBlock>) -> Result<()> {
     for b in &m.blocks {
-        let dss = zoh::discretize(&b.tf, ts)
-            .map_err(|e| anyhow!("{key}.{}: {}", b.input, describe_model_error(&e)))?;
-        let n = dss.n;
-        out.push(DiscreteBlock {
-            name: format!("{key}.{}", b.input),
-            input: format!("{} [{}]", b.input, b.input_unit),
-            output: format!("{} [{}]", m.output, m.output_unit),
-            a: (0..n).map(|i| dss.ad[i][..n].to_vec()).collect(),
-            b: (0..n).map(|i| vec![dss.bd[i]]).collect(),
-            c: vec![dss.cd[..n].to_vec()],
-            d: vec![vec![dss.dd]],
-            delay_samples: dss.delay_samples,
-        });
+        out.push(discretize_tf(
+            format!("{key}.{}", b.input),
+            format!("{} [{}]", b.input, b.input_unit),
+            format!("{} [{}]", m.output, m.output_unit),
+            &b.tf,
+            ts,
+        )?);
     }
     Ok(())
 }

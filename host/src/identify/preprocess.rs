@@ -35,7 +35,7 @@ pub struct PreprocessOptions {
 impl Default for PreprocessOptions {
     fn default() -> Self {
         Self {
-            ts_s: catmodel::model::paper::PAPER_TS_S,
+            ts_s: catmodel::SAMPLE_PERIOD_S_F64,
             fir_taps: 21,
             cutoff_hz: 2.0,
             smooth_span: 10,

@@ -9,80 +9,47 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Result};
-use plotters::prelude::*;
+use anyhow::Result;
 
 use super::{delay, validate, Identification};
+use crate::plot::{Figure, Style, PALETTE};
 
-type Series<'a> = (&'a str, Vec<(f64, f64)>, RGBColor);
+/// Colours of the report's series: measured black, the identified model blue, the kinematic
+/// model red, the command orange; Fig 2's markers green (delay) and purple (settling).
+const MEASURED_C: (u8, u8, u8) = PALETTE[0];
+const MODEL_C: (u8, u8, u8) = PALETTE[1];
+const KINEMATIC_C: (u8, u8, u8) = PALETTE[2];
+const DELAY_C: (u8, u8, u8) = PALETTE[3];
+const COMMAND_C: (u8, u8, u8) = PALETTE[4];
+const SETTLING_C: (u8, u8, u8) = PALETTE[5];
+/// Time series of 20 ms samples are dense: thin lines.
+const TRACE: Style = Style::Line { width_px: 1 };
 
+/// A named series of a report figure: label, points, colour.
+type Curve<'a> = (&'a str, Vec<(f64, f64)>, (u8, u8, u8));
+
+/// A report figure: `title` (with its figure number), `subtitle` (which log), line series, and
+/// labelled marker series; 900 x 500 with the legend below the data.
 fn plot(
     path: &Path,
     title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[Series],
-    points: &[(f64, f64)],
+    subtitle: &str,
+    (x_label, y_label): (&str, &str),
+    lines: Vec<Curve<'_>>,
+    markers: Vec<Curve<'_>>,
 ) -> Result<()> {
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for (_, pts, _) in series {
-        for &(x, y) in pts {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
+    let mut figure = Figure::new(title, x_label, y_label)
+        .subtitle(subtitle)
+        .size(900, 500);
+    for (label, points, color) in lines {
+        figure = figure.series(label, points, TRACE).color(color);
     }
-    if !(x0.is_finite() && y0.is_finite()) {
-        return Ok(());
+    for (label, points, color) in markers {
+        figure = figure
+            .series(label, points, Style::Points { radius_px: 5 })
+            .color(color);
     }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    let pad = ((y1 - y0) * 0.05).max(1e-6);
-    let (y0, y1) = (y0 - pad, y1 + pad);
-    let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
-    let e = |e: DrawingAreaErrorKind<std::io::Error>| anyhow!("plot {}: {e:?}", path.display());
-    root.fill(&WHITE).map_err(e)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(e)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .draw()
-        .map_err(e)?;
-    for (name, pts, color) in series {
-        let c = *color;
-        chart
-            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(1)))
-            .map_err(e)?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-    }
-    if !points.is_empty() {
-        chart
-            .draw_series(points.iter().map(|&p| Circle::new(p, 5, RED.filled())))
-            .map_err(e)?;
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(e)?;
-    root.present().map_err(e)?;
-    Ok(())
+    figure.write_svg(path)
 }
 
 fn xy(t: &[f64], y: &[f64]) -> Vec<(f64, f64)> {
@@ -121,62 +88,57 @@ fn opt(v: Option<f64>, d: usize) -> String {
 pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
     std::fs::create_dir_all(dir)?;
     let (sets, sims, label) = if id.validation.is_empty() {
-        (&id.training, &id.training_sims, "training")
+        (&id.training, &id.training_sims, "Training")
     } else {
-        (&id.validation, &id.validation_sims, "validation")
+        (&id.validation, &id.validation_sims, "Validation")
     };
     if let (Some(e), Some(s)) = (sets.first(), sims.first()) {
-        let name = &e.name;
-        plot(
-            &dir.join("fig4_speed.svg"),
-            &format!("Speed, {label} log {name} (Fig 4)"),
-            "t [s]",
-            "speed [m/s]",
-            &[
-                ("measured", xy(&e.t, &e.vel), BLACK),
-                ("transfer function", xy(&e.t, &s.vel_model), BLUE),
-                ("kinematic", xy(&e.t, &s.vel_kinematic), RED),
-            ],
-            &[],
-        )?;
-        plot(
-            &dir.join("fig5_speed_error.svg"),
-            &format!("|speed error|, {name} (Fig 5)"),
-            "t [s]",
-            "|error| [m/s]",
-            &[
-                (
-                    "transfer function",
-                    abs_err(&e.t, &e.vel, &s.vel_model),
-                    BLUE,
-                ),
-                ("kinematic", abs_err(&e.t, &e.vel, &s.vel_kinematic), RED),
-            ],
-            &[],
-        )?;
-        plot(
-            &dir.join("fig6_dx.svg"),
-            &format!("dx/dt, {label} log {name} (Fig 6)"),
-            "t [s]",
-            "dx/dt [m/s]",
-            &[
-                ("measured (GNSS)", xy(&e.t, &e.dx), BLACK),
-                ("transfer function", xy(&e.t, &s.dx_model), BLUE),
-                ("kinematic", xy(&e.t, &s.dx_kinematic), RED),
-            ],
-            &[],
-        )?;
-        plot(
-            &dir.join("fig7_dx_error.svg"),
-            &format!("|dx/dt error|, {name} (Fig 7)"),
-            "t [s]",
-            "|error| [m/s]",
-            &[
-                ("transfer function", abs_err(&e.t, &e.dx, &s.dx_model), BLUE),
-                ("kinematic", abs_err(&e.t, &e.dx, &s.dx_kinematic), RED),
-            ],
-            &[],
-        )?;
+        let log = format!("{label} log: {}", e.name);
+        // Fig 4 / 5 (speed) and Fig 6 / 7 (dx/dt): the signal, then the absolute errors.
+        let t = &e.t;
+        for (files, numbers, quantity, measured, (model, model_label), kinematic) in [
+            (
+                ("fig4_speed.svg", "fig5_speed_error.svg"),
+                (4, 5),
+                "speed",
+                ("measured", &e.vel),
+                (&s.vel_model, "transfer function (eq 5 form)"),
+                &s.vel_kinematic,
+            ),
+            (
+                ("fig6_dx.svg", "fig7_dx_error.svg"),
+                (6, 7),
+                "dx/dt (east velocity)",
+                ("measured (GNSS)", &e.dx),
+                (&s.dx_model, "transfer function (eq 7 form)"),
+                &s.dx_kinematic,
+            ),
+        ] {
+            let short = quantity.split(' ').next().unwrap_or(quantity);
+            plot(
+                &dir.join(files.0),
+                &format!("Fig {}: {quantity}, measured and simulated", numbers.0),
+                &log,
+                ("t (s)", &format!("{short} (m/s)")),
+                vec![
+                    (measured.0, xy(t, measured.1), MEASURED_C),
+                    (model_label, xy(t, model), MODEL_C),
+                    ("kinematic", xy(t, kinematic), KINEMATIC_C),
+                ],
+                Vec::new(),
+            )?;
+            plot(
+                &dir.join(files.1),
+                &format!("Fig {}: absolute {short} error", numbers.1),
+                &log,
+                ("t (s)", "|error| (m/s)"),
+                vec![
+                    (model_label, abs_err(t, measured.1, model), MODEL_C),
+                    ("kinematic", abs_err(t, measured.1, kinematic), KINEMATIC_C),
+                ],
+                Vec::new(),
+            )?;
+        }
         let resid: Vec<f64> = e.vel.iter().zip(&s.vel_model).map(|(a, b)| a - b).collect();
         let acf = autocorrelation(&resid, 250);
         let lags: Vec<(f64, f64)> = acf
@@ -186,11 +148,11 @@ pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
             .collect();
         plot(
             &dir.join("residual_acf.svg"),
-            &format!("Autocorrelation of the speed simulation error, {name}"),
-            "lag [s]",
-            "r",
-            &[("residual ACF", lags, BLUE)],
-            &[],
+            "Autocorrelation of the speed simulation error",
+            &log,
+            ("lag (s)", "autocorrelation"),
+            vec![("speed error, transfer function (eq 5 form)", lags, MODEL_C)],
+            Vec::new(),
         )?;
     }
     // Fig 2: the first step with both markers, on its experiment.
@@ -199,6 +161,7 @@ pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
         .iter()
         .find(|s| s.delay_s.is_some() && s.settling_s.is_some())
     {
+        let in_training = id.training.iter().any(|e| e.name == step.experiment);
         if let Some(e) = id
             .training
             .iter()
@@ -218,20 +181,35 @@ pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
                 let k = ((t - e.t[0]) / e.ts_s).round().max(0.0) as usize;
                 (t, e.vel[k.min(e.len() - 1)])
             };
-            let dots = [
-                at(step.t_step_s + step.delay_s.unwrap_or(0.0)),
-                at(step.t_step_s + step.settling_s.unwrap_or(0.0)),
-            ];
+            let which = if in_training {
+                "Training"
+            } else {
+                "Validation"
+            };
             plot(
                 &dir.join("fig2_step.svg"),
-                &format!("Delay and settling, {} (Fig 2)", e.name),
-                "t [s]",
-                "speed [m/s]",
-                &[
-                    ("commanded", keep(&e.input_vel), RED),
-                    ("measured", keep(&e.vel), BLACK),
+                "Fig 2: delay and settling of a speed step",
+                &format!(
+                    "{which} log: {}, step at t = {:.2} s",
+                    e.name, step.t_step_s
+                ),
+                ("t (s)", "speed (m/s)"),
+                vec![
+                    ("commanded", keep(&e.input_vel), COMMAND_C),
+                    ("measured", keep(&e.vel), MEASURED_C),
                 ],
-                &dots,
+                vec![
+                    (
+                        "1: delay (the speed has moved 5 % of the step)",
+                        vec![at(step.t_step_s + step.delay_s.unwrap_or(0.0))],
+                        DELAY_C,
+                    ),
+                    (
+                        "2: settled (stays within 5 % of its final value)",
+                        vec![at(step.t_step_s + step.settling_s.unwrap_or(0.0))],
+                        SETTLING_C,
+                    ),
+                ],
             )?;
         }
     }

@@ -1,0 +1,21 @@
+//! The firmware's budgets, written down next to the code that must meet them and imported by
+//! `cargo xtask` (which measures them) instead of copied there.
+use catmodel::SAMPLE_PERIOD_US;
+
+/// The board's core clock, Hz: the STM32F405's maximum, from the 8 MHz crystal through the PLL
+/// (docs/firmware.md).
+pub const BOARD_SYSCLK_HZ: u32 = 168_000_000;
+/// Cycles in one 20 ms tick at [`BOARD_SYSCLK_HZ`]: the basis of every "share of the tick".
+pub const CYCLES_PER_TICK: u64 = BOARD_SYSCLK_HZ as u64 / 1_000_000 * SAMPLE_PERIOD_US;
+/// Instructions one tick may take (drain + step + handoff): 30 000 = 0.89 % of a 20 ms tick at
+/// 168 MHz if every instruction took one cycle. Checked by `cargo qemu` on QEMU instruction
+/// counts.
+pub const TICK_BUDGET_INSTRUCTIONS: u32 = 30_000;
+/// Flash the board image may use, bytes (the STM32F405RG has 1 MiB; the budget keeps the
+/// image small enough to leave room for a second image and the controller).
+pub const FLASH_BUDGET_BYTES: u64 = 96 * 1024;
+/// RAM the board image may use with its stack region, bytes.
+pub const RAM_BUDGET_BYTES: u64 = 24 * 1024;
+/// Share of the stack region the measured high-water mark may use (the rest is headroom for
+/// the board's interrupt handlers and code paths the drive does not take).
+pub const STACK_USE_LIMIT: f64 = 0.75;

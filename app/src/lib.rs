@@ -1,0 +1,382 @@
+//! The app layer: the three async loops the board and QEMU share (bus receive, 20 ms tick, bus
+//! transmit), generic over a small bus trait and the embassy-time clock.
+//!
+//! ```text
+//! bus --BusReceiver--> receive_loop --RxQueue--> tick_loop --TxQueue--> transmit_loop --BusTransmitter--> bus
+//!                      (drops counted)           (Node::step every 20 ms)  (drops counted)
+//! ```
+//! The receive queue carries single frames; the transmit queue carries each tick's frames as
+//! one [`TxBatch`], so the tick pays one queue operation for its ~14 frames, not 14.
+//! What differs between platforms stays behind the traits: how frames arrive and leave
+//! ([`BusReceiver`], [`BusTransmitter`]) and what a tick is measured with and what happens after
+//! it ([`TickPlatform`]: DWT cycles and the watchdog on the board, TIM2 instruction counts and
+//! result records in QEMU). Everything else, including the overrun policy ([`schedule`]), is
+//! the same code on both.
+//!
+//! Time: embassy-time runs at 1 MHz (`tick-hz-1_000_000`), so its ticks are microseconds. The
+//! node's time base (the input's, [`catmodel::node::Tick::now_us`]) is the embassy clock plus a
+//! fixed offset ([`TickConfig::input_offset_us`]): 0 on the board, `first_tick_us - 20 000` in
+//! QEMU (docs/architecture.md, "Tick schedule").
+//!
+//! Budget: one tick (drain + step + handoff) must stay under 30 000 instructions, 0.9 % of the
+//! 20 ms period at 168 MHz; `cargo qemu` measures it and fails above it.
+#![cfg_attr(not(test), no_std)]
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing
+    )
+)]
+#![warn(missing_docs)]
+
+pub mod budget;
+pub mod health;
+pub mod record;
+pub mod schedule;
+
+use core::future::{poll_fn, Future};
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::task::Poll;
+
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::{Channel, TrySendError};
+use embassy_time::{Instant, Timer};
+
+use catmodel::can::TimedFrame;
+use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
+use catmodel::SAMPLE_PERIOD_US;
+
+pub use schedule::{ReplayClock, TickGrid};
+
+/// Frames the receive queue holds between two ticks. The filters admit five input messages at
+/// 50 Hz or less (about 5 frames per tick), so 64 leaves room for bursts; a full queue drops the
+/// newest frame and counts it ([`LinkCounters::rx_queue_drops`]).
+pub const RX_QUEUE_LEN: usize = 64;
+/// Frames one tick hands to the node at most; any further due frames wait for the next tick
+/// (they are not dropped).
+pub const RX_BATCH_LEN: usize = 32;
+/// Tick batches waiting for the bus: two ticks' worth (each up to
+/// [`catmodel::node::MAX_TX_FRAMES`] frames).
+pub const TX_QUEUE_LEN: usize = 2;
+
+/// Received frames, stamped with their receive time on the input's time base.
+pub type RxQueue = Channel<CriticalSectionRawMutex, TimedFrame, RX_QUEUE_LEN>;
+/// Frames to send, one batch per tick.
+pub type TxQueue = Channel<CriticalSectionRawMutex, TxBatch, TX_QUEUE_LEN>;
+
+/// The frames one tick produced, in transmit order, with the tick's time (each frame goes out
+/// stamped with it).
+#[derive(Clone, Debug, Default)]
+pub struct TxBatch {
+    /// The tick's time on the input's time base, us.
+    pub tick_us: u64,
+    /// The frames.
+    pub frames: TxFrames,
+}
+
+/// Counters of the bus paths, shared between the tasks (all since boot).
+#[derive(Debug, Default)]
+pub struct LinkCounters {
+    /// Frames dropped because the receive queue was full.
+    pub rx_queue_drops: AtomicU32,
+    /// Receive errors reported by the bus (error frames, hardware FIFO overruns).
+    pub rx_bus_errors: AtomicU32,
+    /// Frames received that the node cannot represent (remote frames), dropped.
+    pub rx_unsupported: AtomicU32,
+    /// Frames dropped because the transmit queue was full.
+    pub tx_queue_drops: AtomicU32,
+    /// Batches handed to the transmit queue whose frames are not all sent yet.
+    pub tx_batches_in_flight: AtomicU32,
+    /// Frames the bus failed to send.
+    pub tx_bus_errors: AtomicU32,
+}
+
+impl LinkCounters {
+    /// All zero.
+    pub const fn new() -> Self {
+        Self {
+            rx_queue_drops: AtomicU32::new(0),
+            rx_bus_errors: AtomicU32::new(0),
+            rx_unsupported: AtomicU32::new(0),
+            tx_queue_drops: AtomicU32::new(0),
+            tx_batches_in_flight: AtomicU32::new(0),
+            tx_bus_errors: AtomicU32::new(0),
+        }
+    }
+}
+
+fn bump(counter: &AtomicU32) {
+    // Note: a plain load + store would do (one writer per counter), but fetch_add is as cheap on
+    // a Cortex-M4 (LDREX/STREX) and stays right if a second writer ever appears.
+    counter.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Why a bus receive returned no frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RxError {
+    /// A bus error (error frame, FIFO overrun); counted, the loop goes on.
+    Bus,
+    /// A frame the node cannot use (remote frame); counted, the loop goes on.
+    Unsupported,
+    /// The input has ended (replay only); the receive loop returns.
+    EndOfInput,
+}
+
+/// Where frames come from.
+#[allow(async_fn_in_trait)]
+pub trait BusReceiver {
+    /// Waits for the next frame; its `t_us` is the receive time on the input's time base.
+    async fn receive(&mut self) -> Result<TimedFrame, RxError>;
+}
+
+/// Where frames go.
+#[allow(async_fn_in_trait)]
+pub trait BusTransmitter {
+    /// Sends one frame (`t_us` is the time of the tick that produced it). `Err` is counted.
+    async fn transmit(&mut self, frame: &TimedFrame) -> Result<(), ()>;
+    /// Called whenever the transmit queue has run empty (QEMU flushes its output file here).
+    fn idle(&mut self) {}
+}
+
+/// The receive path: moves frames from the bus to the tick's queue without ever blocking the
+/// bus: when the queue is full the frame is dropped and counted. Returns at end of input.
+pub async fn receive_loop<B: BusReceiver>(bus: &mut B, queue: &RxQueue, counters: &LinkCounters) {
+    loop {
+        match bus.receive().await {
+            Ok(frame) => {
+                if queue.try_send(frame).is_err() {
+                    bump(&counters.rx_queue_drops);
+                }
+            }
+            Err(RxError::Bus) => bump(&counters.rx_bus_errors),
+            Err(RxError::Unsupported) => bump(&counters.rx_unsupported),
+            Err(RxError::EndOfInput) => return,
+        }
+    }
+}
+
+/// The transmit path: sends each tick's frames in order.
+pub async fn transmit_loop<B: BusTransmitter>(
+    bus: &mut B,
+    queue: &TxQueue,
+    counters: &LinkCounters,
+) -> ! {
+    loop {
+        let batch = queue.receive().await;
+        for frame in &batch.frames {
+            let timed = TimedFrame {
+                t_us: batch.tick_us,
+                frame: *frame,
+            };
+            if bus.transmit(&timed).await.is_err() {
+                bump(&counters.tx_bus_errors);
+            }
+        }
+        if queue.is_empty() {
+            bus.idle();
+        }
+        counters
+            .tx_batches_in_flight
+            .fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// The measurements of one completed tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickReport {
+    /// Slot index on the grid (0 = first tick); a gap means skipped slots.
+    pub slot: u64,
+    /// The tick's time on the input's time base, us.
+    pub tick_us: u64,
+    /// What the node was told about the platform in this tick.
+    pub platform: PlatformStats,
+    /// Frames handed to the node.
+    pub rx_frames: u16,
+    /// Frames the node returned.
+    pub tx_frames: u16,
+    /// Counter ticks ([`TickPlatform::counter`]) spent moving due frames out of the queue.
+    pub drain_counts: u32,
+    /// Counter ticks spent in `Node::step`.
+    pub step_counts: u32,
+    /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
+    pub tick_counts: u32,
+}
+
+/// What the tick loop needs from its platform.
+pub trait TickPlatform {
+    /// A free-running 32-bit counter to measure the tick with (board: DWT cycles; QEMU: TIM2
+    /// counting instructions). Differences are taken with wrapping arithmetic.
+    fn counter(&self) -> u32;
+    /// `counts` of [`Self::counter`] as microseconds for `PlatformStats::last_step_us`, or `None`
+    /// where the counter does not measure board time (QEMU, host replay: "not available").
+    fn counts_to_us(&self, counts: u32) -> Option<u32>;
+    /// Called after every completed tick (board: feeds the watchdog; QEMU: records the counts).
+    fn tick_completed(&mut self, report: &TickReport);
+    /// Deepest stack use so far, bytes, where the stack is painted; called once per tick after
+    /// [`Self::tick_completed`] (outside the measured tick), reported in the next tick's status.
+    fn stack_high_water_bytes(&mut self) -> Option<u32> {
+        None
+    }
+}
+
+/// Fixed parameters of the tick loop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TickConfig {
+    /// Embassy time (us) of the first tick.
+    pub first_tick_instant_us: u64,
+    /// Added to embassy time to get the input's time base, us, modulo 2^64 (a replayed drive
+    /// that starts at time 0 has a negative offset: [`ReplayClock`]).
+    pub input_offset_us: u64,
+    /// Stop after the tick at or past this time (input time base, us); `None` runs forever.
+    pub last_tick_us: Option<u64>,
+    /// The last reset was caused by the watchdog (board; read once at boot).
+    pub watchdog_reset: bool,
+}
+
+/// What the tick loop saw, returned when it stops (QEMU).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickSummary {
+    /// Ticks that ran.
+    pub ticks: u64,
+    /// Deadline misses ([`TickGrid::overruns`]).
+    pub overruns: u32,
+    /// Slots skipped.
+    pub skipped_slots: u32,
+}
+
+/// Takes the queued frames that are due at `tick_us` (receive time <= tick time), in arrival
+/// order, up to the batch's capacity. A frame stamped after the tick is held in `held` (it was
+/// the queue's oldest) and goes first at the next tick: one queue operation per frame.
+fn drain_due(
+    queue: &RxQueue,
+    tick_us: u64,
+    held: &mut Option<TimedFrame>,
+    batch: &mut heapless::Vec<TimedFrame, RX_BATCH_LEN>,
+) {
+    batch.clear();
+    while !batch.is_full() {
+        let next = match held.take() {
+            Some(frame) => frame,
+            None => match queue.try_receive() {
+                Ok(frame) => frame,
+                Err(_) => break,
+            },
+        };
+        if next.t_us > tick_us {
+            *held = Some(next);
+            break;
+        }
+        // Note: cannot fail, the batch is not full (checked by the loop).
+        let _ = batch.push(next);
+    }
+}
+
+/// The 20 ms tick: at each slot of the grid, hands the due frames to `Node::step` and the frames
+/// it returns to the transmit queue, then reports the tick to the platform. Overruns follow
+/// [`schedule`]: a late tick is counted, a stale slot is skipped (no catch-up burst), and tick
+/// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached.
+pub async fn tick_loop<P: TickPlatform>(
+    node: &mut Node,
+    rx: &RxQueue,
+    tx: &TxQueue,
+    counters: &LinkCounters,
+    platform: &mut P,
+    config: &TickConfig,
+) -> TickSummary {
+    let mut grid = TickGrid::new(config.first_tick_instant_us, SAMPLE_PERIOD_US);
+    let mut batch: heapless::Vec<TimedFrame, RX_BATCH_LEN> = heapless::Vec::new();
+    let mut held = None;
+    let mut out = TxBatch::default();
+    let mut last_step_us = None;
+    let mut stack_high_water_bytes = None;
+    let mut ticks = 0u64;
+    loop {
+        Timer::at(Instant::from_micros(grid.deadline_us())).await;
+        grid.start(Instant::now().as_micros());
+        let tick_us = grid.deadline_us().wrapping_add(config.input_offset_us);
+
+        let c0 = platform.counter();
+        drain_due(rx, tick_us, &mut held, &mut batch);
+        let c1 = platform.counter();
+        let tick = Tick {
+            now_us: tick_us,
+            platform: PlatformStats {
+                overruns: grid.overruns(),
+                rx_queue_drops: counters.rx_queue_drops.load(Ordering::Relaxed),
+                last_step_us,
+                stack_high_water_bytes,
+                watchdog_reset: config.watchdog_reset,
+            },
+        };
+        out.tick_us = tick_us;
+        out.frames.clear();
+        node.step(&tick, &batch, &mut out.frames);
+        let c2 = platform.counter();
+        let tx_frames = out.frames.len();
+        counters
+            .tx_batches_in_flight
+            .fetch_add(1, Ordering::Relaxed);
+        if let Err(TrySendError::Full(back)) = tx.try_send(out) {
+            counters
+                .tx_batches_in_flight
+                .fetch_sub(1, Ordering::Relaxed);
+            counters.tx_queue_drops.fetch_add(
+                u32::try_from(back.frames.len()).unwrap_or(u32::MAX),
+                Ordering::Relaxed,
+            );
+        }
+        out = TxBatch::default();
+        let c3 = platform.counter();
+
+        let step_counts = c2.wrapping_sub(c1);
+        last_step_us = platform.counts_to_us(step_counts);
+        ticks = ticks.saturating_add(1);
+        platform.tick_completed(&TickReport {
+            slot: grid.slot(),
+            tick_us,
+            platform: tick.platform,
+            rx_frames: u16::try_from(batch.len()).unwrap_or(u16::MAX),
+            tx_frames: u16::try_from(tx_frames).unwrap_or(u16::MAX),
+            drain_counts: c1.wrapping_sub(c0),
+            step_counts,
+            tick_counts: c3.wrapping_sub(c0),
+        });
+        stack_high_water_bytes = platform.stack_high_water_bytes();
+        grid.finish(Instant::now().as_micros());
+        if config.last_tick_us.is_some_and(|last| tick_us >= last) {
+            return TickSummary {
+                ticks,
+                overruns: grid.overruns(),
+                skipped_slots: grid.skipped_slots(),
+            };
+        }
+    }
+}
+
+/// Lets every other ready task run once before continuing.
+pub fn yield_now() -> impl Future<Output = ()> {
+    let mut yielded = false;
+    poll_fn(move |cx| {
+        if yielded {
+            Poll::Ready(())
+        } else {
+            yielded = true;
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        }
+    })
+}
+
+/// Waits until the transmit task has sent (and, by [`BusTransmitter::idle`], flushed) every
+/// queued batch.
+pub async fn wait_tx_drained(counters: &LinkCounters) {
+    while counters.tx_batches_in_flight.load(Ordering::Relaxed) > 0 {
+        yield_now().await;
+    }
+}

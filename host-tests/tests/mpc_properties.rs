@@ -1,0 +1,171 @@
+//! Properties of the controller on arbitrary inputs: whatever the reference, state, corridor
+//! (feasible or not), obstacles and uncertainty, every output is finite and within its range,
+//! the plan meets the steering range and rate limits exactly, the iteration and factorisation
+//! counts stay within their caps, and a non-finite input gives the fallback (status 3) without
+//! a NaN anywhere.
+use catmodel::control::mpc::{
+    CarState, ControlStatus, FallbackReason, MpcInput, MpcState, DEFAULT_TUNING, MAX_OBSTACLES,
+    PLAN_STEPS, STEPS, STEP_S,
+};
+use catmodel::model::dynamic::LateralState;
+use catmodel::model::hybrid::Mode;
+use catmodel::model::kinematic::Pose;
+use catmodel::model::{paper, SsBlock};
+use catmodel_host::sim::config::VehicleConfig;
+use catmodel_host_tests::mpc_sim::{mpc_for, TestPath, ESCAPE_BODY};
+use proptest::prelude::*;
+
+#[derive(Clone, Debug)]
+struct Case {
+    speed: f64,
+    curvature: f64,
+    left: f64,
+    right: f64,
+    offset: f32,
+    heading_error: f32,
+    steer: f32,
+    lateral: (f32, f32),
+    dynamic: bool,
+    obstacles: Vec<(f32, f32, f32)>,
+    uncertainty: f32,
+    /// Which input gets a NaN (0 = none).
+    poison: u8,
+}
+
+fn case() -> impl Strategy<Value = Case> {
+    (
+        (0.0f64..28.0, -0.12f64..0.12, 0.3f64..6.0, 0.3f64..6.0),
+        (-2.5f32..2.5, -0.6f32..0.6, -0.6f32..0.6),
+        ((-1.0f32..1.0, -0.6f32..0.6), any::<bool>()),
+        prop::collection::vec(
+            (-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5),
+            0..=MAX_OBSTACLES,
+        ),
+        (0.0f32..1.2, prop_oneof![6 => Just(0u8), 1 => 1u8..6]),
+    )
+        .prop_map(
+            |(
+                (speed, curvature, left, right),
+                (offset, heading_error, steer),
+                (lateral, dynamic),
+                obstacles,
+                (uncertainty, poison),
+            )| Case {
+                speed,
+                curvature,
+                left,
+                right,
+                offset,
+                heading_error,
+                steer,
+                lateral,
+                dynamic,
+                obstacles,
+                uncertainty,
+                poison,
+            },
+        )
+}
+
+/// An arc of curvature `k` from the origin heading north (right positive).
+fn arc(k: f64, left: f64, right: f64, speed: f64) -> TestPath {
+    TestPath::new(
+        90.0,
+        move |s| {
+            if k.abs() < 1e-9 {
+                (0.0, s)
+            } else {
+                ((1.0 - (k * s).cos()) / k, (k * s).sin() / k)
+            }
+        },
+        move |_| (left, right),
+        move |_| speed,
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(500))]
+
+    #[test]
+    fn outputs_are_finite_and_within_limits(c in case()) {
+        let cfg = VehicleConfig::default();
+        let mpc = mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING);
+        let path = arc(c.curvature, c.left, c.right, c.speed);
+        let speeds = [c.speed as f32; PLAN_STEPS + 1];
+        let mut reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+        let (x, y, h) = path.pose(5.0);
+        let mut pose = Pose::new(
+            x as f32 + c.offset * (h as f32).cos(),
+            y as f32 - c.offset * (h as f32).sin(),
+            h as f32 + c.heading_error,
+        );
+        let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+        let model_state = eq5.steady_state_for_output(c.speed as f32).unwrap();
+        let mut obstacles = [None; MAX_OBSTACLES];
+        for (slot, (lat, along, r)) in obstacles.iter_mut().zip(&c.obstacles) {
+            let (ox, oy, oh) = path.pose(5.0 + *along as f64);
+            let east = ox + *lat as f64 * oh.cos();
+            let north = oy - *lat as f64 * oh.sin();
+            *slot = Some(path.place(east, north, *r as f64, 5.0));
+        }
+        let mut steer = c.steer;
+        let mut uncertainty = c.uncertainty;
+        match c.poison {
+            1 => pose.x_m = f32::NAN,
+            2 => reference[7].curvature_per_m = f32::NAN,
+            3 => steer = f32::INFINITY,
+            4 => uncertainty = f32::NAN,
+            5 => reference[3].front.left_m = f32::NAN,
+            _ => {}
+        }
+        let mut state = MpcState::default();
+        let max_steer = (cfg.chassis.max_steer_deg as f32).to_radians();
+        let rate = (cfg.steering.rate_limit_pct_per_s as f32 / 100.0) * max_steer
+            * DEFAULT_TUNING.steer_rate_share;
+        // Three ticks, so that warm starts are exercised too.
+        for _ in 0..3 {
+            let input = MpcInput {
+                reference: &reference,
+                obstacles: &obstacles,
+                car: CarState {
+                    pose,
+                    speed_mps: c.speed as f32,
+                    lateral: LateralState { vy_mps: c.lateral.0, yaw_rate_rps: c.lateral.1 },
+                    steer_rad: steer,
+                    mode: if c.dynamic { Mode::Dynamic } else { Mode::Kinematic },
+                    speed_model: &model_state,
+                    speed_bias_mps: 0.0,
+                    last_speed_cmd_mps: c.speed as f32,
+                },
+                position_uncertainty_m: uncertainty,
+            };
+            let out = mpc.solve(&mut state, &input);
+            prop_assert!(out.steer_cmd_pct.is_finite() && out.steer_cmd_pct.abs() <= 100.0);
+            prop_assert!(out.speed_cmd_mps.is_finite());
+            prop_assert!(out.speed_cmd_mps >= 0.0 && out.speed_cmd_mps <= DEFAULT_TUNING.speed.max_speed_mps);
+            prop_assert!(out.primal_residual.is_finite() && out.dual_residual.is_finite());
+            prop_assert!(out.iterations <= DEFAULT_TUNING.admm.max_iterations);
+            let every = DEFAULT_TUNING.admm.rho_update_every;
+            prop_assert!(out.factorisations <= 1 + (DEFAULT_TUNING.admm.max_iterations - 1) / every);
+            if c.poison != 0 {
+                prop_assert_eq!(out.status, ControlStatus::Fallback);
+                prop_assert_eq!(out.fallback, Some(FallbackReason::BadInput));
+                prop_assert_eq!(out.speed_cmd_mps, 0.0);
+            }
+            if out.status == ControlStatus::Fallback {
+                prop_assert_eq!(out.speed_cmd_mps, 0.0);
+                continue;
+            }
+            for p in &out.plan {
+                prop_assert!(p.x_m.is_finite() && p.y_m.is_finite() && p.heading_rad.is_finite());
+                prop_assert!(p.speed_mps.is_finite() && p.speed_mps >= 0.0);
+                prop_assert!(p.steer_rad.abs() <= max_steer * (1.0 + 1e-5));
+            }
+            // The steering plan's rate limit holds exactly (to rounding).
+            for k in 0..STEPS {
+                let d = out.plan[k + 1].steer_rad - out.plan[k].steer_rad;
+                prop_assert!(d.abs() <= rate * STEP_S * (1.0 + 1e-4) + 1e-6, "step {}: {}", k, d);
+            }
+        }
+    }
+}

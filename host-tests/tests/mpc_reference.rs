@@ -1,0 +1,307 @@
+//! The controller's numerics against independent references (`host-tests/reference/mpc.json`,
+//! made by `host-tests/reference/gen_mpc.py`):
+//! - the trapezoidal discretisation of the lateral error model against
+//!   `scipy.signal.cont2discrete(method='bilinear')`;
+//! - the Riccati-ADMM solver against an interior-point solution (cvxpy + Clarabel) of random
+//!   time-varying problems of the controller's shape, with hard and exact-penalty rows;
+//! - the speed plan: eq 5's pulse response at 0.1 s against scipy's simulation of the ZOH
+//!   model with its delay, and the condensed QP against Clarabel.
+use catmodel::control::mpc::admm::{AdmmSettings, Problem, Row, Workspace};
+use catmodel::control::mpc::lateral::tustin;
+use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState, SpeedTuning};
+use catmodel::control::mpc::{NX, PLAN_STEPS, ROWS};
+
+/// Stages of the reference problems (the solver is generic in the horizon).
+const STEPS: usize = 20;
+use catmodel::model::{paper, SsBlock};
+use catmodel_host_tests::load_reference;
+use nalgebra::{SMatrix, SVector};
+use serde_json::Value;
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn vec_f32(v: &Value) -> Vec<f32> {
+    v.as_array().unwrap().iter().map(|x| f(x) as f32).collect()
+}
+
+fn mat5(v: &Value) -> SMatrix<f32, NX, NX> {
+    let rows: Vec<Vec<f32>> = v.as_array().unwrap().iter().map(vec_f32).collect();
+    SMatrix::from_fn(|i, j| rows[i][j])
+}
+
+fn vec5(v: &Value) -> SVector<f32, NX> {
+    SVector::from_column_slice(&vec_f32(v))
+}
+
+#[test]
+fn trapezoidal_discretisation_matches_scipy_bilinear() {
+    let r = load_reference("mpc.json");
+    let h = f(&r["h"]) as f32;
+    for case in r["tustin"].as_array().unwrap() {
+        let (a, b, c) = tustin(&mat5(&case["f"]), &vec5(&case["e"]), h).expect("discretises");
+        let what = format!("{} at {} m/s", case["mode"], case["v"]);
+        for (got, want) in [(a.as_slice(), mat5(&case["a"]))] {
+            for (g, w) in got.iter().zip(want.as_slice()) {
+                assert!(
+                    (g - w).abs() <= 2e-6 + 1e-5 * w.abs(),
+                    "{what}: A {g} vs {w}"
+                );
+            }
+        }
+        for (got, want) in [(b, vec5(&case["b"])), (c, vec5(&case["c"]))] {
+            for (g, w) in got.iter().zip(want.iter()) {
+                assert!(
+                    (g - w).abs() <= 2e-6 + 1e-5 * w.abs(),
+                    "{what}: B/c {g} vs {w}"
+                );
+            }
+        }
+    }
+}
+
+/// The reference problem as the solver's data; rows beyond the file's are inactive.
+fn problem(p: &Value) -> (Problem<NX, STEPS, ROWS>, SVector<f32, NX>) {
+    let mut q = Problem::<NX, STEPS, ROWS>::zeroed();
+    let (mut box_state, mut box_rho) = (0, 1.0);
+    for k in 0..STEPS {
+        let st = &mut q.stages[k];
+        st.a = mat5(&p["a"][k]);
+        st.b = vec5(&p["b"][k]);
+        st.c = vec5(&p["c"][k]);
+        st.q_diag = vec5(&p["q_diag"][k]);
+        st.q_lin = vec5(&p["q_lin"][k]);
+        st.r_lin = f(&p["r_lin"][k]) as f32;
+        st.u_lower = f(&p["u_lower"][k]) as f32;
+        st.u_upper = f(&p["u_upper"][k]) as f32;
+        let mut slot = 0;
+        for row in p["rows"][k].as_array().unwrap() {
+            let bound = |v: &Value, inf: f32| v.as_f64().map_or(inf, |x| x as f32);
+            let idx = [
+                row["idx"][0].as_u64().unwrap(),
+                row["idx"][1].as_u64().unwrap(),
+            ];
+            if idx == [4, 4] {
+                // The steering range: the solver's state box.
+                box_state = 4;
+                st.box_lower = bound(&row["lower"], f32::NEG_INFINITY);
+                st.box_upper = bound(&row["upper"], f32::INFINITY);
+                box_rho = f(&row["rho"]) as f32;
+                continue;
+            }
+            assert_eq!(idx, [0, 1], "rows read e_y and e_psi");
+            st.rows[slot] = Row {
+                a: f(&row["coef"][0]) as f32,
+                b: f(&row["coef"][1]) as f32,
+                lower: bound(&row["lower"], f32::NEG_INFINITY),
+                upper: bound(&row["upper"], f32::INFINITY),
+                rho: f(&row["rho"]) as f32,
+                soft_weight: row["soft"].as_f64().map_or(f32::INFINITY, |x| x as f32),
+                active: true,
+            };
+            slot += 1;
+        }
+    }
+    q.box_state = box_state;
+    q.box_rho = box_rho;
+    q.r = f(&p["r"]) as f32;
+    q.u_rho = 10.0;
+    (q, vec5(&p["x0"]))
+}
+
+/// The problem's objective (f64) at the solver's plan, soft penalties included.
+fn objective(p: &Problem<NX, STEPS, ROWS>, ws: &Workspace<NX, STEPS, ROWS>) -> f64 {
+    let mut j = 0.0f64;
+    for k in 0..STEPS {
+        let (st, it) = (&p.stages[k], &ws.stages[k]);
+        let x = &it.x;
+        for i in 0..NX {
+            let xi = x[i] as f64;
+            j += 0.5 * st.q_diag[i] as f64 * xi * xi + st.q_lin[i] as f64 * xi;
+        }
+        let u = it.u as f64;
+        j += 0.5 * p.r as f64 * u * u + st.r_lin as f64 * u;
+        for row in st
+            .rows
+            .iter()
+            .filter(|r| r.active && r.soft_weight.is_finite())
+        {
+            j += row.soft_weight as f64 * row.violation(row.eval(x)) as f64;
+        }
+    }
+    j
+}
+
+fn settings(iterations: u16) -> AdmmSettings {
+    AdmmSettings {
+        max_iterations: iterations,
+        primal_tolerance: 0.0,
+        dual_tolerance: 0.0,
+        relaxation: 1.6,
+        check_every: 1,
+        rho_update_every: 0,
+    }
+}
+
+#[test]
+fn admm_reaches_the_interior_point_solution() {
+    let r = load_reference("mpc.json");
+    for (n, case) in r["ltv_qp"].as_array().unwrap().iter().enumerate() {
+        let (p, x0) = problem(&case["problem"]);
+        let mut ws = Workspace::default();
+        ws.cold_start(&p);
+        ws.factor(&p).unwrap();
+        let report = ws.iterate(&p, &x0, &settings(20_000)).unwrap();
+        let sol = &case["solution"];
+        let u_ref = vec_f32(&sol["u"]);
+        let worst_u = ws
+            .stages
+            .iter()
+            .map(|it| it.u)
+            .zip(&u_ref)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        let worst_x = (0..STEPS)
+            .flat_map(|k| {
+                let xr = vec_f32(&sol["x"][k]);
+                (0..NX).map(move |i| (k, i, xr[i]))
+            })
+            .map(|(k, i, xr)| (ws.stages[k].x[i] - xr).abs())
+            .fold(0.0f32, f32::max);
+        let j = objective(&p, &ws);
+        let j_ref = f(&sol["objective"]);
+        let mode = &case["problem"]["mode"];
+        println!(
+            "case {n} ({mode}): |u - u*| {worst_u:.2e} rad/s, |x - x*| {worst_x:.2e}, J {j:.6} vs {j_ref:.6}, residuals {:.1e} / {:.1e}",
+            report.primal_residual, report.dual_residual
+        );
+        assert!(worst_u < 1e-3, "case {n}: inputs off by {worst_u}");
+        assert!(worst_x < 1e-3, "case {n}: states off by {worst_x}");
+        assert!(
+            (j - j_ref).abs() <= 1e-4 * j_ref.abs().max(1.0),
+            "case {n}: objective {j} vs {j_ref}"
+        );
+        // Hard rows and the box hold to the primal residual.
+        for k in 0..STEPS {
+            for row in p.stages[k]
+                .rows
+                .iter()
+                .filter(|r| r.active && !r.soft_weight.is_finite())
+            {
+                assert!(
+                    row.violation(row.eval(&ws.stages[k].x)) < 1e-3,
+                    "case {n}: hard row violated"
+                );
+            }
+            let d = ws.stages[k].x[p.box_state];
+            assert!(
+                d >= p.stages[k].box_lower - 1e-3 && d <= p.stages[k].box_upper + 1e-3,
+                "case {n}: steering box"
+            );
+        }
+    }
+}
+
+/// Warm start: after the state moves a little (the next tick), 30 iterations from the previous
+/// solution's copies and duals land closer to the new optimum than 30 from a cold start.
+#[test]
+fn warm_start_beats_cold_start_at_the_iteration_cap() {
+    let r = load_reference("mpc.json");
+    for (n, case) in r["ltv_qp"].as_array().unwrap().iter().enumerate() {
+        let (p, x0) = problem(&case["problem"]);
+        let mut solved = Workspace::default();
+        solved.cold_start(&p);
+        solved.factor(&p).unwrap();
+        solved.iterate(&p, &x0, &settings(20_000)).unwrap();
+        // The next tick: the car a little further off the path.
+        let mut x1 = x0;
+        x1[0] += 0.05;
+        x1[1] -= 0.01;
+        let mut exact = solved.clone();
+        exact.iterate(&p, &x1, &settings(20_000)).unwrap();
+        let error = |ws: &Workspace<NX, STEPS, ROWS>| {
+            ws.stages
+                .iter()
+                .map(|it| it.u)
+                .zip(exact.stages.iter().map(|it| it.u))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max)
+        };
+        let mut warm = solved.clone();
+        warm.iterate(&p, &x1, &settings(30)).unwrap();
+        let mut cold = Workspace::default();
+        cold.cold_start(&p);
+        cold.factor(&p).unwrap();
+        cold.iterate(&p, &x1, &settings(30)).unwrap();
+        println!(
+            "case {n}: input error after 30 iterations: warm {:.2e}, cold {:.2e}",
+            error(&warm),
+            error(&cold)
+        );
+        assert!(
+            error(&warm) < 0.5 * error(&cold) || error(&warm) < 1e-4,
+            "case {n}"
+        );
+    }
+}
+
+fn eq5_block() -> SsBlock<2> {
+    SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap()
+}
+
+fn speed_tuning(r: &Value, iterations: u16) -> SpeedTuning {
+    let t = &r["speed_qp"]["tuning"];
+    SpeedTuning {
+        speed_weight: f(&t["speed_weight"]) as f32,
+        command_change_weight: f(&t["command_change_weight"]) as f32,
+        max_speed_mps: f(&t["max_speed_mps"]) as f32,
+        accel_mps2: f(&t["accel_mps2"]) as f32,
+        decel_mps2: f(&t["decel_mps2"]) as f32,
+        iterations,
+    }
+}
+
+#[test]
+fn speed_pulse_response_matches_scipy() {
+    let r = load_reference("mpc.json");
+    let planner = SpeedPlanner::new(&eq5_block(), speed_tuning(&r, 10)).unwrap();
+    let want = vec_f32(&r["speed_qp"]["pulse"]);
+    assert_eq!(want.len(), PLAN_STEPS + 1);
+    for (m, (g, w)) in planner.pulse().iter().zip(&want).enumerate() {
+        assert!((g - w).abs() < 2e-6, "pulse[{m}]: {g} vs {w}");
+    }
+    // The delay: 21 samples = 4.2 steps, so the first response is at step 5.
+    assert!(planner.pulse()[..5].iter().all(|p| *p == 0.0));
+    assert!(planner.pulse()[5] > 0.0);
+}
+
+#[test]
+fn speed_plan_matches_the_qp_solution() {
+    let r = load_reference("mpc.json");
+    let block = eq5_block();
+    let planner = SpeedPlanner::new(&block, speed_tuning(&r, 2000)).unwrap();
+    for case in r["speed_qp"]["cases"].as_array().unwrap() {
+        let v0 = f(&case["v0"]) as f32;
+        let model_state = block.steady_state_for_output(v0).unwrap();
+        let start = SpeedStart {
+            model_state: &model_state,
+            bias_mps: 0.0,
+            speed_mps: v0,
+            last_command_mps: f(&case["last_command"]) as f32,
+        };
+        let targets: [f32; PLAN_STEPS + 1] = vec_f32(&case["targets"]).try_into().unwrap();
+        let plan = planner.plan(&mut SpeedState::default(), &start, &targets);
+        let want = vec_f32(&case["commands"]);
+        for (j, (g, w)) in plan.commands_mps.iter().zip(&want).enumerate() {
+            assert!((g - w).abs() < 0.02, "v0 {v0}: command {j}: {g} vs {w}");
+        }
+        let speeds = vec_f32(&case["speeds"]);
+        for (k, (g, w)) in plan.speeds_mps[1..].iter().zip(&speeds).enumerate() {
+            assert!(
+                (g - w.max(0.0)).abs() < 0.01,
+                "v0 {v0}: speed {k}: {g} vs {w}"
+            );
+        }
+    }
+}

@@ -1,0 +1,170 @@
+#!/usr/bin/env python3
+"""Writes the model-file corpus from models/paper.toml: files the node must refuse
+(models/bad/*.toml), each starting with `# expect: TEXT`, the text the one reader's error
+message must contain, and files it must accept as the published car (models/good/*.toml).
+
+Run from anywhere: `python3 models/bad/generate.py`. The files are committed; this script is
+how they were made, so that a reader can see each one is the published file with one change.
+"""
+import pathlib
+import re
+
+HERE = pathlib.Path(__file__).resolve().parent
+MODELS = HERE.parent
+PAPER = (MODELS / "paper.toml").read_text()
+
+
+def block(text, model, name):
+    """The `[[model.blocks]]` table whose input is `name`, with its start and end."""
+    for m in re.finditer(r"\[\[%s\.blocks\]\]\n" % re.escape(model), text):
+        start = m.start()
+        nxt = text.find("\n[", m.end())
+        end = len(text) if nxt < 0 else nxt + 1
+        if 'input = "%s"' % name in text[start:end]:
+            return start, end
+    raise SystemExit(f"no {model} block for {name}")
+
+
+def replace(text, old, new):
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+def drop_block(text, model, name):
+    s, e = block(text, model, name)
+    return text[:s] + text[e:]
+
+
+def duplicate_x(text):
+    s, e = block(text, "dx_dt", "phi")
+    return text[:s] + text[s:e].replace('input = "phi"', 'input = "x"') + text[e:]
+
+
+def reorder(text):
+    """dx/dt blocks in the order phi, y, x, v_m (the node must match them by name)."""
+    spans = [block(text, "dx_dt", n) for n in ("v_m", "x", "y", "phi")]
+    first, last = spans[0][0], spans[-1][1]
+    parts = [text[s:e] for s, e in spans]
+    return text[:first] + "".join(reversed(parts)) + text[last:]
+
+
+BAD = {
+    "misnamed-input": (
+        lambda t: replace(t, 'input = "phi"', 'input = "psi"'),
+        'dx_dt.blocks[3].input = "psi": not an input of this model',
+    ),
+    "duplicate-input": (duplicate_x, 'input = "x": a second block for this input'),
+    "missing-block": (
+        lambda t: drop_block(t, "dx_dt", "phi"),
+        'dx_dt.blocks: no block for input "phi"',
+    ),
+    "speed-order-3": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, 2.0, 1.629, 0.7522]"),
+        "speed.blocks[0]: order 3 is above the 2 the node runs",
+    ),
+    "speed-delay-beyond-line": (
+        lambda t: replace(t, "delay_s = 0.42", "delay_s = 1.5"),
+        "speed.blocks[input_vel]: delay of 75 samples is beyond the 64 samples",
+    ),
+    "dxdt-delay-beyond-line": (
+        lambda t: replace(
+            t, "num = [-4.122, 49.61, -4.098]\nden = [1.0, 6.211, 26.79]\ndelay_s = 0.0",
+            "num = [-4.122, 49.61, -4.098]\nden = [1.0, 6.211, 26.79]\ndelay_s = 0.1"),
+        "dx_dt.blocks[v_m]: delay of 5 samples is beyond the 1 samples",
+    ),
+    "fractional-delay": (
+        lambda t: replace(t, "delay_s = 0.42", "delay_s = 0.43"),
+        "speed.blocks[0].delay_s: delay 0.43 s is not a whole number of samples",
+    ),
+    "improper": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.629, 0.7522]"),
+        "speed.blocks[0]: improper",
+    ),
+    "integrating-speed-model": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, 1.629, 0.0]"),
+        "speed.blocks[input_vel]: the model has a pole at s = 0",
+    ),
+    "negative-wheelbase": (
+        lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_m = -2.62"),
+        "vehicle.wheelbase_m = -2.62: must be a finite number > 0",
+    ),
+    "zero-timeout": (
+        lambda t: replace(t, "steer_timeout_s = 0.1", "steer_timeout_s = 0.0"),
+        "inputs.steer_timeout_s = 0: must be a finite number > 0",
+    ),
+    "nan-understeer": (
+        lambda t: replace(t, "understeer_s2_per_m2 = 0.0015 ", "understeer_s2_per_m2 = nan"),
+        "vehicle.understeer_s2_per_m2 = NaN: must be a finite number >= 0",
+    ),
+    "infinite-gate": (
+        lambda t: replace(t, "gnss_gate_m = 10.0", "gnss_gate_m = inf"),
+        "inputs.gnss_gate_m = inf: must be a finite number > 0",
+    ),
+    "nan-coefficient": (
+        lambda t: replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [0.03679, nan, 0.7647]"),
+        "speed.blocks[0]: a coefficient or the delay is not a finite number",
+    ),
+    "gnss-rate-zero": (
+        lambda t: replace(t, "gnss_rate_hz = 100.0", "gnss_rate_hz = 0.0"),
+        "vehicle.gnss_rate_hz = 0: must be within 1..100",
+    ),
+    "gnss-rate-too-high": (
+        lambda t: replace(t, "gnss_rate_hz = 100.0", "gnss_rate_hz = 200.0"),
+        "vehicle.gnss_rate_hz = 200: must be within 1..100",
+    ),
+    "cg-not-on-wheelbase": (
+        lambda t: replace(t, "cg_to_rear_m = 1.478", "cg_to_rear_m = 1.6"),
+        "dynamics: cg_to_front_m + cg_to_rear_m",
+    ),
+    "no-hysteresis": (
+        lambda t: replace(t, "exit_dynamic_speed_mps = 4.0", "exit_dynamic_speed_mps = 8.0"),
+        "hybrid: exit thresholds must not exceed enter thresholds",
+    ),
+    "unknown-key": (
+        lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_mm = 2620"),
+        "unknown field `wheelbase_mm`",
+    ),
+    "missing-key": (
+        lambda t: re.sub(r"antenna_ahead_m = .*\n", "", t, count=1),
+        "missing field `antenna_ahead_m`",
+    ),
+    "missing-table": (
+        lambda t: t[: t.index("[inputs]")] + t[t.index("[hybrid]"):],
+        "missing field `inputs`",
+    ),
+    "wrong-sample-time": (
+        lambda t: replace(t, "sample_time_s = 0.02", "sample_time_s = 0.01"),
+        "sample_time_s = 0.01: the node runs every 0.02 s",
+    ),
+    "old-format": (
+        lambda t: replace(t, 'format = "catmodel-model-2"', 'format = "catmodel-model-1"'),
+        'format = "catmodel-model-1": written by an older catmodel',
+    ),
+    "not-toml": (
+        lambda t: replace(t, "[vehicle]", "[vehicle"),
+        "not a valid model file: line 15, column 9: invalid table header",
+    ),
+}
+
+GOOD = {
+    # Blocks in another order: matched by name, the same node as the published file.
+    "reordered-inputs": reorder,
+    # A byte-order mark, as some editors write.
+    "byte-order-mark": lambda t: "\ufeff" + t,
+}
+
+
+def main():
+    for name, (edit, expect) in BAD.items():
+        text = edit(PAPER)
+        assert text != PAPER, name
+        (HERE / f"{name}.toml").write_text(f"# expect: {expect}\n{text}")
+    for name, edit in GOOD.items():
+        text = edit(PAPER)
+        assert text != PAPER, name
+        (MODELS / "good" / f"{name}.toml").write_text(text)
+    print(f"wrote {len(BAD)} bad and {len(GOOD)} good model files")
+
+
+if __name__ == "__main__":
+    main()

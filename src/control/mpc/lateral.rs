@@ -1,0 +1,629 @@
+//! The lateral problem: error states along the reference, linearised per stage, discretised by
+//! the trapezoidal rule, with the body's corners in the corridor and the obstacles' half-spaces
+//! as constraint rows.
+//!
+//! State `x = [e_y, e_psi, v_y, r, delta]`: lateral offset of the rear axle from the reference
+//! (m, positive right), heading error (rad, positive = pointing right of the path), lateral
+//! speed at the centre of gravity and yaw rate (the dynamic model's states; held at 0 in the
+//! kinematic mode), and the centre-tyre steering angle (rad). Input: the steering rate (rad/s),
+//! so the actuator's rate limit is a bound on the input and the steering range a bound on a
+//! state. Continuous dynamics with the speed `v` and path curvature `kappa` of the stage
+//! (averages of its two ends), linearised about the previous plan's heading error `e0` and
+//! steering `d0`:
+//! ```text
+//! e_y'   = v (sin e0 + cos e0 (e_psi - e0)) + cos e0 (v_y - l_r r)    (rear-axle velocity)
+//! e_psi' = r - v kappa - v kappa^2 e_y                               (dynamic)
+//!        = v (c(d0) + c'(d0) (delta - d0)) - v kappa - v kappa^2 e_y   (kinematic, eq 8 + eq 2)
+//! v_y', r' = the linear-tyre single-track model (model::dynamic)      (dynamic; 0 kinematic)
+//! delta' = u
+//! ```
+//! with `c(d) = tan(d / (1 + K v^2)) / L` the kinematic curvature. `-v kappa^2 e_y` is the
+//! first-order term of the Frenet frame's `v kappa / (1 - kappa e_y)`.
+//!
+//! Discretisation (trapezoidal / Tustin, step h): `A = M^-1 (I + h/2 F)`, `B = M^-1 h G`,
+//! `c = M^-1 h e` with `M = I - h/2 F`. A-stable (the tyre modes are fast at low speed: about
+//! -(Cf + Cr) / (m v) = -14 1/s at 7 m/s), exact for the integrators, exact in steady state.
+//! `M` is solved without pivoting: for these models every pivot is at least 1 (the proof is in
+//! docs/mpc.md), and a pivot below 0.5 is reported as an error, never divided by.
+use nalgebra::{SMatrix, SVector};
+
+use super::admm::{Problem, Row};
+use super::{clamp, max};
+use super::{
+    ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS, STEP_S,
+};
+use crate::math;
+use crate::model::dynamic::DynamicParams;
+use crate::model::hybrid::Mode;
+use crate::vehicle::{Body, VehicleParams};
+
+/// State indices.
+pub const EY: usize = 0;
+/// Heading error.
+pub const EPSI: usize = 1;
+/// Lateral speed at the CG.
+pub const VY: usize = 2;
+/// Yaw rate.
+pub const R: usize = 3;
+/// Steering angle.
+pub const DELTA: usize = 4;
+
+/// Row slots per stage: the four corners, then one per obstacle (the steering range is the
+/// solver's state box).
+/// Front-left corner (left bound of the corridor at the front sample).
+pub const ROW_FRONT_LEFT: usize = 0;
+/// Front-right corner.
+pub const ROW_FRONT_RIGHT: usize = 1;
+/// Rear-left corner.
+pub const ROW_REAR_LEFT: usize = 2;
+/// Rear-right corner.
+pub const ROW_REAR_RIGHT: usize = 3;
+/// First obstacle row (obstacle `i` is `ROW_OBSTACLE + i`).
+pub const ROW_OBSTACLE: usize = 4;
+
+/// Smallest block determinant accepted in the trapezoidal solve (>= 1 for these models).
+const MIN_PIVOT: f32 = 0.5;
+
+/// The linearisation point of every stage (0..=STEPS): the previous plan, shifted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Linearisation {
+    /// Heading error, rad.
+    pub e_psi: [f32; STEPS + 1],
+    /// Steering angle, rad.
+    pub delta: [f32; STEPS + 1],
+}
+
+/// Everything the builder needs besides the reference.
+pub struct LateralSetup<'a> {
+    /// Kinematic geometry and steering conversion.
+    pub vehicle: &'a VehicleParams,
+    /// Dynamic model parameters (`None`: the kinematic model whatever the mode).
+    pub dynamics: Option<&'a DynamicParams>,
+    /// Body for the corridor and obstacle rows.
+    pub body: &'a Body,
+    /// Cost weights and ADMM penalties.
+    pub weights: &'a Weights,
+    /// Lateral model of this solve.
+    pub mode: Mode,
+    /// Planned speed at each stage, m/s.
+    pub speeds_mps: &'a [f32; STEPS + 1],
+    /// Steering range, rad (symmetric).
+    pub max_steer_rad: f32,
+    /// Steering rate limit the plan may use, rad/s.
+    pub max_steer_rate_rad_per_s: f32,
+}
+
+/// Why the problem could not be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BuildError {
+    /// A pivot of the trapezoidal solve was below the bound (non-finite data).
+    Discretisation,
+}
+
+/// Feedforward steering for curvature `kappa` at speed `v`: the kinematic model's
+/// `(1 + K v^2) atan(L kappa)` (its steady state; the dynamic model's is the same to first
+/// order with its own understeer gradient).
+pub fn feedforward_steer_rad(l_m: f32, understeer: f32, v_mps: f32, kappa_per_m: f32) -> f32 {
+    (1.0 + understeer * v_mps * v_mps) * math::atan(l_m * kappa_per_m)
+}
+
+/// Continuous-time `F`, `e` of one stage (`G` is the unit vector of `delta`).
+fn continuous(
+    setup: &LateralSetup,
+    v: f32,
+    kappa: f32,
+    e0: f32,
+    d0: f32,
+) -> (SMatrix<f32, NX, NX>, SVector<f32, NX>) {
+    let (s0, c0) = math::sin_cos(e0);
+    let mut f = SMatrix::<f32, NX, NX>::zeros();
+    let mut e = SVector::<f32, NX>::zeros();
+    let set = |m: &mut SMatrix<f32, NX, NX>, i: usize, j: usize, v: f32| {
+        if let Some(x) = m.get_mut((i, j)) {
+            *x = v;
+        }
+    };
+    let sete = |m: &mut SVector<f32, NX>, i: usize, v: f32| {
+        if let Some(x) = m.get_mut(i) {
+            *x = v;
+        }
+    };
+    set(&mut f, EY, EPSI, v * c0);
+    sete(&mut e, EY, v * (s0 - c0 * e0));
+    set(&mut f, EPSI, EY, -v * kappa * kappa);
+    match setup.dynamics.filter(|_| setup.mode == Mode::Dynamic) {
+        Some(p) => {
+            // The 1/v terms need a speed; below the model's floor use the floor (the hybrid
+            // switch keeps the dynamic mode above it; a plan that brakes may dip below).
+            let vx = max(max(v, p.min_speed_mps), 0.1);
+            let cf = p.cornering_front_n_per_rad;
+            let cr = p.cornering_rear_n_per_rad;
+            let (lf, lr) = (p.cg_to_front_m, p.cg_to_rear_m);
+            let m = p.mass_kg;
+            let iz = p.yaw_inertia_kg_m2;
+            set(&mut f, EY, VY, c0);
+            set(&mut f, EY, R, -lr * c0);
+            set(&mut f, EPSI, R, 1.0);
+            sete(&mut e, EPSI, -v * kappa);
+            set(&mut f, VY, VY, -(cf + cr) / (m * vx));
+            set(&mut f, VY, R, -vx - (cf * lf - cr * lr) / (m * vx));
+            set(&mut f, VY, DELTA, cf / m);
+            set(&mut f, R, VY, -(cf * lf - cr * lr) / (iz * vx));
+            set(&mut f, R, R, -(cf * lf * lf + cr * lr * lr) / (iz * vx));
+            set(&mut f, R, DELTA, cf * lf / iz);
+        }
+        None => {
+            let veh = setup.vehicle;
+            let scale = 1.0 / (1.0 + veh.understeer_s2_per_m2 * v * v);
+            let t = math::tan(d0 * scale);
+            let c = t / veh.wheelbase_m;
+            let dc = scale * (1.0 + t * t) / veh.wheelbase_m;
+            set(&mut f, EPSI, DELTA, v * dc);
+            sete(&mut e, EPSI, v * (c - dc * d0) - v * kappa);
+        }
+    }
+    (f, e)
+}
+
+/// Trapezoidal discretisation of `x' = F x + G u + e` over `h`, with `G` = unit vector of
+/// `delta`: returns `(A, B, c)`, the solution `X` of `M X = [I + h/2 F | h G | h e]` with
+/// `M = I - h/2 F`.
+///
+/// The solve uses the sparsity of the models' `F` ([`continuous`]): `delta` depends on nothing
+/// (its row of `F` is zero), `v_y` and `r` only on themselves and `delta`, and `e_y`, `e_psi` on
+/// everything but each other's... so `M` is block triangular: `delta`, then the 2 x 2 block of
+/// `(v_y, r)`, then the 2 x 2 block of `(e_y, e_psi)`. Entries of `F` outside that pattern are
+/// ignored (the reference test against scipy's `cont2discrete` covers both modes). A block
+/// determinant below [`MIN_PIVOT`] (never, for these models: each block is `I - h/2` times a
+/// stable 2 x 2 or a nilpotent-plus-small one) or any non-finite result gives `None`.
+#[allow(clippy::type_complexity)]
+pub fn tustin(
+    f: &SMatrix<f32, NX, NX>,
+    e: &SVector<f32, NX>,
+    h: f32,
+) -> Option<(SMatrix<f32, NX, NX>, SVector<f32, NX>, SVector<f32, NX>)> {
+    let half = 0.5 * h;
+    let fm = |i: usize, j: usize| f.get((i, j)).copied().unwrap_or(0.0) * half;
+    // Right-hand side rows [I + h/2 F | h G | h e], 7 wide.
+    let rhs = |i: usize| -> [f32; NX + 2] {
+        let mut r = [0.0f32; NX + 2];
+        for (j, v) in r.iter_mut().enumerate().take(NX) {
+            *v = fm(i, j) + if i == j { 1.0 } else { 0.0 };
+        }
+        if let Some(g) = r.get_mut(NX) {
+            *g = if i == DELTA { h } else { 0.0 };
+        }
+        if let Some(c) = r.get_mut(NX + 1) {
+            *c = e.get(i).copied().unwrap_or(0.0) * h;
+        }
+        r
+    };
+    // x_delta: its row of M is the unit row.
+    let xd = rhs(DELTA);
+    // (v_y, r): M_b [x_vy; x_r] = rhs - M[., delta] x_delta, with M = I - h/2 F.
+    let (vy_rows, r_rows) = solve2(
+        (1.0 - fm(VY, VY), -fm(VY, R), -fm(R, VY), 1.0 - fm(R, R)),
+        sub_scaled(rhs(VY), -fm(VY, DELTA), &xd),
+        sub_scaled(rhs(R), -fm(R, DELTA), &xd),
+    )?;
+    // (e_y, e_psi): the rest of their rows moved to the right-hand side.
+    let mut ey_rhs = rhs(EY);
+    let mut epsi_rhs = rhs(EPSI);
+    for (m_ey, m_epsi, x) in [
+        (-fm(EY, VY), -fm(EPSI, VY), &vy_rows),
+        (-fm(EY, R), -fm(EPSI, R), &r_rows),
+        (-fm(EY, DELTA), -fm(EPSI, DELTA), &xd),
+    ] {
+        ey_rhs = sub_scaled(ey_rhs, m_ey, x);
+        epsi_rhs = sub_scaled(epsi_rhs, m_epsi, x);
+    }
+    let (ey_rows, epsi_rows) = solve2(
+        (
+            1.0 - fm(EY, EY),
+            -fm(EY, EPSI),
+            -fm(EPSI, EY),
+            1.0 - fm(EPSI, EPSI),
+        ),
+        ey_rhs,
+        epsi_rhs,
+    )?;
+    let mut a = SMatrix::<f32, NX, NX>::zeros();
+    let mut b = SVector::<f32, NX>::zeros();
+    let mut c = SVector::<f32, NX>::zeros();
+    for (i, row) in [
+        (EY, ey_rows),
+        (EPSI, epsi_rows),
+        (VY, vy_rows),
+        (R, r_rows),
+        (DELTA, xd),
+    ] {
+        for (j, v) in row.iter().enumerate().take(NX) {
+            if let Some(x) = a.get_mut((i, j)) {
+                *x = *v;
+            }
+        }
+        if let (Some(x), Some(v)) = (b.get_mut(i), row.get(NX)) {
+            *x = *v;
+        }
+        if let (Some(x), Some(v)) = (c.get_mut(i), row.get(NX + 1)) {
+            *x = *v;
+        }
+    }
+    if a.iter()
+        .chain(b.iter())
+        .chain(c.iter())
+        .all(|v| v.is_finite())
+    {
+        Some((a, b, c))
+    } else {
+        None
+    }
+}
+
+/// `r - m x` element-wise (one block elimination step).
+#[inline(always)]
+fn sub_scaled(mut r: [f32; NX + 2], m: f32, x: &[f32; NX + 2]) -> [f32; NX + 2] {
+    if m != 0.0 {
+        for (a, b) in r.iter_mut().zip(x) {
+            *a -= m * b;
+        }
+    }
+    r
+}
+
+/// Solves `[[m00, m01], [m10, m11]] [x; y] = [r0; r1]` for rows of right-hand sides, by
+/// Cramer's rule; `None` if the determinant is below [`MIN_PIVOT`] or not finite.
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn solve2(
+    (m00, m01, m10, m11): (f32, f32, f32, f32),
+    r0: [f32; NX + 2],
+    r1: [f32; NX + 2],
+) -> Option<([f32; NX + 2], [f32; NX + 2])> {
+    let det = m00 * m11 - m01 * m10;
+    if !(det.is_finite() && det >= MIN_PIVOT) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let mut x = [0.0f32; NX + 2];
+    let mut y = [0.0f32; NX + 2];
+    for (((x, y), a), b) in x.iter_mut().zip(y.iter_mut()).zip(&r0).zip(&r1) {
+        *x = (m11 * a - m01 * b) * inv;
+        *y = (m00 * b - m10 * a) * inv;
+    }
+    Some((x, y))
+}
+
+/// A point of the body in the body frame: `ahead_m` ahead of the rear axle, `right_m` to the
+/// right of the centre line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyPoint {
+    /// Ahead of the rear axle, m.
+    pub ahead_m: f32,
+    /// Right of the centre line, m.
+    pub right_m: f32,
+}
+
+/// The lateral offset of a body point from a sample of the path, linearised in `(e_y, e_psi)`
+/// about `e_psi = e0`: `offset ~ a e_y + b e_psi + k`. The body pose is the reference pose
+/// `at` moved `e_y` to its right and turned by `e_psi`; the offset is measured along the
+/// right normal of `sample` (exact geometry at the linearisation point, so a sample further
+/// along a curved path is handled without a small-angle assumption between the two).
+pub fn body_offset(
+    at: &Sample,
+    sample: &Sample,
+    point: BodyPoint,
+    sin_e0: f32,
+    cos_e0: f32,
+    e0: f32,
+) -> (f32, f32, f32) {
+    let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
+    let (ss, cs) = (sample.pose.sin_heading, sample.pose.cos_heading);
+    // Right normal of the sample: (cos, -sin); of the reference: likewise.
+    let n_dot = cr * cs + sr * ss;
+    // Body heading theta = psi_r + e0: t = (sin, cos), n = (cos, -sin).
+    let st = sr * cos_e0 + cr * sin_e0;
+    let ct = cr * cos_e0 - sr * sin_e0;
+    let (s, l) = (point.ahead_m, point.right_m);
+    // Body-frame vector in the world: s t + l n.
+    let wx = s * st + l * ct;
+    let wy = s * ct - l * st;
+    // Its derivative in theta: s n - l t.
+    let dx = s * ct - l * st;
+    let dy = -s * st - l * ct;
+    let proj = |x: f32, y: f32| x * cs - y * ss;
+    let base = proj(at.pose.x_m - sample.pose.x_m, at.pose.y_m - sample.pose.y_m);
+    let b = proj(dx, dy);
+    let k = base + proj(wx, wy) - b * e0;
+    (n_dot, b, k)
+}
+
+/// A corner row: `lower <= offset` (left corner) or `offset <= upper` (right corner).
+fn corner_row(
+    at: &Sample,
+    sample: &Sample,
+    point: BodyPoint,
+    lin: (f32, f32, f32),
+    w: &Weights,
+) -> Row {
+    let (s0, c0, e0) = lin;
+    let (a, b, k) = body_offset(at, sample, point, s0, c0, e0);
+    let (lower, upper) = if point.right_m < 0.0 {
+        (-sample.left_m - k, f32::INFINITY)
+    } else {
+        (f32::NEG_INFINITY, sample.right_m - k)
+    };
+    Row {
+        a,
+        b,
+        lower,
+        upper,
+        rho: w.rho_corridor,
+        soft_weight: w.corridor_weight_per_m,
+        active: lower.is_finite() || upper.is_finite(),
+    }
+}
+
+/// One obstacle as the rows see it (inflated radius).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InflatedObstacle {
+    /// Centre, east, m.
+    pub x_m: f32,
+    /// Centre, north, m.
+    pub y_m: f32,
+    /// Radius plus uncertainty plus margin, m.
+    pub radius_m: f32,
+    /// Where it lies along the path, from the rear axle now, m ([`super::Obstacle::ahead_m`]).
+    pub ahead_m: f32,
+    /// Its centre's offset from the path there, m ([`super::Obstacle::path_offset_m`]).
+    pub path_offset_m: f32,
+}
+
+/// An end-of-horizon stage's row for an obstacle still ahead of the rear axle there (and at most the
+/// preview distance `preview_m` ahead of the body's front): the whole car already beside the
+/// obstacle, its centre line at least half the width plus the inflated radius from the
+/// obstacle's centre, measured from the path (the obstacle's path offset). The horizon ends before the car reaches the
+/// obstacle, and the stage's own geometric row would only ask the front corner to clear it,
+/// which a plan can meet by yawing towards the side at the last moment without moving the car
+/// aside (measured: such plans steer the wrong way first and leave no room for the rest of the
+/// manoeuvre); this terminal condition asks for the displacement the pass will need, early.
+/// `horizon_m` is the stage's station ahead of the rear axle now.
+pub fn terminal_row(
+    at: &Sample,
+    obstacle: &InflatedObstacle,
+    side: ObstacleSide,
+    body: &Body,
+    lin: (f32, f32, f32),
+    w: &Weights,
+    (horizon_m, preview_m): (f32, f32),
+) -> Option<Row> {
+    let front = body.length_m - body.rear_overhang_m;
+    let ahead_of_axle = obstacle.ahead_m - horizon_m;
+    if !(ahead_of_axle > 0.0 && ahead_of_axle - front - obstacle.radius_m <= preview_m) {
+        return None;
+    }
+    Some(side_row(
+        at,
+        body,
+        0.0,
+        side,
+        obstacle.path_offset_m,
+        obstacle.radius_m,
+        lin,
+        w,
+    ))
+}
+
+/// The row keeping the body's side that faces an obstacle, at the point `ahead_m` ahead of the
+/// rear axle, at least `clearance_m` beyond the obstacle's centre line `lateral_m` (offsets
+/// from the sample `at`, positive right): at most `lateral - clearance` passing on the left, at
+/// least `lateral + clearance` passing on the right.
+#[allow(clippy::too_many_arguments)]
+fn side_row(
+    at: &Sample,
+    body: &Body,
+    ahead_m: f32,
+    side: ObstacleSide,
+    lateral_m: f32,
+    clearance_m: f32,
+    (s0, c0, e0): (f32, f32, f32),
+    w: &Weights,
+) -> Row {
+    let half_width = 0.5 * body.width_m;
+    let point = BodyPoint {
+        ahead_m,
+        right_m: match side {
+            // Passing on the left: the obstacle is on the body's right.
+            ObstacleSide::Left => half_width,
+            ObstacleSide::Right => -half_width,
+        },
+    };
+    let (a, b, k) = body_offset(at, at, point, s0, c0, e0);
+    let (lower, upper) = match side {
+        ObstacleSide::Left => (f32::NEG_INFINITY, lateral_m - clearance_m - k),
+        ObstacleSide::Right => (lateral_m + clearance_m - k, f32::INFINITY),
+    };
+    Row {
+        a,
+        b,
+        lower,
+        upper,
+        rho: w.rho_obstacle,
+        soft_weight: w.obstacle_weight_per_m,
+        active: true,
+    }
+}
+
+/// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
+/// facing it stays beyond its inflated circle. `None` when the obstacle is ahead of the front
+/// or behind the rear by more than its radius.
+pub fn obstacle_row(
+    at: &Sample,
+    obstacle: &InflatedObstacle,
+    side: ObstacleSide,
+    body: &Body,
+    lin: (f32, f32, f32),
+    w: &Weights,
+) -> Option<Row> {
+    let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
+    let (dx, dy) = (obstacle.x_m - at.pose.x_m, obstacle.y_m - at.pose.y_m);
+    let along = dx * sr + dy * cr;
+    let lateral = dx * cr - dy * sr;
+    let rear = -body.rear_overhang_m;
+    let front = body.length_m - body.rear_overhang_m;
+    let r = obstacle.radius_m;
+    if !(along > rear - r && along < front + r) {
+        return None;
+    }
+    // Nearest point of the side line, and how far the centre lies beyond the body's end:
+    // there the circle only reaches the side line within its half chord.
+    let ahead = clamp(along, rear, front);
+    let beyond = along - ahead;
+    let half_chord = math::sqrt(max(r * r - beyond * beyond, 0.0));
+    Some(side_row(at, body, ahead, side, lateral, half_chord, lin, w))
+}
+
+/// Stages at the end of the horizon that get [`terminal_row`]s (the last 0.5 s): the car is to
+/// be beside an obstacle ahead by then, not only at the very end, which measured plans
+/// otherwise postponed until the manoeuvre no longer fitted.
+pub const TERMINAL_STAGES: usize = 5;
+
+/// Fills `problem` for this solve. `obstacles[i]` with its chosen side (or `None`);
+/// `preview_m`: how far beyond a stage's body front an obstacle still gets that stage's
+/// [`terminal_row`]. Returns, per stage, a bit per obstacle slot whose row is a terminal row.
+pub fn build(
+    problem: &mut Problem<NX, STEPS, ROWS>,
+    setup: &LateralSetup,
+    reference: &[ReferencePoint; STEPS + 1],
+    lin: &Linearisation,
+    obstacles: &[Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES],
+    preview_m: f32,
+) -> Result<[u8; STEPS], BuildError> {
+    let mut terminal_mask = [0u8; STEPS];
+    let origin = reference.first().map(|r| r.at.pose);
+    let w = setup.weights;
+    let body = setup.body;
+    let understeer = match setup.dynamics.filter(|_| setup.mode == Mode::Dynamic) {
+        None => setup.vehicle.understeer_s2_per_m2,
+        Some(d) => d.understeer_s2_per_m2(),
+    };
+    let front = body.length_m - body.rear_overhang_m;
+    let rear = -body.rear_overhang_m;
+    let half_width = 0.5 * body.width_m;
+    let corners = [
+        (
+            ROW_FRONT_LEFT,
+            BodyPoint {
+                ahead_m: front,
+                right_m: -half_width,
+            },
+            true,
+        ),
+        (
+            ROW_FRONT_RIGHT,
+            BodyPoint {
+                ahead_m: front,
+                right_m: half_width,
+            },
+            true,
+        ),
+        (
+            ROW_REAR_LEFT,
+            BodyPoint {
+                ahead_m: rear,
+                right_m: -half_width,
+            },
+            false,
+        ),
+        (
+            ROW_REAR_RIGHT,
+            BodyPoint {
+                ahead_m: rear,
+                right_m: half_width,
+            },
+            false,
+        ),
+    ];
+    problem.r = w.steer_rate;
+    problem.u_rho = w.rho_steer_rate;
+    problem.box_state = DELTA;
+    problem.box_rho = w.rho_steer;
+    for (k, st) in problem.stages.iter_mut().enumerate() {
+        let (Some(r0), Some(r1)) = (reference.get(k), reference.get(k + 1)) else {
+            continue;
+        };
+        let v0 = setup.speeds_mps.get(k).copied().unwrap_or(0.0);
+        let v1 = setup.speeds_mps.get(k + 1).copied().unwrap_or(v0);
+        let e_a = lin.e_psi.get(k).copied().unwrap_or(0.0);
+        let e_b = lin.e_psi.get(k + 1).copied().unwrap_or(e_a);
+        let d_a = lin.delta.get(k).copied().unwrap_or(0.0);
+        let d_b = lin.delta.get(k + 1).copied().unwrap_or(d_a);
+        let v = 0.5 * (v0 + v1);
+        let kappa = 0.5 * (r0.curvature_per_m + r1.curvature_per_m);
+        let (f, e) = continuous(setup, v, kappa, 0.5 * (e_a + e_b), 0.5 * (d_a + d_b));
+        let (ad, bd, cd) = tustin(&f, &e, STEP_S).ok_or(BuildError::Discretisation)?;
+        st.a = ad;
+        st.b = bd;
+        st.c = cd;
+        // Cost of x_{k+1}: offsets and heading error to zero, steering near the feedforward.
+        let terminal = if k + 1 == STEPS {
+            w.terminal_factor
+        } else {
+            1.0
+        };
+        let ff = feedforward_steer_rad(
+            setup.vehicle.wheelbase_m,
+            understeer,
+            v1,
+            r1.curvature_per_m,
+        );
+        st.q_diag = SVector::<f32, NX>::from([
+            w.lateral_per_m2,
+            w.heading_per_rad2,
+            w.lateral_speed_per_mps2,
+            w.yaw_rate_per_rps2,
+            w.steer_per_rad2,
+        ]) * terminal;
+        st.q_lin = SVector::<f32, NX>::zeros();
+        if let Some(x) = st.q_lin.get_mut(DELTA) {
+            *x = -w.steer_per_rad2 * terminal * ff;
+        }
+        st.r_lin = 0.0;
+        st.u_lower = -setup.max_steer_rate_rad_per_s;
+        st.u_upper = setup.max_steer_rate_rad_per_s;
+        // Rows of x_{k+1}.
+        let (s0, c0) = math::sin_cos(e_b);
+        let lin_b = (s0, c0, e_b);
+        st.rows = [Row::INACTIVE; ROWS];
+        st.box_lower = -setup.max_steer_rad;
+        st.box_upper = setup.max_steer_rad;
+        for (slot, point, at_front) in corners {
+            let sample = if at_front { &r1.front } else { &r1.rear };
+            if let Some(row) = st.rows.get_mut(slot) {
+                *row = corner_row(&r1.at, sample, point, lin_b, w);
+            }
+        }
+        let end = k + TERMINAL_STAGES >= STEPS;
+        // The stage's station ahead of the rear axle now (chord along the first heading).
+        let station_m = origin.map_or(0.0, |o| {
+            (r1.at.pose.x_m - o.x_m) * o.sin_heading + (r1.at.pose.y_m - o.y_m) * o.cos_heading
+        });
+        for (i, ob) in obstacles.iter().enumerate() {
+            let Some((ob, side)) = ob else { continue };
+            let terminal = end
+                .then(|| terminal_row(&r1.at, ob, *side, body, lin_b, w, (station_m, preview_m)))
+                .flatten();
+            if terminal.is_some() {
+                if let Some(m) = terminal_mask.get_mut(k) {
+                    *m |= 1 << i;
+                }
+            }
+            let row = terminal.or_else(|| obstacle_row(&r1.at, ob, *side, body, lin_b, w));
+            if let (Some(slot), Some(r)) = (st.rows.get_mut(ROW_OBSTACLE + i), row) {
+                *slot = r;
+            }
+        }
+    }
+    Ok(terminal_mask)
+}

@@ -1,0 +1,468 @@
+//! The speed plan: the speed commands of the next 2 s, from the identified speed model (eq 5:
+//! commanded speed -> measured speed, 2nd order, 0.42 s input delay), as a condensed QP.
+//!
+//! The decision is the change `du_j` of the command against the last one sent, held over knot
+//! `j` ([`KNOT_STEPS`] MPC steps = 0.2 s; [`KNOTS`] knots cover [`PLAN_STEPS`]). The model is
+//! linear, so the predicted speed at MPC step `k` (0.1 s) is
+//! ```text
+//! v_k = f_k + bias + sum_j p_{k - 2j} du_j
+//! ```
+//! with `f` the free response (a copy of the node's model state, delay line included, rolled
+//! forward with the last command held: the commands already in flight decide the first 0.42 s
+//! exactly, which is how the delay is handled) and `p` the response to a command held over one
+//! knot (from the model, once, when the configuration is built). `p_m` is zero while the
+//! command is still in the delay line, so the first four steps are not the plan's to change.
+//!
+//! Cost `1/2 sum w_v (v_k - r_k)^2 + 1/2 sum w_du (du_j - du_{j-1})^2` (`du_{-1} = 0`: the change
+//! against the command sent last); hard bounds `0 <= u_j <= max_speed`; a soft (exact-penalty)
+//! bound `v_k <= max_speed` on the prediction. The reference `r` is the path's target speed
+//! reached within the acceleration and deceleration limits from the current speed.
+//!
+//! Solver: ADMM on the condensed problem (constraints `z = [du; P du]`). Its matrix
+//! `H + rho_u I + rho_v P'P` never changes, so its inverse is computed once, in f64, when the
+//! configuration is built; an iteration is three small matrix-vector products. Knots of 0.2 s
+//! rather than one command per 0.1 s step: a quarter of the work per iteration, and the speed
+//! loop (time constant about 1.2 s for eq 5) cannot follow a finer command anyway.
+use nalgebra::{SMatrix, SVector};
+
+use super::{clamp, max, PLAN_STEPS, TICKS_PER_STEP};
+
+/// MPC steps per command knot (0.2 s).
+pub const KNOT_STEPS: usize = 2;
+/// Command knots over the plan.
+pub const KNOTS: usize = PLAN_STEPS / KNOT_STEPS;
+use crate::model::{SsBlock, SsBlockState};
+
+/// ADMM penalty of the command bounds (per (m/s)^2).
+const RHO_COMMAND: f32 = 1.0;
+/// ADMM penalty of the predicted-speed bound (per (m/s)^2).
+const RHO_SPEED: f32 = 1.0;
+/// Exact-penalty weight of the predicted-speed bound, cost per m/s over.
+const SPEED_BOUND_WEIGHT: f32 = 100.0;
+
+/// Speed-plan weights and limits. Immutable configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SpeedTuning {
+    /// Weight of the speed error, per (m/s)^2.
+    pub speed_weight: f32,
+    /// Weight of a change of the command from one step to the next, per (m/s)^2.
+    pub command_change_weight: f32,
+    /// Fastest the plan may go (and command), m/s.
+    pub max_speed_mps: f32,
+    /// Acceleration the reference assumes, m/s^2.
+    pub accel_mps2: f32,
+    /// Deceleration the reference assumes, m/s^2.
+    pub decel_mps2: f32,
+    /// ADMM iterations per solve (fixed).
+    pub iterations: u16,
+}
+
+/// Why a speed planner cannot be built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SpeedPlanError {
+    /// A weight or limit is not positive and finite.
+    BadTuning,
+    /// The model gives no response to a command within the horizon (or a non-finite one).
+    NoResponse,
+    /// The KKT matrix is not positive definite (cannot happen for positive weights).
+    NotPositiveDefinite,
+}
+
+/// The speed planner: model responses and the inverse of its ADMM matrix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpeedPlanner {
+    /// The speed model (eq 5 form), stepped for the free response.
+    model: SsBlock<2>,
+    /// `pulse[m]` = speed change `m` steps after the start of a unit command held over one
+    /// knot.
+    pulse: [f32; PLAN_STEPS + 1],
+    /// `P`: `v = f + P du` (steps 1..=PLAN_STEPS by knots).
+    p: SMatrix<f32, PLAN_STEPS, KNOTS>,
+    /// `(H + rho_u I + rho_v P'P)^-1`.
+    kkt_inv: SMatrix<f32, KNOTS, KNOTS>,
+    tuning: SpeedTuning,
+}
+
+/// The speed planner's warm start.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpeedState {
+    z_cmd: [f32; KNOTS],
+    w_cmd: [f32; KNOTS],
+    z_speed: [f32; PLAN_STEPS],
+    w_speed: [f32; PLAN_STEPS],
+}
+
+/// A speed plan.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedPlan {
+    /// Command to send now, m/s.
+    pub command_mps: f32,
+    /// Planned commands per knot, m/s.
+    pub commands_mps: [f32; KNOTS],
+    /// Predicted speed at steps 0..=PLAN_STEPS (0 = now), m/s, >= 0.
+    pub speeds_mps: [f32; PLAN_STEPS + 1],
+}
+
+/// What the plan starts from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedStart<'a> {
+    /// The node's speed-model state: its next step is the command sent now.
+    pub model_state: &'a SsBlockState<2>,
+    /// Measured minus modelled speed now, m/s (held over the horizon).
+    pub bias_mps: f32,
+    /// Measured speed now, m/s.
+    pub speed_mps: f32,
+    /// The command sent last, m/s.
+    pub last_command_mps: f32,
+}
+
+impl SpeedPlanner {
+    /// Precomputes the pulse response and the ADMM matrix inverse (f64).
+    pub fn new(model: &SsBlock<2>, tuning: SpeedTuning) -> Result<Self, SpeedPlanError> {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !(positive(tuning.speed_weight)
+            && positive(tuning.command_change_weight)
+            && positive(tuning.max_speed_mps)
+            && positive(tuning.accel_mps2)
+            && positive(tuning.decel_mps2))
+        {
+            return Err(SpeedPlanError::BadTuning);
+        }
+        // Unit step response at the start of every MPC step (call 5k, k = 0..=PLAN_STEPS), then its
+        // differences: the response to a command held over one step.
+        let mut st = model.zero_state();
+        let step_resp = roll(model, &mut st, 1.0);
+        // A command held over one knot is a unit step minus one KNOT_STEPS later.
+        let mut pulse = [0.0f32; PLAN_STEPS + 1];
+        for (m, p) in pulse.iter_mut().enumerate() {
+            let now = step_resp.get(m).copied().unwrap_or(0.0);
+            let later = m
+                .checked_sub(KNOT_STEPS)
+                .and_then(|i| step_resp.get(i))
+                .copied()
+                .unwrap_or(0.0);
+            *p = now - later;
+        }
+        if pulse.iter().any(|p| !p.is_finite()) || pulse.iter().all(|p| *p == 0.0) {
+            return Err(SpeedPlanError::NoResponse);
+        }
+        // Row i is step k = i + 1; column j the command of knot j (from step KNOT_STEPS j):
+        // pulse[k - KNOT_STEPS j], 0 before the knot starts.
+        let p = SMatrix::<f32, PLAN_STEPS, KNOTS>::from_fn(|i, j| {
+            (i + 1)
+                .checked_sub(KNOT_STEPS * j)
+                .and_then(|m| pulse.get(m))
+                .copied()
+                .unwrap_or(0.0)
+        });
+        let kkt_inv = kkt_inverse(&pulse, &tuning)?;
+        Ok(Self {
+            model: *model,
+            pulse,
+            p,
+            kkt_inv,
+            tuning,
+        })
+    }
+
+    /// The configuration.
+    pub fn tuning(&self) -> &SpeedTuning {
+        &self.tuning
+    }
+
+    /// Pulse response (see the struct doc).
+    pub fn pulse(&self) -> &[f32; PLAN_STEPS + 1] {
+        &self.pulse
+    }
+
+    /// Free response at steps 1..=PLAN_STEPS with `command_mps` held, plus the bias, m/s.
+    pub fn free_response(&self, start: &SpeedStart, command_mps: f32) -> [f32; PLAN_STEPS] {
+        let mut st = *start.model_state;
+        let all = roll(&self.model, &mut st, command_mps);
+        let mut f = [0.0f32; PLAN_STEPS];
+        for (v, y) in f.iter_mut().zip(all.iter().skip(1)) {
+            *v = y + start.bias_mps;
+        }
+        f
+    }
+
+    /// Plans the commands: reference from the targets (`targets_mps[k]`, k = 0..=PLAN_STEPS, the
+    /// path's target speed where the car is expected at step k), then the QP.
+    pub fn plan(
+        &self,
+        state: &mut SpeedState,
+        start: &SpeedStart,
+        targets_mps: &[f32; PLAN_STEPS + 1],
+    ) -> SpeedPlan {
+        let t = &self.tuning;
+        let last = clamp(finite_or(start.last_command_mps, 0.0), 0.0, t.max_speed_mps);
+        let v0 = max(finite_or(start.speed_mps, 0.0), 0.0);
+        let f = SVector::<f32, PLAN_STEPS>::from(self.free_response(start, last));
+        // Reference: the targets, reached within the acceleration limits.
+        let dt = super::STEP_S;
+        let mut r = SVector::<f32, PLAN_STEPS>::zeros();
+        let mut prev = v0;
+        for (rk, target) in r.iter_mut().zip(targets_mps.iter().skip(1)) {
+            let goal = clamp(finite_or(*target, 0.0), 0.0, t.max_speed_mps);
+            prev = clamp(goal, prev - t.decel_mps2 * dt, prev + t.accel_mps2 * dt);
+            *rk = prev;
+        }
+        // Linear cost of du: w_v P' (f - r).
+        let lin = self.p.tr_mul(&(f - r)) * t.speed_weight;
+        let lo = -last;
+        let hi = t.max_speed_mps - last;
+        let speed_room = SVector::<f32, PLAN_STEPS>::from_element(t.max_speed_mps) - f;
+        state.shift();
+        let mut du = SVector::<f32, KNOTS>::zeros();
+        for _ in 0..t.iterations {
+            let zc = SVector::<f32, KNOTS>::from(state.z_cmd);
+            let wc = SVector::<f32, KNOTS>::from(state.w_cmd);
+            let zs = SVector::<f32, PLAN_STEPS>::from(state.z_speed);
+            let ws = SVector::<f32, PLAN_STEPS>::from(state.w_speed);
+            let rhs = -lin + (zc - wc) * RHO_COMMAND + self.p.tr_mul(&(zs - ws)) * RHO_SPEED;
+            du = self.kkt_inv * rhs;
+            let dv = self.p * du;
+            for ((z, w), d) in state
+                .z_cmd
+                .iter_mut()
+                .zip(state.w_cmd.iter_mut())
+                .zip(du.iter())
+            {
+                let z_new = clamp(d + *w, lo, hi);
+                *w += d - z_new;
+                *z = z_new;
+            }
+            for (((z, w), d), room) in state
+                .z_speed
+                .iter_mut()
+                .zip(state.w_speed.iter_mut())
+                .zip(dv.iter())
+                .zip(speed_room.iter())
+            {
+                let v = d + *w;
+                let reach = SPEED_BOUND_WEIGHT / RHO_SPEED;
+                let z_new = if v > *room { max(*room, v - reach) } else { v };
+                *w += d - z_new;
+                *z = z_new;
+            }
+        }
+        // The commands are clamped to their bounds exactly (ADMM meets them only in the limit).
+        let mut commands = [0.0f32; KNOTS];
+        for (c, d) in commands.iter_mut().zip(du.iter()) {
+            *c = clamp(finite_or(last + d, 0.0), 0.0, t.max_speed_mps);
+        }
+        let speeds = self.predict(&f, last, &commands, v0);
+        SpeedPlan {
+            command_mps: commands.first().copied().unwrap_or(0.0),
+            commands_mps: commands,
+            speeds_mps: speeds,
+        }
+    }
+
+    /// The predicted speeds (step 0 = `v0`) of a command sequence, from the free response `f`
+    /// (with `last` held), clamped at 0.
+    pub fn predict(
+        &self,
+        f: &SVector<f32, PLAN_STEPS>,
+        last: f32,
+        commands: &[f32; KNOTS],
+        v0: f32,
+    ) -> [f32; PLAN_STEPS + 1] {
+        let du = SVector::<f32, KNOTS>::from_fn(|j, _| commands.get(j).map_or(0.0, |c| c - last));
+        let v = f + self.p * du;
+        let mut out = [0.0f32; PLAN_STEPS + 1];
+        let mut it = out.iter_mut();
+        if let Some(first) = it.next() {
+            *first = v0;
+        }
+        for (o, vk) in it.zip(v.iter()) {
+            *o = max(finite_or(*vk, 0.0), 0.0);
+        }
+        out
+    }
+
+    /// The plan of the fallback: command 0 (brake to a stop) over the whole horizon.
+    pub fn stop(&self, start: &SpeedStart) -> SpeedPlan {
+        let last = clamp(
+            finite_or(start.last_command_mps, 0.0),
+            0.0,
+            self.tuning.max_speed_mps,
+        );
+        let f = SVector::<f32, PLAN_STEPS>::from(self.free_response(start, last));
+        let commands = [0.0f32; KNOTS];
+        let speeds = self.predict(
+            &f,
+            last,
+            &commands,
+            max(finite_or(start.speed_mps, 0.0), 0.0),
+        );
+        SpeedPlan {
+            command_mps: 0.0,
+            commands_mps: commands,
+            speeds_mps: speeds,
+        }
+    }
+}
+
+impl SpeedState {
+    /// No plan yet. `const`, so that it can initialise a static.
+    pub const fn new() -> Self {
+        Self {
+            z_cmd: [0.0; KNOTS],
+            w_cmd: [0.0; KNOTS],
+            z_speed: [0.0; PLAN_STEPS],
+            w_speed: [0.0; PLAN_STEPS],
+        }
+    }
+
+    /// Warm start for the next tick: one tick is a fifth of a step, a tenth of a knot.
+    fn shift(&mut self) {
+        let per_step = 1.0 / TICKS_PER_STEP as f32;
+        let per_knot = per_step / KNOT_STEPS as f32;
+        shift(&mut self.z_cmd, per_knot);
+        shift(&mut self.w_cmd, per_knot);
+        shift(&mut self.z_speed, per_step);
+        shift(&mut self.w_speed, per_step);
+    }
+}
+
+impl Default for SpeedState {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Each value moved `f` of the way to the next one (the last held).
+fn shift<const N: usize>(v: &mut [f32; N], f: f32) {
+    let old = *v;
+    for (cur, next) in v.iter_mut().zip(old.iter().skip(1)) {
+        *cur += (next - *cur) * f;
+    }
+}
+
+/// The model's output at the start of each MPC step (calls 0, 5, 10, ... of `step`, the call
+/// `5k` being the sample at `t + k STEP_S`) with `u` held from now on.
+fn roll(model: &SsBlock<2>, st: &mut SsBlockState<2>, u: f32) -> [f32; PLAN_STEPS + 1] {
+    let mut out = [0.0f32; PLAN_STEPS + 1];
+    for y in out.iter_mut() {
+        *y = model.step(st, u);
+        for _ in 1..TICKS_PER_STEP {
+            model.step(st, u);
+        }
+    }
+    out
+}
+
+/// `v` if finite, else `fallback`.
+fn finite_or(v: f32, fallback: f32) -> f32 {
+    if v.is_finite() {
+        v
+    } else {
+        fallback
+    }
+}
+
+/// `(H + rho_u I + rho_v P'P)^-1` with `H = w_v P'P + w_du D'D` (D the first difference with
+/// `du_{-1} = 0`), in f64 by Cholesky, rounded to f32.
+fn kkt_inverse(
+    pulse: &[f32; PLAN_STEPS + 1],
+    t: &SpeedTuning,
+) -> Result<SMatrix<f32, KNOTS, KNOTS>, SpeedPlanError> {
+    let pm = |k: usize, j: usize| -> f64 {
+        (k + 1)
+            .checked_sub(KNOT_STEPS * j)
+            .and_then(|m| pulse.get(m))
+            .map_or(0.0, |v| f64::from(*v))
+    };
+    let wv = f64::from(t.speed_weight) + f64::from(RHO_SPEED);
+    let wd = f64::from(t.command_change_weight);
+    // M = (w_v + rho_v) P'P + w_du D'D + rho_u I.
+    let mut m = [[0.0f64; KNOTS]; KNOTS];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let mut ptp = 0.0;
+            for k in 0..PLAN_STEPS {
+                ptp += pm(k, i) * pm(k, j);
+            }
+            // D'D: 2 on the diagonal (1 on the last), -1 beside it.
+            let dtd = if i == j {
+                if i + 1 == KNOTS {
+                    1.0
+                } else {
+                    2.0
+                }
+            } else if i.abs_diff(j) == 1 {
+                -1.0
+            } else {
+                0.0
+            };
+            *v = wv * ptp + wd * dtd + if i == j { f64::from(RHO_COMMAND) } else { 0.0 };
+        }
+    }
+    if !cholesky_in_place(&mut m) {
+        return Err(SpeedPlanError::NotPositiveDefinite);
+    }
+    let l = &m;
+    // Columns of the inverse: solve L L' x = e_c.
+    let mut inv = SMatrix::<f32, KNOTS, KNOTS>::zeros();
+    for c in 0..KNOTS {
+        let mut y = [0.0f64; KNOTS];
+        for i in 0..KNOTS {
+            let mut s = if i == c { 1.0 } else { 0.0 };
+            for k in 0..i {
+                s -= at(l, i, k) * y.get(k).copied().unwrap_or(0.0);
+            }
+            if let Some(yi) = y.get_mut(i) {
+                *yi = s / at(l, i, i);
+            }
+        }
+        let mut x = [0.0f64; KNOTS];
+        for i in (0..KNOTS).rev() {
+            let mut s = y.get(i).copied().unwrap_or(0.0);
+            for k in i + 1..KNOTS {
+                s -= at(l, k, i) * x.get(k).copied().unwrap_or(0.0);
+            }
+            if let Some(xi) = x.get_mut(i) {
+                *xi = s / at(l, i, i);
+            }
+        }
+        for (i, xi) in x.iter().enumerate() {
+            if let Some(v) = inv.get_mut((i, c)) {
+                *v = *xi as f32;
+            }
+        }
+    }
+    Ok(inv)
+}
+
+/// `m[i][j]`, 0 outside.
+fn at(m: &[[f64; KNOTS]; KNOTS], i: usize, j: usize) -> f64 {
+    m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
+}
+
+/// Lower Cholesky factor of a symmetric matrix, written over its lower triangle (each entry
+/// is read before it is overwritten); `false` unless positive definite.
+fn cholesky_in_place(m: &mut [[f64; KNOTS]; KNOTS]) -> bool {
+    for i in 0..KNOTS {
+        for j in 0..=i {
+            let mut s = at(m, i, j);
+            for k in 0..j {
+                s -= at(m, i, k) * at(m, j, k);
+            }
+            let v = if i == j {
+                if !(s > 0.0 && s.is_finite()) {
+                    return false;
+                }
+                libm::sqrt(s)
+            } else {
+                s / at(m, j, j)
+            };
+            if let Some(x) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
+                *x = v;
+            }
+        }
+    }
+    true
+}

@@ -1,0 +1,1155 @@
+//! Model-predictive control over the identified models (the paper's "hybrid predictive
+//! controller"): every tick, a speed plan and a steering plan over the next 2 s, from which the
+//! node sends the first commands and the planned trajectory.
+//!
+//! Decoupled in two problems solved in sequence (docs/mpc.md has the formulation, the solver,
+//! the measurements behind the choices and the bounds):
+//! 1. [`longitudinal`]: the speed commands, through the eq 5-form speed model with its input
+//!    delay (a condensed QP, the delay handled exactly by the prediction);
+//! 2. [`lateral`]: the steering, through an error-state model along the reference linearised
+//!    about the previous plan and the planned speeds: the kinematic model (eq 8) or the
+//!    identified dynamic model, as the hybrid switch chose; steering range and rate, the four
+//!    body corners inside the corridor, each obstacle as a half-space per step on the side
+//!    chosen for it (the discrete decision: more room, with hysteresis), inflated by its radius,
+//!    the node's position uncertainty and a margin; solved by [`admm`].
+//!
+//! Everything is f32 with sizes fixed at compile time, no allocation, a fixed iteration cap,
+//! warm starts from the previous solution moved one tick ahead. A problem that cannot be solved
+//! (an obstacle with no side that fits the corridor, a plan that still hits an obstacle after the
+//! cap, non-finite input) gives status 3 and the documented fallback, never a NaN: brake (speed
+//! command 0) and steer along the last feasible plan (the measured steering once it has run out).
+//!
+//! Frames: x east, y north (m); headings clockwise from north (rad); offsets and steering
+//! positive to the right.
+pub mod admm;
+pub mod lateral;
+pub mod longitudinal;
+
+use nalgebra::SVector;
+
+use self::admm::{AdmmSettings, Problem, SolveError, Workspace};
+use self::lateral::{BuildError, InflatedObstacle, LateralSetup, Linearisation};
+use self::longitudinal::{
+    SpeedPlan, SpeedPlanError, SpeedPlanner, SpeedStart, SpeedState, SpeedTuning,
+};
+use crate::math;
+use crate::model::dynamic::{DynamicParams, LateralState};
+use crate::model::hybrid::Mode;
+use crate::model::kinematic::Pose;
+use crate::model::{SsBlock, SsBlockState};
+use crate::node::NodeConfig;
+use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
+
+/// MPC steps of the steering problem: 15 x 0.1 s = 1.5 s (measured: a longer horizon did not
+/// pass the double lane change faster, and costs a third more per iteration; docs/mpc.md).
+pub const STEPS: usize = 15;
+/// Steps of the plan the node sends: 20 x 0.1 s = 2 s, the PREDICTION frames' horizon. The
+/// speed plan covers it all; beyond [`STEPS`] the steering plan holds its last value.
+pub const PLAN_STEPS: usize = 20;
+/// MPC step, s (every 5th node tick: the PREDICTION frames are every 0.2 s = 2 steps).
+pub const STEP_S: f32 = 0.1;
+/// Node ticks (20 ms, [`crate::SAMPLE_PERIOD_S`]) per MPC step.
+pub const TICKS_PER_STEP: usize = 5;
+/// Obstacles the controller keeps clear of (the OBSTACLE frame's `obstacle_id` 0..3).
+pub const MAX_OBSTACLES: usize = 4;
+/// Lateral states (see [`lateral`]).
+pub const NX: usize = 5;
+/// Constraint rows per stage: four corners, one per obstacle.
+pub const ROWS: usize = 4 + MAX_OBSTACLES;
+
+/// A point of the path with the corridor there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Path pose (rear-axle path; heading along the path).
+    pub pose: Pose,
+    /// How far the body may stray to the left of the path here, m (may be +inf).
+    pub left_m: f32,
+    /// ... and to the right, m.
+    pub right_m: f32,
+}
+
+/// The reference at one MPC step: the path where the car is expected at step k.
+///
+/// `front` and `rear` are the path and corridor at the stations of the body's ends
+/// (`at`'s station plus `length_m - rear_overhang_m`, minus `rear_overhang_m`); their corridors
+/// should be the narrowest between the rear axle and that end, so that the straight sides of
+/// the body between the corners are covered too.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReferencePoint {
+    /// Path at the rear axle's expected station.
+    pub at: Sample,
+    /// Signed path curvature there, 1/m (positive = turning right).
+    pub curvature_per_m: f32,
+    /// Target speed there, m/s.
+    pub speed_mps: f32,
+    /// Path and corridor at the front end of the body.
+    pub front: Sample,
+    /// Path and corridor at the rear end of the body.
+    pub rear: Sample,
+}
+
+/// A circular obstacle, in the frame of the path, with where it lies along the path (the
+/// passing side is decided on these, whether or not the obstacle is within the horizon yet).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Obstacle {
+    /// Centre, east, m.
+    pub east_m: f32,
+    /// Centre, north, m.
+    pub north_m: f32,
+    /// Radius, m.
+    pub radius_m: f32,
+    /// Station of the centre's projection on the path minus the rear axle's station now, m
+    /// (negative: behind).
+    pub ahead_m: f32,
+    /// The centre's offset from the path there, m, positive right.
+    pub path_offset_m: f32,
+    /// The corridor at that station, m (as [`Sample::left_m`]).
+    pub left_m: f32,
+    /// The corridor at that station, m (as [`Sample::right_m`]).
+    pub right_m: f32,
+}
+
+/// Which side of an obstacle the car passes on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ObstacleSide {
+    /// The car passes to the left of the obstacle (the obstacle is on its right).
+    Left,
+    /// The car passes to the right of it.
+    Right,
+}
+
+/// The car now.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CarState<'a> {
+    /// Rear-axle pose (the node's estimate).
+    pub pose: Pose,
+    /// Measured speed, m/s.
+    pub speed_mps: f32,
+    /// Lateral state (the dynamic model's; ignored in the kinematic mode).
+    pub lateral: LateralState,
+    /// Measured centre-tyre steering angle, rad.
+    pub steer_rad: f32,
+    /// Lateral model chosen by the hybrid switch.
+    pub mode: Mode,
+    /// The node's speed-model state, its next step being the command sent now.
+    pub speed_model: &'a SsBlockState<2>,
+    /// Measured minus modelled speed now, m/s.
+    pub speed_bias_mps: f32,
+    /// Speed command sent last, m/s.
+    pub last_speed_cmd_mps: f32,
+}
+
+/// One solve's input.
+#[derive(Clone, Copy, Debug)]
+pub struct MpcInput<'a> {
+    /// The reference at steps 0..=STEPS.
+    pub reference: &'a [ReferencePoint; STEPS + 1],
+    /// Active obstacles (slot = `obstacle_id`).
+    pub obstacles: &'a [Option<Obstacle>; MAX_OBSTACLES],
+    /// The car.
+    pub car: CarState<'a>,
+    /// Bound on the error of the position estimate, m (the estimator's 2-sigma or worse):
+    /// obstacles are inflated by it.
+    pub position_uncertainty_m: f32,
+}
+
+/// Cost weights and ADMM penalties of the lateral problem.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Weights {
+    /// Lateral offset, per m^2.
+    pub lateral_per_m2: f32,
+    /// Heading error, per rad^2.
+    pub heading_per_rad2: f32,
+    /// Lateral speed (dynamic mode), per (m/s)^2.
+    pub lateral_speed_per_mps2: f32,
+    /// Yaw rate (dynamic mode), per (rad/s)^2.
+    pub yaw_rate_per_rps2: f32,
+    /// Steering away from the path's feedforward, per rad^2.
+    pub steer_per_rad2: f32,
+    /// Steering rate, per (rad/s)^2.
+    pub steer_rate: f32,
+    /// The last step's state weights are this many times the others (terminal cost).
+    pub terminal_factor: f32,
+    /// Exact-penalty weight of the corridor, per m outside.
+    pub corridor_weight_per_m: f32,
+    /// Exact-penalty weight of an obstacle, per m inside its inflated circle.
+    pub obstacle_weight_per_m: f32,
+    /// ADMM penalty of the corridor rows, per m^2.
+    pub rho_corridor: f32,
+    /// ADMM penalty of the obstacle rows, per m^2.
+    pub rho_obstacle: f32,
+    /// ADMM penalty of the steering range, per rad^2.
+    pub rho_steer: f32,
+    /// ADMM penalty of the steering-rate bounds, per (rad/s)^2.
+    pub rho_steer_rate: f32,
+}
+
+/// Controller tuning. Immutable configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MpcTuning {
+    /// Lateral problem weights.
+    pub weights: Weights,
+    /// Lateral solver settings (the iteration cap bounds the worst case).
+    pub admm: AdmmSettings,
+    /// Speed plan.
+    pub speed: SpeedTuning,
+    /// Steering command = the plan's steering this far ahead (one tick plus the actuator's
+    /// lag), s.
+    pub steer_lead_s: f32,
+    /// Share of the actuator's rate limit the plan may use (the rest is for feedback), 0..1.
+    pub steer_rate_share: f32,
+    /// Added to each obstacle's radius (besides the position uncertainty), m.
+    pub obstacle_margin_m: f32,
+    /// The other side of an obstacle must have this much more room to change the decision, m.
+    pub side_hysteresis_m: f32,
+    /// A plan whose body enters an inflated obstacle by more than this within `stop_delay_s`
+    /// (two ticks in a row), or further out for more than `obstacle_persist_ticks` ticks in a
+    /// row, is not accepted, m.
+    pub obstacle_tolerance_m: f32,
+    /// See `obstacle_tolerance_m`.
+    pub obstacle_persist_ticks: u16,
+    /// How far beyond the body's front at the end of the horizon an obstacle already pulls the
+    /// plan's last stages to its side, as time at the current speed, s (lateral::terminal_row).
+    pub preview_s: f32,
+    /// Time from a speed command of 0 to full braking (the speed loop's delay and rise), s:
+    /// an obstacle that leaves no room is acted on once it is within the stopping distance
+    /// `v stop_delay + v^2 / (2 decel)` (or the horizon, if that reaches further).
+    pub stop_delay_s: f32,
+}
+
+/// Tuned on the built-in plant (docs/mpc.md, "Tuning").
+pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
+    weights: Weights {
+        lateral_per_m2: 10.0,
+        heading_per_rad2: 10.0,
+        lateral_speed_per_mps2: 0.0,
+        yaw_rate_per_rps2: 0.0,
+        steer_per_rad2: 1.0,
+        steer_rate: 1.0,
+        terminal_factor: 5.0,
+        corridor_weight_per_m: 1000.0,
+        obstacle_weight_per_m: 3000.0,
+        rho_corridor: 50.0,
+        rho_obstacle: 50.0,
+        rho_steer: 300.0,
+        rho_steer_rate: 10.0,
+    },
+    admm: AdmmSettings {
+        max_iterations: 20,
+        primal_tolerance: 0.005,
+        dual_tolerance: 0.05,
+        relaxation: 1.6,
+        check_every: 5,
+        rho_update_every: 10,
+    },
+    speed: SpeedTuning {
+        speed_weight: 1.0,
+        command_change_weight: 0.5,
+        max_speed_mps: 30.0,
+        accel_mps2: 1.5,
+        decel_mps2: 3.0,
+        iterations: 10,
+    },
+    steer_lead_s: 0.07,
+    steer_rate_share: 0.9,
+    obstacle_margin_m: 0.6,
+    side_hysteresis_m: 0.5,
+    obstacle_tolerance_m: 0.25,
+    obstacle_persist_ticks: 10,
+    // Eq 5: 0.42 s delay, then a rise with time constant ~1.2 s; the simulator's speed loop:
+    // 0.4 s delay + 0.4 s actuator lag. 0.8 s covers the plant, conservatively.
+    stop_delay_s: 0.8,
+    preview_s: 1.5,
+};
+
+/// Why a configuration is refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MpcConfigError {
+    /// A body dimension, limit or weight is not positive and finite (or out of its range).
+    BadParameter(&'static str),
+    /// The speed planner could not be built.
+    Speed(SpeedPlanError),
+}
+
+/// The controller's configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MpcConfig {
+    vehicle: VehicleParams,
+    dynamics: Option<DynamicParams>,
+    body: Body,
+    /// The steering actuator's rate limit, rad/s (centre-tyre angle).
+    max_steer_rate_rad_per_s: f32,
+    tuning: MpcTuning,
+    speed: SpeedPlanner,
+}
+
+/// What the controller sends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlStatus {
+    /// Following the path (CONTROL_COMMAND status 1).
+    Tracking,
+    /// Following the path with an obstacle in the horizon (status 2).
+    Avoiding,
+    /// The fallback (status 3): braking along the last feasible plan.
+    Fallback,
+}
+
+impl ControlStatus {
+    /// The CONTROL_COMMAND `status` value.
+    pub fn code(self) -> u8 {
+        match self {
+            ControlStatus::Tracking => 1,
+            ControlStatus::Avoiding => 2,
+            ControlStatus::Fallback => 3,
+        }
+    }
+}
+
+/// Why the fallback was taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FallbackReason {
+    /// A non-finite or out-of-range input (pose, speed, reference, obstacle).
+    BadInput,
+    /// An obstacle leaves no room for the body on either side within the corridor.
+    NoPassage,
+    /// The lateral problem could not be built or solved (non-finite data).
+    Solver,
+    /// The plan after the iteration cap still enters an inflated obstacle.
+    ObstacleNotCleared,
+}
+
+/// One point of the plan.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PlanPoint {
+    /// Time ahead, s.
+    pub t_s: f32,
+    /// East, m (rear axle).
+    pub x_m: f32,
+    /// North, m.
+    pub y_m: f32,
+    /// Heading clockwise from north, rad.
+    pub heading_rad: f32,
+    /// Speed, m/s.
+    pub speed_mps: f32,
+    /// Steering (centre tyre), rad.
+    pub steer_rad: f32,
+}
+
+/// What one solve produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MpcOutput {
+    /// Steering command, % (STEERING_REPORT's unit and sign), within +-100.
+    pub steer_cmd_pct: f32,
+    /// Speed command, m/s, >= 0.
+    pub speed_cmd_mps: f32,
+    /// Status.
+    pub status: ControlStatus,
+    /// Why, when the status is the fallback.
+    pub fallback: Option<FallbackReason>,
+    /// The planned trajectory: the models rolled forward under the planned commands, every
+    /// 0.1 s from now (point 0) to 2 s.
+    pub plan: [PlanPoint; PLAN_STEPS + 1],
+    /// Lateral ADMM iterations run.
+    pub iterations: u16,
+    /// Riccati factorisations of the lateral problem (1 + the penalty rebalances).
+    pub factorisations: u16,
+    /// Lateral primal residual after the last iteration (row units: m or rad).
+    pub primal_residual: f32,
+    /// Lateral dual residual.
+    pub dual_residual: f32,
+    /// Largest corridor violation of the plan's body corners, m (0 inside).
+    pub corridor_violation_m: f32,
+    /// Passing side chosen for each obstacle slot (`None`: no obstacle, or not in reach).
+    pub sides: [Option<ObstacleSide>; MAX_OBSTACLES],
+}
+
+/// The controller's state: warm starts, the side decisions, the last feasible plan.
+#[derive(Clone, Debug)]
+pub struct MpcState {
+    workspace: Workspace<NX, STEPS, ROWS>,
+    problem: Problem<NX, STEPS, ROWS>,
+    speed: SpeedState,
+    /// Linearisation for the next solve (the last plan's heading error and steering).
+    lin: Option<Linearisation>,
+    sides: [Option<ObstacleSide>; MAX_OBSTACLES],
+    /// Steering of the last accepted plan, and ticks since it was made.
+    last_steer_plan: Option<([f32; STEPS + 1], u32)>,
+    /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
+    obstacle_violation_ticks: u16,
+}
+
+impl Default for MpcState {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl MpcState {
+    /// No solve yet. `const`, so that the firmware can keep the state (10 KiB) in a static
+    /// rather than build it on its 12 KiB stack.
+    pub const fn new() -> Self {
+        Self {
+            workspace: Workspace::new(),
+            problem: Problem::zeroed(),
+            speed: SpeedState::new(),
+            lin: None,
+            sides: [None; MAX_OBSTACLES],
+            last_steer_plan: None,
+            obstacle_violation_ticks: 0,
+        }
+    }
+
+    /// Forgets the warm start and the side decisions (a new path), in place (the state is
+    /// 10 KiB: a fresh value would be built on the stack first).
+    pub fn reset(&mut self) {
+        self.workspace.reset();
+        self.speed = SpeedState::new();
+        self.lin = None;
+        self.sides = [None; MAX_OBSTACLES];
+        self.last_steer_plan = None;
+        self.obstacle_violation_ticks = 0;
+    }
+}
+
+impl MpcConfig {
+    /// Checks the parameters and precomputes the speed planner. Without `dynamics` the
+    /// controller plans with the kinematic model at every speed.
+    pub fn new(
+        vehicle: VehicleParams,
+        dynamics: Option<DynamicParams>,
+        body: Body,
+        max_steer_rate_rad_per_s: f32,
+        speed_model: &SsBlock<2>,
+        tuning: MpcTuning,
+    ) -> Result<Self, MpcConfigError> {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        let checks: [(bool, &'static str); 12] = [
+            (positive(body.width_m), "body width_m"),
+            (positive(body.length_m), "body length_m"),
+            (
+                body.rear_overhang_m.is_finite()
+                    && body.rear_overhang_m >= 0.0
+                    && body.rear_overhang_m < body.length_m,
+                "body rear_overhang_m",
+            ),
+            (positive(max_steer_rate_rad_per_s), "steering rate limit"),
+            (positive(vehicle.max_steer_rad), "vehicle max_steer"),
+            (positive(vehicle.wheelbase_m), "vehicle wheelbase_m"),
+            (
+                tuning.steer_lead_s.is_finite() && (0.0..=STEP_S).contains(&tuning.steer_lead_s),
+                "steer_lead_s (0 .. 0.1 s)",
+            ),
+            (
+                positive(tuning.steer_rate_share) && tuning.steer_rate_share <= 1.0,
+                "steer_rate_share (0 .. 1)",
+            ),
+            (
+                tuning.admm.relaxation > 0.0 && tuning.admm.relaxation < 2.0,
+                "ADMM relaxation (0 .. 2)",
+            ),
+            (weights_ok(&tuning.weights), "lateral weights"),
+            (positive(tuning.stop_delay_s), "stop_delay_s"),
+            (
+                tuning.preview_s.is_finite() && tuning.preview_s >= 0.0,
+                "preview_s",
+            ),
+        ];
+        if let Some((_, what)) = checks.iter().find(|(ok, _)| !ok) {
+            return Err(MpcConfigError::BadParameter(what));
+        }
+        let speed = SpeedPlanner::new(speed_model, tuning.speed).map_err(MpcConfigError::Speed)?;
+        Ok(Self {
+            vehicle,
+            dynamics,
+            body,
+            max_steer_rate_rad_per_s,
+            tuning,
+            speed,
+        })
+    }
+
+    /// The controller of the car a node is configured for: its geometry, body, dynamic model
+    /// (if any), steering actuator rate limit and speed model, from the model file
+    /// (`[vehicle]`, `[dynamics]`, `[speed]`); the plan's speed never exceeds the node's
+    /// `max_speed_mps` nor the tuning's.
+    pub fn for_node(node: &NodeConfig, tuning: MpcTuning) -> Result<Self, MpcConfigError> {
+        let rate_rad_per_s =
+            node.max_steer_rate_pct_per_s / STEER_PCT_LIMIT * node.vehicle.max_steer_rad;
+        let mut tuning = tuning;
+        tuning.speed.max_speed_mps = min(tuning.speed.max_speed_mps, node.max_speed_mps);
+        Self::new(
+            node.vehicle,
+            node.dynamics,
+            node.body,
+            rate_rad_per_s,
+            &node.velocity,
+            tuning,
+        )
+    }
+
+    /// The tuning.
+    pub fn tuning(&self) -> &MpcTuning {
+        &self.tuning
+    }
+
+    /// The body.
+    pub fn body(&self) -> &Body {
+        &self.body
+    }
+
+    /// The speed planner.
+    pub fn speed_planner(&self) -> &SpeedPlanner {
+        &self.speed
+    }
+
+    /// One solve: the commands to send now and the plan.
+    pub fn solve(&self, state: &mut MpcState, input: &MpcInput) -> MpcOutput {
+        let car = &input.car;
+        let speed_start = SpeedStart {
+            model_state: car.speed_model,
+            bias_mps: finite_or(car.speed_bias_mps, 0.0),
+            speed_mps: car.speed_mps,
+            last_command_mps: car.last_speed_cmd_mps,
+        };
+        if !input_ok(input) {
+            return self.fallback(state, input, &speed_start, FallbackReason::BadInput);
+        }
+        // 1. Speed plan.
+        // Speed targets over the plan; beyond the reference, its last point's.
+        let last_target = input.reference.last().map_or(0.0, |r| r.speed_mps);
+        let mut targets = [last_target; PLAN_STEPS + 1];
+        for (t, r) in targets.iter_mut().zip(input.reference.iter()) {
+            *t = r.speed_mps;
+        }
+        let speed_plan = self.speed.plan(&mut state.speed, &speed_start, &targets);
+        // 2. Obstacles: inflate, decide sides.
+        let obstacles = match self.decide_sides(state, input) {
+            Ok(o) => o,
+            Err(reason) => return self.fallback(state, input, &speed_start, reason),
+        };
+        // 3. Lateral problem about the previous plan.
+        let x0 = self.initial_state(input);
+        let lin = self.linearisation(state, input, &x0, &speed_plan);
+        let mut speeds = [0.0f32; STEPS + 1];
+        for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
+            *s = *v;
+        }
+        let setup = self.setup(self.mode(input), &speeds);
+        let preview_m = max(car.speed_mps, 0.0) * self.tuning.preview_s;
+        let built = lateral::build(
+            &mut state.problem,
+            &setup,
+            input.reference,
+            &lin,
+            &obstacles,
+            preview_m,
+        );
+        let terminal_mask = match built {
+            Ok(m) => m,
+            Err(BuildError::Discretisation) => {
+                return self.fallback(state, input, &speed_start, FallbackReason::Solver);
+            }
+        };
+        // Avoiding: some obstacle reaches the body within the horizon.
+        let avoiding = state
+            .problem
+            .stages
+            .iter()
+            .any(|st| st.rows.iter().skip(lateral::ROW_OBSTACLE).any(|r| r.active));
+        if state.lin.is_some() {
+            state.workspace.shift(1.0 / TICKS_PER_STEP as f32);
+        } else {
+            state.workspace.cold_start(&state.problem);
+        }
+        let report = match admm::solve(&mut state.workspace, &state.problem, &x0, &self.tuning.admm)
+        {
+            Ok(r) => r,
+            Err(SolveError::BadPivot | SolveError::NonFinite) => {
+                state.workspace.reset();
+                return self.fallback(state, input, &speed_start, FallbackReason::Solver);
+            }
+        };
+        // 4. The plan as sent: inputs within their bounds exactly, states rolled from x0.
+        let mut planned_rates = [0.0f32; STEPS];
+        for (r, it) in planned_rates.iter_mut().zip(&state.workspace.stages) {
+            *r = it.u;
+        }
+        let (states, rates) = self.clamped_rollout(&state.problem, &x0, &planned_rates);
+        if states.iter().any(|x| x.iter().any(|v| !v.is_finite())) {
+            state.workspace.reset();
+            return self.fallback(state, input, &speed_start, FallbackReason::Solver);
+        }
+        // The plan may still enter an obstacle after the iteration cap: at once within the time
+        // braking needs to take hold (then only braking can help), or for several ticks in a
+        // row further out (a solve that has not converged yet resolves it on the next ticks).
+        let imminent = (self.tuning.stop_delay_s / STEP_S) as usize;
+        let v = violations(&state.problem, &states, &terminal_mask, imminent);
+        let corridor_violation_m = v.corridor_m;
+        let tolerance = self.tuning.obstacle_tolerance_m;
+        if v.obstacle_m > tolerance {
+            state.obstacle_violation_ticks = state.obstacle_violation_ticks.saturating_add(1);
+        } else {
+            state.obstacle_violation_ticks = 0;
+        }
+        // An imminent violation must show in two ticks in a row: one noisy position fix can
+        // put a single plan's first stages inside (20 ms of latency is far below the speed
+        // loop's 0.4 s delay).
+        if (v.obstacle_imminent_m > tolerance && state.obstacle_violation_ticks >= 2)
+            || state.obstacle_violation_ticks > self.tuning.obstacle_persist_ticks
+        {
+            return self.fallback(
+                state,
+                input,
+                &speed_start,
+                FallbackReason::ObstacleNotCleared,
+            );
+        }
+        let mut steer = [0.0f32; STEPS + 1];
+        let mut e_psi = [0.0f32; STEPS + 1];
+        for ((s, e), x) in steer.iter_mut().zip(e_psi.iter_mut()).zip(states.iter()) {
+            *s = x.get(lateral::DELTA).copied().unwrap_or(0.0);
+            *e = x.get(lateral::EPSI).copied().unwrap_or(0.0);
+        }
+        state.lin = Some(Linearisation {
+            e_psi,
+            delta: steer,
+        });
+        state.last_steer_plan = Some((steer, 0));
+        let first_rate = rates.first().copied().unwrap_or(0.0);
+        let steer_cmd_rad =
+            steer.first().copied().unwrap_or(0.0) + self.tuning.steer_lead_s * first_rate;
+        let plan = self.rollout(input, &steer, &speed_plan.speeds_mps);
+        MpcOutput {
+            steer_cmd_pct: self.steer_pct(steer_cmd_rad),
+            speed_cmd_mps: speed_plan.command_mps,
+            status: if avoiding {
+                ControlStatus::Avoiding
+            } else {
+                ControlStatus::Tracking
+            },
+            fallback: None,
+            plan,
+            iterations: report.iterations,
+            factorisations: state.workspace.factorisations,
+            primal_residual: report.primal_residual,
+            dual_residual: report.dual_residual,
+            corridor_violation_m,
+            sides: state.sides,
+        }
+    }
+
+    /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
+    /// dynamic model.
+    fn mode(&self, input: &MpcInput) -> Mode {
+        match (input.car.mode, &self.dynamics) {
+            (Mode::Dynamic, Some(_)) => Mode::Dynamic,
+            _ => Mode::Kinematic,
+        }
+    }
+
+    fn setup<'a>(&'a self, mode: Mode, speeds: &'a [f32; STEPS + 1]) -> LateralSetup<'a> {
+        LateralSetup {
+            vehicle: &self.vehicle,
+            dynamics: self.dynamics.as_ref(),
+            body: &self.body,
+            weights: &self.tuning.weights,
+            mode,
+            speeds_mps: speeds,
+            max_steer_rad: self.vehicle.max_steer_rad,
+            max_steer_rate_rad_per_s: self.max_steer_rate_rad_per_s * self.tuning.steer_rate_share,
+        }
+    }
+
+    /// Error state now: offsets from the reference's first point.
+    fn initial_state(&self, input: &MpcInput) -> SVector<f32, NX> {
+        let car = &input.car;
+        let at = &input.reference[0].at.pose;
+        let (dx, dy) = (car.pose.x_m - at.x_m, car.pose.y_m - at.y_m);
+        let e_y = dx * at.cos_heading - dy * at.sin_heading;
+        let e_psi = math::wrap_pi(car.pose.heading_rad - at.heading_rad);
+        let (vy, r) = match self.mode(input) {
+            Mode::Dynamic => (car.lateral.vy_mps, car.lateral.yaw_rate_rps),
+            Mode::Kinematic => (0.0, 0.0),
+        };
+        let delta = clamp(
+            car.steer_rad,
+            -self.vehicle.max_steer_rad,
+            self.vehicle.max_steer_rad,
+        );
+        SVector::<f32, NX>::from([e_y, e_psi, vy, r, delta])
+    }
+
+    /// The previous plan moved one tick ahead, or (first solve) the current heading error and
+    /// the path's feedforward steering.
+    fn linearisation(
+        &self,
+        state: &MpcState,
+        input: &MpcInput,
+        x0: &SVector<f32, NX>,
+        speed: &SpeedPlan,
+    ) -> Linearisation {
+        let e0 = x0.get(lateral::EPSI).copied().unwrap_or(0.0);
+        let d0 = x0.get(lateral::DELTA).copied().unwrap_or(0.0);
+        let mut lin = match &state.lin {
+            Some(prev) => {
+                let f = 1.0 / TICKS_PER_STEP as f32;
+                let mut l = *prev;
+                shift_values(&mut l.e_psi, f);
+                shift_values(&mut l.delta, f);
+                l
+            }
+            None => {
+                let mut l = Linearisation {
+                    e_psi: [e0; STEPS + 1],
+                    delta: [0.0; STEPS + 1],
+                };
+                let understeer = self.vehicle.understeer_s2_per_m2;
+                for ((d, r), v) in l
+                    .delta
+                    .iter_mut()
+                    .zip(input.reference.iter())
+                    .zip(speed.speeds_mps.iter())
+                {
+                    *d = lateral::feedforward_steer_rad(
+                        self.vehicle.wheelbase_m,
+                        understeer,
+                        *v,
+                        r.curvature_per_m,
+                    );
+                }
+                l
+            }
+        };
+        // Stage 0 is the present: linearise there at the measured values.
+        if let Some(e) = lin.e_psi.first_mut() {
+            *e = e0;
+        }
+        if let Some(d) = lin.delta.first_mut() {
+            *d = d0;
+        }
+        lin
+    }
+
+    /// Per obstacle: inflated circle and the side to pass it on (more room, with hysteresis),
+    /// from where it lies along the path. Errors when an obstacle leaves room on neither side
+    /// and is within the stopping distance or the horizon.
+    #[allow(clippy::type_complexity)]
+    fn decide_sides(
+        &self,
+        state: &mut MpcState,
+        input: &MpcInput,
+    ) -> Result<[Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES], FallbackReason> {
+        let mut out = [None; MAX_OBSTACLES];
+        let t = &self.tuning;
+        let body = &self.body;
+        let front = body.length_m - body.rear_overhang_m;
+        let v = max(input.car.speed_mps, 0.0);
+        let stopping_m = v * t.stop_delay_s + v * v / (2.0 * t.speed.decel_mps2);
+        let reach_m = max(stopping_m, horizon_m(input));
+        for ((slot, memory), ob) in out
+            .iter_mut()
+            .zip(state.sides.iter_mut())
+            .zip(input.obstacles)
+        {
+            let Some(ob) = ob else {
+                *memory = None;
+                continue;
+            };
+            let r = ob.radius_m + input.position_uncertainty_m + t.obstacle_margin_m;
+            if ob.ahead_m + r < -body.rear_overhang_m {
+                // Passed: forget the decision.
+                *memory = None;
+                continue;
+            }
+            // Room between the corridor's edge and the inflated circle on each side.
+            let room_left = (ob.path_offset_m - r) + ob.left_m;
+            let room_right = ob.right_m - (ob.path_offset_m + r);
+            let need = body.width_m;
+            let room = |s: ObstacleSide| match s {
+                ObstacleSide::Left => room_left,
+                ObstacleSide::Right => room_right,
+            };
+            let other = |s: ObstacleSide| match s {
+                ObstacleSide::Left => ObstacleSide::Right,
+                ObstacleSide::Right => ObstacleSide::Left,
+            };
+            let keep = memory
+                .filter(|s| room(*s) >= need && room(other(*s)) < room(*s) + t.side_hysteresis_m);
+            let side = match keep {
+                Some(s) => s,
+                None => {
+                    let s = if room_left >= room_right {
+                        ObstacleSide::Left
+                    } else {
+                        ObstacleSide::Right
+                    };
+                    if room(s) < need || room(s).is_nan() {
+                        *memory = None;
+                        if ob.ahead_m - r - front <= reach_m {
+                            return Err(FallbackReason::NoPassage);
+                        }
+                        continue;
+                    }
+                    s
+                }
+            };
+            *memory = Some(side);
+            *slot = Some((
+                InflatedObstacle {
+                    x_m: ob.east_m,
+                    y_m: ob.north_m,
+                    radius_m: r,
+                    ahead_m: ob.ahead_m,
+                    path_offset_m: ob.path_offset_m,
+                },
+                side,
+            ));
+        }
+        Ok(out)
+    }
+
+    /// Re-rolls the linear model from `x0` with the solver's inputs clamped to the rate bounds
+    /// and the steering kept in its range (the plan that is sent meets both exactly).
+    fn clamped_rollout(
+        &self,
+        p: &Problem<NX, STEPS, ROWS>,
+        x0: &SVector<f32, NX>,
+        u: &[f32; STEPS],
+    ) -> ([SVector<f32, NX>; STEPS + 1], [f32; STEPS]) {
+        let mut states = [*x0; STEPS + 1];
+        let mut rates = [0.0f32; STEPS];
+        let max = self.vehicle.max_steer_rad;
+        let mut x = *x0;
+        for (k, (st, uk)) in p.stages.iter().zip(u).enumerate() {
+            let delta = x.get(lateral::DELTA).copied().unwrap_or(0.0);
+            // delta_{k+1} = delta_k + h u exactly (trapezoidal integrator).
+            let to_range_lo = (-max - delta) / STEP_S;
+            let to_range_hi = (max - delta) / STEP_S;
+            let mut rate = clamp(finite_or(*uk, 0.0), st.u_lower, st.u_upper);
+            rate = clamp(rate, to_range_lo, to_range_hi);
+            if let Some(r) = rates.get_mut(k) {
+                *r = rate;
+            }
+            x = st.a * x + st.b * rate + st.c;
+            if let Some(s) = states.get_mut(k + 1) {
+                *s = x;
+            }
+        }
+        (states, rates)
+    }
+
+    /// The planned trajectory: the lateral model of this solve's mode rolled forward from the
+    /// car's pose under the planned steering and speeds.
+    fn rollout(
+        &self,
+        input: &MpcInput,
+        steer: &[f32; STEPS + 1],
+        speeds: &[f32; PLAN_STEPS + 1],
+    ) -> [PlanPoint; PLAN_STEPS + 1] {
+        let car = &input.car;
+        let mut pose = car.pose;
+        let mut lat = car.lateral;
+        let dynamics = match self.mode(input) {
+            Mode::Dynamic => self.dynamics.as_ref(),
+            Mode::Kinematic => None,
+        };
+        let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
+        let mut prev_steer = steer.first().copied().unwrap_or(0.0);
+        let mut prev_speed = speeds.first().copied().unwrap_or(0.0);
+        // Beyond the steering plan: towards the path's steady steering at its last reference
+        // point (the terminal cost brings the plan back to the path), at the rate limit.
+        let max_steer = self.vehicle.max_steer_rad;
+        let target = input.reference.last().map_or(0.0, |r| {
+            let ff = lateral::feedforward_steer_rad(
+                self.vehicle.wheelbase_m,
+                self.vehicle.understeer_s2_per_m2,
+                speeds.get(STEPS).copied().unwrap_or(0.0),
+                r.curvature_per_m,
+            );
+            clamp(ff, -max_steer, max_steer)
+        });
+        let step = self.max_steer_rate_rad_per_s * STEP_S;
+        let mut held = steer.last().copied().unwrap_or(0.0);
+        let beyond = core::iter::from_fn(|| {
+            held += clamp(target - held, -step, step);
+            Some(held)
+        });
+        let steer_all = steer.iter().copied().chain(beyond);
+        for (k, ((pt, s), v)) in plan.iter_mut().zip(steer_all).zip(speeds).enumerate() {
+            if k > 0 {
+                let v_mid = 0.5 * (prev_speed + v);
+                let d_mid = 0.5 * (prev_steer + s);
+                match dynamics {
+                    None => {
+                        let kappa = self.vehicle.curvature_per_m(d_mid, v_mid);
+                        pose.advance_no_slip(v_mid, kappa * v_mid * STEP_S, STEP_S);
+                    }
+                    Some(dynamics) => {
+                        let before = lat;
+                        let lr = dynamics.cg_to_rear_m;
+                        dynamics.step(&mut lat, v_mid, d_mid, STEP_S);
+                        let r_mid = 0.5 * (before.yaw_rate_rps + lat.yaw_rate_rps);
+                        let vy_rear = 0.5
+                            * ((before.vy_mps - lr * before.yaw_rate_rps)
+                                + (lat.vy_mps - lr * lat.yaw_rate_rps));
+                        pose.advance(v_mid, vy_rear, r_mid * STEP_S, STEP_S);
+                    }
+                }
+            }
+            prev_steer = s;
+            prev_speed = *v;
+            *pt = PlanPoint {
+                t_s: k as f32 * STEP_S,
+                x_m: pose.x_m,
+                y_m: pose.y_m,
+                heading_rad: pose.heading_rad,
+                speed_mps: *v,
+                steer_rad: s,
+            };
+        }
+        plan
+    }
+
+    /// Status 3: speed command 0; steering along the last accepted plan while it lasts, else
+    /// the measured steering held (0 if that is not finite).
+    fn fallback(
+        &self,
+        state: &mut MpcState,
+        input: &MpcInput,
+        speed_start: &SpeedStart,
+        reason: FallbackReason,
+    ) -> MpcOutput {
+        let measured = finite_or(input.car.steer_rad, 0.0);
+        let mut steer = [measured; STEPS + 1];
+        if let Some((plan, age)) = &mut state.last_steer_plan {
+            *age = age.saturating_add(1);
+            // The plan was made `age` ticks ago: index of "now" in it, in steps.
+            let shift = *age as f32 / TICKS_PER_STEP as f32;
+            for (k, s) in steer.iter_mut().enumerate() {
+                *s = interpolate(plan, k as f32 + shift);
+            }
+        }
+        state.lin = None;
+        let speeds = self.speed.stop(speed_start).speeds_mps;
+        let lead = self.tuning.steer_lead_s / STEP_S;
+        let steer_cmd_rad = interpolate(&steer, lead);
+        let plan = if pose_ok(&input.car.pose) {
+            self.rollout(input, &steer, &speeds)
+        } else {
+            [PlanPoint::default(); PLAN_STEPS + 1]
+        };
+        MpcOutput {
+            steer_cmd_pct: self.steer_pct(steer_cmd_rad),
+            speed_cmd_mps: 0.0,
+            status: ControlStatus::Fallback,
+            fallback: Some(reason),
+            plan,
+            iterations: 0,
+            factorisations: 0,
+            primal_residual: 0.0,
+            dual_residual: 0.0,
+            corridor_violation_m: 0.0,
+            sides: state.sides,
+        }
+    }
+
+    /// Centre-tyre angle to steering percent, within +-100 (0 if not finite).
+    fn steer_pct(&self, rad: f32) -> f32 {
+        let pct = rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
+        clamp(finite_or(pct, 0.0), -STEER_PCT_LIMIT, STEER_PCT_LIMIT)
+    }
+}
+
+/// Largest corridor and obstacle violations of the rows over the planned states.
+/// The last reference point's station ahead of the first, m (along the first's heading: the
+/// chord, which is the arc to within 1 % for turns up to 0.5 rad over the horizon).
+fn horizon_m(input: &MpcInput) -> f32 {
+    match (input.reference.first(), input.reference.last()) {
+        (Some(a), Some(b)) => {
+            let (dx, dy) = (b.at.pose.x_m - a.at.pose.x_m, b.at.pose.y_m - a.at.pose.y_m);
+            dx * a.at.pose.sin_heading + dy * a.at.pose.cos_heading
+        }
+        _ => 0.0,
+    }
+}
+
+/// How far a plan's body leaves the corridor and enters the inflated obstacles.
+struct Violations {
+    /// Largest corridor violation, m.
+    corridor_m: f32,
+    /// Largest obstacle violation, m.
+    obstacle_m: f32,
+    /// Largest obstacle violation in the first `imminent` stages, m.
+    obstacle_imminent_m: f32,
+}
+
+fn violations(
+    p: &Problem<NX, STEPS, ROWS>,
+    states: &[SVector<f32, NX>; STEPS + 1],
+    terminal_mask: &[u8; STEPS],
+    imminent: usize,
+) -> Violations {
+    let mut v = Violations {
+        corridor_m: 0.0,
+        obstacle_m: 0.0,
+        obstacle_imminent_m: 0.0,
+    };
+    for (k, ((st, x), mask)) in p
+        .stages
+        .iter()
+        .zip(states.iter().skip(1))
+        .zip(terminal_mask)
+        .enumerate()
+    {
+        for (i, row) in st.rows.iter().enumerate() {
+            if !row.active {
+                continue;
+            }
+            let g = row.violation(row.eval(x));
+            match i.checked_sub(lateral::ROW_OBSTACLE) {
+                None => v.corridor_m = max(v.corridor_m, g),
+                // Terminal rows (lateral::terminal_row) pull the plan aside early; they are
+                // not expected to hold yet.
+                Some(slot) if mask & (1 << slot) != 0 => {}
+                Some(_) => {
+                    v.obstacle_m = max(v.obstacle_m, g);
+                    if k < imminent {
+                        v.obstacle_imminent_m = max(v.obstacle_imminent_m, g);
+                    }
+                }
+            }
+        }
+    }
+    v
+}
+
+/// Linear interpolation in a per-step sequence at fractional step `at` (held beyond the ends).
+fn interpolate(v: &[f32; STEPS + 1], at: f32) -> f32 {
+    let at = clamp(at, 0.0, STEPS as f32);
+    // `as` truncates towards zero (at >= 0): the step at or before `at`.
+    let i = at as usize;
+    let frac = at - i as f32;
+    let a = v.get(i).copied().unwrap_or(0.0);
+    let b = v.get(i + 1).copied().unwrap_or(a);
+    a + (b - a) * frac
+}
+
+/// Each value moved `f` of the way to the next one (the last held).
+fn shift_values(v: &mut [f32; STEPS + 1], f: f32) {
+    let old = *v;
+    for (i, cur) in v.iter_mut().enumerate() {
+        if let Some(next) = old.get(i + 1) {
+            *cur += (next - *cur) * f;
+        }
+    }
+}
+
+/// The larger of `a` and `b` by one comparison (`b` if either is NaN). `f32::max` is IEEE
+/// maxNum, which the Cortex-M4F has no instruction for: it becomes a call to a software
+/// `fmaxf` (measured: the solver's iterations took a third more instructions with it).
+#[inline(always)]
+pub(crate) fn max(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The smaller of `a` and `b` by one comparison (`b` if either is NaN).
+#[inline(always)]
+pub(crate) fn min(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `v` limited to [lo, hi] by comparisons (`f32::clamp` asserts lo <= hi, a panic path, and
+/// calls the software maxNum); a NaN `v` gives `hi`.
+#[inline(always)]
+pub(crate) fn clamp(v: f32, lo: f32, hi: f32) -> f32 {
+    min(max(v, lo), hi)
+}
+
+fn finite_or(v: f32, fallback: f32) -> f32 {
+    if v.is_finite() {
+        v
+    } else {
+        fallback
+    }
+}
+
+fn pose_ok(p: &Pose) -> bool {
+    p.x_m.is_finite()
+        && p.y_m.is_finite()
+        && p.heading_rad.is_finite()
+        && p.sin_heading.is_finite()
+        && p.cos_heading.is_finite()
+}
+
+fn sample_ok(s: &Sample) -> bool {
+    pose_ok(&s.pose)
+        && !s.left_m.is_nan()
+        && !s.right_m.is_nan()
+        && s.left_m > -1e6
+        && s.right_m > -1e6
+}
+
+fn weights_ok(w: &Weights) -> bool {
+    let nonneg = |v: f32| v.is_finite() && v >= 0.0;
+    let positive = |v: f32| v.is_finite() && v > 0.0;
+    nonneg(w.lateral_per_m2)
+        && nonneg(w.heading_per_rad2)
+        && nonneg(w.lateral_speed_per_mps2)
+        && nonneg(w.yaw_rate_per_rps2)
+        && nonneg(w.steer_per_rad2)
+        && positive(w.steer_rate)
+        && positive(w.terminal_factor)
+        && positive(w.corridor_weight_per_m)
+        && positive(w.obstacle_weight_per_m)
+        && positive(w.rho_corridor)
+        && positive(w.rho_obstacle)
+        && positive(w.rho_steer)
+        && positive(w.rho_steer_rate)
+}
+
+/// Every number the solve reads is finite (corridor widths may be +inf: unbounded).
+fn input_ok(input: &MpcInput) -> bool {
+    let car = &input.car;
+    let reference_ok = input.reference.iter().all(|r| {
+        sample_ok(&r.at)
+            && sample_ok(&r.front)
+            && sample_ok(&r.rear)
+            && r.curvature_per_m.is_finite()
+            && r.speed_mps.is_finite()
+    });
+    let obstacles_ok = input.obstacles.iter().flatten().all(|o| {
+        o.east_m.is_finite()
+            && o.north_m.is_finite()
+            && o.radius_m.is_finite()
+            && o.radius_m >= 0.0
+            && o.ahead_m.is_finite()
+            && o.path_offset_m.is_finite()
+            && !o.left_m.is_nan()
+            && !o.right_m.is_nan()
+    });
+    pose_ok(&car.pose)
+        && car.speed_mps.is_finite()
+        && car.steer_rad.is_finite()
+        && car.lateral.vy_mps.is_finite()
+        && car.lateral.yaw_rate_rps.is_finite()
+        && input.position_uncertainty_m.is_finite()
+        && input.position_uncertainty_m >= 0.0
+        && reference_ok
+        && obstacles_ok
+}
