@@ -232,6 +232,25 @@ proptest! {
 }
 
 #[test]
+fn narrowest_corridor_between_two_stations() {
+    // Points 1 m apart northwards; the left corridor narrows to 0.5 m at point 5, the right to
+    // 0.2 m at point 8.
+    let mut pts = straight(0.0, 0.0, 0.0, 12, 1.0);
+    pts[5].left_m = 0.5;
+    pts[8].right_m = 0.2;
+    let p = path_of(&pts);
+    // Between 2.5 and 4.5: no narrowing point inside; at 4.5 the left corridor is halfway
+    // between 1.0 and 0.5.
+    assert_eq!(p.narrowest_corridor(2.5, 4.5, 0), Some((0.75, 1.5)));
+    assert_eq!(p.narrowest_corridor(4.5, 2.5, 7), Some((0.75, 1.5)));
+    // Across both points.
+    assert_eq!(p.narrowest_corridor(1.0, 9.5, 0), Some((0.5, 0.2)));
+    // Beyond the ends: clamped.
+    assert_eq!(p.narrowest_corridor(-3.0, 0.5, 0), Some((1.0, 1.5)));
+    assert_eq!(Path::new().narrowest_corridor(0.0, 1.0, 0), None);
+}
+
+#[test]
 fn a_loop_is_followed_in_order_where_it_meets_itself() {
     // A full circle whose last point is next to its first: without history the start is
     // ambiguous; with the previous projection the car at the end stays at the end.

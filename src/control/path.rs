@@ -437,6 +437,34 @@ impl Path {
         (heading, curvature)
     }
 
+    /// The narrowest corridor (left, right), m, over the stations between `from_m` and `to_m`
+    /// (either order; clamped to the path): the corridor is linear between points, so its
+    /// minimum is at an end or at a point in between. `None` without a path. What a
+    /// controller needs to keep a body's side, between two of its corners, inside.
+    pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<(f32, f32)> {
+        let (a, b) = if from_m <= to_m {
+            (from_m, to_m)
+        } else {
+            (to_m, from_m)
+        };
+        let start = self.sample(a, hint)?;
+        let end = self.sample(b, hint)?;
+        let mut left = start.left_m.min(end.left_m);
+        let mut right = start.right_m.min(end.right_m);
+        let first = self.segment_at(a.clamp(0.0, self.length_m()), hint) + 1;
+        for i in first..self.len {
+            let (Some(s), Some(w)) = (self.station_of(i), self.points.get(i)) else {
+                break;
+            };
+            if s >= b {
+                break;
+            }
+            left = left.min(w.left_m);
+            right = right.min(w.right_m);
+        }
+        Some((left, right))
+    }
+
     /// The car's pose relative to the path (projection of the rear axle, heading error, the
     /// reference there); `previous` as in [`Path::project`].
     pub fn track(&self, pose: &Pose, previous: Option<&Projection>) -> Option<Tracking> {
