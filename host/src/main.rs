@@ -168,6 +168,9 @@ enum Command {
         /// Also write the result as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Write the optimiser's best run at its limit as figures into this directory.
+        #[arg(long, value_name = "DIR")]
+        plots: Option<PathBuf>,
     },
     /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
     /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
@@ -449,6 +452,7 @@ fn run(cli: Cli) -> Result<()> {
             vehicle,
             model,
             json,
+            plots,
         } => {
             let progress = Progress::spinner("searching the double lane change's limits");
             let (cfg, node) =
@@ -460,6 +464,15 @@ fn run(cli: Cli) -> Result<()> {
             println!("{text}");
             if let Some(path) = json {
                 replay::write_file(&path, &text)?;
+            }
+            if let (Some(dir), Some(v)) = (plots, limits.optimal_mps) {
+                use catmodel_host::closed_loop::{optimal, plots};
+                let track = optimal::TrackAtSpeed::new(&cfg, v);
+                let rows = track.record(&limits.optimal_profile_pct);
+                std::fs::create_dir_all(&dir)?;
+                for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
+                    eprintln!("wrote {}", p.display());
+                }
             }
             Ok(())
         }

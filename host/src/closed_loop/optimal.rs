@@ -262,6 +262,27 @@ impl TrackAtSpeed {
         (trial, checkpoints)
     }
 
+    /// Runs `knots_pct` and records, every tick, the time (s), the rear axle (east, north,
+    /// heading), the speed (m/s) and the actuator's steering (%): for the figure.
+    pub fn record(&self, knots_pct: &[f64]) -> Vec<[f64; 6]> {
+        let mut rows = Vec::new();
+        self.run_from(
+            &self.begin(),
+            |t, rig| {
+                let (x, y, heading) = rear_axle(rig);
+                rows.push([t, x, y, heading, rig.state().vx_mps, rig.steer_pct()]);
+                knot_value(knots_pct, t)
+            },
+            None,
+        );
+        rows
+    }
+
+    /// The course driven.
+    pub fn course(&self) -> &Course {
+        &self.course
+    }
+
     /// Pure pursuit with `config` on the exact state: the steering it commands at each knot time
     /// (a start for the search), and its own trial.
     pub fn pursuit(&self, config: &PurePursuitConfig) -> (Vec<f64>, Trial) {
