@@ -20,7 +20,7 @@ use nalgebra::SMatrix;
 /// First word of every image: `b"CMCI"` little-endian ("catmodel configuration image").
 pub const MAGIC: u32 = u32::from_le_bytes(*b"CMCI");
 /// Layout version; bumped when any configuration type changes its fields.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 4;
 
 /// Why an image was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

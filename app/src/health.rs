@@ -12,8 +12,8 @@ pub const STACK_PAINT: u32 = 0xCCCC_CCCC;
 /// Incremental stack high-water scan over a painted stack of `len_words` words, word 0 at the
 /// lowest address (the stack grows down towards it from word `len_words`).
 ///
-/// The deepest use is the lowest word that is no longer paint. A full scan of a 12 KiB stack is
-/// 3 072 reads; this spreads it over the ticks, `budget_words` reads per call: each pass walks up
+/// The deepest use is the lowest word that is no longer paint. A full scan of a 16 KiB stack is
+/// 4 096 reads; this spreads it over the ticks, `budget_words` reads per call: each pass walks up
 /// from word 0 to the deepest word found so far and restarts; a scrubbed word on the way is a
 /// new low. Cost per call is bounded; a new low is seen within one pass (painted words / budget
 /// calls). Words that a deeper call frame happened to leave equal to the paint value are not

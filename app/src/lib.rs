@@ -45,7 +45,11 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
 
+use catmodel::can::codec::ControlStatus;
 use catmodel::can::TimedFrame;
+use core::borrow::BorrowMut;
+
+use catmodel::node::drive::Drive;
 use catmodel::node::{Node, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
@@ -205,6 +209,8 @@ pub struct TickReport {
     pub step_counts: u32,
     /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
     pub tick_counts: u32,
+    /// A controller planned in this tick (its budget differs: `budget`).
+    pub controller: bool,
 }
 
 /// What the tick loop needs from its platform.
@@ -281,8 +287,8 @@ fn drain_due(
 /// it returns to the transmit queue, then reports the tick to the platform. Overruns follow
 /// [`schedule`]: a late tick is counted, a stale slot is skipped (no catch-up burst), and tick
 /// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached.
-pub async fn tick_loop<P: TickPlatform>(
-    node: &mut Node,
+pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
+    node: &mut Node<D>,
     rx: &RxQueue,
     tx: &TxQueue,
     counters: &LinkCounters,
@@ -316,7 +322,7 @@ pub async fn tick_loop<P: TickPlatform>(
         };
         out.tick_us = tick_us;
         out.frames.clear();
-        node.step(&tick, &batch, &mut out.frames);
+        let estimate = node.step(&tick, &batch, &mut out.frames);
         let c2 = platform.counter();
         let tx_frames = out.frames.len();
         counters
@@ -346,6 +352,7 @@ pub async fn tick_loop<P: TickPlatform>(
             drain_counts: c1.wrapping_sub(c0),
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
+            controller: estimate.control != ControlStatus::NoPath,
         });
         stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());

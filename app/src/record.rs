@@ -10,12 +10,12 @@
 pub const MAGIC: [u8; 4] = *b"CMQT";
 /// Trailer magic.
 pub const TRAILER_MAGIC: [u8; 4] = *b"END!";
-/// Layout version (3: the trailer ends with the node's construction cost).
-pub const FORMAT_VERSION: u32 = 3;
+/// Layout version (4: each record ends with its flags).
+pub const FORMAT_VERSION: u32 = 4;
 /// Bytes of the header.
 pub const HEADER_LEN: usize = 12;
 /// Bytes of one tick record.
-pub const RECORD_LEN: usize = 40;
+pub const RECORD_LEN: usize = 44;
 /// Bytes of the trailer, magic included.
 pub const TRAILER_LEN: usize = 4 + 8 + 12 * 4;
 
@@ -40,6 +40,18 @@ pub struct TickRecord {
     pub step: u32,
     /// Instructions for the whole tick.
     pub tick: u32,
+    /// [`FLAG_CONTROLLER`] and future per-tick facts.
+    pub flags: u32,
+}
+
+/// [`TickRecord::flags`]: a controller planned in this tick.
+pub const FLAG_CONTROLLER: u32 = 1;
+
+impl TickRecord {
+    /// A controller planned in this tick.
+    pub fn controller(&self) -> bool {
+        self.flags & FLAG_CONTROLLER != 0
+    }
 }
 
 /// Totals written after the last tick record.
@@ -143,6 +155,7 @@ impl TickRecord {
             &self.drain.to_le_bytes(),
             &self.step.to_le_bytes(),
             &self.tick.to_le_bytes(),
+            &self.flags.to_le_bytes(),
         ])
     }
 
@@ -158,6 +171,7 @@ impl TickRecord {
             drain: u32_at(r, 28),
             step: u32_at(r, 32),
             tick: u32_at(r, 36),
+            flags: u32_at(r, 40),
         }
     }
 }
@@ -249,6 +263,7 @@ mod tests {
             drain: 2_000,
             step: 18_000,
             tick: 21_000,
+            flags: FLAG_CONTROLLER,
         };
         let trailer = Trailer {
             ticks: 8,

@@ -19,8 +19,14 @@
 
 pub mod baked {
     //! The model file baked in at build time (see the build script).
+    use core::sync::atomic::{AtomicBool, Ordering};
+
     use catmodel::image::ImageError;
+    use catmodel::node::drive::Drive;
     use catmodel::node::{Node, NodeConfig};
+
+    /// The node as the firmware runs it: its drive stage in a static.
+    pub type FirmwareNode = Node<&'static mut Drive>;
 
     include!(concat!(env!("OUT_DIR"), "/baked.rs"));
 
@@ -29,10 +35,34 @@ pub mod baked {
         NodeConfig::from_image(&CONFIG_IMAGE)
     }
 
-    /// The node every platform runs. An error can only come from a corrupt image: the
-    /// platforms stop rather than run a wrong model.
-    pub fn node() -> Result<Node, ImageError> {
-        node_config().map(Node::new)
+    /// The drive stage's state (about 23 KiB), in a static initialised at compile time: built
+    /// at run time it would pass through the 16 KiB stack. `None` after the first call.
+    pub fn take_drive() -> Option<&'static mut Drive> {
+        static TAKEN: AtomicBool = AtomicBool::new(false);
+        static mut DRIVE: Drive = Drive::new();
+        if TAKEN.swap(true, Ordering::AcqRel) {
+            return None;
+        }
+        // SAFETY: `TAKEN` lets exactly one caller through, so this is the only reference to
+        // `DRIVE` there will ever be.
+        Some(unsafe { &mut *core::ptr::addr_of_mut!(DRIVE) })
+    }
+
+    /// Why the node could not be built.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum BootError {
+        /// The configuration image is corrupt.
+        Image(ImageError),
+        /// The node was already built (its drive state is taken).
+        AlreadyBuilt,
+    }
+
+    /// The node every platform runs. An error can only come from a corrupt image or a second
+    /// call: the platforms stop rather than run a wrong model.
+    pub fn node() -> Result<FirmwareNode, BootError> {
+        let config = node_config().map_err(BootError::Image)?;
+        let drive = take_drive().ok_or(BootError::AlreadyBuilt)?;
+        Ok(Node::new(config, drive))
     }
 }
 

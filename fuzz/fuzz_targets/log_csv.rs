@@ -1,7 +1,8 @@
 //! The log and truth CSV readers on arbitrary bytes: never panic; an error always names a line
-//! inside the file; accepted rows are finite, in range and strictly increasing in time.
+//! inside the file; accepted rows are finite, within LOG_RANGES and strictly increasing in time (lines
+//! with equal time are merged into one row).
 #![no_main]
-use catmodel_host::logcsv::{parse_log, parse_truth};
+use catmodel_host::logcsv::{parse_log, parse_truth, LOG_RANGES};
 use libfuzzer_sys::fuzz_target;
 use std::path::Path;
 
@@ -12,7 +13,8 @@ fuzz_target!(|data: &[u8]| {
     let lines = text.lines().count();
     let path = Path::new("fuzz.csv");
     match parse_log(text, path) {
-        Ok(rows) => {
+        Ok(log) => {
+            let rows = log.rows;
             for w in rows.windows(2) {
                 assert!(
                     w[1].t > w[0].t,
@@ -23,11 +25,15 @@ fuzz_target!(|data: &[u8]| {
             }
             for r in &rows {
                 assert!(r.t.is_finite());
-                for v in [r.vel, r.input_vel, r.accel, r.steer, r.brake, r.lat, r.lon]
-                    .into_iter()
-                    .flatten()
-                {
-                    assert!(v.is_finite(), "{r:?}");
+                let cells = r.cells();
+                for (v, range) in cells.iter().zip(&LOG_RANGES) {
+                    if let Some(v) = v {
+                        assert!(
+                            v.is_finite() && *v >= range.min && *v <= range.max,
+                            "{}: {r:?}",
+                            range.column
+                        );
+                    }
                 }
             }
         }

@@ -154,7 +154,7 @@ fuzz_target!(|input: (bool, Vec<Step>)| {
     if fixed_origin {
         config.origin_e7 = Some(ORIGIN);
     }
-    let mut node = Node::new(config);
+    let mut node = catmodel_host::new_node(config);
     let mut now: u64 = 1_000_000_000;
     let mut overruns = 0u32;
     for step in steps.iter().take(400) {

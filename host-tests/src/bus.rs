@@ -11,7 +11,7 @@ use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::{
-    first_tick_us, Counters, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
+    first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
 };
 
 /// Origin of the local frame, 1e-7 deg.
@@ -192,7 +192,7 @@ pub fn run_with(
     frames: &[TimedFrame],
     platform: impl Fn(usize) -> PlatformStats,
 ) -> Vec<TickOut> {
-    let mut node = Node::new(config);
+    let mut node = catmodel_host::new_node(config);
     let mut out = Vec::new();
     let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
         return out;

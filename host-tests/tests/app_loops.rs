@@ -10,7 +10,7 @@ use std::sync::Mutex;
 use std::task::{Context, Poll, Waker};
 
 use catmodel::can::{CanFrame, TimedFrame};
-use catmodel::node::{first_tick_us, Node, NodeConfig};
+use catmodel::node::{first_tick_us, NodeConfig};
 use catmodel_app::{
     receive_loop, tick_loop, transmit_loop, wait_tx_drained, BusReceiver, BusTransmitter,
     LinkCounters, ReplayClock, RxError, RxQueue, TickPlatform, TickReport, TxQueue,
@@ -79,7 +79,7 @@ fn run_app(frames: &[TimedFrame], config: NodeConfig) -> (Vec<(u64, CanFrame)>, 
         clock,
     };
     let mut out = VecTx(Vec::new());
-    let mut node = Node::new(config);
+    let mut node = catmodel_host::new_node(config);
     let mut platform = NoCounter;
     let ticks = {
         let main = async {

@@ -31,6 +31,8 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         heading: z.clone(),
         yaw_rate: z,
         origin_deg: (0.0, 0.0),
+        yaw_half_width: 48,
+        log_notes: Vec::new(),
     }
 }
 

@@ -1,13 +1,23 @@
-//! The log and truth CSV readers/writers: round trips, schema freedom (column order, extra
-//! columns, empty cells), and every rejection with its `file:line:column` message.
-use catmodel_host::logcsv::{self, LogErrorKind, LogRow, TruthRow};
+//! The log and truth CSV readers/writers: round trips, logs as recorders write them (column
+//! order, extra columns, empty cells, equal timestamps, CRLF, a byte-order mark), physical
+//! ranges, and every rejection with its `file:line:column` message.
+use catmodel_host::logcsv::{
+    self, Conflict, LogErrorKind, LogRow, TruthRow, LOG_COLUMNS, LOG_RANGES,
+};
 use proptest::prelude::*;
 use std::path::Path;
 
 const FILE: &str = "drive.csv";
 
 fn parse(text: &str) -> Result<Vec<LogRow>, logcsv::LogError> {
+    logcsv::parse_log(text, Path::new(FILE)).map(|log| log.rows)
+}
+
+fn notes(text: &str) -> Vec<String> {
     logcsv::parse_log(text, Path::new(FILE))
+        .expect("valid")
+        .notes
+        .messages()
 }
 
 fn error_message(text: &str) -> String {
@@ -79,12 +89,12 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
             "drive.csv:2:5: column `vel`: non-finite value: `inf`",
         ),
         (
-            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.2,,,,,,,\n0.2,,,,,,,\n",
-            "drive.csv:3:1: column `t`: time not increasing: 0.2 after 0.2",
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.2,,,,,,,\n0.1,,,,,,,\n",
+            "drive.csv:3:1: column `t`: time goes backwards: 0.1 after 0.2",
         ),
         (
-            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.2,,,,,,,\n0.1,,,,,,,\n",
-            "drive.csv:3:1: column `t`: time not increasing: 0.1 after 0.2",
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.2,,,,,,,\n0.2,,,,,,,\n0.1999,,,,,,,\n",
+            "drive.csv:4:1: column `t`: time goes backwards: 0.1999 after 0.2",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n,1,,,,,,\n",
@@ -104,23 +114,50 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,-100.5,,,\n",
-            "drive.csv:2:8: column `steer`: value -100.5 outside -100..100",
+            "drive.csv:2:8: column `steer`: -100.5 % is outside -100..100 % (100 % is full lock)",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,101,,,,\n",
-            "drive.csv:2:7: column `accel`: value 101 outside 0..100",
+            "drive.csv:2:7: column `accel`: 101 % is outside 0..100 % (a pedal travels 0..100 %)",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,,-1,,\n",
-            "drive.csv:2:9: column `brake`: value -1 outside 0..100",
+            "drive.csv:2:9: column `brake`: -1 % is outside 0..100 % (a pedal travels 0..100 %)",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,,,91,0\n",
-            "drive.csv:2:10: column `lat`: value 91 outside -90..90",
+            "drive.csv:2:10: column `lat`: 91 deg is outside -90..90 deg (WGS-84 latitude)",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,,,32.2,\n",
-            "drive.csv:2:15: column `lon`: `lat` and `lon` must be both present or both empty",
+            "drive.csv:2:10: column `lat`: `lat` and `lon` must be both present or both empty",
+        ),
+        // The issue's impossible sample: one speed of 1e30 m/s.
+        (
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,4.2,,,,,,\n0.12,1e30,,,,,,\n",
+            "drive.csv:3:6: column `vel`: 1e30 m/s is outside -10..80 m/s \
+             (no car drives this: 80 m/s = 288 km/h is above the 250 km/h most cars are limited to, \
+             -10 m/s = 36 km/h in reverse; a speed in km/h or mph?)",
+        ),
+        (
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,-12,,,,,\n",
+            "drive.csv:2:6: column `input_vel`: -12 m/s is outside -10..80 m/s \
+             (no car drives this: 80 m/s = 288 km/h is above the 250 km/h most cars are limited to, \
+             -10 m/s = 36 km/h in reverse; a speed in km/h or mph?)",
+        ),
+        (
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n1700000000123,,,,,,,\n",
+            "drive.csv:2:1: column `t`: 1.700000000123e12 s is outside -1e10..1e10 s \
+             (1e10 s is 317 years: a time in milliseconds or microseconds?)",
+        ),
+        (
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,,,0,0\n",
+            "drive.csv:2:10: column `lat`: fix at latitude 0, longitude 0: the placeholder receivers write without a fix; leave `lat` and `lon` empty instead",
+        ),
+        // Half a fix stays half a fix when nothing else arrives at that instant.
+        (
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,,,,-110.9\n0.1,3,,,,,,\n0.2,,,,,,,\n",
+            "drive.csv:2:11: column `lon`: `lat` and `lon` must be both present or both empty",
         ),
         // The character column counts characters (not bytes) and names the column.
         (
@@ -130,6 +167,135 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
     ];
     for (text, expected) in cases {
         assert_eq!(&error_message(text), expected, "input {text:?}");
+    }
+}
+
+/// A recorder that writes four decimals: the speed and the GNSS reports of one instant land on
+/// two lines with the same `t` (the issue's `3.6626 after 3.6626`). They are one instant.
+#[test]
+fn lines_with_equal_time_are_one_instant() {
+    let text = format!(
+        "{HEADER}\r\n3.6624,4.01,4.5,,,,,\r\n3.6626,4.02,4.5,,,,,\r\n3.6626,,,,,,32.2319,-110.9501\r\n\
+         3.6626,,,,-3.5,,,\r\n3.6628,,,,,,,\r\n"
+    );
+    let log = logcsv::parse_log(&text, Path::new(FILE)).expect("valid");
+    assert_eq!(
+        log.rows,
+        vec![
+            LogRow {
+                vel: Some(4.01),
+                input_vel: Some(4.5),
+                ..LogRow::empty(3.6624)
+            },
+            LogRow {
+                vel: Some(4.02),
+                input_vel: Some(4.5),
+                steer: Some(-3.5),
+                lat: Some(32.2319),
+                lon: Some(-110.9501),
+                ..LogRow::empty(3.6626)
+            },
+            LogRow::empty(3.6628),
+        ]
+    );
+    assert_eq!(log.notes.merged_lines, 2);
+    assert_eq!(log.notes.conflicts, 0);
+    // Merging without a conflict is normal: no note.
+    assert!(log.notes.messages().is_empty());
+
+    // A recorder writing one line per signal: latitude and longitude of one fix on two lines.
+    let rows = parse(&format!("{HEADER}\n1.5,,,,,,32.5,\n1.5,,,,,,,-110.5\n")).expect("valid");
+    assert_eq!(
+        rows,
+        vec![LogRow {
+            lat: Some(32.5),
+            lon: Some(-110.5),
+            ..LogRow::empty(1.5)
+        }]
+    );
+    // An exact repeat of a line (some loggers write a line twice) is no conflict.
+    let text = format!("{HEADER}\n1.5,3,,,,,,\n1.5,3,,,,,,\n");
+    let log = logcsv::parse_log(&text, Path::new(FILE)).expect("valid");
+    assert_eq!((log.rows.len(), log.notes.conflicts), (1, 0));
+}
+
+/// One sensor with two different values at one instant: the later line wins, counted, and the
+/// note names both lines and values.
+#[test]
+fn two_values_of_one_sensor_at_one_instant_keep_the_later_and_say_so() {
+    let text = format!("{HEADER}\n2.0,5.5,,,,,,\n2.0,5.75,,,10,,,\n2.0,,,,12,,,\n2.02,1,,,,,,\n");
+    let log = logcsv::parse_log(&text, Path::new(FILE)).expect("valid");
+    assert_eq!(log.rows[0].vel, Some(5.75));
+    assert_eq!(log.rows[0].steer, Some(12.0));
+    assert_eq!(log.notes.conflicts, 2);
+    assert_eq!(
+        log.notes.first_conflict,
+        Some(Conflict {
+            column: "vel",
+            t: 2.0,
+            first: (5.5, 2),
+            kept: (5.75, 3),
+        })
+    );
+    assert_eq!(
+        log.notes.messages(),
+        vec!["drive.csv:3: column `vel`: two values at t = 2 s (5.5 on line 2, 5.75 on line 3): the later one is kept (2 such cell(s) in the file)".to_string()]
+    );
+}
+
+/// Extra columns (a recorder's own, with quoted free text holding commas) are read past and
+/// named once, in one note.
+#[test]
+fn extra_columns_are_named_once() {
+    let text = "\u{feff}t,gear,vel,input_vel,accel,steer,brake,lat,lon,comment\r\n\
+                0.5,3,2.5,,,,,,,\"stop, then go\"\r\n\
+                0.52,3,2.6,,,,,,,\"say \"\"hi\"\", twice\"\r\n";
+    let log = logcsv::parse_log(text, Path::new(FILE)).expect("valid");
+    assert_eq!(log.rows.len(), 2);
+    assert_eq!(log.rows[1].vel, Some(2.6));
+    assert_eq!(log.notes.extra_columns, vec!["gear", "comment"]);
+    assert_eq!(
+        log.notes.messages(),
+        vec!["drive.csv: columns `gear`, `comment` are not in the log schema: ignored".to_string()]
+    );
+    assert_eq!(
+        notes("t,vel,input_vel,accel,steer,brake,lat,lon,x\n0,,,,,,,,1\n"),
+        vec!["drive.csv: column `x` is not in the log schema: ignored".to_string()]
+    );
+}
+
+/// Every range bound is accepted and the next double beyond it is refused, for every column.
+#[test]
+fn ranges_are_inclusive_and_end_exactly_at_their_bounds() {
+    assert_eq!(
+        LOG_RANGES.iter().map(|r| r.column).collect::<Vec<_>>(),
+        LOG_COLUMNS
+    );
+    for (i, range) in LOG_RANGES.iter().enumerate() {
+        let line = |v: f64| {
+            let mut cells = vec![String::new(); 8];
+            cells[0] = "1".into();
+            cells[i] = format!("{v:?}");
+            // A fix needs both halves; the other half is a valid non-zero value.
+            match i {
+                6 => cells[7] = "1".into(),
+                7 => cells[6] = "1".into(),
+                _ => {}
+            }
+            format!("{HEADER}\n{}\n", cells.join(","))
+        };
+        for v in [range.min, range.max] {
+            parse(&line(v)).unwrap_or_else(|e| panic!("{}: {v} refused: {e}", range.column));
+        }
+        for v in [range.min.next_down(), range.max.next_up()] {
+            let e = parse(&line(v)).expect_err(range.column);
+            assert!(
+                matches!(e.kind, LogErrorKind::OutOfRange { value, .. } if value == v),
+                "{}: {e}",
+                range.column
+            );
+            assert_eq!(e.column.as_deref(), Some(range.column));
+        }
     }
 }
 
@@ -203,6 +369,17 @@ fn writers_refuse_what_the_readers_would_reject() {
     assert!(matches!(kind, LogErrorKind::TimeNotIncreasing { .. }));
 }
 
+fn speed() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        -10.0..=80.0,
+        Just(0.0),
+        Just(-0.0),
+        Just(80.0),
+        Just(-10.0),
+        Just(1e-300)
+    ]
+}
+
 fn finite() -> impl Strategy<Value = f64> {
     prop_oneof![
         -1e6..1e6,
@@ -219,8 +396,8 @@ fn cell(range: std::ops::RangeInclusive<f64>) -> impl Strategy<Value = Option<f6
 
 prop_compose! {
     fn log_rows()(deltas in proptest::collection::vec(1e-6..1.0f64, 0..40),
-                  cells in proptest::collection::vec((finite(), finite(), cell(0.0..=100.0), cell(-100.0..=100.0),
-                      cell(0.0..=100.0), proptest::option::of((-90.0..=90.0f64, -180.0..=180.0f64)), any::<(bool, bool)>()), 40))
+                  cells in proptest::collection::vec((speed(), speed(), cell(0.0..=100.0), cell(-100.0..=100.0),
+                      cell(0.0..=100.0), proptest::option::of((-90.0..=90.0f64, 1e-9..=180.0f64)), any::<(bool, bool)>()), 40))
                  -> Vec<LogRow> {
         let mut t = -3.0;
         deltas.iter().zip(&cells).map(|(d, (v, iv, a, s, b, fix, (has_v, has_iv)))| {
@@ -241,6 +418,50 @@ proptest! {
         prop_assert_eq!(back.len(), rows.len());
         for (a, b) in back.iter().zip(&rows) {
             // Bit-exact (-0.0 stays -0.0).
+            prop_assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        }
+    }
+
+    /// A recorder that writes each report on its own line (several lines per instant, in any
+    /// order, some repeated) gives back the same rows as one line per instant.
+    #[test]
+    fn one_line_per_report_reads_as_one_row_per_instant(rows in log_rows(), order in proptest::collection::vec(any::<u32>(), 8 * 40), repeat in any::<u64>()) {
+        let mut text = format!("{HEADER}\r\n");
+        let mut k = 0;
+        for (n, r) in rows.iter().enumerate() {
+            let cells = [r.vel, r.input_vel, r.accel, r.steer, r.brake];
+            let mut lines: Vec<String> = cells.iter().enumerate().filter_map(|(i, c)| {
+                c.map(|v| {
+                    let mut out = vec![String::new(); 7];
+                    out[i] = format!("{v:?}");
+                    format!("{:?},{}", r.t, out.join(","))
+                })
+            }).collect();
+            if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
+                lines.push(format!("{:?},,,,,,{lat:?},{lon:?}", r.t));
+            }
+            if lines.is_empty() {
+                lines.push(format!("{:?},,,,,,,", r.t));
+            }
+            if repeat >> (n % 64) & 1 == 1 {
+                let again = lines[0].clone();
+                lines.push(again);
+            }
+            // Shuffle the lines of this instant.
+            for i in (1..lines.len()).rev() {
+                let j = order[k % order.len()] as usize % (i + 1);
+                k += 1;
+                lines.swap(i, j);
+            }
+            for l in lines {
+                text.push_str(&l);
+                text.push_str("\r\n");
+            }
+        }
+        let log = logcsv::parse_log(&text, Path::new(FILE)).expect("reads");
+        prop_assert_eq!(log.notes.conflicts, 0);
+        prop_assert_eq!(log.rows.len(), rows.len());
+        for (a, b) in log.rows.iter().zip(&rows) {
             prop_assert_eq!(format!("{a:?}"), format!("{b:?}"));
         }
     }

@@ -432,7 +432,7 @@ fn watchdog_reset_and_stack_high_water_mark_reach_the_status_frame() {
 fn time_jumps_and_frames_from_the_future() {
     let d = frames(&drive(10.0, 0.0, 6.0));
     // A frame stamped after the tick that receives it (clock mismatch): rejected, counted.
-    let mut node = catmodel::node::Node::new(config());
+    let mut node = catmodel_host::new_node(config());
     let mut tx = catmodel::node::TxFrames::new();
     let tick = catmodel::node::Tick {
         now_us: 2_000_000,
@@ -446,7 +446,7 @@ fn time_jumps_and_frames_from_the_future() {
     assert_eq!(node.counters().time_errors, 1);
     // The tick clock jumps 10 s ahead: GNSS is lost (position invalid), nothing non-finite.
     let mut ticks = run(&d);
-    let mut node = catmodel::node::Node::new(config());
+    let mut node = catmodel_host::new_node(config());
     let mut now = catmodel::node::first_tick_us(d[0].t_us);
     for f in d.chunks(3) {
         let mut tx = catmodel::node::TxFrames::new();

@@ -331,3 +331,49 @@ proptest! {
         }
     }
 }
+
+/// A shorter filter inside a longer one (the node's GNSS lowpass sized at run time for the
+/// receiver's rate) is bit for bit the filter of that size: FIR and moving average, over a
+/// random signal, for every length the node can choose.
+#[test]
+fn run_time_lengths_equal_the_fixed_size_filters() {
+    fn check<const M: usize>(signal: &[f32]) {
+        let (fc, fs) = (0.9, 10.0);
+        let short = Fir::<M>::lowpass(fc, fs).expect("design");
+        let long = Fir::<21>::lowpass_len(M, fc, fs).expect("design");
+        assert_eq!(long.len(), M);
+        assert_eq!(long.group_delay_samples(), short.group_delay_samples());
+        let ma_short = MovingAverage::<M>::new();
+        let ma_long = MovingAverage::<21>::with_span(M).expect("span");
+        assert_eq!(
+            ma_long.group_delay_samples(),
+            ma_short.group_delay_samples()
+        );
+        let (mut s1, mut s2) = (FirState::<M>::new(), FirState::<21>::new());
+        let (mut m1, mut m2) = (
+            MovingAverageState::<M>::new(),
+            MovingAverageState::<21>::new(),
+        );
+        ma_short.prime(&mut m1, signal[0]);
+        ma_long.prime(&mut m2, signal[0]);
+        for &x in signal {
+            let (a, b) = (short.process(&mut s1, x), long.process(&mut s2, x));
+            assert_eq!(a.to_bits(), b.to_bits(), "FIR {M} taps");
+            let (a, b) = (ma_short.process(&mut m1, x), ma_long.process(&mut m2, x));
+            assert_eq!(a.to_bits(), b.to_bits(), "moving average over {M}");
+        }
+    }
+    let signal: Vec<f32> = (0..500)
+        .map(|k| (k as f32 * 0.37).sin() * 30.0 + (k as f32 * 2.9).cos() * 3.0 + 1000.0)
+        .collect();
+    check::<1>(&signal);
+    check::<3>(&signal);
+    check::<5>(&signal);
+    check::<11>(&signal);
+    check::<21>(&signal);
+    // Out of range lengths are refused.
+    assert!(Fir::<21>::lowpass_len(0, 0.9, 10.0).is_err());
+    assert!(Fir::<21>::lowpass_len(22, 0.9, 10.0).is_err());
+    assert!(MovingAverage::<10>::with_span(0).is_none());
+    assert!(MovingAverage::<10>::with_span(11).is_none());
+}

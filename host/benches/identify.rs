@@ -46,7 +46,9 @@ fn drive(name: &str, seed: u64) -> Log {
     let mut text = Vec::new();
     logcsv::write_log_to(&mut text, &out.log).expect("simulator rows are writable");
     let text = String::from_utf8(text).expect("CSV is UTF-8");
-    let rows = logcsv::parse_log(&text, Path::new(name)).expect("written CSV parses");
+    let rows = logcsv::parse_log(&text, Path::new(name))
+        .expect("written CSV parses")
+        .rows;
     (name.to_string(), rows)
 }
 

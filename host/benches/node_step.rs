@@ -13,7 +13,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use catmodel::can::TimedFrame;
-use catmodel::node::{first_tick_us, Node, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_host::replay::read_candump;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
@@ -52,7 +52,7 @@ fn bench_node_step(c: &mut Criterion) {
 
     // State just before the middle tick.
     let mid = ticks.len() / 2;
-    let mut node = Node::new(config.clone());
+    let mut node = catmodel_host::new_node(config.clone());
     let mut tx = TxFrames::new();
     for (now, range) in &ticks[..mid] {
         tx.clear();
@@ -83,7 +83,7 @@ fn bench_node_step(c: &mut Criterion) {
     group.throughput(Throughput::Elements(ticks.len() as u64));
     group.bench_function("bundled_drive", |b| {
         b.iter(|| {
-            let mut n = Node::new(config.clone());
+            let mut n = catmodel_host::new_node(config.clone());
             let mut tx = TxFrames::new();
             for (now, range) in &ticks {
                 tx.clear();

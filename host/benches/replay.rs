@@ -19,7 +19,7 @@
 use std::hint::black_box;
 
 use catmodel::can::{candump, TimedFrame};
-use catmodel::node::{first_tick_us, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, NodeConfig, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_host::{csv2can, replay, sim, SIM_ORIGIN_DEG};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -28,6 +28,8 @@ fn validation_frames() -> Vec<TimedFrame> {
     let out =
         sim::run_named("validation", None, &sim::SimOptions::default()).expect("built-in scenario");
     csv2can::encode_log(&out.log)
+        .expect("simulated times are >= 0")
+        .frames
 }
 
 fn config() -> NodeConfig {
@@ -76,7 +78,7 @@ fn bench_replay(c: &mut Criterion) {
     assert_eq!(schedule.len() as u64, ticks);
     group.bench_function("validation_5min_node_only", |b| {
         b.iter(|| {
-            let mut node = Node::new(config.clone());
+            let mut node = catmodel_host::new_node(config.clone());
             let mut tx = TxFrames::new();
             for (now, range) in &schedule {
                 tx.clear();

@@ -2,26 +2,58 @@
 //! what a logger on the car's bus would have recorded. Every report carries its own rolling
 //! counter (incremented per frame of that message) and CRC; GNSS goes out as NMEA 2000 PGN
 //! 129025 from the default source address.
+//!
+//! What the bus cannot carry is never dropped silently: a negative time is an error (candump
+//! timestamps count up from 0), and a negative speed (a signed sensor's noise around standstill,
+//! or reversing: the log schema allows down to -10 m/s, the bus speed is unsigned) goes out as
+//! 0 m/s and is counted in [`Encoded::negative_speeds`].
+use anyhow::{bail, Result};
 use catmodel::can::codec::{GnssPosition, PedalReport, SpeedReport, SteeringReport};
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::TimedFrame;
 
 use crate::logcsv::LogRow;
 
+/// The frames of a log and what had to be adapted to the bus.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Encoded {
+    /// The frames, in time order.
+    pub frames: Vec<TimedFrame>,
+    /// Speed values (measured or commanded) below 0 m/s, sent as 0 m/s.
+    pub negative_speeds: usize,
+}
+
+impl Encoded {
+    /// A note for stderr when something was adapted.
+    pub fn note(&self) -> Option<String> {
+        (self.negative_speeds > 0).then(|| {
+            format!(
+                "{} speed value(s) below 0 m/s sent as 0 m/s (the bus speed is unsigned)",
+                self.negative_speeds
+            )
+        })
+    }
+}
+
 /// Timestamps: the log's `t` in seconds becomes microseconds on the candump's time base.
-fn t_us(t: f64) -> u64 {
-    (t * 1e6).round().max(0.0) as u64
+fn t_us(t: f64) -> Result<u64> {
+    let us = (t * 1e6).round();
+    if !(0.0..=u64::MAX as f64 / 2.0).contains(&us) {
+        bail!("a row at t = {t} s: candump timestamps are microseconds from 0 (shift the log's time to start at or after 0)");
+    }
+    Ok(us as u64)
 }
 
 /// Encodes log rows into frames one at a time, keeping what the bus keeps between rows: each
-/// report's rolling counter, and the latest commanded speed and pedals (a report carries them
-/// with its own measurement).
+/// report's rolling counter, the latest commanded speed and pedals (a report carries them with
+/// its own measurement), and the count of negative speeds sent as 0.
 #[derive(Debug, Clone, Default)]
 pub struct LogEncoder {
     counters: [u8; 3],
-    input_vel: Option<f64>,
+    input_vel: Option<f32>,
     accel: Option<f64>,
     brake: Option<f64>,
+    negative_speeds: usize,
 }
 
 impl LogEncoder {
@@ -36,12 +68,27 @@ impl LogEncoder {
         c
     }
 
+    /// A speed for the unsigned bus field: negative values go out as 0, counted.
+    fn unsigned(&mut self, v: f64) -> f32 {
+        if v < 0.0 {
+            self.negative_speeds += 1;
+            0.0
+        } else {
+            v as f32
+        }
+    }
+
+    /// Speed values below 0 m/s sent as 0 m/s so far.
+    pub fn negative_speeds(&self) -> usize {
+        self.negative_speeds
+    }
+
     /// Appends the frames of one row, stamped with its `t`. A speed report needs the measured
     /// speed; its commanded speed is the latest `input_vel` seen (the two share one frame).
-    pub fn encode_row(&mut self, r: &LogRow, out: &mut Vec<TimedFrame>) {
-        let t = t_us(r.t);
-        if r.input_vel.is_some() {
-            self.input_vel = r.input_vel;
+    pub fn encode_row(&mut self, r: &LogRow, out: &mut Vec<TimedFrame>) -> Result<()> {
+        let t = t_us(r.t)?;
+        if let Some(v) = r.input_vel {
+            self.input_vel = Some(self.unsigned(v));
         }
         if let Some(steer) = r.steer {
             let c = self.next_counter(0);
@@ -52,10 +99,11 @@ impl LogEncoder {
             out.push(TimedFrame { t_us: t, frame });
         }
         if let Some(vel) = r.vel {
+            let speed = self.unsigned(vel);
             let c = self.next_counter(1);
             let frame = SpeedReport {
-                speed_mps: Some(vel as f32),
-                speed_cmd_mps: self.input_vel.map(|v| v as f32),
+                speed_mps: Some(speed),
+                speed_cmd_mps: self.input_vel,
             }
             .encode(c);
             out.push(TimedFrame { t_us: t, frame });
@@ -79,17 +127,22 @@ impl LogEncoder {
             .encode(N2K_DEFAULT_SOURCE);
             out.push(TimedFrame { t_us: t, frame });
         }
+        Ok(())
     }
 }
 
-/// Encodes the rows (sorted by time), as [`LogEncoder::encode_row`] one after the other.
-pub fn encode_log(rows: &[LogRow]) -> Vec<TimedFrame> {
-    let mut out = Vec::with_capacity(rows.len() * 2);
+/// Encodes the rows (sorted by time, one row per instant as [`crate::logcsv::read_log`]
+/// returns them), as [`LogEncoder::encode_row`] one after the other.
+pub fn encode_log(rows: &[LogRow]) -> Result<Encoded> {
+    let mut frames = Vec::with_capacity(rows.len() * 2);
     let mut encoder = LogEncoder::new();
     for r in rows {
-        encoder.encode_row(r, &mut out);
+        encoder.encode_row(r, &mut frames)?;
     }
-    out
+    Ok(Encoded {
+        frames,
+        negative_speeds: encoder.negative_speeds(),
+    })
 }
 
 /// The frames as candump text.

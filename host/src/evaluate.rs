@@ -1,7 +1,7 @@
 //! `catmodel evaluate`: prediction error at every horizon against ground truth, beside a
 //! kinematic-only baseline computed from the same bus inputs (raw GNSS, measured speed and
 //! steering, eq 8 with constant inputs), and the filtered current position (horizon 0) beside
-//! the raw GNSS error.
+//! the raw GNSS error and the GNSS bias floor ([`BiasFloor`]).
 //!
 //! Ground truth is only ever read here, never by the node.
 use catmodel::math::wrap_pi;
@@ -165,8 +165,143 @@ pub struct Evaluation {
     /// Raw GNSS fixes moved back to the rear axle along the *true* heading: the best any
     /// per-fix lever-arm correction could do, the fair reference for the filtered position.
     pub raw_gnss_at_axle: ErrorStats,
+    /// The GNSS error no filter of GNSS alone can remove, with the filtered position's ratio
+    /// to it.
+    pub bias_floor: BiasFloor,
     /// Ticks whose horizon-0 position was compared.
     pub ticks: usize,
+}
+
+/// Width of the centred window that separates the slow part of the GNSS error, s: about the
+/// length of a lane change, the fastest path change the floor counts as indistinguishable from
+/// motion (ISO 3888-2's double lane change is 12 + 13.5 + 11 + 12.5 + 12 = 61 m long: 4.4 s at
+/// 50 km/h).
+pub const BIAS_FLOOR_WINDOW_S: f64 = 5.0;
+
+/// The bias floor: the part of the GNSS fix error that no filter of GNSS alone can remove.
+///
+/// Definition. The fix error at a fix is `e = fix - true antenna position` (the antenna is the
+/// truth's rear axle moved by the lever arm along the true heading), per axis. Its slow part
+/// `e_slow(t)` is the mean of `e` over the fixes within +-`BIAS_FLOOR_WINDOW_S / 2` of `t`: a
+/// zero-phase (centred) lowpass of the error itself, first null at 0.2 Hz. The floor is the
+/// RMS of `|e_slow|` at the node's scored ticks.
+///
+/// Why it is a floor. `e_slow` changes no faster than a car changes its path in a lane change;
+/// added to a drivable path it gives another drivable path. A filter that sees only the fixes
+/// (causal or not) cannot tell the two apart, so if it follows the car it also follows
+/// `e_slow`: its error is at least `e_slow`. What lies above (the receiver's white noise, and
+/// the small share of the bias that wanders faster than 5 s) is what a filter can remove. For
+/// the simulator's receivers (a Gauss-Markov bias with a 60 s correlation time plus white
+/// noise) `e_slow` is the bias within a few percent: the white noise averages down by the
+/// square root of the fixes in the window (50 at 10 Hz, 500 at 100 Hz), and the bias has under
+/// 4 % of its power above 0.05 Hz.
+///
+/// The node also has dead reckoning (speed, steering), so it can beat this floor on white
+/// noise a little, never on the bias: position is only observable through GNSS.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct BiasFloor {
+    /// The averaging window, s ([`BIAS_FLOOR_WINDOW_S`]).
+    pub window_s: f64,
+    /// Ticks at which the floor and the filtered position were both measured.
+    pub ticks: usize,
+    /// RMS of the slow GNSS error at those ticks, m.
+    pub pos_rms_m: f64,
+    /// RMS of the node's filtered position error (horizon 0) at the same ticks, m.
+    pub filtered_pos_rms_m: f64,
+    /// `filtered_pos_rms_m / pos_rms_m` (1.0 = at the floor); `None` without a floor.
+    pub filtered_ratio: Option<f64>,
+    /// Raw GNSS at the rear axle (true heading), RMS over its fixes, divided by the floor.
+    pub raw_at_axle_ratio: Option<f64>,
+}
+
+/// The slow part of the fix error ([`BiasFloor`]): the centred mean of the error vectors over a
+/// time window, evaluated at any time; fixes sorted by time.
+struct SlowError {
+    /// (t, east error, north error) of every fix inside the truth record.
+    errors: Vec<(f64, f64, f64)>,
+    /// Prefix sums of the east and north errors.
+    sum: Vec<(f64, f64)>,
+    half_window_s: f64,
+}
+
+impl SlowError {
+    fn new(truth: &Truth, gnss: &[(f64, f64, f64)], antenna_ahead_m: f64, window_s: f64) -> Self {
+        let errors: Vec<(f64, f64, f64)> = gnss
+            .iter()
+            .filter_map(|&(t, x, y)| {
+                let (tx, ty, th, _) = truth.at(t)?;
+                let (ax, ay) = (
+                    tx + antenna_ahead_m * th.sin(),
+                    ty + antenna_ahead_m * th.cos(),
+                );
+                Some((t, x - ax, y - ay))
+            })
+            .collect();
+        let mut sum = Vec::with_capacity(errors.len() + 1);
+        let (mut sx, mut sy) = (0.0, 0.0);
+        sum.push((sx, sy));
+        for (_, ex, ey) in &errors {
+            sx += ex;
+            sy += ey;
+            sum.push((sx, sy));
+        }
+        Self {
+            errors,
+            sum,
+            half_window_s: window_s / 2.0,
+        }
+    }
+
+    /// Mean error vector of the fixes within the window around `t`; `None` if there are none.
+    fn at(&self, t: f64) -> Option<(f64, f64)> {
+        let lo = self
+            .errors
+            .partition_point(|e| e.0 < t - self.half_window_s);
+        let hi = self
+            .errors
+            .partition_point(|e| e.0 <= t + self.half_window_s);
+        let n = hi.checked_sub(lo).filter(|&n| n > 0)? as f64;
+        let (a, b) = (self.sum.get(lo)?, self.sum.get(hi)?);
+        Some(((b.0 - a.0) / n, (b.1 - a.1) / n))
+    }
+}
+
+fn rms(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// The bias floor at the node's horizon-0 ticks, with the filtered position's RMS at the same
+/// ticks.
+fn bias_floor(
+    predictions: &[Prediction],
+    truth: &Truth,
+    inputs: &BaselineInputs,
+    antenna_ahead_m: f64,
+    raw_at_axle_rms_m: f64,
+) -> BiasFloor {
+    let slow = SlowError::new(truth, &inputs.gnss, antenna_ahead_m, BIAS_FLOOR_WINDOW_S);
+    let (mut floor, mut filtered) = (Vec::new(), Vec::new());
+    for p in predictions.iter().filter(|p| p.horizon_s == 0.0) {
+        let (Some((tx, ty, _, _)), Some((ex, ey))) = (truth.at(p.t), slow.at(p.t)) else {
+            continue;
+        };
+        floor.push(ex.hypot(ey));
+        filtered.push((p.x - tx).hypot(p.y - ty));
+    }
+    let pos_rms_m = rms(&floor);
+    let ratio = |x: f64| (pos_rms_m > 0.0).then(|| x / pos_rms_m);
+    let filtered_pos_rms_m = rms(&filtered);
+    BiasFloor {
+        window_s: BIAS_FLOOR_WINDOW_S,
+        ticks: floor.len(),
+        pos_rms_m,
+        filtered_pos_rms_m,
+        filtered_ratio: ratio(filtered_pos_rms_m),
+        raw_at_axle_ratio: ratio(raw_at_axle_rms_m),
+    }
 }
 
 /// Per-horizon error lists: (horizon, position, heading, speed errors).
@@ -333,10 +468,18 @@ pub fn evaluate(
     let zeros = vec![0.0; raw_pos.len()];
     let raw_gnss = ErrorStats::from_errors(&mut raw_pos, &zeros, &zeros);
     let raw_gnss_at_axle = ErrorStats::from_errors(&mut raw_axle, &zeros, &zeros);
+    let bias_floor = bias_floor(
+        predictions,
+        truth,
+        inputs,
+        antenna_ahead_m,
+        raw_gnss_at_axle.pos_rms_m,
+    );
     Evaluation {
         horizons,
         raw_gnss,
         raw_gnss_at_axle,
+        bias_floor,
         ticks: tick_count,
     }
 }
@@ -352,6 +495,17 @@ pub fn format_table(e: &Evaluation) -> String {
     s.push_str(&format!(
         "raw GNSS moved to the rear axle with the true heading: mean {:.3} m, RMS {:.3} m, p95 {:.3} m\n",
         a.pos_mean_m, a.pos_rms_m, a.pos_p95_m
+    ));
+    let b = &e.bias_floor;
+    let ratio = |r: Option<f64>| r.map_or("-".to_string(), |r| format!("{r:.3}"));
+    s.push_str(&format!(
+        "GNSS bias floor (error slower than {} s, at {} ticks): RMS {:.3} m; filtered position {:.3} m = {} x the floor; raw GNSS at the rear axle = {} x the floor\n",
+        b.window_s,
+        b.ticks,
+        b.pos_rms_m,
+        b.filtered_pos_rms_m,
+        ratio(b.filtered_ratio),
+        ratio(b.raw_at_axle_ratio)
     ));
     s.push_str(
         "horizon_s | node pos mean  RMS    p95 m | heading RMS rad | speed RMS m/s | baseline pos mean  RMS    p95 m | heading RMS rad\n",
@@ -799,6 +953,81 @@ mod tests {
         assert!(e.horizons[0].node.pos_rms_m < 1e-9);
         assert!((e.horizons[1].node.pos_rms_m - 0.3).abs() < 1e-9);
         assert_eq!(e.ticks, 100);
+    }
+
+    /// Fixes = the true antenna + a bias + alternating +-w noise (zero mean over any pair): the
+    /// floor is the bias's size, the raw error's ratio to it sqrt(b^2 + w^2) / b, and the
+    /// node's ratio its own error over the bias.
+    #[test]
+    fn bias_floor_is_the_slow_error_and_ignores_the_fast_one() {
+        let truth = truth_line();
+        let lever_m = 1.5;
+        let (bx, by, w) = (0.6, -0.8, 0.4);
+        let mut inputs = BaselineInputs::default();
+        for k in 0..1000 {
+            let t = k as f64 * 0.01;
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            // Due north: the antenna is lever_m ahead (north) of the rear axle.
+            inputs
+                .gnss
+                .push((t, bx + sign * w, 10.0 * t + lever_m + by));
+        }
+        let preds: Vec<Prediction> = (0..400)
+            .map(|k| {
+                let t = 1.0 + k as f64 * 0.02;
+                Prediction {
+                    t,
+                    step: k,
+                    horizon_s: 0.0,
+                    x: 1.2,
+                    y: 10.0 * t,
+                    heading: 0.0,
+                    speed: 10.0,
+                    mode: "kinematic".into(),
+                }
+            })
+            .collect();
+        let e = evaluate(&preds, &truth, &inputs, &CAT_VEHICLE, lever_m);
+        let f = &e.bias_floor;
+        assert_eq!(f.ticks, 400);
+        // Windows hold an odd or even number of fixes: the alternating noise leaves at most
+        // w / 500 in the mean.
+        assert!((f.pos_rms_m - 1.0).abs() < 1e-3, "{f:?}");
+        assert!((f.filtered_pos_rms_m - 1.2).abs() < 1e-9, "{f:?}");
+        assert!((f.filtered_ratio.unwrap() - 1.2).abs() < 2e-3, "{f:?}");
+        // Raw at the axle: sqrt(mean((bx +- w)^2) + by^2) = sqrt(1.16).
+        let raw_axle = e.raw_gnss_at_axle.pos_rms_m;
+        assert!((raw_axle - 1.16f64.sqrt()).abs() < 1e-9, "{raw_axle}");
+        assert!(
+            (f.raw_at_axle_ratio.unwrap() - raw_axle).abs() < 2e-3,
+            "{f:?}"
+        );
+    }
+
+    /// A bias that wanders slowly (period 60 s) is all floor; one that alternates every fix is
+    /// none of it.
+    #[test]
+    fn bias_floor_follows_a_slow_wander() {
+        let truth = truth_line();
+        let slow = |t: f64| 0.8 * (std::f64::consts::TAU * t / 60.0).sin();
+        let gnss: Vec<(f64, f64, f64)> = (0..1000)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                (t, slow(t), 10.0 * t)
+            })
+            .collect();
+        let floor = SlowError::new(&truth, &gnss, 0.0, BIAS_FLOOR_WINDOW_S);
+        for t in [2.5, 5.0, 7.5] {
+            let (ex, ey) = floor.at(t).unwrap();
+            // A 5 s mean of a 60 s sine: amplitude sinc(pi 5 / 60) = 0.9886.
+            assert!(
+                (ex - slow(t) * 0.9886).abs() < 2e-3,
+                "{t}: {ex} vs {}",
+                slow(t)
+            );
+            assert!(ey.abs() < 1e-9);
+        }
+        assert_eq!(floor.at(20.0), None);
     }
 
     #[test]

@@ -16,6 +16,14 @@ pub mod sim;
 /// The model file reader (crate `catmodel-model-file`): the same one the firmware build uses.
 pub use catmodel_model_file as model_file;
 
+/// The node as the host runs it: its drive stage (about 23 KiB) on the heap.
+pub type HostNode = catmodel::node::Node<Box<catmodel::node::drive::Drive>>;
+
+/// A node for the car of `config`, with a fresh drive stage on the heap.
+pub fn new_node(config: catmodel::node::NodeConfig) -> HostNode {
+    catmodel::node::Node::new(config, Box::new(catmodel::node::drive::Drive::new()))
+}
+
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};

@@ -1,11 +1,18 @@
 //! The log CSV schema (DESIGN.md, "Log CSV") and the ground-truth CSV of the simulator: typed rows,
 //! strict readers and writers.
 //!
-//! Reading: a header row is required; columns may come in any order; extra columns are ignored;
-//! an empty cell means the sensor did not report at that time. Every problem is an error that
-//! names the file, the line, the column (character position and name) and the reason; nothing
-//! is skipped silently and nothing panics. Writing produces Rust's shortest round-trip form of
-//! each number, so `read(write(rows)) == rows` bit for bit.
+//! Reading takes logs as recorders write them (docs/logs.md): a header row is required; columns
+//! may come in any order; extra columns are ignored and named in a note; an empty cell means the
+//! sensor did not report at that time; a UTF-8 byte-order mark and CRLF line ends are accepted;
+//! rows with equal `t` are one instant (several sensors reported then) and are merged into one
+//! row. A value outside its column's physical range ([`LOG_RANGES`]) is an error. Every problem
+//! is an error that names the file, the line, the column (character position and name) and the
+//! reason; nothing is skipped silently and nothing panics. What reading noticed without refusing
+//! the file (extra columns, a sensor reporting two different values at one instant) comes back
+//! as [`LogNotes`], for the caller to print.
+//!
+//! Writing produces Rust's shortest round-trip form of each number, so `read(write(rows)) ==
+//! rows` bit for bit.
 use std::fmt;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,7 +20,7 @@ use std::path::{Path, PathBuf};
 /// One row of a driving log. Each sensor reports on its own clock, so most cells are empty.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LogRow {
-    /// Time, s (strictly increasing down the file).
+    /// Time, s (as read: strictly increasing down the rows, equal-time lines merged).
     pub t: f64,
     /// Measured speed, m/s.
     pub vel: Option<f64>,
@@ -38,6 +45,20 @@ impl LogRow {
             t,
             ..Default::default()
         }
+    }
+
+    /// The cells in the order of [`LOG_COLUMNS`] (`t` always present).
+    pub fn cells(&self) -> [Option<f64>; 8] {
+        [
+            Some(self.t),
+            self.vel,
+            self.input_vel,
+            self.accel,
+            self.steer,
+            self.brake,
+            self.lat,
+            self.lon,
+        ]
     }
 
     /// Fills the cells of `other` that are present into `self` (rows logged at the same time).
@@ -120,16 +141,17 @@ pub enum LogErrorKind {
     NotANumber(String),
     /// The cell is NaN or infinite.
     NonFinite(String),
-    /// The value is outside its unit's range.
+    /// The value is outside its column's physical range ([`LOG_RANGES`]).
     OutOfRange {
         /// The value.
         value: f64,
-        /// Smallest allowed.
-        min: f64,
-        /// Largest allowed.
-        max: f64,
+        /// The column's range.
+        range: &'static ColumnRange,
     },
-    /// `t` is not greater than the previous row's.
+    /// A GNSS fix at latitude 0, longitude 0: the placeholder many receivers write without a
+    /// fix, not a position (it is in the Gulf of Guinea).
+    NullIsland,
+    /// `t` is smaller than the previous row's (log), or not greater (truth, written files).
     TimeNotIncreasing {
         /// This row's time, s.
         t: f64,
@@ -176,8 +198,21 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::MissingValue => write!(f, "empty cell where a value is required"),
             LogErrorKind::NotANumber(s) => write!(f, "not a number: `{s}`"),
             LogErrorKind::NonFinite(s) => write!(f, "non-finite value: `{s}`"),
-            LogErrorKind::OutOfRange { value, min, max } => {
-                write!(f, "value {value} outside {min}..{max}")
+            LogErrorKind::OutOfRange { value, range } => write!(
+                f,
+                "{value} {unit} is outside {min}..{max} {unit} ({why})",
+                value = Readable(*value),
+                unit = range.unit,
+                min = Readable(range.min),
+                max = Readable(range.max),
+                why = range.why
+            ),
+            LogErrorKind::NullIsland => write!(
+                f,
+                "fix at latitude 0, longitude 0: the placeholder receivers write without a fix; leave `lat` and `lon` empty instead"
+            ),
+            LogErrorKind::TimeNotIncreasing { t, previous } if t < previous => {
+                write!(f, "time goes backwards: {t} after {previous}")
             }
             LogErrorKind::TimeNotIncreasing { t, previous } => {
                 write!(f, "time not increasing: {t} after {previous}")
@@ -185,6 +220,21 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::HalfFix => {
                 write!(f, "`lat` and `lon` must be both present or both empty")
             }
+        }
+    }
+}
+
+/// A number as a person reads it: plain (`101`, `-0.5`), or in exponent form when plain
+/// would be a long run of digits (`1e30`, `1.5e-9`).
+struct Readable(f64);
+
+impl fmt::Display for Readable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let a = self.0.abs();
+        if a != 0.0 && !(1e-4..1e9).contains(&a) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
         }
     }
 }
@@ -226,55 +276,286 @@ fn file_error(path: &Path, kind: LogErrorKind) -> LogError {
     }
 }
 
+/// The physical range of a log column: a value outside it is not a measurement of a car
+/// (a unit mistake, a corrupt cell, a sentinel) and the file is refused at that cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ColumnRange {
+    /// Column name.
+    pub column: &'static str,
+    /// Unit, as the error message prints it.
+    pub unit: &'static str,
+    /// Smallest value accepted.
+    pub min: f64,
+    /// Largest value accepted.
+    pub max: f64,
+    /// Why the range ends there (printed with the error).
+    pub why: &'static str,
+}
+
+/// Speed range shared by `vel` and `input_vel`.
+const SPEED_WHY: &str = "no car drives this: 80 m/s = 288 km/h is above the 250 km/h most cars are limited to, -10 m/s = 36 km/h in reverse; a speed in km/h or mph?";
+/// Pedal range shared by `accel` and `brake`.
+const PEDAL_WHY: &str = "a pedal travels 0..100 %";
+
+/// Ranges of the log columns, in the order of [`LOG_COLUMNS`] (docs/logs.md). Deliberately
+/// wide: they catch values no car can have, not unusual driving.
+pub const LOG_RANGES: [ColumnRange; 8] = [
+    ColumnRange {
+        column: "t",
+        unit: "s",
+        min: -1e10,
+        max: 1e10,
+        why: "1e10 s is 317 years: a time in milliseconds or microseconds?",
+    },
+    ColumnRange {
+        column: "vel",
+        unit: "m/s",
+        min: -10.0,
+        max: 80.0,
+        why: SPEED_WHY,
+    },
+    ColumnRange {
+        column: "input_vel",
+        unit: "m/s",
+        min: -10.0,
+        max: 80.0,
+        why: SPEED_WHY,
+    },
+    ColumnRange {
+        column: "accel",
+        unit: "%",
+        min: 0.0,
+        max: 100.0,
+        why: PEDAL_WHY,
+    },
+    ColumnRange {
+        column: "steer",
+        unit: "%",
+        min: -100.0,
+        max: 100.0,
+        why: "100 % is full lock",
+    },
+    ColumnRange {
+        column: "brake",
+        unit: "%",
+        min: 0.0,
+        max: 100.0,
+        why: PEDAL_WHY,
+    },
+    ColumnRange {
+        column: "lat",
+        unit: "deg",
+        min: -90.0,
+        max: 90.0,
+        why: "WGS-84 latitude",
+    },
+    ColumnRange {
+        column: "lon",
+        unit: "deg",
+        min: -180.0,
+        max: 180.0,
+        why: "WGS-84 longitude",
+    },
+];
+
+/// Index of `t`, `lat` and `lon` in [`LOG_COLUMNS`].
+const T: usize = 0;
+const LAT: usize = 6;
+const LON: usize = 7;
+
+/// A driving log as read: its rows (strictly increasing in time) and what reading noticed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Log {
+    /// One row per instant.
+    pub rows: Vec<LogRow>,
+    /// The file line each row starts on (the first of its instant's lines).
+    pub lines: Vec<usize>,
+    /// Accepted, but worth telling the user.
+    pub notes: LogNotes,
+}
+
+/// A sensor that reported two different values at one instant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Conflict {
+    /// The column.
+    pub column: &'static str,
+    /// The instant, s.
+    pub t: f64,
+    /// The earlier value and its line.
+    pub first: (f64, usize),
+    /// The later value (the one kept) and its line.
+    pub kept: (f64, usize),
+}
+
+/// What reading a log noticed without refusing it.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LogNotes {
+    /// The file.
+    pub path: PathBuf,
+    /// Header cells that are not schema columns, in file order (ignored).
+    pub extra_columns: Vec<String>,
+    /// Lines merged into the row before them because they share its `t`.
+    pub merged_lines: usize,
+    /// Cells whose sensor already had a different value at that instant (the later line
+    /// wins), counted; the first one is kept as an example.
+    pub conflicts: usize,
+    /// The first conflict.
+    pub first_conflict: Option<Conflict>,
+}
+
+impl LogNotes {
+    /// One line per note, `FILE[:LINE]: text`, for stderr. Equal-time lines that merge without
+    /// a conflict are normal and get no note.
+    pub fn messages(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let file = self.path.display();
+        if !self.extra_columns.is_empty() {
+            let names: Vec<String> = self
+                .extra_columns
+                .iter()
+                .map(|c| format!("`{c}`"))
+                .collect();
+            let (noun, verb) = if names.len() == 1 {
+                ("column", "is")
+            } else {
+                ("columns", "are")
+            };
+            out.push(format!(
+                "{file}: {noun} {} {verb} not in the log schema: ignored",
+                names.join(", ")
+            ));
+        }
+        if let Some(c) = &self.first_conflict {
+            out.push(format!(
+                "{file}:{}: column `{}`: two values at t = {} s ({} on line {}, {} on line {}): the later one is kept ({} such cell(s) in the file)",
+                c.kept.1, c.column, c.t, c.first.0, c.first.1, c.kept.0, c.kept.1, self.conflicts
+            ));
+        }
+        out
+    }
+}
+
 /// Reads a driving log. All eight schema columns are required (a sensor that never reported is
 /// an empty column).
-pub fn read_log(path: &Path) -> Result<Vec<LogRow>, LogError> {
+pub fn read_log(path: &Path) -> Result<Log, LogError> {
     let text = read_text(path)?;
     parse_log(&text, path)
 }
 
+/// The instant being assembled from lines that share one `t`.
+struct PendingRow {
+    row: LogRow,
+    /// The instant's first line.
+    line: usize,
+    /// For each column: (line, character column) of the cell that set it.
+    source: [(usize, usize); 8],
+}
+
+impl PendingRow {
+    fn error(&self, path: &Path, i: usize, kind: LogErrorKind) -> LogError {
+        let (line, char_column) = self.source.get(i).copied().unwrap_or((0, 0));
+        LogError {
+            path: path.to_path_buf(),
+            line,
+            char_column,
+            column: LOG_COLUMNS.get(i).map(|s| s.to_string()),
+            kind,
+        }
+    }
+
+    /// Checks the merged fix: both halves or neither, and not the no-fix placeholder.
+    fn finish(self, path: &Path) -> Result<LogRow, LogError> {
+        match (self.row.lat, self.row.lon) {
+            (Some(_), None) => Err(self.error(path, LAT, LogErrorKind::HalfFix)),
+            (None, Some(_)) => Err(self.error(path, LON, LogErrorKind::HalfFix)),
+            (Some(lat), Some(lon)) if lat == 0.0 && lon == 0.0 => {
+                Err(self.error(path, LAT, LogErrorKind::NullIsland))
+            }
+            _ => Ok(self.row),
+        }
+    }
+}
+
 /// Parses log text; `path` only names the source in errors.
-pub fn parse_log(text: &str, path: &Path) -> Result<Vec<LogRow>, LogError> {
+pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
     let table = Table::new(text, path, &LOG_COLUMNS)?;
-    let ranges: [(f64, f64); 8] = [
-        (f64::NEG_INFINITY, f64::INFINITY),
-        (f64::NEG_INFINITY, f64::INFINITY),
-        (f64::NEG_INFINITY, f64::INFINITY),
-        (0.0, 100.0),
-        (-100.0, 100.0),
-        (0.0, 100.0),
-        (-90.0, 90.0),
-        (-180.0, 180.0),
-    ];
+    let mut notes = LogNotes {
+        path: path.to_path_buf(),
+        extra_columns: table.extra_columns(),
+        ..LogNotes::default()
+    };
     let mut rows = Vec::new();
-    let mut previous: Option<f64> = None;
+    let mut lines = Vec::new();
+    let mut pending: Option<PendingRow> = None;
     for line in table.lines() {
         let line = line?;
         let mut values = [None; 8];
         for (i, v) in values.iter_mut().enumerate() {
-            *v = line.value(i, ranges[i])?;
+            *v = line.value(i, LOG_RANGES.get(i))?;
         }
-        let t = match values[0] {
-            Some(t) => t,
-            None => return Err(line.error(0, LogErrorKind::MissingValue)),
+        let Some(t) = values[T] else {
+            return Err(line.error(T, LogErrorKind::MissingValue));
         };
-        check_time(&line, t, &mut previous)?;
-        if values[6].is_some() != values[7].is_some() {
-            let missing = if values[6].is_some() { 7 } else { 6 };
-            return Err(line.error(missing, LogErrorKind::HalfFix));
+        let previous = pending.as_ref().map(|p| p.row.t);
+        if let Some(p) = previous.filter(|p| t < *p) {
+            return Err(line.error(T, LogErrorKind::TimeNotIncreasing { t, previous: p }));
         }
-        rows.push(LogRow {
-            t,
-            vel: values[1],
-            input_vel: values[2],
-            accel: values[3],
-            steer: values[4],
-            brake: values[5],
-            lat: values[6],
-            lon: values[7],
-        });
+        let instant = match pending.take() {
+            Some(p) if p.row.t == t => {
+                notes.merged_lines += 1;
+                p
+            }
+            Some(p) => {
+                lines.push(p.line);
+                rows.push(p.finish(path)?);
+                PendingRow {
+                    row: LogRow::empty(t),
+                    line: line.number,
+                    source: [(0, 0); 8],
+                }
+            }
+            None => PendingRow {
+                row: LogRow::empty(t),
+                line: line.number,
+                source: [(0, 0); 8],
+            },
+        };
+        let mut instant = instant;
+        let cells = [
+            &mut instant.row.vel,
+            &mut instant.row.input_vel,
+            &mut instant.row.accel,
+            &mut instant.row.steer,
+            &mut instant.row.brake,
+            &mut instant.row.lat,
+            &mut instant.row.lon,
+        ];
+        for (k, cell) in cells.into_iter().enumerate() {
+            let i = k + 1;
+            let Some(v) = values[i] else { continue };
+            if let Some(old) = *cell {
+                if old != v {
+                    notes.conflicts += 1;
+                    if notes.first_conflict.is_none() {
+                        notes.first_conflict = Some(Conflict {
+                            column: LOG_COLUMNS[i],
+                            t,
+                            first: (old, instant.source[i].0),
+                            kept: (v, line.number),
+                        });
+                    }
+                }
+            }
+            *cell = Some(v);
+            instant.source[i] = (line.number, line.char_column(i));
+        }
+        pending = Some(instant);
     }
-    Ok(rows)
+    if let Some(p) = pending {
+        lines.push(p.line);
+        rows.push(p.finish(path)?);
+    }
+    Ok(Log { rows, lines, notes })
 }
 
 /// Reads a truth CSV (every cell required).
@@ -288,12 +569,11 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Vec<TruthRow>, LogError> {
     let table = Table::new(text, path, &TRUTH_COLUMNS)?;
     let mut rows = Vec::new();
     let mut previous: Option<f64> = None;
-    let any = (f64::NEG_INFINITY, f64::INFINITY);
     for line in table.lines() {
         let line = line?;
         let mut v = [0.0; 6];
         for (i, out) in v.iter_mut().enumerate() {
-            *out = match line.value(i, any)? {
+            *out = match line.value(i, None)? {
                 Some(x) => x,
                 None => return Err(line.error(i, LogErrorKind::MissingValue)),
             };
@@ -336,16 +616,7 @@ pub fn write_log_to<W: Write>(
     let mut line_text = String::new();
     for (i, r) in rows.iter().enumerate() {
         let line = i + 2;
-        let cells = [
-            Some(r.t),
-            r.vel,
-            r.input_vel,
-            r.accel,
-            r.steer,
-            r.brake,
-            r.lat,
-            r.lon,
-        ];
+        let cells = r.cells();
         check_write(line, &cells, &LOG_COLUMNS, &mut previous)?;
         format_cells(&mut line_text, &cells);
         w.write_all(line_text.as_bytes()).map_err(io)?;
@@ -455,6 +726,7 @@ fn read_text(path: &Path) -> Result<String, LogError> {
     }
 }
 
+/// Strictly increasing time (the truth CSV: one row per sample, never two at one instant).
 fn check_time(line: &Line<'_>, t: f64, previous: &mut Option<f64>) -> Result<(), LogError> {
     if let Some(p) = *previous {
         if t <= p {
@@ -471,16 +743,27 @@ struct Cell<'a> {
     char_column: usize,
 }
 
+/// Splits a line at the commas outside double quotes (RFC 4180: a quoted cell may hold commas,
+/// and `""` inside it is a quote), so that a recorder's free-text column does not shift the
+/// cells after it. A cell's text is trimmed and loses its outer quotes; escaped quotes are
+/// left as they are (no schema column holds text).
 fn split_cells(line: &str) -> Vec<Cell<'_>> {
     let mut cells = Vec::new();
     let mut start_byte = 0;
     let mut start_char = 1;
+    let mut in_quotes = false;
     for (char_index, (byte, ch)) in line
         .char_indices()
         .chain(std::iter::once((line.len(), ',')))
         .enumerate()
     {
-        if ch == ',' {
+        let end_of_line = byte == line.len();
+        if ch == '"' && !end_of_line {
+            // A quote toggles; the second of a `""` pair toggles back.
+            in_quotes = !in_quotes;
+            continue;
+        }
+        if ch == ',' && (!in_quotes || end_of_line) {
             let raw = line.get(start_byte..byte).unwrap_or("");
             let trimmed = raw.trim();
             let text = trimmed
@@ -506,6 +789,8 @@ struct Table<'a> {
     /// For each wanted column, its index among the header cells.
     index: Vec<usize>,
     names: &'static [&'static str],
+    /// Header cells that are not wanted columns, in file order.
+    extra: Vec<String>,
     /// (1-based line number, text) of every line after the header.
     data: Vec<(usize, &'a str)>,
 }
@@ -563,6 +848,11 @@ impl<'a> Table<'a> {
                 }
             }
         }
+        let extra = cells
+            .iter()
+            .filter(|c| !wanted.contains(&c.text))
+            .map(|c| c.text.to_string())
+            .collect();
         let mut data: Vec<(usize, &str)> = lines.collect();
         // Trailing blank lines are the end of the file, not missing rows.
         while data.last().is_some_and(|(_, l)| l.trim().is_empty()) {
@@ -573,8 +863,14 @@ impl<'a> Table<'a> {
             header_len: cells.len(),
             index,
             names: wanted,
+            extra,
             data,
         })
+    }
+
+    /// The header's extra columns.
+    fn extra_columns(&self) -> Vec<String> {
+        self.extra.clone()
     }
 
     fn lines(&self) -> impl Iterator<Item = Result<Line<'_>, LogError>> + '_ {
@@ -613,20 +909,33 @@ struct Line<'a> {
 }
 
 impl Line<'_> {
+    /// Character column of wanted column `i` (0 if absent).
+    fn char_column(&self, i: usize) -> usize {
+        self.table
+            .index
+            .get(i)
+            .and_then(|&h| self.cells.get(h))
+            .map_or(0, |c| c.char_column)
+    }
+
     /// Error at wanted column `i`.
     fn error(&self, i: usize, kind: LogErrorKind) -> LogError {
-        let cell = self.table.index.get(i).and_then(|&h| self.cells.get(h));
         LogError {
             path: self.table.path.to_path_buf(),
             line: self.number,
-            char_column: cell.map_or(0, |c| c.char_column),
+            char_column: self.char_column(i),
             column: self.table.names.get(i).map(|s| s.to_string()),
             kind,
         }
     }
 
-    /// Value of wanted column `i`: `None` for an empty cell.
-    fn value(&self, i: usize, (min, max): (f64, f64)) -> Result<Option<f64>, LogError> {
+    /// Value of wanted column `i`: `None` for an empty cell. Finite always; within `range`
+    /// when one is given.
+    fn value(
+        &self,
+        i: usize,
+        range: Option<&'static ColumnRange>,
+    ) -> Result<Option<f64>, LogError> {
         let text = match self.table.index.get(i).and_then(|&h| self.cells.get(h)) {
             Some(c) => c.text,
             None => "",
@@ -640,8 +949,10 @@ impl Line<'_> {
         if !v.is_finite() {
             return Err(self.error(i, LogErrorKind::NonFinite(text.to_string())));
         }
-        if v < min || v > max {
-            return Err(self.error(i, LogErrorKind::OutOfRange { value: v, min, max }));
+        if let Some(range) = range {
+            if v < range.min || v > range.max {
+                return Err(self.error(i, LogErrorKind::OutOfRange { value: v, range }));
+            }
         }
         Ok(Some(v))
     }

@@ -23,7 +23,7 @@ enum Command {
     /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
     SimulateDrive {
         /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
-        /// circle-left, circle-right, validation, smoke.
+        /// circle-left, circle-right, validation, smoke, standstill, suburb.
         #[arg(long)]
         scenario: String,
         /// Output directory.
@@ -108,6 +108,13 @@ enum Command {
         /// (default: models/paper.toml as built in).
         #[arg(long)]
         base: Option<PathBuf>,
+        /// The car the logs come from: a TOML file with the model file's [vehicle] table and
+        /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Write the model even if a fit is below the floor (the warning goes into the file).
+        #[arg(long)]
+        force: bool,
     },
     /// Simulate each model of a model file over one log, beside the kinematic model.
     Compare {
@@ -128,7 +135,7 @@ enum Command {
         #[arg(long)]
         scenario: String,
         /// mpc or pure-pursuit.
-        #[arg(long, default_value = "pure-pursuit")]
+        #[arg(long, default_value = "mpc")]
         controller: String,
         /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
         #[arg(long)]
@@ -270,8 +277,8 @@ fn run(cli: Cli) -> Result<()> {
             let (log_path, truth_path) =
                 sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
             let can_path = out.join(format!("{scenario}.can.log"));
-            let frames = csv2can::encode_log(&output.log);
-            replay::write_file(&can_path, &csv2can::to_candump(&frames))?;
+            let encoded = csv2can::encode_log(&output.log)?;
+            replay::write_file(&can_path, &csv2can::to_candump(&encoded.frames))?;
             progress.finish();
             eprintln!(
                 "wrote {}, {}, {}",
@@ -282,10 +289,15 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Csv2can { log, out } => {
-            let rows = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let frames = csv2can::encode_log(&rows);
-            replay::write_file(&out, &csv2can::to_candump(&frames))?;
-            eprintln!("wrote {} frames to {}", frames.len(), out.display());
+            let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
+            print_notes(&read.notes.messages());
+            let encoded = csv2can::encode_log(&read.rows)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
+            if let Some(note) = encoded.note() {
+                print_notes(&[format!("{}: {note}", log.display())]);
+            }
+            replay::write_file(&out, &csv2can::to_candump(&encoded.frames))?;
+            eprintln!("wrote {} frames to {}", encoded.frames.len(), out.display());
             Ok(())
         }
         Command::Replay {
@@ -362,8 +374,14 @@ fn run(cli: Cli) -> Result<()> {
             out,
             report,
             base,
+            vehicle,
+            force,
         } => {
             let base = load_base(base.as_deref())?;
+            let base = match vehicle {
+                Some(car) => identify::car::apply(&base, &car)?,
+                None => base,
+            };
             let opts = identify::IdentifyOptions::default();
             let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
                 .with_message("reading logs");
@@ -384,24 +402,50 @@ fn run(cli: Cli) -> Result<()> {
             let training = read(&logs)?;
             let validation = read(&validate)?;
             progress.finish_and_clear();
+            for e in training.iter().chain(&validation) {
+                print_notes(&e.log_notes);
+            }
             let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
             spinner.enable_steady_tick(std::time::Duration::from_millis(120));
-            let id = identify::identify(training, validation, &base, &opts)?;
+            let mut id = identify::identify(training, validation, &base, &opts)?;
             spinner.finish_and_clear();
-            model_file::save(&out, &id.model)
-                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
             print!("{}", identify::summary(&id));
-            eprintln!("wrote {}", out.display());
+            // The report first: it is what shows why a model falls below the floor.
             if let Some(dir) = report {
                 let index = identify::report::write_report(&dir, &id)?;
                 eprintln!("wrote {}", index.display());
             }
+            let violations = identify::floor::check(&id);
+            for v in &violations {
+                eprintln!("catmodel: warning: {v}");
+                if let Some((path, line, value)) =
+                    v.suspect.as_ref().and_then(|s| locate_suspect(s, &logs))
+                {
+                    eprintln!(
+                        "catmodel: warning: {}:{line}: this line's value {value} stands out",
+                        path.display()
+                    );
+                }
+            }
+            if !violations.is_empty() && !force {
+                bail!(
+                    "{} not written: {} fit(s) below the {} % floor (see the warnings above; --force writes it anyway, with the warning in the file)",
+                    out.display(),
+                    violations.len(),
+                    identify::floor::FIT_FLOOR_PERCENT
+                );
+            }
+            identify::floor::mark_forced(&mut id.model, &violations);
+            model_file::save(&out, &id.model)
+                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+            eprintln!("wrote {}", out.display());
             Ok(())
         }
         Command::Compare { log, model, out } => {
             let file = model_file::load(&model)?;
             let opts = identify::preprocess::PreprocessOptions::default();
             let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
+            print_notes(&e.log_notes);
             let sim = identify::validate::simulate_all(&file, &e)?;
             let scores =
                 identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
@@ -483,16 +527,11 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
-            let (vehicle, _) = catmodel_host::closed_loop::load_setup(None, None)?;
-            // The receiver is unknown over SIL: plan for the vehicle file's standard one.
-            let rms = catmodel_host::closed_loop::receiver_rms_m(
-                &vehicle,
-                catmodel_host::closed_loop::Receiver::Standard,
+            // The node exactly as the model file configures it, controller included.
+            let mut driver = catmodel_host::closed_loop::driver::NodeDriver::new(
+                config,
+                catmodel_host::closed_loop::driver::Controller::FromModel,
             );
-            let controller =
-                catmodel_host::closed_loop::controller_named("pure-pursuit", &config, rms)?;
-            let mut driver =
-                catmodel_host::closed_loop::driver::NodeDriver::new(config, controller);
             let stdin = std::io::stdin().lock();
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             catmodel_host::sil::run(&mut driver, stdin, stdout)?;
@@ -512,6 +551,28 @@ fn run(cli: Cli) -> Result<()> {
             println!("{}", serde_json::to_string_pretty(&d)?);
             Ok(())
         }
+    }
+}
+
+/// The training log and line behind a suspect sample of the fit floor, with its value.
+fn locate_suspect(
+    suspect: &identify::floor::Suspect,
+    logs: &[PathBuf],
+) -> Option<(PathBuf, usize, f64)> {
+    let path = logs.iter().find(|p| {
+        p.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.trim_end_matches(".csv") == suspect.log)
+    })?;
+    let log = logcsv::read_log(path).ok()?;
+    let (line, value) = identify::floor::locate(suspect, &log)?;
+    Some((path.clone(), line, value))
+}
+
+/// What reading a file noticed without refusing it, on stderr: `catmodel: note: FILE[:LINE]: ...`.
+fn print_notes(notes: &[String]) {
+    for n in notes {
+        eprintln!("catmodel: note: {n}");
     }
 }
 

@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
 use catmodel::can::codec::{ModelMode, Prediction, StateMotion, StatePosition};
 use catmodel::can::{CanFrame, CanId, TimedFrame};
-use catmodel::node::{first_tick_us, Counters, Node, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
 
 /// Interface name written into candump output.
@@ -522,7 +522,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     tx_log: Option<T>,
     mut progress: impl FnMut(u64),
 ) -> (ReplayStats, std::io::Result<()>, Option<anyhow::Error>) {
-    let mut node = Node::new(config);
+    let mut node = crate::new_node(config);
     let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
@@ -1156,7 +1156,7 @@ mod tests {
         let out = replay(&frames, config.clone());
         let mut csv = String::from(CSV_HEADER);
         let mut tx_log = String::new();
-        let mut node = Node::new(config);
+        let mut node = crate::new_node(config);
         let (mut now, mut next, mut step) = (first_tick_us(frames[0].t_us), 0, 0);
         let mut tx = TxFrames::new();
         while now <= first_tick_us(frames.last().unwrap().t_us) {

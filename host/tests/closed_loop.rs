@@ -204,8 +204,7 @@ fn run_pp(
 ) -> catmodel_host::closed_loop::RunOutput {
     let (vehicle, node) = load_setup(None, None).unwrap();
     let course = scenario::course(kind, &vehicle.body, speed);
-    let controller =
-        controller_named("pure-pursuit", &node, receiver_rms_m(&vehicle, receiver)).unwrap();
+    let controller = controller_named("pure-pursuit", receiver_rms_m(&vehicle, receiver)).unwrap();
     let mut driver = NodeDriver::new(node, controller);
     let options = RunOptions {
         seed,

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use catmodel::can::codec::ControlCommand;
 use catmodel::can::codec::{decode_input, InputMessage, ModelMode, NodeStatus};
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{Prediction, StateMotion, StatePosition, TimedFrame};
@@ -186,6 +187,12 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                     "{page_signals} signals on page {}",
                     m.page()
                 );
+            }
+            "CONTROL_COMMAND" => {
+                let (m, c) = ControlCommand::decode(f).unwrap();
+                assert_eq!(c, counter);
+                agree(&d, "steer_cmd_pct", m.steer_cmd_pct);
+                agree(&d, "speed_cmd_mps", m.speed_cmd_mps);
             }
             other => {
                 let k: u8 = other.strip_prefix("PREDICTION_").unwrap().parse().unwrap();

@@ -29,6 +29,7 @@
 //!   `cornering_front_n_per_rad`, `cornering_rear_n_per_rad`;
 //! - `[inputs]`: `steer_timeout_s`, `speed_timeout_s`, `pedal_timeout_s`,
 //!   `gnss_source_address`, `gnss_gate_m`, `gnss_lost_s`;
+//! - `[control]`: `controller` (`"mpc"` or `"pure-pursuit"`), `position_uncertainty_m`;
 //! - `[hybrid]`: `enter_dynamic_speed_mps`, `enter_dynamic_lat_accel_mps2`,
 //!   `exit_dynamic_speed_mps`, `exit_dynamic_lat_accel_mps2`, `min_dwell_ticks`;
 //! - `[speed]` (eq 5: `input_vel` -> `vel`) and `[dx_dt]` (eq 7: `v_m`, `x`, `y`, `phi` ->
@@ -41,12 +42,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use catmodel::can::freshness::FreshnessConfig;
+use catmodel::control::mpc::{MpcConfig, DEFAULT_TUNING};
 use catmodel::model::block::{MisoBlock, SsBlock};
 use catmodel::model::dynamic::{DynamicParams, MIN_SPEED_MPS};
 use catmodel::model::hybrid::HybridConfig;
 use catmodel::model::predictor::DEFAULT_HORIZON;
 use catmodel::model::tf::{ModelError, TransferFunction};
 use catmodel::model::zoh::{self, DiscreteStateSpace};
+use catmodel::node::drive::Controller;
 use catmodel::node::estimator::EstimatorConfig;
 use catmodel::node::{NodeConfig, DXDT_DELAY_CAP, VELOCITY_DELAY_CAP};
 use catmodel::vehicle::{Body, VehicleParams};
@@ -175,6 +178,8 @@ pub struct ModelFile {
     pub dynamics: Option<DynamicsSection>,
     /// The bus inputs' timeouts and the GNSS receiver's address and gates.
     pub inputs: InputsSection,
+    /// The controller that follows the planner's path.
+    pub control: ControlSection,
     /// Hybrid switching thresholds (f64 as written; [`HybridSection::config`]).
     pub hybrid: HybridSection,
     /// Eq 5: commanded speed -> speed.
@@ -199,6 +204,7 @@ struct RawFile {
     vehicle: VehicleSection,
     dynamics: Option<DynamicsSection>,
     inputs: InputsSection,
+    control: ControlSection,
     hybrid: HybridSection,
     speed: RawModel,
     dx_dt: RawModel,
@@ -330,6 +336,38 @@ impl InputsSection {
     /// Gate rejections in a row after which the fixes win: one second of fixes, at least 3.
     pub fn gnss_reacquire_fixes(gnss_rate_hz: f64) -> u16 {
         gnss_rate_hz.round().clamp(3.0, 1000.0) as u16
+    }
+}
+
+/// `[control]`: the controller that follows the planner's path.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlSection {
+    /// `"mpc"` (model-predictive control over the identified models) or `"pure-pursuit"`
+    /// (the reference controller).
+    pub controller: ControllerName,
+    /// Bound on the error of the node's position estimate with this car's receiver (2 sigma),
+    /// m: the controller inflates obstacles by it.
+    pub position_uncertainty_m: f64,
+}
+
+/// The controller's name in the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerName {
+    /// Model-predictive control.
+    Mpc,
+    /// Pure pursuit + PI.
+    PurePursuit,
+}
+
+impl ControllerName {
+    /// As written in the file.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ControllerName::Mpc => "mpc",
+            ControllerName::PurePursuit => "pure-pursuit",
+        }
     }
 }
 
@@ -717,6 +755,16 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             ));
         }
     }
+    let c = &raw.control;
+    if !(c.position_uncertainty_m.is_finite() && (0.0..=20.0).contains(&c.position_uncertainty_m)) {
+        return Err(err(
+            path,
+            format!(
+                "control.position_uncertainty_m = {}: must be within 0..20 m",
+                c.position_uncertainty_m
+            ),
+        ));
+    }
     let h = &raw.hybrid;
     for (key, val) in [
         ("hybrid.enter_dynamic_speed_mps", h.enter_dynamic_speed_mps),
@@ -774,6 +822,7 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
         vehicle: raw.vehicle,
         dynamics: raw.dynamics,
         inputs: raw.inputs,
+        control: raw.control,
         hybrid: raw.hybrid,
         speed,
         dx_dt,
@@ -892,6 +941,25 @@ impl ModelFile {
             gnss_reacquire_fixes: InputsSection::gnss_reacquire_fixes(v.gnss_rate_hz),
             max_speed_mps: v.max_speed_mps as f32,
             max_steer_rate_pct_per_s: v.max_steer_rate_pct_per_s as f32,
+            controller: match self.control.controller {
+                ControllerName::Mpc => Controller::Mpc,
+                ControllerName::PurePursuit => Controller::PurePursuit,
+            },
+            position_uncertainty_m: self.control.position_uncertainty_m as f32,
+        })
+        .and_then(|config| {
+            // The controller must be buildable for this car, or the node could not drive it.
+            if config.controller == Controller::Mpc {
+                MpcConfig::for_node(&config, DEFAULT_TUNING).map_err(|e| {
+                    err(
+                        path,
+                        format!(
+                            "control: the model-predictive controller cannot run this car: {e:?}"
+                        ),
+                    )
+                })?;
+            }
+            Ok(config)
         })
     }
 }
@@ -1091,6 +1159,18 @@ pub fn to_toml(f: &ModelFile) -> String {
     let _ = writeln!(o, "gnss_source_address = {}", i.gnss_source_address);
     let _ = writeln!(o, "gnss_gate_m = {}", num(i.gnss_gate_m));
     let _ = writeln!(o, "gnss_lost_s = {}", num(i.gnss_lost_s));
+    let c = &f.control;
+    let _ = writeln!(o, "\n[control]");
+    let _ = writeln!(
+        o,
+        "# the controller that follows the planner's path: \"mpc\" or \"pure-pursuit\""
+    );
+    let _ = writeln!(o, "controller = {}", quoted(c.controller.as_str()));
+    let _ = writeln!(
+        o,
+        "position_uncertainty_m = {}  # the position estimate's error bound (2 sigma): obstacles are inflated by it",
+        num(c.position_uncertainty_m)
+    );
     let h = &f.hybrid;
     let _ = writeln!(o, "\n[hybrid]");
     let _ = writeln!(

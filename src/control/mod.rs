@@ -6,8 +6,8 @@
 //!   heading error); the reference (pose, curvature, target speed, corridor) at any station.
 //! - [`planner`]: assembling PATH_HEADER / PATH_POINT / PATH_LIMITS frames into a path (a new
 //!   path replaces the active one only once complete), the obstacle slots, LOCAL_ORIGIN.
-//! - [`mpc`]: model-predictive control over the identified models, which turns a planned path,
-//!   its corridor and obstacles into steering and speed commands every 20 ms.
+//! - [`mpc`]: model-predictive control over the identified models (docs/mpc.md), which turns
+//!   the path, its corridor and the obstacles into steering and speed commands every 20 ms.
 //! - [`pure_pursuit`]: pure pursuit with a speed-dependent lookahead and a PI speed loop: the
 //!   reference controller the model-predictive controller is measured against.
 //!

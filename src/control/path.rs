@@ -376,7 +376,7 @@ impl Path {
             return None;
         }
         let length = self.length_m();
-        let s = station_m.clamp(0.0, length);
+        let s = math::clamp(station_m, 0.0, length);
         let i = self.segment_at(s, hint);
         let (a, h, seg_len) = self.segment(i)?;
         let b = *self.points.get(i + 1)?;

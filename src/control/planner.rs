@@ -62,9 +62,12 @@ pub enum PlannerEvent {
     },
 }
 
-/// A path being received.
+/// A path being received. Always allocated (in place, in the node's static drive state), so
+/// that starting or completing a path never moves its 5 KiB of waypoints through the stack.
 #[derive(Clone, Debug)]
 struct Assembly {
+    /// A path is being received (the other fields mean nothing otherwise).
+    active: bool,
     path_id: u8,
     count: usize,
     next_point: usize,
@@ -89,7 +92,7 @@ enum Stream {
 pub struct PlannerInputs {
     path: Path,
     path_id: Option<u8>,
-    assembly: Option<Assembly>,
+    assembly: Assembly,
     obstacles: [Option<ObstacleCircle>; OBSTACLE_SLOTS],
     /// Latitude page waiting for its longitude page: (lat_e7, counter).
     origin_latitude: Option<(i32, u8)>,
@@ -109,7 +112,20 @@ impl PlannerInputs {
         Self {
             path: Path::new(),
             path_id: None,
-            assembly: None,
+            assembly: Assembly {
+                active: false,
+                path_id: 0,
+                count: 0,
+                next_point: 0,
+                next_limits: 0,
+                waypoints: [Waypoint {
+                    east_m: 0.0,
+                    north_m: 0.0,
+                    speed_mps: 0.0,
+                    left_m: 0.0,
+                    right_m: 0.0,
+                }; MAX_PATH_POINTS],
+            },
             obstacles: [None; OBSTACLE_SLOTS],
             origin_latitude: None,
             counters: [CounterChecker::new(); MESSAGES],
@@ -138,9 +154,8 @@ impl PlannerInputs {
 
     /// The id of the path being received, and how many of its points and limits are in.
     pub fn receiving(&self) -> Option<(u8, usize, usize)> {
-        self.assembly
-            .as_ref()
-            .map(|a| (a.path_id, a.next_point, a.next_limits))
+        let a = &self.assembly;
+        a.active.then_some((a.path_id, a.next_point, a.next_limits))
     }
 
     /// The obstacle slots (`None` = cleared).
@@ -151,6 +166,17 @@ impl PlannerInputs {
     /// Counters since start.
     pub const fn counters(&self) -> &PlannerCounters {
         &self.stats
+    }
+
+    /// Forgets everything received (in place), counters included.
+    pub fn reset(&mut self) {
+        self.path.clear();
+        self.path_id = None;
+        self.assembly.active = false;
+        self.obstacles = [None; OBSTACLE_SLOTS];
+        self.origin_latitude = None;
+        self.counters = [CounterChecker::new(); MESSAGES];
+        self.stats = PlannerCounters::default();
     }
 
     /// Forgets the active path (e.g. the local frame changed under it); the counters stay.
@@ -180,7 +206,7 @@ impl PlannerInputs {
         }
         match *message {
             PlannerMessage::PathHeader(h, _) => {
-                if self.assembly.is_some() {
+                if self.assembly.active {
                     bump(&mut self.stats.paths_abandoned);
                 }
                 self.start_assembly(h.path_id, usize::from(h.count));
@@ -210,18 +236,12 @@ impl PlannerInputs {
     }
 
     fn start_assembly(&mut self, path_id: u8, count: usize) {
-        let waypoints = match self.assembly.take() {
-            // Reuse the buffer: no second 5 KiB on the stack.
-            Some(a) => a.waypoints,
-            None => [Waypoint::default(); MAX_PATH_POINTS],
-        };
-        self.assembly = Some(Assembly {
-            path_id,
-            count: count.min(MAX_PATH_POINTS),
-            next_point: 0,
-            next_limits: 0,
-            waypoints,
-        });
+        let a = &mut self.assembly;
+        a.active = true;
+        a.path_id = path_id;
+        a.count = count.min(MAX_PATH_POINTS);
+        a.next_point = 0;
+        a.next_limits = 0;
     }
 
     /// Stores one half of waypoint `index` (`fill` writes it) if it is the next one expected
@@ -233,10 +253,11 @@ impl PlannerInputs {
         stream: Stream,
         fill: impl FnOnce(&mut Waypoint),
     ) -> PlannerEvent {
-        let Some(a) = self.assembly.as_mut().filter(|a| a.path_id == path_id) else {
+        let a = &mut self.assembly;
+        if !a.active || a.path_id != path_id {
             bump(&mut self.stats.stray_frames);
             return PlannerEvent::None;
-        };
+        }
         let expected = match stream {
             Stream::Points => &mut a.next_point,
             Stream::Limits => &mut a.next_limits,
@@ -247,7 +268,7 @@ impl PlannerInputs {
         }
         if index > *expected || index >= a.count {
             // A lost frame (or an index beyond the count): this path can never complete.
-            self.assembly = None;
+            a.active = false;
             bump(&mut self.stats.paths_abandoned);
             return PlannerEvent::None;
         }
@@ -262,9 +283,11 @@ impl PlannerInputs {
     }
 
     fn complete(&mut self) -> PlannerEvent {
-        let Some(a) = self.assembly.take() else {
+        let a = &mut self.assembly;
+        if !a.active {
             return PlannerEvent::None;
-        };
+        }
+        a.active = false;
         let waypoints = a.waypoints.get(..a.count).unwrap_or(&[]);
         match self.path.load(waypoints) {
             Ok(()) => {

@@ -228,7 +228,8 @@ fn roll<S: Segment>(
     let mut until_point = every;
     for k in 1..=horizon.steps {
         let v_model = speed_model_step(start.speed_cmd_mps);
-        let v = clamp_speed(v_model + start.speed_bias_mps, horizon.max_speed_mps);
+        let v =
+            crate::math::clamp_finite(v_model + start.speed_bias_mps, 0.0, horizon.max_speed_mps);
         segment.step(v, dt);
         until_point -= 1;
         if until_point == 0 {
@@ -248,22 +249,6 @@ fn roll<S: Segment>(
         }
     }
     written
-}
-
-/// `v` limited to [0, max_mps], 0 if not finite (comparisons only: `f32::clamp`'s assertion
-/// would link float formatting into the firmware).
-fn clamp_speed(v: f32, max_mps: f32) -> f32 {
-    if !v.is_finite() {
-        return 0.0;
-    }
-    let mut x = v;
-    if x < 0.0 {
-        x = 0.0;
-    }
-    if x > max_mps {
-        x = max_mps;
-    }
-    x
 }
 
 #[cfg(test)]

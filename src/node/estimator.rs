@@ -2,6 +2,10 @@
 //! 20th-order FIR + moving average, at the GNSS rate, paper II-A and II-C), with the filters'
 //! group delay compensated by dead reckoning, and a heading estimate.
 //!
+//! Receiver rate: the paper's filter is for its 100 Hz receiver, and its shape is a trade-off
+//! that depends on the rate; [`EstimatorConfig::design`] scales it for any rate from 1 to
+//! 100 Hz (see there for the rule and its derivation).
+//!
 //! A plain causal lowpass lags: at 10 m/s its ~0.145 s group delay puts the filtered position
 //! ~1.5 m behind the car, worse than raw GNSS. So every fix also records where dead reckoning
 //! (measured speed, estimated heading) had the car at that instant; the filter output, which
@@ -30,6 +34,16 @@ pub const GNSS_FIR_TAPS: usize = 21;
 pub const GNSS_MA_SPAN: usize = 10;
 /// Fixes of filtered track kept for the course estimate: 0.64 s at 100 Hz.
 const TRACK_LEN: usize = 64;
+/// Time spanned by the chord of the course estimate, s: the paper rate's 63 fixes.
+const TRACK_SPAN_S: f64 = 0.63;
+/// The paper's receiver rate (NovAtel, "every 0.01 seconds", paper II-B), Hz: the rate the
+/// paper's lowpass (21 taps at 2 Hz, then 10 samples) is for, and the anchor of the scaling.
+pub const PAPER_GNSS_RATE_HZ: f64 = 100.0;
+/// Below this rate the course gain falls with the rate, Hz (see [`EstimatorConfig::design`]).
+const COURSE_GAIN_FULL_RATE_HZ: f64 = 25.0;
+/// Complementary-filter gain towards the course per 20 ms tick at 25 Hz and above: a 0.4 s
+/// time constant.
+const COURSE_GAIN: f32 = 0.05;
 /// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
 const ODO_LEN: usize = 32;
 /// Missing fixes filled in after a gap, at most: the filters' memory (FIR taps + MA span);
@@ -47,6 +61,8 @@ pub struct EstimatorConfig {
     pub group_delay_fixes: f32,
     /// Course from the filtered track needs at least this displacement, m.
     pub course_min_baseline_m: f32,
+    /// Fixes spanned by the chord of the course estimate (1..=`TRACK_LEN - 1`).
+    pub track_span_fixes: u32,
     /// Complementary-filter gain towards the GNSS course, per tick (0..1).
     pub course_gain: f32,
     /// Heading is only corrected above this speed, m/s.
@@ -60,10 +76,14 @@ pub struct EstimatorConfig {
     pub gnss_period_s: f32,
 }
 
-/// Lowpass cutoff for GNSS, Hz: the paper's 2 Hz, which passes the car's motion (manoeuvres
-/// below 1 Hz) and removes the receiver's white noise; below a 5 Hz receiver rate it is
-/// lowered to 0.4 x the rate so that the design stays below Nyquist.
+/// Lowpass cutoff for GNSS at the paper's 100 Hz, Hz: the paper's 2 Hz, which passes the car's
+/// motion (manoeuvres below 1 Hz) and removes the receiver's white noise. Other rates scale it
+/// ([`EstimatorConfig::design`]).
 pub const GNSS_CUTOFF_HZ: f64 = 2.0;
+
+/// How the lowpass's window time scales with the receiver rate: `T ~ rate^-WINDOW_EXPONENT`
+/// (see [`EstimatorConfig::design`] for the derivation of 1/3).
+pub const WINDOW_EXPONENT: f64 = 1.0 / 3.0;
 
 impl Image for EstimatorConfig {
     fn write(&self, w: &mut ImageWriter<'_>) {
@@ -71,6 +91,7 @@ impl Image for EstimatorConfig {
             fir,
             ma,
             group_delay_fixes,
+            track_span_fixes,
             course_min_baseline_m,
             course_gain,
             course_min_speed_mps,
@@ -80,6 +101,7 @@ impl Image for EstimatorConfig {
         } = self;
         fir.write(w);
         ma.write(w);
+        track_span_fixes.write(w);
         for v in [
             group_delay_fixes,
             course_min_baseline_m,
@@ -96,6 +118,10 @@ impl Image for EstimatorConfig {
         Ok(Self {
             fir: Fir::read(r)?,
             ma: MovingAverage::read(r)?,
+            track_span_fixes: match u32::read(r)? {
+                n @ 1..=63 => n,
+                _ => return Err(r.out_of_range()),
+            },
             group_delay_fixes: f32::read(r)?,
             course_min_baseline_m: f32::read(r)?,
             course_gain: f32::read(r)?,
@@ -162,30 +188,94 @@ impl Default for EstimatorState {
 }
 
 impl EstimatorConfig {
-    /// The paper's filter for a receiver at `gnss_rate_hz` (designed in f64: on the host or in
-    /// the firmware build, never on the MCU): a 21-tap Hamming lowpass at [`GNSS_CUTOFF_HZ`],
-    /// then a 10-sample moving average; the antenna `antenna_ahead_m` ahead of the rear axle and
-    /// `antenna_left_m` left of the centre line.
+    /// The lowpass and heading filter for a receiver at `gnss_rate_hz` (1..100 Hz; designed in
+    /// f64, on the host or in the firmware build, never on the MCU), the antenna
+    /// `antenna_ahead_m` ahead of the rear axle and `antenna_left_m` left of the centre line.
+    ///
+    /// At the paper's 100 Hz this is the paper's filter: a 21-tap Hamming lowpass at 2 Hz, then
+    /// a 10-sample moving average, a 0.3 s window with a 0.145 s group delay. At other rates
+    /// the window is scaled, not kept in fixes or in seconds:
+    /// - the window averages the receiver's white noise: its residual is about
+    ///   `sigma / sqrt(rate T)` for a window of T seconds;
+    /// - the dead reckoning that moves the output forward over the group delay (about T / 2)
+    ///   drifts in proportion to T (heading error x speed x T);
+    /// - the sum of the two squares is least for `T ~ rate^(-1/3)` ([`WINDOW_EXPONENT`]).
+    ///
+    /// So the window holds `30 (rate / 100)^(2/3)` fixes, shared between FIR taps (odd, 21 at
+    /// 100 Hz) and moving-average samples (10 at 100 Hz) in the paper's proportion, and the
+    /// cutoff follows the window's time scale, `2 Hz (rate / 100)^(1/3)`: at 10 Hz 5 taps at
+    /// 0.93 Hz and 2 samples (a 0.6 s window, 0.25 s delay); at 1 Hz 1 tap and 1 sample (each
+    /// fix as it is, moved by dead reckoning). A window of 30 fixes at every rate (the paper's
+    /// filter designed at the receiver's rate) lags 1.45 s at 10 Hz and lets the heading diverge;
+    /// 0.3 s at every rate averages too few fixes (the comparison on the second car:
+    /// `cargo run --release -p catmodel-host --example gnss_rate -- --exponents`).
+    ///
+    /// The course chord spans 0.63 s (63 fixes at 100 Hz, at least one fix), and below 25 Hz
+    /// the course gain falls as the square root of
+    /// the rate (0.032 per tick at 10 Hz, 0.01 at 1 Hz): a complementary filter's best gain
+    /// goes as sqrt(process noise / measurement noise), and the course's noise variance grows
+    /// as the rate falls (fewer fixes in each chord).
     pub fn design(
         gnss_rate_hz: f64,
+        antenna_ahead_m: f32,
+        antenna_left_m: f32,
+    ) -> Result<Self, FilterError> {
+        Self::design_scaled(
+            gnss_rate_hz,
+            WINDOW_EXPONENT,
+            antenna_ahead_m,
+            antenna_left_m,
+        )
+    }
+
+    /// The lowpass cutoff of [`EstimatorConfig::design_scaled`], Hz: it follows the window's
+    /// time scale, `2 Hz (rate / 100)^window_exponent`, and stays below 0.45 x the rate (below
+    /// Nyquist; never binding from 1 to 100 Hz with the design's exponent).
+    pub fn scaled_cutoff_hz(gnss_rate_hz: f64, window_exponent: f64) -> f64 {
+        let scale = gnss_rate_hz / PAPER_GNSS_RATE_HZ;
+        (GNSS_CUTOFF_HZ * libm::pow(scale, window_exponent)).min(0.45 * gnss_rate_hz)
+    }
+
+    /// [`EstimatorConfig::design`] with the window time scaling as `rate^-window_exponent`
+    /// (0: the paper's 0.3 s at every rate; 1: its 30 fixes at every rate), for the comparison
+    /// that chose [`WINDOW_EXPONENT`].
+    pub fn design_scaled(
+        gnss_rate_hz: f64,
+        window_exponent: f64,
         antenna_ahead_m: f32,
         antenna_left_m: f32,
     ) -> Result<Self, FilterError> {
         if !(gnss_rate_hz.is_finite() && gnss_rate_hz > 0.0) {
             return Err(FilterError::InvalidSampleRate);
         }
-        if !(antenna_ahead_m.is_finite() && antenna_left_m.is_finite()) {
+        if !(antenna_ahead_m.is_finite()
+            && antenna_left_m.is_finite()
+            && window_exponent.is_finite())
+        {
             return Err(FilterError::NonFiniteTap);
         }
-        let fir = Fir::lowpass(GNSS_CUTOFF_HZ.min(0.4 * gnss_rate_hz), gnss_rate_hz)?;
-        let ma = MovingAverage::default();
+        let scale = gnss_rate_hz / PAPER_GNSS_RATE_HZ;
+        let window_share = libm::pow(scale, 1.0 - window_exponent);
+        let taps = libm::round(GNSS_FIR_TAPS as f64 * window_share) as usize;
+        // Odd, so that the group delay is a whole number of fixes, as the paper's 21 taps.
+        let taps = (taps | 1).clamp(1, GNSS_FIR_TAPS);
+        let span =
+            (libm::round(GNSS_MA_SPAN as f64 * window_share) as usize).clamp(1, GNSS_MA_SPAN);
+        let cutoff_hz = Self::scaled_cutoff_hz(gnss_rate_hz, window_exponent);
+        let fir = Fir::lowpass_len(taps, cutoff_hz, gnss_rate_hz)?;
+        let ma = MovingAverage::with_span(span).ok_or(FilterError::NoTaps)?;
         let group_delay_fixes = fir.group_delay_samples() + ma.group_delay_samples();
+        let track_span_fixes =
+            (libm::round(TRACK_SPAN_S * gnss_rate_hz) as u32).clamp(1, TRACK_LEN as u32 - 1);
+        let course_gain =
+            COURSE_GAIN * libm::sqrt((gnss_rate_hz / COURSE_GAIN_FULL_RATE_HZ).min(1.0)) as f32;
         Ok(Self {
             fir,
             ma,
             group_delay_fixes,
+            track_span_fixes,
             course_min_baseline_m: 1.5,
-            course_gain: 0.05,
+            course_gain,
             course_min_speed_mps: 1.5,
             antenna_ahead_m,
             antenna_left_m,
@@ -247,8 +337,8 @@ impl EstimatorState {
         if self.fixes == 0 {
             self.fir_x.prime(fix.x_m);
             self.fir_y.prime(fix.y_m);
-            self.ma_x.prime(fix.x_m);
-            self.ma_y.prime(fix.y_m);
+            cfg.ma.prime(&mut self.ma_x, fix.x_m);
+            cfg.ma.prime(&mut self.ma_y, fix.y_m);
         }
         let fx = cfg
             .ma
@@ -366,15 +456,17 @@ impl EstimatorState {
         });
     }
 
-    /// Course of the filtered track over the last `TRACK_LEN - 1` fixes, with its age in fixes
+    /// Course of the filtered track over the last `track_span_fixes` fixes, with its age in fixes
     /// (the chord's midpoint plus the filter delay); `None` if the car moved too little.
     pub fn track_course(&self, cfg: &EstimatorConfig) -> Option<(f32, f32)> {
-        let span = TRACK_LEN - 1;
+        let span = (cfg.track_span_fixes as usize).clamp(1, TRACK_LEN - 1);
         if (self.fixes as usize) < span + (cfg.group_delay_fixes as usize) * 2 {
             return None;
         }
         let now = self.track.get(self.track_head)?;
-        let then = self.track.get((self.track_head + 1) % TRACK_LEN)?;
+        let then = self
+            .track
+            .get((self.track_head + TRACK_LEN - span) % TRACK_LEN)?;
         let (dx, dy) = (now.x_m - then.x_m, now.y_m - then.y_m);
         if dx * dx + dy * dy < cfg.course_min_baseline_m * cfg.course_min_baseline_m {
             return None;

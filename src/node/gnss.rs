@@ -30,6 +30,25 @@ impl Gnss {
         self.frame.map(|f| (f.origin_lat_e7(), f.origin_lon_e7()))
     }
 
+    /// The planner's map origin (LOCAL_ORIGIN, 1e-7 deg) becomes the local frame. If it differs
+    /// from the frame in use, the filters restart in the new frame (the heading survives: it
+    /// is the car's); returns whether the frame changed. A frame not set yet is simply set.
+    pub fn set_origin(&mut self, (lat_e7, lon_e7): (i32, i32)) -> bool {
+        if self.origin_e7() == Some((lat_e7, lon_e7)) {
+            return false;
+        }
+        let Ok(frame) = LocalFrame::new(lat_e7, lon_e7) else {
+            return false;
+        };
+        let changed = self.frame.is_some();
+        self.frame = Some(frame);
+        if changed {
+            self.estimator.reset();
+            self.rejects_in_row = 0;
+        }
+        changed
+    }
+
     /// When a fix was last rejected.
     pub fn last_reject_us(&self) -> Option<u64> {
         self.last_reject_us
@@ -164,7 +183,15 @@ impl Gnss {
             }
             _ if moving => {
                 if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
-                    let age_s = age_fixes * cfg.gnss_period_s;
+                    // The chord's age at the latest fix, plus the time since that fix: with
+                    // a slow receiver the same chord steers the heading for a whole period,
+                    // while the car keeps turning.
+                    let since_fix_us = inputs
+                        .freshness
+                        .last_us(Input::Gnss)
+                        .map_or(0, |t| now_us.saturating_sub(t));
+                    let age_s =
+                        age_fixes * cfg.gnss_period_s + math::u64_to_f32(since_fix_us) * 1e-6;
                     self.estimator
                         .correct_heading(cfg, course, age_s, speed_mps, yaw_rate_rps);
                 }

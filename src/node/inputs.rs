@@ -2,8 +2,9 @@
 //! range, invalid sentinels), its rolling counter checked ([`crate::can::counter`]), and the
 //! latest valid value of each input kept with its receive time ([`crate::can::freshness`]).
 //! Every rejection is counted in [`Counters`]; nothing is dropped silently. GNSS messages are
-//! handed on to the GNSS stage ([`super::gnss`]).
-use crate::can::codec::{decode_input, DecodeError, InputMessage};
+//! handed on to the GNSS stage ([`super::gnss`]), the planner's to the drive stage
+//! ([`super::drive`]).
+use crate::can::codec::{decode_input, decode_planner, DecodeError, InputMessage, PlannerMessage};
 use crate::can::counter::CounterChecker;
 use crate::can::freshness::{Freshness, Input, INPUT_COUNT};
 use crate::can::TimedFrame;
@@ -33,6 +34,15 @@ pub enum GnssMessage {
         /// COG reference (0 = true north).
         reference: u8,
     },
+}
+
+/// Where a valid frame goes next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Routed {
+    /// To the GNSS stage.
+    Gnss(GnssMessage),
+    /// To the drive stage (the planner's path, obstacles and origin).
+    Planner(PlannerMessage),
 }
 
 /// The vehicle-bus inputs' state: latest values, their counters and receive times.
@@ -65,19 +75,21 @@ pub struct Snapshot {
 }
 
 impl Inputs {
-    /// Decodes and applies one received frame; returns it if it is a GNSS message for the GNSS
-    /// stage. Every rejection is counted.
-    pub fn receive(
-        &mut self,
-        config: &NodeConfig,
-        now_us: u64,
-        f: &TimedFrame,
-    ) -> Option<GnssMessage> {
+    /// Decodes and applies one received frame; returns it if it is for another stage (GNSS,
+    /// the planner's). Every rejection is counted.
+    pub fn receive(&mut self, config: &NodeConfig, now_us: u64, f: &TimedFrame) -> Option<Routed> {
         if f.t_us > now_us {
             bump(&mut self.counters.time_errors);
             return None;
         }
-        let msg = match decode_input(&f.frame, config.gnss_source) {
+        let decoded = match decode_input(&f.frame, config.gnss_source) {
+            Err(DecodeError::UnknownId) => match decode_planner(&f.frame) {
+                Ok(message) => return Some(Routed::Planner(message)),
+                Err(e) => Err(e),
+            },
+            other => other,
+        };
+        let msg = match decoded {
             Ok(m) => m,
             Err(e) => {
                 let c = &mut self.counters;
@@ -117,20 +129,20 @@ impl Inputs {
                 }
             }
             InputMessage::GnssPosition(p) => {
-                return Some(GnssMessage::Fix {
+                return Some(Routed::Gnss(GnssMessage::Fix {
                     t_us: f.t_us,
                     lat_e7: p.lat_e7,
                     lon_e7: p.lon_e7,
-                })
+                }))
             }
             InputMessage::GnssCogSog(c) => {
                 if let (Some(cog_rad), Some(sog_mps)) = (c.cog_rad, c.sog_mps) {
-                    return Some(GnssMessage::Course {
+                    return Some(Routed::Gnss(GnssMessage::Course {
                         t_us: f.t_us,
                         cog_rad,
                         sog_mps,
                         reference: c.cog_reference,
-                    });
+                    }));
                 }
             }
         }

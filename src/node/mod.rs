@@ -22,11 +22,15 @@
 //! Configuration ([`NodeConfig`]) is everything about the car: built from the model file by
 //! `catmodel-model-file` (host) or read from the image the firmware build baked
 //! ([`NodeConfig::from_image`]); nothing about a particular car lives in this crate.
+pub mod drive;
 pub mod estimator;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
 
+use core::borrow::BorrowMut;
+
+use crate::can::codec::ControlStatus;
 use crate::can::freshness::{FreshnessConfig, Input};
 use crate::can::TimedFrame;
 use crate::image::{self, Image, ImageError, ImageReader, ImageWriter};
@@ -37,9 +41,10 @@ use crate::model::kinematic::Pose;
 use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStart};
 use crate::vehicle::{Body, VehicleParams};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
+use drive::{Controller, Drive, DriveInputs, DriveOutput};
 use estimator::EstimatorConfig;
 use gnss::Gnss;
-use inputs::{Inputs, Snapshot};
+use inputs::{Inputs, Routed, Snapshot};
 use publish::Health;
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
@@ -127,6 +132,11 @@ pub struct NodeConfig {
     pub max_speed_mps: f32,
     /// Fastest steering change the car's actuator makes, % per second.
     pub max_steer_rate_pct_per_s: f32,
+    /// The controller that follows the planner's path.
+    pub controller: Controller,
+    /// Bound on the error of the node's position estimate with this receiver (2 sigma), m:
+    /// the controller inflates obstacles by it.
+    pub position_uncertainty_m: f32,
 }
 
 impl Image for FreshnessConfig {
@@ -159,6 +169,8 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes,
             max_speed_mps,
             max_steer_rate_pct_per_s,
+            controller,
+            position_uncertainty_m,
         } = self;
         vehicle.write(w);
         body.write(w);
@@ -176,6 +188,8 @@ impl Image for NodeConfig {
         gnss_reacquire_fixes.write(w);
         max_speed_mps.write(w);
         max_steer_rate_pct_per_s.write(w);
+        controller.write(w);
+        position_uncertainty_m.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         Ok(Self {
@@ -195,6 +209,8 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes: Image::read(r)?,
             max_speed_mps: Image::read(r)?,
             max_steer_rate_pct_per_s: Image::read(r)?,
+            controller: Image::read(r)?,
+            position_uncertainty_m: Image::read(r)?,
         })
     }
 }
@@ -249,6 +265,8 @@ pub struct TickEstimate {
     pub speed_mps: f32,
     /// Lateral model in use.
     pub mode: Mode,
+    /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
+    pub control: ControlStatus,
 }
 
 /// The models' state (stage 2).
@@ -287,20 +305,25 @@ struct Estimate {
     dxdt_mps: Option<f32>,
 }
 
-/// The node's mutable state, one part per stage.
+/// The node's mutable state, one part per stage. The drive stage's state is large (see
+/// [`drive`]) and lives where the platform put it: `D` is a `&'static mut Drive` in a static
+/// on the MCU, a `Box<Drive>` on the host.
 #[derive(Clone, Debug)]
-pub struct Node {
+pub struct Node<D: BorrowMut<Drive>> {
     config: NodeConfig,
     inputs: Inputs,
     gnss: Gnss,
     models: Models,
+    drive: D,
     health: Health,
     last_tick_us: Option<u64>,
 }
 
-impl Node {
-    /// A node with fresh state.
-    pub fn new(config: NodeConfig) -> Self {
+impl<D: BorrowMut<Drive>> Node<D> {
+    /// A node with fresh state for the car of `config`, driving with `drive` (reset and
+    /// configured for that car here).
+    pub fn new(config: NodeConfig, mut drive: D) -> Self {
+        drive.borrow_mut().configure(&config);
         let models = Models {
             velocity: None,
             dxdt: config.dxdt.zero_state(),
@@ -314,9 +337,21 @@ impl Node {
             inputs: Inputs::default(),
             gnss: Gnss::default(),
             models,
+            drive,
             health: Health::default(),
             last_tick_us: None,
         }
+    }
+
+    /// The drive stage: what the planner sent so far (paths, obstacles), the last command.
+    pub fn drive(&self) -> &Drive {
+        self.drive.borrow()
+    }
+
+    /// The drive stage, for host tools that tune the reference controller
+    /// ([`Drive::tune_pursuit`]).
+    pub fn drive_mut(&mut self) -> &mut Drive {
+        self.drive.borrow_mut()
     }
 
     /// The configuration.
@@ -348,14 +383,23 @@ impl Node {
         let snapshot = self.inputs.snapshot(&self.config, now);
         let motion = self.run_models(&snapshot, dt_s);
         let estimate = self.estimate(now, &motion);
+        let drive = self.run_drive(&motion, &estimate);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
-        let predicted = self.predict(&snapshot, &motion, &estimate, &mut points);
+        let predicted = match drive.plan {
+            // While the model-predictive controller drives, the path ahead is its plan.
+            Some(plan) if estimate.pose.is_some() => {
+                points = plan;
+                PREDICTION_POINTS
+            }
+            _ => self.predict(&snapshot, &motion, &estimate, &mut points),
+        };
         let horizon = points.get(..predicted).unwrap_or(&[]);
-        self.publish(tick, &snapshot, &motion, &estimate, horizon, tx);
+        self.publish(tick, &snapshot, &motion, &estimate, horizon, &drive, tx);
         TickEstimate {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
             mode: motion.mode,
+            control: drive.command.status,
         }
     }
 
@@ -377,17 +421,28 @@ impl Node {
         dt_s
     }
 
-    /// Stage 1: every received frame decoded, validated and applied (or counted as rejected).
+    /// Stage 1: every received frame decoded, validated and applied (or counted as rejected):
+    /// the vehicle's reports here, GNSS to the GNSS stage, the planner's to the drive stage.
     fn receive(&mut self, now_us: u64, rx: &[TimedFrame]) {
         for frame in rx {
-            if let Some(gnss) = self.inputs.receive(&self.config, now_us, frame) {
-                self.gnss.receive(
+            match self.inputs.receive(&self.config, now_us, frame) {
+                Some(Routed::Gnss(gnss)) => self.gnss.receive(
                     &self.config,
                     now_us,
                     &gnss,
                     self.models.speed_mps,
                     &mut self.inputs,
-                );
+                ),
+                Some(Routed::Planner(message)) => {
+                    let drive = self.drive.borrow_mut();
+                    if let Some(origin) = drive.receive(&message) {
+                        // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
+                        if self.gnss.set_origin(origin) {
+                            drive.frame_changed();
+                        }
+                    }
+                }
+                None => {}
             }
         }
     }
@@ -414,7 +469,7 @@ impl Node {
                 .unwrap_or(m.speed_mps);
             cfg.velocity.step(state, u)
         });
-        let speed_mps = clamp_finite(
+        let speed_mps = math::clamp_finite(
             inputs
                 .speeds
                 .map(|(v, _)| v)
@@ -485,7 +540,20 @@ impl Node {
         }
     }
 
-    /// Stage 4: the horizon into `points`; returns how many were predicted. Without fresh
+    /// Stage 4: the controller's commands (CONTROL_COMMAND), and its plan while it drives.
+    fn run_drive(&mut self, motion: &Motion, estimate: &Estimate) -> DriveOutput {
+        let inputs = DriveInputs {
+            pose: estimate.pose,
+            speed_mps: motion.speed_mps,
+            lateral: self.models.lateral,
+            steer_rad: motion.center_steer_rad,
+            mode: motion.mode,
+            speed_model: self.models.velocity.as_ref(),
+        };
+        self.drive.borrow_mut().tick(&self.config, &inputs)
+    }
+
+    /// Stage 5: the horizon into `points`; returns how many were predicted. Without fresh
     /// steering the path ahead is unknown: no predictions (the state still goes out, flagged
     /// `steer_stale`).
     fn predict(
@@ -524,7 +592,8 @@ impl Node {
         )
     }
 
-    /// Stage 5: this tick's frames.
+    /// Stage 6: this tick's frames.
+    #[allow(clippy::too_many_arguments)]
     fn publish(
         &mut self,
         tick: &Tick,
@@ -532,6 +601,7 @@ impl Node {
         motion: &Motion,
         estimate: &Estimate,
         predictions: &[PredictedPoint],
+        drive: &DriveOutput,
         tx: &mut TxFrames,
     ) {
         let out = publish::Outputs {
@@ -544,6 +614,7 @@ impl Node {
             speed_model_mps: motion.speed_model_mps,
             dxdt_mps: estimate.dxdt_mps,
             predictions,
+            command: drive.command,
         };
         self.health
             .publish(tick, inputs, &mut self.inputs.counters, &out, tx);
@@ -558,20 +629,4 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
-}
-
-/// `v` limited to [lo, hi], `lo` if not finite. Comparisons only: `f32::clamp` asserts
-/// `lo <= hi` with a formatted panic message, which links float formatting (~20 KiB of flash).
-fn clamp_finite(v: f32, lo: f32, hi: f32) -> f32 {
-    if !v.is_finite() {
-        return lo;
-    }
-    let mut x = v;
-    if x < lo {
-        x = lo;
-    }
-    if x > hi {
-        x = hi;
-    }
-    x
 }

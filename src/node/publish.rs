@@ -1,11 +1,11 @@
-//! Stage 5, publish: the tick's frames in transmit order: STATE_POSITION, STATE_MOTION,
-//! PREDICTION_1..10 (relative to the current pose) and one NODE_STATUS page (the six pages
-//! cycle; page 5 carries the models' outputs). All share the tick's rolling counter. Every value is checked finite and
+//! Stage 6, publish: the tick's frames in transmit order: STATE_POSITION, STATE_MOTION,
+//! PREDICTION_1..10 (relative to the current pose), one NODE_STATUS page (the pages cycle;
+//! page 5 carries the models' outputs) and CONTROL_COMMAND. All share the tick's rolling counter. Every value is checked finite and
 //! saturated to its field by the codec; what was substituted is counted and flagged in the next
 //! health page.
 use crate::can::codec::{
-    EncodeReport, HealthFlags, ModelMode, ModelOutputs, NodeStatus, Prediction, PredictionPoint,
-    StateMotion, StatePosition,
+    ControlCommand, EncodeReport, HealthFlags, ModelMode, ModelOutputs, NodeStatus, Prediction,
+    PredictionPoint, StateMotion, StatePosition,
 };
 use crate::can::CanFrame;
 use crate::math;
@@ -47,6 +47,8 @@ pub struct Outputs<'a> {
     pub dxdt_mps: Option<f32>,
     /// The predicted points (empty without a prediction).
     pub predictions: &'a [PredictedPoint],
+    /// The controller's command.
+    pub command: ControlCommand,
 }
 
 /// The publishing stage's state: the tick counter and what the health bits remember.
@@ -87,7 +89,7 @@ impl Health {
         self.range_errors_seen = counters.range_errors;
         let mut push = |(frame, r): (CanFrame, EncodeReport)| {
             report.merge(&r);
-            // Note: capacity 16 >= 2 + 10 + 1 frames, so the push cannot fail.
+            // Note: capacity 16 >= 2 + 10 + 1 + 1 frames, so the push cannot fail.
             let _ = tx.push(frame);
         };
         let gnss_rejected = recent(now, out.gnss_rejected_us);
@@ -113,6 +115,7 @@ impl Health {
         }
         let status = self.status_page(tick, inputs, counters, out, gnss_rejected);
         push(status.encode_with_report(counter));
+        push(out.command.encode_with_report(counter));
         counters.nonfinite = counters
             .nonfinite
             .saturating_add(u32::from(report.non_finite));

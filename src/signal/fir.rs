@@ -88,14 +88,24 @@ fn sinc(x: f64) -> f64 {
     }
 }
 
-/// The taps; [`Fir::from_taps`] checks them again on the way in.
+/// The taps and how many are in use; [`Fir::from_taps`] checks the taps again on the way in,
+/// and the taps after the ones in use must be zero.
 impl<const N: usize> Image for Fir<N> {
     fn write(&self, w: &mut ImageWriter<'_>) {
-        self.taps.write(w);
+        let Self { taps, len } = self;
+        taps.write(w);
+        len.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         let taps = <[f32; N]>::read(r)?;
-        Self::from_taps(taps).map_err(|_| r.out_of_range())
+        let mut fir = Self::from_taps(taps).map_err(|_| r.out_of_range())?;
+        let len = usize::read(r)?;
+        let unused = taps.get(len..).filter(|_| len >= 1);
+        match unused {
+            Some(rest) if rest.iter().all(|t| *t == 0.0) => fir.len = len,
+            _ => return Err(r.out_of_range()),
+        }
+        Ok(fir)
     }
 }
 
@@ -104,6 +114,8 @@ impl<const N: usize> Image for Fir<N> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fir<const N: usize> {
     taps: [f32; N],
+    /// Taps in use, from the first; the rest are zero (see [`Fir::lowpass_len`]).
+    len: usize,
 }
 
 impl<const N: usize> Fir<N> {
@@ -117,6 +129,7 @@ impl<const N: usize> Fir<N> {
         }
         Ok(Self {
             taps: taps.map(|t| t as f32),
+            len: N,
         })
     }
 
@@ -128,7 +141,7 @@ impl<const N: usize> Fir<N> {
         if taps.iter().any(|t| !t.is_finite()) {
             return Err(FilterError::NonFiniteTap);
         }
-        Ok(Self { taps })
+        Ok(Self { taps, len: N })
     }
 
     /// [`design_lowpass`] with N taps (f64), then [`Fir::from_taps_f64`]. Hz.
@@ -143,10 +156,38 @@ impl<const N: usize> Fir<N> {
         &self.taps
     }
 
-    /// Group delay of a symmetric (linear-phase) design, in samples: (N - 1) / 2
-    /// (10 samples = 0.1 s at 100 Hz for the paper's 21 taps). Half-integer for even N.
+    /// Group delay of a symmetric (linear-phase) design, in samples: (len - 1) / 2 with len
+    /// the taps in use (10 samples = 0.1 s at 100 Hz for the paper's 21 taps). Half-integer
+    /// for an even length.
     pub fn group_delay_samples(&self) -> f32 {
-        (N as f32 - 1.0) * 0.5
+        (self.len as f32 - 1.0) * 0.5
+    }
+
+    /// [`design_lowpass`] with `len` taps (1 <= len <= N) in the first `len` taps and zeros
+    /// after: a shorter filter in this delay line, for a filter whose length is chosen at run
+    /// time (the node's GNSS lowpass follows the receiver's rate). Its output is bit for bit
+    /// that of a `Fir<len>` (the zero taps add exact zeros last); its group delay is
+    /// (len - 1) / 2. `NoTaps` for len 0 or above N.
+    pub fn lowpass_len(len: usize, cutoff_hz: f64, fs_hz: f64) -> Result<Self, FilterError> {
+        let mut taps = [0.0_f64; N];
+        let used = taps
+            .get_mut(..len)
+            .filter(|t| !t.is_empty())
+            .ok_or(FilterError::NoTaps)?;
+        design_lowpass(used, cutoff_hz, fs_hz)?;
+        let mut f = Self::from_taps_f64(&taps)?;
+        f.len = len;
+        Ok(f)
+    }
+
+    /// Taps in use (N, or the `len` of [`Fir::lowpass_len`]).
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True for the degenerate `Fir<0>` (which no constructor returns).
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
 
     /// Pushes one sample into the delay line and returns the filtered output. Same units as

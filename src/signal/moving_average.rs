@@ -8,17 +8,24 @@
 //! and the output depends only on the last N inputs, bit for bit.
 use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 
-/// Configuration of a causal moving average over N samples (N >= 1). Holds 1/N.
+/// Configuration of a causal moving average over N samples (N >= 1), or over a shorter span
+/// chosen at run time ([`MovingAverage::with_span`]). Holds 1/span.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MovingAverage<const N: usize> {
     inv_n: f32,
+    /// Samples averaged, 1..=N (N for [`MovingAverage::new`]).
+    span: usize,
 }
 
-/// Nothing to store: the span is the type's `N`.
+/// The span (1..=N); 1/span follows from it.
 impl<const N: usize> Image for MovingAverage<N> {
-    fn write(&self, _w: &mut ImageWriter<'_>) {}
-    fn read(_r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
-        Ok(Self::new())
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        let Self { inv_n: _, span } = self;
+        span.write(w);
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        let span = usize::read(r)?;
+        Self::with_span(span).ok_or_else(|| r.out_of_range())
     }
 }
 
@@ -34,12 +41,36 @@ impl<const N: usize> MovingAverage<N> {
     pub const fn new() -> Self {
         Self {
             inv_n: if N == 0 { 0.0 } else { 1.0 / N as f32 },
+            span: N,
         }
+    }
+
+    /// A moving average over the last `span` samples, 1 <= span <= N (`None` otherwise). Its
+    /// output is bit for bit that of a `MovingAverage<span>`: the samples sit in the same
+    /// slots, and the unused slots add exact zeros after them.
+    pub fn with_span(span: usize) -> Option<Self> {
+        if span == 0 || span > N {
+            return None;
+        }
+        Some(Self {
+            inv_n: 1.0 / span as f32,
+            span,
+        })
+    }
+
+    /// Fills `state`'s window with `value`, as if the input had been `value` forever (the
+    /// span's slots only: [`MovingAverageState::primed`] fills all N).
+    pub fn prime(&self, state: &mut MovingAverageState<N>, value: f32) {
+        *state = MovingAverageState::new();
+        for slot in state.window.iter_mut().take(self.span) {
+            *slot = value;
+        }
+        state.count = self.span;
     }
 
     /// Window length in samples.
     pub const fn len(&self) -> usize {
-        N
+        self.span
     }
 
     /// True for the degenerate N = 0.
@@ -47,27 +78,27 @@ impl<const N: usize> MovingAverage<N> {
         N == 0
     }
 
-    /// Group delay in samples: (N - 1) / 2.
+    /// Group delay in samples: (span - 1) / 2.
     pub fn group_delay_samples(&self) -> f32 {
-        (N as f32 - 1.0) * 0.5
+        (self.span as f32 - 1.0) * 0.5
     }
 
-    /// Pushes `x` and returns the mean of the last N samples (of the `count` samples seen so
-    /// far while fewer than N have arrived since a reset, so an unprimed filter does not ramp
-    /// up from 0). Same units as `x`. A NaN input poisons the output for N samples.
+    /// Pushes `x` and returns the mean of the last `span` samples (of the `count` samples seen
+    /// so far while fewer than `span` have arrived since a reset, so an unprimed filter does not ramp
+    /// up from 0). Same units as `x`. A NaN input poisons the output for `span` samples.
     pub fn process(&self, state: &mut MovingAverageState<N>, x: f32) -> f32 {
         if let Some(slot) = state.window.get_mut(state.next) {
             *slot = x;
         }
         state.next += 1;
-        if state.next >= N {
+        if state.next >= self.span {
             state.next = 0;
         }
-        if state.count < N {
+        if state.count < self.span {
             state.count += 1;
         }
         let sum: f32 = state.window.iter().sum();
-        if state.count == N {
+        if state.count == self.span {
             sum * self.inv_n
         } else {
             // Unfilled slots are 0 after a reset, so `sum` is the sum of the `count` samples.

@@ -89,7 +89,7 @@ impl<const N: usize> Samples<N> {
 
 /// A `&'static mut` to a fresh, zeroed sample store of type `$t`, one static per use site.
 /// The stores (3 KiB each, 81 KiB in all) live in .bss: on the stack they would not fit its
-/// 12 KiB region (memory.x). Each use site runs once (one call per benchmark group).
+/// 16 KiB region (memory.x). Each use site runs once (one call per benchmark group).
 macro_rules! samples {
     ($t:ty) => {{
         static mut STORE: $t = zeroed_store();
@@ -156,7 +156,7 @@ impl View<'_> {
 /// 20 ms grid from the first frame, each given the frames stamped at or before it); `step`
 /// runs `Node::step`, `each` sees every tick after it.
 fn replay(
-    mut step: impl FnMut(&mut Node, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
+    mut step: impl FnMut(&mut FirmwareNode, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
     mut each: impl FnMut(&View),
 ) {
     let Ok(mut node) = catmodel_firmware::baked::node() else {
@@ -167,33 +167,34 @@ fn replay(
     let mut inputs = Inputs::default();
     let mut tick_us: Option<u64> = None;
     let mut index = 0u32;
-    let mut run_tick = |node: &mut Node, now_us: u64, rx: &[TimedFrame], inputs: &mut Inputs| {
-        for f in rx {
-            match decode_input(&f.frame, config.gnss_source) {
-                Ok(InputMessage::Steering(m, _)) => inputs.steer_pct = m.steer_pct,
-                Ok(InputMessage::Speed(m, _)) => {
-                    inputs.speed_mps = m.speed_mps;
-                    inputs.speed_cmd_mps = m.speed_cmd_mps;
+    let mut run_tick =
+        |node: &mut FirmwareNode, now_us: u64, rx: &[TimedFrame], inputs: &mut Inputs| {
+            for f in rx {
+                match decode_input(&f.frame, config.gnss_source) {
+                    Ok(InputMessage::Steering(m, _)) => inputs.steer_pct = m.steer_pct,
+                    Ok(InputMessage::Speed(m, _)) => {
+                        inputs.speed_mps = m.speed_mps;
+                        inputs.speed_cmd_mps = m.speed_cmd_mps;
+                    }
+                    _ => {}
                 }
-                _ => {}
             }
-        }
-        let tick = Tick {
-            now_us,
-            platform: PlatformStats::default(),
+            let tick = Tick {
+                now_us,
+                platform: PlatformStats::default(),
+            };
+            let mut tx = TxFrames::new();
+            let estimate = step(node, &tick, rx, &mut tx);
+            each(&View {
+                index,
+                config: &config,
+                rx,
+                tx: &tx,
+                estimate,
+                inputs: *inputs,
+            });
+            index += 1;
         };
-        let mut tx = TxFrames::new();
-        let estimate = step(node, &tick, rx, &mut tx);
-        each(&View {
-            index,
-            config: &config,
-            rx,
-            tx: &tx,
-            estimate,
-            inputs: *inputs,
-        });
-        index += 1;
-    };
     for line in BUNDLED_DRIVE.split(|&b| b == b'\n') {
         let Some(frame) = core::str::from_utf8(line)
             .ok()
@@ -218,7 +219,12 @@ fn replay(
     }
 }
 
-fn node_step(node: &mut Node, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
+fn node_step(
+    node: &mut FirmwareNode,
+    tick: &Tick,
+    rx: &[TimedFrame],
+    tx: &mut TxFrames,
+) -> TickEstimate {
     node.step(tick, rx, tx)
 }
 

@@ -132,7 +132,7 @@ impl Stats {
     }
 }
 
-/// The big state lives in .bss: the stack region is 12 KiB (memory.x).
+/// The big state lives in .bss: the stack region is 16 KiB (memory.x).
 struct Statics {
     stats: Stats,
     state: MpcState,
@@ -799,7 +799,7 @@ mod tiny {
 }
 
 /// `MpcConfig::for_node` into `slot`, or the bench stops. One function per value built, so
-/// that no frame holds more than one of them (the benches run on the firmware's 12 KiB stack).
+/// that no frame holds more than one of them (the benches run on the firmware's 16 KiB stack).
 #[inline(never)]
 fn init_controller(slot: &mut Option<MpcConfig>, node: &NodeConfig, tuning: MpcTuning) -> u32 {
     let (mpc, instructions) = timed(|| MpcConfig::for_node(node, tuning));

@@ -1,7 +1,7 @@
 //! The stack: where it is, and how deep it has been (both platforms).
 //!
-//! Layout (`memory.x`): the stack has its own 12 KiB region at the very bottom of SRAM,
-//! 0x2000_0000..0x2000_3000, and every static (.data, .bss) lies above it. It grows down, so an
+//! Layout (`memory.x`): the stack has its own 16 KiB region at the very bottom of SRAM,
+//! 0x2000_0000..0x2000_4000, and every static (.data, .bss) lies above it. It grows down, so an
 //! overflow runs off 0x2000_0000 into reserved address space and faults at once (BusFault ->
 //! HardFault) instead of silently overwriting the node's state: the layout flip-link produces,
 //! made by the linker script so that no extra linker is needed. `cargo xtask size` checks it.

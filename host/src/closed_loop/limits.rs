@@ -8,6 +8,7 @@ use super::driver::{Controller, NodeDriver};
 use super::scenario::{self, Kind};
 use super::{run, Receiver, RunOptions};
 use crate::sim::config::VehicleConfig;
+use catmodel::control::pure_pursuit::PurePursuitConfig;
 use catmodel::node::NodeConfig;
 
 /// Scan step, m/s.
@@ -123,9 +124,10 @@ pub fn dlc_limits(
     let mut pursuit = None;
     for name in controllers {
         let controller =
-            super::controller_named(name, node, super::receiver_rms_m(vehicle, Receiver::Rtk))?;
-        let super::driver::Controller::PurePursuit(cfg) = controller;
-        pursuit.get_or_insert(cfg);
+            super::controller_named(name, super::receiver_rms_m(vehicle, Receiver::Rtk))?;
+        if let super::driver::Controller::PurePursuit(tuning) = controller {
+            pursuit.get_or_insert(PurePursuitConfig::for_node(node, tuning));
+        }
         let mut entries = Vec::new();
         let target = highest_clean_speed(
             |v| {
@@ -154,15 +156,11 @@ pub fn dlc_limits(
         optimal_profile_pct: Vec::new(),
     };
     if optimise {
+        // The optimiser's first guess is the reference controller's steering.
         let pursuit = match pursuit {
             Some(p) => p,
             None => {
-                let super::driver::Controller::PurePursuit(cfg) = super::controller_named(
-                    "pure-pursuit",
-                    node,
-                    super::receiver_rms_m(vehicle, Receiver::Rtk),
-                )?;
-                cfg
+                PurePursuitConfig::for_node(node, catmodel::control::pure_pursuit::DEFAULT_TUNING)
             }
         };
         // The search starts where the slowest controller was still clean (or at the scan's

@@ -140,6 +140,34 @@ pub struct RunOutput {
     pub metrics: Metrics,
 }
 
+/// The node's configuration for `vehicle` (antenna, dynamics, and, without a model file,
+/// geometry and steering), on top of `base` (the published models or a model file's).
+pub fn node_config_for(
+    base: NodeConfig,
+    vehicle: &VehicleConfig,
+    geometry_from_vehicle: bool,
+) -> anyhow::Result<NodeConfig> {
+    let c = &vehicle.chassis;
+    let mut config = base;
+    if geometry_from_vehicle {
+        config.vehicle.wheelbase_m = c.wheelbase_m as f32;
+        config.vehicle.track_m = c.track_m as f32;
+        config.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
+        config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
+    }
+    config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
+    config.dynamics = Some(catmodel::model::dynamic::DynamicParams {
+        mass_kg: c.mass_kg as f32,
+        yaw_inertia_kg_m2: c.yaw_inertia_kg_m2 as f32,
+        cg_to_front_m: c.cg_to_front_m as f32,
+        cg_to_rear_m: c.cg_to_rear_m as f32,
+        cornering_front_n_per_rad: vehicle.tyre_front.cornering_stiffness_n_per_rad as f32,
+        cornering_rear_n_per_rad: vehicle.tyre_rear.cornering_stiffness_n_per_rad as f32,
+        min_speed_mps: catmodel::model::dynamic::MIN_SPEED_MPS,
+    });
+    Ok(config)
+}
+
 /// The planner's path as the core's `Path` (for scoring lateral error on truth).
 pub fn core_path(course: &Course) -> Path {
     let waypoints: Vec<Waypoint> = course
@@ -332,7 +360,9 @@ pub fn run(
         let due = pending_rows.partition_point(|(t, _)| *t as u64 <= t_tick_us);
         let mut rx: Vec<TimedFrame> = Vec::new();
         for (_, row) in pending_rows.drain(..due) {
-            encoder.encode_row(&row, &mut rx);
+            // Note: the simulator's clock starts at 0 and only counts up, so a row's time is
+            // never negative (the only error encode_row reports).
+            let _ = encoder.encode_row(&row, &mut rx);
         }
         let tick_start = t_tick_us - TICK_US;
         for (i, frame) in planner.take_tick_frames().into_iter().enumerate() {
@@ -460,37 +490,26 @@ pub struct ClosedLoopArgs {
     pub out: std::path::PathBuf,
 }
 
-/// The controller called `name` for the car the node knows (`node`: its model file's body)
-/// with a receiver of horizontal RMS error `receiver_rms_m`: obstacles are kept clear by
+/// The controller called `name` (the node's own car from its model file) with a receiver of
+/// horizontal RMS error `receiver_rms_m`: obstacles are kept clear by
 /// [`OBSTACLE_MARGIN_M`] plus 2.5 times that (the estimate can be that far off; the node does
 /// not publish its uncertainty yet).
-pub fn controller_named(
-    name: &str,
-    node: &NodeConfig,
-    receiver_rms_m: f64,
-) -> anyhow::Result<driver::Controller> {
+pub fn controller_named(name: &str, receiver_rms_m: f64) -> anyhow::Result<driver::Controller> {
     match name {
-        "pure-pursuit" => {
-            use catmodel::control::pure_pursuit::{PurePursuitConfig, PurePursuitTuning};
-            let tuning = PurePursuitTuning {
+        "pure-pursuit" => Ok(driver::Controller::PurePursuit(
+            catmodel::control::pure_pursuit::PurePursuitTuning {
                 obstacle_margin_m: (OBSTACLE_MARGIN_M + 2.5 * receiver_rms_m) as f32,
                 ..catmodel::control::pure_pursuit::DEFAULT_TUNING
-            };
-            Ok(driver::Controller::PurePursuit(
-                PurePursuitConfig::for_node(node, tuning),
-            ))
-        }
-        "mpc" => anyhow::bail!(
-            "controller `mpc`: the model-predictive controller is not in this build yet; use \
-             --controller pure-pursuit"
-        ),
+            },
+        )),
+        "mpc" => Ok(driver::Controller::Mpc),
         other => anyhow::bail!("unknown controller `{other}`; known: mpc, pure-pursuit"),
     }
 }
 
 /// Loads the plant's vehicle (`vehicle`, default the CAT Vehicle) and the node's configuration
-/// from the car's model file (`model`, default `models/paper.toml`, the CAT Vehicle's). A plant
-/// vehicle needs its own model file: the node knows a car only from one.
+/// from the car's model file (`model`, default `models/paper.toml`, the CAT Vehicle's; without
+/// one, a plant vehicle lends the node its geometry and steering).
 pub fn load_setup(
     vehicle: Option<&std::path::Path>,
     model: Option<&std::path::Path>,
@@ -499,15 +518,9 @@ pub fn load_setup(
         Some(p) => VehicleConfig::load(p).map_err(|e| anyhow::anyhow!("{e}"))?,
         None => VehicleConfig::default(),
     };
-    if let (Some(v), None) = (vehicle, model) {
-        anyhow::bail!(
-            "--vehicle {} needs --model: the node knows a car only from its model file \
-             (e.g. models/hatchback.toml for host/vehicles/hatchback.toml)",
-            v.display()
-        );
-    }
+    let base = crate::node_config(model)?;
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
-    let node = crate::node_config(model)?;
+    let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
     Ok((cfg, node))
 }
 
@@ -533,7 +546,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         anyhow::anyhow!("unknown receiver `{}`; known: rtk, standard", args.receiver)
     })?;
     let (vehicle, node) = load_setup(args.vehicle.as_deref(), args.model.as_deref())?;
-    let controller = controller_named(&args.controller, &node, receiver_rms_m(&vehicle, receiver))?;
+    let controller = controller_named(&args.controller, receiver_rms_m(&vehicle, receiver))?;
     let speed = args.speed_mps.unwrap_or(kind.default_speed_mps());
     if !(speed.is_finite() && speed > 0.0 && speed <= 40.0) {
         anyhow::bail!("--speed {speed}: a target speed is in (0, 40] m/s");

@@ -9,11 +9,14 @@
 //!    minimisation (separable least squares + Levenberg-Marquardt from the ARX poles), for
 //!    the internal controller (eq 5), the dx/dt MISO model (eq 7) and the lateral model;
 //! 5. [`validate`]: fit % (pure simulation, MATLAB `compare`) and MSE on training and
-//!    validation data, each beside the kinematic model; written into the model file.
+//!    validation data, each beside the kinematic model; written into the model file;
+//! 6. [`floor`]: every fit checked against the floor before the file may be written.
 pub mod arx;
+pub mod car;
 pub mod correlation;
 pub mod delay;
 pub mod discretize;
+pub mod floor;
 pub mod oe;
 pub mod preprocess;
 pub mod report;
@@ -96,6 +99,8 @@ pub struct Identification {
     pub training_scores: Scores,
     /// Scores on validation data.
     pub validation_scores: Option<Scores>,
+    /// Whether the dx/dt model was re-identified (else the file keeps the base file's).
+    pub dx_dt_identified: bool,
     /// Things the user should know (skipped models, weak excitation, transfer caveats).
     pub notes: Vec<String>,
     /// Wall time of the identification (without reading files), s.
@@ -399,7 +404,15 @@ pub fn identify_lateral(
     // Dynamic part over whole experiments.
     let r_kin: Vec<Vec<f64>> = training
         .iter()
-        .map(|e| validate::kinematic_yaw(vehicle, g, k, &e.vel, &e.delta_rad))
+        .map(|e| {
+            e.as_measured_yaw(&validate::kinematic_yaw(
+                vehicle,
+                g,
+                k,
+                &e.vel,
+                &e.delta_rad,
+            ))
+        })
         .collect();
     let inputs: Vec<[&[f64]; 1]> = r_kin.iter().map(|r| [&r[..]]).collect();
     let data: Vec<Data> = training
@@ -622,6 +635,7 @@ pub fn identify(
         speed,
         training_scores,
         validation_scores,
+        dx_dt_identified: dx_dt_tfs.is_some(),
         notes,
         seconds: started.elapsed().as_secs_f64(),
     })

@@ -13,6 +13,7 @@ use catmodel::signal::{filtfilt, fir, resample, smooth};
 
 use crate::logcsv::{self, LogRow};
 use crate::model_file::VehicleSection;
+use catmodel::node::estimator::PAPER_GNSS_RATE_HZ;
 
 /// How logs are preprocessed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,8 +26,9 @@ pub struct PreprocessOptions {
     pub cutoff_hz: f64,
     /// MATLAB `smooth` span (paper: 10, which MATLAB applies as 9); 0 or 1 = none.
     pub smooth_span: usize,
-    /// Half-width of the central difference for dx/dt and yaw rate, samples (12 = +-0.24 s):
-    /// differentiating GNSS positions needs a baseline wider than one sample.
+    /// Half-width of the central difference for dx/dt and yaw rate with the paper's 100 Hz
+    /// receiver, samples (12 = +-0.24 s): differentiating GNSS positions needs a baseline wider
+    /// than one sample. Slower receivers get a wider one ([`diff_half_width`]).
     pub diff_half_width: usize,
     /// Shortest accepted log after resampling, s.
     pub min_duration_s: f64,
@@ -74,16 +76,38 @@ pub struct Experiment {
     pub dx: Vec<f64>,
     /// dy/dt (north velocity), m/s.
     pub dy: Vec<f64>,
-    /// Course over ground, clockwise from north, rad, unwrapped (held where slower than 1 m/s).
+    /// Course over ground, clockwise from north, rad, unwrapped (held where the wheel speed is below 1 m/s).
     pub heading: Vec<f64>,
-    /// Yaw rate from the course, rad/s, positive clockwise (0 where slower than 1 m/s);
+    /// Yaw rate from the course, rad/s, positive clockwise (0 where the wheel speed is below 1 m/s);
     /// central difference over +-4 `diff_half_width` (the course is noisier than positions).
     pub yaw_rate: Vec<f64>,
     /// Origin of `x`, `y`: the first GNSS fix (lat, lon), degrees.
     pub origin_deg: (f64, f64),
+    /// Half-width of the central difference that made `yaw_rate` from the course, samples.
+    pub yaw_half_width: usize,
+    /// What reading the log noticed without refusing it ([`logcsv::LogNotes::messages`]).
+    pub log_notes: Vec<String>,
 }
 
 impl Experiment {
+    /// A yaw rate as `yaw_rate` measures it: `yaw_rate` is the central difference of the
+    /// course over +-`yaw_half_width` samples, i.e. the true yaw rate averaged over that
+    /// window, and 0 where the car stood during the window ([`zero_unless_moving`]). A model's yaw rate goes
+    /// through the same linear operation before it is fitted to or compared with `yaw_rate`
+    /// (as every signal goes through the same lowpass): otherwise the model's dynamics would
+    /// absorb the measurement's window (a 1 s lag that is not the car's).
+    pub fn as_measured_yaw(&self, r: &[f64]) -> Vec<f64> {
+        let mut integral = Vec::with_capacity(r.len());
+        let mut sum = 0.0;
+        for v in r {
+            integral.push(sum);
+            sum += v * self.ts_s;
+        }
+        let mut out = derivative(&integral, self.ts_s, self.yaw_half_width);
+        zero_unless_moving(&mut out, &self.vel, self.yaw_half_width);
+        out
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.t.len()
@@ -124,6 +148,24 @@ pub fn filter_signal(x: &[f64], taps: &[f64], span: usize) -> Result<Vec<f64>> {
     Ok(y)
 }
 
+/// The central difference's half-width for a receiver at `gnss_rate_hz`, samples:
+/// `opts.diff_half_width` at 100 Hz, times `(100 / rate)^(1/7)` (17 at 10 Hz, 23 at 1 Hz).
+/// Why 1/7: a slope fitted over a baseline of T seconds to fixes with white noise has a
+/// variance ~ 1 / (rate T^3), and the path's curvature biases it ~ T^2; the sum of the
+/// variance and the squared bias is least for T ~ rate^(-1/7). With it the second car's 10 Hz
+/// receiver (0.4 m noise) gives a lateral fit of 74 % / 78 % (training / validation,
+/// `scripts/second-car.sh`); with the 100 Hz baseline of 12 samples its course is too noisy
+/// for the fit floor.
+pub fn diff_half_width(opts: &PreprocessOptions, gnss_rate_hz: f64) -> usize {
+    let rate = if gnss_rate_hz.is_finite() && gnss_rate_hz > 0.0 {
+        gnss_rate_hz
+    } else {
+        PAPER_GNSS_RATE_HZ
+    };
+    let scale = (PAPER_GNSS_RATE_HZ / rate).powf(1.0 / 7.0);
+    ((opts.diff_half_width as f64 * scale).round() as usize).max(1)
+}
+
 /// Central difference with half-width `h` samples (one-sided, shrinking, at the ends).
 pub fn derivative(x: &[f64], ts_s: f64, h: usize) -> Vec<f64> {
     let n = x.len();
@@ -157,13 +199,16 @@ pub fn load_experiment(
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
-    let rows = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
+    let log = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
     let name = path
         .file_name()
         .and_then(|n| n.to_str())
         .map(|n| n.trim_end_matches(".csv").to_string())
         .unwrap_or_else(|| "log".into());
-    preprocess_rows(&name, &rows, vehicle, opts).with_context(|| format!("{}", path.display()))
+    let mut e = preprocess_rows(&name, &log.rows, vehicle, opts)
+        .with_context(|| format!("{}", path.display()))?;
+    e.log_notes = log.notes.messages();
+    Ok(e)
 }
 
 /// Preprocesses log rows (see the module doc).
@@ -278,15 +323,16 @@ pub fn preprocess_rows(
         .iter()
         .map(|p| vehicle.steer_pct_to_rad(*p))
         .collect();
-    let dx = derivative(&x, opts.ts_s, opts.diff_half_width);
-    let dy = derivative(&y, opts.ts_s, opts.diff_half_width);
-    let heading = course(&dx, &dy, 1.0);
-    let mut yaw_rate = derivative(&heading, opts.ts_s, 4 * opts.diff_half_width);
-    for (r, (a, b)) in yaw_rate.iter_mut().zip(dx.iter().zip(&dy)) {
-        if a.hypot(*b) < 1.0 {
-            *r = 0.0;
-        }
-    }
+    let half_width = diff_half_width(opts, vehicle.gnss_rate_hz);
+    let dx = derivative(&x, opts.ts_s, half_width);
+    let dy = derivative(&y, opts.ts_s, half_width);
+    // Whether the car moves is the wheel speed's to say: the speed of differentiated GNSS
+    // positions is noise-dominated at standstill (a 10 Hz receiver's 0.4 m noise reads as
+    // about 1 m/s), and a course made of noise turns into yaw-rate spikes of several rad/s.
+    let heading = course(&dx, &dy, &vel, MOVING_MPS);
+    let yaw_half_width = 4 * half_width;
+    let mut yaw_rate = derivative(&heading, opts.ts_s, yaw_half_width);
+    zero_unless_moving(&mut yaw_rate, &vel, yaw_half_width);
     Ok(Experiment {
         name: name.to_string(),
         t: grid,
@@ -304,22 +350,57 @@ pub fn preprocess_rows(
         heading,
         yaw_rate,
         origin_deg: origin,
+        yaw_half_width,
+        log_notes: Vec::new(),
     })
 }
 
+/// Below this wheel speed the car counts as standing: course held, yaw rate 0, m/s.
+pub const MOVING_MPS: f64 = 1.0;
+
+/// Sets `r[k]` to 0 unless the wheel speed is at least [`MOVING_MPS`] at every sample within
+/// +-`half_width` of k: a course difference that reaches into a standstill compares a held
+/// course with one measured at walking pace (noise, with a 10 Hz receiver), and reads as a
+/// yaw-rate spike where the car only starts or stops.
+fn zero_unless_moving(r: &mut [f64], speed_mps: &[f64], half_width: usize) {
+    // Index of the latest standstill sample at or before each k, and the next at or after.
+    let n = r.len().min(speed_mps.len());
+    let mut last_stop: Option<usize> = None;
+    let mut prev = vec![None; n];
+    for (k, p) in prev.iter_mut().enumerate() {
+        if speed_mps[k] < MOVING_MPS {
+            last_stop = Some(k);
+        }
+        *p = last_stop;
+    }
+    let mut next_stop: Option<usize> = None;
+    for k in (0..n).rev() {
+        if speed_mps[k] < MOVING_MPS {
+            next_stop = Some(k);
+        }
+        let near = prev[k].is_some_and(|p| k - p <= half_width)
+            || next_stop.is_some_and(|s| s - k <= half_width);
+        if near {
+            r[k] = 0.0;
+        }
+    }
+}
+
 /// Course over ground from velocity components, clockwise from north, unwrapped; held at the
-/// last value (or the first valid one) where the speed is below `min_speed_mps`.
-pub fn course(dx: &[f64], dy: &[f64], min_speed_mps: f64) -> Vec<f64> {
+/// last value (or the first valid one) where `speed_mps` is below `min_speed_mps`.
+pub fn course(dx: &[f64], dy: &[f64], speed_mps: &[f64], min_speed_mps: f64) -> Vec<f64> {
+    let moving = |v: &f64| *v >= min_speed_mps;
     let first = dx
         .iter()
         .zip(dy)
-        .find(|(a, b)| a.hypot(**b) >= min_speed_mps)
-        .map(|(a, b)| a.atan2(*b))
+        .zip(speed_mps)
+        .find(|(_, v)| moving(v))
+        .map(|((a, b), _)| a.atan2(*b))
         .unwrap_or(0.0);
     let mut out = Vec::with_capacity(dx.len());
     let mut prev = first;
-    for (a, b) in dx.iter().zip(dy) {
-        if a.hypot(*b) >= min_speed_mps {
+    for ((a, b), v) in dx.iter().zip(dy).zip(speed_mps) {
+        if moving(v) {
             let raw = a.atan2(*b);
             let mut d = raw - prev;
             d -= (d / std::f64::consts::TAU).round() * std::f64::consts::TAU;

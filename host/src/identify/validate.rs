@@ -105,17 +105,18 @@ pub fn simulate_all(file: &ModelFile, e: &Experiment) -> Result<Simulated> {
         dx_model,
         dx_kinematic: kinematic_dx(e, &file.vehicle),
         yaw_model,
-        yaw_kinematic: kinematic_yaw(
+        yaw_kinematic: e.as_measured_yaw(&kinematic_yaw(
             &file.vehicle,
             1.0,
             file.vehicle.understeer_s2_per_m2,
             &e.vel,
             &e.delta_rad,
-        ),
+        )),
     })
 }
 
-/// The lateral model's yaw rate over `e` (measured speed, measured steering).
+/// The lateral model's yaw rate over `e` (measured speed, measured steering), as `e.yaw_rate`
+/// measures it ([`Experiment::as_measured_yaw`]).
 pub fn lateral_yaw(l: &Lateral, v: &VehicleSection, e: &Experiment) -> Result<Vec<f64>> {
     let r_kin = kinematic_yaw(
         v,
@@ -124,7 +125,7 @@ pub fn lateral_yaw(l: &Lateral, v: &VehicleSection, e: &Experiment) -> Result<Ve
         &e.vel,
         &e.delta_rad,
     );
-    simulate(&l.model.blocks[0].tf, e.ts_s, &r_kin)
+    simulate(&l.model.blocks[0].tf, e.ts_s, &e.as_measured_yaw(&r_kin))
 }
 
 /// Scores of the simulated series over several experiments, concatenated.

@@ -169,7 +169,7 @@ pub struct BusSensors {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Gnss {
-    /// Fix period, s (paper II-B: 0.01 s).
+    /// Fix period, s (paper II-B: 0.01 s); 0.01..1 s (100 Hz down to 1 Hz).
     pub period_s: f64,
     /// Clock rate error, drawn uniformly in +-this, parts per million.
     pub clock_error_ppm: f64,
@@ -291,6 +291,9 @@ impl Default for VehicleConfig {
         }
     }
 }
+
+/// GNSS fix periods the simulator (and the node) support, s: 100 Hz down to 1 Hz.
+pub const GNSS_PERIOD_RANGE_S: (f64, f64) = (0.01, 1.0);
 
 /// A vehicle file that cannot be used.
 #[derive(Debug)]
@@ -527,6 +530,12 @@ impl VehicleConfig {
         }
         let b = &self.sensors.bus;
         let g = &self.sensors.gnss;
+        if !(GNSS_PERIOD_RANGE_S.0..=GNSS_PERIOD_RANGE_S.1).contains(&g.period_s) {
+            return Err(ConfigError::Invalid(format!(
+                "sensors.gnss.period_s = {} s: receivers from 1 to 100 Hz are supported (0.01..1 s)",
+                g.period_s
+            )));
+        }
         if !(b.timestamp_delay_max_s >= b.timestamp_delay_min_s
             && b.timestamp_delay_max_s - b.timestamp_delay_min_s < b.period_s)
         {

@@ -25,7 +25,7 @@
 //! loop (time constant about 1.2 s for eq 5) cannot follow a finer command anyway.
 use nalgebra::{SMatrix, SVector};
 
-use super::{clamp, max, PLAN_STEPS, TICKS_PER_STEP};
+use super::{clamp, finite_or, max, PLAN_STEPS, TICKS_PER_STEP};
 
 /// MPC steps per command knot (0.2 s).
 pub const KNOT_STEPS: usize = 2;
@@ -353,15 +353,6 @@ fn roll(model: &SsBlock<2>, st: &mut SsBlockState<2>, u: f32) -> [f32; PLAN_STEP
         }
     }
     out
-}
-
-/// `v` if finite, else `fallback`.
-fn finite_or(v: f32, fallback: f32) -> f32 {
-    if v.is_finite() {
-        v
-    } else {
-        fallback
-    }
 }
 
 /// `(H + rho_u I + rho_v P'P)^-1` with `H = w_v P'P + w_du D'D` (D the first difference with

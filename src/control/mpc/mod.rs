@@ -32,7 +32,7 @@ use self::lateral::{BuildError, InflatedObstacle, LateralSetup, Linearisation};
 use self::longitudinal::{
     SpeedPlan, SpeedPlanError, SpeedPlanner, SpeedStart, SpeedState, SpeedTuning,
 };
-use crate::math;
+use crate::math::{self, clamp, finite_or, max, min};
 use crate::model::dynamic::{DynamicParams, LateralState};
 use crate::model::hybrid::Mode;
 use crate::model::kinematic::Pose;
@@ -394,7 +394,7 @@ impl Default for MpcState {
 
 impl MpcState {
     /// No solve yet. `const`, so that the firmware can keep the state (10 KiB) in a static
-    /// rather than build it on its 12 KiB stack.
+    /// rather than build it on its 16 KiB stack.
     pub const fn new() -> Self {
         Self {
             workspace: Workspace::new(),
@@ -1049,43 +1049,6 @@ fn shift_values(v: &mut [f32; STEPS + 1], f: f32) {
         if let Some(next) = old.get(i + 1) {
             *cur += (next - *cur) * f;
         }
-    }
-}
-
-/// The larger of `a` and `b` by one comparison (`b` if either is NaN). `f32::max` is IEEE
-/// maxNum, which the Cortex-M4F has no instruction for: it becomes a call to a software
-/// `fmaxf` (measured: the solver's iterations took a third more instructions with it).
-#[inline(always)]
-pub(crate) fn max(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
-
-/// The smaller of `a` and `b` by one comparison (`b` if either is NaN).
-#[inline(always)]
-pub(crate) fn min(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
-/// `v` limited to [lo, hi] by comparisons (`f32::clamp` asserts lo <= hi, a panic path, and
-/// calls the software maxNum); a NaN `v` gives `hi`.
-#[inline(always)]
-pub(crate) fn clamp(v: f32, lo: f32, hi: f32) -> f32 {
-    min(max(v, lo), hi)
-}
-
-fn finite_or(v: f32, fallback: f32) -> f32 {
-    if v.is_finite() {
-        v
-    } else {
-        fallback
     }
 }
 

@@ -268,6 +268,11 @@ impl TickPlatform for TickRecorder {
             drain: report.drain_counts,
             step: report.step_counts,
             tick: report.tick_counts,
+            flags: if report.controller {
+                record::FLAG_CONTROLLER
+            } else {
+                0
+            },
         }
         .encode();
         self.push(&record);

@@ -1,0 +1,449 @@
+//! Stage 4, drive: the controller that follows the planner's path (the paper's "hybrid
+//! predictive controller").
+//!
+//! The planner's frames (PATH_HEADER, PATH_POINT, PATH_LIMITS, OBSTACLE, LOCAL_ORIGIN) are
+//! assembled by [`PlannerInputs`] as they arrive (stage 1). Each tick, with a complete path and
+//! a valid position, the configured controller computes the steering and speed commands:
+//! - [`Controller::Mpc`], model-predictive control over the identified models
+//!   ([`crate::control::mpc`], docs/mpc.md): the reference is the path sampled at the stations
+//!   the car is expected to reach (the previous plan's speeds, trapezoidal rule), the body's
+//!   ends carry the narrowest corridor between the axle and that end, obstacles are placed
+//!   along the path; its plan (the models rolled forward under the planned commands) becomes
+//!   the PREDICTION frames;
+//! - [`Controller::PurePursuit`], the reference controller it is measured against
+//!   ([`crate::control::pure_pursuit`]); the PREDICTION frames stay the node's roll-out.
+//!
+//! CONTROL_COMMAND goes out every tick: status 0 (no path: speed 0, steering held), 1 tracking,
+//! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet, or
+//! the controller's own fallback: speed 0, steering along the last feasible plan). Never a NaN:
+//! every command is checked finite, else the fallback.
+//!
+//! The state (about 23 KiB: two paths of 256 points and the controller's warm start) is kept
+//! apart from [`super::Node`] so that a platform can place it in a static, initialised at
+//! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
+use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
+use crate::control::mpc::{
+    self, MpcConfig, MpcInput, MpcOutput, MpcState, ReferencePoint, Sample, DEFAULT_TUNING,
+    MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+};
+use crate::control::path::{Path, PathSample, Projection, Tracking};
+use crate::control::planner::{PlannerEvent, PlannerInputs};
+use crate::control::pure_pursuit::{
+    self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
+};
+use crate::image::{Image, ImageError, ImageReader, ImageWriter};
+use crate::model::dynamic::LateralState;
+use crate::model::hybrid::Mode;
+use crate::model::kinematic::Pose;
+use crate::model::predictor::PredictedPoint;
+use crate::model::SsBlockState;
+
+use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
+
+/// Which controller drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Controller {
+    /// Model-predictive control over the identified models.
+    Mpc,
+    /// The reference controller: pure pursuit with a PI speed loop.
+    PurePursuit,
+}
+
+impl Image for Controller {
+    fn write(&self, w: &mut ImageWriter<'_>) {
+        w.word(match self {
+            Controller::Mpc => 0,
+            Controller::PurePursuit => 1,
+        });
+    }
+    fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
+        match r.word()? {
+            0 => Ok(Controller::Mpc),
+            1 => Ok(Controller::PurePursuit),
+            _ => Err(r.out_of_range()),
+        }
+    }
+}
+
+/// What the drive stage needs of this tick's estimate and models.
+#[derive(Clone, Copy, Debug)]
+pub struct DriveInputs<'a> {
+    /// Filtered rear-axle pose; `None` while invalid.
+    pub pose: Option<Pose>,
+    /// Speed, m/s.
+    pub speed_mps: f32,
+    /// The active lateral model's state.
+    pub lateral: LateralState,
+    /// Measured centre-tyre steering angle, rad.
+    pub steer_rad: f32,
+    /// Lateral model the hybrid switch chose.
+    pub mode: Mode,
+    /// Eq 5's state after this tick (its next step consumes the command sent now); `None`
+    /// until a speed was measured.
+    pub speed_model: Option<&'a SsBlockState<2, VELOCITY_DELAY_CAP>>,
+}
+
+/// What the drive stage decided this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveOutput {
+    /// CONTROL_COMMAND.
+    pub command: ControlCommand,
+    /// The controller's planned trajectory at the PREDICTION frames' horizons (0.2 .. 2 s),
+    /// when it has one (the model-predictive controller, while it drives).
+    pub plan: Option<[PredictedPoint; PREDICTION_POINTS]>,
+}
+
+/// The drive stage's state. See the module doc for why it lives apart from the node.
+#[derive(Clone, Debug)]
+pub struct Drive {
+    planner: PlannerInputs,
+    mpc: MpcState,
+    mpc_config: Option<MpcConfig>,
+    pursuit_tuning: PurePursuitTuning,
+    pursuit: PurePursuitState,
+    /// The rear axle's projection on the path last tick.
+    projection: Option<Projection>,
+    /// The last plan's speeds (the reference's stations follow them).
+    planned_speeds: Option<[f32; PLAN_STEPS + 1]>,
+    /// Commands sent last tick.
+    last_speed_cmd_mps: f32,
+    last_steer_cmd_pct: f32,
+    /// CONTROL_COMMAND sent last tick, and where the car was relative to the path.
+    last_command: ControlCommand,
+    last_tracking: Option<Tracking>,
+    /// The controller could not be built for this car (the model file's reader refuses such a
+    /// car; kept so that a corrupt image falls back instead of driving).
+    unconfigured: bool,
+}
+
+impl Default for Drive {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drive {
+    /// Nothing received, not configured. `const`: a platform keeps it in a static.
+    pub const fn new() -> Self {
+        Self {
+            planner: PlannerInputs::new(),
+            mpc: MpcState::new(),
+            mpc_config: None,
+            pursuit_tuning: pure_pursuit::DEFAULT_TUNING,
+            pursuit: PurePursuitState {
+                integral_mps: 0.0,
+                projection: None,
+                steer_cmd_pct: 0.0,
+            },
+            projection: None,
+            planned_speeds: None,
+            last_speed_cmd_mps: 0.0,
+            last_steer_cmd_pct: 0.0,
+            last_command: ControlCommand {
+                status: ControlStatus::NoPath,
+                steer_cmd_pct: Some(0.0),
+                speed_cmd_mps: Some(0.0),
+            },
+            last_tracking: None,
+            unconfigured: true,
+        }
+    }
+
+    /// Forgets everything received and configures the controller for the car of `config`,
+    /// in place (the MPC's speed planner is precomputed here: about 0.6 M instructions, once).
+    pub fn configure(&mut self, config: &NodeConfig) {
+        // Everything in place: this state is too large to pass through the stack.
+        self.planner.reset();
+        self.mpc.reset();
+        self.pursuit = PurePursuitState::default();
+        self.projection = None;
+        self.planned_speeds = None;
+        self.last_speed_cmd_mps = 0.0;
+        self.last_steer_cmd_pct = 0.0;
+        self.mpc_config = match config.controller {
+            Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
+            Controller::PurePursuit => None,
+        };
+        self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+    }
+
+    /// What the planner sent so far.
+    pub fn planner(&self) -> &PlannerInputs {
+        &self.planner
+    }
+
+    /// CONTROL_COMMAND as sent last tick.
+    pub fn last_command(&self) -> ControlCommand {
+        self.last_command
+    }
+
+    /// The car relative to the path last tick, when a controller tracked it.
+    pub fn last_tracking(&self) -> Option<Tracking> {
+        self.last_tracking
+    }
+
+    /// Replaces the reference controller's tuning (host tools that sweep it; the node runs
+    /// [`pure_pursuit::DEFAULT_TUNING`] otherwise).
+    pub fn tune_pursuit(&mut self, tuning: PurePursuitTuning) {
+        self.pursuit_tuning = tuning;
+    }
+
+    /// Applies one planner message (stage 1); returns the map origin when LOCAL_ORIGIN set it.
+    pub fn receive(&mut self, message: &PlannerMessage) -> Option<(i32, i32)> {
+        match self.planner.receive(message) {
+            PlannerEvent::PathActivated(_) => {
+                self.new_path();
+                None
+            }
+            PlannerEvent::Origin { lat_e7, lon_e7 } => Some((lat_e7, lon_e7)),
+            PlannerEvent::None | PlannerEvent::PathInvalid(..) => None,
+        }
+    }
+
+    /// The local frame moved: a path in the old frame means nothing any more.
+    pub fn frame_changed(&mut self) {
+        self.planner.drop_path();
+        self.new_path();
+    }
+
+    fn new_path(&mut self) {
+        self.mpc.reset();
+        self.pursuit.integral_mps = 0.0;
+        self.pursuit.projection = None;
+        self.projection = None;
+        self.planned_speeds = None;
+    }
+
+    /// Stage 4: this tick's commands.
+    pub fn tick(&mut self, config: &NodeConfig, inputs: &DriveInputs<'_>) -> DriveOutput {
+        self.last_tracking = None;
+        let out = self.decide(config, inputs);
+        self.last_command = out.command;
+        out
+    }
+
+    fn decide(&mut self, config: &NodeConfig, inputs: &DriveInputs<'_>) -> DriveOutput {
+        let Some(path) = self.planner.path() else {
+            return self.hold(ControlStatus::NoPath);
+        };
+        let (Some(pose), Some(speed_model)) = (inputs.pose, inputs.speed_model) else {
+            return self.hold(ControlStatus::Fallback);
+        };
+        if self.unconfigured {
+            return self.hold(ControlStatus::Fallback);
+        }
+        let output = match (config.controller, self.mpc_config.as_ref()) {
+            (Controller::Mpc, Some(mpc)) => {
+                let Some((out, tracking)) = mpc_tick(
+                    mpc,
+                    &mut self.mpc,
+                    path,
+                    self.planner.obstacles(),
+                    &mut self.projection,
+                    &mut self.planned_speeds,
+                    pose,
+                    inputs,
+                    speed_model,
+                    self.last_speed_cmd_mps,
+                    config,
+                ) else {
+                    return self.hold(ControlStatus::Fallback);
+                };
+                self.last_tracking = Some(tracking);
+                DriveOutput {
+                    command: ControlCommand {
+                        status: match out.status {
+                            mpc::ControlStatus::Tracking => ControlStatus::Tracking,
+                            mpc::ControlStatus::Avoiding => ControlStatus::Avoiding,
+                            mpc::ControlStatus::Fallback => ControlStatus::Fallback,
+                        },
+                        steer_cmd_pct: Some(out.steer_cmd_pct),
+                        speed_cmd_mps: Some(out.speed_cmd_mps),
+                    },
+                    plan: Some(prediction_points(&out)),
+                }
+            }
+            _ => {
+                let car = PursuitCar {
+                    pose: Some(pose),
+                    speed_mps: inputs.speed_mps,
+                };
+                let out = PurePursuitConfig::for_node(config, self.pursuit_tuning).process(
+                    &mut self.pursuit,
+                    Some(path),
+                    self.planner.obstacles(),
+                    &car,
+                );
+                self.last_tracking = out.tracking;
+                DriveOutput {
+                    command: ControlCommand {
+                        status: out.status,
+                        steer_cmd_pct: Some(out.steer_cmd_pct),
+                        speed_cmd_mps: Some(out.speed_cmd_mps),
+                    },
+                    plan: None,
+                }
+            }
+        };
+        match (output.command.steer_cmd_pct, output.command.speed_cmd_mps) {
+            (Some(steer), Some(speed)) if steer.is_finite() && speed.is_finite() => {
+                self.last_steer_cmd_pct = steer;
+                self.last_speed_cmd_mps = speed;
+                output
+            }
+            _ => self.hold(ControlStatus::Fallback),
+        }
+    }
+
+    /// Speed 0, steering held where it was last commanded.
+    fn hold(&mut self, status: ControlStatus) -> DriveOutput {
+        self.last_speed_cmd_mps = 0.0;
+        DriveOutput {
+            command: ControlCommand {
+                status,
+                steer_cmd_pct: Some(self.last_steer_cmd_pct),
+                speed_cmd_mps: Some(0.0),
+            },
+            plan: None,
+        }
+    }
+}
+
+/// The plan at the PREDICTION frames' horizons: every second 0.1 s step.
+fn prediction_points(out: &MpcOutput) -> [PredictedPoint; PREDICTION_POINTS] {
+    let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
+    for (k, point) in points.iter_mut().enumerate() {
+        if let Some(p) = out.plan.get(2 * (k + 1)) {
+            *point = PredictedPoint {
+                horizon_s: p.t_s,
+                x_m: p.x_m,
+                y_m: p.y_m,
+                heading_rad: p.heading_rad,
+                speed_mps: p.speed_mps,
+            };
+        }
+    }
+    points
+}
+
+fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
+    Sample {
+        pose: Pose::new(s.east_m, s.north_m, s.heading_rad),
+        left_m: corridor.0,
+        right_m: corridor.1,
+    }
+}
+
+/// The narrowest corridor (left, right) of the path between stations `a` and `b` (a <= b):
+/// the samples at both ends and every waypoint in between.
+fn narrowest(path: &Path, a: &PathSample, b: &PathSample) -> (f32, f32) {
+    let mut left = a.left_m.min(b.left_m);
+    let mut right = a.right_m.min(b.right_m);
+    for (i, w) in path.points().iter().enumerate() {
+        let Some(s) = path.station_of(i) else {
+            break;
+        };
+        if s > b.station_m {
+            break;
+        }
+        if s >= a.station_m {
+            left = left.min(w.left_m);
+            right = right.min(w.right_m);
+        }
+    }
+    (left, right)
+}
+
+/// One model-predictive solve; `None` when the path cannot be sampled.
+#[allow(clippy::too_many_arguments)]
+fn mpc_tick(
+    mpc: &MpcConfig,
+    state: &mut MpcState,
+    path: &Path,
+    obstacles: &[Option<ObstacleCircle>],
+    projection: &mut Option<Projection>,
+    planned_speeds: &mut Option<[f32; PLAN_STEPS + 1]>,
+    pose: Pose,
+    inputs: &DriveInputs<'_>,
+    speed_model: &SsBlockState<2, VELOCITY_DELAY_CAP>,
+    last_speed_cmd_mps: f32,
+    config: &NodeConfig,
+) -> Option<(MpcOutput, Tracking)> {
+    let tracking = path.track(&pose, projection.as_ref())?;
+    *projection = Some(tracking.projection);
+    let s0 = tracking.projection.station_m;
+    let hint = tracking.projection.segment;
+    let body = mpc.body();
+    let front = body.length_m - body.rear_overhang_m;
+    let rear = body.rear_overhang_m;
+    // Expected stations: the last plan's speeds (the current speed before there is one).
+    let speeds = planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]);
+    let mut reference = [ReferencePoint {
+        at: sample(&tracking.reference, (0.0, 0.0)),
+        curvature_per_m: 0.0,
+        speed_mps: 0.0,
+        front: sample(&tracking.reference, (0.0, 0.0)),
+        rear: sample(&tracking.reference, (0.0, 0.0)),
+    }; STEPS + 1];
+    let mut s = s0;
+    for (k, r) in reference.iter_mut().enumerate() {
+        if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
+            s += 0.5 * (v0 + v1) * STEP_S;
+        }
+        let at = path.sample(s, hint)?;
+        let ahead = path.sample(s + front, hint)?;
+        let behind = path.sample(s - rear, hint)?;
+        *r = ReferencePoint {
+            at: sample(&at, (at.left_m, at.right_m)),
+            curvature_per_m: at.curvature_per_m,
+            speed_mps: at.speed_mps,
+            front: sample(&ahead, narrowest(path, &at, &ahead)),
+            rear: sample(&behind, narrowest(path, &behind, &at)),
+        };
+    }
+    let mut placed = [None; MAX_OBSTACLES];
+    for (slot, obstacle) in placed.iter_mut().zip(obstacles) {
+        let Some(o) = obstacle else {
+            continue;
+        };
+        let Some(p) = path.project(o.east_m, o.north_m, None) else {
+            continue;
+        };
+        let at = path.sample(p.station_m, p.segment)?;
+        *slot = Some(mpc::Obstacle {
+            east_m: o.east_m,
+            north_m: o.north_m,
+            radius_m: o.radius_m,
+            ahead_m: p.station_m - s0,
+            path_offset_m: p.lateral_m,
+            left_m: at.left_m,
+            right_m: at.right_m,
+        });
+    }
+    // Eq 5's output now: what its next step returns before the command sent now takes effect.
+    let mut peek = *speed_model;
+    let modelled_mps = config.velocity.step(&mut peek, 0.0);
+    let input = MpcInput {
+        reference: &reference,
+        obstacles: &placed,
+        car: mpc::CarState {
+            pose,
+            speed_mps: inputs.speed_mps,
+            lateral: inputs.lateral,
+            steer_rad: inputs.steer_rad,
+            mode: inputs.mode,
+            speed_model,
+            speed_bias_mps: inputs.speed_mps - modelled_mps,
+            last_speed_cmd_mps,
+        },
+        position_uncertainty_m: config.position_uncertainty_m,
+    };
+    let out = mpc.solve(state, &input);
+    let mut next = [0.0; PLAN_STEPS + 1];
+    for (v, p) in next.iter_mut().zip(&out.plan) {
+        *v = p.speed_mps;
+    }
+    *planned_speeds = Some(next);
+    Some((out, tracking))
+}
