@@ -451,7 +451,7 @@ impl Path {
         let end = self.sample(b, hint)?;
         let mut left = start.left_m.min(end.left_m);
         let mut right = start.right_m.min(end.right_m);
-        let first = self.segment_at(a.clamp(0.0, self.length_m()), hint) + 1;
+        let first = self.segment_at(math::clamp(a, 0.0, self.length_m()), hint) + 1;
         for i in first..self.len {
             let (Some(s), Some(w)) = (self.station_of(i), self.points.get(i)) else {
                 break;

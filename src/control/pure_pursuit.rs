@@ -216,19 +216,20 @@ impl PurePursuitConfig {
         let error = target - speed;
         let limit = self.tuning.speed_correction_limit_mps;
         let integral = if error.abs() < limit {
-            (state.integral_mps + self.tuning.speed_ki_per_s * error * self.period_s)
-                .clamp(-limit, limit)
+            math::clamp(
+                state.integral_mps + self.tuning.speed_ki_per_s * error * self.period_s,
+                -limit,
+                limit,
+            )
         } else {
             state.integral_mps
         };
         let speed_cmd = if target <= 0.0 {
             0.0
         } else {
-            let correction = (self.tuning.speed_kp * error + integral).clamp(-limit, limit);
+            let correction = math::clamp(self.tuning.speed_kp * error + integral, -limit, limit);
             // The correction never commands past what still stops in time.
-            (target + correction)
-                .min(stop_limit)
-                .clamp(0.0, self.max_speed_mps)
+            math::clamp((target + correction).min(stop_limit), 0.0, self.max_speed_mps)
         };
 
         if !(steer_pct.is_finite() && speed_cmd.is_finite() && integral.is_finite()) {

@@ -335,26 +335,6 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
     }
 }
 
-/// The narrowest corridor (left, right) of the path between stations `a` and `b` (a <= b):
-/// the samples at both ends and every waypoint in between.
-fn narrowest(path: &Path, a: &PathSample, b: &PathSample) -> (f32, f32) {
-    let mut left = a.left_m.min(b.left_m);
-    let mut right = a.right_m.min(b.right_m);
-    for (i, w) in path.points().iter().enumerate() {
-        let Some(s) = path.station_of(i) else {
-            break;
-        };
-        if s > b.station_m {
-            break;
-        }
-        if s >= a.station_m {
-            left = left.min(w.left_m);
-            right = right.min(w.right_m);
-        }
-    }
-    (left, right)
-}
-
 /// One model-predictive solve; `None` when the path cannot be sampled.
 #[allow(clippy::too_many_arguments)]
 fn mpc_tick(
@@ -398,8 +378,8 @@ fn mpc_tick(
             at: sample(&at, (at.left_m, at.right_m)),
             curvature_per_m: at.curvature_per_m,
             speed_mps: at.speed_mps,
-            front: sample(&ahead, narrowest(path, &at, &ahead)),
-            rear: sample(&behind, narrowest(path, &behind, &at)),
+            front: sample(&ahead, path.narrowest_corridor(s, s + front, hint)?),
+            rear: sample(&behind, path.narrowest_corridor(s - rear, s, hint)?),
         };
     }
     let mut placed = [None; MAX_OBSTACLES];
