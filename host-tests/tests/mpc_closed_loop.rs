@@ -450,3 +450,48 @@ fn second_vehicle_goals() {
         assert!(clearance >= 0.5, "bias {bias_east}: clearance {clearance}");
     }
 }
+
+#[test]
+#[ignore = "scratch: delays"]
+fn scratch_delays() {
+    let cfg = VehicleConfig::default();
+    for (h, st, c) in [
+        (0, 0, 0),
+        (2, 0, 0),
+        (4, 0, 0),
+        (0, 1, 0),
+        (0, 2, 0),
+        (0, 0, 1),
+        (0, 0, 2),
+        (0, 1, 1),
+        (4, 1, 1),
+    ] {
+        let mut line = format!("heading {h} steer {st} command {c}:");
+        for v in [5.0, 8.0, 10.0, 12.0] {
+            let body = ESCAPE_BODY;
+            let (path, _) = double_lane_change(body.width_m as f64, 40.0, v);
+            let mut l = Loop::new(
+                cfg.clone(),
+                mpc_for(&cfg, body, DEFAULT_TUNING),
+                &path,
+                v,
+                0.0,
+                0.0,
+            );
+            l.delays = catmodel_host_tests::mpc_sim::Delays {
+                heading_ticks: h,
+                steer_ticks: st,
+                command_ticks: c,
+            };
+            l.run(&path, path.length_m() - 20.0, 30.0);
+            let worst = l
+                .log
+                .iter()
+                .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+            let rms =
+                (l.log.iter().map(|t| t.e_y_m * t.e_y_m).sum::<f64>() / l.log.len() as f64).sqrt();
+            line += &format!("  {v}: viol {worst:.2} rms {rms:.2}");
+        }
+        println!("{line}");
+    }
+}

@@ -229,7 +229,11 @@ impl PurePursuitConfig {
         } else {
             let correction = math::clamp(self.tuning.speed_kp * error + integral, -limit, limit);
             // The correction never commands past what still stops in time.
-            math::clamp((target + correction).min(stop_limit), 0.0, self.max_speed_mps)
+            math::clamp(
+                (target + correction).min(stop_limit),
+                0.0,
+                self.max_speed_mps,
+            )
         };
 
         if !(steer_pct.is_finite() && speed_cmd.is_finite() && integral.is_finite()) {

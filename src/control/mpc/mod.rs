@@ -197,9 +197,17 @@ pub struct MpcTuning {
     pub admm: AdmmSettings,
     /// Speed plan.
     pub speed: SpeedTuning,
-    /// Steering command = the plan's steering this far ahead (one tick plus the actuator's
-    /// lag), s.
+    /// Steering command = the commanded steering ramp plus the planned rate times this: the
+    /// actuator's lag, s (a first-order lag follows a ramp this far behind).
     pub steer_lead_s: f32,
+    /// The plan starts from the steering the controller commanded (its own ramp, which the
+    /// actuator follows after the bus and its lag), not from the steering report, which is
+    /// older than the command it answers: planning from it closes a loop through the actuator's
+    /// delay that oscillates (a 20 ms old report alone makes the double lane change unclean at
+    /// 5 m/s). The commanded steering is trusted within the distance the actuator covers in
+    /// this time at its rate limit from the report, s; further off (the actuator did not follow:
+    /// saturation, a driver's hand) the plan starts that far from the report.
+    pub steer_trust_s: f32,
     /// Share of the actuator's rate limit the plan may use (the rest is for feedback), 0..1.
     pub steer_rate_share: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
@@ -255,6 +263,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         iterations: 10,
     },
     steer_lead_s: 0.07,
+    steer_trust_s: 0.15,
     steer_rate_share: 0.9,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
@@ -384,6 +393,8 @@ pub struct MpcState {
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
     /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
     obstacle_violation_ticks: u16,
+    /// The commanded steering ramp (without the lead) after the last accepted solve, rad.
+    steer_ramp_rad: Option<f32>,
 }
 
 impl Default for MpcState {
@@ -404,6 +415,7 @@ impl MpcState {
             sides: [None; MAX_OBSTACLES],
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
+            steer_ramp_rad: None,
         }
     }
 
@@ -416,6 +428,7 @@ impl MpcState {
         self.sides = [None; MAX_OBSTACLES];
         self.last_steer_plan = None;
         self.obstacle_violation_ticks = 0;
+        self.steer_ramp_rad = None;
     }
 }
 
@@ -431,7 +444,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 12] = [
+        let checks: [(bool, &'static str); 13] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -446,6 +459,10 @@ impl MpcConfig {
             (
                 tuning.steer_lead_s.is_finite() && (0.0..=STEP_S).contains(&tuning.steer_lead_s),
                 "steer_lead_s (0 .. 0.1 s)",
+            ),
+            (
+                tuning.steer_trust_s.is_finite() && tuning.steer_trust_s >= 0.0,
+                "steer_trust_s (>= 0)",
             ),
             (
                 positive(tuning.steer_rate_share) && tuning.steer_rate_share <= 1.0,
@@ -536,7 +553,7 @@ impl MpcConfig {
             Err(reason) => return self.fallback(state, input, &speed_start, reason),
         };
         // 3. Lateral problem about the previous plan.
-        let x0 = self.initial_state(input);
+        let x0 = self.initial_state(input, state.steer_ramp_rad);
         let lin = self.linearisation(state, input, &x0, &speed_plan);
         let mut speeds = [0.0f32; STEPS + 1];
         for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
@@ -624,8 +641,11 @@ impl MpcConfig {
         });
         state.last_steer_plan = Some((steer, 0));
         let first_rate = rates.first().copied().unwrap_or(0.0);
-        let steer_cmd_rad =
-            steer.first().copied().unwrap_or(0.0) + self.tuning.steer_lead_s * first_rate;
+        // The ramp moves on by one tick of the planned rate; the command leads it by the
+        // actuator's lag.
+        let ramp_rad = steer.first().copied().unwrap_or(0.0) + crate::SAMPLE_PERIOD_S * first_rate;
+        state.steer_ramp_rad = Some(ramp_rad);
+        let steer_cmd_rad = ramp_rad + self.tuning.steer_lead_s * first_rate;
         let plan = self.rollout(input, &steer, &speed_plan.speeds_mps);
         MpcOutput {
             steer_cmd_pct: self.steer_pct(steer_cmd_rad),
@@ -669,7 +689,7 @@ impl MpcConfig {
     }
 
     /// Error state now: offsets from the reference's first point.
-    fn initial_state(&self, input: &MpcInput) -> SVector<f32, NX> {
+    fn initial_state(&self, input: &MpcInput, steer_ramp_rad: Option<f32>) -> SVector<f32, NX> {
         let car = &input.car;
         let at = &input.reference[0].at.pose;
         let (dx, dy) = (car.pose.x_m - at.x_m, car.pose.y_m - at.y_m);
@@ -679,8 +699,13 @@ impl MpcConfig {
             Mode::Dynamic => (car.lateral.vy_mps, car.lateral.yaw_rate_rps),
             Mode::Kinematic => (0.0, 0.0),
         };
+        let trust_rad = self.max_steer_rate_rad_per_s * self.tuning.steer_trust_s;
+        let start = match steer_ramp_rad {
+            Some(ramp) => clamp(ramp, car.steer_rad - trust_rad, car.steer_rad + trust_rad),
+            None => car.steer_rad,
+        };
         let delta = clamp(
-            car.steer_rad,
+            start,
             -self.vehicle.max_steer_rad,
             self.vehicle.max_steer_rad,
         );
@@ -938,6 +963,7 @@ impl MpcConfig {
             }
         }
         state.lin = None;
+        state.steer_ramp_rad = None;
         let speeds = self.speed.stop(speed_start).speeds_mps;
         let lead = self.tuning.steer_lead_s / STEP_S;
         let steer_cmd_rad = interpolate(&steer, lead);
