@@ -23,7 +23,8 @@
 //! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
-    self, MpcConfig, MpcInput, MpcOutput, MpcState, ReferencePoint, Sample, DEFAULT_TUNING,
+    self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample,
+    DEFAULT_TUNING,
     MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
@@ -181,6 +182,16 @@ impl Drive {
     /// The car relative to the path last tick, when a controller tracked it.
     pub fn last_tracking(&self) -> Option<Tracking> {
         self.last_tracking
+    }
+
+    /// Replaces the model-predictive controller's tuning (host tools that sweep it; the node
+    /// runs [`DEFAULT_TUNING`] otherwise) for the car of `config`; `false` (and the controller
+    /// unconfigured: fallback) if the tuning is refused.
+    pub fn tune_mpc(&mut self, config: &NodeConfig, tuning: MpcTuning) -> bool {
+        self.mpc.reset();
+        self.mpc_config = MpcConfig::for_node(config, tuning).ok();
+        self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+        self.mpc_config.is_some()
     }
 
     /// Replaces the reference controller's tuning (host tools that sweep it; the node runs
