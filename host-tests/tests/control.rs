@@ -86,14 +86,20 @@ fn corner_reference_is_continuous_and_its_curvature_hand_derived() {
         pts.push(wp(5.0 + i as f64 * h2.sin(), i as f64 * h2.cos()));
     }
     let p = path_of(&pts);
-    // Between the midpoints of the segments around the corner (stations 4.5 .. 5.5) the
-    // curvature is (pi/6) / 1 m, positive (right turn); elsewhere 0.
+    // Points 1 m apart, baseline 1 m: the reference heading at point i is the direction of the
+    // chord from point i - 1 to point i + 1: pi/2 up to point 4, at the corner (point 5) the
+    // chord (4, 0) -> (5 + sin h2, cos h2) = (1.866, -0.5), pi/2 + atan(0.5 / 1.866) =
+    // pi/2 + pi/12, from point 6 on h2 = pi/2 + pi/6. The curvature at point i is the heading
+    // change from i - 1 to i + 1 over 2 m: pi/24 at points 4 and 6, pi/12 at 5, 0 elsewhere;
+    // linear in between (at 4.5: pi/16). Positive: a right turn.
     for (s, k) in [
         (3.0, 0.0),
-        (4.6, PI / 6.0),
-        (5.0, PI / 6.0),
-        (5.4, PI / 6.0),
-        (6.0, 0.0),
+        (3.5, PI / 48.0),
+        (4.0, PI / 24.0),
+        (4.5, PI / 16.0),
+        (5.0, PI / 12.0),
+        (6.0, PI / 24.0),
+        (7.0, 0.0),
     ] {
         let sample = p.sample(s as f32, 0).unwrap();
         assert!(
@@ -102,11 +108,21 @@ fn corner_reference_is_continuous_and_its_curvature_hand_derived() {
             sample.curvature_per_m
         );
     }
-    // Heading: linear from pi/2 at 4.5 to pi/2 + pi/6 at 5.5.
+    // The curvature integrates to the corner's 30 degrees (trapezoids between the points).
+    let turn: f64 = (0..10)
+        .map(|i| {
+            let k = |s: f64| f64::from(p.sample(s as f32, 0).unwrap().curvature_per_m);
+            0.5 * (k(i as f64) + k(i as f64 + 1.0))
+        })
+        .sum();
+    assert!((turn - PI / 6.0).abs() < 1e-5, "{turn}");
+    // Heading: pi/2 up to 4, then linear between the points' values.
     let h = |s: f32| f64::from(p.sample(s, 0).unwrap().heading_rad);
-    assert!((h(4.5) - PI / 2.0).abs() < 1e-5);
+    assert!((h(4.0) - PI / 2.0).abs() < 1e-5);
+    assert!((h(4.5) - (PI / 2.0 + PI / 24.0)).abs() < 1e-5);
     assert!((h(5.0) - (PI / 2.0 + PI / 12.0)).abs() < 1e-5);
-    assert!((h(5.5) - h2).abs() < 1e-5);
+    assert!((h(5.5) - (PI / 2.0 + PI / 8.0)).abs() < 1e-5);
+    assert!((h(6.0) - h2).abs() < 1e-5);
     // Continuity: no step anywhere along the path.
     let mut prev = h(0.0);
     for k in 1..=1000 {
@@ -132,12 +148,51 @@ fn circle_curvature_within_the_documented_bound() {
     let c = 2.0 * r * (phi / 2.0).sin();
     let expected = phi / c;
     assert!((expected * r - 1.0).abs() <= c * c / (24.0 * r * r) * 1.01);
-    for s in [3.0f32, 7.7, 12.2, 20.0] {
+    // From two baselines (two points here: the chords are just under 1 m) after the start, the
+    // chords around a point are symmetric: the heading is the tangent's and the curvature
+    // phi / c. (Closer to an end, the one-sided chord rounds it: 0.875 phi / c at 3 m.)
+    for s in [4.5f32, 7.7, 12.2, 20.0] {
         let k = f64::from(p.sample(s, 0).unwrap().curvature_per_m);
         assert!(
             (k - expected).abs() < 1e-5 * expected,
             "{s}: {k} vs {expected}"
         );
+    }
+}
+
+#[test]
+fn reference_is_insensitive_to_the_bus_quantisation() {
+    // A right-hand circle of R = 25 m from north (heading = arc / R; 0.04 1/m: the double lane change's curves at 10 m/s) sampled
+    // every 0.5 m and rounded to the bus's 0.02 m: the single segments' headings scatter by up
+    // to 0.02 / 0.5 = 0.04 rad (0.08 1/m of curvature); the reference stays within 0.014 rad of the tangent and
+    // 0.014 1/m of the curvature (the bounds in the module doc).
+    let r = 25.0;
+    let pts: Vec<Waypoint> = (0..120)
+        .map(|i| {
+            let a = i as f64 * 0.5 / r;
+            let (e, n) = (r * (1.0 - a.cos()), r * a.sin());
+            wp((e / 0.02).round() * 0.02, (n / 0.02).round() * 0.02)
+        })
+        .collect();
+    let p = path_of(&pts);
+    let mut s = 4.0f32;
+    while s < 55.0 {
+        let x = p.sample(s, 0).unwrap();
+        // The tangent where the sample lies (centre (R, 0)): stations of rounded points are
+        // not quite arc lengths.
+        let tangent = f64::from(x.north_m).atan2(r - f64::from(x.east_m));
+        let heading_error = (f64::from(x.heading_rad) - tangent).abs();
+        assert!(
+            heading_error < 0.014,
+            "{s}: heading {} vs {tangent}",
+            x.heading_rad
+        );
+        assert!(
+            (f64::from(x.curvature_per_m) - 1.0 / r).abs() < 0.014,
+            "{s}: curvature {}",
+            x.curvature_per_m
+        );
+        s += 0.1;
     }
 }
 

@@ -495,3 +495,81 @@ fn scratch_delays() {
         println!("{line}");
     }
 }
+
+#[test]
+#[ignore = "scratch: the rig's path on the bench"]
+fn scratch_rig_path() {
+    use catmodel_host::closed_loop::scenario::{design_lane_change, dlc_lanes};
+    let cfg = VehicleConfig::default();
+    let body = ESCAPE_BODY;
+    let hb = catmodel_host::sim::config::Body {
+        width_m: body.width_m as f64,
+        length_m: body.length_m as f64,
+        rear_overhang_m: body.rear_overhang_m as f64,
+    };
+    let lanes = dlc_lanes(hb.width_m);
+    let [s1, s3, s5] = lanes;
+    let design = design_lane_change(&hb, &lanes);
+    let lead = 40.0;
+    let edges = move |x: f64| {
+        if x < s1.x_end_m {
+            (s1.y_left_m, s1.y_right_m)
+        } else if x < s3.x_start_m {
+            (s3.y_left_m, s1.y_right_m)
+        } else if x <= s3.x_end_m {
+            (s3.y_left_m, s3.y_right_m)
+        } else if x < s5.x_start_m {
+            (s3.y_left_m, s5.y_right_m)
+        } else {
+            (s5.y_left_m, s5.y_right_m)
+        }
+    };
+    for v in [8.0, 10.0, 11.0, 12.0, 13.0] {
+        let d = design;
+        let path = TestPath::new(
+            lead + s5.x_end_m + 60.0,
+            move |s| {
+                let x = s - lead;
+                (-d.y_at(x.clamp(0.0, s5.x_end_m)), s)
+            },
+            move |s| {
+                let x = s - lead;
+                let y = d.y_at(x.clamp(0.0, s5.x_end_m));
+                let (l, r) = if x < 0.0 || x > s5.x_end_m {
+                    (y + 1.5, y - 1.5)
+                } else {
+                    edges(x)
+                };
+                (l - y, y - r)
+            },
+            move |_| v,
+        );
+        for delays in [
+            Default::default(),
+            catmodel_host_tests::mpc_sim::Delays {
+                heading_ticks: 0,
+                steer_ticks: 1,
+                command_ticks: 1,
+            },
+        ] {
+            let mut l = Loop::new(
+                cfg.clone(),
+                mpc_for(&cfg, body, DEFAULT_TUNING),
+                &path,
+                v,
+                0.0,
+                0.0,
+            );
+            l.delays = delays;
+            l.run(&path, path.length_m() - 20.0, 30.0);
+            let worst = l
+                .log
+                .iter()
+                .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+
+            let rms =
+                (l.log.iter().map(|t| t.e_y_m * t.e_y_m).sum::<f64>() / l.log.len() as f64).sqrt();
+            println!("rig path {v}: {delays:?} viol {worst:.2} rms {rms:.2}");
+        }
+    }
+}

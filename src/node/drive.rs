@@ -24,8 +24,7 @@
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
     self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample,
-    DEFAULT_TUNING,
-    MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
 use crate::control::planner::{PlannerEvent, PlannerInputs};
