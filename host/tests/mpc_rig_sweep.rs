@@ -44,6 +44,7 @@ fn sweep() {
                     "vy" => w.lateral_speed_per_mps2 = x,
                     "r" => w.yaw_rate_per_rps2 = x,
                     "lead" => t.steer_lead_s = x,
+                    "margin" => w.corridor_margin_m = x,
                     "trust" => t.steer_trust_s = x,
                     "share" => t.steer_rate_share = x,
                     "iter" => t.admm.max_iterations = x as u16,
@@ -61,9 +62,18 @@ fn sweep() {
         .collect();
     for (name, t) in variants {
         let mut line = format!("{name:40}");
+        let seeds: u64 = std::env::var("SEEDS").map_or(1, |s| s.parse().unwrap());
         for &v in &speeds {
-            let (hits, rms, max, clr) = dlc(t, v, 1);
-            line += &format!(" | {v}: {hits} {rms:.2}/{max:.2} {clr:+.2}");
+            if seeds == 1 {
+                let (hits, rms, max, clr) = dlc(t, v, 1);
+                line += &format!(" | {v}: {hits} {rms:.2}/{max:.2} {clr:+.2}");
+            } else {
+                let clean = (0..seeds).filter(|&s| dlc(t, v, s).0 == 0).count();
+                let worst = (0..seeds)
+                    .map(|s| dlc(t, v, s).3)
+                    .fold(f64::INFINITY, f64::min);
+                line += &format!(" {v}:{clean}/{seeds}({worst:+.2})");
+            }
         }
         println!("{line}");
     }

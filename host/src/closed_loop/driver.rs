@@ -8,8 +8,8 @@
 //! the reference controller; a SIL session runs the node exactly as configured.
 use catmodel::can::codec::{ControlCommand, ControlStatus};
 use catmodel::can::{CanFrame, TimedFrame};
-use catmodel::control::path::Tracking;
 use catmodel::control::mpc::MpcTuning;
+use catmodel::control::path::Tracking;
 use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::drive::Controller as NodeController;

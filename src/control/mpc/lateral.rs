@@ -350,9 +350,9 @@ fn corner_row(
     let (s0, c0, e0) = lin;
     let (a, b, k) = body_offset(at, sample, point, s0, c0, e0);
     let (lower, upper) = if point.right_m < 0.0 {
-        (-sample.left_m - k, f32::INFINITY)
+        (-(sample.left_m - w.corridor_margin_m) - k, f32::INFINITY)
     } else {
-        (f32::NEG_INFINITY, sample.right_m - k)
+        (f32::NEG_INFINITY, sample.right_m - w.corridor_margin_m - k)
     };
     Row {
         a,

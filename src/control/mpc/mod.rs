@@ -175,6 +175,11 @@ pub struct Weights {
     pub terminal_factor: f32,
     /// Exact-penalty weight of the corridor, per m outside.
     pub corridor_weight_per_m: f32,
+    /// The body's corners are kept this far inside the corridor, m: the corner rows are
+    /// linearised about the previous plan and soft, so a plan on the edge ends up a few
+    /// centimetres outside (measured on the closed-loop rig: up to 0.04 m at 5-8 m/s, a cone
+    /// touched; docs/controller.md).
+    pub corridor_margin_m: f32,
     /// Exact-penalty weight of an obstacle, per m inside its inflated circle.
     pub obstacle_weight_per_m: f32,
     /// ADMM penalty of the corridor rows, per m^2.
@@ -240,6 +245,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         steer_rate: 1.0,
         terminal_factor: 5.0,
         corridor_weight_per_m: 1000.0,
+        corridor_margin_m: 0.15,
         obstacle_weight_per_m: 3000.0,
         rho_corridor: 50.0,
         rho_obstacle: 50.0,
@@ -668,9 +674,18 @@ impl MpcConfig {
 
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
     /// dynamic model.
+    /// The model the steering is planned with: the dynamic one whenever the car has one and
+    /// moves faster than its lower speed limit, else the kinematic one. Not the node's hybrid
+    /// switch (which still picks the model of the node's own predictions and yaw rate): the
+    /// linear single-track model is the kinematic one plus tyre slip, which vanishes at low
+    /// speed, so it is right at every speed it is defined for, while a switch in the middle of a
+    /// manoeuvre (the lateral acceleration of a lane change at 4 m/s crosses the switch's
+    /// threshold) changes the plan's model and its initial state under a running solve; on the
+    /// closed-loop rig the double lane change at 4-5 m/s touched a cone with the switch's
+    /// choice and was clean with this one (docs/controller.md).
     fn mode(&self, input: &MpcInput) -> Mode {
-        match (input.car.mode, &self.dynamics) {
-            (Mode::Dynamic, Some(_)) => Mode::Dynamic,
+        match &self.dynamics {
+            Some(d) if input.car.speed_mps >= d.min_speed_mps => Mode::Dynamic,
             _ => Mode::Kinematic,
         }
     }
@@ -1105,6 +1120,7 @@ fn weights_ok(w: &Weights) -> bool {
         && positive(w.steer_rate)
         && positive(w.terminal_factor)
         && positive(w.corridor_weight_per_m)
+        && nonneg(w.corridor_margin_m)
         && positive(w.obstacle_weight_per_m)
         && positive(w.rho_corridor)
         && positive(w.rho_obstacle)
