@@ -7,7 +7,7 @@ use catmodel::control::mpc::{
 use catmodel::vehicle::Body;
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{
-    circle, hatchback, mpc_for, van, Loop, PositionError, TestPath, ESCAPE_BODY,
+    circle, hatchback, mpc_for, van, Delays, Loop, PositionError, TestPath, ESCAPE_BODY,
 };
 
 fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
@@ -418,15 +418,17 @@ fn controller_from_the_model_file() {
     assert!(rms <= 0.10, "RMS {rms}");
 }
 
-/// The double lane change clean at 13 m/s on the CAT Vehicle (the defaults' car) and on the
-/// hatchback (its lanes sized for its 1.75 m width).
+/// The double lane change clean at 12.5 m/s on the CAT Vehicle (the defaults' car) and at 13 m/s
+/// on the hatchback (its lanes sized for its 1.75 m width). (13 m/s on the CAT Vehicle before
+/// the corners kept `corridor_margin_m` inside: the margin costs the truth-fed bench 0.5 m/s
+/// and buys the node on the rig clean runs at 5-10 m/s.)
 #[test]
 fn double_lane_change_is_clean() {
     let cfg = VehicleConfig::default();
-    let (worst, _, l) = dlc_run(&cfg, 13.0);
+    let (worst, _, l) = dlc_run(&cfg, 12.5);
     assert!(
         worst <= 0.0,
-        "CAT Vehicle at 13 m/s: body {worst} m outside"
+        "CAT Vehicle at 12.5 m/s: body {worst} m outside"
     );
     assert!(l
         .log
@@ -451,68 +453,64 @@ fn second_vehicle_goals() {
     }
 }
 
+/// The state a real node has, not the truth: the steering report a tick old, the command acting
+/// a tick late, the heading a tick late, with RTK-grade noise. Planning from the steering
+/// report made this oscillate out of the lanes even at 5 m/s; from the commanded steering ramp
+/// it is clean at 5 and 8 m/s. Not at 10 m/s (0.12 m outside), nor with two ticks of heading
+/// delay at 8 m/s (0.045 m): the MPC's sensitivity to heading errors is what remains
+/// (docs/controller.md).
 #[test]
-#[ignore = "scratch: delays"]
-fn scratch_delays() {
+fn double_lane_change_is_clean_with_a_real_nodes_delays() {
     let cfg = VehicleConfig::default();
-    for (h, st, c) in [
-        (0, 0, 0),
-        (2, 0, 0),
-        (4, 0, 0),
-        (0, 1, 0),
-        (0, 2, 0),
-        (0, 0, 1),
-        (0, 0, 2),
-        (0, 1, 1),
-        (4, 1, 1),
-    ] {
-        let mut line = format!("heading {h} steer {st} command {c}:");
-        for v in [5.0, 8.0, 10.0, 12.0] {
-            let body = ESCAPE_BODY;
-            let (path, _) = double_lane_change(body.width_m as f64, 40.0, v);
-            let mut l = Loop::new(
-                cfg.clone(),
-                mpc_for(&cfg, body, DEFAULT_TUNING),
-                &path,
-                v,
-                0.0,
-                0.0,
-            );
-            l.delays = catmodel_host_tests::mpc_sim::Delays {
-                heading_ticks: h,
-                steer_ticks: st,
-                command_ticks: c,
-            };
-            l.run(&path, path.length_m() - 20.0, 30.0);
-            let worst = l
-                .log
-                .iter()
-                .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
-            let rms =
-                (l.log.iter().map(|t| t.e_y_m * t.e_y_m).sum::<f64>() / l.log.len() as f64).sqrt();
-            line += &format!("  {v}: viol {worst:.2} rms {rms:.2}");
-        }
-        println!("{line}");
+    for speed in [5.0, 8.0] {
+        let (path, _) = double_lane_change(ESCAPE_BODY.width_m as f64, 40.0, speed);
+        let mut l = Loop::new(
+            cfg.clone(),
+            mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+            &path,
+            speed,
+            0.0,
+            0.0,
+        );
+        l.position_error = PositionError::RTK;
+        l.delays = Delays {
+            heading_ticks: 1,
+            steer_ticks: 1,
+            command_ticks: 1,
+        };
+        l.run(&path, path.length_m() - 20.0, 30.0);
+        let worst = l
+            .log
+            .iter()
+            .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+        assert!(worst <= 0.0, "{speed} m/s: body {worst} m outside");
     }
 }
 
+/// The rig's planner's lane-change path (least-curvature transitions 0.15 m from the cones,
+/// host/src/closed_loop/scenario.rs) on the bench, as a check that the gap between the bench
+/// and the rig is not the path: clean at 12 m/s.
 #[test]
-#[ignore = "scratch: the rig's path on the bench"]
-fn scratch_rig_path() {
+fn the_rigs_lane_change_path_is_clean_on_the_bench() {
     use catmodel_host::closed_loop::scenario::{design_lane_change, dlc_lanes};
     let cfg = VehicleConfig::default();
-    let body = ESCAPE_BODY;
-    let hb = catmodel_host::sim::config::Body {
-        width_m: body.width_m as f64,
-        length_m: body.length_m as f64,
-        rear_overhang_m: body.rear_overhang_m as f64,
+    let body = catmodel_host::sim::config::Body {
+        width_m: ESCAPE_BODY.width_m as f64,
+        length_m: ESCAPE_BODY.length_m as f64,
+        rear_overhang_m: ESCAPE_BODY.rear_overhang_m as f64,
     };
-    let lanes = dlc_lanes(hb.width_m);
+    let lanes = dlc_lanes(body.width_m);
     let [s1, s3, s5] = lanes;
-    let design = design_lane_change(&hb, &lanes);
+    let design = design_lane_change(&body, &lanes);
     let lead = 40.0;
-    let edges = move |x: f64| {
-        if x < s1.x_end_m {
+    let end = s5.x_end_m;
+    // Lateral (left) offset of the path at `s`, and the lane edges beside it.
+    let y = move |s: f64| design.y_at((s - lead).clamp(0.0, end));
+    let edges = move |s: f64| {
+        let x = s - lead;
+        if !(0.0..=end).contains(&x) {
+            (y(s) + 1.5, y(s) - 1.5)
+        } else if x < s1.x_end_m {
             (s1.y_left_m, s1.y_right_m)
         } else if x < s3.x_start_m {
             (s3.y_left_m, s1.y_right_m)
@@ -524,52 +522,28 @@ fn scratch_rig_path() {
             (s5.y_left_m, s5.y_right_m)
         }
     };
-    for v in [8.0, 10.0, 11.0, 12.0, 13.0] {
-        let d = design;
-        let path = TestPath::new(
-            lead + s5.x_end_m + 60.0,
-            move |s| {
-                let x = s - lead;
-                (-d.y_at(x.clamp(0.0, s5.x_end_m)), s)
-            },
-            move |s| {
-                let x = s - lead;
-                let y = d.y_at(x.clamp(0.0, s5.x_end_m));
-                let (l, r) = if x < 0.0 || x > s5.x_end_m {
-                    (y + 1.5, y - 1.5)
-                } else {
-                    edges(x)
-                };
-                (l - y, y - r)
-            },
-            move |_| v,
-        );
-        for delays in [
-            Default::default(),
-            catmodel_host_tests::mpc_sim::Delays {
-                heading_ticks: 0,
-                steer_ticks: 1,
-                command_ticks: 1,
-            },
-        ] {
-            let mut l = Loop::new(
-                cfg.clone(),
-                mpc_for(&cfg, body, DEFAULT_TUNING),
-                &path,
-                v,
-                0.0,
-                0.0,
-            );
-            l.delays = delays;
-            l.run(&path, path.length_m() - 20.0, 30.0);
-            let worst = l
-                .log
-                .iter()
-                .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
-
-            let rms =
-                (l.log.iter().map(|t| t.e_y_m * t.e_y_m).sum::<f64>() / l.log.len() as f64).sqrt();
-            println!("rig path {v}: {delays:?} viol {worst:.2} rms {rms:.2}");
-        }
-    }
+    let speed = 12.0;
+    let path = TestPath::new(
+        lead + end + 60.0,
+        move |s| (-y(s), s),
+        move |s| {
+            let (l, r) = edges(s);
+            (l - y(s), y(s) - r)
+        },
+        move |_| speed,
+    );
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        speed,
+        0.0,
+        0.0,
+    );
+    l.run(&path, path.length_m() - 20.0, 30.0);
+    let worst = l
+        .log
+        .iter()
+        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+    assert!(worst <= 0.0, "body {worst} m outside");
 }

@@ -7,7 +7,9 @@ use catmodel_host::closed_loop::{load_setup, run, Receiver, RunOptions};
 
 fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
     let (vehicle, node) = load_setup(None, None).unwrap();
-    let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, speed);
+    let kind =
+        std::env::var("SCENARIO").map_or(Kind::DoubleLaneChange, |s| Kind::from_name(&s).unwrap());
+    let course = scenario::course(kind, &vehicle.body, speed);
     let mut driver = NodeDriver::new(node, Controller::MpcTuned(tuning));
     let options = RunOptions {
         seed,
