@@ -45,5 +45,6 @@ done
 # Against the firmware: as QEMU runs it, the local frame on the first fix (no options).
 "$B" replay "$D/drive/validation.can.log" --model "$D/vw-polo.toml" \
   --out "$D/pred-first-fix.csv" --tx-out "$D/replay-tx.log"
-CATMODEL_MODEL="$PWD/$D/vw-polo.toml" cargo qemu -- "$D/drive/validation.can.log"
+# CATMODEL_MODEL: absolute, whether DIR was given relative or absolute.
+CATMODEL_MODEL="$(cd "$D" && pwd)/vw-polo.toml" cargo qemu -- "$D/drive/validation.can.log"
 cargo xtask tx-compare target/qemu/tx.log "$D/replay-tx.log"

@@ -87,16 +87,34 @@ pub struct LocalFrame {
     north_per_dlon2: f32,
 }
 
-/// The expansion's coefficients in f64 (k = rad per 1e-7 deg):
-/// [east_per_dlon, east_per_dlat_dlon, north_per_dlat, north_per_dlat2, north_per_dlon2].
-fn expansion_coefficients(origin_lat_e7: i32) -> [f64; 5] {
-    let phi0 = origin_lat_e7 as f64 * RAD_PER_E7;
-    let (s, c) = (libm::sin(phi0), libm::cos(phi0));
-    let w2 = 1.0 - WGS84_E2 * s * s;
-    let n = WGS84_A_M / libm::sqrt(w2);
-    let m = WGS84_A_M * (1.0 - WGS84_E2) / (w2 * libm::sqrt(w2));
-    let dm = 3.0 * m * WGS84_E2 * s * c / w2;
-    let k = RAD_PER_E7;
+/// The expansion's coefficients (k = rad per 1e-7 deg):
+/// [east_per_dlon, east_per_dlat_dlon, north_per_dlat, north_per_dlat2, north_per_dlon2],
+/// computed in f32 with a fixed amount of work (the node builds its frame at the first fix,
+/// inside a tick: f64 on the Cortex-M4F is software, about 8 000 instructions for this). The
+/// latitude goes in as whole degrees plus the rest, so that the conversion to radians keeps
+/// f32's precision; `sin_cos` is within 1e-7 ([`crate::math::sin_cos`]); the radii of curvature
+/// come from binomial series in `u = e^2 sin^2(phi0) <= 0.0067` (truncated below 1e-11), so no
+/// square root. Each coefficient is within 3.5e-7 (relative) of the same expansion in f64
+/// (measured at every 0.01 deg to +-80 deg: `coefficients_in_f32_match_f64`), a few f32
+/// rounding steps; against pymap3d the frame's error is what it was with f64 coefficients
+/// (module doc).
+fn expansion_coefficients(origin_lat_e7: i32) -> [f32; 5] {
+    let whole_deg = origin_lat_e7 / 10_000_000;
+    let rest_e7 = origin_lat_e7 % 10_000_000;
+    let k = RAD_PER_E7 as f32;
+    let phi0 = whole_deg as f32 * (RAD_PER_E7 * 1e7) as f32 + rest_e7 as f32 * k;
+    let (s, c) = crate::math::sin_cos(phi0);
+    let e2 = WGS84_E2 as f32;
+    let u = e2 * s * s;
+    // (1 - u)^(-1/2), (1 - u)^(-3/2) and (1 - u)^(-1): the binomial series to u^5.
+    let inv_w = 1.0 + u * (0.5 + u * (0.375 + u * (0.3125 + u * (0.273_437_5 + u * 0.246_093_75))));
+    let inv_w3 =
+        1.0 + u * (1.5 + u * (1.875 + u * (2.187_5 + u * (2.460_937_5 + u * 2.707_031_3))));
+    let inv_w2 = 1.0 + u * (1.0 + u * (1.0 + u * (1.0 + u * (1.0 + u))));
+    let a = WGS84_A_M as f32;
+    let n = a * inv_w;
+    let m = a * (1.0 - WGS84_E2) as f32 * inv_w3;
+    let dm = 3.0 * m * e2 * s * c * inv_w2;
     [
         n * c * k,
         -m * s * k * k,
@@ -142,11 +160,11 @@ impl LocalFrame {
         Ok(Self {
             origin_lat_e7,
             origin_lon_e7,
-            east_per_dlon: a as f32,
-            east_per_dlat_dlon: b as f32,
-            north_per_dlat: c as f32,
-            north_per_dlat2: d as f32,
-            north_per_dlon2: e as f32,
+            east_per_dlon: a,
+            east_per_dlat_dlon: b,
+            north_per_dlat: c,
+            north_per_dlat2: d,
+            north_per_dlon2: e,
         })
     }
 
@@ -187,7 +205,15 @@ impl LocalFrame {
     /// the point with these local coordinates, solving the same expansion in f64 by fixed-point
     /// iteration. Round trip with `to_local` is within its f32 rounding (< 1 mm within 2 km).
     pub fn from_local(&self, enu: Enu) -> (f64, f64) {
-        let [a, b, c, d, e] = expansion_coefficients(self.origin_lat_e7);
+        // The frame's own coefficients, so that this is the inverse of `to_local`.
+        let [a, b, c, d, e] = [
+            self.east_per_dlon,
+            self.east_per_dlat_dlon,
+            self.north_per_dlat,
+            self.north_per_dlat2,
+            self.north_per_dlon2,
+        ]
+        .map(f64::from);
         let east = enu.east_m as f64;
         let north = enu.north_m as f64;
         let mut dlat = north / c;
@@ -327,6 +353,44 @@ mod tests {
             Err(GeodesyError::OriginTooCloseToPole)
         );
         assert_eq!(f.to_local(322_319_000, -1_109_501_000), Ok(Enu::default()));
+    }
+
+    /// The f32 coefficients against the same expansion in f64 (libm), at every 0.01 deg of
+    /// latitude the node accepts.
+    #[test]
+    fn coefficients_in_f32_match_f64() {
+        let f64_coefficients = |lat_e7: i32| {
+            let phi0 = lat_e7 as f64 * RAD_PER_E7;
+            let (s, c) = (phi0.sin(), phi0.cos());
+            let w2 = 1.0 - WGS84_E2 * s * s;
+            let n = WGS84_A_M / w2.sqrt();
+            let m = WGS84_A_M * (1.0 - WGS84_E2) / (w2 * w2.sqrt());
+            let dm = 3.0 * m * WGS84_E2 * s * c / w2;
+            let k = RAD_PER_E7;
+            [
+                n * c * k,
+                -m * s * k * k,
+                m * k,
+                0.5 * dm * k * k,
+                0.5 * n * s * c * k * k,
+            ]
+        };
+        let mut worst = [0.0f64; 5];
+        for centi_deg in -8_000..=8_000 {
+            let lat_e7 = centi_deg * 100_000;
+            let reference = f64_coefficients(lat_e7);
+            let ours = expansion_coefficients(lat_e7);
+            for i in 0..5 {
+                // Relative to the coefficient's scale at mid latitudes (the sine terms vanish
+                // at the equator, where their absolute error is what matters).
+                let scale = f64_coefficients(450_000_000)[i].abs();
+                worst[i] = worst[i].max((f64::from(ours[i]) - reference[i]).abs() / scale);
+            }
+        }
+        println!("worst relative error of the f32 coefficients: {worst:?}");
+        for w in worst {
+            assert!(w < 5e-7, "{worst:?}");
+        }
     }
 
     #[test]

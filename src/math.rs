@@ -159,10 +159,18 @@ pub fn wrap_pi(x: f32) -> f32 {
     if (-PI..PI).contains(&x) {
         return x;
     }
-    if !x.is_finite() {
+    // One turn out, the usual case (a heading plus an increment, a difference of two
+    // headings, a course in [0, 2 pi)): k = +-1 without the division and `floorf`; the same
+    // result as the general reduction with that k.
+    let k = if (PI..3.0 * PI).contains(&x) {
+        1.0
+    } else if (-3.0 * PI..-PI).contains(&x) {
+        -1.0
+    } else if x.is_finite() {
+        libm::floorf((x + PI) / (TAU_HI + TAU_LO))
+    } else {
         return f32::NAN;
-    }
-    let k = libm::floorf((x + PI) / (TAU_HI + TAU_LO));
+    };
     let mut r = (x - k * TAU_HI) - k * TAU_LO;
     // Rounding can leave r a hair outside the half-open range; one correction step suffices.
     if r >= PI {

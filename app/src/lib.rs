@@ -41,11 +41,15 @@ use core::future::{poll_fn, Future};
 use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Poll;
 
+use core::cell::RefCell;
+
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::{Channel, TrySendError};
 use embassy_time::{Instant, Timer};
+use heapless::Deque;
 
-use catmodel::can::codec::ControlStatus;
+use catmodel::can::spec::is_node_input;
 use catmodel::can::TimedFrame;
 use core::borrow::BorrowMut;
 
@@ -55,19 +59,75 @@ use catmodel::SAMPLE_PERIOD_US;
 
 pub use schedule::{ReplayClock, TickGrid};
 
-/// Frames the receive queue holds between two ticks. The filters admit five input messages at
-/// 50 Hz or less (about 5 frames per tick), so 64 leaves room for bursts; a full queue drops the
-/// newest frame and counts it ([`LinkCounters::rx_queue_drops`]).
+/// Frames the receive queue holds between two ticks. The acceptance filter admits the node's
+/// inputs only (at their highest rates 7 frames per tick), so 64 holds four full ticks of
+/// [`RX_BATCH_LEN`]; a full queue drops the newest frame and counts it
+/// ([`LinkCounters::rx_queue_drops`]).
 pub const RX_QUEUE_LEN: usize = 64;
-/// Frames one tick hands to the node at most; any further due frames wait for the next tick
-/// (they are not dropped).
-pub const RX_BATCH_LEN: usize = 32;
+/// Frames one tick hands to the node at most: the node's own cap
+/// ([`catmodel::node::MAX_RX_FRAMES_PER_TICK`]), so that its worst case holds. Any further due
+/// frames stay in the queue, in order, for the next tick (they are not dropped).
+pub const RX_BATCH_LEN: usize = catmodel::node::MAX_RX_FRAMES_PER_TICK;
 /// Tick batches waiting for the bus: two ticks' worth (each up to
 /// [`catmodel::node::MAX_TX_FRAMES`] frames).
 pub const TX_QUEUE_LEN: usize = 2;
 
-/// Received frames, stamped with their receive time on the input's time base.
-pub type RxQueue = Channel<CriticalSectionRawMutex, TimedFrame, RX_QUEUE_LEN>;
+/// Received frames, stamped with their receive time on the input's time base, oldest first.
+///
+/// The receive loop pushes and the tick drains; neither waits on the queue (the tick runs on
+/// its timer, the receive loop drops when full), so it is a plain ring under a critical
+/// section rather than an async channel: the tick takes all its due frames in one critical
+/// section, peeking at each frame's time before taking it (about 40 instructions a frame,
+/// against about 400 through `embassy_sync::Channel::try_receive`).
+pub struct RxQueue {
+    frames: Mutex<CriticalSectionRawMutex, RefCell<Deque<TimedFrame, RX_QUEUE_LEN>>>,
+}
+
+impl Default for RxQueue {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl RxQueue {
+    /// Empty.
+    pub const fn new() -> Self {
+        Self {
+            frames: Mutex::new(RefCell::new(Deque::new())),
+        }
+    }
+
+    /// Appends `frame`; gives it back when the queue is full.
+    pub fn try_push(&self, frame: TimedFrame) -> Result<(), TimedFrame> {
+        self.frames.lock(|q| q.borrow_mut().push_back(frame))
+    }
+
+    /// Frames waiting.
+    pub fn len(&self) -> usize {
+        self.frames.lock(|q| q.borrow().len())
+    }
+
+    /// Whether no frame is waiting.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Moves the frames due at `tick_us` (receive time <= tick time), oldest first, into
+    /// `batch` (cleared first) until it is full; later frames, and due frames beyond the
+    /// batch, stay for the next tick.
+    pub fn drain_due(&self, tick_us: u64, batch: &mut heapless::Vec<TimedFrame, RX_BATCH_LEN>) {
+        batch.clear();
+        self.frames.lock(|q| {
+            let mut q = q.borrow_mut();
+            while !batch.is_full() && q.front().is_some_and(|f| f.t_us <= tick_us) {
+                if let Some(frame) = q.pop_front() {
+                    // Note: cannot fail, the batch is not full (checked by the loop).
+                    let _ = batch.push(frame);
+                }
+            }
+        });
+    }
+}
 /// Frames to send, one batch per tick.
 pub type TxQueue = Channel<CriticalSectionRawMutex, TxBatch, TX_QUEUE_LEN>;
 
@@ -86,6 +146,9 @@ pub struct TxBatch {
 pub struct LinkCounters {
     /// Frames dropped because the receive queue was full.
     pub rx_queue_drops: AtomicU32,
+    /// Frames the acceptance filter refused (not a node input: [`catmodel::can::spec::is_node_input`]).
+    /// Zero on the board, whose hardware filters never pass them to the CPU.
+    pub rx_filtered: AtomicU32,
     /// Receive errors reported by the bus (error frames, hardware FIFO overruns).
     pub rx_bus_errors: AtomicU32,
     /// Frames received that the node cannot represent (remote frames), dropped.
@@ -103,6 +166,7 @@ impl LinkCounters {
     pub const fn new() -> Self {
         Self {
             rx_queue_drops: AtomicU32::new(0),
+            rx_filtered: AtomicU32::new(0),
             rx_bus_errors: AtomicU32::new(0),
             rx_unsupported: AtomicU32::new(0),
             tx_queue_drops: AtomicU32::new(0),
@@ -146,13 +210,16 @@ pub trait BusTransmitter {
     fn idle(&mut self) {}
 }
 
-/// The receive path: moves frames from the bus to the tick's queue without ever blocking the
-/// bus: when the queue is full the frame is dropped and counted. Returns at end of input.
+/// The receive path: moves the node's input frames from the bus to the tick's queue without
+/// ever blocking the bus: frames that are not node inputs are refused by the acceptance filter
+/// (the board's hardware has refused them already) and counted; when the queue is full the
+/// frame is dropped and counted. Returns at end of input.
 pub async fn receive_loop<B: BusReceiver>(bus: &mut B, queue: &RxQueue, counters: &LinkCounters) {
     loop {
         match bus.receive().await {
+            Ok(frame) if !is_node_input(frame.frame.id) => bump(&counters.rx_filtered),
             Ok(frame) => {
-                if queue.try_send(frame).is_err() {
+                if queue.try_push(frame).is_err() {
                     bump(&counters.rx_queue_drops);
                 }
             }
@@ -209,7 +276,8 @@ pub struct TickReport {
     pub step_counts: u32,
     /// Counter ticks for the whole tick: drain + step + handoff to the transmit queue.
     pub tick_counts: u32,
-    /// A controller planned in this tick (its budget differs: `budget`).
+    /// A controller planned in this tick, or a planner path was completed in it
+    /// (`TickEstimate::controller_tick`; its budget differs: `budget`).
     pub controller: bool,
 }
 
@@ -238,7 +306,8 @@ pub struct TickConfig {
     /// Added to embassy time to get the input's time base, us, modulo 2^64 (a replayed drive
     /// that starts at time 0 has a negative offset: [`ReplayClock`]).
     pub input_offset_us: u64,
-    /// Stop after the tick at or past this time (input time base, us); `None` runs forever.
+    /// Stop after the tick at or past this time (input time base, us) once the receive queue
+    /// is empty; `None` runs forever.
     pub last_tick_us: Option<u64>,
     /// The last reset was caused by the watchdog (board; read once at boot).
     pub watchdog_reset: bool,
@@ -256,37 +325,11 @@ pub struct TickSummary {
     pub skipped_slots: u32,
 }
 
-/// Takes the queued frames that are due at `tick_us` (receive time <= tick time), in arrival
-/// order, up to the batch's capacity. A frame stamped after the tick is held in `held` (it was
-/// the queue's oldest) and goes first at the next tick: one queue operation per frame.
-fn drain_due(
-    queue: &RxQueue,
-    tick_us: u64,
-    held: &mut Option<TimedFrame>,
-    batch: &mut heapless::Vec<TimedFrame, RX_BATCH_LEN>,
-) {
-    batch.clear();
-    while !batch.is_full() {
-        let next = match held.take() {
-            Some(frame) => frame,
-            None => match queue.try_receive() {
-                Ok(frame) => frame,
-                Err(_) => break,
-            },
-        };
-        if next.t_us > tick_us {
-            *held = Some(next);
-            break;
-        }
-        // Note: cannot fail, the batch is not full (checked by the loop).
-        let _ = batch.push(next);
-    }
-}
-
 /// The 20 ms tick: at each slot of the grid, hands the due frames to `Node::step` and the frames
 /// it returns to the transmit queue, then reports the tick to the platform. Overruns follow
 /// [`schedule`]: a late tick is counted, a stale slot is skipped (no catch-up burst), and tick
-/// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached.
+/// times stay on the 20 ms grid. Returns only when [`TickConfig::last_tick_us`] is reached and
+/// no received frame waits any more.
 pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
     node: &mut Node<D>,
     rx: &RxQueue,
@@ -297,7 +340,6 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
 ) -> TickSummary {
     let mut grid = TickGrid::new(config.first_tick_instant_us, SAMPLE_PERIOD_US);
     let mut batch: heapless::Vec<TimedFrame, RX_BATCH_LEN> = heapless::Vec::new();
-    let mut held = None;
     let mut out = TxBatch::default();
     let mut last_step_us = None;
     let mut stack_high_water_bytes = None;
@@ -307,9 +349,6 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
         grid.start(Instant::now().as_micros());
         let tick_us = grid.deadline_us().wrapping_add(config.input_offset_us);
 
-        let c0 = platform.counter();
-        drain_due(rx, tick_us, &mut held, &mut batch);
-        let c1 = platform.counter();
         let tick = Tick {
             now_us: tick_us,
             platform: PlatformStats {
@@ -321,23 +360,14 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
             },
         };
         out.tick_us = tick_us;
-        out.frames.clear();
+        // The measured tick: three calls, each measured alone in `cargo xtask bench-target`
+        // for the worst-case bound.
+        let c0 = platform.counter();
+        rx.drain_due(tick_us, &mut batch);
+        let c1 = platform.counter();
         let estimate = node.step(&tick, &batch, &mut out.frames);
         let c2 = platform.counter();
-        let tx_frames = out.frames.len();
-        counters
-            .tx_batches_in_flight
-            .fetch_add(1, Ordering::Relaxed);
-        if let Err(TrySendError::Full(back)) = tx.try_send(out) {
-            counters
-                .tx_batches_in_flight
-                .fetch_sub(1, Ordering::Relaxed);
-            counters.tx_queue_drops.fetch_add(
-                u32::try_from(back.frames.len()).unwrap_or(u32::MAX),
-                Ordering::Relaxed,
-            );
-        }
-        out = TxBatch::default();
+        let tx_frames = hand_off(tx, counters, &mut out);
         let c3 = platform.counter();
 
         let step_counts = c2.wrapping_sub(c1);
@@ -352,11 +382,13 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
             drain_counts: c1.wrapping_sub(c0),
             step_counts,
             tick_counts: c3.wrapping_sub(c0),
-            controller: estimate.control != ControlStatus::NoPath,
+            controller: estimate.controller_tick(),
         });
         stack_high_water_bytes = platform.stack_high_water_bytes();
         grid.finish(Instant::now().as_micros());
-        if config.last_tick_us.is_some_and(|last| tick_us >= last) {
+        // The last tick is the one at or after the last frame, once no frame waits any more
+        // (frames beyond a tick's batch are taken by the ticks after it).
+        if config.last_tick_us.is_some_and(|last| tick_us >= last) && rx.is_empty() {
             return TickSummary {
                 ticks,
                 overruns: grid.overruns(),
@@ -364,6 +396,27 @@ pub async fn tick_loop<P: TickPlatform, D: BorrowMut<Drive>>(
             };
         }
     }
+}
+
+/// Hands a tick's frames to the transmit queue as one batch and leaves `out` empty for the
+/// next tick; returns how many frames it handed. A full queue drops the batch and counts its
+/// frames ([`LinkCounters::tx_queue_drops`]).
+pub fn hand_off(tx: &TxQueue, counters: &LinkCounters, out: &mut TxBatch) -> usize {
+    let batch = core::mem::take(out);
+    let frames = batch.frames.len();
+    counters
+        .tx_batches_in_flight
+        .fetch_add(1, Ordering::Relaxed);
+    if let Err(TrySendError::Full(back)) = tx.try_send(batch) {
+        counters
+            .tx_batches_in_flight
+            .fetch_sub(1, Ordering::Relaxed);
+        counters.tx_queue_drops.fetch_add(
+            u32::try_from(back.frames.len()).unwrap_or(u32::MAX),
+            Ordering::Relaxed,
+        );
+    }
+    frames
 }
 
 /// Lets every other ready task run once before continuing.
@@ -385,5 +438,51 @@ pub fn yield_now() -> impl Future<Output = ()> {
 pub async fn wait_tx_drained(counters: &LinkCounters) {
     while counters.tx_batches_in_flight.load(Ordering::Relaxed) > 0 {
         yield_now().await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use catmodel::can::{CanFrame, CanId};
+
+    fn frame(t_us: u64, tag: u8) -> TimedFrame {
+        TimedFrame {
+            t_us,
+            frame: CanFrame::new(CanId::Standard(0x100), &[tag]).unwrap_or(CanFrame::EMPTY),
+        }
+    }
+
+    #[test]
+    fn a_tick_takes_its_due_frames_in_order_up_to_the_batch() {
+        let q = RxQueue::new();
+        // 20 frames due at the tick, then 3 later ones.
+        for i in 0..20u8 {
+            assert!(q.try_push(frame(1_000 + u64::from(i), i)).is_ok());
+        }
+        for i in 20..23u8 {
+            assert!(q.try_push(frame(30_000, i)).is_ok());
+        }
+        let mut batch = heapless::Vec::new();
+        q.drain_due(20_000, &mut batch);
+        let tags: heapless::Vec<u8, RX_BATCH_LEN> = batch.iter().map(|f| f.frame.data[0]).collect();
+        assert_eq!(batch.len(), RX_BATCH_LEN);
+        assert!(tags.iter().enumerate().all(|(i, t)| usize::from(*t) == i));
+        // The rest of the due frames go first at the next tick; the later ones wait.
+        q.drain_due(20_000, &mut batch);
+        assert_eq!(batch.len(), 20 - RX_BATCH_LEN);
+        assert_eq!(
+            batch.first().map(|f| f.frame.data[0]),
+            Some(RX_BATCH_LEN as u8)
+        );
+        assert_eq!(q.len(), 3);
+        q.drain_due(40_000, &mut batch);
+        assert_eq!(batch.len(), 3);
+        assert!(q.is_empty());
+        // A full queue gives the frame back.
+        for i in 0..RX_QUEUE_LEN {
+            assert!(q.try_push(frame(i as u64, 0)).is_ok());
+        }
+        assert_eq!(q.try_push(frame(0, 9)), Err(frame(0, 9)));
     }
 }

@@ -44,7 +44,8 @@ pub struct TickRecord {
     pub flags: u32,
 }
 
-/// [`TickRecord::flags`]: a controller planned in this tick.
+/// [`TickRecord::flags`]: a controller planned in this tick, or a planner path was completed
+/// in it (`TickEstimate::controller_tick`).
 pub const FLAG_CONTROLLER: u32 = 1;
 
 impl TickRecord {

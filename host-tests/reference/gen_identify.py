@@ -7,7 +7,7 @@ the controllable canonical realization (scipy.signal.tf2ss, the one catmodel use
 with python-control, control.c2d(sys, ts, 'zoh'), and the delay in samples.
 Writes host-tests/reference/discretize_c2d.json.
 
-Run: /work/venv/bin/python host-tests/reference/gen_identify.py
+Run (with numpy and scipy, e.g. from a venv: pip install numpy scipy): python3 host-tests/reference/gen_identify.py
 """
 import json
 import pathlib

@@ -8,7 +8,7 @@ simulations with scipy.signal.dlsim of:
     complex poles, non-monic denominators, whole-sample delays) at several sample periods.
 Writes host-tests/reference/model_zoh.json.
 
-Run: /work/venv/bin/python host-tests/reference/gen_model.py
+Run (with numpy and scipy, e.g. from a venv: pip install numpy scipy): python3 host-tests/reference/gen_model.py
 """
 import json
 import pathlib

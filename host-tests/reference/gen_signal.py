@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reference values for host-tests/tests/{signal,geodesy}.rs, computed with scipy/numpy/pymap3d.
 
-Run from the repository root:  /work/venv/bin/python host-tests/reference/gen_signal.py
+Run from the repository root (with numpy and scipy): python3 host-tests/reference/gen_signal.py
 Writes host-tests/reference/signal_*.json and geodesy_*.json. Deterministic (fixed seeds).
 """
 import json

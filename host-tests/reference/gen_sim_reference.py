@@ -1,6 +1,6 @@
 """Reference values for host-tests/tests/sim.rs: local ENU -> WGS-84 lat/lon at the Tucson
 origin of the simulator, computed with pymap3d (independent of the Rust code).
-Run: /work/venv/bin/python host-tests/reference/gen_sim_reference.py"""
+Run (with numpy and scipy, e.g. from a venv: pip install numpy scipy): python3 host-tests/reference/gen_sim_reference.py"""
 import json
 import pathlib
 

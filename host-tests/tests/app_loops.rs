@@ -188,3 +188,46 @@ proptest! {
         assert_same_as_replay(start_us, 2);
     }
 }
+
+/// Frames bunched into single ticks (more than a tick takes: the rest wait for the next ones)
+/// and frames the acceptance filter refuses: the app and host replay hand the node the same
+/// frames at the same ticks.
+#[test]
+fn app_loops_hold_back_and_filter_as_host_replay_does() {
+    let mut frames = drive_from(1_700_000_000_003_296, 6);
+    let t0 = frames[0].t_us;
+    for f in &mut frames {
+        // Every 0.5 s, 60 ms of traffic arrives at once.
+        let phase = (f.t_us - t0) % 500_000;
+        if (200_000..260_000).contains(&phase) {
+            f.t_us += 260_000 - phase;
+        }
+    }
+    let extra: Vec<TimedFrame> = frames
+        .iter()
+        .step_by(3)
+        .map(|f| TimedFrame {
+            t_us: f.t_us,
+            frame: CanFrame::new(catmodel::can::CanId::Standard(0x7F0), &[1, 2, 3]).unwrap(),
+        })
+        .collect();
+    frames.extend(extra);
+    frames.sort_by_key(|f| f.t_us);
+    let burst = frames
+        .chunk_by(|a, b| first_tick_us(a.t_us) == first_tick_us(b.t_us))
+        .map(|tick| {
+            tick.iter()
+                .filter(|f| catmodel::can::spec::is_node_input(f.frame.id))
+                .count()
+        })
+        .max()
+        .unwrap();
+    assert!(
+        burst > catmodel::node::MAX_RX_FRAMES_PER_TICK,
+        "the drive must hold frames back ({burst} in its fullest tick)"
+    );
+    let (sent, ticks) = run_app(&frames, config());
+    let replay = catmodel_host::replay::replay(&frames, config());
+    assert_eq!(ticks, replay.ticks);
+    assert!(lines(&sent) == replay.tx_log, "frames differ");
+}

@@ -120,7 +120,8 @@ fn zoh_matches_scipy_cont2discrete() {
     );
 }
 
-/// The numbers in facts.md for eq 5 (8 significant digits there).
+/// Eq 5 discretized at 20 ms (ZOH), as computed once with scipy.signal.cont2discrete (8
+/// significant digits): num [0.03679, -0.07732120, 0.04083214], den [1, -1.96764899, 0.96794501].
 #[test]
 fn eq5_discrete_tf_matches_facts() {
     let d = discretize(&paper::EQ5_INTERNAL_CONTROLLER, 0.02).unwrap();

@@ -2,8 +2,9 @@
 //! which counter or health bit shows it, and that it recovers. Traffic comes from
 //! `catmodel_host_tests::bus` (a known drive), with the fault injected.
 use catmodel::can::codec::{NodeStatus, SpeedReport, SteeringReport};
+use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
-use catmodel::node::PlatformStats;
+use catmodel::node::{PlatformStats, MAX_RX_FRAMES_PER_TICK};
 use catmodel_host_tests::bus::{
     self, config, drive, frames, rear_axle, reseal, run, run_with, Kind, TickOut,
 };
@@ -336,20 +337,98 @@ fn bus_flood_of_unknown_and_higher_priority_ids_is_counted_and_harmless() {
             unknown += 1;
         }
     }
-    let clean = run(&d);
+    // The acceptance filter (bxCAN's filter banks on the board; the app's receive loop in
+    // QEMU and host replay) refuses every flood frame and passes every input frame, so no
+    // flood frame takes a place among a tick's frames.
+    let (passed, refused): (Vec<TimedFrame>, Vec<TimedFrame>) =
+        flooded.iter().partition(|f| is_node_input(f.frame.id));
+    assert_eq!(refused.len() as u32, unknown);
+    assert_eq!(passed, d);
+    // Given to the node anyway (a caller without the filter), the frames beyond its per-tick
+    // cap are counted and not used (page 3), and the flood frames it sees are counted as
+    // unknown identifiers (page 2).
     let ticks = run(&flooded);
-    // Frames after the last tick are never delivered.
-    let last_tick = ticks.last().unwrap().now_us;
-    let delivered = flooded
+    let c = ticks.last().unwrap().counters;
+    assert!(c.rx_over_cap > 0 && c.unknown_ids > 0, "{c:?}");
+    assert_eq!(
+        u64::from(c.rx_over_cap) + u64::from(c.unknown_ids) + passed_to_node(&flooded, &ticks),
+        flooded
+            .iter()
+            .filter(|f| f.t_us <= ticks.last().unwrap().now_us)
+            .count() as u64
+    );
+    // Page 3 reports the count as of the tick that sent it.
+    let page3 = ticks.iter().rev().find(|t| t.status().page() == 3).unwrap();
+    match page3.status() {
+        NodeStatus::Platform { rx_queue_drops, .. } => {
+            assert_eq!(rx_queue_drops, page3.counters.rx_over_cap.min(0xFFFF));
+            assert!(rx_queue_drops > 0);
+        }
+        _ => unreachable!(),
+    }
+}
+
+/// Input frames the node used: every due input frame it did not count as over its cap.
+fn passed_to_node(all: &[TimedFrame], ticks: &[TickOut]) -> u64 {
+    let last = ticks.last().unwrap().now_us;
+    let mut used = 0u64;
+    let mut i = 0;
+    for t in ticks {
+        let mut in_tick = 0;
+        while i < all.len() && all[i].t_us <= t.now_us && all[i].t_us <= last {
+            if in_tick < MAX_RX_FRAMES_PER_TICK && is_node_input(all[i].frame.id) {
+                used += 1;
+            }
+            in_tick += 1;
+            i += 1;
+        }
+    }
+    used
+}
+
+#[test]
+fn frames_beyond_the_tick_cap_are_counted_and_not_used() {
+    // Every frame of a drive, and a burst of 40 corrupt steering reports in one tick.
+    let d = frames(&drive(10.0, 0.0, 3.0));
+    let burst_t = d[150].t_us;
+    let mut bad = SteeringReport {
+        steer_pct: Some(0.0),
+    }
+    .encode(1);
+    bad.data[7] ^= 0x55;
+    let mut with_burst = d.clone();
+    let at = with_burst.iter().position(|f| f.t_us > burst_t).unwrap();
+    let n_burst = 40;
+    for _ in 0..n_burst {
+        with_burst.insert(
+            at,
+            TimedFrame {
+                t_us: burst_t,
+                frame: bad,
+            },
+        );
+    }
+    let ticks = run(&with_burst);
+    let c = ticks.last().unwrap().counters;
+    // That tick's frames, in arrival order: the node decoded the first MAX_RX_FRAMES_PER_TICK
+    // and counted the rest without decoding them.
+    let tick_us = catmodel::node::first_tick_us(burst_t);
+    let due: Vec<&TimedFrame> = with_burst
         .iter()
-        .filter(|f| f.t_us <= last_tick && f.frame.data == [0xFF; 8])
-        .count() as u32;
-    assert!(delivered > unknown - 400);
-    assert_eq!(ticks.last().unwrap().counters.unknown_ids, delivered);
-    // The node's output is exactly what it is without the flood, but for the status pages.
-    for (a, b) in clean.iter().zip(&ticks) {
-        assert_eq!(a.position(), b.position());
-        assert_eq!(a.predictions(), b.predictions());
+        .filter(|f| f.t_us <= tick_us && f.t_us + 20_000 > tick_us)
+        .collect();
+    let decoded_bad = due
+        .iter()
+        .take(MAX_RX_FRAMES_PER_TICK)
+        .filter(|f| f.frame == bad)
+        .count();
+    assert_eq!(c.rx_over_cap as usize, due.len() - MAX_RX_FRAMES_PER_TICK);
+    assert_eq!(c.crc_errors as usize, decoded_bad);
+    match last_page(&ticks, 3) {
+        NodeStatus::Platform { rx_queue_drops, .. } => {
+            assert_eq!(rx_queue_drops, c.rx_over_cap)
+        }
+        _ => unreachable!(),
     }
 }
 

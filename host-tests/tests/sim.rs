@@ -64,7 +64,8 @@ fn truth_bytes(rows: &[TruthRow]) -> Vec<u8> {
     b
 }
 
-/// The TORC steady-state relation (facts.md), rear-axle radius: R = L / tan(delta / (1 + K v^2)).
+/// The TORC steady-state relation (CAT Vehicle ROS package `jmscslgroup/catvehicle`,
+/// `distanceEstimatorSteeringBased.cpp`, "from TORC"), rear-axle radius: R = L / tan(delta / (1 + K v^2)).
 fn torc_radius_m(steer_pct: f64, speed_mps: f64) -> f64 {
     let delta = steer_pct / 100.0 * 35.5_f64.to_radians();
     2.62 / (delta / (1.0 + 0.0015 * speed_mps * speed_mps)).tan()

@@ -1,4 +1,4 @@
-//! The log CSV schema (DESIGN.md, "Log CSV") and the ground-truth CSV of the simulator: typed rows,
+//! The log CSV schema (docs/logs.md) and the ground-truth CSV of the simulator: typed rows,
 //! strict readers and writers.
 //!
 //! Reading takes logs as recorders write them (docs/logs.md): a header row is required; columns

@@ -325,8 +325,8 @@ fn run(cli: Cli) -> Result<()> {
             let c = result.counters;
             eprintln!(
                 "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
-                result.frames, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
-                c.range_errors, c.gnss_gate_rejects, c.unknown_ids, c.time_errors
+                result.frames + result.filtered, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
+                c.range_errors, c.gnss_gate_rejects, result.filtered + u64::from(c.unknown_ids), c.time_errors
             );
             Ok(())
         }

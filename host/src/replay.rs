@@ -1,6 +1,10 @@
 //! `catmodel replay`: the very same [`Node`] as the firmware, stepped every 20 ms of log time
 //! over a candump file, with the tick schedule of docs/architecture.md (so that its frames are
-//! byte-identical to the QEMU run's `target/qemu/tx.log`).
+//! byte-identical to the QEMU run's `target/qemu/tx.log`). Like the firmware's receive path, it
+//! refuses frames that are not node inputs (the acceptance filter,
+//! [`catmodel::can::spec::is_node_input`]) and hands each tick at most
+//! [`MAX_RX_FRAMES_PER_TICK`] due frames, the rest to the following ticks; unlike the
+//! firmware's 64-frame receive queue, it never drops one.
 //!
 //! The text around the node is written for speed (the issue's "replay >= 100x faster than
 //! NumPy/SciPy"): the log is read at once and parsed line by line in place, the CSV and the
@@ -13,8 +17,11 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
 use catmodel::can::codec::{ModelMode, Prediction, StateMotion, StatePosition};
+use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
-use catmodel::node::{first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{
+    first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TxFrames, MAX_RX_FRAMES_PER_TICK,
+};
 use catmodel::SAMPLE_PERIOD_US;
 
 /// Interface name written into candump output.
@@ -152,8 +159,10 @@ pub struct ReplayText {
 /// What a replay did, its text aside.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ReplayStats {
-    /// Frames read.
+    /// Frames handed to the node.
     pub frames: u64,
+    /// Frames the acceptance filter refused (not node inputs), as the firmware's bus does.
+    pub filtered: u64,
     /// Ticks run.
     pub ticks: u64,
     /// The node's rejection counters at the end.
@@ -203,6 +212,7 @@ pub fn replay_with_progress(
     // Note: writing to a Vec cannot fail.
     let stats = replay_into(frames, config, &mut csv, tx_sink, progress).unwrap_or(ReplayStats {
         frames: 0,
+        filtered: 0,
         ticks: 0,
         counters: Counters::default(),
         origin_e7: None,
@@ -385,9 +395,11 @@ const PARSE_CHUNK_FRAMES: usize = 2048;
 trait FrameSource {
     /// The time of the first frame; `None` if there is none.
     fn first_t_us(&mut self) -> Option<u64>;
-    /// The frames up to `now_us` not taken yet.
-    fn take_until(&mut self, now_us: u64) -> &[TimedFrame];
-    /// Whether frames remain (after [`FrameSource::take_until`], all later than its `now_us`).
+    /// The next frame not taken yet if it is due at `now_us` (stamped at or before it).
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame>;
+    /// Takes the frame [`FrameSource::peek_due`] returned.
+    fn take(&mut self);
+    /// Whether frames remain.
     fn has_more(&mut self) -> bool;
     /// Whether the input is complete and valid, so that text may leave (checked after each
     /// tick); `None` while not known yet.
@@ -406,11 +418,14 @@ impl FrameSource for SliceSource<'_> {
     fn first_t_us(&mut self) -> Option<u64> {
         self.frames.first().map(|f| f.t_us)
     }
-    fn take_until(&mut self, now_us: u64) -> &[TimedFrame] {
-        let start = self.next;
-        let rest = self.frames.get(start..).unwrap_or_default();
-        self.next += rest.iter().take_while(|f| f.t_us <= now_us).count();
-        self.frames.get(start..self.next).unwrap_or_default()
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame> {
+        self.frames
+            .get(self.next)
+            .filter(|f| f.t_us <= now_us)
+            .copied()
+    }
+    fn take(&mut self) {
+        self.next += 1;
     }
     fn has_more(&mut self) -> bool {
         self.next < self.frames.len()
@@ -467,24 +482,24 @@ impl FrameSource for StreamSource {
         }
         self.pending.get(self.next).map(|f| f.t_us)
     }
-    fn take_until(&mut self, now_us: u64) -> &[TimedFrame] {
-        // Frames taken by earlier ticks are dropped now and then (here only: the slice
-        // returned below must stay where it is).
+    fn peek_due(&mut self, now_us: u64) -> Option<TimedFrame> {
+        // Frames taken by earlier ticks are dropped now and then.
         if self.next > PARSE_CHUNK_FRAMES {
             self.pending.drain(..self.next);
             self.next = 0;
         }
-        let start = self.next;
-        loop {
-            let rest = self.pending.get(self.next..).unwrap_or_default();
-            let n = rest.iter().take_while(|f| f.t_us <= now_us).count();
-            self.next += n;
-            // Stop at the first later frame, or at the end of the input.
-            if n < rest.len() || !self.receive() {
-                break;
+        while self.pending.len() <= self.next {
+            if !self.receive() {
+                return None;
             }
         }
-        self.pending.get(start..self.next).unwrap_or_default()
+        self.pending
+            .get(self.next)
+            .filter(|f| f.t_us <= now_us)
+            .copied()
+    }
+    fn take(&mut self) {
+        self.next += 1;
     }
     fn has_more(&mut self) -> bool {
         while self.pending.len() <= self.next {
@@ -526,6 +541,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
+    let mut filtered = 0u64;
+    let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
             let mut out = TextOut::new(csv, tx_log);
@@ -561,16 +578,30 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     now_us: now,
                     platform: PlatformStats::default(),
                 };
-                let rx = source.take_until(now);
+                // What the firmware's app does: the acceptance filter first (its refusals
+                // never wait), then at most the node's per-tick cap of due frames, the rest
+                // left for the next tick.
+                rx.clear();
+                while let Some(f) = source.peek_due(now) {
+                    if !is_node_input(f.frame.id) {
+                        filtered += 1;
+                    } else if rx.len() < MAX_RX_FRAMES_PER_TICK {
+                        rx.push(f);
+                    } else {
+                        break;
+                    }
+                    source.take();
+                }
                 frames += rx.len() as u64;
-                node.step(&tick, rx, &mut tx);
+                node.step(&tick, &rx, &mut tx);
                 batch.push((now, tx));
                 step += 1;
                 if step.is_multiple_of(500) {
                     progress(step);
                 }
-                // The last tick is the one at or after the last frame (the QEMU run stops
-                // there too): another one follows while a frame later than this one remains.
+                // The last tick is the one at or after the last frame once every frame is
+                // taken (the QEMU run stops there too): another one follows while a frame
+                // remains.
                 let more = source.has_more();
                 if source.input_ok() == Some(false) {
                     break;
@@ -601,6 +632,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     });
     let stats = ReplayStats {
         frames,
+        filtered,
         ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),

@@ -1,6 +1,6 @@
 //! `catmodel sil --stdio`: lockstep software-in-the-loop over stdin/stdout, so that any
 //! simulator (ours, Gazebo, CARLA, a script) can close the loop around the very same node
-//! (DESIGN.md, "The controller and software-in-the-loop").
+//! (README, "Software in the loop").
 //!
 //! Input, one item per line: a candump line (a frame the node reads), or `TICK SECONDS.UUUUUU`.
 //! On `TICK T` the node runs its tick at time T with every frame given since the previous tick

@@ -198,18 +198,24 @@ impl Writer {
     }
 
     /// Writes counter and CRC (protected messages) and returns the frame.
-    fn finish(mut self, id: CanId, counter: u8) -> (CanFrame, EncodeReport) {
+    fn finish(self, id: CanId, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.finish_into(id, counter, &mut frame);
+        (frame, report)
+    }
+
+    /// [`Writer::finish`] into `out` (in place: no frame is moved on the way to the node's
+    /// transmit list, each move being a library `memcpy` on the Cortex-M4).
+    fn finish_into(mut self, id: CanId, counter: u8, out: &mut CanFrame) -> EncodeReport {
         if let Integrity::CounterCrc(counter_spec) = self.spec.integrity {
             counter_spec.write_raw(&mut self.data, i64::from(counter & 0x0F));
             let crc = frame_crc(id, &self.data);
             sig::CRC.write_raw(&mut self.data, i64::from(crc));
         }
-        let frame = CanFrame {
-            id,
-            len: self.spec.dlc,
-            data: self.data,
-        };
-        (frame, self.report)
+        out.id = id;
+        out.len = self.spec.dlc;
+        out.data = self.data;
+        self.report
     }
 }
 
@@ -837,13 +843,19 @@ impl StatePosition {
     }
     /// As [`Self::encode`], with what had to be substituted.
     pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let mut w = Writer::new(&spec::STATE_POSITION);
         w.flag(&sig::POSITION_VALID, self.position_valid);
         w.flag(&sig::GNSS_FRESH, self.gnss_fresh);
         w.flag(&sig::GNSS_REJECTED, self.gnss_rejected);
         w.phys(&sig::EAST_M, self.east_m);
         w.phys(&sig::NORTH_M, self.north_m);
-        w.finish(spec::STATE_POSITION.id, counter)
+        w.finish_into(spec::STATE_POSITION.id, counter, out)
     }
     /// The message and its counter.
     pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
@@ -879,12 +891,18 @@ impl StateMotion {
     }
     /// As [`Self::encode`], with what had to be substituted.
     pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let mut w = Writer::new(&spec::STATE_MOTION);
         w.raw(&sig::MODE, self.mode.raw());
         w.phys(&sig::HEADING_RAD, self.heading_rad);
         w.phys(&sig::STATE_SPEED_MPS, self.speed_mps);
         w.phys(&sig::YAW_RATE_RADPS, self.yaw_rate_radps);
-        w.finish(spec::STATE_MOTION.id, counter)
+        w.finish_into(spec::STATE_MOTION.id, counter, out)
     }
     /// The message and its counter.
     pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
@@ -968,13 +986,19 @@ impl Prediction {
     }
     /// As [`Self::encode`], with what had to be substituted.
     pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let spec = self.point.spec();
         let mut w = Writer::new(spec);
         w.phys(&sig::DX_M, self.dx_m);
         w.phys(&sig::DY_M, self.dy_m);
         w.phys(&sig::DHEADING_RAD, self.dheading_rad);
         w.phys(&sig::PRED_SPEED_MPS, self.speed_mps);
-        w.finish(spec.id, counter)
+        w.finish_into(spec.id, counter, out)
     }
     /// The message (any of 0x310..=0x319) and its counter.
     pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
@@ -1053,11 +1077,17 @@ impl ControlCommand {
     }
     /// As [`Self::encode`], with what had to be substituted.
     pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let mut w = Writer::new(&spec::CONTROL_COMMAND);
         w.raw(&sig::COMMAND_STATUS, self.status.raw());
         w.phys(&sig::STEER_CMD_PCT, self.steer_cmd_pct);
         w.phys(&sig::COMMAND_SPEED_MPS, self.speed_cmd_mps);
-        w.finish(spec::CONTROL_COMMAND.id, counter)
+        w.finish_into(spec::CONTROL_COMMAND.id, counter, out)
     }
     /// The message and its counter.
     pub fn decode(frame: &CanFrame) -> Result<(Self, u8), DecodeError> {
@@ -1227,6 +1257,12 @@ impl NodeStatus {
 
     /// As [`Self::encode`], with what saturated.
     pub fn encode_with_report(&self, counter: u8) -> (CanFrame, EncodeReport) {
+        let mut frame = CanFrame::EMPTY;
+        let report = self.encode_into(counter, &mut frame);
+        (frame, report)
+    }
+    /// As [`Self::encode_with_report`], into `out` (in place).
+    pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let mut w = Writer::new(&spec::NODE_STATUS);
         w.raw(&sig::PAGE, i64::from(self.page()));
         match *self {
@@ -1283,7 +1319,7 @@ impl NodeStatus {
                 w.phys(&sig::LAT_ACCEL_MPS2, m.lat_accel_mps2);
             }
         }
-        w.finish(spec::NODE_STATUS.id, counter)
+        w.finish_into(spec::NODE_STATUS.id, counter, out)
     }
 
     /// The page and its counter.

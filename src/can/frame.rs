@@ -1,8 +1,13 @@
 //! Classic CAN 2.0 frames as the node sees them.
 
 /// A CAN identifier: 11-bit standard (our own messages) or 29-bit extended (NMEA 2000 GNSS).
+///
+/// `repr(u32)`: a 4-byte tag before the value, so that a frame is five aligned words and
+/// moves as such (with the default layout's 2-byte tag the compiler copied a frame's other 18
+/// bytes with a library `memcpy`, about 100 instructions per frame on the Cortex-M4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u32)]
 pub enum CanId {
     /// 11-bit identifier, 0..=0x7FF.
     Standard(u16),
@@ -42,6 +47,13 @@ pub struct CanFrame {
 }
 
 impl CanFrame {
+    /// The empty standard frame 0 (a slot to encode into).
+    pub const EMPTY: CanFrame = CanFrame {
+        id: CanId::Standard(0),
+        len: 0,
+        data: [0; 8],
+    };
+
     /// A frame with `data` as payload; `None` if `data` is longer than 8 bytes or the id is out
     /// of range.
     pub fn new(id: CanId, data: &[u8]) -> Option<Self> {

@@ -615,6 +615,39 @@ pub const fn n2k_pgn_source(id: u32) -> (u32, u8) {
     (pgn, id as u8)
 }
 
+/// The PGN field of a 29-bit identifier as an acceptance filter masks it: bits 8..25
+/// (reserved, data page, PDU format, PDU specific), priority and source address left out.
+pub const N2K_PGN_FIELD_MASK: u32 = 0x3_FFFF << 8;
+
+/// The node's inputs with standard identifiers: the vehicle's reports and the planner's
+/// messages (the acceptance filter admits exactly these, and the two GNSS PGNs).
+pub const NODE_INPUT_STANDARD: [&MessageSpec; 8] = [
+    &STEERING_REPORT,
+    &SPEED_REPORT,
+    &PEDAL_REPORT,
+    &PATH_HEADER,
+    &PATH_POINT,
+    &PATH_LIMITS,
+    &OBSTACLE,
+    &LOCAL_ORIGIN,
+];
+
+/// Whether a frame with `id` is one of the node's inputs, by its identifier alone: the bus
+/// interface's acceptance filter. The board programs it into bxCAN's filter banks (the 50 Hz
+/// reports and the planner's messages by identifier, the GNSS PGNs from any source at any
+/// priority); the app's receive
+/// loop (QEMU) and host replay apply it in software, so frames it refuses never reach the node
+/// and never take a place among a tick's frames.
+pub fn is_node_input(id: CanId) -> bool {
+    match id {
+        CanId::Standard(_) => NODE_INPUT_STANDARD.iter().any(|spec| spec.id == id),
+        CanId::Extended(raw) => {
+            let pgn = (raw & N2K_PGN_FIELD_MASK) >> 8;
+            pgn == PGN_POSITION_RAPID || pgn == PGN_COG_SOG_RAPID
+        }
+    }
+}
+
 /// Input 0x100, 50 Hz.
 pub const STEERING_REPORT: MessageSpec = MessageSpec {
     name: "STEERING_REPORT",

@@ -91,6 +91,43 @@ pub struct SsBlockState<const N: usize, const DELAY_CAP: usize = DEFAULT_DELAY_C
     pub delay: DelayLineState<DELAY_CAP>,
 }
 
+/// [`SsBlock::forecast`]: a copy of the state vector stepped along the inputs in flight, then a
+/// held input.
+#[derive(Clone, Debug)]
+pub struct Forecast<'a, const N: usize, const DELAY_CAP: usize> {
+    block: &'a SsBlock<N, DELAY_CAP>,
+    x: SVector<f32, N>,
+    /// The inputs in flight not used yet, in order: two pieces of the delay ring.
+    in_flight: [&'a [f32]; 2],
+    u_hold: f32,
+}
+
+impl<const N: usize, const DELAY_CAP: usize> Forecast<'_, N, DELAY_CAP> {
+    /// The outputs of the next `out.len()` steps (each as [`SsBlock::step`] would return it).
+    /// Three plain loops: over each piece of the inputs in flight, then with the held input.
+    pub fn fill(&mut self, out: &mut [f32]) {
+        let b = self.block;
+        let mut out = out;
+        for piece in &mut self.in_flight {
+            let n = piece.len().min(out.len());
+            let (now, rest) = out.split_at_mut(n);
+            let (inputs, later) = piece.split_at(n);
+            for (y, u) in now.iter_mut().zip(inputs) {
+                *y = b.c.dot(&self.x) + b.d * u;
+                self.x = b.a * self.x + b.b * *u;
+            }
+            *piece = later;
+            out = rest;
+        }
+        let du = b.d * self.u_hold;
+        let bu = b.b * self.u_hold;
+        for y in out {
+            *y = b.c.dot(&self.x) + du;
+            self.x = b.a * self.x + bu;
+        }
+    }
+}
+
 impl<const N: usize, const DELAY_CAP: usize> SsBlock<N, DELAY_CAP> {
     /// ZOH-discretizes `tf` at `ts_s` (f64) and rounds to f32.
     ///
@@ -162,6 +199,24 @@ impl<const N: usize, const DELAY_CAP: usize> SsBlock<N, DELAY_CAP> {
         let y = self.c.dot(&state.x) + self.d * u_d;
         state.x = self.a * state.x + self.b * u_d;
         y
+    }
+
+    /// The block's outputs from `state` on, without touching it: the inputs already in its
+    /// delay line first (they reach the model in the next `delay_samples` steps), then `u_hold`
+    /// held. Each output of [`Forecast::fill`] is one [`SsBlock::step`], bit for bit, without
+    /// the ring buffer's bookkeeping (the horizon predictor's speed profile).
+    pub fn forecast<'a>(
+        &'a self,
+        state: &'a SsBlockState<N, DELAY_CAP>,
+        u_hold: f32,
+    ) -> Forecast<'a, N, DELAY_CAP> {
+        let (first, then) = self.delay.in_flight(&state.delay);
+        Forecast {
+            block: self,
+            x: state.x,
+            in_flight: [first, then],
+            u_hold,
+        }
     }
 
     /// All-zero state (zero output history and zero inputs in flight).

@@ -73,6 +73,17 @@ impl<const CAP: usize> DelayLine<CAP> {
         y
     }
 
+    /// The inputs in flight, in the order `push` will return them: two contiguous pieces (the
+    /// ring from its head, then its start).
+    pub fn in_flight<'s>(&self, state: &'s DelayLineState<CAP>) -> (&'s [f32], &'s [f32]) {
+        let line = state.buf.get(..self.delay_samples).unwrap_or(&[]);
+        // Note: `head < delay_samples` unless the state came from another configuration (see
+        // `push`); the modulo keeps even that case consistent with `push`.
+        let head = state.head.checked_rem(self.delay_samples).unwrap_or(0);
+        let (older, newer) = line.split_at(head.min(line.len()));
+        (newer, older)
+    }
+
     /// The value `push` will return `k` calls from now (`k < delay_samples`) without changing
     /// the state: the input already in flight. `None` for `k >= delay_samples`.
     pub fn peek(&self, state: &DelayLineState<CAP>, k: usize) -> Option<f32> {
@@ -113,6 +124,22 @@ mod tests {
         assert_eq!(line.peek(&s, 0), Some(4.0));
         assert_eq!(line.peek(&s, 2), Some(6.0));
         assert_eq!(line.peek(&s, 3), None);
+    }
+
+    #[test]
+    fn in_flight_is_what_push_returns_next() {
+        let line = DelayLine::<8>::new(5).unwrap();
+        let mut s = line.state_primed(0.0);
+        for i in 1..=7 {
+            line.push(&mut s, i as f32);
+        }
+        let (a, b) = line.in_flight(&s);
+        let in_flight: Vec<f32> = a.iter().chain(b).copied().collect();
+        let pushed: Vec<f32> = (0..5).map(|_| line.push(&mut s, -1.0)).collect();
+        assert_eq!(in_flight, pushed);
+        assert_eq!(pushed, [3.0, 4.0, 5.0, 6.0, 7.0]);
+        let none = DelayLine::<8>::NONE;
+        assert_eq!(none.in_flight(&none.state_primed(1.0)), (&[][..], &[][..]));
     }
 
     #[test]

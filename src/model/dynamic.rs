@@ -8,7 +8,7 @@
 //!
 //! vy is positive to the right and r positive clockwise (a right turn), the catmodel convention.
 //! Its steady state is `r = vx delta / (L + K_us vx^2)` with the understeer gradient
-//! `K_us = m (Cr lr - Cf lf) / (Cf Cr L)`: for the CAT Vehicle figures of facts.md this is the
+//! `K_us = m (Cr lr - Cf lf) / (Cf Cr L)`: for the CAT Vehicle figures (models/paper.toml `[dynamics]`) this is the
 //! `0.0015 v^2` term of eq 2 (see [`DynamicParams::understeer_s2_per_m2`]).
 //!
 //! The model is stiff at low speed (poles ~ -(Cf + Cr)/(m vx)), so each step uses the
@@ -217,6 +217,90 @@ impl LateralStepper {
             let inv_det = 1.0 / det;
             state.vy_mps = (m22 * r1 + p12 * r2) * inv_det;
             state.yaw_rate_rps = (m11 * r2 + p21 * r1) * inv_det;
+        }
+    }
+}
+
+/// One trapezoidal step of [`LateralStepper`] with the speed held over several steps, as a
+/// fixed linear map: the horizon holds the speed over each 0.2 s segment
+/// ([`LateralStepper::held`]), so its 10 steps share these coefficients.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HeldStep {
+    /// Below the model's minimum speed: its kinematic steady state, as a path curvature (rad
+    /// per m driven, positive right) and the centre of gravity's side slip per m driven
+    /// (`curvature * lr`).
+    Slow {
+        /// Yaw per metre driven, rad/m.
+        curvature_per_m: f32,
+        /// Side slip per metre driven, m/m.
+        slip_per_m: f32,
+    },
+    /// `x+ = m x + g` with `x = [vy, yaw rate]`, for the speed `vx_mps`.
+    Fast {
+        /// `(I - hA)^-1 (I + hA)`.
+        m: [[f32; 2]; 2],
+        /// `(I - hA)^-1 dt B delta`.
+        g: [f32; 2],
+        /// The held speed, m/s.
+        vx_mps: f32,
+    },
+}
+
+impl LateralStepper {
+    /// The step for a speed `vx_mps` held over several steps: [`LateralStepper::step`] as a
+    /// fixed map (the same trapezoidal rule solved once), or the kinematic steady state below
+    /// `min_speed_mps`. A singular or non-finite system leaves the state unchanged, as `step`
+    /// does.
+    pub fn held(&self, vx_mps: f32) -> HeldStep {
+        if vx_mps >= self.params.min_speed_mps {
+            self.held_fast(vx_mps)
+        } else {
+            // Below the minimum speed, and a NaN speed.
+            let l = self.params.wheelbase_m();
+            let k = self.params.understeer_s2_per_m2();
+            let curvature_per_m = self.delta_rad / (l * (1.0 + k * vx_mps * vx_mps));
+            HeldStep::Slow {
+                curvature_per_m,
+                slip_per_m: curvature_per_m * self.params.cg_to_rear_m,
+            }
+        }
+    }
+
+    /// [`LateralStepper::held`] at or above the minimum speed.
+    fn held_fast(&self, vx_mps: f32) -> HeldStep {
+        let inv_vx = 1.0 / vx_mps;
+        let p11 = self.h_a11_vx * inv_vx;
+        let p12 = self.h_a12_vx * inv_vx - self.half_dt_s * vx_mps;
+        let p21 = self.h_a21_vx * inv_vx;
+        let p22 = self.h_a22_vx * inv_vx;
+        let m11 = 1.0 - p11;
+        let m22 = 1.0 - p22;
+        let det = m11 * m22 - p12 * p21;
+        if !(det.is_finite() && det != 0.0) {
+            return HeldStep::Fast {
+                m: [[1.0, 0.0], [0.0, 1.0]],
+                g: [0.0, 0.0],
+                vx_mps,
+            };
+        }
+        let inv_det = 1.0 / det;
+        // (I - P)^-1 = [[m22, p12], [p21, m11]] / det, applied to (I + P) and to dt B.
+        HeldStep::Fast {
+            m: [
+                [
+                    (m22 * (1.0 + p11) + p12 * p21) * inv_det,
+                    2.0 * p12 * inv_det,
+                ],
+                [
+                    2.0 * p21 * inv_det,
+                    (p21 * p12 + m11 * (1.0 + p22)) * inv_det,
+                ],
+            ],
+            g: [
+                (m22 * self.dt_b1 + p12 * self.dt_b2) * inv_det,
+                (p21 * self.dt_b1 + m11 * self.dt_b2) * inv_det,
+            ],
+            vx_mps,
         }
     }
 }

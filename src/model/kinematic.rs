@@ -76,47 +76,43 @@ impl Pose {
     }
 
     /// Moves `arc_m` along a path of constant curvature `curvature_per_m` (1/m, positive =
-    /// right), in one piece when the turn is at most 0.5 rad, else in equal pieces of at most
-    /// 0.5 rad (the range of [`half_turn`]; at most 64 pieces, beyond which accuracy degrades
-    /// gracefully). With the curvature held, eq 8's path is that circle whatever the speed
-    /// profile, so this equals the per-step [`Pose::advance_no_slip`] over the same distance up to
-    /// f32 rounding, at the cost of one step.
+    /// right) in one step, for a turn of any size ([`any_turn`]: the same fixed work whatever
+    /// the turn). With the curvature held, eq 8's path is that circle whatever the speed
+    /// profile, so this equals the per-step [`Pose::advance_no_slip`] over the same distance
+    /// up to f32 rounding, at the cost of one step.
     pub fn advance_arc(&mut self, arc_m: f32, curvature_per_m: f32) {
         let turn_rad = arc_m * curvature_per_m;
-        let pieces = turn_rad.abs() * 2.0;
-        if pieces <= 1.0 {
-            self.advance_no_slip(arc_m, turn_rad, 1.0);
-            return;
-        }
-        // `as` saturates (NaN gives 0); pieces > 1 here, so n >= 2.
-        let n = (pieces as u32 + 1).min(64);
-        let inv_n = 1.0 / n as f32;
-        let (piece_m, piece_rad) = (arc_m * inv_n, turn_rad * inv_n);
-        for _ in 0..n {
-            self.advance_no_slip(piece_m, piece_rad, 1.0);
-        }
+        self.advance_by(arc_m, 0.0, turn_rad, any_turn(turn_rad));
     }
 
     /// Moves the pose over a segment driven with side slip: `forward_m` along and `side_m` to the
     /// right of the heading (the integrals of v and vy over the segment) while the heading
-    /// turns by `turn_rad`, as one arc with the forward and side components held, in pieces of
-    /// at most 0.5 rad (as [`Pose::advance_arc`]). Over a segment whose yaw rate and slip vary
-    /// (a transient), it differs from stepping [`Pose::advance`] per sample to first order in
-    /// that variation; the predictor adds that first-order term back
+    /// turns by `turn_rad`, as one arc with the forward and side components held, in one step
+    /// for a turn of any size (as [`Pose::advance_arc`]). Over a segment whose yaw rate and
+    /// slip vary (a transient), it differs from stepping [`Pose::advance`] per sample to first
+    /// order in that variation; the predictor adds that first-order term back
     /// ([`Pose::shift_right`], `predictor::rollout`).
     pub fn advance_segment(&mut self, forward_m: f32, side_m: f32, turn_rad: f32) {
-        let pieces = turn_rad.abs() * 2.0;
-        if pieces <= 1.0 {
-            self.advance(forward_m, side_m, turn_rad, 1.0);
-            return;
-        }
-        // `as` saturates (NaN gives 0); pieces > 1 here, so n >= 2.
-        let n = (pieces as u32 + 1).min(64);
-        let inv_n = 1.0 / n as f32;
-        let (fwd, side, turn) = (forward_m * inv_n, side_m * inv_n, turn_rad * inv_n);
-        for _ in 0..n {
-            self.advance(fwd, side, turn, 1.0);
-        }
+        self.advance_by(forward_m, side_m, turn_rad, any_turn(turn_rad));
+    }
+
+    /// The arc step: `forward_m` and `side_m` held while turning `turn_rad`, with the turn's
+    /// `(sinc, sin, cos)` of half the turn.
+    #[inline(always)]
+    fn advance_by(
+        &mut self,
+        forward_m: f32,
+        side_m: f32,
+        turn_rad: f32,
+        (sinc, s_half, c_half): (f32, f32, f32),
+    ) {
+        let sin_mid = self.sin_heading * c_half + self.cos_heading * s_half;
+        let cos_mid = self.cos_heading * c_half - self.sin_heading * s_half;
+        let chord_m = forward_m * sinc;
+        let side_m = side_m * sinc;
+        self.x_m += chord_m * sin_mid + side_m * cos_mid;
+        self.y_m += chord_m * cos_mid - side_m * sin_mid;
+        self.turn_from_mid(sin_mid, cos_mid, s_half, c_half, turn_rad);
     }
 
     /// Moves the position `right_m` to the right of the current heading (negative: left).
@@ -159,6 +155,19 @@ pub fn half_turn(d: f32) -> (f32, f32, f32) {
     let sinc = 1.0 - a2 * INV_6 * (1.0 - a2 * INV_20 * (1.0 - a2 * INV_42));
     let c = 1.0 - 0.5 * a2 * (1.0 - a2 * INV_12 * (1.0 - a2 * INV_30));
     (sinc, a * sinc, c)
+}
+
+/// [`half_turn`] where its series is accurate (|d| <= 0.5 rad), the exact half-angle sine and
+/// cosine beyond ([`math::sin_cos`], |d / 2| > 0.25 so the division is safe): one step for a
+/// turn of any size, a fixed amount of work on either branch. Non-finite `d` gives NaN.
+#[inline(always)]
+pub fn any_turn(d: f32) -> (f32, f32, f32) {
+    if d.abs() <= 0.5 {
+        return half_turn(d);
+    }
+    let a = 0.5 * d;
+    let (s, c) = math::sin_cos(a);
+    (s / a, s, c)
 }
 
 /// Yaw rate of eq 8, `v tan(delta) / L`, rad/s, given the path curvature `tan(delta) / L`.

@@ -54,9 +54,6 @@ const ODO_LEN: usize = 32;
 /// delay plus the time since the fix: 0.47 s at 100 Hz, 1.7 s at 1 Hz). Older courses are
 /// carried forward with the current yaw rate for the rest.
 pub const TURN_HISTORY_TICKS: usize = 128;
-/// Missing fixes filled in after a gap, at most: the filters' memory (FIR taps + MA span);
-/// anything older would be flushed out anyway.
-pub const GAP_FILL_MAX_FIXES: u32 = (GNSS_FIR_TAPS + GNSS_MA_SPAN) as u32;
 
 /// Estimator tuning. Immutable configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -303,12 +300,15 @@ impl EstimatorConfig {
 }
 
 impl EstimatorState {
-    /// Forgets everything (e.g. after a GNSS outage or a position jump).
+    /// Forgets every fix (e.g. after a GNSS outage or a position jump): the next fix primes
+    /// the filters. Only the fix count and the filter output are cleared: nothing reads the
+    /// histories below the fix count (the next fix overwrites the filters' memory, the rings
+    /// are read at most `fixes` back), so this is the same as starting afresh, in a few
+    /// instructions instead of rewriting the whole state. The heading survives a position
+    /// reset: it is still the car's.
     pub fn reset(&mut self) {
-        let heading = self.heading_rad;
-        *self = Self::default();
-        // The heading survives a position reset: it is still the car's.
-        self.heading_rad = heading;
+        self.fixes = 0;
+        self.filtered = None;
     }
 
     /// Current heading estimate, rad.
@@ -401,12 +401,11 @@ impl EstimatorState {
             cfg.ma.prime(&mut self.ma_x, fix.x_m);
             cfg.ma.prime(&mut self.ma_y, fix.y_m);
         }
-        let fx = cfg
-            .ma
-            .process(&mut self.ma_x, cfg.fir.process(&mut self.fir_x, fix.x_m));
-        let fy = cfg
-            .ma
-            .process(&mut self.ma_y, cfg.fir.process(&mut self.fir_y, fix.y_m));
+        let (lx, ly) = cfg
+            .fir
+            .process_pair((&mut self.fir_x, &mut self.fir_y), (fix.x_m, fix.y_m));
+        let fx = cfg.ma.process(&mut self.ma_x, lx);
+        let fy = cfg.ma.process(&mut self.ma_y, ly);
         let filtered = Xy { x_m: fx, y_m: fy };
         self.filtered = Some(filtered);
         // Where dead reckoning had the car when the fix was taken (the heading's sine and
@@ -426,6 +425,63 @@ impl EstimatorState {
             *slot = filtered;
         }
         self.fixes = self.fixes.saturating_add(1);
+    }
+
+    /// Restarts the filters on the dead-reckoned track after a gap of `missing` fixes whose
+    /// newest one would have come one period before a fix of age `age_s`, the antenna being at
+    /// `antenna` now: the state is what filling the filters' whole memory with dead-reckoned
+    /// positions gives (for a gap as long as that memory, what filling fix by fix does, to
+    /// rounding), computed directly in fixed work. On that straight, evenly spaced track a
+    /// unit-gain symmetric FIR and the moving average are pure delays, so each filter's history
+    /// is the track itself, shifted by its group delay.
+    pub fn restart_on_track(
+        &mut self,
+        cfg: &EstimatorConfig,
+        antenna: Xy,
+        age_s: f32,
+        missing: u32,
+        speed_mps: f32,
+    ) {
+        let (s, c) = self.heading_sin_cos;
+        // The antenna `k` periods before the fix, moved `delay` fixes further back: `back_m`
+        // metres behind where it is now.
+        let step_m = speed_mps * cfg.gnss_period_s;
+        let back_m = |k: usize, delay: f32| speed_mps * age_s + (k as f32 + delay) * step_m;
+        let at = |back: f32| Xy {
+            x_m: antenna.x_m - back * s,
+            y_m: antenna.y_m - back * c,
+        };
+        self.fir_x.load(|k| at(back_m(k + 1, 0.0)).x_m);
+        self.fir_y.load(|k| at(back_m(k + 1, 0.0)).y_m);
+        let fir_delay = cfg.fir.group_delay_samples();
+        self.ma_x.load(|k| at(back_m(k + 1, fir_delay)).x_m);
+        self.ma_y.load(|k| at(back_m(k + 1, fir_delay)).y_m);
+        // The histories get one entry per missing fix, oldest first, as filling would give:
+        // the dead-reckoned position then, and the filters' output then. Of the dead-reckoning
+        // history only the entries the delay compensation can still read are written (it reads
+        // `group_delay` and one more fixes back; older entries only get older).
+        let odo = self.odo_now;
+        let odo_entries = (missing as usize).min(ODO_LEN);
+        let odo_read = (cfg.group_delay_fixes.max(0.0) as usize + 2).min(odo_entries);
+        self.odo_head = (self.odo_head + odo_entries - odo_read) % ODO_LEN;
+        for k in (1..=odo_read).rev() {
+            let back = back_m(k, 0.0);
+            self.odo_head = (self.odo_head + 1) % ODO_LEN;
+            if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
+                *slot = Xy {
+                    x_m: odo.x_m - back * s,
+                    y_m: odo.y_m - back * c,
+                };
+            }
+        }
+        for k in (1..=(missing as usize).min(TRACK_LEN)).rev() {
+            self.track_head = (self.track_head + 1) % TRACK_LEN;
+            if let Some(slot) = self.track.get_mut(self.track_head) {
+                *slot = at(back_m(k, cfg.group_delay_fixes));
+            }
+        }
+        self.filtered = Some(at(back_m(1, cfg.group_delay_fixes)));
+        self.fixes = self.fixes.saturating_add(missing);
     }
 
     /// Dead-reckoned position `k` fixes ago (0 = the latest fix); `None` if not recorded yet.
@@ -450,21 +506,15 @@ impl EstimatorState {
         })
     }
 
-    /// Where dead reckoning puts the antenna `age_s` ago (straight back along this tick's
-    /// heading at `speed_mps`): the stand-in for a missing fix. `None` without a position.
-    pub fn dead_reckoned_antenna(
-        &self,
-        cfg: &EstimatorConfig,
-        age_s: f32,
-        speed_mps: f32,
-    ) -> Option<Xy> {
-        let now = self.antenna_position(cfg)?;
+    /// Where dead reckoning puts the antenna `age_s` before it was at `antenna` (straight back
+    /// along this tick's heading at `speed_mps`): the stand-in for a missing fix.
+    pub fn dead_reckoned_back(&self, antenna: Xy, age_s: f32, speed_mps: f32) -> Xy {
         let (s, c) = self.heading_sin_cos;
         let back_m = speed_mps * age_s;
-        Some(Xy {
-            x_m: now.x_m - back_m * s,
-            y_m: now.y_m - back_m * c,
-        })
+        Xy {
+            x_m: antenna.x_m - back_m * s,
+            y_m: antenna.y_m - back_m * c,
+        }
     }
 
     /// The antenna now: the filtered position moved forward by dead reckoning,
@@ -549,6 +599,58 @@ impl EstimatorState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// After a gap longer than the filters' memory, restarting them on the dead-reckoned track
+    /// in one step gives what filling the missing fixes one by one gives (the FIR and the
+    /// moving average are pure delays on that track), to f32 rounding; so do the fixes after.
+    #[test]
+    fn restart_on_the_track_is_filling_the_gap() {
+        let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
+        let (v, heading) = (10.0f32, 0.7f32);
+        let mut warm = EstimatorState::default();
+        warm.correct_heading(&cfg, heading, 0.0, v, 0.0);
+        let (s, c) = (heading.sin(), heading.cos());
+        let mut t = 0.0f32;
+        let at = |t: f32| Xy {
+            x_m: 20.0 + v * t * s,
+            y_m: -5.0 + v * t * c,
+        };
+        for _ in 0..100 {
+            warm.propagate(&cfg, v, 0.0, 0.02);
+            t += 0.02;
+            for age in [0.01f32, 0.0] {
+                warm.add_fix(&cfg, at(t - age), age, v);
+            }
+        }
+        // 40 fixes missing, then the fix of this tick (age 0).
+        let missing = 40u32;
+        warm.propagate(&cfg, v, 0.0, 0.02);
+        t += 0.02;
+        let antenna = warm.antenna_position(&cfg).unwrap();
+        let mut filled = warm.clone();
+        for k in (1..=missing).rev() {
+            let age_k = k as f32 * cfg.gnss_period_s;
+            let p = filled.dead_reckoned_back(antenna, age_k, v);
+            filled.add_fix(&cfg, p, age_k, v);
+        }
+        let mut restarted = warm.clone();
+        restarted.restart_on_track(&cfg, antenna, 0.0, missing, v);
+        assert_eq!(filled.fixes(), restarted.fixes());
+        for step in 0..40 {
+            for state in [&mut filled, &mut restarted] {
+                if step > 0 {
+                    state.propagate(&cfg, v, 0.0, 0.01);
+                }
+                state.add_fix(&cfg, at(t + step as f32 * 0.01), 0.0, v);
+            }
+            let (a, b) = (
+                filled.position(&cfg).unwrap(),
+                restarted.position(&cfg).unwrap(),
+            );
+            let d = ((a.x_m - b.x_m).powi(2) + (a.y_m - b.y_m).powi(2)).sqrt();
+            assert!(d < 1e-4, "fix {step}: {d} m, {a:?} vs {b:?}");
+        }
+    }
 
     /// A car at 10 m/s due east, exact GNSS at 100 Hz, ticks at 50 Hz: the compensated filter
     /// output is on the car (the uncompensated one trails by ~1.45 m).

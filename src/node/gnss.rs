@@ -1,14 +1,28 @@
 //! The GNSS part of stages 1 and 3: fixes into the local frame, through the plausibility gate
 //! and into the lowpass ([`super::estimator`]), gaps refilled by dead reckoning; then the
 //! heading (receiver COG, else the filtered track's course) and the rear-axle position.
+//! Bounded per tick ([`super::stage`]): the fixes, the filled fixes and the restarts after a
+//! long gap each have a per-tick cap.
 use crate::can::freshness::Input;
 use crate::geodesy::LocalFrame;
 use crate::math;
 use crate::model::kinematic::Pose;
 
-use super::estimator::{self, EstimatorConfig, EstimatorState, Xy};
-use super::inputs::{GnssMessage, Inputs};
+use super::estimator::{EstimatorConfig, EstimatorState, Xy};
+use super::inputs::{GnssCourse, GnssFix, Inputs};
+use super::stage::{Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK};
 use super::{bump, NodeConfig};
+
+/// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
+pub type TickFixes = heapless::Vec<GnssFix, GNSS_FIXES_PER_TICK>;
+
+/// What one tick may still spend on gaps.
+struct GapBudget {
+    /// Missing fixes it may still fill one by one.
+    fills_left: u32,
+    /// Whether it may still restart the filters on the dead-reckoned track.
+    restart_left: bool,
+}
 
 /// GNSS state.
 #[derive(Clone, Debug, Default)]
@@ -65,58 +79,73 @@ impl Gnss {
         self.estimator.propagate(cfg, speed_mps, yaw_rate_rps, dt_s);
     }
 
-    /// Applies one decoded GNSS message received before `now_us`, with the car at `speed_mps`.
-    pub fn receive(
-        &mut self,
-        config: &NodeConfig,
-        now_us: u64,
-        msg: &GnssMessage,
-        speed_mps: f32,
-        inputs: &mut Inputs,
-    ) {
-        match *msg {
-            GnssMessage::Fix {
-                t_us,
-                lat_e7,
-                lon_e7,
-            } => self.receive_fix(config, now_us, t_us, (lat_e7, lon_e7), speed_mps, inputs),
-            GnssMessage::Course {
-                t_us,
-                cog_rad,
-                sog_mps,
-                reference,
-            } => {
-                // COG is meaningless when standing still; only true north is understood.
-                if sog_mps >= config.estimator.course_min_speed_mps && reference == 0 {
-                    self.cog = Some((math::wrap_pi(cog_rad), t_us));
-                }
-            }
+    /// A course from the receiver (PGN 129026): kept, with its receive time, while the car
+    /// moves (COG is meaningless when standing still); only true north is understood.
+    pub fn receive_course(&mut self, config: &NodeConfig, course: &GnssCourse) {
+        if course.sog_mps >= config.estimator.course_min_speed_mps && course.reference == 0 {
+            self.cog = Some((math::wrap_pi(course.cog_rad), course.t_us));
         }
     }
 
-    fn receive_fix(
+    /// A fix received at `t_us` was rejected (counted by the caller).
+    pub fn rejected(&mut self, t_us: u64) {
+        self.last_reject_us = Some(t_us);
+    }
+
+    /// The tick's fixes (received before `now_us`, in arrival order), with the car at
+    /// `speed_mps`: each into the local frame, through the gate and into the lowpass, gaps
+    /// before them filled. Bounded work ([`super::stage`]): at most [`GNSS_FIXES_PER_TICK`]
+    /// fixes, [`GAP_FILL_PER_TICK`] filled fixes and one restart on the track per tick.
+    pub fn receive_fixes<P: StageProbe>(
         &mut self,
         config: &NodeConfig,
         now_us: u64,
-        t_us: u64,
-        (lat_e7, lon_e7): (i32, i32),
+        fixes: &TickFixes,
         speed_mps: f32,
         inputs: &mut Inputs,
+        probe: &mut P,
     ) {
+        let mut gaps = GapBudget {
+            fills_left: GAP_FILL_PER_TICK,
+            restart_left: true,
+        };
+        for fix in fixes {
+            self.receive_fix(config, now_us, fix, speed_mps, inputs, &mut gaps, probe);
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn receive_fix<P: StageProbe>(
+        &mut self,
+        config: &NodeConfig,
+        now_us: u64,
+        fix: &GnssFix,
+        speed_mps: f32,
+        inputs: &mut Inputs,
+        gaps: &mut GapBudget,
+        probe: &mut P,
+    ) {
+        let GnssFix {
+            t_us,
+            lat_e7,
+            lon_e7,
+        } = *fix;
         let counters = &mut inputs.counters;
         if self.frame.is_none() {
             let origin = config.origin_e7.unwrap_or((lat_e7, lon_e7));
-            match LocalFrame::new(origin.0, origin.1) {
-                Ok(frame) => self.frame = Some(frame),
-                Err(_) => {
-                    bump(&mut counters.gnss_gate_rejects);
-                    return;
-                }
+            // Once in the node's life: a frame, once built, is never rebuilt. A refused origin
+            // is refused by cheap range checks before any of the f64 set-up.
+            if let Ok(frame) = LocalFrame::new(origin.0, origin.1) {
+                self.frame = Some(frame);
+                probe.lap(Stage::GnssOrigin);
             }
         }
-        let Some(enu) = self.frame.and_then(|fr| fr.to_local(lat_e7, lon_e7).ok()) else {
+        let enu = self.frame.and_then(|fr| fr.to_local(lat_e7, lon_e7).ok());
+        let Some(enu) = enu else {
             bump(&mut counters.gnss_gate_rejects);
             self.last_reject_us = Some(t_us);
+            probe.lap(Stage::GnssFixCheck);
             return;
         };
         let fix = Xy {
@@ -126,38 +155,60 @@ impl Gnss {
         let cfg = &config.estimator;
         // Plausibility gate against where the car should be; repeated rejections mean the car
         // really is there (e.g. after a long gap): restart the filters on the fixes.
-        if let Some(p) = self.estimator.antenna_position(cfg) {
+        let mut antenna = self.estimator.antenna_position(cfg);
+        if let Some(p) = antenna {
             let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
             if dx * dx + dy * dy > config.gnss_gate_m * config.gnss_gate_m {
                 self.rejects_in_row = self.rejects_in_row.saturating_add(1);
                 bump(&mut counters.gnss_gate_rejects);
                 self.last_reject_us = Some(t_us);
                 if self.rejects_in_row < config.gnss_reacquire_fixes {
+                    probe.lap(Stage::GnssFixCheck);
                     return;
                 }
                 self.estimator.reset();
+                antenna = None;
             }
         }
         self.rejects_in_row = 0;
+        probe.lap(Stage::GnssFixCheck);
         let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
         // The lowpass assumes one fix per period. Fixes missing since the last accepted one
         // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
-        // the antenna at those instants, oldest first; no more than the filters remember.
-        if let Some(prev) = inputs.freshness.last_us(Input::Gnss) {
+        // the antenna at those instants, oldest first, up to the tick's budget; a longer gap
+        // restarts the filters on that dead-reckoned track at once (what filling the filters'
+        // whole memory would do). Without a position (filters not warm, or just restarted)
+        // there is nothing to dead-reckon from.
+        let prev = inputs.freshness.last_us(Input::Gnss);
+        if let (Some(prev), Some(antenna)) = (prev, antenna) {
             let gap_periods =
                 math::u64_to_f32(t_us.saturating_sub(prev)) * 1e-6 / cfg.gnss_period_s;
-            let missing = ((gap_periods + 0.5) as u32)
-                .saturating_sub(1)
-                .min(estimator::GAP_FILL_MAX_FIXES);
-            for k in (1..=missing).rev() {
-                let age_k = age_s + k as f32 * cfg.gnss_period_s;
-                if let Some(p) = self.estimator.dead_reckoned_antenna(cfg, age_k, speed_mps) {
+            let missing = ((gap_periods + 0.5) as u32).saturating_sub(1);
+            if missing > 0 && missing <= gaps.fills_left {
+                gaps.fills_left -= missing;
+                for k in (1..=missing).rev() {
+                    let age_k = age_s + k as f32 * cfg.gnss_period_s;
+                    let p = self.estimator.dead_reckoned_back(antenna, age_k, speed_mps);
                     self.estimator.add_fix(cfg, p, age_k, speed_mps);
+                    probe.lap(Stage::GnssFill);
                 }
+            } else if missing > 0 && gaps.restart_left {
+                gaps.restart_left = false;
+                self.estimator
+                    .restart_on_track(cfg, antenna, age_s, missing, speed_mps);
+                probe.lap(Stage::GnssRestart);
+            } else if missing > 0 {
+                // A second long gap within one tick (only a backlog of fixes makes one): this
+                // fix cannot be placed now; counted, and the next one fills in after it.
+                bump(&mut inputs.counters.gnss_gate_rejects);
+                self.last_reject_us = Some(t_us);
+                probe.lap(Stage::GnssFixFilter);
+                return;
             }
         }
         self.estimator.add_fix(cfg, fix, age_s, speed_mps);
         inputs.freshness.mark(Input::Gnss, t_us);
+        probe.lap(Stage::GnssFixFilter);
     }
 
     /// Stage 3's GNSS part: the heading pulled towards the receiver's COG when it is fresh, else

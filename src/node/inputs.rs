@@ -11,29 +11,37 @@ use crate::can::TimedFrame;
 
 use super::{bump, fresh, Counters, NodeConfig};
 
+/// A GNSS position fix that passed decoding (PGN 129025).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GnssFix {
+    /// Receive time, us.
+    pub t_us: u64,
+    /// Latitude, 1e-7 deg.
+    pub lat_e7: i32,
+    /// Longitude, 1e-7 deg.
+    pub lon_e7: i32,
+}
+
+/// PGN 129026 with both fields valid: the receiver's course over ground.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GnssCourse {
+    /// Receive time, us.
+    pub t_us: u64,
+    /// Course, rad clockwise from north (as sent: wrapped by the GNSS stage).
+    pub cog_rad: f32,
+    /// Speed over ground, m/s.
+    pub sog_mps: f32,
+    /// COG reference (0 = true north).
+    pub reference: u8,
+}
+
 /// A GNSS message that passed decoding, for the GNSS stage.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum GnssMessage {
-    /// PGN 129025: a fix, 1e-7 deg.
-    Fix {
-        /// Receive time, us.
-        t_us: u64,
-        /// Latitude, 1e-7 deg.
-        lat_e7: i32,
-        /// Longitude, 1e-7 deg.
-        lon_e7: i32,
-    },
-    /// PGN 129026 with both fields valid: the receiver's course over ground.
-    Course {
-        /// Receive time, us.
-        t_us: u64,
-        /// Course, rad clockwise from north (as sent: wrapped by the GNSS stage).
-        cog_rad: f32,
-        /// Speed over ground, m/s.
-        sog_mps: f32,
-        /// COG reference (0 = true north).
-        reference: u8,
-    },
+    /// PGN 129025: a fix.
+    Fix(GnssFix),
+    /// PGN 129026: a course.
+    Course(GnssCourse),
 }
 
 /// Where a valid frame goes next.
@@ -129,20 +137,20 @@ impl Inputs {
                 }
             }
             InputMessage::GnssPosition(p) => {
-                return Some(Routed::Gnss(GnssMessage::Fix {
+                return Some(Routed::Gnss(GnssMessage::Fix(GnssFix {
                     t_us: f.t_us,
                     lat_e7: p.lat_e7,
                     lon_e7: p.lon_e7,
-                }))
+                })))
             }
             InputMessage::GnssCogSog(c) => {
                 if let (Some(cog_rad), Some(sog_mps)) = (c.cog_rad, c.sog_mps) {
-                    return Some(Routed::Gnss(GnssMessage::Course {
+                    return Some(Routed::Gnss(GnssMessage::Course(GnssCourse {
                         t_us: f.t_us,
                         cog_rad,
                         sog_mps,
                         reference: c.cog_reference,
-                    }));
+                    })));
                 }
             }
         }

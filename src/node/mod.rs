@@ -6,7 +6,8 @@
 //! top to bottom to follow a frame from the bus to a prediction:
 //! 1. **receive and validate** ([`inputs`]): decode each frame (DLC, CRC-8, rolling counter,
 //!    range; GNSS range and a plausibility gate), count every rejection, keep the latest valid
-//!    value of each input with its receive time; GNSS fixes go into the lowpass ([`gnss`]);
+//!    value of each input with its receive time; then the tick's GNSS fixes go into the
+//!    lowpass ([`gnss`]);
 //! 2. **models and hybrid switch**: the speed model (eq 5) driven by the commanded speed, the
 //!    active lateral model (kinematic eq 8, or the dynamic single-track model) chosen by the
 //!    hybrid switch;
@@ -17,7 +18,9 @@
 //!    finite before it is encoded (non-finite values go out as "not available" and are
 //!    counted, health bit `nonfinite_guard`).
 //!
-//! Never panics on bus data, never allocates, never reads a clock.
+//! Never panics on bus data, never allocates, never reads a clock. Its work is bounded for any
+//! input: at most [`MAX_RX_FRAMES_PER_TICK`] frames a tick, fixed loop counts everywhere else
+//! ([`stage`] writes the structure down; docs/firmware.md, "Worst-case tick").
 //!
 //! Configuration ([`NodeConfig`]) is everything about the car: built from the model file by
 //! `catmodel-model-file` (host) or read from the image the firmware build baked
@@ -27,6 +30,7 @@ pub mod estimator;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
+pub mod stage;
 
 use core::borrow::BorrowMut;
 
@@ -44,8 +48,12 @@ use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
 use drive::{Controller, Drive, DriveInputs, DriveOutput};
 use estimator::EstimatorConfig;
 use gnss::Gnss;
-use inputs::{Inputs, Routed, Snapshot};
+use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
+pub use stage::{
+    NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK,
+    MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS, TICK_STAGES,
+};
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
 /// controller's command are 14; 16 leaves room.
@@ -246,6 +254,9 @@ pub struct Counters {
     pub unknown_ids: u32,
     /// Frames stamped after the tick that received them (clock mismatch), rejected.
     pub time_errors: u32,
+    /// Frames beyond [`MAX_RX_FRAMES_PER_TICK`] handed to one tick, not used (the app and host
+    /// replay never hand more: they keep the rest for the next tick).
+    pub rx_over_cap: u32,
     /// Output values replaced because they were not finite.
     pub nonfinite: u32,
     /// Output values saturated to their field's range.
@@ -267,6 +278,19 @@ pub struct TickEstimate {
     pub mode: Mode,
     /// What the drive stage did (anything but `NoPath`: a controller planned this tick).
     pub control: ControlStatus,
+    /// The planner's frames (path, limits, obstacles, origin) arrived in this tick: their
+    /// assembly ran in stage 1, and a path may have been completed (validated and loaded).
+    pub planner_frames: bool,
+}
+
+impl TickEstimate {
+    /// Whether this tick is one of the controller's (its budget and bound,
+    /// `CONTROL_TICK_BUDGET_INSTRUCTIONS`): a controller planned in it, or the planner's frames
+    /// were processed in it. Every other tick (the node estimating and predicting, the
+    /// features the 25 000-instruction budget was set for) is under `TICK_BUDGET_INSTRUCTIONS`.
+    pub fn controller_tick(&self) -> bool {
+        self.control != ControlStatus::NoPath || self.planner_frames
+    }
 }
 
 /// The models' state (stage 2).
@@ -374,16 +398,34 @@ impl<D: BorrowMut<Drive>> Node<D> {
         self.gnss.origin_e7()
     }
 
-    /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order) and
-    /// appends this tick's frames to `tx`. Returns what the tick estimated.
+    /// Runs one tick: consumes `rx` (frames with `t_us <= tick.now_us`, in arrival order; the
+    /// first [`MAX_RX_FRAMES_PER_TICK`], any more are counted and not used) and appends this
+    /// tick's frames to `tx`. Returns what the tick estimated.
     pub fn step(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut TxFrames) -> TickEstimate {
+        self.step_probed(tick, rx, tx, &mut NoProbe)
+    }
+
+    /// [`Node::step`], telling `probe` where each stage ends ([`stage`]): how the tick's
+    /// worst case is measured. Same results as `step`.
+    #[inline(always)]
+    pub fn step_probed<P: StageProbe>(
+        &mut self,
+        tick: &Tick,
+        rx: &[TimedFrame],
+        tx: &mut TxFrames,
+        probe: &mut P,
+    ) -> TickEstimate {
         let now = tick.now_us;
         let dt_s = self.advance(now);
-        self.receive(now, rx);
+        probe.lap(Stage::Advance);
+        let planner_frames = self.receive(now, rx, probe);
         let snapshot = self.inputs.snapshot(&self.config, now);
         let motion = self.run_models(&snapshot, dt_s);
+        probe.lap(Stage::Models);
         let estimate = self.estimate(now, &motion);
+        probe.lap(Stage::Estimate);
         let drive = self.run_drive(&motion, &estimate);
+        probe.lap(Stage::Drive);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
         let predicted = match drive.plan {
             // While the model-predictive controller drives, the path ahead is its plan.
@@ -394,12 +436,15 @@ impl<D: BorrowMut<Drive>> Node<D> {
             _ => self.predict(&snapshot, &motion, &estimate, &mut points),
         };
         let horizon = points.get(..predicted).unwrap_or(&[]);
+        probe.lap(Stage::Predict);
         self.publish(tick, &snapshot, &motion, &estimate, horizon, &drive, tx);
+        probe.lap(Stage::Publish);
         TickEstimate {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
             mode: motion.mode,
             control: drive.command.status,
+            planner_frames,
         }
     }
 
@@ -421,30 +466,78 @@ impl<D: BorrowMut<Drive>> Node<D> {
         dt_s
     }
 
-    /// Stage 1: every received frame decoded, validated and applied (or counted as rejected):
-    /// the vehicle's reports here, GNSS to the GNSS stage, the planner's to the drive stage.
-    fn receive(&mut self, now_us: u64, rx: &[TimedFrame]) {
-        for frame in rx {
+    /// Stage 1: every received frame (the first [`MAX_RX_FRAMES_PER_TICK`]) decoded, validated
+    /// and applied, or counted as rejected: the vehicle's reports here, the planner's to the
+    /// drive stage; then the planner's map origin, if a LOCAL_ORIGIN completed this tick (the
+    /// last one, once per tick); then the tick's GNSS fixes (the first
+    /// [`GNSS_FIXES_PER_TICK`], in arrival order) through the GNSS stage, in the tick's frame.
+    /// The reports change nothing the GNSS stage reads (it uses last tick's speed), so handling
+    /// the fixes after the frames is the same as handling them in between; a fix received
+    /// before a LOCAL_ORIGIN of the same tick goes into the new frame (the old frame's filters
+    /// are reset by the change anyway).
+    ///
+    /// A planner frame that completes a path (validation and load over its points) is a stage
+    /// of its own ([`Stage::PathComplete`], [`Stage::PathCompleteShort`]). Returns whether a
+    /// planner frame was processed (the tick is then a controller tick).
+    fn receive<P: StageProbe>(&mut self, now_us: u64, rx: &[TimedFrame], probe: &mut P) -> bool {
+        let (frames, over_cap) = rx.split_at(rx.len().min(MAX_RX_FRAMES_PER_TICK));
+        let c = &mut self.inputs.counters;
+        c.rx_over_cap = c
+            .rx_over_cap
+            .saturating_add(u32::try_from(over_cap.len()).unwrap_or(u32::MAX));
+        let mut fixes = gnss::TickFixes::new();
+        let mut origin = None;
+        let mut planner_frames = false;
+        for frame in frames {
+            let mut stage = Stage::Frame;
             match self.inputs.receive(&self.config, now_us, frame) {
-                Some(Routed::Gnss(gnss)) => self.gnss.receive(
-                    &self.config,
-                    now_us,
-                    &gnss,
-                    self.models.speed_mps,
-                    &mut self.inputs,
-                ),
+                Some(Routed::Gnss(GnssMessage::Fix(fix))) => {
+                    if let Err(over) = fixes.push(fix) {
+                        bump(&mut self.inputs.counters.gnss_gate_rejects);
+                        self.gnss.rejected(over.t_us);
+                    }
+                }
+                Some(Routed::Gnss(GnssMessage::Course(course))) => {
+                    self.gnss.receive_course(&self.config, &course);
+                }
                 Some(Routed::Planner(message)) => {
+                    planner_frames = true;
                     let drive = self.drive.borrow_mut();
-                    if let Some(origin) = drive.receive(&message) {
-                        // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
-                        if self.gnss.set_origin(origin) {
-                            drive.frame_changed();
-                        }
+                    let completed_before = paths_completed(drive);
+                    // The points of the path being assembled: a frame that completes it has
+                    // its whole stream in, so this is the path's length.
+                    let points = drive.planner().receiving().map_or(0, |(_, p, l)| p.max(l));
+                    if let Some(o) = drive.receive(&message) {
+                        origin = Some(o);
+                    }
+                    if paths_completed(drive) != completed_before {
+                        stage = if points > SHORT_PATH_POINTS {
+                            Stage::PathComplete
+                        } else {
+                            Stage::PathCompleteShort
+                        };
                     }
                 }
                 None => {}
             }
+            probe.lap(stage);
         }
+        if let Some(origin) = origin {
+            // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
+            if self.gnss.set_origin(origin) {
+                self.drive.borrow_mut().frame_changed();
+            }
+            probe.lap(Stage::Origin);
+        }
+        self.gnss.receive_fixes(
+            &self.config,
+            now_us,
+            &fixes,
+            self.models.speed_mps,
+            &mut self.inputs,
+            probe,
+        );
+        planner_frames
     }
 
     /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.
@@ -572,22 +665,23 @@ impl<D: BorrowMut<Drive>> Node<D> {
         ) else {
             return 0;
         };
-        let mut rollout_state = *velocity;
         let start = PredictorStart {
             pose,
             speed_mps: motion.speed_mps,
             speed_bias_mps: motion.speed_mps - v_model,
-            speed_cmd_mps: motion.speed_cmd_mps.unwrap_or(motion.speed_mps),
             center_steer_rad: motion.center_steer_rad,
             lateral: self.models.lateral,
             mode: motion.mode,
         };
+        // Eq 5 along the horizon: the commands in its delay line, then the latest one held.
+        let u_hold = motion.speed_cmd_mps.unwrap_or(motion.speed_mps);
+        let mut speeds = cfg.velocity.forecast(velocity, u_hold);
         predictor::rollout(
             &cfg.horizon,
             &cfg.vehicle,
             cfg.dynamics.as_ref(),
             &start,
-            |u| cfg.velocity.step(&mut rollout_state, u),
+            |block| speeds.fill(block),
             points,
         )
     }
@@ -629,4 +723,11 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
+}
+
+/// Paths the planner side completed so far (made active or refused): a change tells the
+/// receive stage that a frame ran a path's validation and load.
+fn paths_completed(drive: &Drive) -> u64 {
+    let c = drive.planner().counters();
+    u64::from(c.paths_activated) + u64::from(c.paths_invalid)
 }

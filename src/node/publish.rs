@@ -87,35 +87,29 @@ impl Health {
             self.last_range_error_us = Some(now);
         }
         self.range_errors_seen = counters.range_errors;
-        let mut push = |(frame, r): (CanFrame, EncodeReport)| {
-            report.merge(&r);
-            // Note: capacity 16 >= 2 + 10 + 1 + 1 frames, so the push cannot fail.
-            let _ = tx.push(frame);
-        };
         let gnss_rejected = recent(now, out.gnss_rejected_us);
-        for frame in state_frames(out, gnss_rejected, counter) {
-            push(frame);
-        }
+        let r = &mut report;
+        put(tx, r, |f| {
+            position_frame(out, gnss_rejected).encode_into(counter, f)
+        });
+        put(tx, r, |f| motion_frame(out).encode_into(counter, f));
         for (i, point) in PredictionPoint::all().enumerate() {
             let predicted = match (out.pose, out.predictions.get(i)) {
                 (Some(p), Some(q)) => Some((p, q)),
                 _ => None,
             };
-            push(
-                Prediction {
-                    point,
-                    dx_m: predicted.map(|(p, q)| q.x_m - p.x_m),
-                    dy_m: predicted.map(|(p, q)| q.y_m - p.y_m),
-                    dheading_rad: predicted
-                        .map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
-                    speed_mps: predicted.map(|(_, q)| q.speed_mps),
-                }
-                .encode_with_report(counter),
-            );
+            let prediction = Prediction {
+                point,
+                dx_m: predicted.map(|(p, q)| q.x_m - p.x_m),
+                dy_m: predicted.map(|(p, q)| q.y_m - p.y_m),
+                dheading_rad: predicted.map(|(p, q)| math::wrap_pi(q.heading_rad - p.heading_rad)),
+                speed_mps: predicted.map(|(_, q)| q.speed_mps),
+            };
+            put(tx, r, |f| prediction.encode_into(counter, f));
         }
         let status = self.status_page(tick, inputs, counters, out, gnss_rejected);
-        push(status.encode_with_report(counter));
-        push(out.command.encode_with_report(counter));
+        put(tx, r, |f| status.encode_into(counter, f));
+        put(tx, r, |f| out.command.encode_into(counter, f));
         counters.nonfinite = counters
             .nonfinite
             .saturating_add(u32::from(report.non_finite));
@@ -166,9 +160,11 @@ impl Health {
                 gnss_gate_rejects: c.gnss_gate_rejects,
                 unknown_ids: c.unknown_ids,
             },
+            // Frames lost for capacity: the platform's receive queue, and any beyond the
+            // node's per-tick cap (which the app and host replay never hand it).
             3 => NodeStatus::Platform {
                 tick_count: self.tick_count,
-                rx_queue_drops: tick.platform.rx_queue_drops,
+                rx_queue_drops: tick.platform.rx_queue_drops.saturating_add(c.rx_over_cap),
             },
             4 => NodeStatus::Ages {
                 ages_10ms: inputs.ages_10ms,
@@ -190,27 +186,39 @@ fn model_mode(mode: Mode) -> ModelMode {
     }
 }
 
-/// STATE_POSITION, STATE_MOTION.
-fn state_frames(
-    out: &Outputs<'_>,
-    gnss_rejected: bool,
-    counter: u8,
-) -> [(CanFrame, EncodeReport); 2] {
-    [
-        StatePosition {
-            position_valid: out.pose.is_some(),
-            gnss_fresh: out.gnss_fresh,
-            gnss_rejected,
-            east_m: out.pose.map(|p| p.x_m),
-            north_m: out.pose.map(|p| p.y_m),
+/// Appends a frame to `tx`, encoded by `encode` in its place (moving a frame costs a library
+/// memcpy on the Cortex-M4), and merges what the encoder substituted into `report`.
+#[inline(always)]
+fn put(
+    tx: &mut TxFrames,
+    report: &mut EncodeReport,
+    encode: impl FnOnce(&mut CanFrame) -> EncodeReport,
+) {
+    // Note: capacity 16 >= 2 + 10 + 1 + 1 frames, so no slot is ever refused.
+    if tx.push(CanFrame::EMPTY).is_ok() {
+        if let Some(frame) = tx.last_mut() {
+            report.merge(&encode(frame));
         }
-        .encode_with_report(counter),
-        StateMotion {
-            mode: model_mode(out.mode),
-            heading_rad: out.pose.map(|p| p.heading_rad),
-            speed_mps: Some(out.speed_mps),
-            yaw_rate_radps: Some(out.yaw_rate_rps),
-        }
-        .encode_with_report(counter),
-    ]
+    }
+}
+
+/// STATE_POSITION.
+fn position_frame(out: &Outputs<'_>, gnss_rejected: bool) -> StatePosition {
+    StatePosition {
+        position_valid: out.pose.is_some(),
+        gnss_fresh: out.gnss_fresh,
+        gnss_rejected,
+        east_m: out.pose.map(|p| p.x_m),
+        north_m: out.pose.map(|p| p.y_m),
+    }
+}
+
+/// STATE_MOTION.
+fn motion_frame(out: &Outputs<'_>) -> StateMotion {
+    StateMotion {
+        mode: model_mode(out.mode),
+        heading_rad: out.pose.map(|p| p.heading_rad),
+        speed_mps: Some(out.speed_mps),
+        yaw_rate_radps: Some(out.yaw_rate_rps),
+    }
 }

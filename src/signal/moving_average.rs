@@ -142,14 +142,27 @@ impl<const N: usize> MovingAverageState<N> {
         }
     }
 
-    /// Refills the window with `value` (see [`MovingAverageState::primed`]).
+    /// Refills the window with `value` (see [`MovingAverageState::primed`]), in place.
     pub fn prime(&mut self, value: f32) {
-        *self = Self::primed(value);
+        self.load(|_| value);
     }
 
     /// Back to empty.
     pub fn reset(&mut self) {
         *self = Self::new();
+    }
+
+    /// Replaces the window: `input(k)` is the input `k` samples before the newest (k = 0 the
+    /// newest, up to N - 1), exactly as if those N samples had just been pushed in order (the
+    /// same slots, so the same sums, bit for bit).
+    pub fn load(&mut self, mut input: impl FnMut(usize) -> f32) {
+        // N pushes from `next` fill slots next, next + 1, ... (mod N), oldest first, and leave
+        // `next` where it was.
+        let (older, newer) = self.window.split_at_mut(self.next.min(N));
+        for (slot, k) in newer.iter_mut().chain(older.iter_mut()).zip((0..N).rev()) {
+            *slot = input(k);
+        }
+        self.count = N;
     }
 }
 
@@ -167,6 +180,32 @@ mod tests {
             .collect();
         // 3/1, (3+6)/2, (3+6+9)/3, (6+9+12)/3, (9+12+0)/3
         assert_eq!(out, vec![3.0, 4.5, 6.0, 9.0, 7.0]);
+    }
+
+    #[test]
+    fn a_loaded_window_is_a_pushed_one() {
+        let ma = MovingAverage::<10>::new();
+        let x: Vec<f32> = (0..25).map(|i| (i * i) as f32 * 0.37 - 3.0).collect();
+        // From the same state (8 samples in), ten samples pushed or loaded.
+        let mut pushed = MovingAverageState::new();
+        for v in &x[..8] {
+            ma.process(&mut pushed, *v);
+        }
+        let mut loaded = pushed.clone();
+        for v in &x[8..18] {
+            ma.process(&mut pushed, *v);
+        }
+        loaded.load(|k| x[17 - k]);
+        assert_eq!(loaded, pushed);
+        for v in &x[18..] {
+            assert_eq!(
+                ma.process(&mut loaded, *v).to_bits(),
+                ma.process(&mut pushed, *v).to_bits()
+            );
+        }
+        let mut primed = MovingAverageState::<10>::new();
+        primed.prime(4.0);
+        assert_eq!(primed, MovingAverageState::primed(4.0));
     }
 
     #[test]

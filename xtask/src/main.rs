@@ -22,6 +22,8 @@
 //!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
+//! - `cargo xtask adversarial [--runs N] [--seed S]`: drives made to break the tick's
+//!   worst-case bound ([`bound`]), run in QEMU; fails if a tick exceeds it ([`adversarial`]).
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -29,8 +31,11 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 
+mod adversarial;
 mod bench;
+mod bound;
 mod corpus;
+mod drives;
 mod nopanic;
 mod prereq;
 mod schedule;
@@ -61,9 +66,10 @@ fn main() -> ExitCode {
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
         Some("tick-schedule") => schedule::tick_schedule(),
+        Some("adversarial") => adversarial::adversarial(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus | tick-schedule\n\
+             | bench-target [--check] | model-corpus | tick-schedule | adversarial [--runs N] [--seed S]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };
@@ -256,7 +262,10 @@ struct Verdict {
     max_instructions: u32,
     /// The slowest tick in which a controller planned, if any did.
     max_control_instructions: Option<u32>,
+    /// The worst-case bound of ticks in which no controller plans.
     bound_instructions: Option<u64>,
+    /// The worst-case bound of ticks in which a controller plans.
+    control_bound_instructions: Option<u64>,
     failures: Vec<String>,
     /// Checks turned into warnings (CATMODEL_BUDGET_WARN_ONLY).
     waived: Vec<String>,
@@ -296,11 +305,15 @@ fn summary_line(drive: &str, v: &Verdict) -> String {
             grouped(u64::from(CONTROL_BUDGET_INSTRUCTIONS)),
         )
     });
-    let bound = v
-        .bound_instructions
-        .map_or("bound: not computed".to_string(), |b| {
-            format!("bound {} instructions", grouped(b))
-        });
+    let bound = match (v.bound_instructions, v.control_bound_instructions) {
+        (Some(b), Some(c)) => format!(
+            "bound {} instructions (controller ticks: {})",
+            grouped(b),
+            grouped(c)
+        ),
+        (Some(b), None) => format!("bound {} instructions", grouped(b)),
+        _ => "bound: not computed".to_string(),
+    };
     format!(
         "cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, slowest tick {} instructions = {share:.0} % of the {} budget{control}, {bound}",
         grouped(u64::from(v.max_instructions)),
@@ -368,11 +381,16 @@ fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
     let max_control = control.iter().copied().max();
     let [_, _, _, max] = stats(&whole);
     let share = f64::from(max) / INSTRUCTIONS_PER_TICK_AT_168MHZ * 100.0;
+    let bound = bound::measure()?;
+    let bound_total = bound.total();
     let timing = serde_json::json!({
         "ticks": run.records.len(),
         "unit": "instructions (QEMU -icount shift=0: TIM2 counts one per executed instruction); not Cortex-M4 cycles",
         "instructions": stats_json(&whole),
         "budget_instructions": BUDGET_INSTRUCTIONS,
+        "worst_case_bound_instructions": bound.total(),
+        "worst_case_bound_controller_instructions": bound.total_control(),
+        "worst_case": bound.json(),
         "controller_ticks": control.len(),
         "controller_instructions": stats_json(&control),
         "controller_budget_instructions": CONTROL_BUDGET_INSTRUCTIONS,
@@ -460,6 +478,7 @@ fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
         stack_share * 100.0,
         STACK_USE_LIMIT * 100.0
     );
+    table.push_str(&bound.table());
     let _ = writeln!(table, "wrote target/qemu/tx.log, target/qemu/timing.json");
     print!("{table}");
 
@@ -467,6 +486,7 @@ fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
         max_instructions: max_plain,
         max_control_instructions: max_control,
         bound_instructions: timing["worst_case_bound_instructions"].as_u64(),
+        control_bound_instructions: timing["worst_case_bound_controller_instructions"].as_u64(),
         ..Verdict::default()
     };
     if run.trailer.stack_high_water == 0 {
@@ -480,6 +500,7 @@ fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
             STACK_USE_LIMIT * 100.0
         ));
     }
+    verdict.failures.extend(bound.check(max_plain, max_control));
     let over_control = max_control.filter(|&c| c > CONTROL_BUDGET_INSTRUCTIONS);
     if let Some(c) = over_control {
         verdict.failures.push(format!(
@@ -487,11 +508,18 @@ fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
             grouped(u64::from(c))
         ));
     }
-    if max_plain > BUDGET_INSTRUCTIONS {
+    if bound.total_control() > u64::from(CONTROL_BUDGET_INSTRUCTIONS) {
+        verdict.failures.push(format!(
+            "the controller's worst-case bound {} is over its budget",
+            grouped(bound.total_control())
+        ));
+    }
+    if max_plain > BUDGET_INSTRUCTIONS || bound.total() > u64::from(BUDGET_INSTRUCTIONS) {
         // CI sets CATMODEL_BUDGET_WARN_ONLY=1 while the node is over budget (README, "Status"):
         // the run, its outputs and every other check still count.
         let over = format!(
-            "a tick took {}, over the budget",
+            "worst-case bound {} (slowest tick {}), over the budget",
+            grouped(bound_total),
             grouped(u64::from(max_plain))
         );
         if std::env::var_os("CATMODEL_BUDGET_WARN_ONLY").is_some() {
@@ -897,7 +925,7 @@ mod tests {
         };
         assert!(
             summary_line("s.log", &driving).contains(
-                "slowest tick 21 267 instructions = 71 % of the 30 000 budget, slowest controller \
+                "slowest tick 21 267 instructions = 85 % of the 25 000 budget, slowest controller \
                  tick 474 256 = 79 % of the 600 000 budget, bound: not computed"
             ),
             "{}",
@@ -906,11 +934,12 @@ mod tests {
         assert_eq!(
             summary_line("data/bundled.can.log", &pass),
             "cargo qemu: data/bundled.can.log on QEMU netduinoplus2 (STM32F405, Cortex-M4F): PASS, \
-             slowest tick 21 267 instructions = 71 % of the 30 000 budget, bound: not computed"
+             slowest tick 21 267 instructions = 85 % of the 25 000 budget, bound: not computed"
         );
         let fail = Verdict {
             max_instructions: 31_000,
             bound_instructions: Some(45_000),
+            control_bound_instructions: Some(500_000),
             max_control_instructions: None,
             failures: vec![
                 "a tick took 31 000, over the budget".into(),
@@ -920,7 +949,7 @@ mod tests {
         };
         let line = summary_line("d.log", &fail);
         assert!(
-            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 103 % of the 30 000 budget, bound 45 000 instructions"),
+            line.contains(": FAIL (a tick took 31 000, over the budget; 1 overruns), slowest tick 31 000 instructions = 124 % of the 25 000 budget, bound 45 000 instructions (controller ticks: 500 000)"),
             "{line}"
         );
         assert_eq!(line.lines().count(), 1);

@@ -162,9 +162,9 @@ mod tests {
     fn finds_calls_into_panic_entries_but_not_inside_them() {
         let dis = "\
 08000460 <catmodel::node::Node::step>:
-; /work/src/node/mod.rs:400
+; src/node/mod.rs:400
  8000462:      \tvadd.f32\ts0, s0, s2
-; /work/src/node/mod.rs:404
+; src/node/mod.rs:404
  8000466:      \tbl\t0x8008ff8 <core::panicking::panic_bounds_check> @ imm = #1
  800046a:      \tbl\t0x8008000 <catmodel::model::step> @ imm = #1
 
@@ -177,10 +177,7 @@ mod tests {
             vec![Site {
                 function: "catmodel::node::Node::step".into(),
                 callee: "core::panicking::panic_bounds_check".into(),
-                lines: vec![
-                    "/work/src/node/mod.rs:400".into(),
-                    "/work/src/node/mod.rs:404".into()
-                ],
+                lines: vec!["src/node/mod.rs:400".into(), "src/node/mod.rs:404".into()],
             }]
         );
     }

@@ -102,11 +102,16 @@ fn compare(firmware: &[(String, TimedFrame)], host: &[(String, TimedFrame)]) -> 
     Ok(out)
 }
 
+/// Compares two candump files (see the module doc).
+pub fn compare_files(firmware: &Path, host: &Path) -> Result<Comparison> {
+    compare(&read(firmware)?, &read(host)?)
+}
+
 pub fn tx_compare(args: &[String]) -> Result<()> {
     let [firmware, host] = args else {
         bail!("usage: cargo xtask tx-compare FIRMWARE.log HOST.log");
     };
-    let result = compare(&read(Path::new(firmware))?, &read(Path::new(host))?)?;
+    let result = compare_files(Path::new(firmware), Path::new(host))?;
     let Some(deepest) = result.deepest_reported else {
         bail!("the firmware never reported its stack high-water mark in NODE_STATUS page 4");
     };

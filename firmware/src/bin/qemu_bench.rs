@@ -23,8 +23,8 @@
 use core::hint::black_box;
 
 use catmodel::can::codec::{
-    decode_input, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction, StateMotion,
-    StatePosition,
+    decode_input, ControlCommand, EncodeReport, GnssCogSog, InputMessage, NodeStatus, Prediction,
+    StateMotion, StatePosition,
 };
 use catmodel::can::{candump, CanFrame, TimedFrame};
 use catmodel::geodesy::LocalFrame;
@@ -33,12 +33,14 @@ use catmodel::model::hybrid::Mode;
 use catmodel::model::kinematic::{self, Pose};
 use catmodel::model::predictor::{self, PredictedPoint, PredictorStart};
 use catmodel::model::{MisoBlockState, SsBlockState};
+use catmodel::node::drive::Drive;
 use catmodel::node::{
     first_tick_us, Node, NodeConfig, PlatformStats, Tick, TickEstimate, TxFrames,
     PREDICTION_POINTS, VELOCITY_DELAY_CAP,
 };
 use catmodel::signal::{FirState, MovingAverageState};
 use catmodel::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
+use catmodel_firmware::baked::FirmwareNode;
 use catmodel_firmware::platform::qemu::{icount, run::BUNDLED_DRIVE};
 use cortex_m_rt::entry;
 // The `defmt` feature is on for the core's types; nothing here logs through it, but a global
@@ -152,6 +154,21 @@ impl View<'_> {
     }
 }
 
+/// The drive stage of the benchmark's nodes (24 KiB: a static, as on the board).
+static mut BENCH_DRIVE: Drive = Drive::new();
+
+/// A node of the baked model on [`BENCH_DRIVE`], configured afresh. Each replay builds one and
+/// drops it before the next replay builds another.
+fn fresh_node() -> FirmwareNode {
+    let Ok(config) = catmodel_firmware::baked::node_config() else {
+        fail("the baked model does not build")
+    };
+    // SAFETY: single-threaded; the node made by the previous call (the only holder of this
+    // reference) was dropped at the end of its replay.
+    let drive = unsafe { &mut *core::ptr::addr_of_mut!(BENCH_DRIVE) };
+    Node::new(config, drive)
+}
+
 /// Replays the bundled drive through a fresh node exactly as host replay does (ticks on the
 /// 20 ms grid from the first frame, each given the frames stamped at or before it); `step`
 /// runs `Node::step`, `each` sees every tick after it.
@@ -159,9 +176,7 @@ fn replay(
     mut step: impl FnMut(&mut FirmwareNode, &Tick, &[TimedFrame], &mut TxFrames) -> TickEstimate,
     mut each: impl FnMut(&View),
 ) {
-    let Ok(mut node) = catmodel_firmware::baked::node() else {
-        fail("the baked model does not build")
-    };
+    let mut node = fresh_node();
     let config = node.config().clone();
     let mut rx: heapless::Vec<TimedFrame, 64> = heapless::Vec::new();
     let mut inputs = Inputs::default();
@@ -421,7 +436,7 @@ fn bench_models() {
     );
 }
 
-/// One horizon roll-out per tick, the node's way: copy the velocity model's state, then
+/// One horizon roll-out per tick, the node's way: eq 5's forecast from its state, then
 /// `predictor::rollout` over 2 s (100 steps of eq 5 plus the lateral model, 10 points).
 fn bench_rollouts() {
     let kinematic = samples!(Calls);
@@ -459,7 +474,6 @@ fn bench_rollouts() {
                 pose,
                 speed_mps: speed,
                 speed_bias_mps: speed - v_model,
-                speed_cmd_mps: cmd,
                 center_steer_rad: steer,
                 lateral: match mode {
                     Mode::Kinematic => dynamics.steady_state(speed, steer),
@@ -470,14 +484,13 @@ fn bench_rollouts() {
             let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
             let vel_state = *state;
             let (_, n) = timed(|| {
-                let mut rollout_state = *black_box(&vel_state);
-                let velocity = &cfg.velocity;
+                let mut speeds = cfg.velocity.forecast(black_box(&vel_state), black_box(cmd));
                 predictor::rollout(
                     &cfg.horizon,
                     &cfg.vehicle,
                     Some(dynamics),
                     black_box(&start),
-                    |u| velocity.step(&mut rollout_state, u),
+                    |block| speeds.fill(block),
                     black_box(&mut points),
                 )
             });
@@ -487,12 +500,12 @@ fn bench_rollouts() {
     kinematic.report(
         "rollout_kinematic",
         "horizon roll-out, kinematic",
-        "copy of eq 5's state + predictor::rollout: 100 steps of eq 5 (2 s), distance summed, pose moved along the held curvature once per point, 10 points",
+        "eq 5's forecast from its state + predictor::rollout: 100 steps of eq 5 (2 s), distance summed, pose moved along the held curvature once per point, 10 points",
     );
     dynamic.report(
         "rollout_dynamic",
         "horizon roll-out, dynamic",
-        "copy of eq 5's state + predictor::rollout: 100 steps of eq 5, of the lateral model and of the pose (with side slip), 10 points",
+        "eq 5's forecast + predictor::rollout: 100 steps of eq 5, the lateral model in 5 steps of 40 ms per point with the segment's mean speed held, the pose once per point (with side slip), 10 points",
     );
 }
 
@@ -558,6 +571,7 @@ enum Output {
     Motion(StateMotion),
     Prediction(Prediction),
     Status(NodeStatus),
+    Control(ControlCommand),
 }
 
 impl Output {
@@ -571,6 +585,9 @@ impl Output {
         if let Ok((m, c)) = Prediction::decode(frame) {
             return Some((Self::Prediction(m), c));
         }
+        if let Ok((m, c)) = ControlCommand::decode(frame) {
+            return Some((Self::Control(m), c));
+        }
         NodeStatus::decode(frame)
             .ok()
             .map(|(m, c)| (Self::Status(m), c))
@@ -583,6 +600,7 @@ impl Output {
             Self::Motion(m) => m.encode_with_report(counter),
             Self::Prediction(m) => m.encode_with_report(counter),
             Self::Status(m) => m.encode_with_report(counter),
+            Self::Control(m) => m.encode_with_report(counter),
         }
     }
 }
@@ -622,6 +640,8 @@ fn bench_encode() {
                 Output::Status(m) => {
                     status.push(timed(|| black_box(m).encode_with_report(black_box(c))).1)
                 }
+                // Part of the tick's set below; no row of its own.
+                Output::Control(_) => {}
             }
         }
         if view.tx.len() == outputs.len() {
@@ -661,7 +681,7 @@ fn bench_encode() {
     set.report(
         "encode_tick_set",
         "encode a whole tick's frames",
-        "the 14 frames of a running tick (3 state, 10 predictions, 1 status page) encoded, reports merged (the frames are not stored)",
+        "the 14 frames of a running tick (2 state, 10 predictions, 1 status page, CONTROL_COMMAND) encoded, reports merged (the frames are not stored)",
     );
 }
 

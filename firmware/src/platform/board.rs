@@ -22,7 +22,9 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::wdg::IndependentWatchdog;
 
 use crate::platform::stack::StackMeter;
-use catmodel::can::spec::{PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
+use catmodel::can::spec::{
+    MessageSpec, NODE_INPUT_STANDARD, PGN_COG_SOG_RAPID, PGN_POSITION_RAPID,
+};
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel_app::health::{WatchdogFeeder, WatchdogTiming};
 use catmodel_app::{BusReceiver, BusTransmitter, RxError, TickPlatform, TickReport};
@@ -38,8 +40,30 @@ pub const WATCHDOG: WatchdogTiming = WatchdogTiming {
     nominal_timeout_us: WATCHDOG_TIMEOUT_US,
 };
 
-/// Standard IDs the node listens to (steering, speed, pedal reports; catmodel.dbc).
-pub const INPUT_STANDARD_IDS: [u16; 3] = [0x100, 0x101, 0x102];
+/// Standard IDs the node listens to (steering, speed, pedal reports; the planner's PATH_HEADER,
+/// PATH_POINT, PATH_LIMITS, OBSTACLE, LOCAL_ORIGIN; catmodel.dbc): the identifiers of
+/// [`NODE_INPUT_STANDARD`], the software filter's list.
+pub const INPUT_STANDARD_IDS: [u16; 8] = {
+    let [a, b, c, d, e, f, g, h] = NODE_INPUT_STANDARD;
+    [
+        standard_id(a),
+        standard_id(b),
+        standard_id(c),
+        standard_id(d),
+        standard_id(e),
+        standard_id(f),
+        standard_id(g),
+        standard_id(h),
+    ]
+};
+
+/// A standard identifier's 11 bits (every message of [`NODE_INPUT_STANDARD`] has one).
+const fn standard_id(spec: &MessageSpec) -> u16 {
+    match spec.id {
+        CanId::Standard(id) => id,
+        CanId::Extended(_) => 0,
+    }
+}
 /// NMEA 2000 PGNs the node listens to: 129025 position rapid update, 129026 COG & SOG rapid.
 pub const INPUT_PGNS: [u32; 2] = [PGN_POSITION_RAPID, PGN_COG_SOG_RAPID];
 /// The PGN field of a 29-bit NMEA 2000 / J1939 identifier: bits 8..25 (reserved, data page,
@@ -103,27 +127,18 @@ fn pgn_mask(pgn: u32) -> Mask32 {
     filter
 }
 
-/// Filter banks 0-2 of CAN1 (all into FIFO 0): one 16-bit list of the three standard IDs, and
-/// one 32-bit mask per PGN (any priority, any source address). Everything else is rejected in
-/// hardware.
+/// Filter banks 0-3 of CAN1 (all into FIFO 0): two 16-bit lists of the eight standard IDs (a
+/// list bank holds four), and one 32-bit mask per PGN (any priority, any source address).
+/// Everything else is rejected in hardware.
 pub fn configure_filters(can: &mut embassy_stm32::can::Can<'_>) {
-    let [a, b, c] = INPUT_STANDARD_IDS;
+    let [a, b, c, d, e, f, g, h] = INPUT_STANDARD_IDS.map(standard_entry);
     let [position, cog_sog] = INPUT_PGNS;
     can.modify_filters()
         .clear()
-        .enable_bank(
-            0,
-            Fifo::Fifo0,
-            [
-                standard_entry(a),
-                standard_entry(b),
-                standard_entry(c),
-                // A list bank holds four entries; the fourth repeats the third.
-                standard_entry(c),
-            ],
-        )
-        .enable_bank(1, Fifo::Fifo0, pgn_mask(position))
-        .enable_bank(2, Fifo::Fifo0, pgn_mask(cog_sog));
+        .enable_bank(0, Fifo::Fifo0, [a, b, c, d])
+        .enable_bank(1, Fifo::Fifo0, [e, f, g, h])
+        .enable_bank(2, Fifo::Fifo0, pgn_mask(position))
+        .enable_bank(3, Fifo::Fifo0, pgn_mask(cog_sog));
 }
 
 /// The node's frame from a bxCAN frame; `None` for remote frames.

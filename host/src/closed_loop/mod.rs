@@ -24,7 +24,7 @@ use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::path::{Path, Projection, Waypoint};
-use catmodel::node::NodeConfig;
+use catmodel::node::{NodeConfig, MAX_RX_FRAMES_PER_TICK};
 
 use crate::csv2can::LogEncoder;
 use crate::logcsv::{LogRow, TruthRow};
@@ -333,6 +333,7 @@ pub fn run(
     let mut encoder = LogEncoder::new();
     let mut pending_rows: Vec<(i64, LogRow)> = Vec::new();
     let mut inputs = Vec::new();
+    let mut backlog: std::collections::VecDeque<TimedFrame> = std::collections::VecDeque::new();
     let mut outputs = Vec::new();
     let mut samples: Vec<Sample> = Vec::new();
     let mut projection: Option<Projection> = None;
@@ -372,10 +373,15 @@ pub fn run(
             });
         }
         rx.sort_by_key(|f| f.t_us);
-        let mut tx = Vec::new();
-        let report: TickReport = driver.tick(t_tick_us, &rx, &mut tx);
-        let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
         inputs.extend_from_slice(&rx);
+        // As the firmware's receive queue and host replay: at most the node's per-tick cap of
+        // frames, in arrival order; the rest wait for the next tick.
+        backlog.extend(rx);
+        let take = backlog.len().min(MAX_RX_FRAMES_PER_TICK);
+        let due: Vec<TimedFrame> = backlog.drain(..take).collect();
+        let mut tx = Vec::new();
+        let report: TickReport = driver.tick(t_tick_us, &due, &mut tx);
+        let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
         outputs.extend(tx.iter().map(|&frame| TimedFrame {
             t_us: t_tick_us,
             frame,

@@ -9,10 +9,10 @@ use catmodel::can::spec::{MAX_PATH_POINTS, OBSTACLE_SLOTS};
 use catmodel::can::CanFrame;
 use std::collections::VecDeque;
 
-/// Planner frames sent per 20 ms tick at most: 12 worst-case frames of 135 bits in 20 ms are
-/// 16.2 % of 500 kbit/s, and with the vehicle's reports (about 4 per tick) they stay well
-/// inside the node's 32-frame receive batch. A 256-point path (513 frames) takes 43 ticks.
-pub const PATH_FRAMES_PER_TICK: usize = 12;
+/// Planner frames sent per 20 ms tick at most: the node's rule for a conforming planner
+/// ([`catmodel::node::PLANNER_FRAMES_PER_TICK`], 4: with the vehicle's inputs within the 12
+/// frames a tick takes). A 256-point path (513 frames) takes 129 ticks.
+pub const PATH_FRAMES_PER_TICK: usize = catmodel::node::PLANNER_FRAMES_PER_TICK;
 
 /// One point of a planned path, as the planner knows it (f64, the local frame).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,7 +1,7 @@
 //! `identify --vehicle CAR.toml`: the car the logs come from, described by its owner, carried
 //! into the model file that `identify` writes.
 //!
-//! A car file holds the model file's `[vehicle]` table (DESIGN.md, "Model file": geometry,
+//! A car file holds the model file's `[vehicle]` table (README, "Model file": geometry,
 //! steering range, GNSS antenna position and receiver rate, body, limits), and optionally its
 //! `[dynamics]` (the dynamic single-track model's mass, inertia, CG and cornering stiffnesses),
 //! `[inputs]` (timeouts, the receiver's address and gates) and `[control]` (the controller, the

@@ -1,5 +1,5 @@
 //! `catmodel discretize`: every single-input block of a model file as discrete state space
-//! (ZOH, f64, the core's [`catmodel::model::zoh`]), JSON as DESIGN.md:
+//! (ZOH, f64, the core's [`catmodel::model::zoh`]), JSON (README, "CLI"):
 //! `{"ts": 0.02, "models": [{"name", "input", "output", "A", "B", "C", "D", "delay_samples"}]}`
 //! with matrices as arrays of rows (`A` n x n, `B` n x 1, `C` 1 x n, `D` 1 x 1).
 use anyhow::{anyhow, Result};

@@ -29,7 +29,8 @@ pub struct VehicleConfig {
     pub faults: Faults,
 }
 
-/// Rigid body and geometry. Sources: facts.md (wheelbase, track, mass, CG, yaw inertia).
+/// Rigid body and geometry. Sources: models/paper.toml and host/vehicles/cat-vehicle.toml
+/// (wheelbase, track, mass, CG, yaw inertia, each with its source).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Chassis {

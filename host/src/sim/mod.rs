@@ -7,7 +7,7 @@
 //!                     steering command -> rate limit -> actuator lag
 //!   -> plant: nonlinear single-track model, magic-formula tyres, load transfer (RK4, 1 ms)
 //!   -> sensors on their own clocks: speed / steering / pedal reports at 50 Hz, GNSS at 100 Hz
-//!   -> log rows (DESIGN.md log schema) + ground truth at 100 Hz
+//!   -> log rows (docs/logs.md schema) + ground truth at 100 Hz
 //! ```
 //! Deterministic for a given seed on every platform: ChaCha8 streams, and only IEEE arithmetic
 //! and the pure-Rust `libm` (never std's platform-dependent transcendental functions).

@@ -8,10 +8,12 @@
 //! - [`icount`]: TIM2 counting one per executed instruction under `-icount shift=0`,
 //! - [`replay`]: the "bus": a candump file (semihosting) or the bundled drive, frames released
 //!   to the tick whose time has come, and the transmit side writing candump lines,
-//! - [`run`]: command line, records of every tick for `cargo qemu`, exit codes.
+//! - [`run`]: command line, records of every tick for `cargo qemu`, exit codes,
+//! - [`stages`]: the tick's stages measured one by one (the worst-case bound's maxima).
 pub mod candump;
 pub mod executor;
 pub mod icount;
 pub mod replay;
 pub mod run;
+pub mod stages;
 pub mod time_driver;

@@ -1,0 +1,309 @@
+//! The tick's structure (`catmodel::node::stage::TICK_STAGES`, the first factor of the
+//! worst-case bound) against the code: a probe counts how often each stage runs in every tick
+//! of a drive that pushes every count to its limit (more frames than the cap, GNSS at three
+//! times the receiver's rate, gaps of every length, jumps beyond the gate), and no stage may
+//! ever run more often than its row says. The second factor, each stage's most expensive run,
+//! is measured in QEMU (`cargo xtask bench-target`, docs/firmware.md "Worst-case tick").
+use catmodel::can::codec::{LocalOrigin, PathHeader, PathLimits, PathPoint, SteeringReport};
+use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::node::{
+    first_tick_us, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
+};
+use catmodel_host_tests::bus::{config, drive, Kind, Labelled, START_US};
+
+/// Runs per stage (indexed as `TICK_STAGES`) in the current tick, and the most in any tick.
+#[derive(Default)]
+struct Counting {
+    this_tick: [u32; TICK_STAGES.len()],
+    most: [u32; TICK_STAGES.len()],
+    /// A stage reported that has no row.
+    unknown: Option<Stage>,
+}
+
+impl StageProbe for Counting {
+    fn lap(&mut self, stage: Stage) {
+        match TICK_STAGES.iter().position(|row| row.stage == stage) {
+            Some(i) => self.this_tick[i] += 1,
+            None => self.unknown = Some(stage),
+        }
+    }
+}
+
+impl Counting {
+    fn end_tick(&mut self) {
+        for (most, n) in self.most.iter_mut().zip(self.this_tick) {
+            *most = (*most).max(n);
+        }
+        self.this_tick = Default::default();
+    }
+}
+
+/// A 12 m/s drive in a turn, with every count pushed to its limit.
+fn heavy_drive() -> Vec<TimedFrame> {
+    let base = drive(12.0, 30.0, 10.0);
+    let mut frames: Vec<TimedFrame> = Vec::new();
+    let mut fix_index = 0u64;
+    let mut bad = SteeringReport {
+        steer_pct: Some(0.0),
+    }
+    .encode(0);
+    bad.data[7] ^= 0x3C;
+    for Labelled { kind, frame } in base {
+        let t_s = (frame.t_us - START_US) as f64 * 1e-6;
+        if kind != Kind::Gnss {
+            frames.push(frame);
+            continue;
+        }
+        fix_index += 1;
+        // Gaps of 1, 2, 3 and 6 fixes, then a 0.5 s outage; and a stretch 30 m off (beyond
+        // the gate for longer than the node waits before following it).
+        let gap =
+            matches!(fix_index % 97, 10 | 30 | 31 | 50..=52 | 70..=75) || (6.0..6.5).contains(&t_s);
+        if gap {
+            continue;
+        }
+        let mut fix = frame;
+        if (7.0..8.5).contains(&t_s) {
+            // 4096e-7 deg of longitude further: about 38 m east.
+            fix.frame.data[5] = fix.frame.data[5].wrapping_add(0x10);
+        }
+        frames.push(fix);
+        // Three times the receiver's rate: two more fixes 3 and 6 ms later.
+        for dt_us in [3_000, 6_000] {
+            frames.push(TimedFrame {
+                t_us: fix.t_us + dt_us,
+                ..fix
+            });
+        }
+        // Every 2 s the planner moves the map origin (both pages of LOCAL_ORIGIN, twice in
+        // the same tick: the node applies the last one, once).
+        if fix_index % 200 == 100 {
+            for (k, lat_e7) in [(0u8, 322_300_000), (2, 322_310_000)] {
+                for (c, page) in [
+                    (k, LocalOrigin::Latitude { lat_e7 }),
+                    (
+                        k + 1,
+                        LocalOrigin::Longitude {
+                            lon_e7: -1_109_500_000,
+                        },
+                    ),
+                ] {
+                    frames.push(TimedFrame {
+                        t_us: fix.t_us,
+                        frame: page.encode(c),
+                    });
+                }
+            }
+        }
+        // Every 0.5 s a burst of 30 frames the node must decode and reject.
+        if fix_index.is_multiple_of(50) {
+            for _ in 0..30 {
+                frames.push(TimedFrame {
+                    t_us: fix.t_us,
+                    frame: bad,
+                });
+            }
+        }
+    }
+    frames.sort_by_key(|f| f.t_us);
+    planner_bursts(&mut frames);
+    frames
+}
+
+/// Paths completing at the most one tick allows: a 6-point path begun two ticks earlier and
+/// two 2-point paths in one tick (one long, two short completions), then a short path begun a
+/// tick earlier and two more (three short completions). Each tick's planner frames come first
+/// in it, so the cap leaves them all to the node.
+fn planner_bursts(frames: &mut Vec<TimedFrame>) {
+    let t0 = first_tick_us(frames[0].t_us);
+    let mut counters = [0u8; 3];
+    let mut next = |slot: usize| {
+        let c = counters[slot];
+        counters[slot] = (c + 1) & 0x0F;
+        c
+    };
+    let mut path = |path_id: u8, points: usize| -> Vec<CanFrame> {
+        let mut out = vec![PathHeader {
+            path_id,
+            count: points as u16,
+        }
+        .encode(next(0))];
+        for i in 0..points {
+            out.push(
+                PathPoint {
+                    path_id,
+                    index: i as u8,
+                    east_m: i as f32,
+                    north_m: 0.0,
+                }
+                .encode(next(1)),
+            );
+        }
+        for i in 0..points {
+            out.push(
+                PathLimits {
+                    path_id,
+                    index: i as u8,
+                    speed_mps: 5.0,
+                    left_m: 3.0,
+                    right_m: 3.0,
+                }
+                .encode(next(2)),
+            );
+        }
+        out
+    };
+    let long = path(1, 6);
+    let (a, b) = (path(2, 2), path(3, 2));
+    let carried = path(4, 2);
+    let (c, d) = (path(5, 2), path(6, 2));
+    let ticks: [(u64, Vec<CanFrame>); 5] = [
+        (148, long[..7].to_vec()),
+        (149, long[7..12].to_vec()),
+        (150, [&long[12..], &a[..], &b[..]].concat()),
+        (159, carried[..4].to_vec()),
+        (160, [&carried[4..], &c[..], &d[..]].concat()),
+    ];
+    for (k, burst) in ticks {
+        assert!(burst.len() <= catmodel::node::MAX_RX_FRAMES_PER_TICK);
+        let start = t0 + (k - 1) * 20_000;
+        for (i, frame) in burst.into_iter().enumerate() {
+            frames.push(TimedFrame {
+                t_us: start + 1 + i as u64,
+                frame,
+            });
+        }
+    }
+    frames.sort_by_key(|f| f.t_us);
+}
+
+/// Steps a probed and a plain node over `frames` (every due frame handed to the tick: more
+/// than the cap when there are); returns the counts and whether both sent the same frames.
+fn run(frames: &[TimedFrame]) -> (Counting, bool) {
+    let mut probed = catmodel_host::new_node(config());
+    let mut plain = catmodel_host::new_node(config());
+    let mut counting = Counting::default();
+    let mut same = true;
+    let mut now = first_tick_us(frames[0].t_us);
+    let mut next = 0;
+    while next < frames.len() {
+        let start = next;
+        while next < frames.len() && frames[next].t_us <= now {
+            next += 1;
+        }
+        let tick = Tick {
+            now_us: now,
+            platform: PlatformStats::default(),
+        };
+        let (mut a, mut b) = (TxFrames::new(), TxFrames::new());
+        let ea = probed.step_probed(&tick, &frames[start..next], &mut a, &mut counting);
+        let eb = plain.step(&tick, &frames[start..next], &mut b);
+        same &= a == b && ea == eb;
+        counting.end_tick();
+        now += 20_000;
+    }
+    (counting, same)
+}
+
+#[test]
+fn every_stage_has_one_row() {
+    // The match is exhaustive: a new stage does not compile here until it is listed.
+    let listed = |stage: Stage| match stage {
+        Stage::Advance
+        | Stage::Frame
+        | Stage::GnssOrigin
+        | Stage::GnssFixCheck
+        | Stage::GnssFill
+        | Stage::GnssRestart
+        | Stage::GnssFixFilter
+        | Stage::Models
+        | Stage::Origin
+        | Stage::PathComplete
+        | Stage::PathCompleteShort
+        | Stage::Estimate
+        | Stage::Drive
+        | Stage::Predict
+        | Stage::Publish => true,
+    };
+    let all = [
+        Stage::Advance,
+        Stage::Frame,
+        Stage::PathComplete,
+        Stage::PathCompleteShort,
+        Stage::Origin,
+        Stage::GnssOrigin,
+        Stage::GnssFixCheck,
+        Stage::GnssFill,
+        Stage::GnssRestart,
+        Stage::GnssFixFilter,
+        Stage::Models,
+        Stage::Estimate,
+        Stage::Drive,
+        Stage::Predict,
+        Stage::Publish,
+    ];
+    for stage in all {
+        assert!(listed(stage));
+        let rows = TICK_STAGES.iter().filter(|r| r.stage == stage).count();
+        assert_eq!(rows, 1, "{stage:?}");
+    }
+    assert_eq!(TICK_STAGES.len(), all.len());
+    let mut keys: Vec<&str> = TICK_STAGES.iter().map(|r| r.key).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    assert_eq!(keys.len(), TICK_STAGES.len(), "keys are unique");
+}
+
+#[test]
+fn no_stage_runs_more_often_than_its_row_and_the_drive_reaches_every_limit() {
+    let frames = heavy_drive();
+    let (counting, same) = run(&frames);
+    assert_eq!(counting.unknown, None);
+    for (row, most) in TICK_STAGES.iter().zip(counting.most) {
+        assert!(
+            most <= row.max_per_tick,
+            "{}: {most} runs in one tick, its row allows {}",
+            row.key,
+            row.max_per_tick
+        );
+        // The drive pushes every stage to its limit, so the check above is not vacuous.
+        assert_eq!(
+            most, row.max_per_tick,
+            "{} never reached its limit",
+            row.key
+        );
+    }
+    assert!(same, "the probed step sent other frames than the plain one");
+}
+
+#[test]
+fn the_probed_step_is_the_step() {
+    // Plain drives too: what the probe sees is exactly the tick that runs.
+    for frames in [
+        drive(5.0, -20.0, 4.0),
+        drive(25.0, 60.0, 4.0),
+        drive(0.0, 0.0, 2.0),
+    ] {
+        let frames: Vec<TimedFrame> = frames.iter().map(|l| l.frame).collect();
+        let (_, same) = run(&frames);
+        assert!(same);
+    }
+    // And a tick given nothing but frames the node cannot use.
+    let junk = vec![
+        TimedFrame {
+            t_us: START_US,
+            frame: CanFrame::new(catmodel::can::CanId::Standard(0x7FF), &[1, 2]).unwrap(),
+        };
+        40
+    ];
+    let (counting, same) = run(&junk);
+    assert!(same);
+    let frame_row = TICK_STAGES
+        .iter()
+        .position(|r| r.stage == Stage::Frame)
+        .unwrap();
+    assert_eq!(
+        counting.most[frame_row],
+        catmodel::node::MAX_RX_FRAMES_PER_TICK as u32
+    );
+}

@@ -1,0 +1,428 @@
+//! The tick's worst-case bound: the structure written down next to the code
+//! (`catmodel::node::stage::TICK_STAGES`, each stage's runs per tick at most; the app's drain,
+//! handoff and the step's return once each) times each stage's most expensive run, measured
+//! in QEMU by `catmodel-qemu-stages --stages` over the dedicated drives of
+//! [`crate::drives::stage_corpus`]:
+//!
+//! `bound = sum over rows of max_per_tick x max`
+//!
+//! Two bounds: `worst_case_bound_instructions` over the ticks in which no controller plans
+//! (each stage's maximum over such ticks; budget `TICK_BUDGET_INSTRUCTIONS`) and
+//! `worst_case_bound_controller_instructions` over any tick (each stage's maximum over every
+//! tick, the controller's solve on its most expensive path included; budget
+//! `CONTROL_TICK_BUDGET_INSTRUCTIONS`).
+//!
+//! It holds for any input as far as (1) the counts are bounded by the code (a stage that runs
+//! more often than its row says fails the measurement), (2) no stage's cost depends on the data
+//! beyond the paths the dedicated drives take (every loop has a fixed count; the branches are
+//! the ones the drives exercise), and (3) the probed build of the step costs what the plain
+//! one does (the difference is a row of its own). `cargo xtask adversarial` then tries to break
+//! it on whole ticks. The table is data: a new stage is a new row, nothing here changes.
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{anyhow, bail, Context, Result};
+use catmodel::node::NodeConfig;
+use catmodel_app::budget::{
+    CONTROL_TICK_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS,
+};
+
+use super::{cargo_build, drives, qemu_command, root, INSTALL_QEMU};
+
+/// One row of the bound.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Row {
+    /// Stage key.
+    pub key: String,
+    /// Runs per tick, at most.
+    pub max_per_tick: u32,
+    /// Runs measured.
+    pub runs: u32,
+    /// Most expensive run measured in a tick without a controller planning, instructions.
+    pub max: u32,
+    /// The drive that showed it.
+    pub drive: String,
+    /// Most expensive run measured in any tick, instructions.
+    pub max_control: u32,
+    /// The drive that showed it.
+    pub drive_control: String,
+    /// Why no more runs.
+    pub because: String,
+}
+
+impl Row {
+    /// This row's part of the bound.
+    pub fn part(&self) -> u64 {
+        u64::from(self.max_per_tick) * u64::from(self.max)
+    }
+
+    /// This row's part of the controller's bound.
+    pub fn part_control(&self) -> u64 {
+        u64::from(self.max_per_tick) * u64::from(self.max_control)
+    }
+}
+
+/// The bound and what it was computed from.
+#[derive(Clone, Debug)]
+pub struct Bound {
+    /// The rows, node stages first, in the order they run.
+    pub rows: Vec<Row>,
+    /// Ticks measured over the dedicated drives.
+    pub ticks: u32,
+    /// The largest whole tick among them (drain + plain step + handoff) without a controller
+    /// planning, and its drive.
+    pub max_tick: (u32, String),
+    /// The largest whole tick among them, any tick, and its drive.
+    pub max_tick_control: (u32, String),
+    /// The drives.
+    pub drives: Vec<String>,
+}
+
+impl Bound {
+    /// The tick's bound, instructions.
+    pub fn total(&self) -> u64 {
+        self.rows.iter().map(Row::part).sum()
+    }
+
+    /// The bound of a tick in which a controller plans, instructions.
+    pub fn total_control(&self) -> u64 {
+        self.rows.iter().map(Row::part_control).sum()
+    }
+
+    /// The failures of a run whose slowest ticks were `max_plain` (no controller planning) and
+    /// `max_control`: a measured tick over its bound means the bound is wrong (a stage costs
+    /// more than measured, or runs more often than its row says). The dedicated drives' own
+    /// largest ticks are checked too.
+    pub fn check(&self, max_plain: u32, max_control: Option<u32>) -> Vec<String> {
+        let mut failures = Vec::new();
+        let (bound, bound_control) = (self.total(), self.total_control());
+        for (what, tick, limit) in [
+            ("a tick", Some(max_plain), bound),
+            ("a controller tick", max_control, bound_control),
+            ("a dedicated drive's tick", Some(self.max_tick.0), bound),
+            (
+                "a dedicated drive's controller tick",
+                Some(self.max_tick_control.0),
+                bound_control,
+            ),
+        ] {
+            if let Some(t) = tick.filter(|&t| u64::from(t) > limit) {
+                failures.push(format!(
+                    "{what} took {t} instructions, over its worst-case bound of {limit}: the bound is wrong"
+                ));
+            }
+        }
+        failures
+    }
+
+    /// The table printed by `cargo qemu` and `cargo xtask bench-target`.
+    pub fn table(&self) -> String {
+        let total = self.total();
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "worst case per tick, from the code's structure and each stage's measured maximum \
+             ({} ticks of {} dedicated drives; QEMU instruction counts, not cycles):",
+            self.ticks,
+            self.drives.len()
+        );
+        let total_control = self.total_control();
+        let _ = writeln!(
+            t,
+            "  {:<18}{:>9}{:>8}{:>9}{:>7}{:>9}{:>10}{:>7}  {:<26}bounded by",
+            "stage",
+            "max/tick",
+            "max",
+            "part",
+            "share",
+            "max ctl",
+            "part ctl",
+            "share",
+            "max seen on (ctl)"
+        );
+        for r in &self.rows {
+            let share = r.part() as f64 / total.max(1) as f64 * 100.0;
+            let share_control = r.part_control() as f64 / total_control.max(1) as f64 * 100.0;
+            let _ = writeln!(
+                t,
+                "  {:<18}{:>9}{:>8}{:>9}{:>6.1}%{:>9}{:>10}{:>6.1}%  {:<26}{}",
+                r.key,
+                r.max_per_tick,
+                r.max,
+                r.part(),
+                share,
+                r.max_control,
+                r.part_control(),
+                share_control,
+                format!("{} ({})", r.drive, r.drive_control),
+                r.because
+            );
+        }
+        let _ = writeln!(
+            t,
+            "  bound {total} instructions (budget {TICK_BUDGET_INSTRUCTIONS}; {:.3} % of a 20 ms tick at 168 MHz if one instruction took one cycle); largest tick of these drives {}",
+            total as f64 / CYCLES_PER_TICK as f64 * 100.0,
+            self.max_tick.0
+        );
+        let _ = writeln!(
+            t,
+            "  controller bound {total_control} instructions (budget {CONTROL_TICK_BUDGET_INSTRUCTIONS}; {:.3} % of the tick); largest controller tick of these drives {}",
+            total_control as f64 / CYCLES_PER_TICK as f64 * 100.0,
+            self.max_tick_control.0
+        );
+        t
+    }
+
+    /// The markdown table of the README and docs/firmware.md.
+    pub fn markdown(&self) -> String {
+        let total = self.total();
+        let mut t = String::new();
+        let _ = writeln!(
+            t,
+            "| stage | runs per tick, at most | bounded by | most expensive run | share of the bound | most expensive run, controller ticks | share of the controller bound |"
+        );
+        let _ = writeln!(t, "|---|---:|---|---:|---:|---:|---:|");
+        let total_control = self.total_control();
+        for r in &self.rows {
+            let _ = writeln!(
+                t,
+                "| {} | {} | {} | {} | {:.1} % | {} | {:.1} % |",
+                r.key,
+                r.max_per_tick,
+                r.because,
+                r.max,
+                r.part() as f64 / total.max(1) as f64 * 100.0,
+                r.max_control,
+                r.part_control() as f64 / total_control.max(1) as f64 * 100.0
+            );
+        }
+        let _ = writeln!(
+            t,
+            "| **bound** | | | **{total}** | 100 % | **{total_control}** | 100 % |"
+        );
+        t
+    }
+
+    /// `worst_case` of `timing.json`.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "method": "sum over the tick's stages of (runs per tick at most, from catmodel::node::stage::TICK_STAGES and the app) x (most expensive run measured in QEMU on dedicated drives)",
+            "drives": self.drives,
+            "ticks_measured": self.ticks,
+            "largest_tick_measured": self.max_tick.0,
+            "largest_tick_drive": self.max_tick.1,
+            "largest_controller_tick_measured": self.max_tick_control.0,
+            "largest_controller_tick_drive": self.max_tick_control.1,
+            "stages": self.rows.iter().map(|r| serde_json::json!({
+                "stage": r.key,
+                "max_per_tick": r.max_per_tick,
+                "runs_measured": r.runs,
+                "max_instructions": r.max,
+                "max_on_drive": r.drive,
+                "part_instructions": r.part(),
+                "max_controller_instructions": r.max_control,
+                "max_controller_on_drive": r.drive_control,
+                "part_controller_instructions": r.part_control(),
+                "bounded_by": r.because,
+            })).collect::<Vec<_>>(),
+        })
+    }
+}
+
+/// The configuration the firmware bakes: `CATMODEL_MODEL` or `models/paper.toml` (the
+/// firmware's build script reads the same file through the same reader).
+pub fn baked_car() -> Result<NodeConfig> {
+    let path = match std::env::var_os("CATMODEL_MODEL") {
+        Some(p) => PathBuf::from(p),
+        None => root().join("models").join("paper.toml"),
+    };
+    let file = catmodel_model_file::load(&path).map_err(|e| anyhow!("{e}"))?;
+    Ok(file.node_config())
+}
+
+/// Writes the dedicated drives into `dir`; returns their paths relative to the repository.
+pub fn write_stage_corpus(car: &NodeConfig, dir: &Path) -> Result<Vec<String>> {
+    let mut paths = Vec::new();
+    for spec in drives::stage_corpus(car) {
+        let frames = drives::generate(&spec, car);
+        let path = dir.join(format!("{}.log", spec.name));
+        drives::write_candump(&path, &frames)?;
+        let rel = path
+            .strip_prefix(root())
+            .unwrap_or(&path)
+            .to_string_lossy()
+            .into_owned();
+        paths.push(rel);
+    }
+    Ok(paths)
+}
+
+/// Parses the `--stages` output of the bench firmware.
+pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
+    let name = |index: &str| -> Result<String> {
+        let i: usize = index.parse()?;
+        Ok(drives.get(i).cloned().unwrap_or_else(|| format!("#{i}")))
+    };
+    let mut rows = Vec::new();
+    let mut ticks = None;
+    let mut done = false;
+    for line in stderr.lines() {
+        let fields: Vec<&str> = line.split('\t').collect();
+        match fields.as_slice() {
+            ["stage", key, max_per_tick, runs, max, drive, max_control, drive_control, because] => {
+                rows.push(Row {
+                    key: key.to_string(),
+                    max_per_tick: max_per_tick.parse()?,
+                    runs: runs.parse()?,
+                    max: max.parse()?,
+                    drive: name(drive)?,
+                    max_control: max_control.parse()?,
+                    drive_control: name(drive_control)?,
+                    because: because.to_string(),
+                })
+            }
+            ["stage-ticks", n, max, drive, max_control, drive_control] => {
+                ticks = Some((
+                    n.parse()?,
+                    (max.parse()?, name(drive)?),
+                    (max_control.parse()?, name(drive_control)?),
+                ))
+            }
+            ["stage-done"] => done = true,
+            _ => {}
+        }
+    }
+    if !done || rows.is_empty() {
+        bail!("the stage measurement did not finish:\n{stderr}");
+    }
+    let (ticks, max_tick, max_tick_control) =
+        ticks.ok_or_else(|| anyhow!("no stage-ticks line"))?;
+    Ok(Bound {
+        rows,
+        ticks,
+        max_tick,
+        max_tick_control,
+        drives,
+    })
+}
+
+/// Closed-loop scenarios whose recorded bus input (the vehicle's sensors and the planner's path,
+/// obstacles and origin, with the node's own controller driving) are stage drives: the drive
+/// stage planning on a real path, with and without an obstacle.
+const CLOSED_LOOP_SCENARIOS: [&str; 2] = ["dlc", "obstacle"];
+
+/// The release host binary (`catmodel`), built if needed.
+pub fn host_binary() -> Result<PathBuf> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .current_dir(root())
+        .args(["build", "--release", "--quiet", "-p", "catmodel-host"])
+        .status()
+        .context("running cargo build")?;
+    if !status.success() {
+        bail!("building catmodel-host failed");
+    }
+    Ok(root().join("target").join("release").join("catmodel"))
+}
+
+/// Records the closed-loop sessions into `dir` (`catmodel closed-loop --scenario S --out
+/// DIR/closed-loop-S`); returns their bus inputs' paths relative to the repository.
+pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
+    let host = host_binary()?;
+    let mut paths = Vec::new();
+    for scenario in CLOSED_LOOP_SCENARIOS {
+        let out = dir.join(format!("closed-loop-{scenario}"));
+        let output = Command::new(&host)
+            .current_dir(root())
+            .args(["closed-loop", "--scenario", scenario, "--out"])
+            .arg(&out)
+            .output()
+            .context("running catmodel closed-loop")?;
+        if !output.status.success() {
+            bail!(
+                "catmodel closed-loop --scenario {scenario} failed:\n{}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        let log = out.join("session.can.log");
+        paths.push(
+            log.strip_prefix(root())
+                .unwrap_or(&log)
+                .to_string_lossy()
+                .into_owned(),
+        );
+    }
+    Ok(paths)
+}
+
+/// Generates the dedicated drives and records the closed-loop sessions, builds the stage
+/// firmware and measures every stage in QEMU.
+pub fn measure() -> Result<Bound> {
+    let car = baked_car()?;
+    let dir = root().join("target").join("qemu").join("stages");
+    let mut drives = write_stage_corpus(&car, &dir)?;
+    drives.extend(write_closed_loop_sessions(&dir)?);
+    let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
+    let mut append = vec!["catmodel-qemu-stages".to_string(), "--stages".to_string()];
+    append.extend(drives.iter().cloned());
+    let output = qemu_command(&elf)
+        .args(["-append", &append.join(" ")])
+        .output();
+    let output = match output {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
+        }
+        other => other.context("running qemu-system-arm")?,
+    };
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        bail!(
+            "the stage measurement failed ({}):\n{stderr}",
+            output.status
+        );
+    }
+    // A drive's name: its file's stem, or its directory's for a closed-loop session.
+    let names = drives
+        .iter()
+        .map(|p| {
+            let path = Path::new(p);
+            let named = if p.ends_with("session.can.log") {
+                path.parent().and_then(Path::file_name)
+            } else {
+                path.file_stem()
+            };
+            named.map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
+        })
+        .collect();
+    parse(&stderr, names)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bound_is_the_sum_of_runs_times_maxima() {
+        let text = "noise\nstage\tframe\t16\t100\t200\t0\t300\t1\tMAX\n\
+                    stage\tpredict\t1\t9\t5000\t1\t90000\t0\tonce\n\
+                    stage-ticks\t9\t7000\t1\t80000\t0\nstage-done\n";
+        let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        assert_eq!(b.total(), 16 * 200 + 5000);
+        assert_eq!(b.total_control(), 16 * 300 + 90_000);
+        assert_eq!(
+            (b.ticks, b.max_tick.0, b.max_tick.1.as_str()),
+            (9, 7000, "b")
+        );
+        assert_eq!(b.max_tick_control, (80_000, "a".to_string()));
+        assert_eq!(
+            (b.rows[1].drive.as_str(), b.rows[0].drive_control.as_str()),
+            ("b", "b")
+        );
+        assert!(b.table().contains("bound 8200 instructions"));
+        assert!(b.table().contains("controller bound 94800 instructions"));
+        assert!(b.check(8200, Some(94_800)).is_empty());
+        assert_eq!(b.check(8201, Some(94_801)).len(), 2);
+        assert!(parse("stage\tx\t1\t1\t1\tw\n", vec![]).is_err());
+    }
+}

@@ -1,0 +1,671 @@
+//! Drives made to load the node: the dedicated inputs of the stage measurement
+//! ([`stage_corpus`]: each stage of the tick on its most expensive path) and of the adversarial
+//! search ([`targeted`], [`random`], [`mutate`]), written as candump files.
+//!
+//! A drive is a car following eq 8 (with eq 2's understeer) along speed and steering profiles,
+//! reported the way `catmodel.dbc` says (steering, speed and pedal reports, GNSS position and
+//! COG/SOG from the configured receiver), with the load and the faults of docs/faults.md laid
+//! on top: frames bunched into one tick, GNSS at rates above the receiver's, dropouts and
+//! jumps beyond the gate, floods of corrupt input frames (CRC, DLC, range, stuck counters,
+//! unavailable fixes, foreign GNSS sources) and of identifiers the acceptance filter refuses.
+//! Everything is deterministic in the spec (its seed included).
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use catmodel::can::codec::{
+    GnssCogSog, GnssPosition, LocalOrigin, PathHeader, PathLimits, PathPoint, PedalReport,
+    SpeedReport, SteeringReport,
+};
+use catmodel::can::spec::MAX_PATH_POINTS;
+use catmodel::can::{candump, CanFrame, CanId, TimedFrame};
+use catmodel::geodesy::{Enu, LocalFrame};
+use catmodel::node::NodeConfig;
+use catmodel::node::{PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS};
+
+/// A value over time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Profile {
+    /// Constant.
+    Const(f64),
+    /// `mean + amp sin(2 pi t / period_s)`.
+    Sine { mean: f64, amp: f64, period_s: f64 },
+    /// `lo` for the first half of each period, `hi` for the second.
+    Square { lo: f64, hi: f64, period_s: f64 },
+    /// From `from` to `to` over `seconds`, then `to`.
+    Ramp { from: f64, to: f64, seconds: f64 },
+}
+
+impl Profile {
+    fn at(&self, t_s: f64) -> f64 {
+        match *self {
+            Profile::Const(v) => v,
+            Profile::Sine {
+                mean,
+                amp,
+                period_s,
+            } => mean + amp * (std::f64::consts::TAU * t_s / period_s.max(1e-3)).sin(),
+            Profile::Square { lo, hi, period_s } => {
+                if (t_s / period_s.max(1e-3)).fract() < 0.5 {
+                    lo
+                } else {
+                    hi
+                }
+            }
+            Profile::Ramp { from, to, seconds } => {
+                from + (to - from) * (t_s / seconds.max(1e-3)).clamp(0.0, 1.0)
+            }
+        }
+    }
+}
+
+/// A window that repeats: `len_s` long, every `every_s`, the first at `first_s`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Periodic {
+    /// Start of the first window, s.
+    pub first_s: f64,
+    /// Period, s.
+    pub every_s: f64,
+    /// Length of each window, s.
+    pub len_s: f64,
+}
+
+impl Periodic {
+    /// The window `t_s` lies in, as its start.
+    fn window(&self, t_s: f64) -> Option<f64> {
+        if t_s < self.first_s {
+            return None;
+        }
+        let k = ((t_s - self.first_s) / self.every_s.max(1e-3)).floor();
+        let start = self.first_s + k * self.every_s;
+        (t_s < start + self.len_s).then_some(start)
+    }
+}
+
+/// Everything a drive is made of.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spec {
+    /// File name (without `.log`).
+    pub name: String,
+    /// Seed of the noise and of the fault choices.
+    pub seed: u64,
+    /// Length, s.
+    pub seconds: f64,
+    /// Local frame origin (the first fix is near it), degrees.
+    pub origin_deg: (f64, f64),
+    /// Speed, m/s (reported as it is: the node clamps it).
+    pub speed: Profile,
+    /// Steering, % (clamped to the DBC's +-100).
+    pub steer: Profile,
+    /// GNSS position fixes per second (0: none).
+    pub gnss_hz: f64,
+    /// COG/SOG frames per second (0: none).
+    pub cog_hz: f64,
+    /// White noise on each fix, m.
+    pub gnss_noise_m: f64,
+    /// GNSS silent in these windows.
+    pub gnss_dropout: Option<Periodic>,
+    /// Fixes moved by `gnss_jump_m` east in these windows.
+    pub gnss_jump: Option<Periodic>,
+    /// The jump, m.
+    pub gnss_jump_m: f64,
+    /// Every frame inside a window is stamped at the window's end: all of them are due in one
+    /// tick.
+    pub burst: Option<Periodic>,
+    /// Extra input frames per tick that the node rejects (bad CRC, DLC, range, stuck counter,
+    /// unavailable fix, foreign GNSS source).
+    pub corrupt_per_tick: u32,
+    /// Frames per tick that are not node inputs (the acceptance filter refuses them).
+    pub unknown_per_tick: u32,
+    /// Points of the path a planner sends over and over (0: no planner): LOCAL_ORIGIN at the
+    /// drive's origin first, then the path (a straight line east of the origin, 1 m between
+    /// points, 5 m/s, 3 m corridors: valid, so every completion activates it) paced at the
+    /// node's rule for a conforming planner (`PLANNER_FRAMES_PER_TICK`).
+    pub path_points: usize,
+}
+
+impl Spec {
+    /// A plain drive: 10 s at 5 m/s, gentle steering, GNSS and COG at 100 Hz, no faults.
+    pub fn plain(name: &str) -> Self {
+        Self {
+            name: name.to_string(),
+            seed: 1,
+            seconds: 10.0,
+            origin_deg: (32.2319, -110.9501),
+            speed: Profile::Const(5.0),
+            steer: Profile::Sine {
+                mean: 0.0,
+                amp: 30.0,
+                period_s: 4.0,
+            },
+            gnss_hz: 100.0,
+            cog_hz: 100.0,
+            gnss_noise_m: 0.3,
+            gnss_dropout: None,
+            gnss_jump: None,
+            gnss_jump_m: 0.0,
+            burst: None,
+            corrupt_per_tick: 0,
+            unknown_per_tick: 0,
+            path_points: 0,
+        }
+    }
+}
+
+/// The planner's frames of `spec` (see [`Spec::path_points`]).
+fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
+    let mut out = Vec::new();
+    if spec.path_points < 2 {
+        return out;
+    }
+    let points = spec.path_points.min(MAX_PATH_POINTS);
+    let mut counters = [0u8; 5];
+    let mut next = |slot: usize| {
+        let c = counters[slot];
+        counters[slot] = (c + 1) & 0x0F;
+        c
+    };
+    let mut frames: Vec<CanFrame> = vec![
+        LocalOrigin::Latitude {
+            lat_e7: origin_e7.0,
+        }
+        .encode(next(4)),
+        LocalOrigin::Longitude {
+            lon_e7: origin_e7.1,
+        }
+        .encode(next(4)),
+    ];
+    let per_path = 2 * points + 1;
+    let ticks = (spec.seconds / 0.02) as usize;
+    let paths = ticks * PLANNER_FRAMES_PER_TICK / per_path + 1;
+    for k in 0..paths {
+        let path_id = (k % 16) as u8;
+        frames.push(
+            PathHeader {
+                path_id,
+                count: points as u16,
+            }
+            .encode(next(0)),
+        );
+        for i in 0..points {
+            let index = i as u8;
+            frames.push(
+                PathPoint {
+                    path_id,
+                    index,
+                    east_m: i as f32,
+                    north_m: 0.0,
+                }
+                .encode(next(1)),
+            );
+            frames.push(
+                PathLimits {
+                    path_id,
+                    index,
+                    speed_mps: 5.0,
+                    left_m: 3.0,
+                    right_m: 3.0,
+                }
+                .encode(next(2)),
+            );
+        }
+    }
+    // PLANNER_FRAMES_PER_TICK per 20 ms, 0.5 ms apart, from the first tick on.
+    for (i, frame) in frames.into_iter().enumerate() {
+        let tick = (i / PLANNER_FRAMES_PER_TICK) as f64;
+        let slot = (i % PLANNER_FRAMES_PER_TICK) as f64;
+        let t_s = 0.0015 + tick * 0.02 + slot * 0.0005;
+        if t_s >= spec.seconds {
+            break;
+        }
+        out.push(TimedFrame {
+            t_us: us(t_s),
+            frame,
+        });
+    }
+    out
+}
+
+/// splitmix64: small, fast and good enough to choose faults and noise reproducibly.
+#[derive(Clone, Debug)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator from `seed`.
+    pub fn new(seed: u64) -> Self {
+        Self(seed ^ 0x9E37_79B9_7F4A_7C15)
+    }
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+    /// Uniform integer in [0, n).
+    pub fn below(&mut self, n: u64) -> u64 {
+        self.next_u64() % n.max(1)
+    }
+    /// Standard normal (Box-Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u = self.uniform().max(1e-300);
+        let v = self.uniform();
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
+
+/// The drive's first frame time, us: an epoch-like time, as a recorder writes it.
+const START_US: u64 = 1_700_000_000_000_000;
+/// Truth integration step, s.
+const TRUTH_DT_S: f64 = 0.001;
+/// Rate of the drive-by-wire reports (catmodel.dbc: 50 Hz).
+const REPORT_HZ: f64 = 50.0;
+/// Tick period, s.
+const TICK_S: f64 = catmodel::SAMPLE_PERIOD_S_F64;
+
+/// The car along the drive: rear axle and heading every [`TRUTH_DT_S`].
+struct Truth {
+    /// (east, north, heading rad clockwise from north, speed).
+    samples: Vec<(f64, f64, f64, f64)>,
+}
+
+impl Truth {
+    fn new(spec: &Spec, car: &NodeConfig) -> Self {
+        let n = (spec.seconds / TRUTH_DT_S).ceil() as usize + 1;
+        let mut samples = Vec::with_capacity(n);
+        let (mut x, mut y, mut h) = (0.0f64, 0.0f64, 0.3f64);
+        for i in 0..n {
+            let t = i as f64 * TRUTH_DT_S;
+            let v = spec.speed.at(t).max(0.0).min(f64::from(car.max_speed_mps));
+            samples.push((x, y, h, v));
+            let steer = spec.steer.at(t).clamp(-100.0, 100.0) as f32;
+            let center = car.vehicle.steer_pct_to_center_rad(steer);
+            let curvature = f64::from(car.vehicle.curvature_per_m(center, v as f32));
+            let ds = v * TRUTH_DT_S;
+            x += ds * (h + 0.5 * ds * curvature).sin();
+            y += ds * (h + 0.5 * ds * curvature).cos();
+            h += ds * curvature;
+        }
+        Self { samples }
+    }
+
+    fn at(&self, t_s: f64) -> (f64, f64, f64, f64) {
+        let i = ((t_s / TRUTH_DT_S).round().max(0.0) as usize).min(self.samples.len() - 1);
+        self.samples[i]
+    }
+}
+
+/// Every time `k / hz + phase_s` within the drive.
+fn ticks_of(hz: f64, phase_s: f64, seconds: f64) -> impl Iterator<Item = f64> {
+    let n = if hz > 0.0 {
+        (seconds * hz).floor() as u64
+    } else {
+        0
+    };
+    (0..n).map(move |k| k as f64 / hz + phase_s)
+}
+
+fn us(t_s: f64) -> u64 {
+    START_US + (t_s * 1e6).round() as u64
+}
+
+/// The drive's frames, in time order.
+pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
+    let truth = Truth::new(spec, car);
+    let mut rng = Rng::new(spec.seed);
+    let origin_e7 = (
+        (spec.origin_deg.0 * 1e7).round() as i32,
+        (spec.origin_deg.1 * 1e7).round() as i32,
+    );
+    let frame = LocalFrame::new(origin_e7.0, origin_e7.1).ok();
+    let source = car.gnss_source;
+    let lever = f64::from(car.estimator.antenna_ahead_m);
+    let mut out: Vec<TimedFrame> = planner_frames(spec, origin_e7);
+    let mut push = |t_s: f64, frame: CanFrame| {
+        out.push(TimedFrame {
+            t_us: us(t_s),
+            frame,
+        })
+    };
+
+    // Drive-by-wire reports, 50 Hz, each with its own rolling counter.
+    for (k, t) in ticks_of(REPORT_HZ, 0.0011, spec.seconds).enumerate() {
+        let (_, _, _, v) = truth.at(t);
+        let counter = (k % 16) as u8;
+        let steer = spec.steer.at(t).clamp(-100.0, 100.0) as f32;
+        // The command leads the speed by the car's speed-loop delay (eq 5: 0.42 s).
+        let (_, _, _, v_cmd) = truth.at(t + 0.42);
+        push(
+            t,
+            SteeringReport {
+                steer_pct: Some(steer),
+            }
+            .encode(counter),
+        );
+        push(
+            t + 0.0002,
+            SpeedReport {
+                speed_mps: Some(spec.speed.at(t).clamp(0.0, 655.0) as f32),
+                speed_cmd_mps: Some(v_cmd.max(v * 0.0) as f32),
+            }
+            .encode(counter),
+        );
+        push(
+            t + 0.0004,
+            PedalReport {
+                accel_pct: Some(20.0),
+                brake_pct: Some(0.0),
+            }
+            .encode(counter),
+        );
+    }
+    // GNSS: the antenna ahead of the rear axle, in the node's local frame.
+    if let Some(local) = frame {
+        for t in ticks_of(spec.gnss_hz, 0.0033, spec.seconds) {
+            if spec.gnss_dropout.and_then(|w| w.window(t)).is_some() {
+                continue;
+            }
+            let (x, y, h, _) = truth.at(t);
+            let jump = match spec.gnss_jump.and_then(|w| w.window(t)) {
+                Some(_) => spec.gnss_jump_m,
+                None => 0.0,
+            };
+            let east = x + lever * h.sin() + spec.gnss_noise_m * rng.normal() + jump;
+            let north = y + lever * h.cos() + spec.gnss_noise_m * rng.normal();
+            let (lat, lon) = local.from_local(Enu {
+                east_m: east as f32,
+                north_m: north as f32,
+            });
+            push(
+                t,
+                GnssPosition {
+                    lat_e7: (lat * 1e7).round() as i32,
+                    lon_e7: (lon * 1e7).round() as i32,
+                }
+                .encode(source),
+            );
+        }
+    }
+    for (k, t) in ticks_of(spec.cog_hz, 0.0057, spec.seconds).enumerate() {
+        let (_, _, h, v) = truth.at(t);
+        push(
+            t,
+            GnssCogSog {
+                sid: k as u8,
+                cog_reference: 0,
+                // The field's top (raw 62 832 x 1e-4 rad, catmodel.dbc), just below 2 pi.
+                cog_rad: Some(h.rem_euclid(std::f64::consts::TAU).min(62_831.0 * 1e-4) as f32),
+                sog_mps: Some(v.min(655.0) as f32),
+            }
+            .encode(source),
+        );
+    }
+    // Load: frames the node rejects, and frames the acceptance filter refuses.
+    let ticks = (spec.seconds / TICK_S).floor() as u64;
+    for tick in 0..ticks {
+        let t0 = tick as f64 * TICK_S;
+        for _ in 0..spec.corrupt_per_tick {
+            let t = t0 + rng.range(0.0, TICK_S);
+            let frame = corrupt_frame(&mut rng, source);
+            push(t, frame);
+        }
+        for _ in 0..spec.unknown_per_tick {
+            let t = t0 + rng.range(0.0, TICK_S);
+            push(t, unknown_frame(&mut rng));
+        }
+    }
+    // Bursts: everything in a window arrives at its end, in one tick.
+    if let Some(burst) = spec.burst {
+        for f in out.iter_mut() {
+            let t = (f.t_us - START_US) as f64 * 1e-6;
+            if let Some(start) = burst.window(t) {
+                f.t_us = us(start + burst.len_s);
+            }
+        }
+    }
+    out.sort_by_key(|f| f.t_us);
+    out
+}
+
+/// An input frame the node rejects, of a random kind.
+fn corrupt_frame(rng: &mut Rng, source: u8) -> CanFrame {
+    let counter = rng.below(16) as u8;
+    let good = match rng.below(3) {
+        0 => SteeringReport {
+            steer_pct: Some(rng.range(-100.0, 100.0) as f32),
+        }
+        .encode(counter),
+        1 => SpeedReport {
+            speed_mps: Some(rng.range(0.0, 60.0) as f32),
+            speed_cmd_mps: Some(rng.range(0.0, 60.0) as f32),
+        }
+        .encode(counter),
+        _ => PedalReport {
+            accel_pct: Some(50.0),
+            brake_pct: Some(0.0),
+        }
+        .encode(counter),
+    };
+    match rng.below(6) {
+        // CRC error.
+        0 => {
+            let mut f = good;
+            f.data[7] ^= 0x5A;
+            f
+        }
+        // Wrong DLC.
+        1 => CanFrame::new(good.id, &good.data[..7]).unwrap_or(good),
+        // Out of range (steering raw beyond +-100 %), with a valid CRC.
+        2 => {
+            let mut f = SteeringReport {
+                steer_pct: Some(0.0),
+            }
+            .encode(counter);
+            f.data[0] = 0x50;
+            f.data[1] = 0x46; // 18000 x 0.01 % = 180 %
+            f.data[7] = catmodel::can::crc::frame_crc(f.id, &f.data);
+            f
+        }
+        // A fix "not available".
+        3 => GnssPosition {
+            lat_e7: i32::MAX,
+            lon_e7: i32::MAX,
+        }
+        .encode(source),
+        // A fix from another receiver (passes the filter, the node counts it unknown).
+        4 => GnssPosition {
+            lat_e7: 322_319_000,
+            lon_e7: -1_109_501_000,
+        }
+        .encode(source.wrapping_add(1)),
+        // A COG/SOG frame with its fields unavailable.
+        _ => GnssCogSog {
+            sid: 0,
+            cog_reference: 0,
+            cog_rad: None,
+            sog_mps: None,
+        }
+        .encode(source),
+    }
+}
+
+/// A frame whose identifier is not a node input.
+fn unknown_frame(rng: &mut Rng) -> CanFrame {
+    let id = loop {
+        let id = if rng.below(2) == 0 {
+            CanId::Standard(rng.below(0x800) as u16)
+        } else {
+            CanId::Extended(rng.below(0x2000_0000) as u32)
+        };
+        if !catmodel::can::spec::is_node_input(id) {
+            break id;
+        }
+    };
+    let mut data = [0u8; 8];
+    for b in &mut data {
+        *b = rng.below(256) as u8;
+    }
+    CanFrame::new(id, &data).unwrap_or(CanFrame {
+        id,
+        len: 0,
+        data: [0; 8],
+    })
+}
+
+/// Writes `frames` as a candump file.
+pub fn write_candump(path: &Path, frames: &[TimedFrame]) -> Result<()> {
+    let mut text = String::with_capacity(frames.len() * 48);
+    for f in frames {
+        candump::format_line(f, "can0", &mut text).map_err(|_| anyhow::anyhow!("format"))?;
+        let _ = writeln!(text);
+    }
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The dedicated drives of the stage measurement: together they take every stage of the tick
+/// through its most expensive path (docs/firmware.md, "Worst-case tick"). Each runs on a
+/// fresh node.
+pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
+    let top = f64::from(car.max_speed_mps) + 5.0;
+    let enter = f64::from(car.hybrid.enter_dynamic_speed_mps);
+    let exit = f64::from(car.hybrid.exit_dynamic_speed_mps);
+    let dwell_s = f64::from(car.hybrid.min_dwell_ticks) * TICK_S;
+    vec![
+        // Running, both modes: frames bunched into single ticks (every tick at the cap for a
+        // while), GNSS and COG at twice the fastest receiver's rate.
+        Spec {
+            burst: Some(Periodic {
+                first_s: 3.0,
+                every_s: 0.5,
+                len_s: 0.1,
+            }),
+            gnss_hz: 200.0,
+            cog_hz: 200.0,
+            ..Spec::plain("stages-bursts")
+        },
+        // Top speed, full lock, steering flipping: the dynamic model, turns of more than
+        // 0.5 rad per 0.2 s segment, headings wrapping, predictions saturating.
+        Spec {
+            seconds: 12.0,
+            speed: Profile::Ramp {
+                from: 8.0,
+                to: top,
+                seconds: 4.0,
+            },
+            steer: Profile::Square {
+                lo: -100.0,
+                hi: 100.0,
+                period_s: 1.3,
+            },
+            ..Spec::plain("stages-top-speed-full-lock")
+        },
+        // The hybrid switch flipping as often as its dwell allows, both ways.
+        Spec {
+            speed: Profile::Square {
+                lo: (exit - 1.0).max(0.5),
+                hi: enter + 1.0,
+                period_s: 2.0 * dwell_s + 2.0 * TICK_S,
+            },
+            steer: Profile::Square {
+                lo: -100.0,
+                hi: 100.0,
+                period_s: 0.7,
+            },
+            ..Spec::plain("stages-hybrid-flips")
+        },
+        // GNSS gaps of every length: filled fix by fix, restarts on the track, outages past
+        // "lost"; and jumps beyond the gate long enough to be followed.
+        Spec {
+            seconds: 16.0,
+            speed: Profile::Const(12.0),
+            gnss_dropout: Some(Periodic {
+                first_s: 2.0,
+                every_s: 0.37,
+                len_s: 0.013,
+            }),
+            gnss_jump: Some(Periodic {
+                first_s: 6.0,
+                every_s: 5.0,
+                len_s: 1.3,
+            }),
+            gnss_jump_m: 40.0,
+            ..Spec::plain("stages-gnss-gaps-short")
+        },
+        Spec {
+            seconds: 16.0,
+            speed: Profile::Const(12.0),
+            gnss_dropout: Some(Periodic {
+                first_s: 2.0,
+                every_s: 1.1,
+                len_s: 0.45,
+            }),
+            ..Spec::plain("stages-gnss-gaps-long")
+        },
+        Spec {
+            seconds: 14.0,
+            gnss_dropout: Some(Periodic {
+                first_s: 3.0,
+                every_s: 6.0,
+                len_s: 2.6,
+            }),
+            ..Spec::plain("stages-gnss-lost")
+        },
+        // Floods: every tick at the cap with frames the node must decode and reject, and
+        // frames the acceptance filter refuses.
+        Spec {
+            corrupt_per_tick: 14,
+            unknown_per_tick: 40,
+            ..Spec::plain("stages-floods")
+        },
+        // Standstill, then off: the slow branches of the models and the roll-out.
+        Spec {
+            speed: Profile::Square {
+                lo: 0.0,
+                hi: 2.0,
+                period_s: 3.0,
+            },
+            steer: Profile::Const(100.0),
+            ..Spec::plain("stages-standstill")
+        },
+        // The local frame at other latitudes (its f64 set-up takes other paths).
+        Spec {
+            seconds: 2.0,
+            origin_deg: (0.0001, 0.0001),
+            ..Spec::plain("stages-origin-equator")
+        },
+        Spec {
+            seconds: 2.0,
+            origin_deg: (79.9, 179.9),
+            ..Spec::plain("stages-origin-north")
+        },
+        Spec {
+            seconds: 2.0,
+            origin_deg: (-45.0, -179.99),
+            ..Spec::plain("stages-origin-south")
+        },
+        // The planner's paths completing: the longest path the bus carries (validation and
+        // load over 256 points), and short ones completing every few ticks.
+        Spec {
+            seconds: 9.0,
+            path_points: MAX_PATH_POINTS,
+            ..Spec::plain("stages-path-long")
+        },
+        Spec {
+            seconds: 4.0,
+            path_points: SHORT_PATH_POINTS,
+            ..Spec::plain("stages-path-short")
+        },
+    ]
+}
