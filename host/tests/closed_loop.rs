@@ -279,7 +279,7 @@ fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
     let metrics: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["scenario"], "dlc");
-    assert_eq!(metrics["controller"], "pure-pursuit");
+    assert_eq!(metrics["controller"], "mpc");
     assert_eq!(metrics["cone_hits"], 0);
     assert_eq!(metrics["clean"], true);
     for f in ["path.svg", "lateral_error.svg", "steering.svg", "speed.svg"] {
@@ -291,8 +291,8 @@ fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
     }
     let samples = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
     assert!(samples.starts_with("t,x,y,heading,speed,est_x"));
-    // The node's frames (all but CONTROL_COMMAND, which the controller beside it sends) come
-    // back identical from `replay` over the recorded input: what `cargo qemu` runs.
+    // The node's frames, CONTROL_COMMAND included (the controller runs inside it), come back
+    // identical from `replay` over the recorded input: what `cargo qemu` runs.
     let replay_tx = dir.join("replay_tx.log");
     let out = Command::new(BIN)
         .args([
@@ -311,13 +311,8 @@ fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
         String::from_utf8_lossy(&out.stderr)
     );
     let session = std::fs::read_to_string(dir.join("session.tx.log")).unwrap();
-    let node_only: String = session
-        .lines()
-        .filter(|l| !l.contains(" 320#"))
-        .map(|l| format!("{l}\n"))
-        .collect();
     assert!(session.lines().filter(|l| l.contains(" 320#")).count() > 500);
-    assert_eq!(node_only, std::fs::read_to_string(&replay_tx).unwrap());
+    assert!(session == std::fs::read_to_string(&replay_tx).unwrap());
 }
 
 #[test]
