@@ -175,10 +175,12 @@ pub struct Weights {
     pub terminal_factor: f32,
     /// Exact-penalty weight of the corridor, per m outside.
     pub corridor_weight_per_m: f32,
-    /// The body's corners are kept this far inside the corridor, m: the corner rows are
-    /// linearised about the previous plan and soft, so a plan on the edge ends up a few
-    /// centimetres outside (measured on the closed-loop rig: up to 0.04 m at 5-8 m/s, a cone
-    /// touched; docs/controller.md).
+    /// The body's corners are kept this far inside the corridor, m, but never by more than
+    /// half the room the body has on a side (a lane 0.2 m wider than the car keeps 0.05 m):
+    /// the corner rows are linearised about the previous plan and soft, so a plan on the edge
+    /// ends up a few centimetres outside (measured on the closed-loop rig: up to 0.04 m at
+    /// 5-8 m/s, a cone touched), while a full margin in the narrow lanes leaves the plan no room
+    /// at speed (docs/controller.md).
     pub corridor_margin_m: f32,
     /// Exact-penalty weight of an obstacle, per m inside its inflated circle.
     pub obstacle_weight_per_m: f32,
