@@ -244,7 +244,8 @@ impl Path {
         *k = k.saturating_sub(1).max(1);
         loop {
             let (lo, hi) = (i.saturating_sub(*k), (i + *k).min(last));
-            let span = self.station_of(hi).unwrap_or(0.0) - self.station_of(lo).unwrap_or(0.0);
+            let span = self.station_m.get(hi).copied().unwrap_or(0.0)
+                - self.station_m.get(lo).copied().unwrap_or(0.0);
             if span >= 2.0 * REFERENCE_BASELINE_M || (lo == 0 && hi == last) {
                 return (lo, hi);
             }
@@ -255,9 +256,13 @@ impl Path {
     /// The reference heading and curvature at every point (see the module doc).
     fn reference_geometry(&mut self) {
         let n = self.len;
+        // Each point's chord half-width in points, kept for the curvature pass (at most
+        // 2 m / MIN_SEGMENT_M = 40).
+        let mut chord_points = [0u8; MAX_PATH_POINTS];
         let mut k = 1;
-        for i in 0..n {
+        for (i, kept) in chord_points.iter_mut().enumerate().take(n) {
             let (lo, hi) = self.chord_around(i, &mut k);
+            *kept = k.min(u8::MAX as usize) as u8;
             let (Some(a), Some(b)) = (self.points.get(lo), self.points.get(hi)) else {
                 break;
             };
@@ -266,14 +271,14 @@ impl Path {
                 *h = heading;
             }
         }
-        let mut k = 1;
-        for i in 0..n {
-            let (lo, hi) = self.chord_around(i, &mut k);
-            let (Some(&h_lo), Some(&h_hi), Some(s_lo), Some(s_hi)) = (
+        let last = n.saturating_sub(1);
+        for (i, &k) in chord_points.iter().enumerate().take(n) {
+            let (lo, hi) = (i.saturating_sub(k as usize), (i + k as usize).min(last));
+            let (Some(&h_lo), Some(&h_hi), Some(&s_lo), Some(&s_hi)) = (
                 self.reference_heading_rad.get(lo),
                 self.reference_heading_rad.get(hi),
-                self.station_of(lo),
-                self.station_of(hi),
+                self.station_m.get(lo),
+                self.station_m.get(hi),
             ) else {
                 break;
             };
