@@ -180,23 +180,28 @@ impl Path {
                 return Err(PathError::BadValue(i as u16));
             }
         }
-        let mut previous_heading: Option<f32> = None;
+        // Lengths and turns without square roots or arc tangents (the tick a path completes
+        // also loads it): squared lengths against the squared limits, and a turn beyond
+        // MAX_TURN_RAD as `dot < cos(MAX_TURN_RAD) |a| |b|`, i.e. a non-positive dot or
+        // `dot^2 < cos^2 |a|^2 |b|^2`.
+        let cos_max_turn = math::cos(MAX_TURN_RAD);
+        let mut previous: Option<(f32, f32, f32)> = None;
         for (i, w) in waypoints.iter().enumerate() {
             let Some(next) = waypoints.get(i + 1) else {
                 break;
             };
             let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
-            let length = math::sqrt(dx * dx + dy * dy);
-            if !(MIN_SEGMENT_M..=MAX_SEGMENT_M).contains(&length) {
+            let length2 = dx * dx + dy * dy;
+            if !(MIN_SEGMENT_M * MIN_SEGMENT_M..=MAX_SEGMENT_M * MAX_SEGMENT_M).contains(&length2) {
                 return Err(PathError::SegmentLength(i as u16));
             }
-            let heading = math::atan2(dx, dy);
-            if let Some(h) = previous_heading {
-                if math::wrap_pi(heading - h).abs() > MAX_TURN_RAD {
+            if let Some((px, py, p2)) = previous {
+                let dot = px * dx + py * dy;
+                if dot <= 0.0 || dot * dot < cos_max_turn * cos_max_turn * p2 * length2 {
                     return Err(PathError::Turn(i as u16));
                 }
             }
-            previous_heading = Some(heading);
+            previous = Some((dx, dy, length2));
         }
         Ok(())
     }
