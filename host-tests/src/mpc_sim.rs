@@ -304,6 +304,19 @@ impl PositionError {
     }
 }
 
+/// How old what the controller is told is, in 20 ms ticks, as on a real node: its heading
+/// estimate lags the truth in transients, the steering report is a tick old when it is used,
+/// and the command reaches the actuator a tick later. All zero: the truth, at once.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Delays {
+    /// The pose's heading is the true heading this many ticks ago.
+    pub heading_ticks: usize,
+    /// The measured steering is the actuator's this many ticks ago.
+    pub steer_ticks: usize,
+    /// Commands act this many ticks after they are computed.
+    pub command_ticks: usize,
+}
+
 /// One tick of the log.
 #[derive(Clone, Copy, Debug)]
 pub struct TickLog {
@@ -356,6 +369,12 @@ pub struct Loop {
     pub obstacles: [Option<Obstacle>; MAX_OBSTACLES],
     /// Per tick.
     pub log: Vec<TickLog>,
+    /// Measurement and command delays.
+    pub delays: Delays,
+    /// Past true headings and steering (newest last), commands not yet acting (oldest first).
+    heading_history: std::collections::VecDeque<f64>,
+    steer_history: std::collections::VecDeque<f64>,
+    command_queue: std::collections::VecDeque<(f32, f32)>,
 }
 
 /// The CAT Vehicle's body for the tests: 2010 Ford Escape Hybrid, 4.44 m long, 1.81 m wide
@@ -554,6 +573,10 @@ impl Loop {
             position_error: PositionError::NONE,
             obstacles: [None; MAX_OBSTACLES],
             log: Vec::new(),
+            delays: Delays::default(),
+            heading_history: Default::default(),
+            steer_history: Default::default(),
+            command_queue: Default::default(),
             cfg,
         }
     }
@@ -625,7 +648,21 @@ impl Loop {
         let ex = self.position_error.bias_m.0 + self.position_error.white_m * self.normal();
         let ey = self.position_error.bias_m.1 + self.position_error.white_m * self.normal();
         let (mx, my) = (x + ex, y + ey);
-        let mh = h + self.position_error.heading_white_rad * self.normal();
+        self.heading_history.push_back(h);
+        self.steer_history.push_back(self.steer_pct);
+        while self.heading_history.len() > self.delays.heading_ticks + 1 {
+            self.heading_history.pop_front();
+        }
+        while self.steer_history.len() > self.delays.steer_ticks + 1 {
+            self.steer_history.pop_front();
+        }
+        let h_told = self.heading_history.front().copied().unwrap_or(h);
+        let steer_told = self
+            .steer_history
+            .front()
+            .copied()
+            .unwrap_or(self.steer_pct);
+        let mh = h_told + self.position_error.heading_white_rad * self.normal();
         self.station_m = path.project(mx, my, self.station_m);
         let vx = self.state.vx_mps;
         let r = self.state.yaw_rate_rps;
@@ -658,7 +695,7 @@ impl Loop {
                     vy_mps: self.state.vy_mps as f32,
                     yaw_rate_rps: r as f32,
                 },
-                steer_rad: self.steer_pct as f32 / 100.0 * max_steer,
+                steer_rad: steer_told as f32 / 100.0 * max_steer,
                 mode,
                 speed_model: &self.speed_model_state,
                 speed_bias_mps: vx as f32 - modelled,
@@ -674,13 +711,19 @@ impl Loop {
         self.last_steer_cmd = out.steer_cmd_pct;
         self.speed_model
             .step(&mut self.speed_model_state, out.speed_cmd_mps);
+        self.command_queue
+            .push_back((out.steer_cmd_pct, out.speed_cmd_mps));
+        // The first commands also stand for the ticks before them.
+        let first = (out.steer_cmd_pct, out.speed_cmd_mps);
+        while self.command_queue.len() <= self.delays.command_ticks {
+            self.command_queue.push_front(first);
+        }
+        let (steer_cmd_pct, speed_cmd_mps) = self.command_queue.pop_front().unwrap_or(first);
         let dt = catmodel_host::sim::PLANT_STEP_S;
         let max_steer_rad = self.cfg.chassis.max_steer_deg.to_radians();
         for _ in 0..20 {
-            self.steer_pct = self.steering.step(out.steer_cmd_pct as f64);
-            let drive = self
-                .speed_ctl
-                .step(out.speed_cmd_mps as f64, self.state.vx_mps);
+            self.steer_pct = self.steering.step(steer_cmd_pct as f64);
+            let drive = self.speed_ctl.step(speed_cmd_mps as f64, self.state.vx_mps);
             let input = PlantInput {
                 steer_rad: self.steer_pct / 100.0 * max_steer_rad,
                 drive_force_n: drive.drive_force_n,

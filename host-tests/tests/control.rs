@@ -8,21 +8,12 @@ use catmodel::can::codec::{
 use catmodel::control::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
-    CarState, PurePursuitConfig, PurePursuitState, DEFAULT_PURE_PURSUIT,
+    CarState, PurePursuitConfig, PurePursuitState, PurePursuitTuning, DEFAULT_TUNING,
 };
 use catmodel::model::kinematic::Pose;
-use catmodel::vehicle::VehicleParams;
+use catmodel::vehicle::{Body, VehicleParams};
 use proptest::prelude::*;
 use std::f64::consts::PI;
-
-/// The CAT Vehicle's steering geometry (models/paper.toml's `[vehicle]`): L 2.62 m, T 1.55 m,
-/// 35.5 deg at 100 %, K 0.0015 s^2/m^2 (paper II-C, CAT Vehicle ROS package).
-const CAT_VEHICLE: VehicleParams = VehicleParams {
-    wheelbase_m: 2.62,
-    track_m: 1.55,
-    max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
-    understeer_s2_per_m2: 0.0015,
-};
 
 fn wp(east: f64, north: f64) -> Waypoint {
     Waypoint {
@@ -95,14 +86,20 @@ fn corner_reference_is_continuous_and_its_curvature_hand_derived() {
         pts.push(wp(5.0 + i as f64 * h2.sin(), i as f64 * h2.cos()));
     }
     let p = path_of(&pts);
-    // Between the midpoints of the segments around the corner (stations 4.5 .. 5.5) the
-    // curvature is (pi/6) / 1 m, positive (right turn); elsewhere 0.
+    // Points 1 m apart, baseline 1 m: the reference heading at point i is the direction of the
+    // chord from point i - 1 to point i + 1: pi/2 up to point 4, at the corner (point 5) the
+    // chord (4, 0) -> (5 + sin h2, cos h2) = (1.866, -0.5), pi/2 + atan(0.5 / 1.866) =
+    // pi/2 + pi/12, from point 6 on h2 = pi/2 + pi/6. The curvature at point i is the heading
+    // change from i - 1 to i + 1 over 2 m: pi/24 at points 4 and 6, pi/12 at 5, 0 elsewhere;
+    // linear in between (at 4.5: pi/16). Positive: a right turn.
     for (s, k) in [
         (3.0, 0.0),
-        (4.6, PI / 6.0),
-        (5.0, PI / 6.0),
-        (5.4, PI / 6.0),
-        (6.0, 0.0),
+        (3.5, PI / 48.0),
+        (4.0, PI / 24.0),
+        (4.5, PI / 16.0),
+        (5.0, PI / 12.0),
+        (6.0, PI / 24.0),
+        (7.0, 0.0),
     ] {
         let sample = p.sample(s as f32, 0).unwrap();
         assert!(
@@ -111,11 +108,21 @@ fn corner_reference_is_continuous_and_its_curvature_hand_derived() {
             sample.curvature_per_m
         );
     }
-    // Heading: linear from pi/2 at 4.5 to pi/2 + pi/6 at 5.5.
+    // The curvature integrates to the corner's 30 degrees (trapezoids between the points).
+    let turn: f64 = (0..10)
+        .map(|i| {
+            let k = |s: f64| f64::from(p.sample(s as f32, 0).unwrap().curvature_per_m);
+            0.5 * (k(i as f64) + k(i as f64 + 1.0))
+        })
+        .sum();
+    assert!((turn - PI / 6.0).abs() < 1e-5, "{turn}");
+    // Heading: pi/2 up to 4, then linear between the points' values.
     let h = |s: f32| f64::from(p.sample(s, 0).unwrap().heading_rad);
-    assert!((h(4.5) - PI / 2.0).abs() < 1e-5);
+    assert!((h(4.0) - PI / 2.0).abs() < 1e-5);
+    assert!((h(4.5) - (PI / 2.0 + PI / 24.0)).abs() < 1e-5);
     assert!((h(5.0) - (PI / 2.0 + PI / 12.0)).abs() < 1e-5);
-    assert!((h(5.5) - h2).abs() < 1e-5);
+    assert!((h(5.5) - (PI / 2.0 + PI / 8.0)).abs() < 1e-5);
+    assert!((h(6.0) - h2).abs() < 1e-5);
     // Continuity: no step anywhere along the path.
     let mut prev = h(0.0);
     for k in 1..=1000 {
@@ -141,12 +148,51 @@ fn circle_curvature_within_the_documented_bound() {
     let c = 2.0 * r * (phi / 2.0).sin();
     let expected = phi / c;
     assert!((expected * r - 1.0).abs() <= c * c / (24.0 * r * r) * 1.01);
-    for s in [3.0f32, 7.7, 12.2, 20.0] {
+    // From two baselines (two points here: the chords are just under 1 m) after the start, the
+    // chords around a point are symmetric: the heading is the tangent's and the curvature
+    // phi / c. (Closer to an end, the one-sided chord rounds it: 0.875 phi / c at 3 m.)
+    for s in [4.5f32, 7.7, 12.2, 20.0] {
         let k = f64::from(p.sample(s, 0).unwrap().curvature_per_m);
         assert!(
             (k - expected).abs() < 1e-5 * expected,
             "{s}: {k} vs {expected}"
         );
+    }
+}
+
+#[test]
+fn reference_is_insensitive_to_the_bus_quantisation() {
+    // A right-hand circle of R = 25 m from north (heading = arc / R; 0.04 1/m: the double lane change's curves at 10 m/s) sampled
+    // every 0.5 m and rounded to the bus's 0.02 m: the single segments' headings scatter by up
+    // to 0.02 / 0.5 = 0.04 rad (0.08 1/m of curvature); the reference stays within 0.014 rad of the tangent and
+    // 0.014 1/m of the curvature (the bounds in the module doc).
+    let r = 25.0;
+    let pts: Vec<Waypoint> = (0..120)
+        .map(|i| {
+            let a = i as f64 * 0.5 / r;
+            let (e, n) = (r * (1.0 - a.cos()), r * a.sin());
+            wp((e / 0.02).round() * 0.02, (n / 0.02).round() * 0.02)
+        })
+        .collect();
+    let p = path_of(&pts);
+    let mut s = 4.0f32;
+    while s < 55.0 {
+        let x = p.sample(s, 0).unwrap();
+        // The tangent where the sample lies (centre (R, 0)): stations of rounded points are
+        // not quite arc lengths.
+        let tangent = f64::from(x.north_m).atan2(r - f64::from(x.east_m));
+        let heading_error = (f64::from(x.heading_rad) - tangent).abs();
+        assert!(
+            heading_error < 0.014,
+            "{s}: heading {} vs {tangent}",
+            x.heading_rad
+        );
+        assert!(
+            (f64::from(x.curvature_per_m) - 1.0 / r).abs() < 0.014,
+            "{s}: curvature {}",
+            x.curvature_per_m
+        );
+        s += 0.1;
     }
 }
 
@@ -238,6 +284,25 @@ proptest! {
             prop_assert_eq!(*o, p.sample(*s, 0).unwrap());
         }
     }
+}
+
+#[test]
+fn narrowest_corridor_between_two_stations() {
+    // Points 1 m apart northwards; the left corridor narrows to 0.5 m at point 5, the right to
+    // 0.2 m at point 8.
+    let mut pts = straight(0.0, 0.0, 0.0, 12, 1.0);
+    pts[5].left_m = 0.5;
+    pts[8].right_m = 0.2;
+    let p = path_of(&pts);
+    // Between 2.5 and 4.5: no narrowing point inside; at 4.5 the left corridor is halfway
+    // between 1.0 and 0.5.
+    assert_eq!(p.narrowest_corridor(2.5, 4.5, 0), Some((0.75, 1.5)));
+    assert_eq!(p.narrowest_corridor(4.5, 2.5, 7), Some((0.75, 1.5)));
+    // Across both points.
+    assert_eq!(p.narrowest_corridor(1.0, 9.5, 0), Some((0.5, 0.2)));
+    // Beyond the ends: clamped.
+    assert_eq!(p.narrowest_corridor(-3.0, 0.5, 0), Some((1.0, 1.5)));
+    assert_eq!(Path::new().narrowest_corridor(0.0, 1.0, 0), None);
 }
 
 #[test]
@@ -517,6 +582,29 @@ proptest! {
 // ------------------------------------------------------------------------------------------
 // Pure pursuit
 
+/// The CAT Vehicle as the hand derivations below use it: L = 2.62 m, 35.5 deg at 100 %,
+/// K = 0.0015 s^2/m^2; body 1.806 x 4.437 m, rear overhang 0.85 m.
+const CAT: VehicleParams = VehicleParams {
+    wheelbase_m: 2.62,
+    track_m: 1.55,
+    max_steer_rad: 35.5 * std::f32::consts::PI / 180.0,
+    understeer_s2_per_m2: 0.0015,
+};
+
+fn pursuit(tuning: PurePursuitTuning) -> PurePursuitConfig {
+    PurePursuitConfig {
+        tuning,
+        vehicle: CAT,
+        body: Body {
+            width_m: 1.806,
+            length_m: 4.437,
+            rear_overhang_m: 0.85,
+        },
+        max_speed_mps: 40.0,
+        period_s: 0.02,
+    }
+}
+
 fn car(east: f32, north: f32, heading: f32, speed: f32) -> CarState {
     CarState {
         pose: Some(Pose::new(east, north, heading)),
@@ -530,16 +618,10 @@ fn pure_pursuit_steering_hand_derived() {
     // lookahead 3 m, goal (0, 3): right = -1, d^2 = 10, kappa = 2 (-1) / 10 = -0.2 1/m;
     // delta = atan(-0.2 * 2.62) = -0.48255 rad = -77.88 % of 35.5 deg.
     let path = path_of(&straight(0.0, 0.0, 0.0, 30, 1.0));
-    let cfg = DEFAULT_PURE_PURSUIT;
+    let cfg = pursuit(DEFAULT_TUNING);
     assert_eq!(cfg.lookahead_m(0.0), 3.0);
     let mut state = PurePursuitState::default();
-    let out = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(1.0, 0.0, 0.0, 0.0),
-    );
+    let out = cfg.process(&mut state, Some(&path), &[], &car(1.0, 0.0, 0.0, 0.0));
     let expected_pct = (-0.2f64 * 2.62).atan() / 35.5f64.to_radians() * 100.0;
     assert_eq!(out.status, ControlStatus::Tracking);
     assert!(
@@ -553,7 +635,6 @@ fn pure_pursuit_steering_hand_derived() {
     // Mirror image: 1 m to the left steers right by the same amount.
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(-1.0, 0.0, 0.0, 0.0),
@@ -570,16 +651,15 @@ fn pure_pursuit_on_a_circle_steers_for_its_curvature() {
     // circle's tangent there, so this holds to rounding.
     let r = 20.0;
     let path = path_of(&clockwise_circle(r, 120, 0.5));
-    let cfg = PurePursuitConfig {
+    let cfg = pursuit(PurePursuitTuning {
         lookahead_time_s: 0.5,
-        ..DEFAULT_PURE_PURSUIT
-    };
+        ..DEFAULT_TUNING
+    });
     for v in [2.0f32, 5.0] {
         let s = path.station_of(20).unwrap();
         let on = path.sample(s, 0).unwrap();
         let out = cfg.process(
             &mut PurePursuitState::default(),
-            &CAT_VEHICLE,
             Some(&path),
             &[],
             &car(on.east_m, on.north_m, on.heading_rad, v),
@@ -596,54 +676,61 @@ fn pure_pursuit_on_a_circle_steers_for_its_curvature() {
 
 #[test]
 fn pure_pursuit_speed_loop_and_stops() {
-    let cfg = PurePursuitConfig {
+    let cfg = pursuit(PurePursuitTuning {
         speed_preview_s: 0.0,
-        ..DEFAULT_PURE_PURSUIT
-    };
+        ..DEFAULT_TUNING
+    });
+    let t = cfg.tuning;
+    let front = cfg.body.length_m - cfg.body.rear_overhang_m;
     let path = path_of(&straight(0.0, 0.0, 0.0, 200, 1.0));
     // At the target speed: the command is the target (plus the integral, zero here).
     let mut state = PurePursuitState::default();
-    let out = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 5.0),
-    );
+    let out = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 5.0));
     assert!((out.speed_cmd_mps - 5.0).abs() < 1e-6);
-    // 1 m/s slow: kp * 1 + ki * 1 * dt above the target, and the integral grows each tick.
+    // 0.5 m/s slow: kp * 0.5 + ki * 0.5 * dt above the target, and the integral grows each
+    // tick.
     let mut state = PurePursuitState::default();
-    let a = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 4.0),
-    );
-    let expected = 5.0 + cfg.speed_kp + cfg.speed_ki_per_s * cfg.period_s;
+    let a = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 4.5));
+    let expected = 5.0 + 0.5 * t.speed_kp + 0.5 * t.speed_ki_per_s * cfg.period_s;
     assert!(
         (a.speed_cmd_mps - expected).abs() < 1e-5,
         "{}",
         a.speed_cmd_mps
     );
-    let b = cfg.process(
-        &mut state,
-        &CAT_VEHICLE,
-        Some(&path),
-        &[],
-        &car(0.0, 10.0, 0.0, 4.0),
-    );
+    let b = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 4.5));
     assert!(b.speed_cmd_mps > a.speed_cmd_mps);
-    // Near the end: the stopping limit sqrt(2 a d) (d = 199 - 195 = 4 m -> 4.47 m/s).
+    // At rest (a launch): the correction is capped, the integral does not run.
+    let mut state = PurePursuitState::default();
+    let out = cfg.process(&mut state, Some(&path), &[], &car(0.0, 10.0, 0.0, 0.0));
+    assert!((out.speed_cmd_mps - (5.0 + t.speed_correction_limit_mps)).abs() < 1e-6);
+    assert_eq!(state.integral_mps, 0.0);
+    // Near the end: at rest 4 m before it, the stopping limit is sqrt(2 a 4), and the
+    // correction never goes past it; at speed, the response time's travel comes off.
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &[],
-        &car(0.0, 195.0, 0.0, 4.47),
+        &car(0.0, 195.0, 0.0, 0.0),
     );
-    let limit = (2.0 * cfg.stop_decel_mps2 * 4.0).sqrt();
-    assert!(out.speed_cmd_mps <= limit + cfg.speed_kp * 0.01 + 1e-3);
+    let limit = (2.0 * t.stop_decel_mps2 * 4.0).sqrt();
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-5,
+        "{}",
+        out.speed_cmd_mps
+    );
+    let v = 1.5;
+    let out = cfg.process(
+        &mut PurePursuitState::default(),
+        Some(&path),
+        &[],
+        &car(0.0, 195.0, 0.0, v),
+    );
+    let limit = (2.0 * t.stop_decel_mps2 * (4.0 - v * t.speed_response_s)).sqrt();
+    assert!(
+        (out.speed_cmd_mps - limit).abs() < 1e-5,
+        "{}",
+        out.speed_cmd_mps
+    );
     // An obstacle on the path 10 m ahead of the rear axle: the target drops so that the front
     // bumper stops a margin short of it: free distance = 20 - 0.5 - margin - front - 10.
     let obstacle = [Some(ObstacleCircle {
@@ -651,15 +738,14 @@ fn pure_pursuit_speed_loop_and_stops() {
         north_m: 20.0,
         radius_m: 0.5,
     })];
-    let free = 20.0 - 0.5 - cfg.obstacle_margin_m - cfg.front_m - 10.0;
-    let limit = (2.0 * cfg.stop_decel_mps2 * free).sqrt();
+    let free = 20.0 - 0.5 - t.obstacle_margin_m - front - 10.0;
+    let limit = (2.0 * t.stop_decel_mps2 * free).sqrt();
     assert!(limit < 5.0);
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &obstacle,
-        &car(0.0, 10.0, 0.0, limit),
+        &car(0.0, 10.0, 0.0, 0.0),
     );
     assert!(
         (out.speed_cmd_mps - limit).abs() < 1e-3,
@@ -670,7 +756,6 @@ fn pure_pursuit_speed_loop_and_stops() {
     for north in [10.0 + free, 10.0 + free + 1.0] {
         let out = cfg.process(
             &mut PurePursuitState::default(),
-            &CAT_VEHICLE,
             Some(&path),
             &obstacle,
             &car(0.0, north, 0.0, 0.0),
@@ -685,7 +770,6 @@ fn pure_pursuit_speed_loop_and_stops() {
     })];
     let out = cfg.process(
         &mut PurePursuitState::default(),
-        &CAT_VEHICLE,
         Some(&path),
         &beside,
         &car(0.0, 10.0, 0.0, 5.0),
@@ -696,13 +780,7 @@ fn pure_pursuit_speed_loop_and_stops() {
 #[test]
 fn pure_pursuit_without_path_or_position_holds_the_car() {
     let mut state = PurePursuitState::default();
-    let out = DEFAULT_PURE_PURSUIT.process(
-        &mut state,
-        &CAT_VEHICLE,
-        None,
-        &[],
-        &car(0.0, 0.0, 0.0, 3.0),
-    );
+    let out = pursuit(DEFAULT_TUNING).process(&mut state, None, &[], &car(0.0, 0.0, 0.0, 3.0));
     assert_eq!(
         (out.status, out.speed_cmd_mps),
         (ControlStatus::NoPath, 0.0)
@@ -712,15 +790,14 @@ fn pure_pursuit_without_path_or_position_holds_the_car() {
         pose: None,
         speed_mps: 3.0,
     };
-    let out = DEFAULT_PURE_PURSUIT.process(&mut state, &CAT_VEHICLE, Some(&path), &[], &lost);
+    let out = pursuit(DEFAULT_TUNING).process(&mut state, Some(&path), &[], &lost);
     assert_eq!(
         (out.status, out.speed_cmd_mps),
         (ControlStatus::Fallback, 0.0)
     );
     // Non-finite speed never leaks into the command.
-    let out = DEFAULT_PURE_PURSUIT.process(
+    let out = pursuit(DEFAULT_TUNING).process(
         &mut state,
-        &CAT_VEHICLE,
         Some(&path),
         &[],
         &car(0.0, 1.0, 0.0, f32::NAN),

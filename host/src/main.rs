@@ -127,17 +127,6 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
-    Decode {
-        /// candump log.
-        log: PathBuf,
-        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
-        #[arg(long, value_delimiter = ',')]
-        messages: Vec<String>,
-        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
-        #[arg(long)]
-        csv: bool,
-    },
     /// Close the loop: the plant simulator, the node and its controller on one bus, over a
     /// scenario (dlc, obstacle, loop); writes DIR/session.can.log, session.tx.log,
     /// metrics.json and plots.
@@ -167,6 +156,29 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The ISO 3888-2 double lane change's speeds for one car: each controller's highest clean
+    /// speed (3 seeds, RTK receiver) and the offline optimiser's limit (perfect plant
+    /// knowledge); prints JSON.
+    DlcLimits {
+        /// Controllers to measure (pure-pursuit, mpc), comma-separated.
+        #[arg(long, default_value = "pure-pursuit", value_delimiter = ',')]
+        controllers: Vec<String>,
+        /// Also run the offline optimiser (minutes).
+        #[arg(long)]
+        optimal: bool,
+        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+        #[arg(long)]
+        vehicle: Option<PathBuf>,
+        /// Model file for the node (default: the published models).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Also write the result as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Write the optimiser's best run at its limit as figures into this directory.
+        #[arg(long, value_name = "DIR")]
+        plots: Option<PathBuf>,
+    },
     /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
     /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
     /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
@@ -180,6 +192,17 @@ enum Command {
         /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
         #[arg(long, value_parser = parse_origin)]
         origin: Option<(f64, f64)>,
+    },
+    /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
+    Decode {
+        /// candump log.
+        log: PathBuf,
+        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        messages: Vec<String>,
+        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
+        #[arg(long)]
+        csv: bool,
     },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
@@ -438,14 +461,6 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Decode { log, messages, csv } => {
-            let format = if csv {
-                decode::Format::Csv
-            } else {
-                decode::Format::Table
-            };
-            decode::run(&log, &messages, format)
-        }
         Command::ClosedLoop {
             scenario,
             controller,
@@ -475,6 +490,36 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Command::DlcLimits {
+            controllers,
+            optimal,
+            vehicle,
+            model,
+            json,
+            plots,
+        } => {
+            let progress = Progress::spinner("searching the double lane change's limits");
+            let (cfg, node) =
+                catmodel_host::closed_loop::load_setup(vehicle.as_deref(), model.as_deref())?;
+            let limits =
+                catmodel_host::closed_loop::limits::dlc_limits(&cfg, &node, &controllers, optimal)?;
+            progress.finish();
+            let text = serde_json::to_string_pretty(&limits)?;
+            println!("{text}");
+            if let Some(path) = json {
+                replay::write_file(&path, &text)?;
+            }
+            if let (Some(dir), Some(v)) = (plots, limits.optimal_mps) {
+                use catmodel_host::closed_loop::{optimal, plots};
+                let track = optimal::TrackAtSpeed::new(&cfg, v);
+                let rows = track.record(&limits.optimal_profile_pct);
+                std::fs::create_dir_all(&dir)?;
+                for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
+                    eprintln!("wrote {}", p.display());
+                }
+            }
+            Ok(())
+        }
         Command::Sil {
             stdio: _,
             model,
@@ -491,6 +536,14 @@ fn run(cli: Cli) -> Result<()> {
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             Ok(())
+        }
+        Command::Decode { log, messages, csv } => {
+            let format = if csv {
+                decode::Format::Csv
+            } else {
+                decode::Format::Table
+            };
+            decode::run(&log, &messages, format)
         }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;

@@ -7,13 +7,23 @@
 //! and to the right). Conventions, as everywhere in catmodel: heading clockwise from north,
 //! curvature and lateral offsets positive to the right.
 //!
-//! The reference is continuous where a polyline is not: segment `i` (point `i` to `i + 1`) has
-//! the constant heading `h_i`; the reference heading is linear in station between segment
-//! midpoints, so its derivative, the curvature, is constant between midpoints and equals the
-//! heading change at the point divided by the distance between the midpoints. On points of a
-//! circle of radius R, `c` metres apart (chords), this is `2 asin(c / 2R) / c`, within a
-//! relative `c^2 / 24 R^2` of `1 / R` (0.13 % at c = 1 m on the car's tightest circle,
-//! R = 5.6 m).
+//! The reference is continuous where a polyline is not, and insensitive to the bus's 0.02 m
+//! quantisation of the points: the reference heading at point `i` is the direction of the chord
+//! from point `i - k` to point `i + k`, with `k` the fewest points that span twice
+//! [`REFERENCE_BASELINE_M`], and the curvature there the change of that heading between those
+//! two points divided by the distance between them; between points both are linear in station. With the heading of single segments, a
+//! dense path (a planner's 0.5 m spacing) carries up to 0.04 rad of heading and 0.08 1/m of
+//! curvature noise from the quantisation alone (a 6 deg steering feedforward at 10 m/s), which
+//! a tracking controller follows. Rounded to 0.02 m, a point lies at most 0.014 m off across
+//! the path, so a chord of at least 2 m turns by at most 0.014 rad, and the curvature, a
+//! heading difference over at least 2 m, is off by at most 0.014 1/m
+//! (host-tests `reference_is_insensitive_to_the_bus_quantisation`). On
+//! points of a circle of radius R, `c` metres apart (chords), the chord's direction is the
+//! tangent's at the middle point and the curvature `2 asin(c / 2R) / c`, within a relative
+//! `c^2 / 24 R^2` of `1 / R` (0.13 % at c = 1 m on the car's tightest circle, R = 5.6 m),
+//! except within two baselines of the path's ends, where the chord is one-sided. Elsewhere the
+//! curvature is the mean over about 4 m of path, which rounds a curvature step (a clothoid's
+//! start) over that length.
 //!
 //! Never allocates, never panics; every loop runs at most [`MAX_PATH_POINTS`] times.
 use crate::math;
@@ -21,6 +31,8 @@ use crate::model::kinematic::Pose;
 
 /// Most points of a path: the bus carries an 8-bit point index (docs/bus.md).
 pub const MAX_PATH_POINTS: usize = crate::can::spec::MAX_PATH_POINTS;
+/// Half the chord the reference heading at a point is measured over, m (see the module doc).
+pub const REFERENCE_BASELINE_M: f32 = 1.0;
 /// Consecutive points at least this far apart, m: the heading of a shorter segment is
 /// dominated by the 0.02 m quantisation of the bus (0.02 m over 0.05 m is 0.4 rad).
 pub const MIN_SEGMENT_M: f32 = 0.05;
@@ -113,8 +125,8 @@ pub struct Tracking {
     pub reference: PathSample,
 }
 
-/// A path: up to [`MAX_PATH_POINTS`] waypoints with their stations and segment headings.
-/// 7 f32 per point: 7 KiB at 256 points.
+/// A path: up to [`MAX_PATH_POINTS`] waypoints with their stations, segment headings and the
+/// reference heading and curvature at each point. 9 f32 per point: 9 KiB at 256 points.
 #[derive(Clone, Debug)]
 pub struct Path {
     len: usize,
@@ -124,6 +136,10 @@ pub struct Path {
     /// Heading of segment `i` (point `i` to `i + 1`), rad; the last entry repeats the last
     /// segment's.
     heading_rad: [f32; MAX_PATH_POINTS],
+    /// Reference heading at point `i` (see the module doc), rad.
+    reference_heading_rad: [f32; MAX_PATH_POINTS],
+    /// Reference curvature at point `i`, 1/m, positive turning right.
+    curvature_per_m: [f32; MAX_PATH_POINTS],
 }
 
 impl Default for Path {
@@ -146,6 +162,8 @@ impl Path {
             }; MAX_PATH_POINTS],
             station_m: [0.0; MAX_PATH_POINTS],
             heading_rad: [0.0; MAX_PATH_POINTS],
+            reference_heading_rad: [0.0; MAX_PATH_POINTS],
+            curvature_per_m: [0.0; MAX_PATH_POINTS],
         }
     }
 
@@ -162,23 +180,28 @@ impl Path {
                 return Err(PathError::BadValue(i as u16));
             }
         }
-        let mut previous_heading: Option<f32> = None;
+        // Lengths and turns without square roots or arc tangents (the tick a path completes
+        // also loads it): squared lengths against the squared limits, and a turn beyond
+        // MAX_TURN_RAD as `dot < cos(MAX_TURN_RAD) |a| |b|`, i.e. a non-positive dot or
+        // `dot^2 < cos^2 |a|^2 |b|^2`.
+        let cos_max_turn = math::cos(MAX_TURN_RAD);
+        let mut previous: Option<(f32, f32, f32)> = None;
         for (i, w) in waypoints.iter().enumerate() {
             let Some(next) = waypoints.get(i + 1) else {
                 break;
             };
             let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
-            let length = math::sqrt(dx * dx + dy * dy);
-            if !(MIN_SEGMENT_M..=MAX_SEGMENT_M).contains(&length) {
+            let length2 = dx * dx + dy * dy;
+            if !(MIN_SEGMENT_M * MIN_SEGMENT_M..=MAX_SEGMENT_M * MAX_SEGMENT_M).contains(&length2) {
                 return Err(PathError::SegmentLength(i as u16));
             }
-            let heading = math::atan2(dx, dy);
-            if let Some(h) = previous_heading {
-                if math::wrap_pi(heading - h).abs() > MAX_TURN_RAD {
+            if let Some((px, py, p2)) = previous {
+                let dot = px * dx + py * dy;
+                if dot <= 0.0 || dot * dot < cos_max_turn * cos_max_turn * p2 * length2 {
                     return Err(PathError::Turn(i as u16));
                 }
             }
-            previous_heading = Some(heading);
+            previous = Some((dx, dy, length2));
         }
         Ok(())
     }
@@ -212,7 +235,68 @@ impl Path {
             *h = last;
         }
         self.len = n;
+        self.reference_geometry();
         Ok(())
+    }
+
+    /// The chord around point `i`: the points `k` before and `k` after it (clamped to the
+    /// path's ends) with `k` the fewest that span at least twice [`REFERENCE_BASELINE_M`]; as
+    /// many points on both sides, so that on evenly spaced points the chord is parallel to the
+    /// tangent at `i`. `k` starts from the previous point's less one: each call moves it by
+    /// little, and all calls along the path take O(points) steps.
+    fn chord_around(&self, i: usize, k: &mut usize) -> (usize, usize) {
+        let last = self.len.saturating_sub(1);
+        *k = k.saturating_sub(1).max(1);
+        loop {
+            let (lo, hi) = (i.saturating_sub(*k), (i + *k).min(last));
+            let span = self.station_m.get(hi).copied().unwrap_or(0.0)
+                - self.station_m.get(lo).copied().unwrap_or(0.0);
+            if span >= 2.0 * REFERENCE_BASELINE_M || (lo == 0 && hi == last) {
+                return (lo, hi);
+            }
+            *k += 1;
+        }
+    }
+
+    /// The reference heading and curvature at every point (see the module doc).
+    fn reference_geometry(&mut self) {
+        let n = self.len;
+        // Each point's chord half-width in points, kept for the curvature pass (at most
+        // 2 m / MIN_SEGMENT_M = 40).
+        let mut chord_points = [0u8; MAX_PATH_POINTS];
+        let mut k = 1;
+        for (i, kept) in chord_points.iter_mut().enumerate().take(n) {
+            let (lo, hi) = self.chord_around(i, &mut k);
+            *kept = k.min(u8::MAX as usize) as u8;
+            let (Some(a), Some(b)) = (self.points.get(lo), self.points.get(hi)) else {
+                break;
+            };
+            let heading = math::atan2(b.east_m - a.east_m, b.north_m - a.north_m);
+            if let Some(h) = self.reference_heading_rad.get_mut(i) {
+                *h = heading;
+            }
+        }
+        let last = n.saturating_sub(1);
+        for (i, &k) in chord_points.iter().enumerate().take(n) {
+            let (lo, hi) = (i.saturating_sub(k as usize), (i + k as usize).min(last));
+            let (Some(&h_lo), Some(&h_hi), Some(&s_lo), Some(&s_hi)) = (
+                self.reference_heading_rad.get(lo),
+                self.reference_heading_rad.get(hi),
+                self.station_m.get(lo),
+                self.station_m.get(hi),
+            ) else {
+                break;
+            };
+            let span = s_hi - s_lo;
+            let curvature = if span > 0.0 {
+                math::wrap_pi(h_hi - h_lo) / span
+            } else {
+                0.0
+            };
+            if let Some(k) = self.curvature_per_m.get_mut(i) {
+                *k = curvature;
+            }
+        }
     }
 
     /// Forgets every point.
@@ -404,37 +488,54 @@ impl Path {
         })
     }
 
-    /// Heading and curvature `t` metres into segment `i` of length `seg_len`: the heading is
-    /// linear between segment midpoints (see the module doc).
+    /// Reference heading and curvature `t` metres into segment `i` of length `seg_len`: linear
+    /// between the segment's points (see the module doc).
     fn heading_and_curvature(&self, i: usize, t: f32, seg_len: f32) -> (f32, f32) {
-        let h = self.heading_rad.get(i).copied().unwrap_or(0.0);
-        let half = 0.5 * seg_len;
-        // The neighbouring segment on the side of the midpoint that `t` is on.
-        let neighbour = if t < half {
-            i.checked_sub(1)
-        } else if i + 2 < self.len {
-            Some(i + 1)
+        let f = if seg_len > 0.0 {
+            math::clamp(t / seg_len, 0.0, 1.0)
         } else {
-            None
+            0.0
         };
-        let Some(j) = neighbour else {
-            return (h, 0.0);
+        let (Some(&h0), Some(&h1), Some(&k0), Some(&k1)) = (
+            self.reference_heading_rad.get(i),
+            self.reference_heading_rad.get(i + 1),
+            self.curvature_per_m.get(i),
+            self.curvature_per_m.get(i + 1),
+        ) else {
+            return (self.heading_rad.get(i).copied().unwrap_or(0.0), 0.0);
         };
-        let (Some(&hj), Some(len_j)) = (self.heading_rad.get(j), self.segment(j).map(|s| s.2))
-        else {
-            return (h, 0.0);
-        };
-        // Signed heading change from segment min(i, j) to max(i, j), over the distance
-        // between their midpoints.
-        let (turn, span) = if j < i {
-            (math::wrap_pi(h - hj), 0.5 * (len_j + seg_len))
+        (
+            math::wrap_pi(h0 + math::wrap_pi(h1 - h0) * f),
+            k0 + (k1 - k0) * f,
+        )
+    }
+
+    /// The narrowest corridor (left, right), m, over the stations between `from_m` and `to_m`
+    /// (either order; clamped to the path): the corridor is linear between points, so its
+    /// minimum is at an end or at a point in between. `None` without a path. What a
+    /// controller needs to keep a body's side, between two of its corners, inside.
+    pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<(f32, f32)> {
+        let (a, b) = if from_m <= to_m {
+            (from_m, to_m)
         } else {
-            (math::wrap_pi(hj - h), 0.5 * (seg_len + len_j))
+            (to_m, from_m)
         };
-        let curvature = if span > 0.0 { turn / span } else { 0.0 };
-        // Distance from this segment's midpoint, signed along the path.
-        let heading = math::wrap_pi(h + curvature * (t - half));
-        (heading, curvature)
+        let start = self.sample(a, hint)?;
+        let end = self.sample(b, hint)?;
+        let mut left = start.left_m.min(end.left_m);
+        let mut right = start.right_m.min(end.right_m);
+        let first = self.segment_at(math::clamp(a, 0.0, self.length_m()), hint) + 1;
+        for i in first..self.len {
+            let (Some(s), Some(w)) = (self.station_of(i), self.points.get(i)) else {
+                break;
+            };
+            if s >= b {
+                break;
+            }
+            left = left.min(w.left_m);
+            right = right.min(w.right_m);
+        }
+        Some((left, right))
     }
 
     /// The car's pose relative to the path (projection of the rear axle, heading error, the

@@ -11,24 +11,28 @@
 //! `delta = atan(kappa L) (1 + K v^2)`.
 //!
 //! Speed: the path's target speed a preview time ahead (the car's speed loop lags by its 0.4 s
-//! input delay), limited so that the car can stop at `stop_decel_mps2` before the path's end
-//! and with its front bumper a margin short of any obstacle whose circle, grown by half the
-//! body width and the margin, reaches the path ahead (pure pursuit cannot steer around one: it
-//! stops, and stays stopped while the obstacle is there); then a PI loop on the speed error,
-//! its integral clamped (anti-windup).
+//! input delay), limited so that the car can stop at `stop_decel_mps2`, after its response
+//! time, before the path's end and with its front bumper a margin short of any obstacle whose
+//! circle, grown by half the body width and the margin, reaches the path ahead (pure pursuit
+//! cannot steer around one: it stops, and stays stopped while the obstacle is there). The car
+//! tracks a speed command itself; a PI loop on the speed error trims its steady-state error
+//! only: the correction is limited to `speed_correction_limit_mps`, and the integral runs only
+//! while the error is within that limit (integral separation, so a launch winds nothing up).
 //!
 //! Never panics, never returns a non-finite command: a non-finite intermediate falls back to
 //! the previous steering and zero speed (status fallback).
 use crate::can::codec::{ControlStatus, ObstacleCircle};
 use crate::math;
 use crate::model::kinematic::Pose;
-use crate::vehicle::{VehicleParams, STEER_PCT_LIMIT};
+use crate::node::NodeConfig;
+use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
 
 use super::path::{Path, Projection, Tracking};
 
-/// Tuning (immutable). [`DEFAULT_PURE_PURSUIT`] is the tuned set (docs/controller.md).
+/// The controller's own numbers (immutable); [`DEFAULT_TUNING`] is the tuned set
+/// (docs/controller.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PurePursuitConfig {
+pub struct PurePursuitTuning {
     /// Lookahead at standstill, m.
     pub lookahead_min_m: f32,
     /// Lookahead growth with speed, s: lookahead = min + this * speed.
@@ -39,43 +43,52 @@ pub struct PurePursuitConfig {
     pub speed_kp: f32,
     /// Speed loop integral gain, 1/s.
     pub speed_ki_per_s: f32,
-    /// The speed loop's integral stays within +- this, m/s (anti-windup).
-    pub speed_integral_limit_mps: f32,
+    /// The PI correction (and its integral) stays within +- this, m/s; the integral only runs
+    /// while the error is within it.
+    pub speed_correction_limit_mps: f32,
+    /// The car's speed response to a command, s: the input delay and the lag of its speed loop
+    /// (eq 5: 0.42 s delay, poles near 1.2 s^-1); a stop is planned after this much travel.
+    pub speed_response_s: f32,
     /// The target speed is read this far ahead of the car (at its speed), s.
     pub speed_preview_s: f32,
     /// Deceleration the speed limit plans with, to stop at the path's end or before an
     /// obstacle, m/s^2.
     pub stop_decel_mps2: f32,
-    /// Largest speed command, m/s.
-    pub max_speed_mps: f32,
-    /// Half the car's body width, m (obstacle check).
-    pub half_width_m: f32,
-    /// The body's front ahead of the rear axle, m (obstacle check).
-    pub front_m: f32,
-    /// Clearance kept from an obstacle when stopping, m.
+    /// Clearance kept from an obstacle when stopping, m (grow it by the position estimate's
+    /// error).
     pub obstacle_margin_m: f32,
-    /// Control period, s.
-    pub period_s: f32,
 }
 
 /// The tuned reference controller (docs/controller.md, "Pure pursuit tuning": a sweep of the
-/// lookahead's two parameters on the double lane change for the highest clean speed; the best,
-/// 8.5 m/s, lies on a ridge of lookaheads near 7.5 m at that speed, and this is its middle).
-pub const DEFAULT_PURE_PURSUIT: PurePursuitConfig = PurePursuitConfig {
+/// lookahead's two parameters on the double lane change for the highest clean speed; the best
+/// lies on a ridge of lookaheads near 7.5 m at that speed, and this is its middle).
+pub const DEFAULT_TUNING: PurePursuitTuning = PurePursuitTuning {
     lookahead_min_m: 3.0,
     lookahead_time_s: 0.55,
     lookahead_max_m: 30.0,
-    speed_kp: 0.5,
-    speed_ki_per_s: 0.2,
-    speed_integral_limit_mps: 2.0,
+    speed_kp: 0.3,
+    speed_ki_per_s: 0.1,
+    speed_correction_limit_mps: 1.0,
+    speed_response_s: 1.0,
     speed_preview_s: 0.6,
-    stop_decel_mps2: 2.5,
-    max_speed_mps: 40.0,
-    half_width_m: 0.903,
-    front_m: 3.528,
+    stop_decel_mps2: 1.5,
     obstacle_margin_m: 1.0,
-    period_s: crate::SAMPLE_PERIOD_S,
 };
+
+/// The controller for one car (immutable): its tuning and what it needs of the car.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PurePursuitConfig {
+    /// The controller's own numbers.
+    pub tuning: PurePursuitTuning,
+    /// Geometry and steering conversion (eq 2).
+    pub vehicle: VehicleParams,
+    /// The body around the rear axle (obstacle checks).
+    pub body: Body,
+    /// Largest speed command, m/s.
+    pub max_speed_mps: f32,
+    /// Control period, s.
+    pub period_s: f32,
+}
 
 /// The state between ticks.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -113,10 +126,21 @@ pub struct PursuitOutput {
 }
 
 impl PurePursuitConfig {
+    /// The controller with `tuning` for the car the node is configured for (its model file).
+    pub fn for_node(node: &NodeConfig, tuning: PurePursuitTuning) -> Self {
+        Self {
+            tuning,
+            vehicle: node.vehicle,
+            body: node.body,
+            max_speed_mps: node.max_speed_mps,
+            period_s: crate::SAMPLE_PERIOD_S,
+        }
+    }
+
     /// Lookahead at `speed_mps`, m.
     pub fn lookahead_m(&self, speed_mps: f32) -> f32 {
-        (self.lookahead_min_m + self.lookahead_time_s * speed_mps.max(0.0))
-            .min(self.lookahead_max_m)
+        let t = &self.tuning;
+        (t.lookahead_min_m + t.lookahead_time_s * speed_mps.max(0.0)).min(t.lookahead_max_m)
     }
 
     /// One tick: steering and speed commands for `car` on `path` (`None`: no path), with the
@@ -124,7 +148,6 @@ impl PurePursuitConfig {
     pub fn process(
         &self,
         state: &mut PurePursuitState,
-        vehicle: &VehicleParams,
         path: Option<&Path>,
         obstacles: &[Option<ObstacleCircle>],
         car: &CarState,
@@ -174,31 +197,40 @@ impl PurePursuitConfig {
         } else {
             curvature
         };
+        let vehicle = &self.vehicle;
         let center_rad = math::atan(curvature * vehicle.wheelbase_m)
             * (1.0 + vehicle.understeer_s2_per_m2 * speed * speed);
         let steer_pct = (center_rad / vehicle.max_steer_rad * STEER_PCT_LIMIT)
             .clamp(-STEER_PCT_LIMIT, STEER_PCT_LIMIT);
 
         // Speed: previewed target, limited by stopping distance, then PI.
-        let preview = path.sample(station + speed * self.speed_preview_s, segment);
+        let preview = path.sample(station + speed * self.tuning.speed_preview_s, segment);
         let mut target = preview.map_or(0.0, |p| p.speed_mps);
         let mut stop_at_m = path.length_m() - station;
         if let Some(d) = self.obstacle_ahead_m(path, station, obstacles) {
             stop_at_m = stop_at_m.min(d);
         }
-        let stop_limit = math::sqrt(2.0 * self.stop_decel_mps2 * stop_at_m.max(0.0));
+        let braking_room = stop_at_m - speed * self.tuning.speed_response_s;
+        let stop_limit = math::sqrt(2.0 * self.tuning.stop_decel_mps2 * braking_room.max(0.0));
         target = target.min(stop_limit).min(self.max_speed_mps);
         let error = target - speed;
-        let integral = math::clamp(
-            state.integral_mps + self.speed_ki_per_s * error * self.period_s,
-            -self.speed_integral_limit_mps,
-            self.speed_integral_limit_mps,
-        );
+        let limit = self.tuning.speed_correction_limit_mps;
+        let integral = if error.abs() < limit {
+            math::clamp(
+                state.integral_mps + self.tuning.speed_ki_per_s * error * self.period_s,
+                -limit,
+                limit,
+            )
+        } else {
+            state.integral_mps
+        };
         let speed_cmd = if target <= 0.0 {
             0.0
         } else {
+            let correction = math::clamp(self.tuning.speed_kp * error + integral, -limit, limit);
+            // The correction never commands past what still stops in time.
             math::clamp(
-                target + self.speed_kp * error + integral,
+                (target + correction).min(stop_limit),
                 0.0,
                 self.max_speed_mps,
             )
@@ -235,12 +267,14 @@ impl PurePursuitConfig {
             let Some(p) = path.project(o.east_m, o.north_m, None) else {
                 continue;
             };
-            let reach = o.radius_m + self.half_width_m + self.obstacle_margin_m;
+            let margin = self.tuning.obstacle_margin_m;
+            let reach = o.radius_m + 0.5 * self.body.width_m + margin;
             if p.lateral_m.abs() > reach || p.station_m < station {
                 continue;
             }
             // The front bumper stops `margin` short of the circle's near side.
-            let free = p.station_m - o.radius_m - self.obstacle_margin_m - self.front_m - station;
+            let front = self.body.length_m - self.body.rear_overhang_m;
+            let free = p.station_m - o.radius_m - margin - front - station;
             let d = free.max(0.0);
             nearest = Some(nearest.map_or(d, |n: f32| n.min(d)));
         }

@@ -23,13 +23,13 @@
 //! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
-    self, MpcConfig, MpcInput, MpcOutput, MpcState, ReferencePoint, Sample, DEFAULT_TUNING,
-    MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample,
+    DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
 use crate::control::planner::{PlannerEvent, PlannerInputs};
 use crate::control::pure_pursuit::{
-    CarState as PursuitCar, PurePursuitConfig, PurePursuitState, DEFAULT_PURE_PURSUIT,
+    self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
 };
 use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 use crate::model::dynamic::LateralState;
@@ -100,7 +100,7 @@ pub struct Drive {
     planner: PlannerInputs,
     mpc: MpcState,
     mpc_config: Option<MpcConfig>,
-    pursuit_config: PurePursuitConfig,
+    pursuit_tuning: PurePursuitTuning,
     pursuit: PurePursuitState,
     /// The rear axle's projection on the path last tick.
     projection: Option<Projection>,
@@ -130,7 +130,7 @@ impl Drive {
             planner: PlannerInputs::new(),
             mpc: MpcState::new(),
             mpc_config: None,
-            pursuit_config: DEFAULT_PURE_PURSUIT,
+            pursuit_tuning: pure_pursuit::DEFAULT_TUNING,
             pursuit: PurePursuitState {
                 integral_mps: 0.0,
                 projection: None,
@@ -161,7 +161,6 @@ impl Drive {
         self.planned_speeds = None;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
-        self.pursuit_config = pursuit_config(config);
         self.mpc_config = match config.controller {
             Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
             Controller::PurePursuit => None,
@@ -184,10 +183,20 @@ impl Drive {
         self.last_tracking
     }
 
+    /// Replaces the model-predictive controller's tuning (host tools that sweep it; the node
+    /// runs [`DEFAULT_TUNING`] otherwise) for the car of `config`; `false` (and the controller
+    /// unconfigured: fallback) if the tuning is refused.
+    pub fn tune_mpc(&mut self, config: &NodeConfig, tuning: MpcTuning) -> bool {
+        self.mpc.reset();
+        self.mpc_config = MpcConfig::for_node(config, tuning).ok();
+        self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+        self.mpc_config.is_some()
+    }
+
     /// Replaces the reference controller's tuning (host tools that sweep it; the node runs
-    /// [`DEFAULT_PURE_PURSUIT`] with the car's body otherwise).
-    pub fn tune_pursuit(&mut self, tuning: PurePursuitConfig) {
-        self.pursuit_config = tuning;
+    /// [`pure_pursuit::DEFAULT_TUNING`] otherwise).
+    pub fn tune_pursuit(&mut self, tuning: PurePursuitTuning) {
+        self.pursuit_tuning = tuning;
     }
 
     /// Applies one planner message (stage 1); returns the map origin when LOCAL_ORIGIN set it.
@@ -270,9 +279,8 @@ impl Drive {
                     pose: Some(pose),
                     speed_mps: inputs.speed_mps,
                 };
-                let out = self.pursuit_config.process(
+                let out = PurePursuitConfig::for_node(config, self.pursuit_tuning).process(
                     &mut self.pursuit,
-                    &config.vehicle,
                     Some(path),
                     self.planner.obstacles(),
                     &car,
@@ -312,17 +320,6 @@ impl Drive {
     }
 }
 
-/// The reference controller for the car of `config`: the tuned gains, the car's body and
-/// speed limit.
-fn pursuit_config(config: &NodeConfig) -> PurePursuitConfig {
-    PurePursuitConfig {
-        half_width_m: 0.5 * config.body.width_m,
-        front_m: config.body.length_m - config.body.rear_overhang_m,
-        max_speed_mps: config.max_speed_mps.min(DEFAULT_PURE_PURSUIT.max_speed_mps),
-        ..DEFAULT_PURE_PURSUIT
-    }
-}
-
 /// The plan at the PREDICTION frames' horizons: every second 0.1 s step.
 fn prediction_points(out: &MpcOutput) -> [PredictedPoint; PREDICTION_POINTS] {
     let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
@@ -346,26 +343,6 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
         left_m: corridor.0,
         right_m: corridor.1,
     }
-}
-
-/// The narrowest corridor (left, right) of the path between stations `a` and `b` (a <= b):
-/// the samples at both ends and every waypoint in between.
-fn narrowest(path: &Path, a: &PathSample, b: &PathSample) -> (f32, f32) {
-    let mut left = a.left_m.min(b.left_m);
-    let mut right = a.right_m.min(b.right_m);
-    for (i, w) in path.points().iter().enumerate() {
-        let Some(s) = path.station_of(i) else {
-            break;
-        };
-        if s > b.station_m {
-            break;
-        }
-        if s >= a.station_m {
-            left = left.min(w.left_m);
-            right = right.min(w.right_m);
-        }
-    }
-    (left, right)
 }
 
 /// One model-predictive solve; `None` when the path cannot be sampled.
@@ -411,8 +388,8 @@ fn mpc_tick(
             at: sample(&at, (at.left_m, at.right_m)),
             curvature_per_m: at.curvature_per_m,
             speed_mps: at.speed_mps,
-            front: sample(&ahead, narrowest(path, &at, &ahead)),
-            rear: sample(&behind, narrowest(path, &behind, &at)),
+            front: sample(&ahead, path.narrowest_corridor(s, s + front, hint)?),
+            rear: sample(&behind, path.narrowest_corridor(s - rear, s, hint)?),
         };
     }
     let mut placed = [None; MAX_OBSTACLES];

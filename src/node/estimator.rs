@@ -41,11 +41,19 @@ const TRACK_SPAN_S: f64 = 0.63;
 pub const PAPER_GNSS_RATE_HZ: f64 = 100.0;
 /// Below this rate the course gain falls with the rate, Hz (see [`EstimatorConfig::design`]).
 const COURSE_GAIN_FULL_RATE_HZ: f64 = 25.0;
+/// Half the window the yaw rate at a course's time is averaged over, s (the antenna's lead
+/// correction).
+const LEAD_WINDOW_S: f32 = 0.1;
 /// Complementary-filter gain towards the course per 20 ms tick at 25 Hz and above: a 0.4 s
 /// time constant.
 const COURSE_GAIN: f32 = 0.05;
 /// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
 const ODO_LEN: usize = 32;
+/// How far back the dead reckoning's heading change is kept, ticks: 2.56 s, more than the
+/// oldest course the heading is corrected with (the chord's half span plus the filter's group
+/// delay plus the time since the fix: 0.47 s at 100 Hz, 1.7 s at 1 Hz). Older courses are
+/// carried forward with the current yaw rate for the rest.
+pub const TURN_HISTORY_TICKS: usize = 128;
 
 /// Estimator tuning. Immutable configuration.
 #[derive(Clone, Debug, PartialEq)]
@@ -162,6 +170,13 @@ pub struct EstimatorState {
     heading_rad: Option<f32>,
     /// sin and cos of the heading at this tick's dead-reckoning step.
     heading_sin_cos: (f32, f32),
+    /// The dead reckoning's heading change (yaw rate integrated, without the course
+    /// corrections; wrapped to +-pi: only differences over less than half a turn are used) at
+    /// the end of each of the last ticks (ring, newest at `turned_head`).
+    turned_rad: [f32; TURN_HISTORY_TICKS],
+    turned_head: usize,
+    /// Valid entries of `turned_rad`.
+    turned_len: usize,
 }
 
 impl Default for EstimatorState {
@@ -180,6 +195,9 @@ impl Default for EstimatorState {
             odo_now: Xy::default(),
             heading_rad: None,
             heading_sin_cos: (0.0, 1.0),
+            turned_rad: [0.0; TURN_HISTORY_TICKS],
+            turned_head: 0,
+            turned_len: 0,
         }
     }
 }
@@ -329,6 +347,49 @@ impl EstimatorState {
         if let Some(h) = self.heading_rad.as_mut() {
             *h = math::wrap_pi(*h + yaw_rate_rps * dt_s);
         }
+        let turned = self
+            .turned_rad
+            .get(self.turned_head)
+            .copied()
+            .unwrap_or(0.0);
+        self.turned_head = (self.turned_head + 1) % TURN_HISTORY_TICKS;
+        if let Some(slot) = self.turned_rad.get_mut(self.turned_head) {
+            *slot = math::wrap_pi(turned + yaw_rate_rps * dt_s);
+        }
+        self.turned_len = (self.turned_len + 1).min(TURN_HISTORY_TICKS);
+    }
+
+    /// How far the dead reckoning turned over the last `age_s` (rad, clockwise): the yaw rates
+    /// of the ticks in between, integrated (interpolated within a tick; beyond the history,
+    /// `yaw_rate_rps` for the rest). A course measured `age_s` ago plus this is the course now,
+    /// whatever the yaw rate did in between: a turn that starts or ends within the age is not
+    /// extrapolated with the yaw rate of now.
+    pub fn turned_since(&self, age_s: f32, yaw_rate_rps: f32) -> f32 {
+        let age_ticks = math::max(age_s, 0.0) / crate::SAMPLE_PERIOD_S;
+        let Some(now) = self.turned_rad.get(self.turned_head).copied() else {
+            return yaw_rate_rps * age_s;
+        };
+        let available = self.turned_len.saturating_sub(1);
+        let within = math::min(age_ticks, available as f32);
+        let k0 = within as usize; // floor: within >= 0
+        let w = within - k0 as f32;
+        let at = |k: usize| {
+            self.turned_rad
+                .get(
+                    (self.turned_head + TURN_HISTORY_TICKS - k % TURN_HISTORY_TICKS)
+                        % TURN_HISTORY_TICKS,
+                )
+                .copied()
+                .unwrap_or(now)
+        };
+        let a = math::wrap_pi(now - at(k0));
+        let b = if k0 < available {
+            math::wrap_pi(now - at(k0 + 1))
+        } else {
+            a
+        };
+        let beyond_s = (age_ticks - within) * crate::SAMPLE_PERIOD_S;
+        a + (b - a) * w + yaw_rate_rps * beyond_s
     }
 
     /// One GNSS fix in local metres, `age_s` before the current dead-reckoning instant
@@ -482,8 +543,11 @@ impl EstimatorState {
     /// Pulls the heading towards the antenna's course (rad, clockwise from north) measured
     /// `age_s` ago, given the current speed (> 0) and yaw rate. The antenna's course leads the
     /// heading by `atan(antenna_ahead * yaw_rate / (v + antenna_left * yaw_rate))` (rigid body,
-    /// no side slip at the rear axle); that is removed first. The first course initialises the
-    /// heading.
+    /// no side slip at the rear axle), with the yaw rate of then; that is removed first, and the
+    /// course is carried to now by the heading change the dead reckoning integrated since
+    /// ([`Self::turned_since`]; carrying it with the current yaw rate instead lags the truth
+    /// in every transient, e.g. 0.05 rad in a lane change at 10 m/s with a 0.47 s old course).
+    /// The first course initialises the heading.
     pub fn correct_heading(
         &mut self,
         cfg: &EstimatorConfig,
@@ -493,13 +557,19 @@ impl EstimatorState {
         yaw_rate_rps: f32,
     ) {
         // The antenna's speed along the heading; the course says nothing when it is not ahead.
-        let antenna_along_mps = speed_mps + cfg.antenna_left_m * yaw_rate_rps;
+        // The yaw rate when the course was measured: the turn over a window around then.
+        let turned = self.turned_since(age_s, yaw_rate_rps);
+        let half_window_s = math::min(age_s, LEAD_WINDOW_S);
+        let yaw_then_rps = (self.turned_since(age_s + LEAD_WINDOW_S, yaw_rate_rps)
+            - self.turned_since(age_s - half_window_s, yaw_rate_rps))
+            / (LEAD_WINDOW_S + half_window_s);
+        let antenna_along_mps = speed_mps + cfg.antenna_left_m * yaw_then_rps;
         let lead_rad = if speed_mps > 0.0 && antenna_along_mps > 0.0 {
-            math::atan(cfg.antenna_ahead_m * yaw_rate_rps / antenna_along_mps)
+            math::atan(cfg.antenna_ahead_m * yaw_then_rps / antenna_along_mps)
         } else {
             0.0
         };
-        let course_now = math::wrap_pi(course_rad - lead_rad + yaw_rate_rps * age_s);
+        let course_now = math::wrap_pi(course_rad - lead_rad + turned);
         self.heading_rad = Some(match self.heading_rad {
             None => course_now,
             Some(h) => math::wrap_pi(h + cfg.course_gain * math::wrap_pi(course_now - h)),

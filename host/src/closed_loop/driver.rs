@@ -8,8 +8,9 @@
 //! the reference controller; a SIL session runs the node exactly as configured.
 use catmodel::can::codec::{ControlCommand, ControlStatus};
 use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::control::mpc::MpcTuning;
 use catmodel::control::path::Tracking;
-use catmodel::control::pure_pursuit::PurePursuitConfig;
+use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::drive::Controller as NodeController;
 use catmodel::node::{NodeConfig, PlatformStats, Tick, TxFrames};
@@ -43,8 +44,10 @@ pub enum Controller {
     FromModel,
     /// The model-predictive controller.
     Mpc,
+    /// The model-predictive controller with this tuning (tuning sweeps).
+    MpcTuned(MpcTuning),
     /// The reference controller with this tuning.
-    PurePursuit(PurePursuitConfig),
+    PurePursuit(PurePursuitTuning),
 }
 
 /// The node, controller included.
@@ -57,12 +60,17 @@ impl NodeDriver {
     pub fn new(mut config: NodeConfig, controller: Controller) -> Self {
         match controller {
             Controller::FromModel => {}
-            Controller::Mpc => config.controller = NodeController::Mpc,
+            Controller::Mpc | Controller::MpcTuned(_) => config.controller = NodeController::Mpc,
             Controller::PurePursuit(_) => config.controller = NodeController::PurePursuit,
         }
-        let mut node = crate::new_node(config);
-        if let Controller::PurePursuit(tuning) = controller {
-            node.drive_mut().tune_pursuit(tuning);
+        let mut node = crate::new_node(config.clone());
+        match controller {
+            Controller::PurePursuit(tuning) => node.drive_mut().tune_pursuit(tuning),
+            Controller::MpcTuned(tuning) => {
+                // A refused tuning leaves the controller in its fallback: the run shows it.
+                let _ = node.drive_mut().tune_mpc(&config, tuning);
+            }
+            Controller::FromModel | Controller::Mpc => {}
         }
         Self { node }
     }

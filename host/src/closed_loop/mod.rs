@@ -28,7 +28,7 @@ use catmodel::node::{NodeConfig, MAX_RX_FRAMES_PER_TICK};
 
 use crate::csv2can::LogEncoder;
 use crate::logcsv::{LogRow, TruthRow};
-use crate::sim::config::{Body, Gnss, VehicleConfig};
+use crate::sim::config::{Gnss, VehicleConfig};
 use crate::sim::plant::PlantState;
 use crate::sim::scenario::Command;
 use crate::sim::{Rig, SimOptions};
@@ -51,6 +51,8 @@ pub const ENGAGE_AFTER_VALID_S: f64 = 1.0;
 pub const COMMAND_TIMEOUT_US: u64 = 100_000;
 /// A command applies this many plant steps after its tick (computation and bus latency, 1 ms).
 const COMMAND_LATENCY_STEPS: u64 = 1;
+/// Clearance a controller keeps from an obstacle beyond the position estimate's error, m.
+pub const OBSTACLE_MARGIN_M: f64 = 1.0;
 /// A run ends this long after the car came to rest while engaged, s.
 const STOPPED_END_S: f64 = 3.0;
 
@@ -494,14 +496,16 @@ pub struct ClosedLoopArgs {
     pub out: std::path::PathBuf,
 }
 
-/// The controller called `name` for a car with `body`.
-pub fn controller_named(name: &str, body: &Body) -> anyhow::Result<driver::Controller> {
+/// The controller called `name` (the node's own car from its model file) with a receiver of
+/// horizontal RMS error `receiver_rms_m`: obstacles are kept clear by
+/// [`OBSTACLE_MARGIN_M`] plus 2.5 times that (the estimate can be that far off; the node does
+/// not publish its uncertainty yet).
+pub fn controller_named(name: &str, receiver_rms_m: f64) -> anyhow::Result<driver::Controller> {
     match name {
         "pure-pursuit" => Ok(driver::Controller::PurePursuit(
-            catmodel::control::pure_pursuit::PurePursuitConfig {
-                half_width_m: (0.5 * body.width_m) as f32,
-                front_m: (body.length_m - body.rear_overhang_m) as f32,
-                ..catmodel::control::pure_pursuit::DEFAULT_PURE_PURSUIT
+            catmodel::control::pure_pursuit::PurePursuitTuning {
+                obstacle_margin_m: (OBSTACLE_MARGIN_M + 2.5 * receiver_rms_m) as f32,
+                ..catmodel::control::pure_pursuit::DEFAULT_TUNING
             },
         )),
         "mpc" => Ok(driver::Controller::Mpc),
@@ -509,7 +513,9 @@ pub fn controller_named(name: &str, body: &Body) -> anyhow::Result<driver::Contr
     }
 }
 
-/// Loads the plant's vehicle and the node's configuration the way the CLI does.
+/// Loads the plant's vehicle (`vehicle`, default the CAT Vehicle) and the node's configuration
+/// from the car's model file (`model`, default `models/paper.toml`, the CAT Vehicle's; without
+/// one, a plant vehicle lends the node its geometry and steering).
 pub fn load_setup(
     vehicle: Option<&std::path::Path>,
     model: Option<&std::path::Path>,
@@ -522,6 +528,13 @@ pub fn load_setup(
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
     let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
     Ok((cfg, node))
+}
+
+/// The horizontal RMS error of `vehicle`'s GNSS receiver with `receiver`, m.
+pub fn receiver_rms_m(vehicle: &VehicleConfig, receiver: Receiver) -> f64 {
+    let mut gnss = vehicle.sensors.gnss.clone();
+    receiver.apply(&mut gnss);
+    (2.0 * (gnss.white_noise_m.powi(2) + gnss.bias_sigma_m.powi(2))).sqrt()
 }
 
 /// `catmodel closed-loop`: runs the scenario and writes `session.can.log` (every frame the node
@@ -539,7 +552,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         anyhow::anyhow!("unknown receiver `{}`; known: rtk, standard", args.receiver)
     })?;
     let (vehicle, node) = load_setup(args.vehicle.as_deref(), args.model.as_deref())?;
-    let controller = controller_named(&args.controller, &vehicle.body)?;
+    let controller = controller_named(&args.controller, receiver_rms_m(&vehicle, receiver))?;
     let speed = args.speed_mps.unwrap_or(kind.default_speed_mps());
     if !(speed.is_finite() && speed > 0.0 && speed <= 40.0) {
         anyhow::bail!("--speed {speed}: a target speed is in (0, 40] m/s");

@@ -47,8 +47,12 @@ use crate::sim::plant::PlantState;
 use crate::sim::scenario::Command;
 use crate::sim::{Rig, SimOptions, PLANT_STEP_S};
 
-/// Steering knots are this far apart, s.
-pub const KNOT_S: f64 = 0.25;
+/// Steering knots are this far apart, s: 12 ticks of 20 ms (the command is set every tick).
+pub const KNOT_S: f64 = 0.24;
+/// Ticks per knot.
+const TICKS_PER_KNOT: usize = 12;
+/// The command period, s.
+const TICK_S: f64 = 0.02;
 /// Every trial starts with the rear axle this far before the track (the body's front 6 m before
 /// the first cones), m.
 pub const START_BEFORE_TRACK_M: f64 = 10.0;
@@ -59,13 +63,23 @@ const SMOOTHNESS_WEIGHT: f64 = 0.002;
 /// Forward-difference step of the Jacobian, % of steering command.
 const JACOBIAN_STEP_PCT: f64 = 0.5;
 /// Levenberg-Marquardt iterations per start.
-const ITERATIONS: usize = 40;
+const ITERATIONS: usize = 30;
 /// Previews of the curvature feed-forward starts, s.
 pub const PREVIEWS_S: [f64; 3] = [0.1, 0.3, 0.5];
-/// Scan step over speed, m/s.
-pub const SCAN_STEP_MPS: f64 = 0.5;
-/// Bisection tolerance, m/s.
-pub const TOLERANCE_MPS: f64 = 0.1;
+/// Continuation step over speed, m/s.
+pub const SCAN_STEP_MPS: f64 = 0.25;
+/// The search ends after this many consecutive speeds that no start passes.
+pub const FAILURES_TO_STOP: usize = 2;
+/// Variants of the previous speed's profile tried as starts: time shift (s) and gain.
+pub const VARIANTS: [(f64, f64); 7] = [
+    (0.0, 1.0),
+    (0.1, 1.0),
+    (0.1, 1.1),
+    (0.0, 1.1),
+    (0.2, 1.1),
+    (-0.1, 1.1),
+    (0.2, 1.0),
+];
 
 /// The outcome of one trial.
 #[derive(Debug, Clone, PartialEq)]
@@ -93,6 +107,14 @@ impl Trial {
             .copied()
             .fold(f64::INFINITY, f64::min)
     }
+}
+
+/// The state of a trial at the start of a tick.
+#[derive(Clone)]
+struct Checkpoint {
+    rig: Rig,
+    scorer: Scorer,
+    tick: usize,
 }
 
 /// The track at one speed, and the car on it just before the first cones.
@@ -172,72 +194,121 @@ impl TrackAtSpeed {
 
     /// Runs the steering command profile `knots_pct` from the start state.
     pub fn trial(&self, knots_pct: &[f64]) -> Trial {
-        self.run(|t, _| knot_value(knots_pct, t))
+        self.run_from(&self.begin(), |t, _| knot_value(knots_pct, t), None)
     }
 
-    /// Runs with a steering law `command(t, rig)` (evaluated every 20 ms, held in between).
-    fn run(&self, mut command: impl FnMut(f64, &Rig) -> f64) -> Trial {
-        let mut rig = self.start.clone();
-        let mut scorer = Scorer::new(&self.vehicle.body, &self.course);
-        let t0 = rig.time_s();
-        let mut steer = 0.0;
-        let per_tick = (0.02 / PLANT_STEP_S).round() as u64;
+    /// The state at the start of the trials.
+    fn begin(&self) -> Checkpoint {
+        Checkpoint {
+            rig: self.start.clone(),
+            scorer: Scorer::new(&self.vehicle.body, &self.course),
+            tick: 0,
+        }
+    }
+
+    /// Runs from `from` with a steering law `command(t, rig)` evaluated every tick (20 ms) and
+    /// held in between; with `checkpoints`, keeps the state at every knot's first tick.
+    fn run_from(
+        &self,
+        from: &Checkpoint,
+        mut command: impl FnMut(f64, &Rig) -> f64,
+        mut checkpoints: Option<&mut Vec<Checkpoint>>,
+    ) -> Trial {
+        let mut now = from.clone();
+        let per_tick = (TICK_S / PLANT_STEP_S).round() as u64;
+        let last_tick = (self.knots + 4) * TICKS_PER_KNOT;
         let mut spun = false;
-        let mut k = 0u64;
-        loop {
-            if k.is_multiple_of(per_tick) {
-                steer = command(rig.time_s() - t0, &rig);
+        'ticks: while now.tick < last_tick {
+            if let Some(c) = checkpoints.as_deref_mut() {
+                if now.tick.is_multiple_of(TICKS_PER_KNOT) {
+                    c.push(now.clone());
+                }
             }
-            rig.step(&Command {
-                speed_mps: self.speed_mps,
-                steer_pct: steer,
-            });
-            k += 1;
-            let (x, y, heading) = rear_axle(&rig);
-            scorer.observe(x, y, heading);
-            let (cx, _) = self.course.frame.to_course(x, y);
-            let off = (heading - self.course.frame.heading_rad).rem_euclid(std::f64::consts::TAU);
-            if off > std::f64::consts::FRAC_PI_2 && off < 1.5 * std::f64::consts::PI {
-                spun = true;
-                break;
+            let steer = command(now.tick as f64 * TICK_S, &now.rig);
+            for _ in 0..per_tick {
+                now.rig.step(&Command {
+                    speed_mps: self.speed_mps,
+                    steer_pct: steer,
+                });
+                let (x, y, heading) = rear_axle(&now.rig);
+                now.scorer.observe(x, y, heading);
+                let off =
+                    (heading - self.course.frame.heading_rad).rem_euclid(std::f64::consts::TAU);
+                if off > std::f64::consts::FRAC_PI_2 && off < 1.5 * std::f64::consts::PI {
+                    spun = true;
+                    break 'ticks;
+                }
+                if self.course.frame.to_course(x, y).0 >= self.end_x_m {
+                    break 'ticks;
+                }
             }
-            if cx >= self.end_x_m || rig.time_s() - t0 > (self.knots as f64 + 4.0) * KNOT_S {
-                break;
-            }
+            now.tick += 1;
         }
         Trial {
-            cone_clearance_m: scorer.cone_clearances_m().to_vec(),
-            gate_miss_m: scorer.gate_misses_m().to_vec(),
+            cone_clearance_m: now.scorer.cone_clearances_m().to_vec(),
+            gate_miss_m: now.scorer.gate_misses_m().to_vec(),
             spun,
         }
     }
 
+    /// Runs a profile, keeping the state at every knot (for the Jacobian).
+    fn trial_with_checkpoints(&self, knots_pct: &[f64]) -> (Trial, Vec<Checkpoint>) {
+        let mut checkpoints = Vec::with_capacity(self.knots + 4);
+        let trial = self.run_from(
+            &self.begin(),
+            |t, _| knot_value(knots_pct, t),
+            Some(&mut checkpoints),
+        );
+        (trial, checkpoints)
+    }
+
+    /// Runs `knots_pct` and records, every tick, the time (s), the rear axle (east, north,
+    /// heading), the speed (m/s) and the actuator's steering (%): for the figure.
+    pub fn record(&self, knots_pct: &[f64]) -> Vec<[f64; 6]> {
+        let mut rows = Vec::new();
+        self.run_from(
+            &self.begin(),
+            |t, rig| {
+                let (x, y, heading) = rear_axle(rig);
+                rows.push([t, x, y, heading, rig.state().vx_mps, rig.steer_pct()]);
+                knot_value(knots_pct, t)
+            },
+            None,
+        );
+        rows
+    }
+
+    /// The course driven.
+    pub fn course(&self) -> &Course {
+        &self.course
+    }
+
     /// Pure pursuit with `config` on the exact state: the steering it commands at each knot time
     /// (a start for the search), and its own trial.
-    pub fn pursuit(
-        &self,
-        config: &PurePursuitConfig,
-        vehicle: &VehicleParams,
-    ) -> (Vec<f64>, Trial) {
+    pub fn pursuit(&self, config: &PurePursuitConfig) -> (Vec<f64>, Trial) {
         let path = core_path(&self.course);
         let mut state = PurePursuitState::default();
         let mut profile = vec![0.0; self.knots];
-        let trial = self.run(|t, rig| {
-            let (x, y, heading) = rear_axle(rig);
-            let car = CarState {
-                pose: Some(Pose::new(x as f32, y as f32, heading as f32)),
-                speed_mps: rig.state().vx_mps as f32,
-            };
-            let out = config.process(&mut state, vehicle, Some(&path), &[], &car);
-            let steer = f64::from(out.steer_cmd_pct);
-            let k = (t / KNOT_S).round() as usize;
-            if (t - k as f64 * KNOT_S).abs() < 0.011 {
-                if let Some(p) = profile.get_mut(k) {
-                    *p = steer;
+        let trial = self.run_from(
+            &self.begin(),
+            |t, rig| {
+                let (x, y, heading) = rear_axle(rig);
+                let car = CarState {
+                    pose: Some(Pose::new(x as f32, y as f32, heading as f32)),
+                    speed_mps: rig.state().vx_mps as f32,
+                };
+                let out = config.process(&mut state, Some(&path), &[], &car);
+                let steer = f64::from(out.steer_cmd_pct);
+                let k = (t / KNOT_S).round() as usize;
+                if (t - k as f64 * KNOT_S).abs() < 0.011 {
+                    if let Some(p) = profile.get_mut(k) {
+                        *p = steer;
+                    }
                 }
-            }
-            steer
-        });
+                steer
+            },
+            None,
+        );
         // Knots after the trial ended hold the last command.
         let last = (0..self.knots)
             .rev()
@@ -298,7 +369,7 @@ impl TrackAtSpeed {
         let mut x: Vec<f64> = (0..n)
             .map(|k| start.get(k).copied().unwrap_or(0.0))
             .collect();
-        let mut trial = self.trial(&x);
+        let (mut trial, mut checkpoints) = self.trial_with_checkpoints(&x);
         let mut r = self.residuals(&x, &trial);
         let mut cost = r.norm_squared();
         let mut best = (x.clone(), trial.clone(), cost);
@@ -307,7 +378,7 @@ impl TrackAtSpeed {
             if trial.clean() && trial.min_clearance_m() >= MARGIN_M {
                 break;
             }
-            let jacobian = self.jacobian(&x, &r);
+            let jacobian = self.jacobian(&x, &r, &checkpoints);
             let jt = jacobian.transpose();
             let jtj = &jt * &jacobian;
             let g = &jt * &r;
@@ -326,11 +397,11 @@ impl TrackAtSpeed {
                     .zip(step.iter())
                     .map(|(xi, di)| (xi + di).clamp(-100.0, 100.0))
                     .collect();
-                let t = self.trial(&candidate);
+                let (t, cp) = self.trial_with_checkpoints(&candidate);
                 let rc = self.residuals(&candidate, &t);
                 let c = rc.norm_squared();
                 if c < cost {
-                    (x, trial, r, cost) = (candidate, t, rc, c);
+                    (x, trial, r, cost, checkpoints) = (candidate, t, rc, c, cp);
                     lambda = (lambda / 3.0).max(1e-7);
                     improved = true;
                     break;
@@ -354,7 +425,9 @@ impl TrackAtSpeed {
     }
 
     /// Forward-difference Jacobian of the residuals at `x` (one trial per knot, two threads).
-    fn jacobian(&self, x: &[f64], r: &DVector<f64>) -> DMatrix<f64> {
+    /// Knot `i` only changes the command after knot `i - 1`: its trial restarts from that
+    /// knot's checkpoint of the unperturbed trial (bit-identical to a run from the start).
+    fn jacobian(&self, x: &[f64], r: &DVector<f64>, checkpoints: &[Checkpoint]) -> DMatrix<f64> {
         let n = x.len();
         let columns: Vec<DVector<f64>> = std::thread::scope(|scope| {
             let half = n.div_ceil(2);
@@ -366,7 +439,12 @@ impl TrackAtSpeed {
                             .map(|i| {
                                 let mut xi = x.to_vec();
                                 xi[i] += JACOBIAN_STEP_PCT;
-                                let t = self.trial(&xi);
+                                let from = i.saturating_sub(1);
+                                let t = match checkpoints.get(from) {
+                                    Some(c) => self.run_from(c, |t, _| knot_value(&xi, t), None),
+                                    // The trial ended before this knot: it cannot matter.
+                                    None => self.trial(&xi),
+                                };
                                 (self.residuals(&xi, &t) - r) / JACOBIAN_STEP_PCT
                             })
                             .collect::<Vec<_>>()
@@ -414,31 +492,44 @@ pub struct SpeedResult {
     pub passable: bool,
     /// The best profile (steering command per knot, %).
     pub profile: Vec<f64>,
+    /// Starts tried.
+    pub starts_tried: usize,
 }
 
-/// Searches one speed from every start (and `previous`, stretched, if given).
+/// `profile` delayed by `shift_s` (a later command) and scaled by `gain`.
+fn variant(profile: &[f64], shift_s: f64, gain: f64) -> Vec<f64> {
+    (0..profile.len())
+        .map(|k| gain * knot_value(profile, (k as f64 * KNOT_S - shift_s).max(0.0)))
+        .collect()
+}
+
+/// Searches one speed: the previous passing profiles (stretched to this speed, nearest speed
+/// first, each in its [`VARIANTS`]), then pure pursuit on the exact state, then the curvature
+/// feed-forward at each of [`PREVIEWS_S`]; stops at the first start whose optimum clears every
+/// cone by [`MARGIN_M`].
 pub fn search_speed(
     vehicle: &VehicleConfig,
     params: &VehicleParams,
     pursuit: &PurePursuitConfig,
     speed_mps: f64,
-    previous: Option<&SpeedResult>,
+    previous: &[SpeedResult],
 ) -> SpeedResult {
     let track = TrackAtSpeed::new(vehicle, speed_mps);
     let n = track.knots();
     let mut starts: Vec<Vec<f64>> = Vec::new();
-    if let Some(p) = previous {
-        starts.push(stretch(&p.profile, p.speed_mps, speed_mps, n));
+    for p in previous.iter().rev().filter(|p| p.passable).take(2) {
+        let stretched = stretch(&p.profile, p.speed_mps, speed_mps, n);
+        starts.extend(VARIANTS.iter().map(|&(s, g)| variant(&stretched, s, g)));
     }
-    let (pp_profile, pp_trial) = track.pursuit(pursuit, params);
-    starts.push(pp_profile.clone());
+    let (pp_profile, pp_trial) = track.pursuit(pursuit);
+    let mut best: Option<(Vec<f64>, Trial)> = pp_trial
+        .clean()
+        .then(|| (pp_profile.clone(), pp_trial.clone()));
+    starts.push(pp_profile);
     for preview in PREVIEWS_S {
         starts.push(track.feedforward(params, preview));
     }
-    let mut best: Option<(Vec<f64>, Trial)> = None;
-    if pp_trial.clean() {
-        best = Some((pp_profile, pp_trial));
-    }
+    let mut tried = 0;
     for s in &starts {
         if best
             .as_ref()
@@ -446,6 +537,7 @@ pub fn search_speed(
         {
             break;
         }
+        tried += 1;
         let (x, t) = track.optimise(s);
         let better = match &best {
             None => true,
@@ -458,18 +550,21 @@ pub fn search_speed(
             best = Some((x, t));
         }
     }
-    let (profile, trial) = best.unwrap_or((vec![0.0; n], track.trial(&vec![0.0; n])));
+    let (profile, trial) = best.unwrap_or_else(|| (vec![0.0; n], track.trial(&vec![0.0; n])));
     SpeedResult {
         speed_mps,
         entry_speed_mps: track.entry_speed_mps(),
         min_clearance_m: trial.min_clearance_m(),
         passable: trial.clean(),
         profile,
+        starts_tried: tried,
     }
 }
 
-/// The limit: scan up from `from_mps` (which should be passable) in [`SCAN_STEP_MPS`] steps,
-/// then bisect to [`TOLERANCE_MPS`]; every speed searched is returned, in order.
+/// The limit: continuation from `from_mps` (which should be passable) up in
+/// [`SCAN_STEP_MPS`] steps, each speed warm-started from the passing profiles below it, until
+/// [`FAILURES_TO_STOP`] consecutive speeds fail (or `to_mps`); the highest passable speed, and
+/// every speed searched in order.
 pub fn limit(
     vehicle: &VehicleConfig,
     params: &VehicleParams,
@@ -477,37 +572,15 @@ pub fn limit(
     from_mps: f64,
     to_mps: f64,
 ) -> (Option<SpeedResult>, Vec<SpeedResult>) {
-    let mut log = Vec::new();
-    let first = search_speed(vehicle, params, pursuit, from_mps, None);
-    log.push(first.clone());
-    if !first.passable {
-        return (None, log);
+    let mut log: Vec<SpeedResult> = Vec::new();
+    let mut failures = 0;
+    let mut v = from_mps;
+    while v <= to_mps + 1e-9 && failures < FAILURES_TO_STOP {
+        let r = search_speed(vehicle, params, pursuit, v, &log);
+        failures = if r.passable { 0 } else { failures + 1 };
+        log.push(r);
+        v += SCAN_STEP_MPS;
     }
-    let mut good = first;
-    let mut bad: Option<f64> = None;
-    let mut v = from_mps + SCAN_STEP_MPS;
-    while v <= to_mps + 1e-9 {
-        let r = search_speed(vehicle, params, pursuit, v, Some(&good));
-        log.push(r.clone());
-        if r.passable {
-            good = r;
-            v += SCAN_STEP_MPS;
-        } else {
-            bad = Some(v);
-            break;
-        }
-    }
-    if let Some(mut bad) = bad {
-        while bad - good.speed_mps > TOLERANCE_MPS {
-            let mid = 0.5 * (good.speed_mps + bad);
-            let r = search_speed(vehicle, params, pursuit, mid, Some(&good));
-            log.push(r.clone());
-            if r.passable {
-                good = r;
-            } else {
-                bad = mid;
-            }
-        }
-    }
-    (Some(good), log)
+    let best = log.iter().rev().find(|r| r.passable).cloned();
+    (best, log)
 }

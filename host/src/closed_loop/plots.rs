@@ -190,3 +190,78 @@ pub fn write_plots(dir: &Path, output: &RunOutput, body: &Body) -> Result<Vec<Pa
     written.push(speed_svg);
     Ok(written)
 }
+
+/// The offline optimiser's best run at `speed_mps` (rows of `optimal::TrackAtSpeed::record`):
+/// `optimal_path.svg` (the planned path, the cones, the driven path and the body every
+/// [`OUTLINE_EVERY_M`]) and `optimal_steering.svg` (the actuator's steering), into `dir`.
+pub fn write_optimal_plots(
+    dir: &Path,
+    course: &super::scenario::Course,
+    body: &Body,
+    speed_mps: f64,
+    rows: &[[f64; 6]],
+) -> Result<Vec<PathBuf>> {
+    let title = format!(
+        "{}: offline optimiser's limit, {speed_mps:.2} m/s (perfect plant knowledge)",
+        course.kind.name()
+    );
+    let driven: Vec<(f64, f64)> = rows.iter().map(|r| (r[1], r[2])).collect();
+    let (e0, e1, n0, n1) = driven.iter().fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+    );
+    let mut outlines = Vec::new();
+    let mut travelled = 0.0;
+    let mut next = 0.0;
+    for (i, r) in rows.iter().enumerate() {
+        if i > 0 {
+            let q = &rows[i - 1];
+            travelled += ((r[1] - q[1]).powi(2) + (r[2] - q[2]).powi(2)).sqrt();
+        }
+        if travelled >= next {
+            dotted_polygon(&body_corners(body, r[1], r[2], r[3]), &mut outlines);
+            next = travelled + OUTLINE_EVERY_M;
+        }
+    }
+    let near =
+        |&(e, n): &(f64, f64)| e >= e0 - 10.0 && e <= e1 + 10.0 && n >= n0 - 10.0 && n <= n1 + 10.0;
+    let planned: Vec<(f64, f64)> = course
+        .path
+        .iter()
+        .map(|p| (p.east_m, p.north_m))
+        .filter(near)
+        .collect();
+    let cones: Vec<(f64, f64)> = course.cones.iter().map(|c| (c.east_m, c.north_m)).collect();
+    let mut fig = Figure::new(&title, "east (m)", "north (m)")
+        .line("planned path (rear axle)", planned)
+        .color((120, 120, 120))
+        .scatter("body outline every 5 m", outlines)
+        .color((160, 190, 230))
+        .scatter("cones", cones)
+        .color((255, 127, 14))
+        .line(
+            "driven path (rear axle)",
+            decimate(&driven, MAX_LINE_POINTS),
+        )
+        .color((31, 119, 180))
+        .equal_aspect();
+    let aspect = (n1 - n0 + 10.0) / (e1 - e0 + 10.0);
+    fig.size = (1600, (1500.0 * aspect + 180.0).clamp(350.0, 1200.0) as u32);
+    let path_svg = dir.join("optimal_path.svg");
+    fig.write_svg(&path_svg)?;
+    let steer: Vec<(f64, f64)> = rows.iter().map(|r| (r[0], r[5])).collect();
+    let steering_svg = dir.join("optimal_steering.svg");
+    Figure::new(
+        &format!("{title}: steering"),
+        "time from the start of the trial (s)",
+        "steering (%, + right)",
+    )
+    .line("actuator", decimate(&steer, MAX_LINE_POINTS))
+    .write_svg(&steering_svg)?;
+    Ok(vec![path_svg, steering_svg])
+}

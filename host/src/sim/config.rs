@@ -224,7 +224,7 @@ impl Default for VehicleConfig {
             body: Body {
                 width_m: 1.806,
                 length_m: 4.437,
-                rear_overhang_m: 0.909,
+                rear_overhang_m: 0.85,
             },
             tyre_front: Tyre {
                 cornering_stiffness_n_per_rad: 80_000.0,

@@ -349,10 +349,13 @@ fn corner_row(
 ) -> Row {
     let (s0, c0, e0) = lin;
     let (a, b, k) = body_offset(at, sample, point, s0, c0, e0);
+    // The margin never takes more than half of the room the body has on each side.
+    let room_m = 0.5 * (sample.left_m + sample.right_m) - point.right_m.abs();
+    let margin_m = math::min(w.corridor_margin_m, math::max(0.5 * room_m, 0.0));
     let (lower, upper) = if point.right_m < 0.0 {
-        (-sample.left_m - k, f32::INFINITY)
+        (-(sample.left_m - margin_m) - k, f32::INFINITY)
     } else {
-        (f32::NEG_INFINITY, sample.right_m - k)
+        (f32::NEG_INFINITY, sample.right_m - margin_m - k)
     };
     Row {
         a,

@@ -175,6 +175,13 @@ pub struct Weights {
     pub terminal_factor: f32,
     /// Exact-penalty weight of the corridor, per m outside.
     pub corridor_weight_per_m: f32,
+    /// The body's corners are kept this far inside the corridor, m, but never by more than
+    /// half the room the body has on a side (a lane 0.2 m wider than the car keeps 0.05 m):
+    /// the corner rows are linearised about the previous plan and soft, so a plan on the edge
+    /// ends up a few centimetres outside (measured on the closed-loop rig: up to 0.04 m at
+    /// 5-8 m/s, a cone touched), while a full margin in the narrow lanes leaves the plan no room
+    /// at speed (docs/controller.md).
+    pub corridor_margin_m: f32,
     /// Exact-penalty weight of an obstacle, per m inside its inflated circle.
     pub obstacle_weight_per_m: f32,
     /// ADMM penalty of the corridor rows, per m^2.
@@ -197,9 +204,17 @@ pub struct MpcTuning {
     pub admm: AdmmSettings,
     /// Speed plan.
     pub speed: SpeedTuning,
-    /// Steering command = the plan's steering this far ahead (one tick plus the actuator's
-    /// lag), s.
+    /// Steering command = the commanded steering ramp plus the planned rate times this: the
+    /// actuator's lag, s (a first-order lag follows a ramp this far behind).
     pub steer_lead_s: f32,
+    /// The plan starts from the steering the controller commanded (its own ramp, which the
+    /// actuator follows after the bus and its lag), not from the steering report, which is
+    /// older than the command it answers: planning from it closes a loop through the actuator's
+    /// delay that oscillates (a 20 ms old report alone makes the double lane change unclean at
+    /// 5 m/s). The commanded steering is trusted within the distance the actuator covers in
+    /// this time at its rate limit from the report, s; further off (the actuator did not follow:
+    /// saturation, a driver's hand) the plan starts that far from the report.
+    pub steer_trust_s: f32,
     /// Share of the actuator's rate limit the plan may use (the rest is for feedback), 0..1.
     pub steer_rate_share: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
@@ -232,6 +247,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         steer_rate: 1.0,
         terminal_factor: 5.0,
         corridor_weight_per_m: 1000.0,
+        corridor_margin_m: 0.15,
         obstacle_weight_per_m: 3000.0,
         rho_corridor: 50.0,
         rho_obstacle: 50.0,
@@ -255,6 +271,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         iterations: 10,
     },
     steer_lead_s: 0.07,
+    steer_trust_s: 0.15,
     steer_rate_share: 0.9,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
@@ -384,6 +401,8 @@ pub struct MpcState {
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
     /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
     obstacle_violation_ticks: u16,
+    /// The commanded steering ramp (without the lead) after the last accepted solve, rad.
+    steer_ramp_rad: Option<f32>,
 }
 
 impl Default for MpcState {
@@ -404,6 +423,7 @@ impl MpcState {
             sides: [None; MAX_OBSTACLES],
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
+            steer_ramp_rad: None,
         }
     }
 
@@ -416,6 +436,7 @@ impl MpcState {
         self.sides = [None; MAX_OBSTACLES];
         self.last_steer_plan = None;
         self.obstacle_violation_ticks = 0;
+        self.steer_ramp_rad = None;
     }
 }
 
@@ -431,7 +452,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 12] = [
+        let checks: [(bool, &'static str); 13] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -446,6 +467,10 @@ impl MpcConfig {
             (
                 tuning.steer_lead_s.is_finite() && (0.0..=STEP_S).contains(&tuning.steer_lead_s),
                 "steer_lead_s (0 .. 0.1 s)",
+            ),
+            (
+                tuning.steer_trust_s.is_finite() && tuning.steer_trust_s >= 0.0,
+                "steer_trust_s (>= 0)",
             ),
             (
                 positive(tuning.steer_rate_share) && tuning.steer_rate_share <= 1.0,
@@ -536,7 +561,7 @@ impl MpcConfig {
             Err(reason) => return self.fallback(state, input, &speed_start, reason),
         };
         // 3. Lateral problem about the previous plan.
-        let x0 = self.initial_state(input);
+        let x0 = self.initial_state(input, state.steer_ramp_rad);
         let lin = self.linearisation(state, input, &x0, &speed_plan);
         let mut speeds = [0.0f32; STEPS + 1];
         for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
@@ -624,8 +649,11 @@ impl MpcConfig {
         });
         state.last_steer_plan = Some((steer, 0));
         let first_rate = rates.first().copied().unwrap_or(0.0);
-        let steer_cmd_rad =
-            steer.first().copied().unwrap_or(0.0) + self.tuning.steer_lead_s * first_rate;
+        // The ramp moves on by one tick of the planned rate; the command leads it by the
+        // actuator's lag.
+        let ramp_rad = steer.first().copied().unwrap_or(0.0) + crate::SAMPLE_PERIOD_S * first_rate;
+        state.steer_ramp_rad = Some(ramp_rad);
+        let steer_cmd_rad = ramp_rad + self.tuning.steer_lead_s * first_rate;
         let plan = self.rollout(input, &steer, &speed_plan.speeds_mps);
         MpcOutput {
             steer_cmd_pct: self.steer_pct(steer_cmd_rad),
@@ -648,9 +676,18 @@ impl MpcConfig {
 
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
     /// dynamic model.
+    /// The model the steering is planned with: the dynamic one whenever the car has one and
+    /// moves faster than its lower speed limit, else the kinematic one. Not the node's hybrid
+    /// switch (which still picks the model of the node's own predictions and yaw rate): the
+    /// linear single-track model is the kinematic one plus tyre slip, which vanishes at low
+    /// speed, so it is right at every speed it is defined for, while a switch in the middle of a
+    /// manoeuvre (the lateral acceleration of a lane change at 4 m/s crosses the switch's
+    /// threshold) changes the plan's model and its initial state under a running solve; on the
+    /// closed-loop rig the double lane change at 4-5 m/s touched a cone with the switch's
+    /// choice and was clean with this one (docs/controller.md).
     fn mode(&self, input: &MpcInput) -> Mode {
-        match (input.car.mode, &self.dynamics) {
-            (Mode::Dynamic, Some(_)) => Mode::Dynamic,
+        match &self.dynamics {
+            Some(d) if input.car.speed_mps >= d.min_speed_mps => Mode::Dynamic,
             _ => Mode::Kinematic,
         }
     }
@@ -669,7 +706,7 @@ impl MpcConfig {
     }
 
     /// Error state now: offsets from the reference's first point.
-    fn initial_state(&self, input: &MpcInput) -> SVector<f32, NX> {
+    fn initial_state(&self, input: &MpcInput, steer_ramp_rad: Option<f32>) -> SVector<f32, NX> {
         let car = &input.car;
         let at = &input.reference[0].at.pose;
         let (dx, dy) = (car.pose.x_m - at.x_m, car.pose.y_m - at.y_m);
@@ -679,8 +716,13 @@ impl MpcConfig {
             Mode::Dynamic => (car.lateral.vy_mps, car.lateral.yaw_rate_rps),
             Mode::Kinematic => (0.0, 0.0),
         };
+        let trust_rad = self.max_steer_rate_rad_per_s * self.tuning.steer_trust_s;
+        let start = match steer_ramp_rad {
+            Some(ramp) => clamp(ramp, car.steer_rad - trust_rad, car.steer_rad + trust_rad),
+            None => car.steer_rad,
+        };
         let delta = clamp(
-            car.steer_rad,
+            start,
             -self.vehicle.max_steer_rad,
             self.vehicle.max_steer_rad,
         );
@@ -938,6 +980,7 @@ impl MpcConfig {
             }
         }
         state.lin = None;
+        state.steer_ramp_rad = None;
         let speeds = self.speed.stop(speed_start).speeds_mps;
         let lead = self.tuning.steer_lead_s / STEP_S;
         let steer_cmd_rad = interpolate(&steer, lead);
@@ -1079,6 +1122,7 @@ fn weights_ok(w: &Weights) -> bool {
         && positive(w.steer_rate)
         && positive(w.terminal_factor)
         && positive(w.corridor_weight_per_m)
+        && nonneg(w.corridor_margin_m)
         && positive(w.obstacle_weight_per_m)
         && positive(w.rho_corridor)
         && positive(w.rho_obstacle)

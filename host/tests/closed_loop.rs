@@ -1,0 +1,356 @@
+//! The closed loop: scenario geometry against ISO 3888-2's figures (hand-derived), the body and
+//! gate scoring, every scenario's path, the reference controller on the built-in plant, a
+//! session replayed through `catmodel replay` byte for byte, and the `closed-loop` command's
+//! files and errors.
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use catmodel::control::path::Path as CorePath;
+use catmodel_host::closed_loop::driver::NodeDriver;
+use catmodel_host::closed_loop::metrics::{body_corners, distance_to_body, Scorer};
+use catmodel_host::closed_loop::scenario::{
+    self, dlc_lanes, Kind, CONE_RADIUS_M, CONE_SPACING_M, DLC_PATH_MARGIN_M,
+};
+use catmodel_host::closed_loop::{
+    controller_named, core_path, load_setup, receiver_rms_m, run, Receiver, RunOptions,
+};
+use catmodel_host::sim::config::{Body, VehicleConfig};
+
+const BIN: &str = env!("CARGO_BIN_EXE_catmodel");
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("closed_loop_{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+#[test]
+fn iso_3888_2_lanes_from_the_vehicle_width() {
+    // b = 1.806 m (the CAT Vehicle): section 1 1.1 b + 0.25 = 2.2366 m wide, section 3 b + 1 =
+    // 2.806 m with its near edge 1 m beside section 1's far edge, section 5 1.3 b + 0.25 =
+    // 2.5978 m; sections at 0-12, 25.5-36.5, 49-61 m.
+    let [s1, s3, s5] = dlc_lanes(1.806);
+    assert!(close(s1.y_left_m - s1.y_right_m, 2.2366, 1e-9));
+    assert!(close(s1.y_left_m, 1.1183, 1e-9));
+    assert!(close(s3.y_right_m - s1.y_left_m, 1.0, 1e-9));
+    assert!(close(s3.y_left_m - s3.y_right_m, 2.806, 1e-9));
+    assert!(close(s5.y_left_m - s5.y_right_m, 2.5978, 1e-9));
+    assert!(close(s5.y_left_m + s5.y_right_m, 0.0, 1e-12));
+    assert_eq!(
+        [
+            s1.x_start_m,
+            s1.x_end_m,
+            s3.x_start_m,
+            s3.x_end_m,
+            s5.x_start_m,
+            s5.x_end_m
+        ],
+        [0.0, 12.0, 25.5, 36.5, 49.0, 61.0]
+    );
+    // A wide car: section 5 is at most 3 m (1.3 * 2.2 + 0.25 = 3.11).
+    let [_, _, wide5] = dlc_lanes(2.2);
+    assert!(close(wide5.y_left_m - wide5.y_right_m, 3.0, 1e-12));
+}
+
+#[test]
+fn cones_are_tangent_to_the_lane_edges_and_close_enough() {
+    let vehicle = VehicleConfig::default();
+    let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, 10.0);
+    assert_eq!(course.cones.len(), 2 * (5 + 5 + 5));
+    for cone in &course.cones {
+        let (x, y) = course.frame.to_course(cone.east_m, cone.north_m);
+        let lane = course
+            .lanes
+            .iter()
+            .find(|l| x >= l.x_start_m - 1e-9 && x <= l.x_end_m + 1e-9)
+            .expect("every cone beside a lane");
+        let outside = (y - lane.y_left_m).max(lane.y_right_m - y);
+        assert!(close(outside, CONE_RADIUS_M, 1e-9), "{cone:?}");
+    }
+    for lane in &course.lanes {
+        let xs: Vec<f64> = scenario::cone_stations(lane).collect();
+        assert_eq!(xs.first(), Some(&lane.x_start_m));
+        assert!(close(*xs.last().unwrap(), lane.x_end_m, 1e-9));
+        assert!(xs.windows(2).all(|w| w[1] - w[0] <= CONE_SPACING_M + 1e-9));
+    }
+}
+
+#[test]
+fn body_distance_and_corners_hand_derived() {
+    let body = Body {
+        width_m: 2.0,
+        length_m: 5.0,
+        rear_overhang_m: 1.0,
+    };
+    // Heading north from the origin: the body spans east -1..1, north -1..4.
+    assert_eq!(distance_to_body(&body, 0.0, 0.0, 0.0, 0.5, 2.0), 0.0);
+    assert!(close(
+        distance_to_body(&body, 0.0, 0.0, 0.0, 3.0, 2.0),
+        2.0,
+        1e-12
+    ));
+    assert!(close(
+        distance_to_body(&body, 0.0, 0.0, 0.0, 0.0, -3.0),
+        2.0,
+        1e-12
+    ));
+    // Off a corner (1, 4): 3-4-5.
+    assert!(close(
+        distance_to_body(&body, 0.0, 0.0, 0.0, 4.0, 8.0),
+        5.0,
+        1e-12
+    ));
+    // Heading east: the body spans east -1..4, north -1..1; right of the heading is south.
+    let c = body_corners(&body, 0.0, 0.0, std::f64::consts::FRAC_PI_2);
+    let expected = [(-1.0, -1.0), (4.0, -1.0), (4.0, 1.0), (-1.0, 1.0)];
+    for (a, b) in c.iter().zip(expected) {
+        assert!(close(a.0, b.0, 1e-12) && close(a.1, b.1, 1e-12), "{c:?}");
+    }
+}
+
+#[test]
+fn scoring_counts_cone_hits_and_gates_missed() {
+    let vehicle = VehicleConfig::default();
+    let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, 10.0);
+    // Driving straight through at y = 0: every cone of section 3 is missed (its gates are
+    // crossed to the right of the lane), none is touched.
+    let mut straight = Scorer::new(&vehicle.body, &course);
+    for k in 0..3000 {
+        let x = -10.0 + k as f64 * 0.03;
+        let (e, n) = course.frame.to_local(x, 0.0);
+        straight.observe(e, n, course.frame.heading_rad);
+    }
+    assert_eq!(straight.cones().0, 0);
+    assert_eq!(straight.gates_missed(), 5);
+    // Driving at y = 1.0 the body reaches y = 1.903: it touches section 1's left cones (centres
+    // at 1.118 + 0.15), section 5's (1.299 + 0.15) and section 3's right cones (2.118 - 0.15,
+    // their base circles reach down to 1.818): 15.
+    let mut offset = Scorer::new(&vehicle.body, &course);
+    for k in 0..3000 {
+        let x = -10.0 + k as f64 * 0.03;
+        let (e, n) = course.frame.to_local(x, 1.0);
+        offset.observe(e, n, course.frame.heading_rad);
+    }
+    assert_eq!(offset.cones().0, 15);
+}
+
+#[test]
+fn every_scenario_path_is_a_valid_path_the_node_can_hold() {
+    let vehicle = VehicleConfig::default();
+    for kind in [Kind::DoubleLaneChange, Kind::Obstacle, Kind::Loop] {
+        for speed in [2.0, 8.0, 15.0, 25.0] {
+            let course = scenario::course(kind, &vehicle.body, speed);
+            let path = core_path(&course);
+            assert!(
+                CorePath::validate(path.points()).is_ok() && path.len() == course.path.len(),
+                "{kind:?} at {speed}: {} points",
+                course.path.len()
+            );
+            assert!(course.obstacles.len() <= 4);
+            assert!(course
+                .path
+                .iter()
+                .all(|p| p.left_m >= 0.0 && p.right_m >= 0.0 && p.speed_mps <= speed));
+            assert_eq!(course.path.last().unwrap().speed_mps, 0.0);
+        }
+    }
+}
+
+#[test]
+fn the_planned_lane_change_clears_every_cone_when_followed_exactly() {
+    // An independent check of the planner's design: the body on the path, heading along it,
+    // every 2 cm, against every cone.
+    for width in [1.806, 1.6, 2.0] {
+        let body = Body {
+            width_m: width,
+            ..VehicleConfig::default().body
+        };
+        let course = scenario::course(Kind::DoubleLaneChange, &body, 10.0);
+        let path = core_path(&course);
+        let mut worst = f64::INFINITY;
+        let mut s = 0.0f32;
+        while s < path.length_m() {
+            let p = path.sample(s, 0).unwrap();
+            for c in &course.cones {
+                let d = distance_to_body(
+                    &body,
+                    f64::from(p.east_m),
+                    f64::from(p.north_m),
+                    f64::from(p.heading_rad),
+                    c.east_m,
+                    c.north_m,
+                ) - c.radius_m;
+                worst = worst.min(d);
+            }
+            s += 0.02;
+        }
+        assert!(
+            worst >= DLC_PATH_MARGIN_M - 0.01,
+            "width {width}: {worst} m from a cone"
+        );
+    }
+}
+
+fn run_pp(
+    kind: Kind,
+    speed: f64,
+    receiver: Receiver,
+    seed: u64,
+) -> catmodel_host::closed_loop::RunOutput {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let course = scenario::course(kind, &vehicle.body, speed);
+    let controller = controller_named("pure-pursuit", receiver_rms_m(&vehicle, receiver)).unwrap();
+    let mut driver = NodeDriver::new(node, controller);
+    let options = RunOptions {
+        seed,
+        receiver,
+        max_time_s: 150.0,
+    };
+    run(&vehicle, &course, &mut driver, "pure-pursuit", &options)
+}
+
+#[test]
+fn pure_pursuit_passes_the_lane_change_below_its_limit_and_not_far_above() {
+    for seed in [0, 1, 2] {
+        let m = run_pp(Kind::DoubleLaneChange, 7.0, Receiver::Rtk, seed).metrics;
+        assert!(m.clean, "seed {seed}: {m:?}");
+        assert!(
+            m.entry_speed_mps.is_some_and(|v| v > 6.5 && v < 7.6),
+            "{m:?}"
+        );
+    }
+    let m = run_pp(Kind::DoubleLaneChange, 11.0, Receiver::Rtk, 0).metrics;
+    assert!(!m.clean && m.cone_hits > 0, "{m:?}");
+}
+
+#[test]
+fn pure_pursuit_stops_for_an_obstacle_it_cannot_steer_around() {
+    for receiver in [Receiver::Rtk, Receiver::Standard] {
+        let out = run_pp(Kind::Obstacle, 8.0, receiver, 0);
+        let m = &out.metrics;
+        assert!(
+            m.min_obstacle_clearance_m.is_some_and(|d| d > 0.0),
+            "{receiver:?}: {m:?}"
+        );
+        assert!(!m.completed && !m.clean, "{m:?}");
+        // It came to rest while driving.
+        let last = out.samples.last().unwrap();
+        assert!(last.engaged && last.truth.speed < 0.05);
+    }
+}
+
+#[test]
+fn pure_pursuit_follows_the_loop() {
+    let m = run_pp(Kind::Loop, 4.0, Receiver::Rtk, 3).metrics;
+    assert!(m.completed && m.clean, "{m:?}");
+    assert!(m.lateral_rms_m.is_some_and(|e| e < 0.10), "{m:?}");
+    assert_eq!(m.status_ticks[0] + m.status_ticks[2] + m.status_ticks[3], 0);
+}
+
+fn cl(args: &[&str]) -> std::process::Output {
+    Command::new(BIN)
+        .arg("closed-loop")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
+    let dir = tmp_dir("session");
+    let out = cl(&[
+        "--scenario",
+        "dlc",
+        "--speed",
+        "7",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["scenario"], "dlc");
+    assert_eq!(metrics["controller"], "mpc");
+    assert_eq!(metrics["cone_hits"], 0);
+    assert_eq!(metrics["clean"], true);
+    for f in ["path.svg", "lateral_error.svg", "steering.svg", "speed.svg"] {
+        let text = std::fs::read_to_string(dir.join(f)).unwrap();
+        assert!(
+            text.starts_with("<svg") && text.trim_end().ends_with("</svg>"),
+            "{f}"
+        );
+    }
+    let samples = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
+    assert!(samples.starts_with("t,x,y,heading,speed,est_x"));
+    // The node's frames, CONTROL_COMMAND included (the controller runs inside it), come back
+    // identical from `replay` over the recorded input: what `cargo qemu` runs.
+    let replay_tx = dir.join("replay_tx.log");
+    let out = Command::new(BIN)
+        .args([
+            "replay",
+            dir.join("session.can.log").to_str().unwrap(),
+            "--out",
+            dir.join("pred.csv").to_str().unwrap(),
+            "--tx-out",
+            replay_tx.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let session = std::fs::read_to_string(dir.join("session.tx.log")).unwrap();
+    assert!(session.lines().filter(|l| l.contains(" 320#")).count() > 500);
+    assert!(session == std::fs::read_to_string(&replay_tx).unwrap());
+}
+
+#[test]
+fn closed_loop_command_errors_name_the_problem() {
+    let dir = tmp_dir("errors");
+    let d = dir.to_str().unwrap();
+    for (args, needle) in [
+        (
+            vec!["--scenario", "moose", "--out", d],
+            "unknown scenario `moose`",
+        ),
+        (
+            vec!["--scenario", "dlc", "--controller", "lqr", "--out", d],
+            "unknown controller `lqr`",
+        ),
+        (
+            vec!["--scenario", "dlc", "--receiver", "dgps", "--out", d],
+            "unknown receiver `dgps`",
+        ),
+        (
+            vec!["--scenario", "loop", "--speed=-3", "--out", d],
+            "a target speed is in (0, 40] m/s",
+        ),
+        (
+            vec![
+                "--scenario",
+                "loop",
+                "--vehicle",
+                "/nonexistent.toml",
+                "--out",
+                d,
+            ],
+            "/nonexistent.toml",
+        ),
+    ] {
+        let out = cl(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+}

@@ -1,0 +1,82 @@
+//! Tuning sweeps of the model-predictive controller on the closed-loop rig (the node, the bus,
+//! the built-in plant): ignored; they print, the goals are pinned in `closed_loop_goals.rs`.
+use catmodel::control::mpc::{MpcTuning, DEFAULT_TUNING};
+use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
+use catmodel_host::closed_loop::scenario::{self, Kind};
+use catmodel_host::closed_loop::{load_setup, run, Receiver, RunOptions};
+
+fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let kind =
+        std::env::var("SCENARIO").map_or(Kind::DoubleLaneChange, |s| Kind::from_name(&s).unwrap());
+    let course = scenario::course(kind, &vehicle.body, speed);
+    let mut driver = NodeDriver::new(node, Controller::MpcTuned(tuning));
+    let options = RunOptions {
+        seed,
+        receiver: Receiver::Rtk,
+        max_time_s: 120.0,
+    };
+    let m = run(&vehicle, &course, &mut driver, "mpc", &options).metrics;
+    (
+        m.cone_hits + m.gates_missed,
+        m.lateral_rms_m.unwrap_or(f64::NAN),
+        m.lateral_max_m.unwrap_or(f64::NAN),
+        m.min_cone_clearance_m.unwrap_or(f64::NAN),
+    )
+}
+
+#[test]
+#[ignore = "tuning sweep on the rig; prints"]
+fn sweep() {
+    let variants: Vec<(&str, MpcTuning)> = {
+        let mut v = vec![("default", DEFAULT_TUNING)];
+        let var = std::env::var("SWEEP").unwrap_or_default();
+        for item in var.split(';').filter(|s| !s.is_empty()) {
+            let mut t = DEFAULT_TUNING;
+            for kv in item.split(',') {
+                let (k, val) = kv.split_once('=').unwrap();
+                let x: f32 = val.parse().unwrap();
+                let w = &mut t.weights;
+                match k {
+                    "lat" => w.lateral_per_m2 = x,
+                    "head" => w.heading_per_rad2 = x,
+                    "steer" => w.steer_per_rad2 = x,
+                    "rate" => w.steer_rate = x,
+                    "term" => w.terminal_factor = x,
+                    "vy" => w.lateral_speed_per_mps2 = x,
+                    "r" => w.yaw_rate_per_rps2 = x,
+                    "lead" => t.steer_lead_s = x,
+                    "margin" => w.corridor_margin_m = x,
+                    "trust" => t.steer_trust_s = x,
+                    "share" => t.steer_rate_share = x,
+                    "iter" => t.admm.max_iterations = x as u16,
+                    _ => panic!("{k}"),
+                }
+            }
+            v.push((Box::leak(item.to_string().into_boxed_str()), t));
+        }
+        v
+    };
+    let speeds: Vec<f64> = std::env::var("SPEEDS")
+        .unwrap_or("5,8,10,11,12,13,14".into())
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    for (name, t) in variants {
+        let mut line = format!("{name:40}");
+        let seeds: u64 = std::env::var("SEEDS").map_or(1, |s| s.parse().unwrap());
+        for &v in &speeds {
+            if seeds == 1 {
+                let (hits, rms, max, clr) = dlc(t, v, 1);
+                line += &format!(" | {v}: {hits} {rms:.2}/{max:.2} {clr:+.2}");
+            } else {
+                let clean = (0..seeds).filter(|&s| dlc(t, v, s).0 == 0).count();
+                let worst = (0..seeds)
+                    .map(|s| dlc(t, v, s).3)
+                    .fold(f64::INFINITY, f64::min);
+                line += &format!(" {v}:{clean}/{seeds}({worst:+.2})");
+            }
+        }
+        println!("{line}");
+    }
+}
