@@ -221,6 +221,8 @@ fn every_stage_has_one_row() {
         | Stage::PathComplete
         | Stage::PathCompleteShort
         | Stage::Estimate
+        | Stage::DriveReference
+        | Stage::MpcSolve
         | Stage::Drive
         | Stage::Predict
         | Stage::Publish => true,
@@ -238,6 +240,8 @@ fn every_stage_has_one_row() {
         Stage::GnssFixFilter,
         Stage::Models,
         Stage::Estimate,
+        Stage::DriveReference,
+        Stage::MpcSolve,
         Stage::Drive,
         Stage::Predict,
         Stage::Publish,

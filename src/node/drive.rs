@@ -38,6 +38,7 @@ use crate::model::kinematic::Pose;
 use crate::model::predictor::PredictedPoint;
 use crate::model::SsBlockState;
 
+use super::stage::{Stage, StageProbe};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
 
 /// Which controller drives.
@@ -225,15 +226,26 @@ impl Drive {
         self.planned_speeds = None;
     }
 
-    /// Stage 4: this tick's commands.
-    pub fn tick(&mut self, config: &NodeConfig, inputs: &DriveInputs<'_>) -> DriveOutput {
+    /// Stage 4: this tick's commands. `probe` marks where the model-predictive controller's
+    /// problem and solve end ([`Stage::DriveReference`], [`Stage::MpcSolve`]).
+    pub fn tick<P: StageProbe>(
+        &mut self,
+        config: &NodeConfig,
+        inputs: &DriveInputs<'_>,
+        probe: &mut P,
+    ) -> DriveOutput {
         self.last_tracking = None;
-        let out = self.decide(config, inputs);
+        let out = self.decide(config, inputs, probe);
         self.last_command = out.command;
         out
     }
 
-    fn decide(&mut self, config: &NodeConfig, inputs: &DriveInputs<'_>) -> DriveOutput {
+    fn decide<P: StageProbe>(
+        &mut self,
+        config: &NodeConfig,
+        inputs: &DriveInputs<'_>,
+        probe: &mut P,
+    ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
             return self.hold(ControlStatus::NoPath);
         };
@@ -257,6 +269,7 @@ impl Drive {
                     speed_model,
                     self.last_speed_cmd_mps,
                     config,
+                    probe,
                 ) else {
                     return self.hold(ControlStatus::Fallback);
                 };
@@ -347,7 +360,7 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
 
 /// One model-predictive solve; `None` when the path cannot be sampled.
 #[allow(clippy::too_many_arguments)]
-fn mpc_tick(
+fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
     state: &mut MpcState,
     path: &Path,
@@ -359,6 +372,7 @@ fn mpc_tick(
     speed_model: &SsBlockState<2, VELOCITY_DELAY_CAP>,
     last_speed_cmd_mps: f32,
     config: &NodeConfig,
+    probe: &mut P,
 ) -> Option<(MpcOutput, Tracking)> {
     let tracking = path.track(&pose, projection.as_ref())?;
     *projection = Some(tracking.projection);
@@ -429,7 +443,9 @@ fn mpc_tick(
         },
         position_uncertainty_m: config.position_uncertainty_m,
     };
+    probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);
+    probe.lap(Stage::MpcSolve);
     let mut next = [0.0; PLAN_STEPS + 1];
     for (v, p) in next.iter_mut().zip(&out.plan) {
         *v = p.speed_mps;

@@ -424,7 +424,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         probe.lap(Stage::Models);
         let estimate = self.estimate(now, &motion);
         probe.lap(Stage::Estimate);
-        let drive = self.run_drive(&motion, &estimate);
+        let drive = self.run_drive(&motion, &estimate, probe);
         probe.lap(Stage::Drive);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
         let predicted = match drive.plan {
@@ -634,7 +634,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
     }
 
     /// Stage 4: the controller's commands (CONTROL_COMMAND), and its plan while it drives.
-    fn run_drive(&mut self, motion: &Motion, estimate: &Estimate) -> DriveOutput {
+    fn run_drive<P: StageProbe>(
+        &mut self,
+        motion: &Motion,
+        estimate: &Estimate,
+        probe: &mut P,
+    ) -> DriveOutput {
         let inputs = DriveInputs {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
@@ -643,7 +648,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             mode: motion.mode,
             speed_model: self.models.velocity.as_ref(),
         };
-        self.drive.borrow_mut().tick(&self.config, &inputs)
+        self.drive.borrow_mut().tick(&self.config, &inputs, probe)
     }
 
     /// Stage 5: the horizon into `points`; returns how many were predicted. Without fresh

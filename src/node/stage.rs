@@ -83,8 +83,16 @@ pub enum Stage {
     Models,
     /// Heading, filtered rear-axle position, eq 7.
     Estimate,
-    /// The controller's commands (CONTROL_COMMAND; the model-predictive controller's solve
-    /// while it drives, the pure pursuit's step, or holding without a path).
+    /// The model-predictive controller's problem: the car on the path, the reference sampled
+    /// at the stations the plan reaches, the corridor, the obstacles placed along the path.
+    DriveReference,
+    /// The model-predictive controller's solve. Its iterations are capped
+    /// (`MpcTuning::admm`), so its worst case is a property of the code, measured with every
+    /// row active and no early exit (`catmodel-qemu-mpc-bench`, `mpc_worst_*`); the bound
+    /// takes the larger of that and what the stage drives showed.
+    MpcSolve,
+    /// The controller's commands (CONTROL_COMMAND; after the model-predictive controller's
+    /// solve its checks and plan, the pure pursuit's step, or holding without a path).
     Drive,
     /// The 2 s horizon roll-out.
     Predict,
@@ -122,7 +130,7 @@ pub struct StageBound {
 
 /// The tick's structure, in the order the stages run. Each stage's `max_per_tick` is enforced
 /// by the code it names.
-pub const TICK_STAGES: [StageBound; 15] = [
+pub const TICK_STAGES: [StageBound; 17] = [
     StageBound {
         stage: Stage::Advance,
         key: "advance",
@@ -194,6 +202,18 @@ pub const TICK_STAGES: [StageBound; 15] = [
         key: "estimate",
         max_per_tick: 1,
         because: "once per tick",
+    },
+    StageBound {
+        stage: Stage::DriveReference,
+        key: "drive_reference",
+        max_per_tick: 1,
+        because: "once per tick, over the reference's fixed stations",
+    },
+    StageBound {
+        stage: Stage::MpcSolve,
+        key: "mpc_solve",
+        max_per_tick: 1,
+        because: "once per tick; ADMM iterations capped (MpcTuning::admm), worst case from catmodel-qemu-mpc-bench",
     },
     StageBound {
         stage: Stage::Drive,

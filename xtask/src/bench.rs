@@ -58,23 +58,27 @@ const BUDGETS: &[(&str, u32)] = &[
 
 /// The benchmark firmwares: the node's components, and the controller (with TinyMPC on the
 /// same model for comparison).
-const BENCHES: &[(&str, &str)] = &[
-    ("qemu", "catmodel-qemu-bench"),
-    ("qemu,tinympc", "catmodel-qemu-mpc-bench"),
-];
+const BENCHES: &[(&str, &str)] = &[("qemu", "catmodel-qemu-bench"), MPC_BENCH];
+
+/// The controller's benchmark firmware (features, binary): its worst-case solve is also a row
+/// of the tick's bound (`bound::measure`).
+pub const MPC_BENCH: (&str, &str) = ("qemu,tinympc", "catmodel-qemu-mpc-bench");
 
 /// One component's line.
-struct Row {
-    key: String,
+pub struct Row {
+    /// Component key.
+    pub key: String,
     name: String,
     calls: u32,
     min: u32,
     median: u32,
-    max: u32,
+    /// Most instructions of one call.
+    pub max: u32,
     what: String,
 }
 
-fn parse(stderr: &str) -> Result<(Vec<Row>, u32)> {
+/// The rows and the timing overhead printed by a benchmark firmware.
+pub fn parse(stderr: &str) -> Result<(Vec<Row>, u32)> {
     let mut rows = Vec::new();
     let mut overhead = None;
     let mut done = false;
@@ -151,7 +155,9 @@ pub fn bench_target(args: &[String]) -> Result<()> {
     );
     // The tick's worst case from its structure and each stage's maximum (docs/firmware.md,
     // "Worst-case tick"), measured by the same firmware in its `--stages` mode.
-    let bound = bound::measure()?;
+    let mut bound = bound::measure_stages()?;
+    let (worst, which) = bound::worst_solve(&rows, MPC_BENCH.1)?;
+    bound.compose_solve(worst, &which);
     let _ = writeln!(
         table,
         "\nWorst case per tick (`worst_case_bound_instructions`), {} instructions; with a controller planning (`worst_case_bound_controller_instructions`), {}:\n\n{}",

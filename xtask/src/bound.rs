@@ -28,7 +28,11 @@ use catmodel_app::budget::{
     CONTROL_TICK_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS,
 };
 
+use super::bench::{self, MPC_BENCH};
 use super::{cargo_build, drives, qemu_command, root, INSTALL_QEMU};
+
+/// The stage row of the model-predictive controller's solve (`Stage::MpcSolve`).
+const SOLVE_ROW: &str = "mpc_solve";
 
 /// One row of the bound.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -80,6 +84,18 @@ pub struct Bound {
 }
 
 impl Bound {
+    /// The controller's solve row takes `worst` (its cost on its most expensive path, measured
+    /// apart) where the stage drives showed less: the drives reach the solve, not its worst
+    /// case.
+    pub fn compose_solve(&mut self, worst: u32, which: &str) {
+        for row in self.rows.iter_mut().filter(|r| r.key == SOLVE_ROW) {
+            if worst > row.max_control {
+                row.max_control = worst;
+                row.drive_control = which.to_string();
+            }
+        }
+    }
+
     /// The tick's bound, instructions.
     pub fn total(&self) -> u64 {
         self.rows.iter().map(Row::part).sum()
@@ -357,8 +373,17 @@ pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
 }
 
 /// Generates the dedicated drives and records the closed-loop sessions, builds the stage
-/// firmware and measures every stage in QEMU.
+/// firmware and measures every stage in QEMU; the controller's solve row is composed with its
+/// worst case ([`mpc_worst_solve`]).
 pub fn measure() -> Result<Bound> {
+    let mut bound = measure_stages()?;
+    let (worst, which) = mpc_worst_solve()?;
+    bound.compose_solve(worst, &which);
+    Ok(bound)
+}
+
+/// [`measure`] without the controller's worst-case solve (the caller composes it).
+pub fn measure_stages() -> Result<Bound> {
     let car = baked_car()?;
     let dir = root().join("target").join("qemu").join("stages");
     let mut drives = write_stage_corpus(&car, &dir)?;
@@ -398,6 +423,34 @@ pub fn measure() -> Result<Bound> {
     parse(&stderr, names)
 }
 
+/// The model-predictive controller's solve on its most expensive path: every row of every
+/// stage active and every ADMM iteration run (no early exit), in both lateral modes, on the
+/// baked car (`catmodel-qemu-mpc-bench`, rows `mpc_worst_dynamic` and `mpc_worst_kinematic`;
+/// docs/mpc.md). The solve's iterations are capped, so this is its cost for any input.
+fn mpc_worst_solve() -> Result<(u32, String)> {
+    let (features, bin) = MPC_BENCH;
+    let elf = cargo_build(features, bin)?;
+    let output = qemu_command(&elf)
+        .args(["-append", bin])
+        .output()
+        .context("running qemu-system-arm")?;
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    if !output.status.success() {
+        bail!("{bin} failed ({}):\n{stderr}", output.status);
+    }
+    let (rows, _) = bench::parse(&stderr)?;
+    worst_solve(&rows, bin)
+}
+
+/// The largest `mpc_worst_*` row of the controller's benchmark.
+pub fn worst_solve(rows: &[bench::Row], bin: &str) -> Result<(u32, String)> {
+    rows.iter()
+        .filter(|r| r.key.starts_with("mpc_worst_"))
+        .max_by_key(|r| r.max)
+        .map(|r| (r.max, format!("{bin} {}", r.key)))
+        .ok_or_else(|| anyhow!("{bin} printed no mpc_worst_* row"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -424,5 +477,21 @@ mod tests {
         assert!(b.check(8200, Some(94_800)).is_empty());
         assert_eq!(b.check(8201, Some(94_801)).len(), 2);
         assert!(parse("stage\tx\t1\t1\t1\tw\n", vec![]).is_err());
+    }
+
+    #[test]
+    fn the_solve_row_takes_the_worst_case_where_the_drives_showed_less() {
+        let text = "stage\tmpc_solve\t1\t5\t0\t0\t200000\t1\tcap\n\
+                    stage\tdrive\t1\t9\t70\t0\t3000\t1\tonce\n\
+                    stage-ticks\t9\t100\t0\t210000\t1\nstage-done\n";
+        let mut b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        b.compose_solve(419_144, "bench mpc_worst_dynamic");
+        assert_eq!(b.total_control(), 419_144 + 3000);
+        assert_eq!(b.rows[0].drive_control, "bench mpc_worst_dynamic");
+        // Without a controller the solve never runs: that bound is unchanged.
+        assert_eq!(b.total(), 70);
+        // A drive that showed more than the bench keeps its figure.
+        b.compose_solve(100_000, "smaller");
+        assert_eq!(b.rows[0].max_control, 419_144);
     }
 }
