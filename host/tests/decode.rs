@@ -205,8 +205,8 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
             }
         }
     }
-    // 748 ticks, 13 frames each; the drive has real positions, not only sentinels.
-    assert_eq!(per_name.len(), 13);
+    // 748 ticks, 14 frames each; the drive has real positions, not only sentinels.
+    assert_eq!(per_name.len(), 14);
     assert!(per_name.values().all(|&n| n == 748), "{per_name:?}");
 }
 
@@ -341,7 +341,7 @@ fn selection_by_name_prefix_and_id() {
         let mut out = Vec::new();
         let summary = decode_frames(&dbc, &frames, sel.as_ref(), Format::Table, &mut out).unwrap();
         assert_eq!(
-            summary.frames, 9_724,
+            summary.frames, 10_472,
             "every frame is checked, shown or not"
         );
         assert_eq!(
@@ -374,7 +374,7 @@ fn cli_decodes_and_names_bad_lines() {
     assert!(stdout.lines().nth(1).unwrap().contains("STATE_MOTION"));
     let stderr = String::from_utf8(out.stderr).unwrap();
     assert!(
-        stderr.contains("decoded 9724 frames (748 shown)") && stderr.contains("0 crc errors"),
+        stderr.contains("decoded 10472 frames (748 shown)") && stderr.contains("0 crc errors"),
         "{stderr}"
     );
 
