@@ -314,11 +314,17 @@ fn summary_line(drive: &str, v: &Verdict) -> String {
         (Some(b), None) => format!("bound {} instructions", grouped(b)),
         _ => "bound: not computed".to_string(),
     };
-    format!(
-        "cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, slowest tick {} instructions = {share:.0} % of the {} budget{control}, {bound}",
-        grouped(u64::from(v.max_instructions)),
-        grouped(u64::from(BUDGET_INSTRUCTIONS)),
-    )
+    // No tick takes 0 instructions: 0 means every tick was a controller tick.
+    let plain = if v.max_instructions == 0 && v.max_control_instructions.is_some() {
+        "every tick a controller tick".to_string()
+    } else {
+        format!(
+            "slowest tick {} instructions = {share:.0} % of the {} budget",
+            grouped(u64::from(v.max_instructions)),
+            grouped(u64::from(BUDGET_INSTRUCTIONS)),
+        )
+    };
+    format!("cargo qemu: {drive} on {QEMU_MACHINE}: {verdict}, {plain}{control}, {bound}")
 }
 
 fn qemu(args: &[String]) -> Result<()> {
@@ -930,6 +936,17 @@ mod tests {
             ),
             "{}",
             summary_line("s.log", &driving)
+        );
+        let session = Verdict {
+            max_instructions: 0,
+            max_control_instructions: Some(438_248),
+            ..Verdict::default()
+        };
+        assert!(
+            summary_line("s.log", &session)
+                .contains("PASS, every tick a controller tick, slowest controller tick 438 248"),
+            "{}",
+            summary_line("s.log", &session)
         );
         assert_eq!(
             summary_line("data/bundled.can.log", &pass),
