@@ -77,6 +77,24 @@ pub struct Row {
     what: String,
 }
 
+/// Builds benchmark firmware `bin` with `features` and runs it in QEMU; returns what it printed
+/// on stderr (its rows).
+pub fn run_bench(features: &str, bin: &str) -> Result<String> {
+    let elf = cargo_build(features, bin)?;
+    let output = qemu_command(&elf).args(["-append", bin]).output();
+    let output = match output {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
+        }
+        other => other.context("running qemu-system-arm")?,
+    };
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    if !output.status.success() {
+        bail!("{bin} failed ({}):\n{stderr}", output.status);
+    }
+    Ok(stderr)
+}
+
 /// The rows and the timing overhead printed by a benchmark firmware.
 pub fn parse(stderr: &str) -> Result<(Vec<Row>, u32)> {
     let mut rows = Vec::new();
@@ -114,19 +132,8 @@ pub fn bench_target(args: &[String]) -> Result<()> {
     };
     let mut rows = Vec::new();
     let mut overhead = 0;
-    for (features, bin) in BENCHES {
-        let elf = cargo_build(features, bin)?;
-        let output = qemu_command(&elf).args(["-append", bin]).output();
-        let output = match output {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
-            }
-            other => other.context("running qemu-system-arm")?,
-        };
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        if !output.status.success() {
-            bail!("{bin} failed ({}):\n{stderr}", output.status);
-        }
+    for &(features, bin) in BENCHES {
+        let stderr = run_bench(features, bin)?;
         let (more, n) = parse(&stderr)?;
         rows.extend(more);
         overhead = n;

@@ -447,15 +447,7 @@ pub fn measure_stages() -> Result<Bound> {
 /// docs/mpc.md). The solve's iterations are capped, so this is its cost for any input.
 fn mpc_worst_solve() -> Result<(u32, String)> {
     let (features, bin) = MPC_BENCH;
-    let elf = cargo_build(features, bin)?;
-    let output = qemu_command(&elf)
-        .args(["-append", bin])
-        .output()
-        .context("running qemu-system-arm")?;
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    if !output.status.success() {
-        bail!("{bin} failed ({}):\n{stderr}", output.status);
-    }
+    let stderr = bench::run_bench(features, bin)?;
     let (rows, _) = bench::parse(&stderr)?;
     worst_solve(&rows, bin)
 }
