@@ -11,7 +11,7 @@ use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ReferencePoint,
     Sample, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
-use catmodel::model::dynamic::{DynamicParams, LateralState};
+use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::{HybridConfig, HybridState};
 use catmodel::model::kinematic::Pose;
 use catmodel::model::{paper, SsBlock, SsBlockState};
@@ -494,15 +494,7 @@ pub fn mpc_for(cfg: &VehicleConfig, body: Body, tuning: MpcTuning) -> MpcConfig 
         max_steer_rad: (c.max_steer_deg as f32).to_radians(),
         understeer_s2_per_m2: cfg.understeer_s2_per_m2() as f32,
     };
-    let dynamics = DynamicParams {
-        mass_kg: c.mass_kg as f32,
-        yaw_inertia_kg_m2: c.yaw_inertia_kg_m2 as f32,
-        cg_to_front_m: c.cg_to_front_m as f32,
-        cg_to_rear_m: c.cg_to_rear_m as f32,
-        cornering_front_n_per_rad: cfg.tyre_front.cornering_stiffness_n_per_rad as f32,
-        cornering_rear_n_per_rad: cfg.tyre_rear.cornering_stiffness_n_per_rad as f32,
-        min_speed_mps: 1.0,
-    };
+    let dynamics = cfg.dynamic_params();
     let rate = (cfg.steering.rate_limit_pct_per_s / 100.0 * c.max_steer_deg.to_radians()) as f32;
     let speed_model = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S)
         .expect("eq 5 discretises");

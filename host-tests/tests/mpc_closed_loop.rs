@@ -492,7 +492,7 @@ fn double_lane_change_is_clean_with_a_real_nodes_delays() {
 /// and the rig is not the path: clean at 12 m/s.
 #[test]
 fn the_rigs_lane_change_path_is_clean_on_the_bench() {
-    use catmodel_host::closed_loop::scenario::{design_lane_change, dlc_lanes};
+    use catmodel_host::closed_loop::scenario::{design_lane_change, dlc_edges, dlc_lanes};
     let cfg = VehicleConfig::default();
     let body = catmodel_host::sim::config::Body {
         width_m: ESCAPE_BODY.width_m as f64,
@@ -500,26 +500,17 @@ fn the_rigs_lane_change_path_is_clean_on_the_bench() {
         rear_overhang_m: ESCAPE_BODY.rear_overhang_m as f64,
     };
     let lanes = dlc_lanes(body.width_m);
-    let [s1, s3, s5] = lanes;
+    let end = lanes[2].x_end_m;
     let design = design_lane_change(&body, &lanes);
     let lead = 40.0;
-    let end = s5.x_end_m;
     // Lateral (left) offset of the path at `s`, and the lane edges beside it.
     let y = move |s: f64| design.y_at((s - lead).clamp(0.0, end));
     let edges = move |s: f64| {
         let x = s - lead;
         if !(0.0..=end).contains(&x) {
             (y(s) + 1.5, y(s) - 1.5)
-        } else if x < s1.x_end_m {
-            (s1.y_left_m, s1.y_right_m)
-        } else if x < s3.x_start_m {
-            (s3.y_left_m, s1.y_right_m)
-        } else if x <= s3.x_end_m {
-            (s3.y_left_m, s3.y_right_m)
-        } else if x < s5.x_start_m {
-            (s3.y_left_m, s5.y_right_m)
         } else {
-            (s5.y_left_m, s5.y_right_m)
+            dlc_edges(&lanes, x)
         }
     };
     let speed = 12.0;

@@ -156,15 +156,7 @@ pub fn node_config_for(
         config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
     }
     config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
-    config.dynamics = Some(catmodel::model::dynamic::DynamicParams {
-        mass_kg: c.mass_kg as f32,
-        yaw_inertia_kg_m2: c.yaw_inertia_kg_m2 as f32,
-        cg_to_front_m: c.cg_to_front_m as f32,
-        cg_to_rear_m: c.cg_to_rear_m as f32,
-        cornering_front_n_per_rad: vehicle.tyre_front.cornering_stiffness_n_per_rad as f32,
-        cornering_rear_n_per_rad: vehicle.tyre_rear.cornering_stiffness_n_per_rad as f32,
-        min_speed_mps: catmodel::model::dynamic::MIN_SPEED_MPS,
-    });
+    config.dynamics = Some(vehicle.dynamic_params());
     Ok(config)
 }
 

@@ -243,6 +243,23 @@ pub fn dlc_lanes(width_m: f64) -> [Lane; 3] {
     ]
 }
 
+/// The corridor's (left, right) edges at course `x` of the double lane change of `lanes`: the
+/// lane whose cones are beside the point; across a gap, the envelope of the two lanes it joins.
+pub fn dlc_edges(lanes: &[Lane; 3], x: f64) -> (f64, f64) {
+    let [s1, s3, s5] = lanes;
+    if x < s1.x_end_m {
+        (s1.y_left_m, s1.y_right_m)
+    } else if x < s3.x_start_m {
+        (s3.y_left_m, s1.y_right_m)
+    } else if x <= s3.x_end_m {
+        (s3.y_left_m, s3.y_right_m)
+    } else if x < s5.x_start_m {
+        (s3.y_left_m, s5.y_right_m)
+    } else {
+        (s5.y_left_m, s5.y_right_m)
+    }
+}
+
 /// Clearance the planner keeps between the body and every cone when the car follows its path
 /// exactly, m: room for tracking error.
 pub const DLC_PATH_MARGIN_M: f64 = 0.15;
@@ -389,24 +406,10 @@ pub fn design_lane_change(body: &Body, lanes: &[Lane; 3]) -> LaneChangeDesign {
 /// heading east.
 pub fn double_lane_change(body: &Body, speed_mps: f64) -> Course {
     let lanes = dlc_lanes(body.width_m);
-    let [s1, s3, s5] = lanes;
+    let s5 = lanes[2];
     let design = design_lane_change(body, &lanes);
     let y_at = |x: f64| design.y_at(x);
-    // Corridor: the lane whose cones are beside the point; across a gap, the envelope of the
-    // two lanes it joins.
-    let edges = |x: f64| {
-        if x < s1.x_end_m {
-            (s1.y_left_m, s1.y_right_m)
-        } else if x < s3.x_start_m {
-            (s3.y_left_m, s1.y_right_m)
-        } else if x <= s3.x_end_m {
-            (s3.y_left_m, s3.y_right_m)
-        } else if x < s5.x_start_m {
-            (s3.y_left_m, s5.y_right_m)
-        } else {
-            (s5.y_left_m, s5.y_right_m)
-        }
-    };
+    let edges = |x: f64| dlc_edges(&lanes, x);
     let run_up = run_up_m(speed_mps);
     let exit = 40.0;
     let approach_spacing = (run_up / 80.0).max(1.0);

@@ -338,6 +338,21 @@ impl VehicleConfig {
         Ok(cfg)
     }
 
+    /// The node's linear-tyre single-track model of this car (its true mass, inertia, CG and
+    /// tyres' cornering stiffnesses, in f32).
+    pub fn dynamic_params(&self) -> catmodel::model::dynamic::DynamicParams {
+        let c = &self.chassis;
+        catmodel::model::dynamic::DynamicParams {
+            mass_kg: c.mass_kg as f32,
+            yaw_inertia_kg_m2: c.yaw_inertia_kg_m2 as f32,
+            cg_to_front_m: c.cg_to_front_m as f32,
+            cg_to_rear_m: c.cg_to_rear_m as f32,
+            cornering_front_n_per_rad: self.tyre_front.cornering_stiffness_n_per_rad as f32,
+            cornering_rear_n_per_rad: self.tyre_rear.cornering_stiffness_n_per_rad as f32,
+            min_speed_mps: catmodel::model::dynamic::MIN_SPEED_MPS,
+        }
+    }
+
     /// Understeer term K of `R = L / tan(delta / (1 + K v^2))` implied by the linear tyre
     /// stiffnesses: `K = m (b / C_f - a / C_r) / L^2`, s^2/m^2 (0.0015 for the CAT Vehicle).
     pub fn understeer_s2_per_m2(&self) -> f64 {
