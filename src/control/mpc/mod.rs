@@ -674,6 +674,50 @@ impl MpcConfig {
         }
     }
 
+    /// A tick without a solve: `last`, the previous tick's accepted output, moved on by one
+    /// tick along its own plan, and the warm start aged by the same tick (the next solve starts
+    /// where it would have after two solves). The steering ramp moves on at the plan's first
+    /// rate (the plan holds it over the first step), the speed command is the first knot's (it
+    /// holds for 0.2 s), the plan is the same trajectory seen one tick later. The node's drive
+    /// stage sends it in a tick that completes a long path, so that no tick both loads a path
+    /// and solves (docs/firmware.md, "Worst-case tick"). Its cost is fixed: no loop depends on
+    /// the data.
+    pub fn coast(&self, state: &mut MpcState, last: &MpcOutput) -> MpcOutput {
+        let tick_steps = 1.0 / TICKS_PER_STEP as f32;
+        if let Some(lin) = state.lin.as_mut() {
+            shift_values(&mut lin.e_psi, tick_steps);
+            shift_values(&mut lin.delta, tick_steps);
+            state.workspace.shift(tick_steps);
+        }
+        state.speed.shift();
+        if let Some((_, age)) = &mut state.last_steer_plan {
+            *age = age.saturating_add(1);
+        }
+        let steer_at = |k: usize| last.plan.get(k).map_or(0.0, |p| p.steer_rad);
+        let tick_rad = (steer_at(1) - steer_at(0)) * tick_steps;
+        if let Some(ramp) = &mut state.steer_ramp_rad {
+            *ramp += tick_rad;
+        }
+        let steer_pct =
+            last.steer_cmd_pct + tick_rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
+        let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
+        for (k, p) in plan.iter_mut().enumerate() {
+            *p = plan_at(&last.plan, k as f32 + tick_steps);
+            p.t_s = k as f32 * STEP_S;
+        }
+        MpcOutput {
+            steer_cmd_pct: clamp(
+                finite_or(steer_pct, last.steer_cmd_pct),
+                -STEER_PCT_LIMIT,
+                STEER_PCT_LIMIT,
+            ),
+            plan,
+            iterations: 0,
+            factorisations: 0,
+            ..*last
+        }
+    }
+
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
     /// dynamic model.
     /// The model the steering is planned with: the dynamic one whenever the car has one and
@@ -1083,6 +1127,29 @@ fn interpolate(v: &[f32; STEPS + 1], at: f32) -> f32 {
     let a = v.get(i).copied().unwrap_or(0.0);
     let b = v.get(i + 1).copied().unwrap_or(a);
     a + (b - a) * frac
+}
+
+/// The plan at fractional step `at` (>= 0): linear between its points, extrapolated along its
+/// last step beyond the end; the heading along the shorter way, the speed not below 0.
+fn plan_at(plan: &[PlanPoint; PLAN_STEPS + 1], at: f32) -> PlanPoint {
+    let at = max(at, 0.0);
+    // `as` truncates towards zero (at >= 0): the step at or before `at`, the last one's start
+    // beyond the end.
+    let i = min(at, (PLAN_STEPS - 1) as f32) as usize;
+    let f = at - i as f32;
+    let a = plan.get(i).copied().unwrap_or_default();
+    let b = plan.get(i + 1).copied().unwrap_or(a);
+    let mix = |x: f32, y: f32| x + (y - x) * f;
+    PlanPoint {
+        t_s: mix(a.t_s, b.t_s),
+        x_m: mix(a.x_m, b.x_m),
+        y_m: mix(a.y_m, b.y_m),
+        heading_rad: math::wrap_pi(
+            a.heading_rad + math::wrap_pi(b.heading_rad - a.heading_rad) * f,
+        ),
+        speed_mps: max(mix(a.speed_mps, b.speed_mps), 0.0),
+        steer_rad: mix(a.steer_rad, b.steer_rad),
+    }
 }
 
 /// Each value moved `f` of the way to the next one (the last held).
