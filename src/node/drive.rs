@@ -125,8 +125,10 @@ pub struct Drive {
     projection: Option<Projection>,
     /// The last plan's speeds (the reference's stations follow them).
     planned_speeds: Option<[f32; PLAN_STEPS + 1]>,
-    /// The model-predictive controller's output of the previous tick, when it planned.
+    /// The model-predictive controller's last accepted output (kept in place: it is 0.6 KiB).
     last_plan: Option<MpcOutput>,
+    /// ... and it is the previous tick's.
+    planned_last_tick: bool,
     /// A long path completed this tick: no solve until the next ([`Stage::DriveCoast`]).
     path_loaded: bool,
     /// Commands sent last tick.
@@ -162,6 +164,7 @@ impl Drive {
             projection: None,
             planned_speeds: None,
             last_plan: None,
+            planned_last_tick: false,
             path_loaded: false,
             last_speed_cmd_mps: 0.0,
             last_steer_cmd_pct: 0.0,
@@ -185,6 +188,7 @@ impl Drive {
         self.projection = None;
         self.planned_speeds = None;
         self.last_plan = None;
+        self.planned_last_tick = false;
         self.path_loaded = false;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
@@ -284,8 +288,8 @@ impl Drive {
     ) -> DriveOutput {
         self.last_tracking = None;
         let path_loaded = core::mem::take(&mut self.path_loaded);
-        let last_plan = self.last_plan.take();
-        let out = self.decide(config, inputs, path_loaded, last_plan.as_ref(), probe);
+        let planned_last_tick = core::mem::take(&mut self.planned_last_tick);
+        let out = self.decide(config, inputs, path_loaded, planned_last_tick, probe);
         self.last_command = out.command;
         out
     }
@@ -295,7 +299,7 @@ impl Drive {
         config: &NodeConfig,
         inputs: &DriveInputs<'_>,
         path_loaded: bool,
-        last_plan: Option<&MpcOutput>,
+        planned_last_tick: bool,
         probe: &mut P,
     ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
@@ -309,7 +313,7 @@ impl Drive {
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
             (Controller::Mpc, Some(mpc)) if path_loaded => {
-                let Some(last) = last_plan else {
+                let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
                     // Nothing to move on: the path takes effect next tick.
                     let status = match self.last_command.status {
                         ControlStatus::NoPath => ControlStatus::NoPath,
@@ -317,10 +321,10 @@ impl Drive {
                     };
                     return self.hold(status);
                 };
-                let out = mpc.coast(&mut self.mpc, last);
+                mpc.coast(&mut self.mpc, out);
                 probe.lap(Stage::DriveCoast);
-                self.last_plan = Some(out);
-                mpc_command(&out)
+                self.planned_last_tick = true;
+                mpc_command(out)
             }
             (Controller::Mpc, Some(mpc)) => {
                 let Some((out, tracking)) = mpc_tick(
@@ -340,10 +344,12 @@ impl Drive {
                     return self.hold(ControlStatus::Fallback);
                 };
                 self.last_tracking = Some(tracking);
+                let command = mpc_command(&out);
                 if out.status != mpc::ControlStatus::Fallback {
                     self.last_plan = Some(out);
+                    self.planned_last_tick = true;
                 }
-                mpc_command(&out)
+                command
             }
             _ => {
                 let car = PursuitCar {

@@ -674,15 +674,15 @@ impl MpcConfig {
         }
     }
 
-    /// A tick without a solve: `last`, the previous tick's accepted output, moved on by one
-    /// tick along its own plan, and the warm start aged by the same tick (the next solve starts
-    /// where it would have after two solves). The steering ramp moves on at the plan's first
-    /// rate (the plan holds it over the first step), the speed command is the first knot's (it
-    /// holds for 0.2 s), the plan is the same trajectory seen one tick later. The node's drive
-    /// stage sends it in a tick that completes a long path, so that no tick both loads a path
-    /// and solves (docs/firmware.md, "Worst-case tick"). Its cost is fixed: no loop depends on
-    /// the data.
-    pub fn coast(&self, state: &mut MpcState, last: &MpcOutput) -> MpcOutput {
+    /// A tick without a solve: `out`, the previous tick's accepted output, moved on by one
+    /// tick along its own plan (in place: it is 0.6 KiB), and the warm start aged by the same
+    /// tick (the next solve starts where it would have after two solves). The steering ramp
+    /// moves on at the plan's first rate (the plan holds it over the first step), the speed
+    /// command is the first knot's (it holds for 0.2 s), the plan is the same trajectory seen
+    /// one tick later. The node's drive stage runs it in a tick that completes a long path, so
+    /// that no tick both loads a path and solves (docs/firmware.md, "Worst-case tick"). Its
+    /// cost is fixed: no loop depends on the data.
+    pub fn coast(&self, state: &mut MpcState, out: &mut MpcOutput) {
         let tick_steps = 1.0 / TICKS_PER_STEP as f32;
         if let Some(lin) = state.lin.as_mut() {
             shift_values(&mut lin.e_psi, tick_steps);
@@ -693,29 +693,37 @@ impl MpcConfig {
         if let Some((_, age)) = &mut state.last_steer_plan {
             *age = age.saturating_add(1);
         }
-        let steer_at = |k: usize| last.plan.get(k).map_or(0.0, |p| p.steer_rad);
+        let steer_at = |k: usize| out.plan.get(k).map_or(0.0, |p| p.steer_rad);
         let tick_rad = (steer_at(1) - steer_at(0)) * tick_steps;
         if let Some(ramp) = &mut state.steer_ramp_rad {
             *ramp += tick_rad;
         }
-        let steer_pct =
-            last.steer_cmd_pct + tick_rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
-        let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
-        for (k, p) in plan.iter_mut().enumerate() {
-            *p = plan_at(&last.plan, k as f32 + tick_steps);
-            p.t_s = k as f32 * STEP_S;
+        let steer_pct = out.steer_cmd_pct + tick_rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
+        out.steer_cmd_pct = clamp(
+            finite_or(steer_pct, out.steer_cmd_pct),
+            -STEER_PCT_LIMIT,
+            STEER_PCT_LIMIT,
+        );
+        // Point k becomes the old plan a fifth of a step after k: it reads points k and k + 1
+        // only, so the points move first to last; the last one extrapolates the old last step.
+        let mut last_step = [PlanPoint::default(); 2];
+        if let Some(tail) = out.plan.get(PLAN_STEPS - 1..) {
+            last_step.copy_from_slice(tail);
         }
-        MpcOutput {
-            steer_cmd_pct: clamp(
-                finite_or(steer_pct, last.steer_cmd_pct),
-                -STEER_PCT_LIMIT,
-                STEER_PCT_LIMIT,
-            ),
-            plan,
-            iterations: 0,
-            factorisations: 0,
-            ..*last
+        for k in 0..=PLAN_STEPS {
+            let (a, b, f) = match (out.plan.get(k), out.plan.get(k + 1)) {
+                (Some(a), Some(b)) => (*a, *b, tick_steps),
+                _ => (last_step[0], last_step[1], 1.0 + tick_steps),
+            };
+            if let Some(p) = out.plan.get_mut(k) {
+                *p = PlanPoint {
+                    t_s: k as f32 * STEP_S,
+                    ..between(&a, &b, f)
+                };
+            }
         }
+        out.iterations = 0;
+        out.factorisations = 0;
     }
 
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
@@ -1129,16 +1137,9 @@ fn interpolate(v: &[f32; STEPS + 1], at: f32) -> f32 {
     a + (b - a) * frac
 }
 
-/// The plan at fractional step `at` (>= 0): linear between its points, extrapolated along its
-/// last step beyond the end; the heading along the shorter way, the speed not below 0.
-fn plan_at(plan: &[PlanPoint; PLAN_STEPS + 1], at: f32) -> PlanPoint {
-    let at = max(at, 0.0);
-    // `as` truncates towards zero (at >= 0): the step at or before `at`, the last one's start
-    // beyond the end.
-    let i = min(at, (PLAN_STEPS - 1) as f32) as usize;
-    let f = at - i as f32;
-    let a = plan.get(i).copied().unwrap_or_default();
-    let b = plan.get(i + 1).copied().unwrap_or(a);
+/// The point `f` of the way from `a` to `b` (beyond `b` for `f` > 1): linear, the heading
+/// along the shorter way, the speed not below 0.
+fn between(a: &PlanPoint, b: &PlanPoint, f: f32) -> PlanPoint {
     let mix = |x: f32, y: f32| x + (y - x) * f;
     PlanPoint {
         t_s: mix(a.t_s, b.t_s),
