@@ -706,14 +706,12 @@ impl MpcConfig {
         );
         // Point k becomes the old plan a fifth of a step after k: it reads points k and k + 1
         // only, so the points move first to last; the last one extrapolates the old last step.
-        let mut last_step = [PlanPoint::default(); 2];
-        if let Some(tail) = out.plan.get(PLAN_STEPS - 1..) {
-            last_step.copy_from_slice(tail);
-        }
+        let point = |k: usize| out.plan.get(k).copied().unwrap_or_default();
+        let last_step = (point(PLAN_STEPS - 1), point(PLAN_STEPS));
         for k in 0..=PLAN_STEPS {
             let (a, b, f) = match (out.plan.get(k), out.plan.get(k + 1)) {
                 (Some(a), Some(b)) => (*a, *b, tick_steps),
-                _ => (last_step[0], last_step[1], 1.0 + tick_steps),
+                _ => (last_step.0, last_step.1, 1.0 + tick_steps),
             };
             if let Some(p) = out.plan.get_mut(k) {
                 *p = PlanPoint {
