@@ -609,6 +609,7 @@ fn car(east: f32, north: f32, heading: f32, speed: f32) -> CarState {
     CarState {
         pose: Some(Pose::new(east, north, heading)),
         speed_mps: speed,
+        rear_side_mps: 0.0,
     }
 }
 
@@ -640,6 +641,35 @@ fn pure_pursuit_steering_hand_derived() {
         &car(-1.0, 0.0, 0.0, 0.0),
     );
     assert!((f64::from(out.steer_cmd_pct) + expected_pct).abs() < 1e-3);
+}
+
+#[test]
+fn pure_pursuit_arc_starts_along_the_rear_axles_course() {
+    // A rear axle sliding right at 0.5 m/s at 10 m/s travels 0.04996 rad right of its heading:
+    // pure pursuit's arc is tangent to that course, so the car steers as one without slip
+    // whose heading is the course. Heading along the path, the goal lies left of the course:
+    // it steers left.
+    let path = path_of(&straight(0.0, 0.0, 0.0, 60, 1.0));
+    let cfg = pursuit(DEFAULT_TUNING);
+    let sliding = CarState {
+        rear_side_mps: 0.5,
+        ..car(0.0, 5.0, 0.0, 10.0)
+    };
+    let slid = cfg.process(&mut PurePursuitState::default(), Some(&path), &[], &sliding);
+    let course = (0.5f32 / 10.0).atan();
+    let turned = cfg.process(
+        &mut PurePursuitState::default(),
+        Some(&path),
+        &[],
+        &car(0.0, 5.0, course, 10.0),
+    );
+    assert!(slid.steer_cmd_pct < -1.0, "{}", slid.steer_cmd_pct);
+    assert!(
+        (slid.steer_cmd_pct - turned.steer_cmd_pct).abs() < 1e-3,
+        "{} vs {}",
+        slid.steer_cmd_pct,
+        turned.steer_cmd_pct
+    );
 }
 
 #[test]
@@ -789,6 +819,7 @@ fn pure_pursuit_without_path_or_position_holds_the_car() {
     let lost = CarState {
         pose: None,
         speed_mps: 3.0,
+        rear_side_mps: 0.0,
     };
     let out = pursuit(DEFAULT_TUNING).process(&mut state, Some(&path), &[], &lost);
     assert_eq!(

@@ -12,7 +12,7 @@ use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::limits::{clean_at, SEEDS};
 use catmodel_host::closed_loop::metrics::Metrics;
 use catmodel_host::closed_loop::scenario::{self, Kind};
-use catmodel_host::closed_loop::{controller_named, load_setup, receiver_rms_m, run};
+use catmodel_host::closed_loop::{load_setup, run};
 use catmodel_host::closed_loop::{Receiver, RunOptions};
 
 /// The second car, which the defaults were not tuned on: the compact hatchback
@@ -51,22 +51,18 @@ fn drive_car(
     run(&vehicle, &course, &mut driver, "", &options).metrics
 }
 
-/// The double lane change: the MPC clean on every seed up to 10.5 m/s (its limit by
-/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 10.5 m/s), where pure pursuit, whose
-/// limit is 8.94 m/s, is not. Goal: 2 m/s above pure pursuit (10.94 m/s) and within 1 m/s of
-/// the optimiser's limit: not reached (docs/controller.md).
+/// The double lane change: the MPC clean on every seed up to 12.5 m/s (its limit by
+/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 12.69 m/s; pure pursuit's 12.62 m/s).
+/// Goal: 2 m/s above pure pursuit and within 1 m/s of the optimiser's limit (16.94 m/s): not
+/// reached (docs/controller.md, "What is left").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
-fn double_lane_change_mpc_clean_where_pure_pursuit_is_not() {
+fn double_lane_change_mpc_clean_up_to_its_limit() {
     let (vehicle, node) = load_setup(None, None).unwrap();
-    for speed in [5.0, 8.0, 10.0, 10.5] {
+    for speed in [5.0, 8.0, 10.0, 12.5] {
         let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, speed);
         assert!(clean, "MPC not clean at {speed} m/s on seeds {SEEDS:?}");
     }
-    let pursuit =
-        controller_named("pure-pursuit", receiver_rms_m(&vehicle, Receiver::Rtk)).unwrap();
-    let (clean, _) = clean_at(&vehicle, &node, pursuit, Receiver::Rtk, 10.5);
-    assert!(!clean, "pure pursuit clean at 10.5 m/s");
 }
 
 /// The obstacle on the path with the standard receiver (1.2 m horizontal RMS): passed with at
@@ -88,35 +84,37 @@ fn obstacle_passed_with_half_a_metre_standard_receiver() {
     }
 }
 
-/// Lateral RMS with the RTK receiver on the parking-lot loop: 0.021 m at its 4 m/s; at 10 m/s
-/// 0.141 m, above the goal's 0.10 m (docs/controller.md): pinned at 0.16 m.
+/// Lateral RMS with the RTK receiver on the parking-lot loop: 0.012 m at its 4 m/s; at 10 m/s
+/// 0.043 m (goal 0.10 m; 0.141 m before the dead reckoning knew the rear axle's slip).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn loop_lateral_rms_rtk() {
     let slow = drive(Kind::Loop, Controller::Mpc, Receiver::Rtk, 4.0, 0);
     let rms = slow.lateral_rms_m.unwrap();
-    assert!(rms <= 0.05, "4 m/s: {rms} m");
-    let fast = drive(Kind::Loop, Controller::Mpc, Receiver::Rtk, 10.0, 0);
-    let rms = fast.lateral_rms_m.unwrap();
-    assert!(fast.completed && rms <= 0.16, "10 m/s: {rms} m");
+    assert!(rms <= 0.03, "4 m/s: {rms} m");
+    for seed in SEEDS {
+        let fast = drive(Kind::Loop, Controller::Mpc, Receiver::Rtk, 10.0, seed);
+        let rms = fast.lateral_rms_m.unwrap();
+        assert!(
+            fast.completed && rms <= 0.10,
+            "10 m/s, seed {seed}: {rms} m"
+        );
+    }
 }
 
-/// The second car: the MPC clean at 10.5 m/s, at least 2 m/s above pure pursuit's limit
-/// (`catmodel dlc-limits --controllers pure-pursuit,mpc --vehicle host/vehicles/hatchback.toml
-/// --model models/hatchback.toml`: pure pursuit 8.38 m/s, MPC 11.38 m/s), where pure pursuit
-/// is not; the obstacle passed with 0.5 m with the standard receiver (measured 2.03 m); the
-/// loop at 10 m/s with 0.108 m lateral RMS (goal 0.10 m, pinned at 0.12 m).
+/// The second car: the MPC clean at 12.5 m/s (`catmodel dlc-limits --controllers
+/// pure-pursuit,mpc --vehicle host/vehicles/hatchback.toml --model models/hatchback.toml`:
+/// MPC 13.06 m/s; pure pursuit with the CAT Vehicle's tuning 6.69 m/s, with a lookahead tuned
+/// for this car 14.88 m/s: docs/controller.md); the obstacle passed with 0.5 m with the
+/// standard receiver (measured 2.01 m); the loop at 10 m/s within the goal's 0.10 m lateral
+/// RMS (measured 0.040 m).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn second_car_goals() {
     let (v, m) = hatchback();
     let (vehicle, node) = load_setup(Some(&v), Some(&m)).unwrap();
-    let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, 10.5);
-    assert!(clean, "MPC not clean at 10.5 m/s");
-    let pursuit =
-        controller_named("pure-pursuit", receiver_rms_m(&vehicle, Receiver::Rtk)).unwrap();
-    let (clean, _) = clean_at(&vehicle, &node, pursuit, Receiver::Rtk, 10.5);
-    assert!(!clean, "pure pursuit clean at 10.5 m/s");
+    let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, 12.5);
+    assert!(clean, "MPC not clean at 12.5 m/s");
     let car = Some((v, m));
     let obstacle = drive_car(
         car.clone(),
@@ -133,5 +131,5 @@ fn second_car_goals() {
     );
     let fast = drive_car(car, Kind::Loop, Controller::Mpc, Receiver::Rtk, 10.0, 0);
     let rms = fast.lateral_rms_m.unwrap();
-    assert!(fast.completed && rms <= 0.12, "10 m/s: {rms} m");
+    assert!(fast.completed && rms <= 0.10, "10 m/s: {rms} m");
 }

@@ -5,7 +5,8 @@
 //! against it (docs/controller.md).
 //!
 //! Steering: the goal point is the path point `lookahead` metres of station ahead of the rear
-//! axle's projection; the arc from the rear axle, tangent to the car's heading, through the
+//! axle's projection; the arc from the rear axle, tangent to its course (the heading turned by
+//! the rear tyres' slip angle, from the node's lateral model), through the
 //! goal has curvature `kappa = 2 sin(alpha) / d` (alpha the goal's bearing from the heading, d
 //! its distance); the steering is eq 2 inverted for that curvature at the current speed:
 //! `delta = atan(kappa L) (1 + K v^2)`.
@@ -108,6 +109,9 @@ pub struct CarState {
     pub pose: Option<Pose>,
     /// Speed, m/s.
     pub speed_mps: f32,
+    /// The rear axle's sideways velocity (tyre slip, from the node's lateral model; 0 in the
+    /// kinematic model), m/s, positive right.
+    pub rear_side_mps: f32,
 }
 
 /// One tick's output.
@@ -186,8 +190,17 @@ impl PurePursuitConfig {
             return hold(state, ControlStatus::Fallback);
         };
         let (dx, dy) = (goal.east_m - pose.x_m, goal.north_m - pose.y_m);
-        let forward = dx * pose.sin_heading + dy * pose.cos_heading;
-        let right = dx * pose.cos_heading - dy * pose.sin_heading;
+        // The arc starts along the rear axle's course: the heading turned by its slip angle.
+        let slip_rad = if speed > 0.5 {
+            math::atan(car.rear_side_mps / speed)
+        } else {
+            0.0
+        };
+        let (sin_slip, cos_slip) = math::sin_cos(slip_rad);
+        let sin_course = pose.sin_heading * cos_slip + pose.cos_heading * sin_slip;
+        let cos_course = pose.cos_heading * cos_slip - pose.sin_heading * sin_slip;
+        let forward = dx * sin_course + dy * cos_course;
+        let right = dx * cos_course - dy * sin_course;
         let d2 = dx * dx + dy * dy;
         // 2 sin(alpha) / d = 2 right / d^2.
         let curvature = if d2 > 1e-6 { 2.0 * right / d2 } else { 0.0 };

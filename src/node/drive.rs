@@ -83,6 +83,9 @@ pub struct DriveInputs<'a> {
     pub speed_mps: f32,
     /// The active lateral model's state.
     pub lateral: LateralState,
+    /// The rear axle's sideways velocity (tyre slip), m/s: its course is the heading turned by
+    /// `rear_side / speed`.
+    pub rear_side_mps: f32,
     /// Measured centre-tyre steering angle, rad.
     pub steer_rad: f32,
     /// Lateral model the hybrid switch chose.
@@ -355,6 +358,7 @@ impl Drive {
                 let car = PursuitCar {
                     pose: Some(pose),
                     speed_mps: inputs.speed_mps,
+                    rear_side_mps: inputs.rear_side_mps,
                 };
                 let out = PurePursuitConfig::for_node(config, self.pursuit_tuning).process(
                     &mut self.pursuit,

@@ -21,8 +21,16 @@
 //! `antenna_left_m` left of the reference point of eq 8 (the rear axle, whose velocity points
 //! along the heading). Everything inside the filter is the antenna's;
 //! [`EstimatorState::position`] moves the result back to the rear axle, and the antenna's course,
-//! which in a turn leads the heading by `atan(ahead * yaw_rate / (v + left * yaw_rate))` (rigid
-//! body, no side slip at the rear axle), is corrected before it steers the heading.
+//! which in a turn leads the heading by `atan((ahead * yaw_rate + rear_side) / (v + left *
+//! yaw_rate))`, is corrected before it steers the heading.
+//!
+//! Side slip: eq 8's rear axle moves along the heading, but a real one slides outwards in a
+//! turn by its tyres' slip angle, `m l_f a_y / (L C_r)`: 0.042 rad for the CAT Vehicle at
+//! 5 m/s^2 (a 20 m arc at 10 m/s), which a course taken for the heading turns into a heading
+//! error of the same size and a tracking offset of 0.19 m. The node's lateral model gives the
+//! rear axle's sideways velocity ([`Rates::rear_side_mps`]: `v_y - l_r r` of the dynamic
+//! single-track model, in either mode; 0 without one), and both the dead reckoning and the
+//! course's lead use it.
 use crate::image::{Image, ImageError, ImageReader, ImageWriter};
 use crate::math;
 use crate::signal::fir::{FilterError, Fir, FirState};
@@ -148,6 +156,48 @@ pub struct Xy {
     pub y_m: f32,
 }
 
+/// The body's motion the dead reckoning integrates, from the node's lateral model.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Rates {
+    /// Yaw rate, rad/s, clockwise.
+    pub yaw_rps: f32,
+    /// The rear axle's velocity to the right of the heading (tyre slip), m/s; 0 in the
+    /// kinematic model.
+    pub rear_side_mps: f32,
+}
+
+/// What the dead reckoning swept since some instant: heading change (rad, clockwise, wrapped to
+/// +-pi) and the rear axle's sideways travel in the body frame (m, right; wrapped to
+/// +-[`SLID_WRAP_M`]). Only differences over less than half a wrap are used.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Swept {
+    turned_rad: f32,
+    slid_m: f32,
+}
+
+/// The sideways travel's wrap, m: a difference over the course's age is at most a few metres,
+/// and f32 keeps millimetres up to here.
+const SLID_WRAP_M: f32 = 1024.0;
+
+fn wrap_slid(x: f32) -> f32 {
+    if x > SLID_WRAP_M {
+        x - 2.0 * SLID_WRAP_M
+    } else if x < -SLID_WRAP_M {
+        x + 2.0 * SLID_WRAP_M
+    } else {
+        x
+    }
+}
+
+impl Swept {
+    fn minus(self, other: Self) -> Self {
+        Self {
+            turned_rad: math::wrap_pi(self.turned_rad - other.turned_rad),
+            slid_m: wrap_slid(self.slid_m - other.slid_m),
+        }
+    }
+}
+
 /// Estimator state.
 #[derive(Clone, Debug)]
 pub struct EstimatorState {
@@ -170,12 +220,12 @@ pub struct EstimatorState {
     heading_rad: Option<f32>,
     /// sin and cos of the heading at this tick's dead-reckoning step.
     heading_sin_cos: (f32, f32),
-    /// The dead reckoning's heading change (yaw rate integrated, without the course
-    /// corrections; wrapped to +-pi: only differences over less than half a turn are used) at
-    /// the end of each of the last ticks (ring, newest at `turned_head`).
-    turned_rad: [f32; TURN_HISTORY_TICKS],
+    /// What the dead reckoning swept (yaw rate and the rear axle's sideways velocity
+    /// integrated, without the course corrections) at the end of each of the last ticks (ring,
+    /// newest at `turned_head`).
+    turned: [Swept; TURN_HISTORY_TICKS],
     turned_head: usize,
-    /// Valid entries of `turned_rad`.
+    /// Valid entries of `turned`.
     turned_len: usize,
 }
 
@@ -195,7 +245,7 @@ impl Default for EstimatorState {
             odo_now: Xy::default(),
             heading_rad: None,
             heading_sin_cos: (0.0, 1.0),
-            turned_rad: [0.0; TURN_HISTORY_TICKS],
+            turned: [Swept::default(); TURN_HISTORY_TICKS],
             turned_head: 0,
             turned_len: 0,
         }
@@ -322,39 +372,36 @@ impl EstimatorState {
     }
 
     /// Dead reckoning of the antenna: the car moved `dt_s` at `speed_mps` (rear axle, along the
-    /// heading) while turning at `yaw_rate_rps`; the antenna also swings sideways by
-    /// `antenna_ahead * yaw_rate` and, off the centre line, moves `antenna_left * yaw_rate`
-    /// faster along (the outside of a turn travels farther). Call once per tick, before the tick's fixes are applied with
-    /// their time offsets.
-    pub fn propagate(
-        &mut self,
-        cfg: &EstimatorConfig,
-        speed_mps: f32,
-        yaw_rate_rps: f32,
-        dt_s: f32,
-    ) {
+    /// heading) while turning at `rates.yaw_rps` and sliding sideways at `rates.rear_side_mps`;
+    /// the antenna also swings sideways by `antenna_ahead * yaw_rate` and, off the centre line,
+    /// moves `antenna_left * yaw_rate` faster along (the outside of a turn travels farther).
+    /// Call once per tick, before the tick's fixes are applied with their time offsets.
+    pub fn propagate(&mut self, cfg: &EstimatorConfig, speed_mps: f32, rates: Rates, dt_s: f32) {
         let heading = self.heading_rad.unwrap_or(0.0);
-        let mid = heading + 0.5 * yaw_rate_rps * dt_s;
+        let mid = heading + 0.5 * rates.yaw_rps * dt_s;
         let (s, c) = math::sin_cos(mid);
         // Close enough to the end-of-step heading for the <= 20 ms look-backs of `add_fix`.
         self.heading_sin_cos = (s, c);
-        let along_m = (speed_mps + cfg.antenna_left_m * yaw_rate_rps) * dt_s;
+        let along_m = (speed_mps + cfg.antenna_left_m * rates.yaw_rps) * dt_s;
         // Right of the heading is (cos, -sin); positive yaw rate (clockwise) swings the antenna
         // to the right.
-        let across_m = cfg.antenna_ahead_m * yaw_rate_rps * dt_s;
+        let across_m = (cfg.antenna_ahead_m * rates.yaw_rps + rates.rear_side_mps) * dt_s;
         self.odo_now.x_m += along_m * s + across_m * c;
         self.odo_now.y_m += along_m * c - across_m * s;
         if let Some(h) = self.heading_rad.as_mut() {
-            *h = math::wrap_pi(*h + yaw_rate_rps * dt_s);
+            *h = math::wrap_pi(*h + rates.yaw_rps * dt_s);
         }
-        let turned = self
-            .turned_rad
+        let swept = self
+            .turned
             .get(self.turned_head)
             .copied()
-            .unwrap_or(0.0);
+            .unwrap_or_default();
         self.turned_head = (self.turned_head + 1) % TURN_HISTORY_TICKS;
-        if let Some(slot) = self.turned_rad.get_mut(self.turned_head) {
-            *slot = math::wrap_pi(turned + yaw_rate_rps * dt_s);
+        if let Some(slot) = self.turned.get_mut(self.turned_head) {
+            *slot = Swept {
+                turned_rad: math::wrap_pi(swept.turned_rad + rates.yaw_rps * dt_s),
+                slid_m: wrap_slid(swept.slid_m + rates.rear_side_mps * dt_s),
+            };
         }
         self.turned_len = (self.turned_len + 1).min(TURN_HISTORY_TICKS);
     }
@@ -365,16 +412,32 @@ impl EstimatorState {
     /// whatever the yaw rate did in between: a turn that starts or ends within the age is not
     /// extrapolated with the yaw rate of now.
     pub fn turned_since(&self, age_s: f32, yaw_rate_rps: f32) -> f32 {
+        self.swept_since(
+            age_s,
+            Rates {
+                yaw_rps: yaw_rate_rps,
+                rear_side_mps: 0.0,
+            },
+        )
+        .turned_rad
+    }
+
+    /// [`Self::turned_since`] for both integrals (the rear axle's sideways travel too), with
+    /// `now`'s rates beyond the history.
+    fn swept_since(&self, age_s: f32, now_rates: Rates) -> Swept {
         let age_ticks = math::max(age_s, 0.0) / crate::SAMPLE_PERIOD_S;
-        let Some(now) = self.turned_rad.get(self.turned_head).copied() else {
-            return yaw_rate_rps * age_s;
+        let Some(now) = self.turned.get(self.turned_head).copied() else {
+            return Swept {
+                turned_rad: now_rates.yaw_rps * age_s,
+                slid_m: now_rates.rear_side_mps * age_s,
+            };
         };
         let available = self.turned_len.saturating_sub(1);
         let within = math::min(age_ticks, available as f32);
         let k0 = within as usize; // floor: within >= 0
         let w = within - k0 as f32;
         let at = |k: usize| {
-            self.turned_rad
+            self.turned
                 .get(
                     (self.turned_head + TURN_HISTORY_TICKS - k % TURN_HISTORY_TICKS)
                         % TURN_HISTORY_TICKS,
@@ -382,14 +445,19 @@ impl EstimatorState {
                 .copied()
                 .unwrap_or(now)
         };
-        let a = math::wrap_pi(now - at(k0));
+        let a = now.minus(at(k0));
         let b = if k0 < available {
-            math::wrap_pi(now - at(k0 + 1))
+            now.minus(at(k0 + 1))
         } else {
             a
         };
         let beyond_s = (age_ticks - within) * crate::SAMPLE_PERIOD_S;
-        a + (b - a) * w + yaw_rate_rps * beyond_s
+        Swept {
+            turned_rad: a.turned_rad
+                + (b.turned_rad - a.turned_rad) * w
+                + now_rates.yaw_rps * beyond_s,
+            slid_m: a.slid_m + (b.slid_m - a.slid_m) * w + now_rates.rear_side_mps * beyond_s,
+        }
     }
 
     /// One GNSS fix in local metres, `age_s` before the current dead-reckoning instant
@@ -541,31 +609,34 @@ impl EstimatorState {
     }
 
     /// Pulls the heading towards the antenna's course (rad, clockwise from north) measured
-    /// `age_s` ago, given the current speed (> 0) and yaw rate. The antenna's course leads the
-    /// heading by `atan(antenna_ahead * yaw_rate / (v + antenna_left * yaw_rate))` (rigid body,
-    /// no side slip at the rear axle), with the yaw rate of then; that is removed first, and the
-    /// course is carried to now by the heading change the dead reckoning integrated since
-    /// ([`Self::turned_since`]; carrying it with the current yaw rate instead lags the truth
-    /// in every transient, e.g. 0.05 rad in a lane change at 10 m/s with a 0.47 s old course).
-    /// The first course initialises the heading.
+    /// `age_s` ago, given the current speed (> 0) and rates. The antenna's course leads the
+    /// heading by `atan((antenna_ahead * yaw_rate + rear_side) / (v + antenna_left * yaw_rate))`
+    /// (the rear axle's slip plus the lever arm's swing), with the rates of then; that is
+    /// removed first, and the course is carried to now by the heading change the dead reckoning
+    /// integrated since ([`Self::turned_since`]; carrying it with the current yaw rate instead
+    /// lags the truth in every transient, e.g. 0.05 rad in a lane change at 10 m/s with a
+    /// 0.47 s old course). The first course initialises the heading.
     pub fn correct_heading(
         &mut self,
         cfg: &EstimatorConfig,
         course_rad: f32,
         age_s: f32,
         speed_mps: f32,
-        yaw_rate_rps: f32,
+        rates: Rates,
     ) {
         // The antenna's speed along the heading; the course says nothing when it is not ahead.
-        // The yaw rate when the course was measured: the turn over a window around then.
-        let turned = self.turned_since(age_s, yaw_rate_rps);
+        // The rates when the course was measured: the sweep over a window around then.
+        let turned = self.swept_since(age_s, rates).turned_rad;
         let half_window_s = math::min(age_s, LEAD_WINDOW_S);
-        let yaw_then_rps = (self.turned_since(age_s + LEAD_WINDOW_S, yaw_rate_rps)
-            - self.turned_since(age_s - half_window_s, yaw_rate_rps))
-            / (LEAD_WINDOW_S + half_window_s);
+        let window = self
+            .swept_since(age_s + LEAD_WINDOW_S, rates)
+            .minus(self.swept_since(age_s - half_window_s, rates));
+        let window_s = LEAD_WINDOW_S + half_window_s;
+        let (yaw_then_rps, side_then_mps) =
+            (window.turned_rad / window_s, window.slid_m / window_s);
         let antenna_along_mps = speed_mps + cfg.antenna_left_m * yaw_then_rps;
         let lead_rad = if speed_mps > 0.0 && antenna_along_mps > 0.0 {
-            math::atan(cfg.antenna_ahead_m * yaw_then_rps / antenna_along_mps)
+            math::atan((cfg.antenna_ahead_m * yaw_then_rps + side_then_mps) / antenna_along_mps)
         } else {
             0.0
         };
@@ -608,7 +679,7 @@ mod tests {
         let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
         let (v, heading) = (10.0f32, 0.7f32);
         let mut warm = EstimatorState::default();
-        warm.correct_heading(&cfg, heading, 0.0, v, 0.0);
+        warm.correct_heading(&cfg, heading, 0.0, v, Rates::default());
         let (s, c) = (heading.sin(), heading.cos());
         let mut t = 0.0f32;
         let at = |t: f32| Xy {
@@ -616,7 +687,7 @@ mod tests {
             y_m: -5.0 + v * t * c,
         };
         for _ in 0..100 {
-            warm.propagate(&cfg, v, 0.0, 0.02);
+            warm.propagate(&cfg, v, Rates::default(), 0.02);
             t += 0.02;
             for age in [0.01f32, 0.0] {
                 warm.add_fix(&cfg, at(t - age), age, v);
@@ -624,7 +695,7 @@ mod tests {
         }
         // 40 fixes missing, then the fix of this tick (age 0).
         let missing = 40u32;
-        warm.propagate(&cfg, v, 0.0, 0.02);
+        warm.propagate(&cfg, v, Rates::default(), 0.02);
         t += 0.02;
         let antenna = warm.antenna_position(&cfg).unwrap();
         let mut filled = warm.clone();
@@ -639,7 +710,7 @@ mod tests {
         for step in 0..40 {
             for state in [&mut filled, &mut restarted] {
                 if step > 0 {
-                    state.propagate(&cfg, v, 0.0, 0.01);
+                    state.propagate(&cfg, v, Rates::default(), 0.01);
                 }
                 state.add_fix(&cfg, at(t + step as f32 * 0.01), 0.0, v);
             }
@@ -658,11 +729,17 @@ mod tests {
     fn compensation_removes_the_filter_lag() {
         let cfg = EstimatorConfig::design(100.0, 0.0, 0.0).unwrap();
         let mut st = EstimatorState::default();
-        st.correct_heading(&cfg, core::f32::consts::FRAC_PI_2, 0.0, 10.0, 0.0);
+        st.correct_heading(
+            &cfg,
+            core::f32::consts::FRAC_PI_2,
+            0.0,
+            10.0,
+            Rates::default(),
+        );
         let v = 10.0;
         let mut t = 0.0f32;
         for _tick in 0..200 {
-            st.propagate(&cfg, v, 0.0, 0.02);
+            st.propagate(&cfg, v, Rates::default(), 0.02);
             t += 0.02;
             // two fixes per tick, at t - 0.01 and t
             for age in [0.01f32, 0.0] {
@@ -679,6 +756,59 @@ mod tests {
         assert!(
             (lag - v * cfg.group_delay_fixes * 0.01).abs() < 0.05,
             "{lag}"
+        );
+    }
+
+    /// A steady right turn at 10 m/s on a 20 m radius whose rear axle slides 0.042 rad out of
+    /// the turn (the CAT Vehicle's linear-tyre slip at 5 m/s^2), exact GNSS at 100 Hz from an
+    /// antenna 1.478 m ahead: told the slide, the heading estimate settles on the heading;
+    /// told nothing (eq 8's no-slip rear axle), it settles on the rear axle's course, off by
+    /// the slip angle.
+    #[test]
+    fn heading_in_a_sliding_turn() {
+        let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
+        let (v, r, slip) = (10.0f32, 0.5f32, -0.042f32);
+        let side = v * slip.tan();
+        let run = |told: Rates| {
+            let mut st = EstimatorState::default();
+            // Truth, integrated finely: rear axle position and heading.
+            let (mut x, mut y, mut psi) = (0.0f64, 0.0f64, 0.3f64);
+            let antenna = |x: f64, y: f64, psi: f64| Xy {
+                x_m: (x + 1.478 * psi.sin()) as f32,
+                y_m: (y + 1.478 * psi.cos()) as f32,
+            };
+            st.correct_heading(&cfg, psi as f32, 0.0, v, told);
+            for _tick in 0..500 {
+                st.propagate(&cfg, v, told, 0.02);
+                let mut fixes = [Xy::default(); 2];
+                for fix in fixes.iter_mut() {
+                    for _ in 0..10 {
+                        let dt = 0.001f64;
+                        let (s, c) = (psi.sin(), psi.cos());
+                        x += dt * (f64::from(v) * s + f64::from(side) * c);
+                        y += dt * (f64::from(v) * c - f64::from(side) * s);
+                        psi += dt * f64::from(r);
+                    }
+                    *fix = antenna(x, y, psi);
+                }
+                st.add_fix(&cfg, fixes[0], 0.01, v);
+                st.add_fix(&cfg, fixes[1], 0.0, v);
+                if let Some((course, age_fixes)) = st.track_course(&cfg) {
+                    st.correct_heading(&cfg, course, age_fixes * cfg.gnss_period_s, v, told);
+                }
+            }
+            math::wrap_pi(st.heading_rad().unwrap() - psi as f32)
+        };
+        let yaw = |rear_side_mps| Rates {
+            yaw_rps: r,
+            rear_side_mps,
+        };
+        let told = run(yaw(side));
+        assert!(told.abs() < 0.005, "told the slide: {told} rad");
+        let untold = run(yaw(0.0));
+        assert!(
+            (untold - slip).abs() < 0.01,
+            "not told: {untold} rad, the slip is {slip}"
         );
     }
 }

@@ -8,7 +8,7 @@ use crate::geodesy::LocalFrame;
 use crate::math;
 use crate::model::kinematic::Pose;
 
-use super::estimator::{EstimatorConfig, EstimatorState, Xy};
+use super::estimator::{EstimatorConfig, EstimatorState, Rates, Xy};
 use super::inputs::{GnssCourse, GnssFix, Inputs};
 use super::stage::{Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK};
 use super::{bump, NodeConfig};
@@ -69,14 +69,8 @@ impl Gnss {
     }
 
     /// Dead reckoning over `dt_s` (see [`EstimatorState::propagate`]).
-    pub fn propagate(
-        &mut self,
-        cfg: &EstimatorConfig,
-        speed_mps: f32,
-        yaw_rate_rps: f32,
-        dt_s: f32,
-    ) {
-        self.estimator.propagate(cfg, speed_mps, yaw_rate_rps, dt_s);
+    pub fn propagate(&mut self, cfg: &EstimatorConfig, speed_mps: f32, rates: Rates, dt_s: f32) {
+        self.estimator.propagate(cfg, speed_mps, rates, dt_s);
     }
 
     /// A course from the receiver (PGN 129026): kept, with its receive time, while the car
@@ -220,7 +214,7 @@ impl Gnss {
         config: &NodeConfig,
         now_us: u64,
         speed_mps: f32,
-        yaw_rate_rps: f32,
+        rates: Rates,
         inputs: &Inputs,
     ) -> (Option<Pose>, bool) {
         let cfg = &config.estimator;
@@ -230,7 +224,7 @@ impl Gnss {
             Some((cog, t)) if moving && now_us.saturating_sub(t) <= gnss_timeout_us => {
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
                 self.estimator
-                    .correct_heading(cfg, cog, age_s, speed_mps, yaw_rate_rps);
+                    .correct_heading(cfg, cog, age_s, speed_mps, rates);
             }
             _ if moving => {
                 if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
@@ -244,7 +238,7 @@ impl Gnss {
                     let age_s =
                         age_fixes * cfg.gnss_period_s + math::u64_to_f32(since_fix_us) * 1e-6;
                     self.estimator
-                        .correct_heading(cfg, course, age_s, speed_mps, yaw_rate_rps);
+                        .correct_heading(cfg, course, age_s, speed_mps, rates);
                 }
             }
             _ => {}

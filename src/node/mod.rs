@@ -46,7 +46,7 @@ use crate::model::predictor::{self, HorizonConfig, PredictedPoint, PredictorStar
 use crate::vehicle::{Body, VehicleParams};
 use crate::{math, SAMPLE_PERIOD_S, SAMPLE_PERIOD_US};
 use drive::{Controller, Drive, DriveInputs, DriveOutput};
-use estimator::EstimatorConfig;
+use estimator::{EstimatorConfig, Rates};
 use gnss::Gnss;
 use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
@@ -294,6 +294,11 @@ impl TickEstimate {
     }
 }
 
+/// The largest rear-axle slip angle the dead reckoning believes, rad: the linear tyres'
+/// slip beyond it is saturation (road tyres peak near 0.1 rad), which the linear model
+/// overstates.
+const MAX_REAR_SLIP_RAD: f32 = 0.15;
+
 /// The models' state (stage 2).
 #[derive(Clone, Debug)]
 struct Models {
@@ -305,8 +310,21 @@ struct Models {
     hybrid: HybridState,
     /// The active lateral model's yaw rate, rad/s (dead reckoning uses last tick's).
     yaw_rate_rps: f32,
+    /// The rear axle's sideways velocity in the lateral model (tyre slip; 0 without a dynamic
+    /// model), m/s (dead reckoning uses last tick's).
+    rear_side_mps: f32,
     /// The speed the node uses, m/s (dead reckoning uses last tick's).
     speed_mps: f32,
+}
+
+impl Models {
+    /// The rates the dead reckoning integrates.
+    fn rates(&self) -> Rates {
+        Rates {
+            yaw_rps: self.yaw_rate_rps,
+            rear_side_mps: self.rear_side_mps,
+        }
+    }
 }
 
 /// What stage 2 produced this tick.
@@ -355,6 +373,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             lateral: LateralState::default(),
             hybrid: HybridState::default(),
             yaw_rate_rps: 0.0,
+            rear_side_mps: 0.0,
             speed_mps: 0.0,
         };
         Self {
@@ -461,7 +480,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         self.gnss.propagate(
             &self.config.estimator,
             self.models.speed_mps,
-            self.models.yaw_rate_rps,
+            self.models.rates(),
             dt_s,
         );
         dt_s
@@ -589,6 +608,20 @@ impl<D: BorrowMut<Drive>> Node<D> {
             m.yaw_rate_rps = 0.0;
             bump(&mut self.inputs.counters.nonfinite);
         }
+        // Either mode's lateral state is the dynamic model's when the car has one (its steady
+        // state in the kinematic mode), so the rear axle's slip is there in both.
+        m.rear_side_mps = match &cfg.dynamics {
+            Some(d) => {
+                let side = m.lateral.vy_mps - d.cg_to_rear_m * m.lateral.yaw_rate_rps;
+                let most = MAX_REAR_SLIP_RAD * speed_mps;
+                if side.is_finite() {
+                    math::clamp(side, -most, most)
+                } else {
+                    0.0
+                }
+            }
+            None => 0.0,
+        };
         Motion {
             speed_mps,
             speed_model_mps,
@@ -605,7 +638,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             cfg,
             now_us,
             motion.speed_mps,
-            self.models.yaw_rate_rps,
+            self.models.rates(),
             &self.inputs,
         );
         // Eq 7: inputs [v_m, x, y, phi] with phi the steering angle, rad.
@@ -633,6 +666,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             pose: estimate.pose,
             speed_mps: motion.speed_mps,
             lateral: self.models.lateral,
+            rear_side_mps: self.models.rear_side_mps,
             steer_rad: motion.center_steer_rad,
             mode: motion.mode,
             speed_model: self.models.velocity.as_ref(),

@@ -293,9 +293,11 @@ impl TrackAtSpeed {
             &self.begin(),
             |t, rig| {
                 let (x, y, heading) = rear_axle(rig);
+                let plant = rig.state();
                 let car = CarState {
                     pose: Some(Pose::new(x as f32, y as f32, heading as f32)),
-                    speed_mps: rig.state().vx_mps as f32,
+                    speed_mps: plant.vx_mps as f32,
+                    rear_side_mps: (plant.vy_mps - rig.cg_to_rear_m() * plant.yaw_rate_rps) as f32,
                 };
                 let out = config.process(&mut state, Some(&path), &[], &car);
                 let steer = f64::from(out.steer_cmd_pct);
