@@ -1,11 +1,11 @@
 //! Properties of the controller on arbitrary inputs: whatever the reference, state, corridor
 //! (feasible or not), obstacles and uncertainty, every output is finite and within its range,
 //! the plan meets the steering range and rate limits exactly, the iteration and factorisation
-//! counts stay within their caps, and a non-finite input gives the fallback (status 3) without
-//! a NaN anywhere.
+//! counts stay within their caps, a non-finite input gives the fallback (status 3) without
+//! a NaN anywhere, and a tick without a solve (`MpcConfig::coast`) moves the plan on by one tick.
 use catmodel::control::mpc::{
     CarState, ControlStatus, FallbackReason, MpcInput, MpcState, DEFAULT_TUNING, MAX_OBSTACLES,
-    PLAN_STEPS, STEPS, STEP_S,
+    PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::Mode;
@@ -122,8 +122,9 @@ proptest! {
         let max_steer = (cfg.chassis.max_steer_deg as f32).to_radians();
         let rate = (cfg.steering.rate_limit_pct_per_s as f32 / 100.0) * max_steer
             * DEFAULT_TUNING.steer_rate_share;
-        // Three ticks, so that warm starts are exercised too.
-        for _ in 0..3 {
+        // Three ticks, so that warm starts are exercised too (the second is followed by a tick
+        // without a solve).
+        for tick in 0..3 {
             let input = MpcInput {
                 reference: &reference,
                 obstacles: &obstacles,
@@ -165,6 +166,33 @@ proptest! {
             for k in 0..STEPS {
                 let d = out.plan[k + 1].steer_rad - out.plan[k].steer_rad;
                 prop_assert!(d.abs() <= rate * STEP_S * (1.0 + 1e-4) + 1e-6, "step {}: {}", k, d);
+            }
+            if tick == 1 {
+                // A tick without a solve (the node's tick that loads a long path): the same
+                // plan one tick (a fifth of a step) later, the same speed command, the steering
+                // ramp one tick on; and the next solve starts from the warm start it aged.
+                let mut coasted = out;
+                mpc.coast(&mut state, &mut coasted);
+                let f = 1.0 / TICKS_PER_STEP as f32;
+                let near = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + a.abs().max(b.abs()));
+                for k in 0..=PLAN_STEPS {
+                    let (a, b, at) = if k < PLAN_STEPS {
+                        (out.plan[k], out.plan[k + 1], f)
+                    } else {
+                        (out.plan[k - 1], out.plan[k], 1.0 + f)
+                    };
+                    let p = coasted.plan[k];
+                    prop_assert!(near(p.t_s, k as f32 * STEP_S));
+                    prop_assert!(near(p.x_m, a.x_m + (b.x_m - a.x_m) * at), "x at {}", k);
+                    prop_assert!(near(p.y_m, a.y_m + (b.y_m - a.y_m) * at), "y at {}", k);
+                    prop_assert!(near(p.steer_rad, a.steer_rad + (b.steer_rad - a.steer_rad) * at));
+                }
+                prop_assert_eq!(coasted.speed_cmd_mps, out.speed_cmd_mps);
+                prop_assert_eq!(coasted.status, out.status);
+                let ramp_pct = (out.plan[1].steer_rad - out.plan[0].steer_rad) * f / max_steer * 100.0;
+                let steer = (out.steer_cmd_pct + ramp_pct).clamp(-100.0, 100.0);
+                prop_assert!(near(coasted.steer_cmd_pct, steer));
+                prop_assert_eq!(coasted.iterations, 0);
             }
         }
     }

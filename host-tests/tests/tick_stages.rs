@@ -2,20 +2,29 @@
 //! worst-case bound) against the code: a probe counts how often each stage runs in every tick
 //! of a drive that pushes every count to its limit (more frames than the cap, GNSS at three
 //! times the receiver's rate, gaps of every length, jumps beyond the gate), and no stage may
-//! ever run more often than its row says. The second factor, each stage's most expensive run,
+//! ever run more often than its row says, nor a tick run stages of two branches (a tick that
+//! loads a long path does not also plan). The second factor, each stage's most expensive run,
 //! is measured in QEMU (`cargo xtask bench-target`, docs/firmware.md "Worst-case tick").
 use catmodel::can::codec::{LocalOrigin, PathHeader, PathLimits, PathPoint, SteeringReport};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::node::{
-    first_tick_us, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
+    first_tick_us, Branch, BranchTaken, PlatformStats, Stage, StageProbe, Tick, TxFrames,
+    TICK_STAGES,
 };
 use catmodel_host_tests::bus::{config, drive, Kind, Labelled, START_US};
 
-/// Runs per stage (indexed as `TICK_STAGES`) in the current tick, and the most in any tick.
+/// Runs per stage (indexed as `TICK_STAGES`) in the current tick, the most in any tick, and
+/// every tick's runs.
 #[derive(Default)]
 struct Counting {
     this_tick: [u32; TICK_STAGES.len()],
     most: [u32; TICK_STAGES.len()],
+    /// The runs of every tick so far.
+    ticks: Vec<[u32; TICK_STAGES.len()]>,
+    /// The branch the current tick took.
+    branch: BranchTaken,
+    /// A stage that ran beside a stage of another branch, and the tick.
+    mixed: Option<(Stage, usize)>,
     /// A stage reported that has no row.
     unknown: Option<Stage>,
 }
@@ -26,6 +35,9 @@ impl StageProbe for Counting {
             Some(i) => self.this_tick[i] += 1,
             None => self.unknown = Some(stage),
         }
+        if !self.branch.enter(stage) {
+            self.mixed = Some((stage, self.ticks.len()));
+        }
     }
 }
 
@@ -34,7 +46,17 @@ impl Counting {
         for (most, n) in self.most.iter_mut().zip(self.this_tick) {
             *most = (*most).max(n);
         }
+        self.ticks.push(self.this_tick);
         self.this_tick = Default::default();
+        self.branch = BranchTaken::new();
+    }
+
+    /// Ticks in which `stage` ran.
+    fn ticks_with(&self, stage: Stage) -> Vec<usize> {
+        let i = TICK_STAGES.iter().position(|r| r.stage == stage).unwrap();
+        (0..self.ticks.len())
+            .filter(|&t| self.ticks[t][i] > 0)
+            .collect()
     }
 }
 
@@ -110,10 +132,14 @@ fn heavy_drive() -> Vec<TimedFrame> {
     frames
 }
 
+/// The tick (1-based, as in [`planner_bursts`]) that completes the last long path.
+const PATH_AGAIN_TICK: u64 = 171;
+
 /// Paths completing at the most one tick allows: a 6-point path begun two ticks earlier and
 /// two 2-point paths in one tick (one long, two short completions), then a short path begun a
-/// tick earlier and two more (three short completions). Each tick's planner frames come first
-/// in it, so the cap leaves them all to the node.
+/// tick earlier and two more (three short completions); then, while the controller plans on
+/// the last of them, a 6-point path again (a tick that loads a long path with a plan to move
+/// on). Each tick's planner frames come first in it, so the cap leaves them all to the node.
 fn planner_bursts(frames: &mut Vec<TimedFrame>) {
     let t0 = first_tick_us(frames[0].t_us);
     let mut counters = [0u8; 3];
@@ -157,12 +183,15 @@ fn planner_bursts(frames: &mut Vec<TimedFrame>) {
     let (a, b) = (path(2, 2), path(3, 2));
     let carried = path(4, 2);
     let (c, d) = (path(5, 2), path(6, 2));
-    let ticks: [(u64, Vec<CanFrame>); 5] = [
+    let again = path(7, 6);
+    let ticks: [(u64, Vec<CanFrame>); 7] = [
         (148, long[..7].to_vec()),
         (149, long[7..12].to_vec()),
         (150, [&long[12..], &a[..], &b[..]].concat()),
         (159, carried[..4].to_vec()),
         (160, [&carried[4..], &c[..], &d[..]].concat()),
+        (PATH_AGAIN_TICK - 1, again[..7].to_vec()),
+        (PATH_AGAIN_TICK, again[7..].to_vec()),
     ];
     for (k, burst) in ticks {
         assert!(burst.len() <= catmodel::node::MAX_RX_FRAMES_PER_TICK);
@@ -223,6 +252,7 @@ fn every_stage_has_one_row() {
         | Stage::Estimate
         | Stage::DriveReference
         | Stage::MpcSolve
+        | Stage::DriveCoast
         | Stage::Drive
         | Stage::Predict
         | Stage::Publish => true,
@@ -242,6 +272,7 @@ fn every_stage_has_one_row() {
         Stage::Estimate,
         Stage::DriveReference,
         Stage::MpcSolve,
+        Stage::DriveCoast,
         Stage::Drive,
         Stage::Predict,
         Stage::Publish,
@@ -263,6 +294,7 @@ fn no_stage_runs_more_often_than_its_row_and_the_drive_reaches_every_limit() {
     let frames = heavy_drive();
     let (counting, same) = run(&frames);
     assert_eq!(counting.unknown, None);
+    assert_eq!(counting.mixed, None, "a tick ran stages of two branches");
     for (row, most) in TICK_STAGES.iter().zip(counting.most) {
         assert!(
             most <= row.max_per_tick,
@@ -310,4 +342,47 @@ fn the_probed_step_is_the_step() {
         counting.most[frame_row],
         catmodel::node::MAX_RX_FRAMES_PER_TICK as u32
     );
+}
+
+#[test]
+fn a_tick_that_loads_a_long_path_does_not_plan_and_the_next_one_does() {
+    let frames = heavy_drive();
+    let (counting, _) = run(&frames);
+    assert_eq!(counting.mixed, None);
+    let loads = counting.ticks_with(Stage::PathComplete);
+    let plans = counting.ticks_with(Stage::MpcSolve);
+    let coasts = counting.ticks_with(Stage::DriveCoast);
+    // Both long paths; the first arrives before any plan (nothing to move on: a hold), the
+    // second while the controller plans (it moves the plan on).
+    assert_eq!(loads.len(), 2, "{loads:?}");
+    assert_eq!(coasts, loads[1..].to_vec());
+    assert!(
+        plans.contains(&(loads[1] - 1)),
+        "a plan before the second load"
+    );
+    for load in loads {
+        assert!(
+            !plans.contains(&load),
+            "tick {load} loaded a long path and planned"
+        );
+        assert!(
+            plans.contains(&(load + 1)),
+            "no plan in the tick after {load}"
+        );
+    }
+    // The rows say so: the loading stages are one branch, the plan's another.
+    let branch = |stage: Stage| {
+        TICK_STAGES
+            .iter()
+            .find(|r| r.stage == stage)
+            .unwrap()
+            .branch
+    };
+    assert_eq!(branch(Stage::PathComplete), Branch::PathLoad);
+    assert_eq!(branch(Stage::DriveCoast), Branch::PathLoad);
+    assert_eq!(branch(Stage::MpcSolve), Branch::Plan);
+    assert_eq!(branch(Stage::DriveReference), Branch::Plan);
+    // What may run beside a plan is common: short paths, the origin.
+    assert_eq!(branch(Stage::PathCompleteShort), Branch::Common);
+    assert_eq!(branch(Stage::Origin), Branch::Common);
 }

@@ -13,6 +13,13 @@
 //! - [`Controller::PurePursuit`], the reference controller it is measured against
 //!   ([`crate::control::pure_pursuit`]); the PREDICTION frames stay the node's roll-out.
 //!
+//! A tick that completes a path of more than [`SHORT_PATH_POINTS`] points (its validation and
+//! load over every point) does not also solve: the model-predictive controller sends the
+//! previous tick's plan moved on by one tick ([`MpcConfig::coast`]; without a plan from the
+//! previous tick, the node holds as below, status 0 if it had no path before, else 3) and
+//! solves on the new path in the next tick. So loading a path and solving never add up in one
+//! tick (docs/firmware.md, "Worst-case tick").
+//!
 //! CONTROL_COMMAND goes out every tick: status 0 (no path: speed 0, steering held), 1 tracking,
 //! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet, or
 //! the controller's own fallback: speed 0, steering along the last feasible plan). Never a NaN:
@@ -38,7 +45,7 @@ use crate::model::kinematic::Pose;
 use crate::model::predictor::PredictedPoint;
 use crate::model::SsBlockState;
 
-use super::stage::{Stage, StageProbe};
+use super::stage::{Stage, StageProbe, SHORT_PATH_POINTS};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
 
 /// Which controller drives.
@@ -98,6 +105,17 @@ pub struct DriveOutput {
     pub plan: Option<[PredictedPoint; PREDICTION_POINTS]>,
 }
 
+/// What one planner frame did ([`Drive::receive`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Received {
+    /// The planner's map origin (1e-7 deg), when a LOCAL_ORIGIN completed it.
+    pub origin: Option<(i32, i32)>,
+    /// When the frame completed a path (accepted or refused), its stage:
+    /// [`Stage::PathComplete`] for a path of more than [`SHORT_PATH_POINTS`] points, else
+    /// [`Stage::PathCompleteShort`].
+    pub completed: Option<Stage>,
+}
+
 /// The drive stage's state. See the module doc for why it lives apart from the node.
 #[derive(Clone, Debug)]
 pub struct Drive {
@@ -110,6 +128,12 @@ pub struct Drive {
     projection: Option<Projection>,
     /// The last plan's speeds (the reference's stations follow them).
     planned_speeds: Option<[f32; PLAN_STEPS + 1]>,
+    /// The model-predictive controller's last accepted output (kept in place: it is 0.6 KiB).
+    last_plan: Option<MpcOutput>,
+    /// ... and it is the previous tick's.
+    planned_last_tick: bool,
+    /// A long path completed this tick: no solve until the next ([`Stage::DriveCoast`]).
+    path_loaded: bool,
     /// Commands sent last tick.
     last_speed_cmd_mps: f32,
     last_steer_cmd_pct: f32,
@@ -142,6 +166,9 @@ impl Drive {
             },
             projection: None,
             planned_speeds: None,
+            last_plan: None,
+            planned_last_tick: false,
+            path_loaded: false,
             last_speed_cmd_mps: 0.0,
             last_steer_cmd_pct: 0.0,
             last_command: ControlCommand {
@@ -163,6 +190,9 @@ impl Drive {
         self.pursuit = PurePursuitState::default();
         self.projection = None;
         self.planned_speeds = None;
+        self.last_plan = None;
+        self.planned_last_tick = false;
+        self.path_loaded = false;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
         self.mpc_config = match config.controller {
@@ -203,15 +233,36 @@ impl Drive {
         self.pursuit_tuning = tuning;
     }
 
-    /// Applies one planner message (stage 1); returns the map origin when LOCAL_ORIGIN set it.
-    pub fn receive(&mut self, message: &PlannerMessage) -> Option<(i32, i32)> {
+    /// Applies one planner message (stage 1).
+    pub fn receive(&mut self, message: &PlannerMessage) -> Received {
+        // The points of the path being assembled: a frame that completes it has its whole
+        // stream in, so this is the path's length.
+        let points = self.planner.receiving().map_or(0, |(_, p, l)| p.max(l));
+        let completed = |long: &mut bool| {
+            *long |= points > SHORT_PATH_POINTS;
+            Some(if points > SHORT_PATH_POINTS {
+                Stage::PathComplete
+            } else {
+                Stage::PathCompleteShort
+            })
+        };
         match self.planner.receive(message) {
             PlannerEvent::PathActivated(_) => {
                 self.new_path();
-                None
+                Received {
+                    origin: None,
+                    completed: completed(&mut self.path_loaded),
+                }
             }
-            PlannerEvent::Origin { lat_e7, lon_e7 } => Some((lat_e7, lon_e7)),
-            PlannerEvent::None | PlannerEvent::PathInvalid(..) => None,
+            PlannerEvent::PathInvalid(..) => Received {
+                origin: None,
+                completed: completed(&mut self.path_loaded),
+            },
+            PlannerEvent::Origin { lat_e7, lon_e7 } => Received {
+                origin: Some((lat_e7, lon_e7)),
+                completed: None,
+            },
+            PlannerEvent::None => Received::default(),
         }
     }
 
@@ -230,7 +281,8 @@ impl Drive {
     }
 
     /// Stage 4: this tick's commands. `probe` marks where the model-predictive controller's
-    /// problem and solve end ([`Stage::DriveReference`], [`Stage::MpcSolve`]).
+    /// problem and solve end ([`Stage::DriveReference`], [`Stage::MpcSolve`]), or its coast
+    /// in a tick that loaded a long path ([`Stage::DriveCoast`]).
     pub fn tick<P: StageProbe>(
         &mut self,
         config: &NodeConfig,
@@ -238,7 +290,9 @@ impl Drive {
         probe: &mut P,
     ) -> DriveOutput {
         self.last_tracking = None;
-        let out = self.decide(config, inputs, probe);
+        let path_loaded = core::mem::take(&mut self.path_loaded);
+        let planned_last_tick = core::mem::take(&mut self.planned_last_tick);
+        let out = self.decide(config, inputs, path_loaded, planned_last_tick, probe);
         self.last_command = out.command;
         out
     }
@@ -247,6 +301,8 @@ impl Drive {
         &mut self,
         config: &NodeConfig,
         inputs: &DriveInputs<'_>,
+        path_loaded: bool,
+        planned_last_tick: bool,
         probe: &mut P,
     ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
@@ -259,6 +315,20 @@ impl Drive {
             return self.hold(ControlStatus::Fallback);
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
+            (Controller::Mpc, Some(mpc)) if path_loaded => {
+                let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
+                    // Nothing to move on: the path takes effect next tick.
+                    let status = match self.last_command.status {
+                        ControlStatus::NoPath => ControlStatus::NoPath,
+                        _ => ControlStatus::Fallback,
+                    };
+                    return self.hold(status);
+                };
+                mpc.coast(&mut self.mpc, out);
+                probe.lap(Stage::DriveCoast);
+                self.planned_last_tick = true;
+                mpc_command(out)
+            }
             (Controller::Mpc, Some(mpc)) => {
                 let Some((out, tracking)) = mpc_tick(
                     mpc,
@@ -277,18 +347,12 @@ impl Drive {
                     return self.hold(ControlStatus::Fallback);
                 };
                 self.last_tracking = Some(tracking);
-                DriveOutput {
-                    command: ControlCommand {
-                        status: match out.status {
-                            mpc::ControlStatus::Tracking => ControlStatus::Tracking,
-                            mpc::ControlStatus::Avoiding => ControlStatus::Avoiding,
-                            mpc::ControlStatus::Fallback => ControlStatus::Fallback,
-                        },
-                        steer_cmd_pct: Some(out.steer_cmd_pct),
-                        speed_cmd_mps: Some(out.speed_cmd_mps),
-                    },
-                    plan: Some(prediction_points(&out)),
+                let command = mpc_command(&out);
+                if out.status != mpc::ControlStatus::Fallback {
+                    self.last_plan = Some(out);
+                    self.planned_last_tick = true;
                 }
+                command
             }
             _ => {
                 let car = PursuitCar {
@@ -334,6 +398,22 @@ impl Drive {
             },
             plan: None,
         }
+    }
+}
+
+/// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
+fn mpc_command(out: &MpcOutput) -> DriveOutput {
+    DriveOutput {
+        command: ControlCommand {
+            status: match out.status {
+                mpc::ControlStatus::Tracking => ControlStatus::Tracking,
+                mpc::ControlStatus::Avoiding => ControlStatus::Avoiding,
+                mpc::ControlStatus::Fallback => ControlStatus::Fallback,
+            },
+            steer_cmd_pct: Some(out.steer_cmd_pct),
+            speed_cmd_mps: Some(out.speed_cmd_mps),
+        },
+        plan: Some(prediction_points(out)),
     }
 }
 

@@ -51,8 +51,9 @@ use gnss::Gnss;
 use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
 pub use stage::{
-    NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK,
-    MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS, TICK_STAGES,
+    Branch, BranchTaken, NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK,
+    GNSS_FIXES_PER_TICK, MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS,
+    TICK_STAGES,
 };
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
@@ -521,21 +522,9 @@ impl<D: BorrowMut<Drive>> Node<D> {
                 }
                 Some(Routed::Planner(message)) => {
                     planner_frames = true;
-                    let drive = self.drive.borrow_mut();
-                    let completed_before = paths_completed(drive);
-                    // The points of the path being assembled: a frame that completes it has
-                    // its whole stream in, so this is the path's length.
-                    let points = drive.planner().receiving().map_or(0, |(_, p, l)| p.max(l));
-                    if let Some(o) = drive.receive(&message) {
-                        origin = Some(o);
-                    }
-                    if paths_completed(drive) != completed_before {
-                        stage = if points > SHORT_PATH_POINTS {
-                            Stage::PathComplete
-                        } else {
-                            Stage::PathCompleteShort
-                        };
-                    }
+                    let received = self.drive.borrow_mut().receive(&message);
+                    origin = received.origin.or(origin);
+                    stage = received.completed.unwrap_or(stage);
                 }
                 None => {}
             }
@@ -762,11 +751,4 @@ fn fresh(
     now_us: u64,
 ) -> bool {
     freshness.is_fresh(&config.freshness, input, now_us)
-}
-
-/// Paths the planner side completed so far (made active or refused): a change tells the
-/// receive stage that a frame ran a path's validation and load.
-fn paths_completed(drive: &Drive) -> u64 {
-    let c = drive.planner().counters();
-    u64::from(c.paths_activated) + u64::from(c.paths_invalid)
 }

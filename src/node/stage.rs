@@ -5,9 +5,12 @@
 //! a bounded count: the received frames (at most [`MAX_RX_FRAMES_PER_TICK`]), the GNSS fixes
 //! among them ([`GNSS_FIXES_PER_TICK`]), the missing fixes filled after a gap
 //! ([`GAP_FILL_PER_TICK`]); everything else runs once per tick, with fixed loop counts inside.
-//! So a tick's work is at most
-//! `sum over stages of max_per_tick(stage) x most expensive run of the stage`,
-//! whatever the input. [`TICK_STAGES`] writes the first factor down next to the code;
+//! Some stages exclude one another: a tick that completes a long path does not also plan
+//! ([`Branch`]). So a tick's work is at most
+//! `sum over the common stages of max_per_tick(stage) x most expensive run of the stage`
+//! `+ max over the branches of the same sum over the branch's stages`,
+//! whatever the input. [`TICK_STAGES`] writes the first factor and the branches down next to
+//! the code;
 //! `cargo xtask bench-target` measures the second in QEMU on each stage's costliest path
 //! (`firmware/src/bin/qemu_bench.rs`) and `cargo qemu` adds the product up into
 //! `worst_case_bound_instructions`. Adding a stage to the tick is adding a [`Stage`], a
@@ -17,7 +20,8 @@
 //! end of each piece of work; everything since the previous lap belongs to that stage. In
 //! [`Node::step`](super::Node::step) the probe is [`NoProbe`], whose laps compile to nothing.
 //! `host-tests/tests/tick_stages.rs` runs the node over adversarial ticks with a counting probe
-//! and checks that no stage ever runs more often than its row says.
+//! and checks that no stage ever runs more often than its row says, and that no tick runs
+//! stages of two branches.
 
 /// Frames one tick decodes at most: 12. The inputs of `catmodel.dbc` are 7 frames per 20 ms at
 /// their highest rates (steering, speed and pedal reports at 50 Hz: 3; GNSS position and
@@ -91,6 +95,10 @@ pub enum Stage {
     /// row active and no early exit (`catmodel-qemu-mpc-bench`, `mpc_worst_*`); the bound
     /// takes the larger of that and what the stage drives showed.
     MpcSolve,
+    /// The model-predictive controller in a tick that completed a long path
+    /// ([`Stage::PathComplete`]): no solve, the previous tick's plan moved on by one tick
+    /// (`MpcConfig::coast`); the next tick solves on the new path.
+    DriveCoast,
     /// The controller's commands (CONTROL_COMMAND; after the model-predictive controller's
     /// solve its checks and plan, the pure pursuit's step, or holding without a path).
     Drive,
@@ -115,7 +123,60 @@ impl StageProbe for NoProbe {
     fn lap(&mut self, _stage: Stage) {}
 }
 
-/// One row of the tick's structure: a stage and how often it may run in one tick.
+/// Which of a tick's mutually exclusive branches a stage belongs to. A tick runs the
+/// [`Branch::Common`] stages and the stages of at most one other branch: a tick that completes
+/// a path of more than [`SHORT_PATH_POINTS`] points (its validation and load, the controller's
+/// restart) does not also plan; its drive stage moves the previous plan on by one tick instead
+/// and the next tick plans on the new path (`super::drive`). Whatever may run in the same tick
+/// as a plan (short paths, LOCAL_ORIGIN) is common.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Branch {
+    /// Any tick.
+    Common,
+    /// A tick that completes a long path.
+    PathLoad,
+    /// A tick in which the model-predictive controller plans.
+    Plan,
+}
+
+impl Branch {
+    /// Short name (the stage measurement's output, `timing.json`).
+    pub const fn key(self) -> &'static str {
+        match self {
+            Branch::Common => "common",
+            Branch::PathLoad => "path_load",
+            Branch::Plan => "plan",
+        }
+    }
+}
+
+/// The branch a tick has taken, for checking that it takes one at most (the stage
+/// measurement in QEMU and `host-tests/tests/tick_stages.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BranchTaken(Option<Branch>);
+
+impl BranchTaken {
+    /// A new tick: no branch yet.
+    pub const fn new() -> Self {
+        Self(None)
+    }
+
+    /// `stage` ran; false if its branch is not the one this tick took before.
+    pub fn enter(&mut self, stage: Stage) -> bool {
+        match bound_of(stage).map(|row| row.branch) {
+            None | Some(Branch::Common) => true,
+            Some(branch) => *self.0.get_or_insert(branch) == branch,
+        }
+    }
+
+    /// The branch taken, if any.
+    pub const fn taken(&self) -> Option<Branch> {
+        self.0
+    }
+}
+
+/// One row of the tick's structure: a stage, how often it may run in one tick, and its branch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StageBound {
     /// The stage.
@@ -126,112 +187,138 @@ pub struct StageBound {
     pub max_per_tick: u32,
     /// Why no more (the constant or the rule that bounds it).
     pub because: &'static str,
+    /// Which stages it may run beside.
+    pub branch: Branch,
 }
 
 /// The tick's structure, in the order the stages run. Each stage's `max_per_tick` is enforced
 /// by the code it names.
-pub const TICK_STAGES: [StageBound; 17] = [
+pub const TICK_STAGES: [StageBound; 18] = [
     StageBound {
         stage: Stage::Advance,
         key: "advance",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Frame,
         key: "frame",
         max_per_tick: MAX_RX_FRAMES_PER_TICK as u32,
         because: "MAX_RX_FRAMES_PER_TICK",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::PathComplete,
         key: "path_complete",
         max_per_tick: 1,
         because: "one path assembled at a time; only a path begun in an earlier tick is long",
+        branch: Branch::PathLoad,
     },
     StageBound {
         stage: Stage::PathCompleteShort,
         key: "path_complete_short",
         max_per_tick: 3,
         because: "SHORT_PATH_POINTS: the carried-over path and 2 x 5 frames of the 12",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Origin,
         key: "origin",
         max_per_tick: 1,
         because: "the tick's last LOCAL_ORIGIN only, after the frames",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::GnssOrigin,
         key: "gnss_origin",
         max_per_tick: 1,
         because: "once in the node's life (the local frame is never rebuilt)",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::GnssFixCheck,
         key: "gnss_fix_check",
         max_per_tick: GNSS_FIXES_PER_TICK as u32,
         because: "GNSS_FIXES_PER_TICK",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::GnssFill,
         key: "gnss_fill",
         max_per_tick: GAP_FILL_PER_TICK,
         because: "GAP_FILL_PER_TICK",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::GnssRestart,
         key: "gnss_restart",
         max_per_tick: 1,
         because: "at most one restart on the track per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::GnssFixFilter,
         key: "gnss_fix_filter",
         max_per_tick: GNSS_FIXES_PER_TICK as u32,
         because: "GNSS_FIXES_PER_TICK",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Models,
         key: "models",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Estimate,
         key: "estimate",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::DriveReference,
         key: "drive_reference",
         max_per_tick: 1,
         because: "once per tick, over the reference's fixed stations",
+        branch: Branch::Plan,
     },
     StageBound {
         stage: Stage::MpcSolve,
         key: "mpc_solve",
         max_per_tick: 1,
         because: "once per tick; ADMM iterations capped (MpcTuning::admm), worst case from catmodel-qemu-mpc-bench",
+        branch: Branch::Plan,
+    },
+    StageBound {
+        stage: Stage::DriveCoast,
+        key: "drive_coast",
+        max_per_tick: 1,
+        because: "once per tick, in place of the solve",
+        branch: Branch::PathLoad,
     },
     StageBound {
         stage: Stage::Drive,
         key: "drive",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Predict,
         key: "predict",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
     StageBound {
         stage: Stage::Publish,
         key: "publish",
         max_per_tick: 1,
         because: "once per tick",
+        branch: Branch::Common,
     },
 ];
 

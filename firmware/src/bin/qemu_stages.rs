@@ -75,7 +75,7 @@ fn stage_mode() {
         Err(StageError::Model) => fail("the baked model does not build"),
         Err(StageError::Structure(stage)) => {
             semihosting::eprintln!(
-                "catmodel-qemu-stages: error: stage {stage:?} ran more often in one tick than TICK_STAGES allows"
+                "catmodel-qemu-stages: error: stage {stage:?} ran more often in one tick than TICK_STAGES allows, or beside a stage of another branch"
             );
             semihosting::process::exit(3)
         }

@@ -318,7 +318,7 @@ impl SpeedState {
     }
 
     /// Warm start for the next tick: one tick is a fifth of a step, a tenth of a knot.
-    fn shift(&mut self) {
+    pub(super) fn shift(&mut self) {
         let per_step = 1.0 / TICKS_PER_STEP as f32;
         let per_knot = per_step / KNOT_STEPS as f32;
         shift(&mut self.z_cmd, per_knot);

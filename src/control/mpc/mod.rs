@@ -674,6 +674,56 @@ impl MpcConfig {
         }
     }
 
+    /// A tick without a solve: `out`, the previous tick's accepted output, moved on by one
+    /// tick along its own plan (in place: it is 0.6 KiB), and the warm start aged by the same
+    /// tick (the next solve starts where it would have after two solves). The steering ramp
+    /// moves on at the plan's first rate (the plan holds it over the first step), the speed
+    /// command is the first knot's (it holds for 0.2 s), the plan is the same trajectory seen
+    /// one tick later. The node's drive stage runs it in a tick that completes a long path, so
+    /// that no tick both loads a path and solves (docs/firmware.md, "Worst-case tick"). Its
+    /// cost is fixed: no loop depends on the data.
+    pub fn coast(&self, state: &mut MpcState, out: &mut MpcOutput) {
+        let tick_steps = 1.0 / TICKS_PER_STEP as f32;
+        if let Some(lin) = state.lin.as_mut() {
+            shift_values(&mut lin.e_psi, tick_steps);
+            shift_values(&mut lin.delta, tick_steps);
+            state.workspace.shift(tick_steps);
+        }
+        state.speed.shift();
+        if let Some((_, age)) = &mut state.last_steer_plan {
+            *age = age.saturating_add(1);
+        }
+        let steer_at = |k: usize| out.plan.get(k).map_or(0.0, |p| p.steer_rad);
+        let tick_rad = (steer_at(1) - steer_at(0)) * tick_steps;
+        if let Some(ramp) = &mut state.steer_ramp_rad {
+            *ramp += tick_rad;
+        }
+        let steer_pct = out.steer_cmd_pct + tick_rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
+        out.steer_cmd_pct = clamp(
+            finite_or(steer_pct, out.steer_cmd_pct),
+            -STEER_PCT_LIMIT,
+            STEER_PCT_LIMIT,
+        );
+        // Point k becomes the old plan a fifth of a step after k: it reads points k and k + 1
+        // only, so the points move first to last; the last one extrapolates the old last step.
+        let point = |k: usize| out.plan.get(k).copied().unwrap_or_default();
+        let last_step = (point(PLAN_STEPS - 1), point(PLAN_STEPS));
+        for k in 0..=PLAN_STEPS {
+            let (a, b, f) = match (out.plan.get(k), out.plan.get(k + 1)) {
+                (Some(a), Some(b)) => (*a, *b, tick_steps),
+                _ => (last_step.0, last_step.1, 1.0 + tick_steps),
+            };
+            if let Some(p) = out.plan.get_mut(k) {
+                *p = PlanPoint {
+                    t_s: k as f32 * STEP_S,
+                    ..between(&a, &b, f)
+                };
+            }
+        }
+        out.iterations = 0;
+        out.factorisations = 0;
+    }
+
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
     /// dynamic model.
     /// The model the steering is planned with: the dynamic one whenever the car has one and
@@ -1083,6 +1133,22 @@ fn interpolate(v: &[f32; STEPS + 1], at: f32) -> f32 {
     let a = v.get(i).copied().unwrap_or(0.0);
     let b = v.get(i + 1).copied().unwrap_or(a);
     a + (b - a) * frac
+}
+
+/// The point `f` of the way from `a` to `b` (beyond `b` for `f` > 1): linear, the heading
+/// along the shorter way, the speed not below 0.
+fn between(a: &PlanPoint, b: &PlanPoint, f: f32) -> PlanPoint {
+    let mix = |x: f32, y: f32| x + (y - x) * f;
+    PlanPoint {
+        t_s: mix(a.t_s, b.t_s),
+        x_m: mix(a.x_m, b.x_m),
+        y_m: mix(a.y_m, b.y_m),
+        heading_rad: math::wrap_pi(
+            a.heading_rad + math::wrap_pi(b.heading_rad - a.heading_rad) * f,
+        ),
+        speed_mps: max(mix(a.speed_mps, b.speed_mps), 0.0),
+        steer_rad: mix(a.steer_rad, b.steer_rad),
+    }
 }
 
 /// Each value moved `f` of the way to the next one (the last held).

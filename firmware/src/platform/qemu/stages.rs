@@ -10,10 +10,10 @@
 //! reported as its own row. Every count is TIM2's, one per instruction under `-icount shift=0`.
 //!
 //! Output (semihosting stderr), tab-separated: one
-//! `stage KEY MAX_PER_TICK RUNS MAX DRIVE MAX_CONTROL DRIVE_CONTROL WHY` line per row (the
-//! node's rows of `TICK_STAGES`, then the app's; MAX over the ticks in which no controller
+//! `stage KEY MAX_PER_TICK RUNS MAX DRIVE MAX_CONTROL DRIVE_CONTROL BRANCH WHY` line per row
+//! (the node's rows of `TICK_STAGES`, then the app's; MAX over the ticks in which no controller
 //! planned, MAX_CONTROL over every tick; DRIVE is the index of the drive that showed the
-//! maximum), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
+//! maximum; BRANCH the row's `Branch::key`, the app's rows are common), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
 //! largest whole ticks measured, without and with a controller planning), and `stage-done`.
 //! A tick is a controller tick when a controller planned in it or a planner path was completed
 //! in it (`TickEstimate::controller_tick`), as the app flags it (`TickReport::controller`).
@@ -25,7 +25,8 @@ use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, TimedFrame};
 use catmodel::node::drive::Drive;
 use catmodel::node::{
-    first_tick_us, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames, TICK_STAGES,
+    first_tick_us, Branch, BranchTaken, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames,
+    TICK_STAGES,
 };
 use catmodel::SAMPLE_PERIOD_US;
 use catmodel_app::{hand_off, LinkCounters, RxQueue, TxBatch, TxQueue, RX_BATCH_LEN};
@@ -52,7 +53,10 @@ pub struct Laps {
     /// Largest run of each stage in the current tick.
     tick_max: [u32; NODE_ROWS],
     tick_sum: u32,
-    /// A stage ran more often in one tick than its row allows (the structure is wrong).
+    /// The branch the current tick took.
+    branch: BranchTaken,
+    /// A stage ran more often in one tick than its row allows, or beside a stage of another
+    /// branch (the structure is wrong).
     pub over_structure: Option<Stage>,
 }
 
@@ -68,6 +72,7 @@ impl Laps {
             this_tick: [0; NODE_ROWS],
             tick_max: [0; NODE_ROWS],
             tick_sum: 0,
+            branch: BranchTaken::new(),
             over_structure: None,
         }
     }
@@ -78,6 +83,7 @@ impl Laps {
         self.this_tick = [0; NODE_ROWS];
         self.tick_max = [0; NODE_ROWS];
         self.tick_sum = 0;
+        self.branch = BranchTaken::new();
         compiler_fence(Ordering::SeqCst);
         self.last = icount::now();
     }
@@ -121,7 +127,7 @@ impl StageProbe for Laps {
                 *max = (*max).max(n);
                 *runs += 1;
                 *this += 1;
-                if *this > row.max_per_tick {
+                if *this > row.max_per_tick || !self.branch.enter(stage) {
                     self.over_structure = Some(stage);
                 }
             }
@@ -180,7 +186,8 @@ pub enum StageError {
     Io,
     /// The baked model does not build.
     Model,
-    /// A stage ran more often in one tick than `TICK_STAGES` allows.
+    /// A stage ran more often in one tick than `TICK_STAGES` allows, or beside a stage of
+    /// another branch.
     Structure(Stage),
 }
 
@@ -246,7 +253,7 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
             laps.any.get(i).copied().unwrap_or((0, 0)),
         );
         semihosting::eprintln!(
-            "stage\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
+            "stage\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
             row.key,
             row.max_per_tick,
             laps.runs.get(i).copied().unwrap_or(0),
@@ -254,6 +261,7 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
             plain.1,
             any.0,
             any.1,
+            row.branch.key(),
             row.because
         );
     }
@@ -277,12 +285,13 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
     ] {
         let [plain, any] = max;
         semihosting::eprintln!(
-            "stage\t{key}\t1\t{}\t{}\t{}\t{}\t{}\t{why}",
+            "stage\t{key}\t1\t{}\t{}\t{}\t{}\t{}\t{}\t{why}",
             app.ticks,
             plain.0,
             plain.1,
             any.0,
-            any.1
+            any.1,
+            Branch::Common.key()
         );
     }
     let [plain, any] = app.whole_tick;
