@@ -152,6 +152,10 @@ enum Command {
         /// Sensor noise seed.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// The planner replans: it sends the path (a new path id) and obstacles again every
+        /// SECONDS (default: once).
+        #[arg(long, value_name = "SECONDS")]
+        replan_every: Option<f64>,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -469,6 +473,7 @@ fn run(cli: Cli) -> Result<()> {
             receiver,
             speed,
             seed,
+            replan_every,
             out,
         } => {
             let progress = Progress::spinner(&format!("closed loop: {scenario}"));
@@ -481,6 +486,7 @@ fn run(cli: Cli) -> Result<()> {
                     receiver,
                     speed_mps: speed,
                     seed,
+                    replan_s: replan_every,
                     out,
                 })?;
             progress.finish();

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use catmodel::control::path::Path as CorePath;
-use catmodel_host::closed_loop::driver::NodeDriver;
+use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::metrics::{body_corners, distance_to_body, Scorer};
 use catmodel_host::closed_loop::scenario::{
     self, dlc_lanes, Kind, CONE_RADIUS_M, CONE_SPACING_M, DLC_PATH_MARGIN_M,
@@ -210,6 +210,7 @@ fn run_pp(
         seed,
         receiver,
         max_time_s: 150.0,
+        replan_s: None,
     };
     run(&vehicle, &course, &mut driver, "pure-pursuit", &options)
 }
@@ -354,4 +355,46 @@ fn closed_loop_command_errors_name_the_problem() {
         assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
         assert!(stderr.contains(needle), "{args:?}: {stderr}");
     }
+}
+
+/// A planner that replans (the path sent again, with a new path id, as soon as the previous
+/// transfer has gone out): every replacement resets the controller and is loaded in a tick
+/// that does not solve (the previous plan is moved on by one tick instead, docs/firmware.md
+/// "Worst-case tick"); the car drives through all of them as through one path: the lane change
+/// at 10 m/s clean, no fallback tick, tracking as with one path.
+#[test]
+fn the_mpc_drives_through_a_replanning_planners_paths() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, 10.0);
+    let drive = |replan_s| {
+        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+        let options = RunOptions {
+            seed: 0,
+            receiver: Receiver::Rtk,
+            max_time_s: 120.0,
+            replan_s,
+        };
+        run(&vehicle, &course, &mut driver, "mpc", &options)
+    };
+    let once = drive(None);
+    let replanned = drive(Some(0.5));
+    let headers = |out: &catmodel_host::closed_loop::RunOutput| {
+        out.inputs
+            .iter()
+            .filter(|f| f.frame.id == catmodel::can::spec::PATH_HEADER.id)
+            .count()
+    };
+    assert_eq!(headers(&once), 1);
+    assert!(headers(&replanned) >= 5, "{} paths", headers(&replanned));
+    let m = &replanned.metrics;
+    assert!(m.clean && m.completed, "{m:?}");
+    assert_eq!(m.status_ticks[3], 0, "fallback ticks: {m:?}");
+    let (a, b) = (
+        once.metrics.lateral_rms_m.unwrap(),
+        m.lateral_rms_m.unwrap(),
+    );
+    assert!(
+        (a - b).abs() < 0.03,
+        "lateral RMS {a} with one path, {b} replanned"
+    );
 }

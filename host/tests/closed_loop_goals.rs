@@ -47,6 +47,7 @@ fn drive_car(
         seed,
         receiver,
         max_time_s: 120.0,
+        replan_s: None,
     };
     run(&vehicle, &course, &mut driver, "", &options).metrics
 }

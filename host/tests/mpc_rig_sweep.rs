@@ -15,6 +15,7 @@ fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
         seed,
         receiver: Receiver::Rtk,
         max_time_s: 120.0,
+        replan_s: None,
     };
     let m = run(&vehicle, &course, &mut driver, "mpc", &options).metrics;
     (

@@ -35,6 +35,7 @@ pub fn clean_at(
             seed,
             receiver,
             max_time_s: 120.0,
+            replan_s: None,
         };
         let m = run(vehicle, &course, &mut driver, "", &options).metrics;
         if !m.clean {

@@ -102,6 +102,9 @@ pub struct RunOptions {
     pub receiver: Receiver,
     /// Stop after this much simulated time, s.
     pub max_time_s: f64,
+    /// A planner that replans: the course's path (a new path id) and obstacles are sent again
+    /// this often, s (each time the previous transfer has gone out); `None`: once, at the start.
+    pub replan_s: Option<f64>,
 }
 
 /// One tick of a run, for plots.
@@ -318,6 +321,8 @@ pub fn run(
     // Note: the scenarios' paths have 2..=256 points and at most 4 obstacles (host tests).
     let _ = planner.send_path(&course.path);
     let _ = planner.send_obstacles(&course.obstacles);
+    let replan_us = options.replan_s.map(|s| (s * 1e6).round().max(1.0) as u64);
+    let mut last_plan_us = 0u64;
 
     let path = core_path(course);
     let mut scorer = Scorer::new(&vehicle.body, course);
@@ -358,6 +363,13 @@ pub fn run(
             let _ = encoder.encode_row(&row, &mut rx);
         }
         let tick_start = t_tick_us - TICK_US;
+        if let Some(every) = replan_us {
+            if planner.pending() == 0 && tick_start >= last_plan_us + every {
+                last_plan_us = tick_start;
+                let _ = planner.send_path(&course.path);
+                let _ = planner.send_obstacles(&course.obstacles);
+            }
+        }
         for (i, frame) in planner.take_tick_frames().into_iter().enumerate() {
             rx.push(TimedFrame {
                 t_us: tick_start + 500 * (i as u64 + 1),
@@ -484,6 +496,8 @@ pub struct ClosedLoopArgs {
     pub speed_mps: Option<f64>,
     /// Sensor noise seed.
     pub seed: u64,
+    /// The planner sends the path again this often, s (`None`: once).
+    pub replan_s: Option<f64>,
     /// Output directory.
     pub out: std::path::PathBuf,
 }
@@ -551,10 +565,16 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     }
     let course = scenario::course(kind, &vehicle.body, speed);
     let mut driver = driver::NodeDriver::new(node, controller);
+    if let Some(r) = args.replan_s {
+        if !(r.is_finite() && r >= 0.02) {
+            anyhow::bail!("--replan-every {r}: a period of at least 0.02 s");
+        }
+    }
     let options = RunOptions {
         seed: args.seed,
         receiver,
         max_time_s: 300.0,
+        replan_s: args.replan_s,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
     let mut files = write_session(&args.out, &output)?;
