@@ -398,3 +398,31 @@ fn the_mpc_drives_through_a_replanning_planners_paths() {
         "lateral RMS {a} with one path, {b} replanned"
     );
 }
+
+/// The rig's node knows its car from its model file alone, as on the road: a file whose
+/// single-track model and antenna differ from the plant's keeps its own (the plant lends them
+/// only when no model file is given).
+#[test]
+fn the_rigs_node_knows_its_car_from_its_model_file() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("models/paper.toml")).unwrap();
+    let text = text
+        .replace(
+            "cornering_front_n_per_rad = 80000.0",
+            "cornering_front_n_per_rad = 40000.0",
+        )
+        .replace("antenna_ahead_m = 1.478", "antenna_ahead_m = 1.2");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rig_model_file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = dir.join("soft-front.toml");
+    std::fs::write(&model, text).unwrap();
+    let plant = root.join("host/vehicles/cat-vehicle.toml");
+    let (_, node) = load_setup(Some(&plant), Some(&model)).unwrap();
+    let dynamics = node.dynamics.unwrap();
+    assert_eq!(dynamics.cornering_front_n_per_rad, 40000.0);
+    assert_eq!(node.estimator.antenna_ahead_m, 1.2);
+    // Without a model file the plant lends its own.
+    let (_, lent) = load_setup(Some(&plant), None).unwrap();
+    assert_eq!(lent.dynamics.unwrap().cornering_front_n_per_rad, 80000.0);
+    assert_eq!(lent.estimator.antenna_ahead_m, 1.478);
+}

@@ -143,23 +143,28 @@ pub struct RunOutput {
     pub metrics: Metrics,
 }
 
-/// The node's configuration for `vehicle` (antenna, dynamics, and, without a model file,
-/// geometry and steering), on top of `base` (the published models or a model file's).
+/// The node's configuration for `vehicle` on top of `base` (the published models or a model
+/// file's). With `from_vehicle` (a plant vehicle and no model file for it) the plant lends the
+/// node its geometry, steering, antenna and single-track model; otherwise the node knows its
+/// car from its model file alone, as on the road (the plant fills in only a single-track
+/// model the file does not have).
 pub fn node_config_for(
     base: NodeConfig,
     vehicle: &VehicleConfig,
-    geometry_from_vehicle: bool,
+    from_vehicle: bool,
 ) -> anyhow::Result<NodeConfig> {
     let c = &vehicle.chassis;
     let mut config = base;
-    if geometry_from_vehicle {
+    if from_vehicle {
         config.vehicle.wheelbase_m = c.wheelbase_m as f32;
         config.vehicle.track_m = c.track_m as f32;
         config.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
         config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
+        config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
+        config.dynamics = Some(vehicle.dynamic_params());
+    } else if config.dynamics.is_none() {
+        config.dynamics = Some(vehicle.dynamic_params());
     }
-    config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
-    config.dynamics = Some(vehicle.dynamic_params());
     Ok(config)
 }
 
