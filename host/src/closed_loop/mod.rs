@@ -146,8 +146,7 @@ pub struct RunOutput {
 /// The node's configuration for `vehicle` on top of `base` (the published models or a model
 /// file's). With `from_vehicle` (a plant vehicle and no model file for it) the plant lends the
 /// node its geometry, steering, antenna and single-track model; otherwise the node knows its
-/// car from its model file alone, as on the road (the plant fills in only a single-track
-/// model the file does not have).
+/// car from its model file alone, as on the road (a file without `[dynamics]`: kinematic only).
 pub fn node_config_for(
     base: NodeConfig,
     vehicle: &VehicleConfig,
@@ -161,8 +160,6 @@ pub fn node_config_for(
         config.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
         config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
         config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
-        config.dynamics = Some(vehicle.dynamic_params());
-    } else if config.dynamics.is_none() {
         config.dynamics = Some(vehicle.dynamic_params());
     }
     Ok(config)
