@@ -811,4 +811,29 @@ mod tests {
             "not told: {untold} rad, the slip is {slip}"
         );
     }
+
+    /// The sideways travel is kept wrapped to +-1024 m; a window that spans the wrap still
+    /// measures the travel in it (a car circling for hours slides that far).
+    #[test]
+    fn sideways_travel_across_the_wrap() {
+        let cfg = EstimatorConfig::design(100.0, 0.0, 0.0).unwrap();
+        let mut st = EstimatorState::default();
+        let rates = Rates {
+            yaw_rps: 0.0,
+            rear_side_mps: 3.0,
+        };
+        let mut crossed = false;
+        for _ in 0..20_000 {
+            st.propagate(&cfg, 20.0, rates, 0.02);
+            let window = st.swept_since(0.5, rates);
+            assert!(
+                (window.slid_m - 1.5).abs() < 1e-2,
+                "{} m over 0.5 s",
+                window.slid_m
+            );
+            let now = st.turned[st.turned_head].slid_m;
+            crossed |= now < 0.0;
+        }
+        assert!(crossed, "the integral wrapped");
+    }
 }
