@@ -406,24 +406,11 @@ impl EstimatorState {
         self.turned_len = (self.turned_len + 1).min(TURN_HISTORY_TICKS);
     }
 
-    /// How far the dead reckoning turned over the last `age_s` (rad, clockwise): the yaw rates
-    /// of the ticks in between, integrated (interpolated within a tick; beyond the history,
-    /// `yaw_rate_rps` for the rest). A course measured `age_s` ago plus this is the course now,
-    /// whatever the yaw rate did in between: a turn that starts or ends within the age is not
-    /// extrapolated with the yaw rate of now.
-    pub fn turned_since(&self, age_s: f32, yaw_rate_rps: f32) -> f32 {
-        self.swept_since(
-            age_s,
-            Rates {
-                yaw_rps: yaw_rate_rps,
-                rear_side_mps: 0.0,
-            },
-        )
-        .turned_rad
-    }
-
-    /// [`Self::turned_since`] for both integrals (the rear axle's sideways travel too), with
-    /// `now`'s rates beyond the history.
+    /// How far the dead reckoning turned (rad, clockwise) and the rear axle slid sideways (m)
+    /// over the last `age_s`: the rates of the ticks in between, integrated (interpolated within
+    /// a tick; beyond the history, `now_rates` for the rest). A course measured `age_s` ago plus
+    /// the turn is the course now, whatever the yaw rate did in between: a turn that starts or
+    /// ends within the age is not extrapolated with the yaw rate of now.
     fn swept_since(&self, age_s: f32, now_rates: Rates) -> Swept {
         let age_ticks = math::max(age_s, 0.0) / crate::SAMPLE_PERIOD_S;
         let Some(now) = self.turned.get(self.turned_head).copied() else {
@@ -613,7 +600,7 @@ impl EstimatorState {
     /// heading by `atan((antenna_ahead * yaw_rate + rear_side) / (v + antenna_left * yaw_rate))`
     /// (the rear axle's slip plus the lever arm's swing), with the rates of then; that is
     /// removed first, and the course is carried to now by the heading change the dead reckoning
-    /// integrated since ([`Self::turned_since`]; carrying it with the current yaw rate instead
+    /// integrated since (`swept_since`; carrying it with the current yaw rate instead
     /// lags the truth in every transient, e.g. 0.05 rad in a lane change at 10 m/s with a
     /// 0.47 s old course). The first course initialises the heading.
     pub fn correct_heading(
