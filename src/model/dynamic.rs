@@ -103,6 +103,12 @@ pub struct LateralState {
 }
 
 impl DynamicParams {
+    /// The rear axle's sideways velocity in `state`, `v_y - l_r r`, m/s (positive right): the
+    /// rear tyres' slip, which eq 8 takes as zero.
+    pub fn rear_side_mps(&self, state: &LateralState) -> f32 {
+        state.vy_mps - self.cg_to_rear_m * state.yaw_rate_rps
+    }
+
     /// Wheelbase lf + lr, m.
     pub fn wheelbase_m(&self) -> f32 {
         self.cg_to_front_m + self.cg_to_rear_m

@@ -612,7 +612,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         // state in the kinematic mode), so the rear axle's slip is there in both.
         m.rear_side_mps = match &cfg.dynamics {
             Some(d) => {
-                let side = m.lateral.vy_mps - d.cg_to_rear_m * m.lateral.yaw_rate_rps;
+                let side = d.rear_side_mps(&m.lateral);
                 let most = MAX_REAR_SLIP_RAD * speed_mps;
                 if side.is_finite() {
                     math::clamp(side, -most, most)

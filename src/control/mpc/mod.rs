@@ -986,12 +986,10 @@ impl MpcConfig {
                     }
                     Some(dynamics) => {
                         let before = lat;
-                        let lr = dynamics.cg_to_rear_m;
                         dynamics.step(&mut lat, v_mid, d_mid, STEP_S);
                         let r_mid = 0.5 * (before.yaw_rate_rps + lat.yaw_rate_rps);
-                        let vy_rear = 0.5
-                            * ((before.vy_mps - lr * before.yaw_rate_rps)
-                                + (lat.vy_mps - lr * lat.yaw_rate_rps));
+                        let vy_rear =
+                            0.5 * (dynamics.rear_side_mps(&before) + dynamics.rear_side_mps(&lat));
                         pose.advance(v_mid, vy_rear, r_mid * STEP_S, STEP_S);
                     }
                 }
