@@ -55,8 +55,11 @@ const LEAD_WINDOW_S: f32 = 0.1;
 /// Complementary-filter gain towards the course per 20 ms tick at 25 Hz and above: a 0.4 s
 /// time constant.
 const COURSE_GAIN: f32 = 0.05;
-/// Dead-reckoning history, one entry per fix; must exceed the group delay (14.5 fixes).
-const ODO_LEN: usize = 32;
+/// Dead-reckoning history, one entry per fix: it must span the course chord (at most
+/// `TRACK_LEN - 1` fixes) beyond the group delay (14.5 fixes at 100 Hz), for
+/// [`EstimatorState::correct_heading_on_track`].
+const ODO_LEN: usize = 128;
+const _: () = assert!(ODO_LEN >= TRACK_LEN + 16);
 /// How far back the dead reckoning's heading change is kept, ticks: 2.56 s, more than the
 /// oldest course the heading is corrected with (the chord's half span plus the filter's group
 /// delay plus the time since the fix: 0.47 s at 100 Hz, 1.7 s at 1 Hz). Older courses are
@@ -173,6 +176,8 @@ pub struct Rates {
 struct Swept {
     turned_rad: f32,
     slid_m: f32,
+    /// The course corrections applied to the heading (rad, wrapped to +-pi).
+    corrected_rad: f32,
 }
 
 /// The sideways travel's wrap, m: a difference over the course's age is at most a few metres,
@@ -194,6 +199,7 @@ impl Swept {
         Self {
             turned_rad: math::wrap_pi(self.turned_rad - other.turned_rad),
             slid_m: wrap_slid(self.slid_m - other.slid_m),
+            corrected_rad: math::wrap_pi(self.corrected_rad - other.corrected_rad),
         }
     }
 }
@@ -210,6 +216,9 @@ pub struct EstimatorState {
     /// Dead-reckoned position at each of the last fixes (ring, newest at `odo_head`).
     odo_at_fix: [Xy; ODO_LEN],
     odo_head: usize,
+    /// Entries of `odo_at_fix` recorded in a row with a heading estimate (since it was first
+    /// set, or since the filters restarted on the dead-reckoned track).
+    odo_valid: u32,
     fixes: u32,
     /// Filtered track for the course estimate (ring).
     track: [Xy; TRACK_LEN],
@@ -227,6 +236,8 @@ pub struct EstimatorState {
     turned_head: usize,
     /// Valid entries of `turned`.
     turned_len: usize,
+    /// Every course correction applied to the heading, summed (rad, wrapped to +-pi).
+    corrected_rad: f32,
 }
 
 impl Default for EstimatorState {
@@ -239,6 +250,7 @@ impl Default for EstimatorState {
             filtered: None,
             odo_at_fix: [Xy::default(); ODO_LEN],
             odo_head: 0,
+            odo_valid: 0,
             fixes: 0,
             track: [Xy::default(); TRACK_LEN],
             track_head: 0,
@@ -248,6 +260,7 @@ impl Default for EstimatorState {
             turned: [Swept::default(); TURN_HISTORY_TICKS],
             turned_head: 0,
             turned_len: 0,
+            corrected_rad: 0.0,
         }
     }
 }
@@ -358,6 +371,7 @@ impl EstimatorState {
     /// reset: it is still the car's.
     pub fn reset(&mut self) {
         self.fixes = 0;
+        self.odo_valid = 0;
         self.filtered = None;
     }
 
@@ -401,6 +415,7 @@ impl EstimatorState {
             *slot = Swept {
                 turned_rad: math::wrap_pi(swept.turned_rad + rates.yaw_rps * dt_s),
                 slid_m: wrap_slid(swept.slid_m + rates.rear_side_mps * dt_s),
+                corrected_rad: self.corrected_rad,
             };
         }
         self.turned_len = (self.turned_len + 1).min(TURN_HISTORY_TICKS);
@@ -417,6 +432,7 @@ impl EstimatorState {
             return Swept {
                 turned_rad: now_rates.yaw_rps * age_s,
                 slid_m: now_rates.rear_side_mps * age_s,
+                corrected_rad: 0.0,
             };
         };
         let available = self.turned_len.saturating_sub(1);
@@ -444,6 +460,7 @@ impl EstimatorState {
                 + (b.turned_rad - a.turned_rad) * w
                 + now_rates.yaw_rps * beyond_s,
             slid_m: a.slid_m + (b.slid_m - a.slid_m) * w + now_rates.rear_side_mps * beyond_s,
+            corrected_rad: a.corrected_rad + (b.corrected_rad - a.corrected_rad) * w,
         }
     }
 
@@ -475,6 +492,11 @@ impl EstimatorState {
         if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
             *slot = odo_fix;
         }
+        self.odo_valid = if self.heading_rad.is_some() {
+            self.odo_valid.saturating_add(1)
+        } else {
+            0
+        };
         self.track_head = (self.track_head + 1) % TRACK_LEN;
         if let Some(slot) = self.track.get_mut(self.track_head) {
             *slot = filtered;
@@ -516,6 +538,8 @@ impl EstimatorState {
         // history only the entries the delay compensation can still read are written (it reads
         // `group_delay` and one more fixes back; older entries only get older).
         let odo = self.odo_now;
+        // Only those few entries: the chord comparison waits for a history of its own.
+        self.odo_valid = 0;
         let odo_entries = (missing as usize).min(ODO_LEN);
         let odo_read = (cfg.group_delay_fixes.max(0.0) as usize + 2).min(odo_entries);
         self.odo_head = (self.odo_head + odo_entries - odo_read) % ODO_LEN;
@@ -628,10 +652,80 @@ impl EstimatorState {
             0.0
         };
         let course_now = math::wrap_pi(course_rad - lead_rad + turned);
-        self.heading_rad = Some(match self.heading_rad {
-            None => course_now,
-            Some(h) => math::wrap_pi(h + cfg.course_gain * math::wrap_pi(course_now - h)),
+        match self.heading_rad {
+            None => self.heading_rad = Some(course_now),
+            Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
+        }
+    }
+
+    /// The heading moved by a course correction, which is remembered for
+    /// [`Self::correct_heading_on_track`].
+    fn turn_heading(&mut self, heading_rad: f32, correction_rad: f32) {
+        self.heading_rad = Some(math::wrap_pi(heading_rad + correction_rad));
+        self.corrected_rad = math::wrap_pi(self.corrected_rad + correction_rad);
+    }
+
+    /// The course corrections applied over the last `age_s` (rad).
+    fn corrected_since(&self, age_s: f32) -> f32 {
+        let since_tick = self.turned.get(self.turned_head).map_or(0.0, |now| {
+            math::wrap_pi(self.corrected_rad - now.corrected_rad)
         });
+        math::wrap_pi(self.swept_since(age_s, Rates::default()).corrected_rad + since_tick)
+    }
+
+    /// Pulls the heading towards agreement between the filtered GNSS track and the dead
+    /// reckoning over the same stretch: the chord of the track's last `track_span_fixes` fixes
+    /// against the chord the dead reckoning drew between the instants those filtered fixes
+    /// describe (each `group_delay_fixes` before its fix). The dead reckoning's chord is turned
+    /// from the truth's by the heading's error over that stretch, whatever the car did along it
+    /// (a course read off the chord itself is the course of the stretch's mean velocity, which
+    /// after the two turns of a lane change is 0.06-0.1 rad from the course at its middle); the
+    /// corrections applied since its middle are already in the heading and are taken off. The
+    /// lever arm and the rear axle's slide are in both chords. `since_fix_s`: time since the
+    /// latest fix. Returns `false`, doing nothing, until the dead reckoning has a history with a
+    /// heading as long as the chord plus the group delay (at the start, after a restart of the
+    /// filters): [`Self::correct_heading`] with [`Self::track_course`] then.
+    pub fn correct_heading_on_track(&mut self, cfg: &EstimatorConfig, since_fix_s: f32) -> bool {
+        let Some(heading) = self.heading_rad else {
+            return false;
+        };
+        let span = (cfg.track_span_fixes as usize).clamp(1, TRACK_LEN - 1);
+        let delay = cfg.group_delay_fixes.max(0.0);
+        let k0 = delay as usize; // floor: delay >= 0
+        let w = delay - k0 as f32;
+        if (self.odo_valid as usize) < k0 + span + 2 || (self.fixes as usize) < span + 2 * k0 {
+            return false;
+        }
+        let odo_at = |k: usize| -> Option<Xy> {
+            let a = self.odo_fixes_ago(k)?;
+            let b = self.odo_fixes_ago(k + 1)?;
+            Some(Xy {
+                x_m: a.x_m + (b.x_m - a.x_m) * w,
+                y_m: a.y_m + (b.y_m - a.y_m) * w,
+            })
+        };
+        let (Some(now), Some(then), Some(odo_now), Some(odo_then)) = (
+            self.track.get(self.track_head),
+            self.track
+                .get((self.track_head + TRACK_LEN - span) % TRACK_LEN),
+            odo_at(k0),
+            odo_at(k0 + span),
+        ) else {
+            return false;
+        };
+        let (gx, gy) = (now.x_m - then.x_m, now.y_m - then.y_m);
+        let (dx, dy) = (odo_now.x_m - odo_then.x_m, odo_now.y_m - odo_then.y_m);
+        let min2 = cfg.course_min_baseline_m * cfg.course_min_baseline_m;
+        if gx * gx + gy * gy < min2 || dx * dx + dy * dy < min2 {
+            return false;
+        }
+        // The angle from the dead reckoning's chord to the track's, clockwise (headings are
+        // clockwise from north: atan2(east, north)).
+        let error_then = math::atan2(dy * gx - dx * gy, dx * gx + dy * gy);
+        let age_s = (span as f32 * 0.5 + delay) * cfg.gnss_period_s + since_fix_s;
+        let error_now = math::wrap_pi(error_then - self.corrected_since(age_s));
+        self.turn_heading(heading, cfg.course_gain * error_now);
+        true
     }
 
     /// Course of the filtered track over the last `track_span_fixes` fixes, with its age in fixes

@@ -227,18 +227,19 @@ impl Gnss {
                     .correct_heading(cfg, cog, age_s, speed_mps, rates);
             }
             _ if moving => {
-                if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
-                    // The chord's age at the latest fix, plus the time since that fix: with
-                    // a slow receiver the same chord steers the heading for a whole period,
-                    // while the car keeps turning.
-                    let since_fix_us = inputs
-                        .freshness
-                        .last_us(Input::Gnss)
-                        .map_or(0, |t| now_us.saturating_sub(t));
-                    let age_s =
-                        age_fixes * cfg.gnss_period_s + math::u64_to_f32(since_fix_us) * 1e-6;
-                    self.estimator
-                        .correct_heading(cfg, course, age_s, speed_mps, rates);
+                // The time since the latest fix: with a slow receiver the same chord steers
+                // the heading for a whole period, while the car keeps turning.
+                let since_fix_us = inputs
+                    .freshness
+                    .last_us(Input::Gnss)
+                    .map_or(0, |t| now_us.saturating_sub(t));
+                let since_fix_s = math::u64_to_f32(since_fix_us) * 1e-6;
+                if !self.estimator.correct_heading_on_track(cfg, since_fix_s) {
+                    if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
+                        let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
+                        self.estimator
+                            .correct_heading(cfg, course, age_s, speed_mps, rates);
+                    }
                 }
             }
             _ => {}
