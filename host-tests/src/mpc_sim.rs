@@ -9,7 +9,7 @@
 //! the whole node over the bus).
 use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ReferencePoint,
-    Sample, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    Sample, SidePoint, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::{HybridConfig, HybridState};
@@ -147,16 +147,30 @@ impl TestPath {
         (self.left[i], self.right[i])
     }
 
-    /// Narrowest corridor over stations [a, b].
-    pub fn narrowest(&self, a: f64, b: f64) -> (f64, f64) {
-        let (ia, _) = self.index(a.min(b));
-        let (ib, _) = self.index(a.max(b));
-        let mut out = (f64::INFINITY, f64::INFINITY);
-        for i in ia..=(ib + 1).min(self.x.len() - 1) {
-            out.0 = out.0.min(self.left[i]);
-            out.1 = out.1.min(self.right[i]);
+    /// Where the corridor binds a body's sides between the axle at station `axle` and the end
+    /// at `end` (the node's rule, `Path::narrowest_corridor`: the narrowest corridor, ties to
+    /// the station farther from the axle): ((left width, station), (right width, station)).
+    pub fn binding(&self, axle: f64, end: f64) -> ((f64, f64), (f64, f64)) {
+        let (ia, _) = self.index(axle.min(end));
+        let (ib, _) = self.index(axle.max(end));
+        let last = (ib + 1).min(self.x.len() - 1);
+        let mut left = (f64::INFINITY, axle);
+        let mut right = (f64::INFINITY, axle);
+        let indices: Vec<usize> = if end >= axle {
+            (ia..=last).collect()
+        } else {
+            (ia..=last).rev().collect()
+        };
+        for i in indices {
+            let s = (i as f64 * PATH_STEP_M).clamp(axle.min(end), axle.max(end));
+            for (best, w) in [(&mut left, self.left[i]), (&mut right, self.right[i])] {
+                if w <= best.0 + 0.01 {
+                    best.1 = s;
+                }
+                best.0 = best.0.min(w);
+            }
         }
-        out
+        (left, right)
     }
 
     /// Station of the point nearest to (x, y), searching around `hint`.
@@ -205,6 +219,13 @@ impl TestPath {
         }
     }
 
+    fn side_point(&self, axle: f64, (_, station): (f64, f64), widths: (f64, f64)) -> SidePoint {
+        SidePoint {
+            sample: self.sample(station, widths),
+            ahead_m: (station - axle) as f32,
+        }
+    }
+
     /// An obstacle at (east, north) with radius `r`, placed along the path as the controller
     /// reads it, seen from a rear axle at station `car_station`.
     pub fn place(&self, east: f64, north: f64, r: f64, car_station: f64) -> Obstacle {
@@ -235,12 +256,16 @@ impl TestPath {
             if k > 0 {
                 s += 0.5 * (speeds[k - 1] + speeds[k]) as f64 * STEP_S as f64;
             }
+            let (left_f, right_f) = self.binding(s, s + front);
+            let (left_r, right_r) = self.binding(s, s - rear);
             ReferencePoint {
                 at: self.sample(s, self.corridor(s)),
                 curvature_per_m: self.curvature(s) as f32,
                 speed_mps: self.speed(s) as f32,
-                front: self.sample(s + front, self.narrowest(s, s + front)),
-                rear: self.sample(s - rear, self.narrowest(s - rear, s)),
+                front_left: self.side_point(s, left_f, (left_f.0, right_f.0)),
+                front_right: self.side_point(s, right_f, (left_f.0, right_f.0)),
+                rear_left: self.side_point(s, left_r, (left_r.0, right_r.0)),
+                rear_right: self.side_point(s, right_r, (left_r.0, right_r.0)),
             }
         })
     }

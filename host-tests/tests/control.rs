@@ -5,7 +5,7 @@ use catmodel::can::codec::{
     ControlStatus, LocalOrigin, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint,
     PlannerMessage,
 };
-use catmodel::control::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
+use catmodel::control::path::{Narrowest, Path, PathError, Waypoint, MAX_PATH_POINTS};
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
     CarState, PurePursuitConfig, PurePursuitState, PurePursuitTuning, DEFAULT_TUNING,
@@ -286,23 +286,84 @@ proptest! {
     }
 }
 
+fn narrowest(left_m: f32, left_station_m: f32, right_m: f32, right_station_m: f32) -> Narrowest {
+    Narrowest {
+        left_m,
+        left_station_m,
+        right_m,
+        right_station_m,
+    }
+}
+
 #[test]
 fn narrowest_corridor_between_two_stations() {
     // Points 1 m apart northwards; the left corridor narrows to 0.5 m at point 5, the right to
-    // 0.2 m at point 8.
+    // 0.2 m at point 8 (elsewhere 1.0 and 1.5).
     let mut pts = straight(0.0, 0.0, 0.0, 12, 1.0);
     pts[5].left_m = 0.5;
     pts[8].right_m = 0.2;
     let p = path_of(&pts);
     // Between 2.5 and 4.5: no narrowing point inside; at 4.5 the left corridor is halfway
-    // between 1.0 and 0.5.
-    assert_eq!(p.narrowest_corridor(2.5, 4.5, 0), Some((0.75, 1.5)));
-    assert_eq!(p.narrowest_corridor(4.5, 2.5, 7), Some((0.75, 1.5)));
+    // between 1.0 and 0.5. The right one is 1.5 throughout: it binds farthest from the axle.
+    assert_eq!(
+        p.narrowest_corridor(2.5, 4.5, 0),
+        Some(narrowest(0.75, 4.5, 1.5, 4.5))
+    );
+    assert_eq!(
+        p.narrowest_corridor(4.5, 2.5, 7),
+        Some(narrowest(0.75, 4.5, 1.5, 2.5))
+    );
     // Across both points.
-    assert_eq!(p.narrowest_corridor(1.0, 9.5, 0), Some((0.5, 0.2)));
-    // Beyond the ends: clamped.
-    assert_eq!(p.narrowest_corridor(-3.0, 0.5, 0), Some((1.0, 1.5)));
+    assert_eq!(
+        p.narrowest_corridor(1.0, 9.5, 0),
+        Some(narrowest(0.5, 5.0, 0.2, 8.0))
+    );
+    // Beyond the ends: the path's ends' corridor, at the stations asked for.
+    assert_eq!(
+        p.narrowest_corridor(-3.0, 0.5, 0),
+        Some(narrowest(1.0, 0.5, 1.5, 0.5))
+    );
+    assert_eq!(
+        p.narrowest_corridor(11.0, 13.0, 0),
+        Some(narrowest(1.0, 13.0, 1.5, 13.0))
+    );
     assert_eq!(Path::new().narrowest_corridor(0.0, 1.0, 0), None);
+    assert_eq!(p.narrowest_corridor(0.0, f32::NAN, 0), None);
+}
+
+/// A lane that ends beside the body binds its side at the lane's last point, one that goes
+/// on past the body's end at the end's corner; the same seen from the rear half.
+#[test]
+fn narrowest_corridor_binds_where_a_lane_ends() {
+    // Left corridor 0.5 m up to point 5, 2.0 m from point 6 on (a lane that ends at 5).
+    let mut pts = straight(0.0, 0.0, 0.0, 12, 1.0);
+    for w in pts.iter_mut().skip(6) {
+        w.left_m = 2.0;
+    }
+    for w in pts.iter_mut().take(6) {
+        w.left_m = 0.5;
+    }
+    let p = path_of(&pts);
+    // Axle at 3, front end at 8: the side meets the lane's end at 5.
+    let n = p.narrowest_corridor(3.0, 8.0, 0).expect("path");
+    assert_eq!((n.left_m, n.left_station_m), (0.5, 5.0));
+    // Axle at 1, front at 4: the lane goes on past the front: the corner.
+    let n = p.narrowest_corridor(1.0, 4.0, 0).expect("path");
+    assert_eq!((n.left_m, n.left_station_m), (0.5, 4.0));
+    // Rear half, axle at 8, rear end at 3: the lane lies behind, past the rear end: the rear
+    // corner.
+    let n = p.narrowest_corridor(8.0, 3.0, 0).expect("path");
+    assert_eq!((n.left_m, n.left_station_m), (0.5, 3.0));
+    // A lane that starts at 5 (wide before): the rear half of a body whose axle is at 8 meets
+    // it at its first point; the front half of one at 3 at the front corner.
+    for w in pts.iter_mut() {
+        w.left_m = if w.north_m < 4.5 { 2.0 } else { 0.5 };
+    }
+    let p = path_of(&pts);
+    let n = p.narrowest_corridor(8.0, 3.0, 0).expect("path");
+    assert_eq!((n.left_m, n.left_station_m), (0.5, 5.0));
+    let n = p.narrowest_corridor(3.0, 8.0, 0).expect("path");
+    assert_eq!((n.left_m, n.left_station_m), (0.5, 8.0));
 }
 
 #[test]

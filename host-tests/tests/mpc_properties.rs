@@ -115,7 +115,7 @@ proptest! {
             2 => reference[7].curvature_per_m = f32::NAN,
             3 => steer = f32::INFINITY,
             4 => uncertainty = f32::NAN,
-            5 => reference[3].front.left_m = f32::NAN,
+            5 => reference[3].front_left.sample.left_m = f32::NAN,
             _ => {}
         }
         let mut state = MpcState::default();

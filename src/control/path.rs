@@ -102,6 +102,45 @@ pub struct PathSample {
     pub right_m: f32,
 }
 
+/// Corridor widths this close are one width in [`Path::narrowest_corridor`], m.
+pub const NARROWEST_TIE_M: f32 = 0.01;
+
+/// Where the corridor binds a body's side ([`Path::narrowest_corridor`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Narrowest {
+    /// The narrowest corridor to the left, m.
+    pub left_m: f32,
+    /// Where it is, station, m.
+    pub left_station_m: f32,
+    /// The narrowest corridor to the right, m.
+    pub right_m: f32,
+    /// Where it is, station, m.
+    pub right_station_m: f32,
+}
+
+/// The running minimum of one side's corridor over ascending stations.
+struct Binding {
+    station_m: f32,
+    width_m: f32,
+}
+
+impl Binding {
+    const fn new(station_m: f32, width_m: f32) -> Self {
+        Self { station_m, width_m }
+    }
+
+    /// A narrower width moves the binding point here; an equal one (within the tie) only when
+    /// later stations win.
+    fn offer(&mut self, station_m: f32, width_m: f32, later_wins: bool) {
+        if width_m < self.width_m - NARROWEST_TIE_M
+            || (later_wins && width_m <= self.width_m + NARROWEST_TIE_M)
+        {
+            self.station_m = station_m;
+        }
+        self.width_m = math::min(self.width_m, width_m);
+    }
+}
+
 /// Where a point is relative to the path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Projection {
@@ -510,21 +549,35 @@ impl Path {
         )
     }
 
-    /// The narrowest corridor (left, right), m, over the stations between `from_m` and `to_m`
-    /// (either order; clamped to the path): the corridor is linear between points, so its
-    /// minimum is at an end or at a point in between. `None` without a path. What a
-    /// controller needs to keep a body's side, between two of its corners, inside.
-    pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<(f32, f32)> {
-        let (a, b) = if from_m <= to_m {
+    /// Where the corridor binds a straight side of a body that spans the stations from `from_m`
+    /// (the rear axle) to `to_m` (one end of the body; either order; clamped to the path): per
+    /// side, the narrowest corridor there and the station where it is. The corridor is linear
+    /// between points, so its minimum is at an end or at a point in between; where it is equally
+    /// narrow over a stretch (within [`NARROWEST_TIE_M`]), the station farthest from `from_m`
+    /// is taken: in a lane that goes on past the body's end that is the end's corner, in a lane
+    /// that ends (or starts) between the axle and the end it is the lane's last (or first)
+    /// point, where the body's side meets it. `None` without a path. What a controller needs to
+    /// keep a body's side, between the axle and a corner, inside.
+    pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<Narrowest> {
+        if !(from_m.is_finite() && to_m.is_finite()) {
+            return None;
+        }
+        // The ends' stations as asked (the path extends beyond its ends, `sample`), the
+        // points between them on the path.
+        let (lo, hi) = if from_m <= to_m {
             (from_m, to_m)
         } else {
             (to_m, from_m)
         };
-        let start = self.sample(a, hint)?;
-        let end = self.sample(b, hint)?;
-        let mut left = start.left_m.min(end.left_m);
-        let mut right = start.right_m.min(end.right_m);
-        let first = self.segment_at(math::clamp(a, 0.0, self.length_m()), hint) + 1;
+        let length = self.length_m();
+        let (a, b) = (math::clamp(lo, 0.0, length), math::clamp(hi, 0.0, length));
+        let start = self.sample(lo, hint)?;
+        let end = self.sample(hi, hint)?;
+        // Ascending stations; a tie goes to the later one when `to` is ahead of `from`.
+        let later_wins = from_m <= to_m;
+        let mut left = Binding::new(lo, start.left_m);
+        let mut right = Binding::new(lo, start.right_m);
+        let first = self.segment_at(a, hint) + 1;
         for i in first..self.len {
             let (Some(s), Some(w)) = (self.station_of(i), self.points.get(i)) else {
                 break;
@@ -532,10 +585,20 @@ impl Path {
             if s >= b {
                 break;
             }
-            left = left.min(w.left_m);
-            right = right.min(w.right_m);
+            if s <= a {
+                continue;
+            }
+            left.offer(s, w.left_m, later_wins);
+            right.offer(s, w.right_m, later_wins);
         }
-        Some((left, right))
+        left.offer(hi, end.left_m, later_wins);
+        right.offer(hi, end.right_m, later_wins);
+        Some(Narrowest {
+            left_m: left.width_m,
+            left_station_m: left.station_m,
+            right_m: right.width_m,
+            right_station_m: right.station_m,
+        })
     }
 
     /// The car's pose relative to the path (projection of the rear axle, heading error, the

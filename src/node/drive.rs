@@ -30,7 +30,7 @@
 //! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
-    self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample,
+    self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample, SidePoint,
     DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
@@ -442,6 +442,32 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
     }
 }
 
+/// Where the corridor binds the body's left and right sides between the rear axle at station
+/// `axle_m` and the body's end at `end_m` ([`Path::narrowest_corridor`]); one path sample when
+/// both sides bind at the same station (the end's corners, mostly).
+fn side_points(
+    path: &Path,
+    axle_m: f32,
+    end_m: f32,
+    hint: usize,
+) -> Option<(SidePoint, SidePoint)> {
+    let n = path.narrowest_corridor(axle_m, end_m, hint)?;
+    let widths = (n.left_m, n.right_m);
+    let left = SidePoint {
+        sample: sample(&path.sample(n.left_station_m, hint)?, widths),
+        ahead_m: n.left_station_m - axle_m,
+    };
+    let right = if n.right_station_m == n.left_station_m {
+        left
+    } else {
+        SidePoint {
+            sample: sample(&path.sample(n.right_station_m, hint)?, widths),
+            ahead_m: n.right_station_m - axle_m,
+        }
+    };
+    Some((left, right))
+}
+
 /// One model-predictive solve; `None` when the path cannot be sampled.
 #[allow(clippy::too_many_arguments)]
 fn mpc_tick<P: StageProbe>(
@@ -467,12 +493,18 @@ fn mpc_tick<P: StageProbe>(
     let rear = body.rear_overhang_m;
     // Expected stations: the last plan's speeds (the current speed before there is one).
     let speeds = planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]);
+    let none = SidePoint {
+        sample: sample(&tracking.reference, (0.0, 0.0)),
+        ahead_m: 0.0,
+    };
     let mut reference = [ReferencePoint {
-        at: sample(&tracking.reference, (0.0, 0.0)),
+        at: none.sample,
         curvature_per_m: 0.0,
         speed_mps: 0.0,
-        front: sample(&tracking.reference, (0.0, 0.0)),
-        rear: sample(&tracking.reference, (0.0, 0.0)),
+        front_left: none,
+        front_right: none,
+        rear_left: none,
+        rear_right: none,
     }; STEPS + 1];
     let mut s = s0;
     for (k, r) in reference.iter_mut().enumerate() {
@@ -480,14 +512,16 @@ fn mpc_tick<P: StageProbe>(
             s += 0.5 * (v0 + v1) * STEP_S;
         }
         let at = path.sample(s, hint)?;
-        let ahead = path.sample(s + front, hint)?;
-        let behind = path.sample(s - rear, hint)?;
+        let (front_left, front_right) = side_points(path, s, s + front, hint)?;
+        let (rear_left, rear_right) = side_points(path, s, s - rear, hint)?;
         *r = ReferencePoint {
             at: sample(&at, (at.left_m, at.right_m)),
             curvature_per_m: at.curvature_per_m,
             speed_mps: at.speed_mps,
-            front: sample(&ahead, path.narrowest_corridor(s, s + front, hint)?),
-            rear: sample(&behind, path.narrowest_corridor(s - rear, s, hint)?),
+            front_left,
+            front_right,
+            rear_left,
+            rear_right,
         };
     }
     let mut placed = [None; MAX_OBSTACLES];

@@ -34,7 +34,8 @@ use catmodel::control::mpc::lateral::{self, InflatedObstacle, LateralSetup, Line
 use catmodel::control::mpc::longitudinal::{SpeedStart, SpeedState};
 use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ObstacleSide,
-    ReferencePoint, Sample, DEFAULT_TUNING, MAX_OBSTACLES, NX, PLAN_STEPS, ROWS, STEPS, STEP_S,
+    ReferencePoint, Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, NX, PLAN_STEPS, ROWS, STEPS,
+    STEP_S,
 };
 use catmodel::math;
 use catmodel::model::dynamic::{DynamicParams, LateralState};
@@ -167,15 +168,29 @@ trait Road {
         let n = 1.0 + dp * dp;
         -ddp / (n * math::sqrt(n))
     }
-    fn narrowest(&self, a: f32, b: f32) -> (f32, f32) {
-        let mut out = (f32::INFINITY, f32::INFINITY);
-        let mut s = a;
-        while s <= b {
+    /// Where the corridor binds the body's sides between the axle at `axle` and the end at
+    /// `end` (as the node's `Path::narrowest_corridor`: the narrowest, ties to the farther
+    /// station), every 0.25 m: the left and right side points.
+    fn side_points(&self, axle: f32, end: f32) -> (SidePoint, SidePoint) {
+        let step = if end >= axle { 0.25 } else { -0.25 };
+        let n = ((end - axle) / step) as usize;
+        let (mut left, mut right) = ((f32::INFINITY, axle), (f32::INFINITY, axle));
+        for i in 0..=n + 1 {
+            let s = if i > n { end } else { axle + step * i as f32 };
             let (l, r) = self.corridor(s);
-            out = (out.0.min(l), out.1.min(r));
-            s += 0.25;
+            for (best, w) in [(&mut left, l), (&mut right, r)] {
+                if w <= best.0 + 0.01 {
+                    best.1 = s;
+                }
+                best.0 = best.0.min(w);
+            }
         }
-        out
+        let widths = (left.0, right.0);
+        let point = |station: f32| SidePoint {
+            sample: self.sample(station, widths),
+            ahead_m: station - axle,
+        };
+        (point(left.1), point(right.1))
     }
     fn sample(&self, s: f32, c: (f32, f32)) -> Sample {
         Sample {
@@ -204,12 +219,16 @@ trait Road {
                 s += 0.5 * (prev + v) * STEP_S;
             }
             prev = v;
+            let (front_left, front_right) = self.side_points(s, s + front);
+            let (rear_left, rear_right) = self.side_points(s, s - rear);
             ReferencePoint {
                 at: self.sample(s, self.corridor(s)),
                 curvature_per_m: self.curvature(s),
                 speed_mps: target,
-                front: self.sample(s + front, self.narrowest(s, s + front)),
-                rear: self.sample(s - rear, self.narrowest(s - rear, s)),
+                front_left,
+                front_right,
+                rear_left,
+                rear_right,
             }
         })
     }

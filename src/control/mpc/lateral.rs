@@ -48,15 +48,16 @@ pub const R: usize = 3;
 /// Steering angle.
 pub const DELTA: usize = 4;
 
-/// Row slots per stage: the four corners, then one per obstacle (the steering range is the
-/// solver's state box).
-/// Front-left corner (left bound of the corridor at the front sample).
+/// Row slots per stage: the body's sides in the corridor (each at the point where the corridor
+/// binds it, [`super::SidePoint`]), then one per obstacle (the steering range is the solver's
+/// state box).
+/// Left side, front half.
 pub const ROW_FRONT_LEFT: usize = 0;
-/// Front-right corner.
+/// Right side, front half.
 pub const ROW_FRONT_RIGHT: usize = 1;
-/// Rear-left corner.
+/// Left side, rear half.
 pub const ROW_REAR_LEFT: usize = 2;
-/// Rear-right corner.
+/// Right side, rear half.
 pub const ROW_REAR_RIGHT: usize = 3;
 /// First obstacle row (obstacle `i` is `ROW_OBSTACLE + i`).
 pub const ROW_OBSTACLE: usize = 4;
@@ -339,7 +340,8 @@ pub fn body_offset(
     (n_dot, b, k)
 }
 
-/// A corner row: `lower <= offset` (left corner) or `offset <= upper` (right corner).
+/// A corridor row for a point of the body's side: `lower <= offset` (left side) or
+/// `offset <= upper` (right side).
 fn corner_row(
     at: &Sample,
     sample: &Sample,
@@ -511,43 +513,7 @@ pub fn build(
         None => setup.vehicle.understeer_s2_per_m2,
         Some(d) => d.understeer_s2_per_m2(),
     };
-    let front = body.length_m - body.rear_overhang_m;
-    let rear = -body.rear_overhang_m;
     let half_width = 0.5 * body.width_m;
-    let corners = [
-        (
-            ROW_FRONT_LEFT,
-            BodyPoint {
-                ahead_m: front,
-                right_m: -half_width,
-            },
-            true,
-        ),
-        (
-            ROW_FRONT_RIGHT,
-            BodyPoint {
-                ahead_m: front,
-                right_m: half_width,
-            },
-            true,
-        ),
-        (
-            ROW_REAR_LEFT,
-            BodyPoint {
-                ahead_m: rear,
-                right_m: -half_width,
-            },
-            false,
-        ),
-        (
-            ROW_REAR_RIGHT,
-            BodyPoint {
-                ahead_m: rear,
-                right_m: half_width,
-            },
-            false,
-        ),
-    ];
     problem.r = w.steer_rate;
     problem.u_rho = w.rho_steer_rate;
     problem.box_state = DELTA;
@@ -601,10 +567,19 @@ pub fn build(
         st.rows = [Row::INACTIVE; ROWS];
         st.box_lower = -setup.max_steer_rad;
         st.box_upper = setup.max_steer_rad;
-        for (slot, point, at_front) in corners {
-            let sample = if at_front { &r1.front } else { &r1.rear };
+        let sides = [
+            (ROW_FRONT_LEFT, &r1.front_left, -half_width),
+            (ROW_FRONT_RIGHT, &r1.front_right, half_width),
+            (ROW_REAR_LEFT, &r1.rear_left, -half_width),
+            (ROW_REAR_RIGHT, &r1.rear_right, half_width),
+        ];
+        for (slot, side, right_m) in sides {
+            let point = BodyPoint {
+                ahead_m: side.ahead_m,
+                right_m,
+            };
             if let Some(row) = st.rows.get_mut(slot) {
-                *row = corner_row(&r1.at, sample, point, lin_b, w);
+                *row = corner_row(&r1.at, &side.sample, point, lin_b, w);
             }
         }
         let end = k + TERMINAL_STAGES >= STEPS;

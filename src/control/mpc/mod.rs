@@ -68,12 +68,22 @@ pub struct Sample {
     pub right_m: f32,
 }
 
+/// The point of one side of one half of the body (axle to front end, axle to rear end) where
+/// the corridor binds it: the path and corridor at the station where the corridor is narrowest
+/// over that half ([`crate::control::path::Path::narrowest_corridor`]). The corridor row keeps
+/// the body's side there inside: at the end's corner while the lane goes on past it, at a lane's
+/// last (first) point when the lane ends (starts) beside the body, where the body turning out
+/// of the lane (into it) meets its edge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SidePoint {
+    /// Path pose and corridor there (the row reads the side's width only).
+    pub sample: Sample,
+    /// Its station minus the rear axle's (`at`'s), m: in `0 ..= length_m - rear_overhang_m` for
+    /// the front half, `-rear_overhang_m ..= 0` for the rear half.
+    pub ahead_m: f32,
+}
+
 /// The reference at one MPC step: the path where the car is expected at step k.
-///
-/// `front` and `rear` are the path and corridor at the stations of the body's ends
-/// (`at`'s station plus `length_m - rear_overhang_m`, minus `rear_overhang_m`); their corridors
-/// should be the narrowest between the rear axle and that end, so that the straight sides of
-/// the body between the corners are covered too.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReferencePoint {
     /// Path at the rear axle's expected station.
@@ -82,10 +92,14 @@ pub struct ReferencePoint {
     pub curvature_per_m: f32,
     /// Target speed there, m/s.
     pub speed_mps: f32,
-    /// Path and corridor at the front end of the body.
-    pub front: Sample,
-    /// Path and corridor at the rear end of the body.
-    pub rear: Sample,
+    /// Where the corridor binds the body's left side between the axle and the front end.
+    pub front_left: SidePoint,
+    /// ... its right side between the axle and the front end.
+    pub front_right: SidePoint,
+    /// ... its left side between the rear end and the axle.
+    pub rear_left: SidePoint,
+    /// ... its right side between the rear end and the axle.
+    pub rear_right: SidePoint,
 }
 
 /// A circular obstacle, in the frame of the path, with where it lies along the path (the
@@ -1199,8 +1213,9 @@ fn input_ok(input: &MpcInput) -> bool {
     let car = &input.car;
     let reference_ok = input.reference.iter().all(|r| {
         sample_ok(&r.at)
-            && sample_ok(&r.front)
-            && sample_ok(&r.rear)
+            && [r.front_left, r.front_right, r.rear_left, r.rear_right]
+                .iter()
+                .all(|p| sample_ok(&p.sample) && p.ahead_m.is_finite())
             && r.curvature_per_m.is_finite()
             && r.speed_mps.is_finite()
     });
