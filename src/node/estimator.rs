@@ -893,6 +893,64 @@ mod tests {
         );
     }
 
+    /// A weave at 14 m/s (heading 0.15 sin(2 pi t / 1.6 s): lane changes back and forth at
+    /// 3.6 m/s^2 peak lateral acceleration), exact GNSS at 100 Hz from an antenna 1.478 m
+    /// ahead, the yaw rate told exactly: the heading corrected by the chords compared stays on
+    /// the heading; the course read off the chord (the mean velocity's over 0.63 s, not the
+    /// course at the chord's middle) pulls it off by 0.02 rad.
+    #[test]
+    fn heading_in_a_weave() {
+        let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
+        let v = 14.0f32;
+        let (amp, period) = (0.15f64, 1.6f64);
+        let w = 2.0 * core::f64::consts::PI / period;
+        let run = |chords: bool| {
+            let mut st = EstimatorState::default();
+            let (mut x, mut y, mut t) = (0.0f64, 0.0f64, 0.0f64);
+            let psi = |t: f64| amp * (w * t).sin();
+            let antenna = |x: f64, y: f64, t: f64| Xy {
+                x_m: (x + 1.478 * psi(t).sin()) as f32,
+                y_m: (y + 1.478 * psi(t).cos()) as f32,
+            };
+            st.correct_heading(&cfg, 0.0, 0.0, v, Rates::default());
+            let mut worst = 0.0f32;
+            for tick in 0..600 {
+                let rates = Rates {
+                    yaw_rps: (amp * w * (w * (t + 0.01)).cos()) as f32,
+                    rear_side_mps: 0.0,
+                };
+                st.propagate(&cfg, v, rates, 0.02);
+                let mut fixes = [Xy::default(); 2];
+                for fix in fixes.iter_mut() {
+                    for _ in 0..10 {
+                        let dt = 0.001f64;
+                        let h = psi(t + 0.5 * dt);
+                        x += dt * f64::from(v) * h.sin();
+                        y += dt * f64::from(v) * h.cos();
+                        t += dt;
+                    }
+                    *fix = antenna(x, y, t);
+                }
+                st.add_fix(&cfg, fixes[0], 0.01, v);
+                st.add_fix(&cfg, fixes[1], 0.0, v);
+                if !(chords && st.correct_heading_on_track(&cfg, 0.0)) {
+                    if let Some((course, age_fixes)) = st.track_course(&cfg) {
+                        st.correct_heading(&cfg, course, age_fixes * cfg.gnss_period_s, v, rates);
+                    }
+                }
+                if tick > 100 {
+                    let error = math::wrap_pi(st.heading_rad().unwrap() - psi(t) as f32);
+                    worst = worst.max(error.abs());
+                }
+            }
+            worst
+        };
+        let chords = run(true);
+        let course = run(false);
+        assert!(chords < 0.005, "chords compared: {chords} rad");
+        assert!(course > 0.015, "the chord's course: {course} rad");
+    }
+
     /// The sideways travel is kept wrapped to +-1024 m; a window that spans the wrap still
     /// measures the travel in it (a car circling for hours slides that far).
     #[test]
