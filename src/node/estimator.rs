@@ -894,60 +894,90 @@ mod tests {
     }
 
     /// A weave at 14 m/s (heading 0.15 sin(2 pi t / 1.6 s): lane changes back and forth at
-    /// 3.6 m/s^2 peak lateral acceleration), exact GNSS at 100 Hz from an antenna 1.478 m
-    /// ahead, the yaw rate told exactly: the heading corrected by the chords compared stays on
-    /// the heading; the course read off the chord (the mean velocity's over 0.63 s, not the
-    /// course at the chord's middle) pulls it off by 0.02 rad.
+    /// 3.6 m/s^2 peak lateral acceleration), exact GNSS from an antenna 1.478 m ahead, the yaw
+    /// rate told exactly, the heading started 0.05 rad off: the heading corrected by the
+    /// chords compared settles on the heading without overshooting, at 100 Hz and with a 10 Hz
+    /// receiver (whose chord steers the heading for five ticks: the corrections since are
+    /// taken off); the course read off the chord (the mean velocity's over 0.63 s, not the
+    /// course at the chord's middle) stays 0.02 rad off at 100 Hz and overshoots at 10 Hz.
     #[test]
     fn heading_in_a_weave() {
-        let cfg = EstimatorConfig::design(100.0, 1.478, 0.0).unwrap();
         let v = 14.0f32;
         let (amp, period) = (0.15f64, 1.6f64);
         let w = 2.0 * core::f64::consts::PI / period;
-        let run = |chords: bool| {
+        let psi = |t: f64| amp * (w * t).sin();
+        // Largest heading error after the first 2 s, and the error's largest overshoot below
+        // zero while it settles (the start is 0.05 rad clockwise of the truth).
+        let run = |chords: bool, rate_hz: f64| {
+            let cfg = EstimatorConfig::design(rate_hz, 1.478, 0.0).unwrap();
             let mut st = EstimatorState::default();
             let (mut x, mut y, mut t) = (0.0f64, 0.0f64, 0.0f64);
-            let psi = |t: f64| amp * (w * t).sin();
             let antenna = |x: f64, y: f64, t: f64| Xy {
                 x_m: (x + 1.478 * psi(t).sin()) as f32,
                 y_m: (y + 1.478 * psi(t).cos()) as f32,
             };
-            st.correct_heading(&cfg, 0.0, 0.0, v, Rates::default());
-            let mut worst = 0.0f32;
+            st.correct_heading(&cfg, 0.05, 0.0, v, Rates::default());
+            let period_ms = libm::round(1000.0 / rate_hz) as u32;
+            let (mut ms, mut last_fix_ms) = (0u32, 0u32);
+            let (mut worst, mut undershoot) = (0.0f32, 0.0f32);
             for tick in 0..600 {
                 let rates = Rates {
                     yaw_rps: (amp * w * (w * (t + 0.01)).cos()) as f32,
                     rear_side_mps: 0.0,
                 };
                 st.propagate(&cfg, v, rates, 0.02);
-                let mut fixes = [Xy::default(); 2];
-                for fix in fixes.iter_mut() {
-                    for _ in 0..10 {
-                        let dt = 0.001f64;
-                        let h = psi(t + 0.5 * dt);
-                        x += dt * f64::from(v) * h.sin();
-                        y += dt * f64::from(v) * h.cos();
-                        t += dt;
+                for _ in 0..20 {
+                    let dt = 0.001f64;
+                    let h = psi(t + 0.5 * dt);
+                    x += dt * f64::from(v) * h.sin();
+                    y += dt * f64::from(v) * h.cos();
+                    t += dt;
+                    ms += 1;
+                    if ms % period_ms == 0 {
+                        let age_s = (20 * (tick + 1) - ms) as f32 * 1e-3;
+                        st.add_fix(&cfg, antenna(x, y, t), age_s, v);
+                        last_fix_ms = ms;
                     }
-                    *fix = antenna(x, y, t);
                 }
-                st.add_fix(&cfg, fixes[0], 0.01, v);
-                st.add_fix(&cfg, fixes[1], 0.0, v);
-                if !(chords && st.correct_heading_on_track(&cfg, 0.0)) {
+                let since_fix_s = (ms - last_fix_ms) as f32 * 1e-3;
+                if !(chords && st.correct_heading_on_track(&cfg, since_fix_s)) {
                     if let Some((course, age_fixes)) = st.track_course(&cfg) {
-                        st.correct_heading(&cfg, course, age_fixes * cfg.gnss_period_s, v, rates);
+                        let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
+                        st.correct_heading(&cfg, course, age_s, v, rates);
                     }
                 }
+                let error = math::wrap_pi(st.heading_rad().unwrap() - psi(t) as f32);
+                undershoot = undershoot.min(error);
                 if tick > 100 {
-                    let error = math::wrap_pi(st.heading_rad().unwrap() - psi(t) as f32);
                     worst = worst.max(error.abs());
                 }
             }
-            worst
+            (worst, undershoot)
         };
-        let chords = run(true);
-        let course = run(false);
-        assert!(chords < 0.005, "chords compared: {chords} rad");
+        let (chords, under) = run(true, 100.0);
+        assert!(chords < 0.005, "chords compared, 100 Hz: {chords} rad");
+        assert!(
+            under > -0.005,
+            "chords compared, 100 Hz: overshoot {under} rad"
+        );
+        // At 10 Hz the lowpass's 0.6 s window smooths the weave's track, which the dead
+        // reckoning's chord is not: 0.012 rad left, against the chord's course's 0.027 rad with
+        // a 0.017 rad overshoot.
+        let (chords, under) = run(true, 10.0);
+        let (course, course_under) = run(false, 10.0);
+        assert!(
+            chords < 0.6 * course,
+            "10 Hz: chords {chords} rad, course {course} rad"
+        );
+        assert!(
+            under > -0.005,
+            "chords compared, 10 Hz: overshoot {under} rad"
+        );
+        assert!(
+            course_under < -0.01,
+            "the chord's course, 10 Hz: {course_under} rad"
+        );
+        let (course, _) = run(false, 100.0);
         assert!(course > 0.015, "the chord's course: {course} rad");
     }
 
