@@ -550,8 +550,9 @@ impl Path {
     }
 
     /// Where the corridor binds a straight side of a body that spans the stations from `from_m`
-    /// (the rear axle) to `to_m` (one end of the body; either order; clamped to the path): per
-    /// side, the narrowest corridor there and the station where it is. The corridor is linear
+    /// (the rear axle) to `to_m` (one end of the body; either order; beyond the path's ends the
+    /// corridor is its end point's, at the station asked for): per side, the narrowest
+    /// corridor there and the station where it is. The corridor is linear
     /// between points, so its minimum is at an end or at a point in between; where it is equally
     /// narrow over a stretch (within [`NARROWEST_TIE_M`]), the station farthest from `from_m`
     /// is taken: in a lane that goes on past the body's end that is the end's corner, in a lane
