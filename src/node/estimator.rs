@@ -679,7 +679,8 @@ impl EstimatorState {
     /// describe (each `group_delay_fixes` before its fix). The dead reckoning's chord is turned
     /// from the truth's by the heading's error over that stretch, whatever the car did along it
     /// (a course read off the chord itself is the course of the stretch's mean velocity, which
-    /// after the two turns of a lane change is 0.06-0.1 rad from the course at its middle); the
+    /// after the turns of a lane change is hundredths of a radian from the course at its
+    /// middle: `tests::heading_in_a_weave`); the
     /// corrections applied since its middle are already in the heading and are taken off. The
     /// lever arm and the rear axle's slide are in both chords. `since_fix_s`: time since the
     /// latest fix. Returns `false`, doing nothing, until the dead reckoning has a history with a
