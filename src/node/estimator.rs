@@ -573,21 +573,6 @@ impl EstimatorState {
             .copied()
     }
 
-    /// Dead-reckoned position `fixes` fixes before the latest one (>= 0, fractional:
-    /// interpolated between the two recorded around it; the older one, if not recorded yet,
-    /// stands in for itself); `None` if not recorded.
-    fn odo_back(&self, fixes: f32) -> Option<Xy> {
-        let d = fixes.max(0.0);
-        let k0 = d as usize; // floor: d >= 0
-        let w = d - k0 as f32;
-        let a = self.odo_fixes_ago(k0)?;
-        let b = self.odo_fixes_ago(k0 + 1).unwrap_or(a);
-        Some(Xy {
-            x_m: a.x_m + (b.x_m - a.x_m) * w,
-            y_m: a.y_m + (b.y_m - a.y_m) * w,
-        })
-    }
-
     /// The rear axle now: [`Self::antenna_position`] moved back by the lever arm (ahead along
     /// the heading `(sin, cos)`, left along `(-cos, sin)`). `None` without a position or a
     /// heading.
@@ -619,7 +604,15 @@ impl EstimatorState {
         if (self.fixes as f32) < cfg.group_delay_fixes * 2.0 {
             return None;
         }
-        let odo_then = self.odo_back(cfg.group_delay_fixes)?;
+        let d = cfg.group_delay_fixes.max(0.0);
+        let k0 = d as usize; // floor: d >= 0
+        let w = d - k0 as f32;
+        let a = self.odo_fixes_ago(k0)?;
+        let b = self.odo_fixes_ago(k0 + 1).unwrap_or(a);
+        let odo_then = Xy {
+            x_m: a.x_m + (b.x_m - a.x_m) * w,
+            y_m: a.y_m + (b.y_m - a.y_m) * w,
+        };
         Some(Xy {
             x_m: filtered.x_m + (self.odo_now.x_m - odo_then.x_m),
             y_m: filtered.y_m + (self.odo_now.y_m - odo_then.y_m),
@@ -700,15 +693,24 @@ impl EstimatorState {
         let span = (cfg.track_span_fixes as usize).clamp(1, TRACK_LEN - 1);
         let delay = cfg.group_delay_fixes.max(0.0);
         let k0 = delay as usize; // floor: delay >= 0
+        let w = delay - k0 as f32;
         if (self.odo_valid as usize) < k0 + span + 2 || (self.fixes as usize) < span + 2 * k0 {
             return false;
         }
+        let odo_at = |k: usize| -> Option<Xy> {
+            let a = self.odo_fixes_ago(k)?;
+            let b = self.odo_fixes_ago(k + 1)?;
+            Some(Xy {
+                x_m: a.x_m + (b.x_m - a.x_m) * w,
+                y_m: a.y_m + (b.y_m - a.y_m) * w,
+            })
+        };
         let (Some(now), Some(then), Some(odo_now), Some(odo_then)) = (
             self.track.get(self.track_head),
             self.track
                 .get((self.track_head + TRACK_LEN - span) % TRACK_LEN),
-            self.odo_back(delay),
-            self.odo_back(delay + span as f32),
+            odo_at(k0),
+            odo_at(k0 + span),
         ) else {
             return false;
         };
