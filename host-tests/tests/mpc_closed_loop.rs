@@ -488,12 +488,10 @@ fn double_lane_change_is_clean_with_a_real_nodes_delays() {
 }
 
 /// The rig's planner's lane-change path (least-curvature transitions 0.15 m from the cones,
-/// host/src/closed_loop/scenario.rs) on the bench, as a check that the gap between the bench
-/// and the rig is not the path: clean at 12 m/s.
-#[test]
-fn the_rigs_lane_change_path_is_clean_on_the_bench() {
+/// host/src/closed_loop/scenario.rs) for the CAT Vehicle's body at `speed`, with the lanes'
+/// edges as its corridor.
+fn rigs_lane_change(speed: f64) -> TestPath {
     use catmodel_host::closed_loop::scenario::{design_lane_change, dlc_edges, dlc_lanes};
-    let cfg = VehicleConfig::default();
     let body = catmodel_host::sim::config::Body {
         width_m: ESCAPE_BODY.width_m as f64,
         length_m: ESCAPE_BODY.length_m as f64,
@@ -513,8 +511,7 @@ fn the_rigs_lane_change_path_is_clean_on_the_bench() {
             dlc_edges(&lanes, x)
         }
     };
-    let speed = 12.0;
-    let path = TestPath::new(
+    TestPath::new(
         lead + end + 60.0,
         move |s| (-y(s), s),
         move |s| {
@@ -522,7 +519,14 @@ fn the_rigs_lane_change_path_is_clean_on_the_bench() {
             (l - y(s), y(s) - r)
         },
         move |_| speed,
-    );
+    )
+}
+
+/// The largest corridor violation of the CAT Vehicle's body on the rig's lane-change path at
+/// `speed`, with `delays` and `position_error` between the plant and the controller, m.
+fn rigs_lane_change_violation(speed: f64, delays: Delays, position_error: PositionError) -> f64 {
+    let cfg = VehicleConfig::default();
+    let path = rigs_lane_change(speed);
     let mut l = Loop::new(
         cfg.clone(),
         mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
@@ -531,10 +535,58 @@ fn the_rigs_lane_change_path_is_clean_on_the_bench() {
         0.0,
         0.0,
     );
+    l.delays = delays;
+    l.position_error = position_error;
     l.run(&path, path.length_m() - 20.0, 30.0);
-    let worst = l
-        .log
+    l.log
         .iter()
-        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m))
+}
+
+/// The rig's lane-change path on the bench, as a check that the gap between the bench and the
+/// rig is not the path: clean at 12 m/s.
+#[test]
+fn the_rigs_lane_change_path_is_clean_on_the_bench() {
+    let worst = rigs_lane_change_violation(12.0, Delays::default(), PositionError::NONE);
     assert!(worst <= 0.0, "body {worst} m outside");
+}
+
+/// Where the lane change's limit goes between the bench and the rig: the rig's path at 13 to
+/// 17 m/s, fed the truth at once, then with each of the node's one-tick delays and the RTK
+/// receiver's error alone, then all of them (docs/controller.md, "What is left"). Prints each
+/// speed's largest corridor violation (m) and the highest speed with every speed below it
+/// clean.
+#[test]
+#[ignore = "measurement; prints the lane change's limit per delay"]
+fn rigs_lane_change_limit_per_delay() {
+    let one = |heading_ticks, steer_ticks, command_ticks| Delays {
+        heading_ticks,
+        steer_ticks,
+        command_ticks,
+    };
+    let cases = [
+        ("truth", one(0, 0, 0), PositionError::NONE),
+        ("heading a tick old", one(1, 0, 0), PositionError::NONE),
+        (
+            "steering report a tick old",
+            one(0, 1, 0),
+            PositionError::NONE,
+        ),
+        ("command a tick late", one(0, 0, 1), PositionError::NONE),
+        ("RTK position error", one(0, 0, 0), PositionError::RTK),
+        ("all of them", one(1, 1, 1), PositionError::RTK),
+    ];
+    for (name, delays, error) in cases {
+        let mut limit = None;
+        let mut line = String::new();
+        for v4 in 52..=68 {
+            let speed = v4 as f64 / 4.0;
+            let worst = rigs_lane_change_violation(speed, delays, error);
+            line += &format!(" {speed}:{worst:.2}");
+            if worst > 0.0 && limit.is_none() {
+                limit = Some(speed - 0.25);
+            }
+        }
+        println!("{name}: limit {limit:?} m/s;{line}");
+    }
 }
