@@ -784,6 +784,13 @@ impl Loop {
         }
     }
 
+    /// The largest corridor violation of the body over the log, m (0 when it stayed inside).
+    pub fn worst_corridor_violation_m(&self) -> f64 {
+        self.log
+            .iter()
+            .fold(0.0f64, |m, t| m.max(t.corridor_violation_m))
+    }
+
     /// The plant's state (CG).
     pub fn plant_state(&self) -> &PlantState {
         &self.state

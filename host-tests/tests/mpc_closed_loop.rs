@@ -140,10 +140,7 @@ fn dlc_run_body(
         0.0,
     );
     l.run(&path, path.length_m() - 20.0, 30.0);
-    let worst = l
-        .log
-        .iter()
-        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+    let worst = l.worst_corridor_violation_m();
     let iters = l.log.iter().map(|t| t.out.iterations).max().unwrap_or(0);
     (worst, iters, l)
 }
@@ -479,10 +476,7 @@ fn double_lane_change_is_clean_with_a_real_nodes_delays() {
             command_ticks: 1,
         };
         l.run(&path, path.length_m() - 20.0, 30.0);
-        let worst = l
-            .log
-            .iter()
-            .fold(0.0f64, |m, t| m.max(t.corridor_violation_m));
+        let worst = l.worst_corridor_violation_m();
         assert!(worst <= 0.0, "{speed} m/s: body {worst} m outside");
     }
 }
@@ -538,9 +532,7 @@ fn rigs_lane_change_violation(speed: f64, delays: Delays, position_error: Positi
     l.delays = delays;
     l.position_error = position_error;
     l.run(&path, path.length_m() - 20.0, 30.0);
-    l.log
-        .iter()
-        .fold(0.0f64, |m, t| m.max(t.corridor_violation_m))
+    l.worst_corridor_violation_m()
 }
 
 /// The rig's lane-change path on the bench, as a check that the gap between the bench and the
