@@ -50,6 +50,10 @@ pub const PROJECTION_BEHIND_M: f32 = 3.0;
 /// A windowed projection farther than this from the path falls back to a search of the whole
 /// path, m (the car was moved, or the path changed under it).
 pub const PROJECTION_RESEARCH_M: f32 = 5.0;
+/// Relative margin by which a segment's corner must be nearer (in squared distance) than a
+/// foot on another segment to be taken (see `Path::nearest_in`): five times what the rounding
+/// of 0.3 m segments' headings 1 km from the origin can make of a tie.
+const VERTEX_TIE: f32 = 2e-3;
 
 /// One point of a path as the planner sends it: PATH_POINT and PATH_LIMITS of one index.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -382,6 +386,11 @@ impl Path {
     /// Projects `(east, north)` onto segment `i` (the end segments extend beyond the path's
     /// ends): `(station, lateral, squared distance to the segment itself, whether the foot was
     /// clamped to an end point)`. `lateral` is the offset from the segment's line.
+    ///
+    /// The station and offset of a point beyond the path's ends are on the extended end
+    /// segment, but its distance is to the segment itself, the end point: the extension is a
+    /// ray without end, and a path whose end points back at its start (a loop) must not take a
+    /// car at the start for one far beyond the end.
     fn project_on(&self, i: usize, east_m: f32, north_m: f32) -> Option<(f32, f32, f32, bool)> {
         let (a, h, length) = self.segment(i)?;
         let (sin_h, cos_h) = math::sin_cos(h);
@@ -396,7 +405,7 @@ impl Path {
             (_, true) => length,
             _ => along,
         };
-        let (ex, ey) = (along - t, lateral);
+        let (ex, ey) = (along - math::clamp(along, 0.0, length), lateral);
         let station = self.station_m.get(i)? + t;
         Some((station, lateral, ex * ex + ey * ey, t != along))
     }
@@ -408,13 +417,23 @@ impl Path {
         east_m: f32,
         north_m: f32,
     ) -> Option<(Projection, f32)> {
-        let mut best: Option<(Projection, f32)> = None;
+        let mut best: Option<(Projection, f32, bool)> = None;
         for i in range {
             let Some((station_m, lateral, d2, clamped)) = self.project_on(i, east_m, north_m)
             else {
                 break;
             };
-            if best.is_none_or(|(_, b)| d2 < b) {
+            // Near a point of a nearly straight stretch, the foot on the next segment and the
+            // corner of the previous one are equally near but for the rounding of the two
+            // segments' headings (1 km from the origin f32 points are 6e-5 m apart: 2e-4 rad
+            // for a 0.3 m segment, which moves a squared distance by up to 4e-4 of itself).
+            // The foot, the true nearest point there, wins such a tie.
+            let better = |b: f32, best_clamped: bool| match (clamped, best_clamped) {
+                (false, true) => d2 < b * (1.0 + VERTEX_TIE),
+                (true, false) => d2 < b * (1.0 - VERTEX_TIE),
+                _ => d2 < b,
+            };
+            if best.is_none_or(|(_, b, best_clamped)| better(b, best_clamped)) {
                 // At a corner the nearest point is the corner itself: the offset is the
                 // distance to it, with the side of the segment's line.
                 let lateral_m = if clamped {
@@ -429,10 +448,11 @@ impl Path {
                         lateral_m,
                     },
                     d2,
+                    clamped,
                 ));
             }
         }
-        best
+        best.map(|(p, d2, _)| (p, d2))
     }
 
     /// The projection of `(east, north)` onto the path. With `previous` (last tick's
