@@ -13,6 +13,7 @@ use catmodel::control::pure_pursuit::{
 use catmodel::model::kinematic::Pose;
 use catmodel::vehicle::{Body, VehicleParams};
 use proptest::prelude::*;
+use std::f32::consts::FRAC_PI_2;
 use std::f64::consts::PI;
 
 fn wp(east: f64, north: f64) -> Waypoint {
@@ -236,6 +237,82 @@ fn a_loop_whose_end_points_at_its_start_is_not_taken_for_its_end() {
     );
 }
 
+/// A closed loop (the rig's parking loop): east 20 m, a half circle of radius 5 m to the left,
+/// west 20 m, a half circle back to the start; points 1 m apart, the last one the first.
+fn closed_loop() -> Vec<Waypoint> {
+    let (l, r) = (20.0, 5.0);
+    let half = PI * r;
+    let perimeter = 2.0 * l + 2.0 * half;
+    let n = perimeter.round() as usize;
+    (0..=n)
+        .map(|i| {
+            let s = perimeter * i as f64 / n as f64;
+            // Course coordinates: x east, y north.
+            let (x, y) = if s <= l {
+                (s, 0.0)
+            } else if s <= l + half {
+                let a = (s - l) / r;
+                (l + r * a.sin(), r - r * a.cos())
+            } else if s <= 2.0 * l + half {
+                (l - (s - l - half), 2.0 * r)
+            } else {
+                let a = (s - 2.0 * l - half) / r;
+                (-r * a.sin(), r + r * a.cos())
+            };
+            wp(x, y)
+        })
+        .collect()
+}
+
+#[test]
+fn a_car_without_a_projection_is_at_the_start_of_a_closed_loop() {
+    let p = path_of(&closed_loop());
+    let length = p.length_m();
+    // Heading east at the start: a fix 0.5 m behind it lies on the loop's last segment, nearer
+    // than to the first one's extension (0.5 m); the car is starting the loop all the same.
+    for (east, north) in [(-0.5f32, 0.02f32), (-0.5, -0.3), (0.0, 0.0), (0.3, 0.1)] {
+        let pose = Pose::new(east, north, FRAC_PI_2);
+        let t = p.track(&pose, None).unwrap();
+        assert_eq!(t.projection.segment, 0, "({east}, {north}): {t:?}");
+        assert!((t.projection.station_m - east).abs() < 1e-4, "{t:?}");
+        // The same fix, tracked from the loop's last metres, is at its end.
+        let late = Projection {
+            segment: p.len() - 3,
+            station_m: length - 1.5,
+            lateral_m: 0.0,
+        };
+        let t = p.track(&pose, Some(&late)).unwrap();
+        assert!(
+            t.projection.station_m > length - 1.0,
+            "({east}, {north}): {t:?}"
+        );
+    }
+    // Halfway along the loop's far straight the car is there, not at the start.
+    let t = p.track(&Pose::new(10.0, 10.1, -FRAC_PI_2), None).unwrap();
+    let expected = 20.0 + PI as f32 * 5.0 + 10.0;
+    assert!((t.projection.station_m - expected).abs() < 0.05, "{t:?}");
+}
+
+#[test]
+fn a_car_ahead_of_a_paths_start_is_placed_where_it_is() {
+    // A planner's path that starts 15 m behind the car (north, points 1 m apart): the first
+    // 10 m end 5 m behind it, a corner of the stretch, not a foot; the whole path's nearest
+    // point is taken.
+    let p = path_of(&straight(0.0, 0.0, 0.0, 40, 1.0));
+    for north in [10.5f32, 11.5, 15.0, 30.0] {
+        let t = p.track(&Pose::new(0.4, north, 0.0), None).unwrap();
+        assert!(
+            (t.projection.station_m - north).abs() < 1e-4,
+            "{north}: {t:?}"
+        );
+        assert!(
+            (t.projection.lateral_m - 0.4).abs() < 1e-4,
+            "{north}: {t:?}"
+        );
+    }
+    assert!(p.track(&Pose::new(f32::NAN, 1.0, 0.0), None).is_none());
+}
+
 // ------------------------------------------------------------------------------------------
 // Properties
 
@@ -277,13 +354,12 @@ proptest! {
     }
 
     /// Walking along the path (or beside it, closer than its radius of curvature), the tracked
-    /// projection's station never goes back. The walk is tracked from the start: a random path
-    /// may cross itself there, and a car without a previous projection is then as near to the
-    /// crossing's later stretch (the nearest is taken; a seed in control.proptest-regressions).
+    /// projection's station never goes back, from the first (a random path may cross itself
+    /// at its start, or end pointing at it: seeds in control.proptest-regressions).
     #[test]
     fn station_is_monotone_along_the_path(pts in arb_path(), offset in -0.5f32..0.5) {
         let p = path_of(&pts);
-        let mut prev = Some(Projection { segment: 0, station_m: 0.0, lateral_m: offset });
+        let mut prev = None;
         let mut last_station = f32::NEG_INFINITY;
         let n = 200;
         for k in 0..=n {
@@ -292,8 +368,13 @@ proptest! {
             let (sin_h, cos_h) = (on.heading_rad.sin(), on.heading_rad.cos());
             // A car beside the path (its right normal is (cos h, -sin h)).
             let (e, nn) = (on.east_m + offset * cos_h, on.north_m - offset * sin_h);
-            let q = p.project(e, nn, prev.as_ref()).unwrap();
+            let q = p.track(&Pose::new(e, nn, on.heading_rad), prev.as_ref()).unwrap().projection;
             prop_assert!(q.station_m >= last_station - 0.05, "{} after {}", q.station_m, last_station);
+            if k == 0 {
+                // Beside the start along the rounded heading's normal, which is not the first
+                // segment's: within the offset of station 0.
+                prop_assert!(q.station_m.abs() <= offset.abs() + 1e-3, "starts at {q:?}");
+            }
             last_station = q.station_m;
             prev = Some(q);
         }

@@ -50,6 +50,11 @@ pub const PROJECTION_BEHIND_M: f32 = 3.0;
 /// A windowed projection farther than this from the path falls back to a search of the whole
 /// path, m (the car was moved, or the path changed under it).
 pub const PROJECTION_RESEARCH_M: f32 = 5.0;
+/// How much nearer than the path's first [`PROJECTION_AHEAD_M`] the rest of the path must be
+/// for a car without a projection to be placed on it, m (see `Path::acquire`): the CAT
+/// Vehicle's receiver error, 1.2 m RMS horizontal (paper, II-A), so that a car at the start of
+/// a closed loop is at its start whatever its first fix.
+pub const ACQUIRE_TIE_M: f32 = 1.2;
 /// Relative margin by which a segment's corner must be nearer (in squared distance) than a
 /// foot on another segment to be taken (see `Path::nearest_in`): five times what the rounding
 /// of 0.3 m segments' headings 1 km from the origin can make of a tie.
@@ -176,9 +181,10 @@ pub struct Path {
     points: [Waypoint; MAX_PATH_POINTS],
     /// Distance along the path from point 0 to point `i`, m.
     station_m: [f32; MAX_PATH_POINTS],
-    /// Heading of segment `i` (point `i` to `i + 1`), rad; the last entry repeats the last
-    /// segment's.
-    heading_rad: [f32; MAX_PATH_POINTS],
+    /// Sine and cosine of the heading of segment `i` (point `i` to `i + 1`), computed once at
+    /// load (every projection and sample uses them: a search of the whole path would otherwise
+    /// take a sine and cosine per segment); the last entry repeats the last segment's.
+    direction: [(f32, f32); MAX_PATH_POINTS],
     /// Reference heading at point `i` (see the module doc), rad.
     reference_heading_rad: [f32; MAX_PATH_POINTS],
     /// Reference curvature at point `i`, 1/m, positive turning right.
@@ -204,7 +210,7 @@ impl Path {
                 right_m: 0.0,
             }; MAX_PATH_POINTS],
             station_m: [0.0; MAX_PATH_POINTS],
-            heading_rad: [0.0; MAX_PATH_POINTS],
+            direction: [(0.0, 1.0); MAX_PATH_POINTS],
             reference_heading_rad: [0.0; MAX_PATH_POINTS],
             curvature_per_m: [0.0; MAX_PATH_POINTS],
         }
@@ -256,10 +262,10 @@ impl Path {
         let n = waypoints.len();
         let mut station = 0.0;
         for i in 0..n {
-            let (Some(w), Some(s), Some(h), Some(p)) = (
+            let (Some(w), Some(s), Some(d), Some(p)) = (
                 waypoints.get(i),
                 self.station_m.get_mut(i),
-                self.heading_rad.get_mut(i),
+                self.direction.get_mut(i),
                 self.points.get_mut(i),
             ) else {
                 break;
@@ -268,14 +274,14 @@ impl Path {
             *s = station;
             if let Some(next) = waypoints.get(i + 1) {
                 let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
-                *h = math::atan2(dx, dy);
+                *d = math::sin_cos(math::atan2(dx, dy));
                 station += math::sqrt(dx * dx + dy * dy);
             }
         }
         // The last point has no segment of its own: it keeps the last segment's heading.
-        let last = self.heading_rad.get(n - 2).copied().unwrap_or(0.0);
-        if let Some(h) = self.heading_rad.get_mut(n - 1) {
-            *h = last;
+        let last = self.direction.get(n - 2).copied().unwrap_or((0.0, 1.0));
+        if let Some(d) = self.direction.get_mut(n - 1) {
+            *d = last;
         }
         self.len = n;
         self.reference_geometry();
@@ -372,15 +378,15 @@ impl Path {
         self.station_of(self.len.saturating_sub(1)).unwrap_or(0.0)
     }
 
-    /// Segment `i`: its start point, heading and length.
-    fn segment(&self, i: usize) -> Option<(Waypoint, f32, f32)> {
+    /// Segment `i`: its start point, heading's `(sin, cos)` and length.
+    fn segment(&self, i: usize) -> Option<(Waypoint, (f32, f32), f32)> {
         if i + 1 >= self.len {
             return None;
         }
         let a = *self.points.get(i)?;
-        let h = *self.heading_rad.get(i)?;
+        let d = *self.direction.get(i)?;
         let length = self.station_m.get(i + 1)? - self.station_m.get(i)?;
-        Some((a, h, length))
+        Some((a, d, length))
     }
 
     /// Projects `(east, north)` onto segment `i` (the end segments extend beyond the path's
@@ -392,8 +398,7 @@ impl Path {
     /// ray without end, and a path whose end points back at its start (a loop) must not take a
     /// car at the start for one far beyond the end.
     fn project_on(&self, i: usize, east_m: f32, north_m: f32) -> Option<(f32, f32, f32, bool)> {
-        let (a, h, length) = self.segment(i)?;
-        let (sin_h, cos_h) = math::sin_cos(h);
+        let (a, (sin_h, cos_h), length) = self.segment(i)?;
         let (px, py) = (east_m - a.east_m, north_m - a.north_m);
         // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
         let along = px * sin_h + py * cos_h;
@@ -410,13 +415,14 @@ impl Path {
         Some((station, lateral, ex * ex + ey * ey, t != along))
     }
 
-    /// The nearest point of the path to `(east, north)` among segments `range`.
+    /// The nearest point of the path to `(east, north)` among segments `range`, its squared
+    /// distance and whether it is a segment's end point rather than a foot on it.
     fn nearest_in(
         &self,
         range: core::ops::Range<usize>,
         east_m: f32,
         north_m: f32,
-    ) -> Option<(Projection, f32)> {
+    ) -> Option<(Projection, f32, bool)> {
         let mut best: Option<(Projection, f32, bool)> = None;
         for i in range {
             let Some((station_m, lateral, d2, clamped)) = self.project_on(i, east_m, north_m)
@@ -452,7 +458,7 @@ impl Path {
                 ));
             }
         }
-        best.map(|(p, d2, _)| (p, d2))
+        best
     }
 
     /// The projection of `(east, north)` onto the path. With `previous` (last tick's
@@ -471,30 +477,61 @@ impl Path {
         }
         let segments = self.len - 1;
         if let Some(prev) = previous.filter(|p| p.segment < segments) {
-            let mut lo = prev.segment;
-            while lo > 0
-                && self
-                    .station_of(lo)
-                    .is_some_and(|s| s > prev.station_m - PROJECTION_BEHIND_M)
-            {
-                lo -= 1;
-            }
-            let mut hi = prev.segment + 1;
-            while hi < segments
-                && self
-                    .station_of(hi)
-                    .is_some_and(|s| s < prev.station_m + PROJECTION_AHEAD_M)
-            {
-                hi += 1;
-            }
-            if let Some((p, d2)) = self.nearest_in(lo..hi, east_m, north_m) {
+            if let Some((p, d2, _)) = self.nearest_in(self.window(prev), east_m, north_m) {
                 if d2 <= PROJECTION_RESEARCH_M * PROJECTION_RESEARCH_M {
                     return Some(p);
                 }
             }
         }
         self.nearest_in(0..segments, east_m, north_m)
-            .map(|(p, _)| p)
+            .map(|(p, _, _)| p)
+    }
+
+    /// The segments from [`PROJECTION_BEHIND_M`] behind to [`PROJECTION_AHEAD_M`] ahead of
+    /// `prev`.
+    fn window(&self, prev: &Projection) -> core::ops::Range<usize> {
+        let segments = self.len.saturating_sub(1);
+        let mut lo = prev.segment.min(segments);
+        while lo > 0
+            && self
+                .station_of(lo)
+                .is_some_and(|s| s > prev.station_m - PROJECTION_BEHIND_M)
+        {
+            lo -= 1;
+        }
+        let mut hi = (prev.segment + 1).min(segments);
+        while hi < segments
+            && self
+                .station_of(hi)
+                .is_some_and(|s| s < prev.station_m + PROJECTION_AHEAD_M)
+        {
+            hi += 1;
+        }
+        lo..hi
+    }
+
+    /// The projection of a car that has none yet (a new path, or a reset): the car is about to
+    /// start the path, so a foot on its first [`PROJECTION_AHEAD_M`] is taken unless the rest
+    /// of the path is nearer by more than [`ACQUIRE_TIE_M`]. A closed loop's end, or a figure
+    /// of eight's crossing, lies at its start: there the nearest point of the whole path is a
+    /// matter of the receiver's noise (a fix 0.5 m behind the start of a loop is on its last
+    /// segment), and the car would take itself for one at the end of the path. A point of the
+    /// first stretch that is a corner (the stretch's far end, for a car farther on) is not
+    /// taken: the whole path's nearest point is.
+    fn acquire(&self, east_m: f32, north_m: f32) -> Option<Projection> {
+        let start = Projection {
+            segment: 0,
+            station_m: 0.0,
+            lateral_m: 0.0,
+        };
+        let (near_start, d2_start, corner) =
+            self.nearest_in(self.window(&start), east_m, north_m)?;
+        let (nearest, d2, _) = self.nearest_in(0..self.len.saturating_sub(1), east_m, north_m)?;
+        if !corner && math::sqrt(d2_start) <= math::sqrt(d2) + ACQUIRE_TIE_M {
+            Some(near_start)
+        } else {
+            Some(nearest)
+        }
     }
 
     /// Index of the segment whose span holds `station_m`, searching forward from `hint` (then
@@ -521,13 +558,12 @@ impl Path {
         let length = self.length_m();
         let s = math::clamp(station_m, 0.0, length);
         let i = self.segment_at(s, hint);
-        let (a, h, seg_len) = self.segment(i)?;
+        let (a, (sin_h, cos_h), seg_len) = self.segment(i)?;
         let b = *self.points.get(i + 1)?;
         let s_a = *self.station_m.get(i)?;
         let t = s - s_a;
         let f = if seg_len > 0.0 { t / seg_len } else { 0.0 };
         let lerp = |x: f32, y: f32| x + (y - x) * f;
-        let (sin_h, cos_h) = math::sin_cos(h);
         // Beyond the end, the last segment extends straight: position moves on, speed is 0.
         let beyond = (station_m - length).max(0.0);
         let (heading_rad, curvature_per_m) = self.heading_and_curvature(i, t, seg_len);
@@ -561,7 +597,8 @@ impl Path {
             self.curvature_per_m.get(i),
             self.curvature_per_m.get(i + 1),
         ) else {
-            return (self.heading_rad.get(i).copied().unwrap_or(0.0), 0.0);
+            let (sin_h, cos_h) = self.direction.get(i).copied().unwrap_or((0.0, 1.0));
+            return (math::atan2(sin_h, cos_h), 0.0);
         };
         (
             math::wrap_pi(h0 + math::wrap_pi(h1 - h0) * f),
@@ -623,9 +660,17 @@ impl Path {
     }
 
     /// The car's pose relative to the path (projection of the rear axle, heading error, the
-    /// reference there); `previous` as in [`Path::project`].
+    /// reference there); `previous` as in [`Path::project`]. Without `previous` the car is
+    /// taken to be starting the path (see `Path::acquire`); `None` without a path or for a
+    /// non-finite pose.
     pub fn track(&self, pose: &Pose, previous: Option<&Projection>) -> Option<Tracking> {
-        let projection = self.project(pose.x_m, pose.y_m, previous)?;
+        let projection = match previous {
+            Some(_) => self.project(pose.x_m, pose.y_m, previous)?,
+            None if self.len >= 2 && pose.x_m.is_finite() && pose.y_m.is_finite() => {
+                self.acquire(pose.x_m, pose.y_m)?
+            }
+            None => return None,
+        };
         let reference = self.sample(projection.station_m, projection.segment)?;
         Some(Tracking {
             projection,
