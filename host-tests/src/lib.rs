@@ -41,8 +41,35 @@ pub fn assert_allclose(actual: &[f64], expected: &[f64], rtol: f64, atol: f64, w
     }
 }
 
-/// One drive of the built-in simulator (`scenario`, `seed`) preprocessed as `identify` does,
-/// named `SCENARIO-SEED`.
+/// One drive of the built-in simulator (`scenario`, `seed`) on the plant `plant`, preprocessed
+/// as `identify` does for the car file's `vehicle`, named `SCENARIO-SEED`.
+pub fn sim_experiment_of(
+    scenario: &str,
+    seed: u64,
+    plant: &sim::config::VehicleConfig,
+    vehicle: &model_file::VehicleSection,
+) -> Experiment {
+    let base = sim::scenario::Scenario::builtin(scenario)
+        .unwrap_or_else(|| panic!("no built-in scenario {scenario}"));
+    let out = sim::simulate(
+        &base,
+        plant,
+        &SimOptions {
+            seed,
+            ..SimOptions::default()
+        },
+    );
+    preprocess_rows(
+        &format!("{scenario}-{seed}"),
+        &out.log,
+        vehicle,
+        &PreprocessOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("preprocessing {scenario}: {e:#}"))
+}
+
+/// One drive of the built-in simulator (`scenario`, `seed`) on the CAT Vehicle, preprocessed
+/// as `identify` does, named `SCENARIO-SEED`.
 pub fn sim_experiment(scenario: &str, seed: u64) -> Experiment {
     let out = sim::run_named(
         scenario,

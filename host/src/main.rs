@@ -23,7 +23,7 @@ enum Command {
     /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
     SimulateDrive {
         /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
-        /// circle-left, circle-right, validation, smoke, standstill, suburb.
+        /// circle-left, circle-right, validation, smoke, standstill, suburb, steps-at-speed.
         #[arg(long)]
         scenario: String,
         /// Output directory.

@@ -16,6 +16,7 @@ pub mod car;
 pub mod correlation;
 pub mod delay;
 pub mod discretize;
+pub mod dynamics;
 pub mod floor;
 pub mod oe;
 pub mod preprocess;
@@ -101,6 +102,9 @@ pub struct Identification {
     pub validation_scores: Option<Scores>,
     /// Whether the dx/dt model was re-identified (else the file keeps the base file's).
     pub dx_dt_identified: bool,
+    /// The cornering stiffnesses, when the drives determine them (else the file keeps the car
+    /// file's `[dynamics]`, and a note says why).
+    pub dynamics: Option<dynamics::DynamicsFit>,
     /// Things the user should know (skipped models, weak excitation, transfer caveats).
     pub notes: Vec<String>,
     /// Wall time of the identification (without reading files), s.
@@ -527,8 +531,44 @@ pub fn identify(
         }
     };
 
+    let identified_dynamics = match (&base.dynamics, &lateral) {
+        (None, _) => {
+            notes.push("[dynamics] not identified: the car file has none (its mass, yaw inertia and centre of gravity are needed; the cornering stiffnesses are then fitted)".into());
+            None
+        }
+        (Some(prior), lateral) => {
+            let steer_gain = lateral.as_ref().map_or(1.0, |l| l.0);
+            match dynamics::identify_dynamics(&training, &vehicle, prior, steer_gain) {
+                Ok(fit) => {
+                    notes.push(format!(
+                        "[dynamics] cornering stiffnesses identified from {} samples at speed ({} cornering): C_f {:.0} N/rad (+-{:.1} %), C_r {:.0} N/rad (+-{:.1} %); course rate fit {:.1} % (the car file's stiffnesses {:.1} %, kinematic {:.1} %)",
+                        fit.samples,
+                        fit.cornering_samples,
+                        fit.section.cornering_front_n_per_rad,
+                        100.0 * fit.relative_std_error.0,
+                        fit.section.cornering_rear_n_per_rad,
+                        100.0 * fit.relative_std_error.1,
+                        fit.fit_percent,
+                        fit.prior_fit_percent,
+                        fit.kinematic_fit_percent
+                    ));
+                    Some(fit)
+                }
+                Err(why) => {
+                    notes.push(format!(
+                        "[dynamics] cornering stiffnesses not identified, the car file's kept: {why}"
+                    ));
+                    None
+                }
+            }
+        }
+    };
+
     let mut model = base.clone();
     model.name = "identified".into();
+    if let Some(fit) = &identified_dynamics {
+        model.dynamics = Some(fit.section);
+    }
     let names: Vec<&str> = training.iter().map(|e| e.name.as_str()).collect();
     model.description = format!(
         "Identified by catmodel identify from {} log(s): {}",
@@ -636,6 +676,7 @@ pub fn identify(
         training_scores,
         validation_scores,
         dx_dt_identified: dx_dt_tfs.is_some(),
+        dynamics: identified_dynamics,
         notes,
         seconds: started.elapsed().as_secs_f64(),
     })

@@ -1,0 +1,307 @@
+//! `[dynamics]` from drives: the single-track model's cornering stiffnesses `C_f`, `C_r`, by a
+//! simulation-error fit of the course rate at speed.
+//!
+//! The car file gives what a scale and a tape measure give (mass, yaw inertia, the centre of
+//! gravity: `[dynamics]`'s other keys); the tyres are what only a drive shows. The model is the
+//! node's own (`catmodel::model::dynamic`, the same trapezoidal step), driven by the measured
+//! speed and the centre-tyre angle (with the steering gain the lateral fit found). Its output
+//! is what the log measures: the course over ground at the antenna, `psi + beta_antenna` with
+//! `beta_antenna = (v_y + d r) / v_x` (`d` the antenna ahead of the centre of gravity), through
+//! the same central difference as the log's yaw rate ([`Experiment::as_measured_yaw`]).
+//! Residuals count only where the car was above [`MIN_FIT_SPEED_MPS`] over the whole window.
+//!
+//! The fit is Levenberg-Marquardt on `(ln C_f, ln C_r)` from three starts (the car file's
+//! values times 0.5, 1 and 2), with a numerical Jacobian. Whether the drives determine the
+//! stiffnesses is decided from the fit itself: the standard error of each (from the Jacobian,
+//! with the residuals' correlation over the measurement's window taken into account) must be
+//! below [`MAX_RELATIVE_STD_ERROR`] of the value, and the drives must have cornered at speed
+//! ([`MIN_CORNERING_SAMPLES`]). The paper's drives (turns at 2.5 m/s) do not: at that speed the
+//! car follows its wheels and the tyres' slip is not measurable.
+use catmodel::model::dynamic::LateralState;
+
+use super::preprocess::Experiment;
+use crate::model_file::{DynamicsSection, VehicleSection};
+
+/// Samples count in the fit only where the car was faster than this, m/s (over the whole
+/// window of the yaw rate's central difference).
+pub const MIN_FIT_SPEED_MPS: f64 = 5.0;
+/// Below this speed the model is held at its kinematic steady state, m/s.
+const MIN_MODEL_SPEED_MPS: f64 = 3.0;
+/// Cornering at speed the drives must hold, samples (5 s at 20 ms) with a lateral acceleration
+/// above [`CORNERING_MPS2`] and a speed above [`MIN_FIT_SPEED_MPS`].
+pub const MIN_CORNERING_SAMPLES: usize = 250;
+/// Lateral acceleration that counts as cornering, m/s^2.
+pub const CORNERING_MPS2: f64 = 1.0;
+/// Largest standard error of a stiffness, relative to its value, for it to be written.
+pub const MAX_RELATIVE_STD_ERROR: f64 = 0.05;
+
+/// The fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DynamicsFit {
+    /// The car file's `[dynamics]` with the identified stiffnesses.
+    pub section: DynamicsSection,
+    /// Standard error of `C_f` and `C_r`, relative to their values.
+    pub relative_std_error: (f64, f64),
+    /// Samples in the fit.
+    pub samples: usize,
+    /// Of which cornering (see [`MIN_CORNERING_SAMPLES`]).
+    pub cornering_samples: usize,
+    /// Fit % of the course rate at speed, the identified model, the car file's, the kinematic
+    /// model (eq 8 with the identified steering gain).
+    pub fit_percent: f64,
+    /// ... with the car file's stiffnesses.
+    pub prior_fit_percent: f64,
+    /// ... with the kinematic model.
+    pub kinematic_fit_percent: f64,
+}
+
+/// The course rate at the antenna the log would show for stiffnesses `(cf, cr)`, per
+/// experiment, and the mask of samples that count.
+fn simulate(
+    e: &Experiment,
+    vehicle: &VehicleSection,
+    dynamics: &DynamicsSection,
+    steer_gain: f64,
+) -> Vec<f64> {
+    let params = dynamics.params();
+    let ahead_of_cg = vehicle.antenna_ahead_m - dynamics.cg_to_rear_m;
+    let mut state = LateralState::default();
+    let mut rate = Vec::with_capacity(e.len());
+    let mut beta_prev = 0.0;
+    for k in 0..e.len() {
+        let v = e.vel[k];
+        let delta = (steer_gain * e.delta_rad[k]) as f32;
+        if v < MIN_MODEL_SPEED_MPS {
+            state = params.steady_state(v as f32, delta);
+        } else {
+            params.step(&mut state, v as f32, delta, e.ts_s as f32);
+        }
+        let (vy, r) = (f64::from(state.vy_mps), f64::from(state.yaw_rate_rps));
+        let beta = (vy + ahead_of_cg * r) / v.max(MIN_MODEL_SPEED_MPS);
+        let beta_rate = if k == 0 {
+            0.0
+        } else {
+            (beta - beta_prev) / e.ts_s
+        };
+        beta_prev = beta;
+        rate.push(r + beta_rate);
+    }
+    e.as_measured_yaw(&rate)
+}
+
+/// The kinematic model's course rate at the antenna (eq 8: the rear axle does not slide).
+fn kinematic(e: &Experiment, vehicle: &VehicleSection, steer_gain: f64) -> Vec<f64> {
+    let l = vehicle.wheelbase_m;
+    let rate: Vec<f64> = (0..e.len())
+        .map(|k| e.vel[k] * (steer_gain * e.delta_rad[k]).tan() / l)
+        .collect();
+    e.as_measured_yaw(&rate)
+}
+
+/// The samples that count: above [`MIN_FIT_SPEED_MPS`] over the central difference's window.
+fn mask(e: &Experiment) -> Vec<bool> {
+    let hw = e.yaw_half_width;
+    (0..e.len())
+        .map(|k| {
+            k >= hw
+                && k + hw < e.len()
+                && e.vel[k - hw..=k + hw]
+                    .iter()
+                    .all(|&v| v > MIN_FIT_SPEED_MPS)
+        })
+        .collect()
+}
+
+/// Residuals (measured minus model) over the masked samples of every experiment.
+fn residuals(
+    training: &[Experiment],
+    masks: &[Vec<bool>],
+    model: impl Fn(&Experiment) -> Vec<f64>,
+) -> Vec<f64> {
+    let mut out = Vec::new();
+    for (e, m) in training.iter().zip(masks) {
+        let y = model(e);
+        for k in 0..e.len() {
+            if m[k] {
+                out.push(e.yaw_rate[k] - y[k]);
+            }
+        }
+    }
+    out
+}
+
+fn sse(r: &[f64]) -> f64 {
+    r.iter().map(|x| x * x).sum()
+}
+
+/// Fit % (NRMSE form, as everywhere in the report) of residuals `r` against the measured
+/// values' spread.
+fn fit_percent(r: &[f64], measured: &[f64]) -> f64 {
+    let mean = measured.iter().sum::<f64>() / measured.len().max(1) as f64;
+    let spread: f64 = measured.iter().map(|y| (y - mean).powi(2)).sum();
+    100.0 * (1.0 - (sse(r) / spread.max(f64::MIN_POSITIVE)).sqrt())
+}
+
+/// Identifies `C_f` and `C_r` (see the module doc); `Err` says why the drives do not determine
+/// them (the car file's `[dynamics]` is then kept as it is).
+pub fn identify_dynamics(
+    training: &[Experiment],
+    vehicle: &VehicleSection,
+    prior: &DynamicsSection,
+    steer_gain: f64,
+) -> std::result::Result<DynamicsFit, String> {
+    let masks: Vec<Vec<bool>> = training.iter().map(mask).collect();
+    let samples: usize = masks.iter().map(|m| m.iter().filter(|&&b| b).count()).sum();
+    let cornering_samples: usize = training
+        .iter()
+        .zip(&masks)
+        .map(|(e, m)| {
+            (0..e.len())
+                .filter(|&k| m[k] && (e.vel[k] * e.yaw_rate[k]).abs() > CORNERING_MPS2)
+                .count()
+        })
+        .sum();
+    if cornering_samples < MIN_CORNERING_SAMPLES {
+        return Err(format!(
+            "the drives corner at more than {CORNERING_MPS2} m/s^2 above {MIN_FIT_SPEED_MPS} m/s for {cornering_samples} samples ({MIN_CORNERING_SAMPLES} needed: drive step steers at speed, e.g. `simulate-drive --scenario steps-at-speed`)"
+        ));
+    }
+    let with = |theta: [f64; 2]| DynamicsSection {
+        cornering_front_n_per_rad: theta[0].exp(),
+        cornering_rear_n_per_rad: theta[1].exp(),
+        ..*prior
+    };
+    let res = |theta: [f64; 2]| {
+        let d = with(theta);
+        residuals(training, &masks, |e| simulate(e, vehicle, &d, steer_gain))
+    };
+    let measured: Vec<f64> = training
+        .iter()
+        .zip(&masks)
+        .flat_map(|(e, m)| (0..e.len()).filter(|&k| m[k]).map(|k| e.yaw_rate[k]))
+        .collect();
+    let start = [
+        prior.cornering_front_n_per_rad.ln(),
+        prior.cornering_rear_n_per_rad.ln(),
+    ];
+    let mut best: Option<([f64; 2], f64, [[f64; 2]; 2])> = None;
+    for scale in [1.0f64, 0.5, 2.0] {
+        let theta0 = [start[0] + scale.ln(), start[1] + scale.ln()];
+        let (theta, cost, jtj) = levenberg_marquardt(theta0, &res);
+        if best.as_ref().is_none_or(|b| cost < b.1) {
+            best = Some((theta, cost, jtj));
+        }
+    }
+    let Some((theta, cost, jtj)) = best else {
+        return Err("no fit".into());
+    };
+    // Standard errors: s^2 (J'J)^-1 in ln C, i.e. relative. The residuals are a central
+    // difference over 2 hw + 1 samples: about that many are one independent error.
+    let hw = training.first().map_or(1, |e| e.yaw_half_width);
+    let correlated = (2 * hw + 1) as f64;
+    let dof = (samples as f64 - 2.0).max(1.0);
+    let s2 = cost / dof * correlated;
+    let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
+    if det.is_nan() || det <= 0.0 {
+        return Err("the course rate does not depend on the stiffnesses on these drives".into());
+    }
+    let rel = ((s2 * jtj[1][1] / det).sqrt(), (s2 * jtj[0][0] / det).sqrt());
+    let section = with(theta);
+    if !(theta[0].is_finite() && theta[1].is_finite()) {
+        return Err("the fit diverged".into());
+    }
+    let fit = DynamicsFit {
+        section,
+        relative_std_error: rel,
+        samples,
+        cornering_samples,
+        fit_percent: fit_percent(&res(theta), &measured),
+        prior_fit_percent: fit_percent(&res(start), &measured),
+        kinematic_fit_percent: fit_percent(
+            &residuals(training, &masks, |e| kinematic(e, vehicle, steer_gain)),
+            &measured,
+        ),
+    };
+    if rel.0 > MAX_RELATIVE_STD_ERROR || rel.1 > MAX_RELATIVE_STD_ERROR {
+        return Err(format!(
+            "C_f {:.0} N/rad, C_r {:.0} N/rad with standard errors of {:.0} % and {:.0} % (at most {:.0} %): the drives do not determine them; drive step steers at speed",
+            section.cornering_front_n_per_rad,
+            section.cornering_rear_n_per_rad,
+            100.0 * rel.0,
+            100.0 * rel.1,
+            100.0 * MAX_RELATIVE_STD_ERROR
+        ));
+    }
+    Ok(fit)
+}
+
+/// Levenberg-Marquardt on two parameters with a central-difference Jacobian: the parameters,
+/// the sum of squared residuals and `J'J` at the end.
+fn levenberg_marquardt(
+    mut theta: [f64; 2],
+    res: &impl Fn([f64; 2]) -> Vec<f64>,
+) -> ([f64; 2], f64, [[f64; 2]; 2]) {
+    const H: f64 = 1e-3;
+    let mut r = res(theta);
+    let mut cost = sse(&r);
+    let mut lambda = 1e-3;
+    let mut jtj = [[0.0; 2]; 2];
+    for _ in 0..40 {
+        let mut columns = [Vec::new(), Vec::new()];
+        for (i, column) in columns.iter_mut().enumerate() {
+            let (mut up, mut down) = (theta, theta);
+            up[i] += H;
+            down[i] -= H;
+            let (ru, rd) = (res(up), res(down));
+            // d(residual)/d(theta): residual = measured - model.
+            *column = ru
+                .iter()
+                .zip(&rd)
+                .map(|(a, b)| (a - b) / (2.0 * H))
+                .collect();
+        }
+        let mut jtr = [0.0; 2];
+        for a in 0..2 {
+            for b in 0..2 {
+                jtj[a][b] = columns[a].iter().zip(&columns[b]).map(|(x, y)| x * y).sum();
+            }
+            jtr[a] = columns[a].iter().zip(&r).map(|(x, y)| x * y).sum();
+        }
+        let mut improved = false;
+        while lambda < 1e10 {
+            let m = [
+                [jtj[0][0] * (1.0 + lambda), jtj[0][1]],
+                [jtj[1][0], jtj[1][1] * (1.0 + lambda)],
+            ];
+            let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+            if det.abs() < f64::MIN_POSITIVE {
+                break;
+            }
+            // Gauss-Newton on r(theta + step) ~ r + J step: step = -(J'J)^-1 J'r.
+            let step = [
+                -(jtr[0] * m[1][1] - jtr[1] * m[0][1]) / det,
+                -(m[0][0] * jtr[1] - m[1][0] * jtr[0]) / det,
+            ];
+            let candidate = [
+                theta[0] + step[0].clamp(-1.0, 1.0),
+                theta[1] + step[1].clamp(-1.0, 1.0),
+            ];
+            let rc = res(candidate);
+            let c = sse(&rc);
+            if c < cost {
+                let small = step[0].abs() < 1e-6 && step[1].abs() < 1e-6;
+                theta = candidate;
+                r = rc;
+                cost = c;
+                lambda = (lambda / 10.0).max(1e-9);
+                improved = !small;
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    (theta, cost, jtj)
+}
