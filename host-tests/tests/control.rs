@@ -237,30 +237,14 @@ fn a_loop_whose_end_points_at_its_start_is_not_taken_for_its_end() {
     );
 }
 
-/// A closed loop (the rig's parking loop): east 20 m, a half circle of radius 5 m to the left,
-/// west 20 m, a half circle back to the start; points 1 m apart, the last one the first.
+/// The rig's parking loop (`closed-loop --scenario loop`): east 40 m, a half circle of radius
+/// 20 m to the left, west 40 m, a half circle back to the start; points about 1 m apart, the
+/// last one the first.
 fn closed_loop() -> Vec<Waypoint> {
-    let (l, r) = (20.0, 5.0);
-    let half = PI * r;
-    let perimeter = 2.0 * l + 2.0 * half;
-    let n = perimeter.round() as usize;
-    (0..=n)
-        .map(|i| {
-            let s = perimeter * i as f64 / n as f64;
-            // Course coordinates: x east, y north.
-            let (x, y) = if s <= l {
-                (s, 0.0)
-            } else if s <= l + half {
-                let a = (s - l) / r;
-                (l + r * a.sin(), r - r * a.cos())
-            } else if s <= 2.0 * l + half {
-                (l - (s - l - half), 2.0 * r)
-            } else {
-                let a = (s - 2.0 * l - half) / r;
-                (-r * a.sin(), r + r * a.cos())
-            };
-            wp(x, y)
-        })
+    catmodel_host::closed_loop::scenario::parking_loop(5.0)
+        .path
+        .iter()
+        .map(|p| wp(p.east_m, p.north_m))
         .collect()
 }
 
@@ -287,10 +271,11 @@ fn a_car_without_a_projection_is_at_the_start_of_a_closed_loop() {
             "({east}, {north}): {t:?}"
         );
     }
-    // Halfway along the loop's far straight the car is there, not at the start.
-    let t = p.track(&Pose::new(10.0, 10.1, -FRAC_PI_2), None).unwrap();
-    let expected = 20.0 + PI as f32 * 5.0 + 10.0;
-    assert!((t.projection.station_m - expected).abs() < 0.05, "{t:?}");
+    // Halfway along the loop's far straight the car is there, not at the start (the half
+    // circle's chords make its stations a little short of the arc's).
+    let t = p.track(&Pose::new(20.0, 40.1, -FRAC_PI_2), None).unwrap();
+    let expected = 40.0 + PI as f32 * 20.0 + 20.0;
+    assert!((t.projection.station_m - expected).abs() < 0.1, "{t:?}");
 }
 
 #[test]
