@@ -280,6 +280,22 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
             fit.fit_percent > fit.kinematic_fit_percent + 10.0,
             "{fit:?}"
         );
+        // The lateral model's understeer from the same drives, steady samples only: the
+        // plant's K = m (b / C_f - a / C_r) / L^2 (the transients of the steps read as
+        // understeer 2.5 times the plant's when every sample counted).
+        let lateral =
+            identify::identify_lateral(&drives, &car.vehicle, &IdentifyOptions::default())
+                .unwrap()
+                .unwrap();
+        assert!(lateral.understeer_estimated);
+        let (gain, k) = (lateral.steer_gain, lateral.understeer_s2_per_m2);
+        let plant_k = plant.understeer_s2_per_m2();
+        println!("{name}: steering gain {gain:.4}, understeer {k:.5} (plant {plant_k:.5})");
+        assert!(
+            (k / plant_k - 1.0).abs() < 0.15,
+            "{name}: K {k} vs {plant_k}"
+        );
+        assert!((gain - 1.0).abs() < 0.03, "{name}: steering gain {gain}");
         // The other keys are the car file's.
         assert_eq!(fit.section.mass_kg, prior.mass_kg);
         assert_eq!(fit.section.cg_to_front_m, prior.cg_to_front_m);

@@ -351,18 +351,33 @@ pub fn identify_lateral(
     training: &[Experiment],
     vehicle: &VehicleSection,
     opts: &IdentifyOptions,
-) -> Result<std::result::Result<(f64, f64, TransferFunction), String>> {
+) -> Result<std::result::Result<LateralFit, String>> {
+    // The steering gain and understeer are a steady-state relation: only samples where the
+    // steering and speed have been steady for LATERAL_STEADY_S (and over the yaw rate's window
+    // ahead) count. A step steer at speed yaws up over a second; fitted as if steady, its
+    // transient reads as understeer (0.0038 s^2/m^2 instead of the plant's 0.0015 with
+    // `steps-at-speed` in the set).
     let mut pts = Vec::new();
     for e in training {
-        for k in 0..e.len() {
-            if e.vel[k] > 2.0 && e.delta_rad[k].abs() > 0.01 {
-                pts.push((e.vel[k], e.delta_rad[k], e.yaw_rate[k]));
+        let behind = (LATERAL_STEADY_S / e.ts_s).round() as usize;
+        for k in behind..e.len().saturating_sub(e.yaw_half_width) {
+            let (v, d) = (e.vel[k], e.delta_rad[k]);
+            if v <= 2.0 || d.abs() <= 0.01 {
+                continue;
+            }
+            let window = k - behind..=k + e.yaw_half_width;
+            let steady = e.delta_rad[window.clone()]
+                .iter()
+                .all(|x| (x - d).abs() <= 0.05 * d.abs() + 0.002)
+                && e.vel[window].iter().all(|x| (x - v).abs() <= 0.3);
+            if steady {
+                pts.push((v, d, e.yaw_rate[k]));
             }
         }
     }
     if pts.len() < 250 {
         return Ok(Err(format!(
-            "only {} samples with steering above 0.01 rad at more than 2 m/s (at least 250 needed: drive turns or circles)",
+            "only {} samples of steady steering above 0.01 rad at more than 2 m/s (at least 250 needed: drive turns or circles)",
             pts.len()
         )));
     }
@@ -451,8 +466,31 @@ pub fn identify_lateral(
         )
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     }
-    Ok(Ok((g, k, tf)))
+    Ok(Ok(LateralFit {
+        steer_gain: g,
+        understeer_s2_per_m2: k,
+        understeer_estimated: estimate_k,
+        tf,
+    }))
 }
+
+/// The lateral model's steady-state part and lag.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LateralFit {
+    /// Steering gain g (true centre angle / nominal).
+    pub steer_gain: f64,
+    /// Understeer K, s^2/m^2.
+    pub understeer_s2_per_m2: f64,
+    /// Whether K was estimated (the steady turns span more than 2 m/s of speed); else it is
+    /// the car file's.
+    pub understeer_estimated: bool,
+    /// The lag G(s) from the kinematic yaw rate to the measured one.
+    pub tf: TransferFunction,
+}
+
+/// How long steering and speed must have been steady for a sample to count in the lateral
+/// model's steady-state fit, s (the yaw rate settles within a second of a step at 16 m/s).
+pub const LATERAL_STEADY_S: f64 = 1.5;
 
 /// Fastest lateral lag pole written, 1/s (time constant 2 samples of 20 ms): a faster fitted
 /// pole means no lag is measurable, and is replaced by this one with the same DC gain.
@@ -537,7 +575,7 @@ pub fn identify(
             None
         }
         (Some(prior), lateral) => {
-            let steer_gain = lateral.as_ref().map_or(1.0, |l| l.0);
+            let steer_gain = lateral.as_ref().map_or(1.0, |l| l.steer_gain);
             match dynamics::identify_dynamics(&training, &vehicle, prior, steer_gain) {
                 Ok(fit) => {
                     notes.push(format!(
@@ -604,9 +642,15 @@ pub fn identify(
             fit: Fit::default(),
         };
     }
-    model.lateral = lateral.map(|(g, k, tf)| Lateral {
-        steer_gain: g,
-        understeer_s2_per_m2: k,
+    if let Some(l) = lateral.as_ref().filter(|l| !l.understeer_estimated) {
+        notes.push(format!(
+            "lateral model: the understeer is the car file's ({} s^2/m^2), not estimated: the steady turns span less than 2 m/s of speed (drive circles at two speeds, or steps-at-speed)",
+            l.understeer_s2_per_m2
+        ));
+    }
+    model.lateral = lateral.map(|l| Lateral {
+        steer_gain: l.steer_gain,
+        understeer_s2_per_m2: l.understeer_s2_per_m2,
         model: Model {
             equation: "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order".into(),
             output: "yaw_rate".into(),
@@ -614,7 +658,7 @@ pub fn identify(
             blocks: vec![Block {
                 input: model_file::LATERAL_INPUTS[0].into(),
                 input_unit: "rad/s".into(),
-                tf,
+                tf: l.tf,
             }],
             fit: Fit::default(),
         },
