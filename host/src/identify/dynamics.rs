@@ -223,8 +223,10 @@ pub fn identify_dynamics(
         ),
     };
     if rel.0 > MAX_RELATIVE_STD_ERROR || rel.1 > MAX_RELATIVE_STD_ERROR {
+        // The standard error falls as one over the square root of the data.
+        let more = (rel.0.max(rel.1) / MAX_RELATIVE_STD_ERROR).powi(2).ceil();
         return Err(format!(
-            "C_f {:.0} N/rad, C_r {:.0} N/rad with standard errors of {:.0} % and {:.0} % (at most {:.0} %): the drives do not determine them; drive step steers at speed",
+            "C_f {:.0} N/rad, C_r {:.0} N/rad with standard errors of {:.0} % and {:.0} % (at most {:.0} %): the drives do not determine them; drive step steers at speed (about {more:.0} times as much as these drives' {cornering_samples} cornering samples, or a receiver with a steadier course)",
             section.cornering_front_n_per_rad,
             section.cornering_rear_n_per_rad,
             100.0 * rel.0,
