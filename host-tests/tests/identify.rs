@@ -309,6 +309,40 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
             .expect_err("a standard receiver's course does not determine the stiffnesses");
         assert!(why.contains("standard errors"), "{name}: {why}");
     }
+    // Through the whole pipeline: the written model file carries the identified pair (the
+    // steering gain from the same drives), and reads back equal.
+    let mut skewed_base = base.clone();
+    if let Some(d) = skewed_base.dynamics.as_mut() {
+        d.cornering_front_n_per_rad *= 0.5;
+        d.cornering_rear_n_per_rad *= 2.0;
+    }
+    let rtk = with_rtk(VehicleConfig::default());
+    let drives: Vec<Experiment> = [1, 2]
+        .iter()
+        .map(|&s| sim_experiment_of("steps-at-speed", s, &rtk, &base.vehicle))
+        .collect();
+    let id = identify::identify(
+        drives,
+        Vec::new(),
+        &skewed_base,
+        &IdentifyOptions::default(),
+    )
+    .unwrap();
+    let fit = id.dynamics.as_ref().expect("[dynamics] identified");
+    assert_eq!(id.model.dynamics, Some(fit.section));
+    let written = id.model.dynamics.unwrap();
+    assert!((written.cornering_front_n_per_rad / 80_000.0 - 1.0).abs() < 0.08);
+    assert!((written.cornering_rear_n_per_rad / 91_000.0 - 1.0).abs() < 0.08);
+    assert!(id
+        .notes
+        .iter()
+        .any(|n| n.contains("cornering stiffnesses identified")));
+    let text = model_file::to_toml(&id.model);
+    assert_eq!(
+        model_file::parse(&text, Path::new("<id>")).unwrap(),
+        id.model
+    );
+
     // The paper's drives: no cornering at speed.
     let set: Vec<Experiment> = PAPER_SIZED_TRAINING
         .iter()
