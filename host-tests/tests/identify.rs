@@ -86,6 +86,20 @@ fn recovers_the_published_speed_model() {
     }
 }
 
+/// `model` written as a model file reads back equal.
+fn assert_round_trips(model: &model_file::ModelFile) {
+    let text = model_file::to_toml(model);
+    assert_eq!(&model_file::parse(&text, Path::new("<id>")).unwrap(), model);
+}
+
+/// The paper-sized training set on the CAT Vehicle.
+fn paper_sized_set() -> Vec<Experiment> {
+    PAPER_SIZED_TRAINING
+        .iter()
+        .map(|&(n, seed)| sim_experiment(n, seed))
+        .collect()
+}
+
 /// Trained on the four straight-line experiments of the simulator, the speed model reaches at
 /// least 87 % fit (pure simulation) on the 5-minute validation drive; the paper-sized set
 /// (11 one-minute experiments + validation) is identified in under 5 s.
@@ -115,16 +129,9 @@ fn simulator_bars() {
     assert!(fit > v.vel_kinematic.fit_percent.unwrap());
     assert_eq!(id.model.speed.fit.validation_fit_percent, Some(fit));
     // The written file loads back equal.
-    let text = model_file::to_toml(&id.model);
-    assert_eq!(
-        model_file::parse(&text, Path::new("<id>")).unwrap(),
-        id.model
-    );
+    assert_round_trips(&id.model);
 
-    let set: Vec<Experiment> = PAPER_SIZED_TRAINING
-        .iter()
-        .map(|&(n, seed)| sim_experiment(n, seed))
-        .collect();
+    let set = paper_sized_set();
     assert_eq!(set.len(), 11);
     let started = Instant::now();
     let id = identify::identify(set, validation, &base, &IdentifyOptions::default()).unwrap();
@@ -337,17 +344,10 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
         .notes
         .iter()
         .any(|n| n.contains("cornering stiffnesses identified")));
-    let text = model_file::to_toml(&id.model);
-    assert_eq!(
-        model_file::parse(&text, Path::new("<id>")).unwrap(),
-        id.model
-    );
+    assert_round_trips(&id.model);
 
     // The paper's drives: no cornering at speed.
-    let set: Vec<Experiment> = PAPER_SIZED_TRAINING
-        .iter()
-        .map(|&(n, seed)| sim_experiment(n, seed))
-        .collect();
+    let set = paper_sized_set();
     let prior = base.dynamics.unwrap();
     let why = identify::dynamics::identify_dynamics(&set, &base.vehicle, &prior, 1.0).unwrap_err();
     assert!(why.contains("step steers at speed"), "{why}");
