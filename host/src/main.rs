@@ -35,6 +35,10 @@ enum Command {
         /// Vehicle parameters (TOML); default: the CAT Vehicle.
         #[arg(long)]
         vehicle: Option<PathBuf>,
+        /// GNSS receiver: standard (the vehicle file's) or rtk (survey grade: 1 cm, as
+        /// `closed-loop --receiver rtk`).
+        #[arg(long, default_value = "standard")]
+        receiver: String,
         /// Inject sensor faults (GNSS dropouts and outliers, lost reports).
         #[arg(long)]
         faults: bool,
@@ -267,6 +271,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             seed,
             vehicle,
+            receiver,
             faults,
         } => {
             let options = sim::SimOptions {
@@ -274,9 +279,16 @@ fn run(cli: Cli) -> Result<()> {
                 faults,
                 ..sim::SimOptions::default()
             };
+            let receiver =
+                catmodel_host::closed_loop::Receiver::from_name(&receiver).ok_or_else(|| {
+                    anyhow::anyhow!("unknown receiver `{receiver}`; known: standard, rtk")
+                })?;
+            let mut cfg =
+                sim::load_vehicle(vehicle.as_deref()).map_err(|e| anyhow::anyhow!("{e}"))?;
+            receiver.apply(&mut cfg.sensors.gnss);
             let progress = Progress::spinner(&format!("simulating {scenario}"));
-            let output = sim::run_named(&scenario, vehicle.as_deref(), &options)
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let output =
+                sim::run_named_on(&scenario, &cfg, &options).map_err(|e| anyhow::anyhow!("{e}"))?;
             progress.set_message("writing");
             let (log_path, truth_path) =
                 sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -96,19 +96,32 @@ impl std::fmt::Display for SimError {
 impl std::error::Error for SimError {}
 
 /// Runs the built-in scenario `name`, with the vehicle file `vehicle` or the CAT Vehicle.
-/// This is what `catmodel simulate-drive` calls.
 pub fn run_named(
     name: &str,
     vehicle: Option<&Path>,
     options: &SimOptions,
 ) -> Result<SimOutput, SimError> {
+    run_named_on(name, &load_vehicle(vehicle)?, options)
+}
+
+/// The vehicle file `vehicle`, or the CAT Vehicle.
+pub fn load_vehicle(vehicle: Option<&Path>) -> Result<VehicleConfig, SimError> {
+    match vehicle {
+        Some(p) => VehicleConfig::load(p).map_err(SimError::Config),
+        None => Ok(VehicleConfig::default()),
+    }
+}
+
+/// Runs the built-in scenario `name` on the plant `cfg`. This is what `catmodel simulate-drive`
+/// calls (after `--receiver` changed the vehicle's GNSS receiver).
+pub fn run_named_on(
+    name: &str,
+    cfg: &VehicleConfig,
+    options: &SimOptions,
+) -> Result<SimOutput, SimError> {
     let base =
         Scenario::builtin(name).ok_or_else(|| SimError::UnknownScenario(name.to_string()))?;
-    let cfg = match vehicle {
-        Some(p) => VehicleConfig::load(p).map_err(SimError::Config)?,
-        None => VehicleConfig::default(),
-    };
-    Ok(simulate(&base, &cfg, options))
+    Ok(simulate(&base, cfg, options))
 }
 
 /// Writes `DIR/NAME.csv` (log) and `DIR/NAME.truth.csv`, creating `dir`; returns both paths.
