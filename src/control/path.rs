@@ -519,6 +519,9 @@ impl Path {
     /// first stretch that is a corner (the stretch's far end, for a car farther on) is not
     /// taken: the whole path's nearest point is.
     fn acquire(&self, east_m: f32, north_m: f32) -> Option<Projection> {
+        if self.len < 2 || !east_m.is_finite() || !north_m.is_finite() {
+            return None;
+        }
         let start = Projection {
             segment: 0,
             station_m: 0.0,
@@ -666,10 +669,7 @@ impl Path {
     pub fn track(&self, pose: &Pose, previous: Option<&Projection>) -> Option<Tracking> {
         let projection = match previous {
             Some(_) => self.project(pose.x_m, pose.y_m, previous)?,
-            None if self.len >= 2 && pose.x_m.is_finite() && pose.y_m.is_finite() => {
-                self.acquire(pose.x_m, pose.y_m)?
-            }
-            None => return None,
+            None => self.acquire(pose.x_m, pose.y_m)?,
         };
         let reference = self.sample(projection.station_m, projection.segment)?;
         Some(Tracking {

@@ -18,6 +18,7 @@
 //! below [`MAX_RELATIVE_STD_ERROR`] of the value, and the drives must have cornered at speed
 //! ([`MIN_CORNERING_SAMPLES`]). The paper's drives (turns at 2.5 m/s) do not: at that speed the
 //! car follows its wheels and the tyres' slip is not measurable.
+use catmodel::metrics;
 use catmodel::model::dynamic::LateralState;
 
 use super::preprocess::Experiment;
@@ -152,12 +153,11 @@ fn sse(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
 
-/// Fit % (NRMSE form, as everywhere in the report) of residuals `r` against the measured
-/// values' spread.
+/// Fit % ([`metrics::fit_percent`], as everywhere in the report) of the model whose residuals
+/// against `measured` are `r`; NaN for a constant `measured` (cornering rules that out).
 fn fit_percent(r: &[f64], measured: &[f64]) -> f64 {
-    let mean = measured.iter().sum::<f64>() / measured.len().max(1) as f64;
-    let spread: f64 = measured.iter().map(|y| (y - mean).powi(2)).sum();
-    100.0 * (1.0 - (sse(r) / spread.max(f64::MIN_POSITIVE)).sqrt())
+    let model: Vec<f64> = measured.iter().zip(r).map(|(y, e)| y - e).collect();
+    metrics::fit_percent(measured, &model).unwrap_or(f64::NAN)
 }
 
 /// Identifies `C_f` and `C_r` (see the module doc); `Err` says why the drives do not determine
