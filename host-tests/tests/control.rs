@@ -1004,3 +1004,48 @@ fn pure_pursuit_without_path_or_position_holds_the_car() {
     );
     assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
 }
+
+#[test]
+fn a_car_beside_its_corridor_or_against_the_path_has_lost_it() {
+    // Path north, corridor 1.0 m left (west) and 1.5 m right (east); a body 1.8 m wide is lost
+    // when its rear axle is more than 1.8 m outside: east of 3.3 m or west of -2.8 m.
+    let p = path_of(&straight(0.0, 0.0, 0.0, 30, 1.0));
+    let lost = |east: f32, heading: f32| {
+        let t = p.track(&Pose::new(east, 10.0, heading), None).unwrap();
+        (t.outside_corridor_m(), t.has_lost_path(1.8))
+    };
+    let close = |(outside, was_lost): (f32, bool), expect_outside: f32, expect_lost: bool| {
+        assert!((outside - expect_outside).abs() < 1e-5, "{outside}");
+        assert_eq!(was_lost, expect_lost, "outside {outside}");
+    };
+    close(lost(0.7, 0.0), 0.0, false);
+    close(lost(-0.9, 0.0), 0.0, false);
+    close(lost(3.25, 0.0), 1.75, false);
+    close(lost(3.35, 0.0), 1.85, true);
+    close(lost(-2.75, 0.0), 1.75, false);
+    close(lost(-2.85, 0.0), 1.85, true);
+    // Turned across the path is still following it; facing against it is not.
+    close(lost(0.0, FRAC_PI_2 - 0.01), 0.0, false);
+    close(lost(0.0, -(FRAC_PI_2 - 0.01)), 0.0, false);
+    close(lost(0.0, FRAC_PI_2 + 0.01), 0.0, true);
+    close(lost(0.0, std::f32::consts::PI), 0.0, true);
+}
+
+#[test]
+fn pure_pursuit_stops_with_the_wheels_straight_when_it_has_lost_the_path() {
+    let path = path_of(&straight(0.0, 0.0, 0.0, 60, 1.0));
+    let cfg = pursuit(DEFAULT_TUNING);
+    let mut state = PurePursuitState::default();
+    // Tracking at speed, steering hard left towards the path from 1.7 m right of its corridor.
+    let out = cfg.process(&mut state, Some(&path), &[], &car(3.2, 5.0, 0.0, 8.0));
+    assert_eq!(out.status, ControlStatus::Tracking);
+    assert!(out.steer_cmd_pct < -20.0, "{}", out.steer_cmd_pct);
+    // Facing against the path: brake, wheels straight.
+    let out = cfg.process(&mut state, Some(&path), &[], &car(0.0, 6.0, 3.0, 8.0));
+    assert_eq!(out.status, ControlStatus::Fallback);
+    assert_eq!((out.speed_cmd_mps, out.steer_cmd_pct), (0.0, 0.0));
+    // Beside the corridor by more than the body's width: the same.
+    let out = cfg.process(&mut state, Some(&path), &[], &car(3.4, 7.0, 0.0, 8.0));
+    assert_eq!(out.status, ControlStatus::Fallback);
+    assert_eq!((out.speed_cmd_mps, out.steer_cmd_pct), (0.0, 0.0));
+}

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use catmodel::can::codec::ControlStatus;
 use catmodel::control::path::Path as CorePath;
 use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::metrics::{body_corners, distance_to_body, Scorer};
@@ -425,4 +426,54 @@ fn the_rigs_node_knows_its_car_from_its_model_file() {
     let (_, lent) = load_setup(Some(&plant), None).unwrap();
     assert_eq!(lent.dynamics.unwrap().cornering_front_n_per_rad, 80000.0);
     assert_eq!(lent.estimator.antenna_ahead_m, 1.478);
+}
+
+#[test]
+fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
+    // The van (host/vehicles/van.toml: slow steering, a 5 Hz uncorrected receiver) swerving
+    // round the obstacle on seed 1 overshoots its corridor and spins out. Before the
+    // controllers knew when they had lost the path, the MPC went on "tracking" (status 1) for
+    // the whole 300 s, driving the path's line the wrong way, 2 km past its start.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let (vehicle, node) = load_setup(
+        Some(&root.join("host/vehicles/van.toml")),
+        Some(&root.join("models/van.toml")),
+    )
+    .unwrap();
+    let course = scenario::course(Kind::Obstacle, &vehicle.body, 8.0);
+    let receiver = Receiver::Standard;
+    let controller = controller_named("mpc", receiver_rms_m(&vehicle, receiver)).unwrap();
+    let mut driver = NodeDriver::new(node, controller);
+    let options = RunOptions {
+        seed: 1,
+        receiver,
+        max_time_s: 120.0,
+        replan_s: None,
+    };
+    let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+    let path_heading = course.frame.heading_rad;
+    for s in out.samples.iter().filter(|s| s.engaged) {
+        if matches!(
+            s.command.status,
+            ControlStatus::Tracking | ControlStatus::Avoiding
+        ) {
+            // The node judges on its estimate: the truth is within the receiver's error of it.
+            let turned = (s.truth.heading - path_heading + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            assert!(
+                turned.abs() < 2.2 && s.lateral_m.abs() < 12.0,
+                "t {}: still {:?} with the car {:.1} m off the path, {turned:.2} rad from it",
+                s.t_s,
+                s.command.status,
+                s.lateral_m
+            );
+        }
+    }
+    // It braked to a stop with the wheels straight, in fallback, well before the time limit.
+    let last = out.samples.last().unwrap();
+    assert_eq!(last.command.status, ControlStatus::Fallback);
+    assert_eq!(last.command.speed_cmd_mps, Some(0.0));
+    assert_eq!(last.command.steer_cmd_pct, Some(0.0));
+    assert!(last.truth.speed < 0.05 && last.t_s < 60.0, "{:?}", last);
 }

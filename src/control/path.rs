@@ -173,6 +173,32 @@ pub struct Tracking {
     pub reference: PathSample,
 }
 
+/// A car turned further than this from the path's direction is driving against it, rad.
+pub const LOST_HEADING_RAD: f32 = core::f32::consts::FRAC_PI_2;
+
+impl Tracking {
+    /// How far the rear axle is outside the corridor at its projection, m (0 inside).
+    pub fn outside_corridor_m(&self) -> f32 {
+        let lateral = self.projection.lateral_m;
+        math::max(
+            math::max(lateral - self.reference.right_m, -lateral - self.reference.left_m),
+            0.0,
+        )
+    }
+
+    /// Whether the car has lost the path, for a body `body_width_m` wide: its rear axle more
+    /// than a body width outside the corridor (the body, however it is turned, cannot reach
+    /// back into it without a new plan: the planner's to make), or the car turned more than
+    /// [`LOST_HEADING_RAD`] from the path (driving against it). A controller falls back (status
+    /// 3, braking) rather than steer back on its own: a car beside its corridor or facing
+    /// the wrong way has left what the planner checked. A non-finite input counts as lost.
+    pub fn has_lost_path(&self, body_width_m: f32) -> bool {
+        let outside = self.outside_corridor_m();
+        let heading = self.heading_error_rad;
+        !(outside <= body_width_m && heading.abs() <= LOST_HEADING_RAD)
+    }
+}
+
 /// A path: up to [`MAX_PATH_POINTS`] waypoints with their stations, segment headings and the
 /// reference heading and curvature at each point. 9 f32 per point: 9 KiB at 256 points.
 #[derive(Clone, Debug)]

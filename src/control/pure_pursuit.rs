@@ -181,6 +181,16 @@ impl PurePursuitConfig {
         let Some(tracking) = path.track(&pose, state.projection.as_ref()) else {
             return hold(state, ControlStatus::Fallback);
         };
+        if tracking.has_lost_path(self.body.width_m) {
+            // Beside the corridor or facing against the path: brake with the wheels straight
+            // (along a line, not the circle the last command would hold) for the planner to
+            // replan.
+            state.projection = Some(tracking.projection);
+            state.steer_cmd_pct = 0.0;
+            let mut out = hold(state, ControlStatus::Fallback);
+            out.tracking = Some(tracking);
+            return out;
+        }
         let station = tracking.projection.station_m;
         let segment = tracking.projection.segment;
 

@@ -21,9 +21,10 @@
 //! tick (docs/firmware.md, "Worst-case tick").
 //!
 //! CONTROL_COMMAND goes out every tick: status 0 (no path: speed 0, steering held), 1 tracking,
-//! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet, or
-//! the controller's own fallback: speed 0, steering along the last feasible plan). Never a NaN:
-//! every command is checked finite, else the fallback.
+//! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet;
+//! the controller's own fallback: speed 0, steering along the last feasible plan; or the car
+//! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
+//! sends a path it is on). Never a NaN: every command is checked finite, else the fallback.
 //!
 //! The state (about 23 KiB: two paths of 256 points and the controller's warm start) is kept
 //! apart from [`super::Node`] so that a platform can place it in a static, initialised at
@@ -330,7 +331,7 @@ impl Drive {
                 mpc_command(out)
             }
             (Controller::Mpc, Some(mpc)) => {
-                let Some((out, tracking)) = mpc_tick(
+                let Some(solved) = mpc_tick(
                     mpc,
                     &mut self.mpc,
                     path,
@@ -345,6 +346,13 @@ impl Drive {
                     probe,
                 ) else {
                     return self.hold(ControlStatus::Fallback);
+                };
+                let (out, tracking) = match solved {
+                    Ok(solved) => solved,
+                    Err(lost) => {
+                        self.last_tracking = Some(lost);
+                        return self.stop_lost();
+                    }
                 };
                 self.last_tracking = Some(tracking);
                 let command = mpc_command(&out);
@@ -385,6 +393,14 @@ impl Drive {
             }
             _ => self.hold(ControlStatus::Fallback),
         }
+    }
+
+    /// The car has lost the path ([`Tracking::has_lost_path`]): speed 0 and the wheels
+    /// straight (the actuator centres them at its rate), so that it brakes to a stop along a
+    /// line instead of on the circle its last steering command would hold it on.
+    fn stop_lost(&mut self) -> DriveOutput {
+        self.last_steer_cmd_pct = 0.0;
+        self.hold(ControlStatus::Fallback)
     }
 
     /// Speed 0, steering held where it was last commanded.
@@ -468,7 +484,8 @@ fn side_points(
     Some((left, right))
 }
 
-/// One model-predictive solve; `None` when the path cannot be sampled.
+/// One model-predictive solve; `None` when the path cannot be sampled, `Err` with the car's
+/// tracking when it has lost the path ([`Tracking::has_lost_path`]).
 #[allow(clippy::too_many_arguments)]
 fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
@@ -483,9 +500,14 @@ fn mpc_tick<P: StageProbe>(
     last_speed_cmd_mps: f32,
     config: &NodeConfig,
     probe: &mut P,
-) -> Option<(MpcOutput, Tracking)> {
+) -> Option<Result<(MpcOutput, Tracking), Tracking>> {
     let tracking = path.track(&pose, projection.as_ref())?;
     *projection = Some(tracking.projection);
+    if tracking.has_lost_path(mpc.body().width_m) {
+        // Beside the corridor or facing against the path: the fallback (the caller brakes),
+        // for the planner to replan; nothing is solved.
+        return Some(Err(tracking));
+    }
     let s0 = tracking.projection.station_m;
     let hint = tracking.projection.segment;
     let body = mpc.body();
@@ -569,5 +591,5 @@ fn mpc_tick<P: StageProbe>(
         *v = p.speed_mps;
     }
     *planned_speeds = Some(next);
-    Some((out, tracking))
+    Some(Ok((out, tracking)))
 }
