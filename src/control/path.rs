@@ -181,7 +181,10 @@ impl Tracking {
     pub fn outside_corridor_m(&self) -> f32 {
         let lateral = self.projection.lateral_m;
         math::max(
-            math::max(lateral - self.reference.right_m, -lateral - self.reference.left_m),
+            math::max(
+                lateral - self.reference.right_m,
+                -lateral - self.reference.left_m,
+            ),
             0.0,
         )
     }
