@@ -7,11 +7,14 @@
 //! is measured in QEMU (`cargo xtask bench-target`, docs/firmware.md "Worst-case tick").
 use catmodel::can::codec::{LocalOrigin, PathHeader, PathLimits, PathPoint, SteeringReport};
 use catmodel::can::{CanFrame, TimedFrame};
+use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::{
     first_tick_us, Branch, BranchTaken, PlatformStats, Stage, StageProbe, Tick, TxFrames,
     TICK_STAGES,
 };
-use catmodel_host_tests::bus::{config, drive, Kind, Labelled, START_US};
+use catmodel_host_tests::bus::{
+    config, curvature, drive, rear_axle, Kind, Labelled, ORIGIN, START_US,
+};
 
 /// Runs per stage (indexed as `TICK_STAGES`) in the current tick, the most in any tick, and
 /// every tick's runs.
@@ -60,9 +63,16 @@ impl Counting {
     }
 }
 
+/// The heavy drive's speed, m/s, and steering, %.
+const HEAVY_SPEED_MPS: f32 = 12.0;
+const HEAVY_STEER_PCT: f32 = 30.0;
+/// The planner's map origin in the heavy drive (LOCAL_ORIGIN, 1e-7 deg): the frame its paths
+/// are in.
+const PLANNER_ORIGIN: (i32, i32) = (322_310_000, -1_109_500_000);
+
 /// A 12 m/s drive in a turn, with every count pushed to its limit.
 fn heavy_drive() -> Vec<TimedFrame> {
-    let base = drive(12.0, 30.0, 10.0);
+    let base = drive(HEAVY_SPEED_MPS, HEAVY_STEER_PCT, 10.0);
     let mut frames: Vec<TimedFrame> = Vec::new();
     let mut fix_index = 0u64;
     let mut bad = SteeringReport {
@@ -100,13 +110,13 @@ fn heavy_drive() -> Vec<TimedFrame> {
         // Every 2 s the planner moves the map origin (both pages of LOCAL_ORIGIN, twice in
         // the same tick: the node applies the last one, once).
         if fix_index % 200 == 100 {
-            for (k, lat_e7) in [(0u8, 322_300_000), (2, 322_310_000)] {
+            for (k, lat_e7) in [(0u8, 322_300_000), (2, PLANNER_ORIGIN.0)] {
                 for (c, page) in [
                     (k, LocalOrigin::Latitude { lat_e7 }),
                     (
                         k + 1,
                         LocalOrigin::Longitude {
-                            lon_e7: -1_109_500_000,
+                            lon_e7: PLANNER_ORIGIN.1,
                         },
                     ),
                 ] {
@@ -140,27 +150,47 @@ const PATH_AGAIN_TICK: u64 = 171;
 /// tick earlier and two more (three short completions); then, while the controller plans on
 /// the last of them, a 6-point path again (a tick that loads a long path with a plan to move
 /// on). Each tick's planner frames come first in it, so the cap leaves them all to the node.
+/// Every path lies on the car's own circle, from a metre behind where it is when the path's
+/// first frame goes out, 1 m apart: the car is on it (a car off its path is not planned for).
 fn planner_bursts(frames: &mut Vec<TimedFrame>) {
     let t0 = first_tick_us(frames[0].t_us);
+    let origin = LocalFrame::new(ORIGIN.0, ORIGIN.1).unwrap();
+    let planner = LocalFrame::new(PLANNER_ORIGIN.0, PLANNER_ORIGIN.1).unwrap();
+    let kappa = curvature(HEAVY_SPEED_MPS, HEAVY_STEER_PCT);
+    let v = f64::from(HEAVY_SPEED_MPS);
+    // The rear axle `along_m` metres of arc from where it is at `tick`, in the planner's frame.
+    let on_circle = |tick: u64, along_m: f64| -> (f32, f32) {
+        let t_s = (t0 + (tick - 1) * 20_000 - START_US) as f64 * 1e-6 + along_m / v;
+        let (east, north, _) = rear_axle(v, kappa, t_s);
+        let (lat, lon) = origin.from_local(Enu {
+            east_m: east as f32,
+            north_m: north as f32,
+        });
+        let enu = planner
+            .to_local((lat * 1e7).round() as i32, (lon * 1e7).round() as i32)
+            .unwrap();
+        (enu.east_m, enu.north_m)
+    };
     let mut counters = [0u8; 3];
     let mut next = |slot: usize| {
         let c = counters[slot];
         counters[slot] = (c + 1) & 0x0F;
         c
     };
-    let mut path = |path_id: u8, points: usize| -> Vec<CanFrame> {
+    let mut path = |path_id: u8, points: usize, tick: u64| -> Vec<CanFrame> {
         let mut out = vec![PathHeader {
             path_id,
             count: points as u16,
         }
         .encode(next(0))];
         for i in 0..points {
+            let (east_m, north_m) = on_circle(tick, i as f64 - 1.0);
             out.push(
                 PathPoint {
                     path_id,
                     index: i as u8,
-                    east_m: i as f32,
-                    north_m: 0.0,
+                    east_m,
+                    north_m,
                 }
                 .encode(next(1)),
             );
@@ -179,11 +209,11 @@ fn planner_bursts(frames: &mut Vec<TimedFrame>) {
         }
         out
     };
-    let long = path(1, 6);
-    let (a, b) = (path(2, 2), path(3, 2));
-    let carried = path(4, 2);
-    let (c, d) = (path(5, 2), path(6, 2));
-    let again = path(7, 6);
+    let long = path(1, 6, 148);
+    let (a, b) = (path(2, 2, 150), path(3, 2, 150));
+    let carried = path(4, 2, 159);
+    let (c, d) = (path(5, 2, 160), path(6, 2, 160));
+    let again = path(7, 6, PATH_AGAIN_TICK - 1);
     let ticks: [(u64, Vec<CanFrame>); 7] = [
         (148, long[..7].to_vec()),
         (149, long[7..12].to_vec()),
