@@ -118,9 +118,11 @@ pub struct Spec {
     /// Frames per tick that are not node inputs (the acceptance filter refuses them).
     pub unknown_per_tick: u32,
     /// Points of the path a planner sends over and over (0: no planner): LOCAL_ORIGIN at the
-    /// drive's origin first, then the path (a straight line east of the origin, 1 m between
-    /// points, 5 m/s, 3 m corridors: valid, so every completion activates it) paced at the
-    /// node's rule for a conforming planner (`PLANNER_FRAMES_PER_TICK`).
+    /// drive's origin first, then the path (the car's own track from a metre behind where it
+    /// is when the path's first frame goes out, straight on beyond the drive's end, 1 m
+    /// between points, 5 m/s, 3 m corridors: valid, so every completion activates it, and the
+    /// car is on it, so the controller plans) paced at the node's rule for a conforming
+    /// planner (`PLANNER_FRAMES_PER_TICK`).
     pub path_points: usize,
 }
 
@@ -153,7 +155,7 @@ impl Spec {
 }
 
 /// The planner's frames of `spec` (see [`Spec::path_points`]).
-fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
+fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
     let mut out = Vec::new();
     if spec.path_points < 2 {
         return out;
@@ -180,6 +182,7 @@ fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
     let paths = ticks * PLANNER_FRAMES_PER_TICK / per_path + 1;
     for k in 0..paths {
         let path_id = (k % 16) as u8;
+        let track = truth.track_ahead(frame_time_s(frames.len()) - 0.2, points, 1.0);
         frames.push(
             PathHeader {
                 path_id,
@@ -193,8 +196,8 @@ fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
                 PathPoint {
                     path_id,
                     index,
-                    east_m: i as f32,
-                    north_m: 0.0,
+                    east_m: track[i].0 as f32,
+                    north_m: track[i].1 as f32,
                 }
                 .encode(next(1)),
             );
@@ -210,11 +213,8 @@ fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
             );
         }
     }
-    // PLANNER_FRAMES_PER_TICK per 20 ms, 0.5 ms apart, from the first tick on.
     for (i, frame) in frames.into_iter().enumerate() {
-        let tick = (i / PLANNER_FRAMES_PER_TICK) as f64;
-        let slot = (i % PLANNER_FRAMES_PER_TICK) as f64;
-        let t_s = 0.0015 + tick * 0.02 + slot * 0.0005;
+        let t_s = frame_time_s(i);
         if t_s >= spec.seconds {
             break;
         }
@@ -224,6 +224,14 @@ fn planner_frames(spec: &Spec, origin_e7: (i32, i32)) -> Vec<TimedFrame> {
         });
     }
     out
+}
+
+/// When the planner's `i`-th frame goes out, s into the drive: PLANNER_FRAMES_PER_TICK per
+/// 20 ms, 0.5 ms apart, from the first tick on.
+fn frame_time_s(i: usize) -> f64 {
+    let tick = (i / PLANNER_FRAMES_PER_TICK) as f64;
+    let slot = (i % PLANNER_FRAMES_PER_TICK) as f64;
+    0.0015 + tick * 0.02 + slot * 0.0005
 }
 
 /// splitmix64: small, fast and good enough to choose faults and noise reproducibly.
@@ -298,6 +306,30 @@ impl Truth {
         Self { samples }
     }
 
+    /// `points` points `spacing_m` apart along the rear axle's track from where it is at
+    /// `t_s` (clamped to the drive), straight on along the last heading beyond the drive's end.
+    fn track_ahead(&self, t_s: f64, points: usize, spacing_m: f64) -> Vec<(f64, f64)> {
+        let first = ((t_s / TRUTH_DT_S).round().max(0.0) as usize).min(self.samples.len() - 1);
+        let (x0, y0, _, _) = self.samples[first];
+        let mut out = vec![(x0, y0)];
+        let (mut last_x, mut last_y) = (x0, y0);
+        for &(x, y, _, _) in &self.samples[first..] {
+            if out.len() == points {
+                break;
+            }
+            if (x - last_x).hypot(y - last_y) >= spacing_m {
+                out.push((x, y));
+                (last_x, last_y) = (x, y);
+            }
+        }
+        let (_, _, h, _) = self.samples[self.samples.len() - 1];
+        while out.len() < points {
+            (last_x, last_y) = (last_x + spacing_m * h.sin(), last_y + spacing_m * h.cos());
+            out.push((last_x, last_y));
+        }
+        out
+    }
+
     fn at(&self, t_s: f64) -> (f64, f64, f64, f64) {
         let i = ((t_s / TRUTH_DT_S).round().max(0.0) as usize).min(self.samples.len() - 1);
         self.samples[i]
@@ -329,7 +361,7 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
     let frame = LocalFrame::new(origin_e7.0, origin_e7.1).ok();
     let source = car.gnss_source;
     let lever = f64::from(car.estimator.antenna_ahead_m);
-    let mut out: Vec<TimedFrame> = planner_frames(spec, origin_e7);
+    let mut out: Vec<TimedFrame> = planner_frames(spec, &truth, origin_e7);
     let mut push = |t_s: f64, frame: CanFrame| {
         out.push(TimedFrame {
             t_us: us(t_s),
