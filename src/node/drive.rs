@@ -45,7 +45,6 @@ use crate::model::hybrid::Mode;
 use crate::model::kinematic::Pose;
 use crate::model::predictor::PredictedPoint;
 use crate::model::SsBlockState;
-use crate::node::estimator::{EstimatorConfig, Xy};
 
 use super::stage::{Stage, StageProbe, SHORT_PATH_POINTS};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
@@ -81,11 +80,6 @@ impl Image for Controller {
 pub struct DriveInputs<'a> {
     /// Filtered rear-axle pose; `None` while invalid.
     pub pose: Option<Pose>,
-    /// The antenna's dead-reckoned position ([`EstimatorState::dead_reckoned`]): its change
-    /// over a tick is the car's motion, free of the fixes' jumps.
-    ///
-    /// [`EstimatorState::dead_reckoned`]: crate::node::estimator::EstimatorState::dead_reckoned
-    pub dead_reckoned: Xy,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// The active lateral model's state.
@@ -147,8 +141,6 @@ pub struct Drive {
     /// CONTROL_COMMAND sent last tick, and where the car was relative to the path.
     last_command: ControlCommand,
     last_tracking: Option<Tracking>,
-    /// The control pose's state ([`control_pose`]).
-    smoothing: Smoothing,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
@@ -186,7 +178,6 @@ impl Drive {
                 speed_cmd_mps: Some(0.0),
             },
             last_tracking: None,
-            smoothing: Smoothing::new(),
             unconfigured: true,
         }
     }
@@ -205,7 +196,6 @@ impl Drive {
         self.path_loaded = false;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
-        self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.mpc_config = match config.controller {
             Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
             Controller::PurePursuit => None,
@@ -284,7 +274,6 @@ impl Drive {
     }
 
     fn new_path(&mut self) {
-        self.smoothing.forget();
         self.mpc.reset();
         self.pursuit.integral_mps = 0.0;
         self.pursuit.projection = None;
@@ -318,16 +307,11 @@ impl Drive {
         probe: &mut P,
     ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
-            self.smoothing.forget();
             return self.hold(ControlStatus::NoPath);
         };
         let (Some(pose), Some(speed_model)) = (inputs.pose, inputs.speed_model) else {
-            self.smoothing.forget();
             return self.hold(ControlStatus::Fallback);
         };
-        let pose = self
-            .smoothing
-            .control_pose(&config.estimator, pose, inputs.dead_reckoned);
         if self.unconfigured {
             return self.hold(ControlStatus::Fallback);
         }
@@ -429,121 +413,6 @@ impl Drive {
                 speed_cmd_mps: Some(0.0),
             },
             plan: None,
-        }
-    }
-}
-
-/// The controllers' position follows the estimate's jumps over this many fix periods (less a
-/// tick: [`Smoothing::for_estimator`]).
-pub const SMOOTHING_FIXES: f32 = 4.0;
-
-/// A difference between the estimate and the smoothed position beyond this is taken at once
-/// (a restarted estimate, a moved origin), m: a fix's noise stays well below it.
-pub const SMOOTHING_SNAP_M: f32 = 3.0;
-
-/// The smoothing waits this many of the heading correction's time constants after the pose
-/// becomes valid: the first heading, from a short chord of a slow receiver's fixes, can be
-/// tenths of a radian out, and dead reckoning along it would carry the error into the position.
-pub const SMOOTHING_SETTLE_TIME_CONSTANTS: f32 = 3.0;
-
-/// The position the controllers follow: the estimate with the jumps a slow receiver's fixes
-/// put into it spread out. Between fixes the estimate moves with the dead reckoning; at a fix
-/// it jumps by the new fix's noise (up to a metre at 5 Hz with an uncorrected receiver: the
-/// filter's window holds three fixes), and the controller steers at each step. So the antenna
-/// moves with the dead reckoning and is pulled towards the estimate by `tick / (SMOOTHING_FIXES
-/// x (fix period - tick))` per tick: a complementary filter whose lowpass acts only on the
-/// estimate's difference from the dead reckoning (the fixes' noise, the dead reckoning's
-/// drift), so the car's own motion passes without lag. With a fix every tick or more often the
-/// estimate does not jump and the pull is 1, the estimate as it is.
-#[derive(Clone, Copy, Debug)]
-struct Smoothing {
-    /// The smoothed antenna and the dead reckoning it was last moved with.
-    last: Option<(Xy, Xy)>,
-    /// Ticks with a valid pose in a row (saturating).
-    valid_ticks: u32,
-    /// Pull per tick (1: none).
-    gain: f32,
-    /// Ticks of valid pose before the pull applies.
-    settle_ticks: u32,
-}
-
-impl Smoothing {
-    const fn new() -> Self {
-        Self {
-            last: None,
-            valid_ticks: 0,
-            gain: 1.0,
-            settle_ticks: 0,
-        }
-    }
-
-    /// For a receiver with fixes `cfg.gnss_period_s` apart and the heading correction's gain.
-    fn for_estimator(cfg: &EstimatorConfig) -> Self {
-        let tick_s = crate::SAMPLE_PERIOD_S;
-        let tau_s = SMOOTHING_FIXES * (cfg.gnss_period_s - tick_s);
-        let gain = if cfg.gnss_period_s.is_finite() && tau_s > tick_s {
-            tick_s / tau_s
-        } else {
-            1.0
-        };
-        let settle = if cfg.course_gain > 0.0 {
-            SMOOTHING_SETTLE_TIME_CONSTANTS / cfg.course_gain
-        } else {
-            0.0
-        };
-        Self {
-            last: None,
-            valid_ticks: 0,
-            gain,
-            // Saturating: a few hundred ticks at most from the design's gains.
-            settle_ticks: settle as u32,
-        }
-    }
-
-    /// Forgets the smoothed position (no pose, a new path): the next pose is taken as it is
-    /// and the settling starts again.
-    fn forget(&mut self) {
-        self.last = None;
-        self.valid_ticks = 0;
-    }
-
-    /// This tick's control pose for the estimate `pose` and the dead reckoning.
-    fn control_pose(&mut self, cfg: &EstimatorConfig, pose: Pose, dead_reckoned: Xy) -> Pose {
-        let (s, c) = (pose.sin_heading, pose.cos_heading);
-        // The estimate's antenna (`EstimatorState::position` inverted).
-        let lever = Xy {
-            x_m: cfg.antenna_ahead_m * s - cfg.antenna_left_m * c,
-            y_m: cfg.antenna_ahead_m * c + cfg.antenna_left_m * s,
-        };
-        let estimate = Xy {
-            x_m: pose.x_m + lever.x_m,
-            y_m: pose.y_m + lever.y_m,
-        };
-        self.valid_ticks = self.valid_ticks.saturating_add(1);
-        let settled = self.valid_ticks > self.settle_ticks;
-        let smoothed = match self.last {
-            Some((last, odo)) if settled && self.gain < 1.0 => {
-                let moved = Xy {
-                    x_m: last.x_m + (dead_reckoned.x_m - odo.x_m),
-                    y_m: last.y_m + (dead_reckoned.y_m - odo.y_m),
-                };
-                let (dx, dy) = (estimate.x_m - moved.x_m, estimate.y_m - moved.y_m);
-                (dx * dx + dy * dy <= SMOOTHING_SNAP_M * SMOOTHING_SNAP_M).then_some(Xy {
-                    x_m: moved.x_m + self.gain * dx,
-                    y_m: moved.y_m + self.gain * dy,
-                })
-            }
-            _ => None,
-        };
-        self.last = Some((smoothed.unwrap_or(estimate), dead_reckoned));
-        match smoothed {
-            Some(antenna) => Pose {
-                x_m: antenna.x_m - lever.x_m,
-                y_m: antenna.y_m - lever.y_m,
-                ..pose
-            },
-            // Not smoothing: the estimate exactly as it is.
-            None => pose,
         }
     }
 }
@@ -725,87 +594,4 @@ fn mpc_tick<P: StageProbe>(
     }
     *planned_speeds = Some(next);
     Some(Ok((out, tracking)))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn pose(x: f32, y: f32) -> Pose {
-        Pose::new(x, y, 0.0)
-    }
-
-    #[test]
-    fn a_receiver_with_a_fix_every_tick_is_not_smoothed() {
-        for rate_hz in [50.0, 100.0] {
-            let cfg = EstimatorConfig::design(rate_hz, 1.5, 0.0).unwrap();
-            let mut s = Smoothing::for_estimator(&cfg);
-            assert_eq!(s.gain, 1.0);
-            // Whatever the estimate does, it is passed as it is.
-            for k in 0..500 {
-                let p = pose(0.3 * k as f32, if k % 7 == 0 { 1.0 } else { 0.0 });
-                let odo = Xy {
-                    x_m: 0.3 * k as f32,
-                    y_m: 1.5,
-                };
-                let out = s.control_pose(&cfg, p, odo);
-                assert_eq!((out.x_m, out.y_m), (p.x_m, p.y_m));
-            }
-        }
-    }
-
-    #[test]
-    fn a_fixs_jump_is_spread_over_the_smoothing_time_after_the_settling() {
-        // 5 Hz: pull 0.02 / (4 x 0.18) = 1/36 per tick; settling 3 / course gain ticks.
-        let cfg = EstimatorConfig::design(5.0, 1.5, 0.0).unwrap();
-        let mut s = Smoothing::for_estimator(&cfg);
-        let gain = 0.02f32 / (SMOOTHING_FIXES * 0.18);
-        assert!((s.gain - gain).abs() < 1e-6, "{}", s.gain);
-        let settle = (SMOOTHING_SETTLE_TIME_CONSTANTS / cfg.course_gain) as u32;
-        assert_eq!(s.settle_ticks, settle);
-        assert!(settle > 50 && settle < 300, "{settle}");
-        // Heading north at 10 m/s; the antenna is 1.5 m ahead of the rear axle.
-        let odo = |k: u32| Xy {
-            x_m: 0.0,
-            y_m: 0.2 * k as f32 + 1.5,
-        };
-        let mut k = 0;
-        // Until it has settled, a jump is passed as it is.
-        while k < settle {
-            let jump = if k == settle / 2 { 0.8 } else { 0.0 };
-            let out = s.control_pose(&cfg, pose(jump, 0.2 * k as f32), odo(k));
-            assert_eq!((out.x_m, out.y_m), (jump, 0.2 * k as f32), "tick {k}");
-            k += 1;
-        }
-        // Settled: the estimate is the dead reckoning; then it jumps 0.8 m east and stays.
-        for _ in 0..5 {
-            let out = s.control_pose(&cfg, pose(0.0, 0.2 * k as f32), odo(k));
-            assert!(out.x_m.abs() < 1e-4 && (out.y_m - 0.2 * k as f32).abs() < 1e-3);
-            k += 1;
-        }
-        let mut east = 0.0f32;
-        for n in 1..=72u32 {
-            let out = s.control_pose(&cfg, pose(0.8, 0.2 * k as f32), odo(k));
-            // The motion passes without lag; the jump comes in as 1 - (1 - gain)^n.
-            assert!((out.y_m - 0.2 * k as f32).abs() < 1e-3, "tick {k}");
-            let expected = 0.8 * (1.0 - (1.0 - gain).powi(n as i32));
-            assert!(
-                (out.x_m - expected).abs() < 1e-3,
-                "{n}: {} vs {expected}",
-                out.x_m
-            );
-            assert!(out.x_m > east);
-            east = out.x_m;
-            k += 1;
-        }
-        // Two time constants: 86 % of it.
-        assert!(east > 0.68 && east < 0.71, "{east}");
-        // A difference beyond the snap distance (a restarted estimate) is taken at once.
-        let out = s.control_pose(&cfg, pose(5.0, 0.2 * k as f32), odo(k));
-        assert_eq!(out.x_m, 5.0);
-        // Forgetting starts the settling again.
-        s.forget();
-        let out = s.control_pose(&cfg, pose(-1.0, 0.0), odo(k + 1));
-        assert_eq!(out.x_m, -1.0);
-    }
 }

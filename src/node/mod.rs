@@ -664,7 +664,6 @@ impl<D: BorrowMut<Drive>> Node<D> {
     ) -> DriveOutput {
         let inputs = DriveInputs {
             pose: estimate.pose,
-            dead_reckoned: self.gnss.dead_reckoned(),
             speed_mps: motion.speed_mps,
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,

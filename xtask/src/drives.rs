@@ -190,14 +190,14 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
             }
             .encode(next(0)),
         );
-        for i in 0..points {
+        for (i, &(east, north)) in track.iter().enumerate() {
             let index = i as u8;
             frames.push(
                 PathPoint {
                     path_id,
                     index,
-                    east_m: track[i].0 as f32,
-                    north_m: track[i].1 as f32,
+                    east_m: east as f32,
+                    north_m: north as f32,
                 }
                 .encode(next(1)),
             );
