@@ -135,3 +135,74 @@ fn second_car_goals() {
     let rms = fast.lateral_rms_m.unwrap();
     assert!(fast.completed && rms <= 0.10, "10 m/s: {rms} m");
 }
+
+/// The second car with a slower receiver than its own: the same uncorrected noise (1.2 m RMS)
+/// at 5 Hz instead of 100 Hz, its vehicle and model files edited to say so. Each fix moves the
+/// estimate by up to a metre (the filter's window holds three fixes); the control pose spreads
+/// those jumps by the scatter it measures (`catmodel::node::smoothing`). Without it the MPC
+/// steered at every jump: on the loop at 10 m/s the steering command moved at 67-68 %/s on
+/// average (the same car at 100 Hz: 9 %/s), on the obstacle seed 6 of these ten drove into it
+/// (-0.46 m) and seed 3 passed it by 0.33 m. Measured with it: 30-36 %/s; every seed passes
+/// (the closest, seed 6, by 0.24 m: below the goal's 0.5 m, which is set for the car's own
+/// receiver; docs/controller.md, "Slow receivers").
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn second_car_with_a_slow_noisy_receiver() {
+    let (v, m) = hatchback();
+    let dir = std::env::temp_dir().join(format!("catmodel-5hz-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let edit = |from: &std::path::Path, to: &str, old: &str, new: &str| {
+        let text = std::fs::read_to_string(from).unwrap();
+        assert_eq!(text.matches(old).count(), 1, "{old} in {}", from.display());
+        let to = dir.join(to);
+        std::fs::write(&to, text.replace(old, new)).unwrap();
+        to
+    };
+    let v = edit(
+        &v,
+        "vehicle.toml",
+        "period_s = 0.01             # paper",
+        "period_s = 0.2 # paper",
+    );
+    let m = edit(
+        &m,
+        "model.toml",
+        "gnss_rate_hz = 100.0",
+        "gnss_rate_hz = 5.0",
+    );
+    let (vehicle, node) = load_setup(Some(&v), Some(&m)).unwrap();
+    assert_eq!(node.estimator.gnss_period_s, 0.2);
+    let go = |kind: Kind, speed: f64, seed: u64| {
+        let course = scenario::course(kind, &vehicle.body, speed);
+        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+        let options = RunOptions {
+            seed,
+            receiver: Receiver::Standard,
+            max_time_s: 120.0,
+            replan_s: None,
+        };
+        run(&vehicle, &course, &mut driver, "", &options)
+    };
+    for seed in 0..10 {
+        let m = go(Kind::Obstacle, Kind::Obstacle.default_speed_mps(), seed).metrics;
+        assert!(m.clean, "obstacle, seed {seed}: {m:?}");
+    }
+    for seed in 0..3 {
+        let out = go(Kind::Loop, 10.0, seed);
+        assert!(out.metrics.completed, "loop, seed {seed}");
+        let steer: Vec<f64> = out
+            .samples
+            .iter()
+            .filter(|s| s.engaged)
+            .filter_map(|s| s.command.steer_cmd_pct.map(f64::from))
+            .collect();
+        let rate = steer.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>()
+            / (steer.len() - 1) as f64
+            / 0.02;
+        assert!(
+            rate < 45.0,
+            "loop, seed {seed}: steering moves {rate:.0} %/s"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -46,6 +46,8 @@ use crate::model::kinematic::Pose;
 use crate::model::predictor::PredictedPoint;
 use crate::model::SsBlockState;
 
+use super::estimator::Xy;
+use super::smoothing::Smoothing;
 use super::stage::{Stage, StageProbe, SHORT_PATH_POINTS};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
 
@@ -80,6 +82,9 @@ impl Image for Controller {
 pub struct DriveInputs<'a> {
     /// Filtered rear-axle pose; `None` while invalid.
     pub pose: Option<Pose>,
+    /// The antenna's dead-reckoned position ([`super::estimator::EstimatorState::dead_reckoned`]):
+    /// its change over a tick is the car's motion, free of the fixes' jumps.
+    pub dead_reckoned: Xy,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// The active lateral model's state.
@@ -141,6 +146,8 @@ pub struct Drive {
     /// CONTROL_COMMAND sent last tick, and where the car was relative to the path.
     last_command: ControlCommand,
     last_tracking: Option<Tracking>,
+    /// The position the controllers follow ([`Smoothing`]).
+    smoothing: Smoothing,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
@@ -178,6 +185,7 @@ impl Drive {
                 speed_cmd_mps: Some(0.0),
             },
             last_tracking: None,
+            smoothing: Smoothing::new(),
             unconfigured: true,
         }
     }
@@ -196,6 +204,7 @@ impl Drive {
         self.path_loaded = false;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
+        self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.mpc_config = match config.controller {
             Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
             Controller::PurePursuit => None,
@@ -274,6 +283,7 @@ impl Drive {
     }
 
     fn new_path(&mut self) {
+        self.smoothing.forget();
         self.mpc.reset();
         self.pursuit.integral_mps = 0.0;
         self.pursuit.projection = None;
@@ -307,11 +317,16 @@ impl Drive {
         probe: &mut P,
     ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
+            self.smoothing.forget();
             return self.hold(ControlStatus::NoPath);
         };
         let (Some(pose), Some(speed_model)) = (inputs.pose, inputs.speed_model) else {
+            self.smoothing.forget();
             return self.hold(ControlStatus::Fallback);
         };
+        let pose = self
+            .smoothing
+            .control_pose(&config.estimator, pose, inputs.dead_reckoned);
         if self.unconfigured {
             return self.hold(ControlStatus::Fallback);
         }

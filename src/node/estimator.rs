@@ -375,6 +375,12 @@ impl EstimatorState {
         self.filtered = None;
     }
 
+    /// The antenna's dead-reckoned position, m: continuous (fixes never move it), so its change
+    /// over a tick is the car's motion alone.
+    pub fn dead_reckoned(&self) -> Xy {
+        self.odo_now
+    }
+
     /// Current heading estimate, rad.
     pub fn heading_rad(&self) -> Option<f32> {
         self.heading_rad

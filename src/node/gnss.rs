@@ -63,6 +63,11 @@ impl Gnss {
         changed
     }
 
+    /// The antenna's dead-reckoned position ([`EstimatorState::dead_reckoned`]).
+    pub fn dead_reckoned(&self) -> Xy {
+        self.estimator.dead_reckoned()
+    }
+
     /// When a fix was last rejected.
     pub fn last_reject_us(&self) -> Option<u64> {
         self.last_reject_us

@@ -30,6 +30,7 @@ pub mod estimator;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
+pub mod smoothing;
 pub mod stage;
 
 use core::borrow::BorrowMut;
@@ -664,6 +665,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
     ) -> DriveOutput {
         let inputs = DriveInputs {
             pose: estimate.pose,
+            dead_reckoned: self.gnss.dead_reckoned(),
             speed_mps: motion.speed_mps,
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,

@@ -1,0 +1,236 @@
+//! The control pose (`catmodel::node::smoothing`): the estimate with a slow, noisy receiver's
+//! fix jumps spread out by as much as the jumps measured on line call for, and a quiet
+//! receiver's estimate passed as it is.
+use catmodel::model::kinematic::Pose;
+use catmodel::node::estimator::{EstimatorConfig, Xy};
+use catmodel::node::smoothing::{Smoothing, DRIFT_MPS, SNAP_M};
+use catmodel::SAMPLE_PERIOD_S;
+
+/// Antenna 1.2 m ahead of the rear axle, on the centre line.
+const AHEAD_M: f32 = 1.2;
+
+fn config(rate_hz: f64) -> EstimatorConfig {
+    EstimatorConfig::design(rate_hz, AHEAD_M, 0.0).unwrap()
+}
+
+/// Deterministic standard normal draws (xorshift64*, Box-Muller).
+struct Normal(u64);
+
+impl Normal {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    fn next(&mut self) -> f32 {
+        let (a, b) = (self.uniform(), self.uniform());
+        ((-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()) as f32
+    }
+}
+
+/// A car driving east at 5 m/s; its estimate's antenna off the truth by `error(tick)`; the dead
+/// reckoning exact. Returns, per tick, the truth's rear axle, the estimate and the control pose.
+fn drive(
+    smoothing: &mut Smoothing,
+    cfg: &EstimatorConfig,
+    ticks: usize,
+    mut error: impl FnMut(usize) -> (f32, f32),
+) -> Vec<(Pose, Pose, Pose)> {
+    let heading = core::f32::consts::FRAC_PI_2;
+    (0..ticks)
+        .map(|k| {
+            let x = 5.0 * SAMPLE_PERIOD_S * k as f32;
+            let truth = Pose::new(x, 0.0, heading);
+            let (ex, ey) = error(k);
+            let estimate = Pose::new(x + ex, ey, heading);
+            // The dead-reckoned antenna: the truth's, from an arbitrary origin.
+            let odo = Xy {
+                x_m: 100.0 + x + AHEAD_M,
+                y_m: -50.0,
+            };
+            let control = smoothing.control_pose(cfg, estimate, odo);
+            (truth, estimate, control)
+        })
+        .collect()
+}
+
+/// The steady-state Kalman gain of a random walk with process noise `q` per step measured with
+/// noise `r`, by iterating the Riccati recursion (independent of the closed form the node uses).
+fn kalman_gain(q: f64, r: f64) -> f64 {
+    let mut p = r;
+    let mut k = 0.0;
+    for _ in 0..100_000 {
+        let prior = p + q;
+        k = prior / (prior + r);
+        p = (1.0 - k) * prior;
+    }
+    k
+}
+
+/// Fix errors of a receiver at `rate_hz` with `sigma_m` per axis, held between fixes.
+fn fix_errors(rate_hz: f32, sigma_m: f32, seed: u64) -> impl FnMut(usize) -> (f32, f32) {
+    let ticks_per_fix = ((1.0 / rate_hz) / SAMPLE_PERIOD_S).round().max(1.0) as usize;
+    let mut normal = Normal(seed);
+    let mut held = (0.0, 0.0);
+    move |k| {
+        if k % ticks_per_fix == 0 {
+            held = (sigma_m * normal.next(), sigma_m * normal.next());
+        }
+        held
+    }
+}
+
+#[test]
+fn an_estimate_that_moves_with_the_dead_reckoning_is_followed_exactly() {
+    // No jumps but f32 rounding: nothing to smooth, whatever the receiver's rate; the pose
+    // passes to within rounding (the position's f32 ulp at 300 m is 3e-5 m).
+    for rate in [1.0, 5.0, 10.0, 100.0] {
+        let cfg = config(rate);
+        let mut smoothing = Smoothing::for_estimator(&cfg);
+        for (_, estimate, control) in drive(&mut smoothing, &cfg, 3_000, |_| (0.3, -0.2)) {
+            let off = (control.x_m - estimate.x_m).hypot(control.y_m - estimate.y_m);
+            assert!(off < 1e-4, "{rate} Hz: {off} m");
+            assert_eq!(control.heading_rad, estimate.heading_rad);
+        }
+    }
+}
+
+#[test]
+fn the_pull_per_tick_is_the_kalman_gain_per_fix_spread_over_its_ticks() {
+    // 5 Hz: ten ticks per fix. Jumps of a known mean square; the node's pull per tick `g` must
+    // satisfy (1 - g)^10 = 1 - K for the steady-state gain K of process noise (DRIFT_MPS x 0.2
+    // s)^2 against measurement noise (mean square jump / 2).
+    let cfg = config(5.0);
+    for sigma in [0.05f32, 0.2, 0.5, 1.0] {
+        let mut smoothing = Smoothing::for_estimator(&cfg);
+        drive(&mut smoothing, &cfg, 20_000, fix_errors(5.0, sigma, 7));
+        // The mean square jump the node saw over its last window (5 s = 25 fixes) is noisy;
+        // take the one it would see on average: per axis 2 sigma^2, two axes.
+        let jump_ms = 4.0 * f64::from(sigma) * f64::from(sigma);
+        let q = (f64::from(DRIFT_MPS) * 0.2).powi(2);
+        let k = kalman_gain(q, jump_ms / 2.0);
+        let g = f64::from(smoothing.gain());
+        let k_node = 1.0 - (1.0 - g).powi(10);
+        // The window's estimate of the mean square scatters by about sqrt(2 / 25) = 28 %; K
+        // goes about as its square root.
+        assert!(
+            (k_node / k - 1.0).abs() < 0.25,
+            "sigma {sigma}: K {k:.3}, the node's {k_node:.3}"
+        );
+    }
+}
+
+#[test]
+fn a_survey_grade_receiver_is_followed_and_a_noisy_slow_one_smoothed() {
+    // RTK at 10 Hz (1 cm): the jumps are below the drift allowed for, the pull is close to 1.
+    let cfg = config(10.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    drive(&mut smoothing, &cfg, 3_000, fix_errors(10.0, 0.01, 3));
+    assert!(smoothing.gain() > 0.5, "RTK: {}", smoothing.gain());
+    // An uncorrected receiver at 5 Hz (0.5 m per axis at the estimate): each fix's jump is
+    // spread over several fix periods; the control pose moves by far less per tick and is
+    // nearer the truth than the estimate.
+    let cfg = config(5.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    let run = drive(&mut smoothing, &cfg, 10_000, fix_errors(5.0, 0.5, 11));
+    let g = smoothing.gain();
+    assert!(g < 0.05, "5 Hz, 0.5 m: {g}");
+    let settled = &run[2_000..];
+    let rms = |f: &dyn Fn(&(Pose, Pose, Pose)) -> f32| {
+        (settled.iter().map(|s| f(s).powi(2)).sum::<f32>() / settled.len() as f32).sqrt()
+    };
+    let est_err = rms(&|(t, e, _)| (e.x_m - t.x_m).hypot(e.y_m - t.y_m));
+    let ctl_err = rms(&|(t, _, c)| (c.x_m - t.x_m).hypot(c.y_m - t.y_m));
+    assert!(ctl_err < 0.6 * est_err, "error {ctl_err} vs {est_err}");
+    let steps = |pick: fn(&(Pose, Pose, Pose)) -> Pose| {
+        settled
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (pick(&w[0]), pick(&w[1]));
+                // The car's own motion is 0.1 m east per tick.
+                (b.x_m - a.x_m - 0.1).abs().max((b.y_m - a.y_m).abs())
+            })
+            .fold(0.0f32, f32::max)
+    };
+    let est_step = steps(|s| s.1);
+    let ctl_step = steps(|s| s.2);
+    assert!(
+        ctl_step < 0.2 * est_step,
+        "largest step {ctl_step} vs {est_step}"
+    );
+}
+
+#[test]
+fn a_lasting_offset_is_followed_within_the_gains_time() {
+    // A noisy 5 Hz receiver; then the estimate moves 1 m north and stays (the dead reckoning
+    // had drifted): the control pose follows at the pull per tick, no slower.
+    let cfg = config(5.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    let mut noise = fix_errors(5.0, 0.3, 5);
+    let run = drive(&mut smoothing, &cfg, 4_000, |k| {
+        let (x, y) = noise(k);
+        if k < 3_000 {
+            (x, y)
+        } else {
+            (0.0, 1.0)
+        }
+    });
+    let g = smoothing.gain();
+    assert!(g < 1.0);
+    // After n ticks of the offset (the statistics saw one jump of 1 m more, the pull grew),
+    // at most (1 - g_before)^n of it is left.
+    let before = {
+        let mut s = Smoothing::for_estimator(&cfg);
+        let mut noise = fix_errors(5.0, 0.3, 5);
+        drive(&mut s, &cfg, 3_000, &mut noise);
+        s.gain()
+    };
+    for n in [50usize, 200, 500] {
+        let (_, e, c) = run[3_000 + n];
+        let left = (e.y_m - c.y_m).abs();
+        let bound = (1.0 - before).powi(n as i32) + 0.3;
+        assert!(
+            left <= bound,
+            "after {n} ticks {left} m of 1 m left (bound {bound})"
+        );
+    }
+    let (_, e, c) = run[3_999];
+    assert!((e.y_m - c.y_m).abs() < 0.05);
+}
+
+#[test]
+fn a_jump_beyond_the_snap_distance_is_taken_at_once_and_not_counted() {
+    let cfg = config(5.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    let mut noise = fix_errors(5.0, 0.3, 9);
+    let run = drive(&mut smoothing, &cfg, 2_500, |k| {
+        let (x, y) = noise(k);
+        if k < 2_000 {
+            (x, y)
+        } else {
+            (x, y + 2.0 * SNAP_M)
+        }
+    });
+    let (_, e, c) = run[2_000];
+    assert_eq!(c, e, "the restarted estimate is taken as it is");
+    // The 6 m jump stayed out of the statistics: the receiver still counts as noisy.
+    assert!(smoothing.gain() < 0.1, "{}", smoothing.gain());
+}
+
+#[test]
+fn the_first_heading_settles_before_the_smoothing_starts_and_a_new_path_restarts_it() {
+    let cfg = config(5.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    let settle = (3.0 / cfg.course_gain) as usize;
+    let run = drive(&mut smoothing, &cfg, settle + 200, fix_errors(5.0, 0.5, 13));
+    for (k, (_, e, c)) in run.iter().enumerate().take(settle) {
+        assert_eq!(c, e, "tick {k}: still settling");
+    }
+    assert!(run[settle..].iter().any(|(_, e, c)| c != e));
+    smoothing.forget();
+    let run = drive(&mut smoothing, &cfg, settle, fix_errors(5.0, 0.5, 17));
+    for (k, (_, e, c)) in run.iter().enumerate() {
+        assert_eq!(c, e, "tick {k} after forget: settling again");
+    }
+}

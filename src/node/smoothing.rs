@@ -1,0 +1,195 @@
+//! The position the controllers follow: the estimate, with the jumps a slow, noisy receiver's
+//! fixes put into it spread out by as much as the receiver's measured noise calls for.
+//!
+//! Between fixes the estimate moves with the dead reckoning; at a fix it jumps by the new
+//! fix's noise and by the dead reckoning's drift since the last one. With a survey-grade
+//! receiver the jumps are centimetres, mostly drift, and must be followed at once; with an
+//! uncorrected receiver at 5 Hz they are half a metre to a metre (the filter's window holds
+//! three fixes), and a controller steering at each step drives a car with slow steering into a
+//! growing oscillation (docs/controller.md, "Slow receivers"). Which of the two a receiver is,
+//! the node learns on line: the control pose tracks the mean square of the estimate's jumps
+//! against the dead reckoning ([`JUMP_WINDOW_S`]), and weighs them as a steady-state Kalman
+//! filter weighs a measurement of that noise against a dead reckoning that drifts by
+//! [`DRIFT_MPS`]:
+//! - measurement noise per fix `r = jump_ms / 2` (a jump is the difference of two estimates'
+//!   errors), process noise per fix `q = (DRIFT_MPS x fix period)^2`;
+//! - the correction per fix `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
+//!   scalar Riccati equation's fixed point): close to 1 for a receiver whose jumps are below
+//!   the drift (RTK: the estimate as it is), `sqrt(q / r)` for a noisy one;
+//! - spread over the fix period's ticks as a complementary filter: the smoothed antenna moves
+//!   with the dead reckoning and is pulled towards the estimate by `g` per tick, with
+//!   `(1 - g)^ticks = 1 - K` (`g = -ln(1 - K) / ticks`, at most 1). The lowpass acts only on
+//!   the estimate's difference from the dead reckoning, so the car's own motion passes
+//!   without lag.
+//!
+//! The smoothing waits [`SETTLE_TIME_CONSTANTS`] of the heading correction after the pose
+//! becomes valid (the first heading, from a short chord of a slow receiver's fixes, can be
+//! tenths of a radian out, and the dead reckoning would carry it into the position), and a
+//! difference beyond [`SNAP_M`] (a restarted estimate, a moved origin) is taken at once.
+use crate::math;
+use crate::model::kinematic::Pose;
+
+use super::estimator::{EstimatorConfig, Xy};
+
+/// The dead reckoning's drift against the truth the smoothing allows for, m/s: its process
+/// noise is this times the fix period, per fix.
+pub const DRIFT_MPS: f32 = 0.5;
+
+/// The jumps' mean square is averaged over about this long, s (a running mean until then).
+pub const JUMP_WINDOW_S: f32 = 5.0;
+
+/// The smoothing starts this many of the heading correction's time constants after the pose
+/// becomes valid.
+pub const SETTLE_TIME_CONSTANTS: f32 = 3.0;
+
+/// A difference between the estimate and the smoothed position beyond this is taken at once,
+/// m; a jump beyond it is not noise and stays out of the mean square.
+pub const SNAP_M: f32 = 3.0;
+
+/// The control pose's state ([`Smoothing::control_pose`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Smoothing {
+    /// The smoothed antenna and the dead reckoning it was last moved with.
+    last: Option<(Xy, Xy)>,
+    /// The estimate's antenna last tick and the dead reckoning then.
+    last_estimate: Option<(Xy, Xy)>,
+    /// Mean square of the estimate's jumps per tick, m^2.
+    jump_ms_per_tick: f32,
+    /// Ticks in the mean square (saturating at the window's).
+    jump_ticks: u32,
+    /// Ticks with a valid pose in a row (saturating).
+    valid_ticks: u32,
+    /// Ticks of valid pose before the pull applies.
+    settle_ticks: u32,
+    /// Ticks per fix (at least 1).
+    ticks_per_fix: f32,
+    /// Process noise per fix, m^2.
+    drift_var_per_fix: f32,
+}
+
+impl Smoothing {
+    /// No receiver known: the estimate as it is. `const`: the drive stage is built at compile
+    /// time.
+    pub const fn new() -> Self {
+        Self {
+            last: None,
+            last_estimate: None,
+            jump_ms_per_tick: 0.0,
+            jump_ticks: 0,
+            valid_ticks: 0,
+            settle_ticks: 0,
+            ticks_per_fix: 1.0,
+            drift_var_per_fix: 0.0,
+        }
+    }
+
+    /// For the receiver and heading correction of `cfg`; nothing measured yet.
+    pub fn for_estimator(cfg: &EstimatorConfig) -> Self {
+        let tick_s = crate::SAMPLE_PERIOD_S;
+        let period_s = if cfg.gnss_period_s.is_finite() {
+            math::max(cfg.gnss_period_s, tick_s)
+        } else {
+            tick_s
+        };
+        let settle = if cfg.course_gain > 0.0 {
+            SETTLE_TIME_CONSTANTS / cfg.course_gain
+        } else {
+            0.0
+        };
+        let drift = DRIFT_MPS * period_s;
+        Self {
+            // Saturating conversion: a few hundred ticks from the design's gains.
+            settle_ticks: settle as u32,
+            ticks_per_fix: period_s / tick_s,
+            drift_var_per_fix: drift * drift,
+            ..Self::new()
+        }
+    }
+
+    /// Forgets the smoothed position (no pose, a new path): the next pose is taken as it is and
+    /// the settling starts again. The jumps' statistics (the receiver's) are kept.
+    pub fn forget(&mut self) {
+        self.last = None;
+        self.last_estimate = None;
+        self.valid_ticks = 0;
+    }
+
+    /// The pull towards the estimate per tick for the jumps measured so far (1: none).
+    pub fn gain(&self) -> f32 {
+        let r = 0.5 * self.jump_ms_per_tick * self.ticks_per_fix;
+        let q = self.drift_var_per_fix;
+        if !(r > 0.0 && q > 0.0) {
+            return 1.0;
+        }
+        let p = 0.5 * (q + math::sqrt(q * q + 4.0 * q * r));
+        // 1 - K, in (0, 1): r and p are positive and finite (the jumps are bounded by SNAP_M).
+        let keep = r / (p + r);
+        if keep.is_nan() || keep <= 0.0 {
+            return 1.0;
+        }
+        math::clamp(-libm::logf(keep) / self.ticks_per_fix, 0.0, 1.0)
+    }
+
+    /// This tick's control pose for the estimate `pose` (rear axle) and the dead reckoning.
+    pub fn control_pose(&mut self, cfg: &EstimatorConfig, pose: Pose, dead_reckoned: Xy) -> Pose {
+        let (s, c) = (pose.sin_heading, pose.cos_heading);
+        // The estimate's antenna (`EstimatorState::position` inverted).
+        let lever = Xy {
+            x_m: cfg.antenna_ahead_m * s - cfg.antenna_left_m * c,
+            y_m: cfg.antenna_ahead_m * c + cfg.antenna_left_m * s,
+        };
+        let estimate = Xy {
+            x_m: pose.x_m + lever.x_m,
+            y_m: pose.y_m + lever.y_m,
+        };
+        self.measure(estimate, dead_reckoned);
+        self.valid_ticks = self.valid_ticks.saturating_add(1);
+        let gain = self.gain();
+        let smoothed = match self.last {
+            Some((last, odo)) if self.valid_ticks > self.settle_ticks && gain < 1.0 => {
+                let moved = Xy {
+                    x_m: last.x_m + (dead_reckoned.x_m - odo.x_m),
+                    y_m: last.y_m + (dead_reckoned.y_m - odo.y_m),
+                };
+                let (dx, dy) = (estimate.x_m - moved.x_m, estimate.y_m - moved.y_m);
+                (dx * dx + dy * dy <= SNAP_M * SNAP_M).then_some(Xy {
+                    x_m: moved.x_m + gain * dx,
+                    y_m: moved.y_m + gain * dy,
+                })
+            }
+            _ => None,
+        };
+        self.last = Some((smoothed.unwrap_or(estimate), dead_reckoned));
+        match smoothed {
+            Some(antenna) => Pose {
+                x_m: antenna.x_m - lever.x_m,
+                y_m: antenna.y_m - lever.y_m,
+                ..pose
+            },
+            // Not smoothing: the estimate exactly as it is.
+            None => pose,
+        }
+    }
+
+    /// Adds this tick's jump of the estimate against the dead reckoning to the mean square.
+    fn measure(&mut self, estimate: Xy, dead_reckoned: Xy) {
+        if let Some((e, d)) = self.last_estimate {
+            let jx = (estimate.x_m - e.x_m) - (dead_reckoned.x_m - d.x_m);
+            let jy = (estimate.y_m - e.y_m) - (dead_reckoned.y_m - d.y_m);
+            let j2 = jx * jx + jy * jy;
+            if j2 <= SNAP_M * SNAP_M {
+                let window = JUMP_WINDOW_S / crate::SAMPLE_PERIOD_S;
+                self.jump_ticks = self.jump_ticks.saturating_add(1);
+                let n = math::min(self.jump_ticks as f32, window);
+                self.jump_ms_per_tick += (j2 - self.jump_ms_per_tick) / n;
+            }
+        }
+        self.last_estimate = Some((estimate, dead_reckoned));
+    }
+}
+
+impl Default for Smoothing {
+    fn default() -> Self {
+        Self::new()
+    }
+}
