@@ -3,7 +3,7 @@
 //! receiver's estimate passed as it is.
 use catmodel::model::kinematic::Pose;
 use catmodel::node::estimator::{EstimatorConfig, Xy};
-use catmodel::node::smoothing::{Smoothing, DRIFT_MPS, SNAP_M};
+use catmodel::node::smoothing::{Smoothing, DRIFT_DIFFUSION_M2_PER_S, SNAP_M};
 use catmodel::SAMPLE_PERIOD_S;
 
 /// Antenna 1.2 m ahead of the rear axle, on the centre line.
@@ -99,8 +99,8 @@ fn an_estimate_that_moves_with_the_dead_reckoning_is_followed_exactly() {
 #[test]
 fn the_pull_per_tick_is_the_kalman_gain_per_fix_spread_over_its_ticks() {
     // 5 Hz: ten ticks per fix. Jumps of a known mean square; the node's pull per tick `g` must
-    // satisfy (1 - g)^10 = 1 - K for the steady-state gain K of process noise (DRIFT_MPS x 0.2
-    // s)^2 against measurement noise (mean square jump / 2).
+    // satisfy (1 - g)^10 = 1 - K for the steady-state gain K of process noise
+    // DRIFT_DIFFUSION_M2_PER_S x 0.2 s against measurement noise (mean square jump / 2).
     let cfg = config(5.0);
     for sigma in [0.05f32, 0.2, 0.5, 1.0] {
         let mut smoothing = Smoothing::for_estimator(&cfg);
@@ -108,7 +108,7 @@ fn the_pull_per_tick_is_the_kalman_gain_per_fix_spread_over_its_ticks() {
         // The mean square jump the node saw over its last window (5 s = 25 fixes) is noisy;
         // take the one it would see on average: per axis 2 sigma^2, two axes.
         let jump_ms = 4.0 * f64::from(sigma) * f64::from(sigma);
-        let q = (f64::from(DRIFT_MPS) * 0.2).powi(2);
+        let q = f64::from(DRIFT_DIFFUSION_M2_PER_S) * 0.2;
         let k = kalman_gain(q, jump_ms / 2.0);
         let g = f64::from(smoothing.gain());
         let k_node = 1.0 - (1.0 - g).powi(10);

@@ -109,7 +109,7 @@ fn loop_lateral_rms_rtk() {
 /// MPC 13.5 m/s; pure pursuit with the CAT Vehicle's tuning 6.13 m/s, with a lookahead tuned
 /// for this car 14.81 m/s: docs/controller.md); the obstacle passed with 0.5 m with the
 /// standard receiver (measured 2.12 m); the loop at 10 m/s within the goal's 0.10 m lateral
-/// RMS (measured 0.032 m).
+/// RMS (measured 0.031 m).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn second_car_goals() {

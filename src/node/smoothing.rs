@@ -9,10 +9,10 @@
 //! growing oscillation (docs/controller.md, "Slow receivers"). Which of the two a receiver is,
 //! the node learns on line: the control pose tracks the mean square of the estimate's jumps
 //! against the dead reckoning ([`JUMP_WINDOW_S`]), and weighs them as a steady-state Kalman
-//! filter weighs a measurement of that noise against a dead reckoning that drifts by
-//! [`DRIFT_MPS`]:
+//! filter weighs a measurement of that noise against a dead reckoning whose error wanders as a
+//! random walk ([`DRIFT_DIFFUSION_M2_PER_S`]):
 //! - measurement noise per fix `r = jump_ms / 2` (a jump is the difference of two estimates'
-//!   errors), process noise per fix `q = (DRIFT_MPS x fix period)^2`;
+//!   errors), process noise per fix `q = DRIFT_DIFFUSION_M2_PER_S x fix period`;
 //! - the correction per fix `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
 //!   scalar Riccati equation's fixed point): close to 1 for a receiver whose jumps are below
 //!   the drift (RTK: the estimate as it is), `sqrt(q / r)` for a noisy one;
@@ -31,9 +31,11 @@ use crate::model::kinematic::Pose;
 
 use super::estimator::{EstimatorConfig, Xy};
 
-/// The dead reckoning's drift against the truth the smoothing allows for, m/s: its process
-/// noise is this times the fix period, per fix.
-pub const DRIFT_MPS: f32 = 0.5;
+/// How fast the dead reckoning's error against the truth wanders, as a random walk, m^2/s: the
+/// process noise per fix is this times the fix period (0.1 m per fix at 5 Hz, 0.07 m at 10 Hz,
+/// 0.03 m per tick at 100 Hz). The one setting of the control pose: docs/controller.md, "Slow
+/// receivers", for what more and less of it do.
+pub const DRIFT_DIFFUSION_M2_PER_S: f32 = 0.05;
 
 /// The jumps' mean square is averaged over about this long, s (a running mean until then).
 pub const JUMP_WINDOW_S: f32 = 5.0;
@@ -96,12 +98,12 @@ impl Smoothing {
         } else {
             0.0
         };
-        let drift = DRIFT_MPS * period_s;
+
         Self {
             // Saturating conversion: a few hundred ticks from the design's gains.
             settle_ticks: settle as u32,
             ticks_per_fix: period_s / tick_s,
-            drift_var_per_fix: drift * drift,
+            drift_var_per_fix: DRIFT_DIFFUSION_M2_PER_S * period_s,
             ..Self::new()
         }
     }
