@@ -219,18 +219,46 @@ fn a_jump_beyond_the_snap_distance_is_taken_at_once_and_not_counted() {
 }
 
 #[test]
-fn the_first_heading_settles_before_the_smoothing_starts_and_a_new_path_restarts_it() {
+fn forgetting_takes_the_next_estimate_as_it_is_and_keeps_the_receivers_statistics() {
     let cfg = config(5.0);
     let mut smoothing = Smoothing::for_estimator(&cfg);
-    let settle = (3.0 / cfg.course_gain) as usize;
-    let run = drive(&mut smoothing, &cfg, settle + 200, fix_errors(5.0, 0.5, 13));
-    for (k, (_, e, c)) in run.iter().enumerate().take(settle) {
-        assert_eq!(c, e, "tick {k}: still settling");
-    }
-    assert!(run[settle..].iter().any(|(_, e, c)| c != e));
+    let run = drive(&mut smoothing, &cfg, 2_000, fix_errors(5.0, 0.5, 13));
+    assert!(run[1_000..].iter().any(|(_, e, c)| c != e));
+    let gain = smoothing.gain();
+    assert!(gain < 0.1);
     smoothing.forget();
-    let run = drive(&mut smoothing, &cfg, settle, fix_errors(5.0, 0.5, 17));
-    for (k, (_, e, c)) in run.iter().enumerate() {
-        assert_eq!(c, e, "tick {k} after forget: settling again");
+    assert_eq!(smoothing.gain(), gain);
+    let run = drive(&mut smoothing, &cfg, 2, |_| (0.7, -0.4));
+    assert_eq!(
+        run[0].2, run[0].1,
+        "the first pose after forget is the estimate"
+    );
+}
+
+#[test]
+fn the_heading_settles_after_three_time_constants_of_its_correction() {
+    use catmodel::node::estimator::{EstimatorState, Rates, HEADING_SETTLE_TIME_CONSTANTS};
+    for rate in [1.0, 5.0, 100.0] {
+        let cfg = config(rate);
+        let needed = HEADING_SETTLE_TIME_CONSTANTS / cfg.course_gain;
+        let mut est = EstimatorState::default();
+        assert!(!est.heading_settled(), "{rate} Hz: no heading yet");
+        // The first course sets the heading; each further one corrects it.
+        est.correct_heading(&cfg, 0.4, 0.0, 5.0, Rates::default());
+        let mut corrections = 0u32;
+        while (corrections as f32) < needed - 1.0 {
+            assert!(!est.heading_settled(), "{rate} Hz after {corrections}");
+            est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
+            corrections += 1;
+        }
+        est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
+        est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
+        assert!(est.heading_settled(), "{rate} Hz after {}", corrections + 2);
+        // By then the first course's 0.4 rad error is down to about e^-3 of it.
+        let left = est.heading_rad().unwrap().abs();
+        assert!(left < 0.4 * 0.06, "{rate} Hz: {left} rad left");
+        // A filter reset (a GNSS outage) keeps the heading, and it stays settled.
+        est.reset();
+        assert!(est.heading_settled());
     }
 }

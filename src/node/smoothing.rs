@@ -22,10 +22,11 @@
 //!   the estimate's difference from the dead reckoning, so the car's own motion passes
 //!   without lag.
 //!
-//! The smoothing waits [`SETTLE_TIME_CONSTANTS`] of the heading correction after the pose
-//! becomes valid (the first heading, from a short chord of a slow receiver's fixes, can be
-//! tenths of a radian out, and the dead reckoning would carry it into the position), and a
-//! difference beyond [`SNAP_M`] (a restarted estimate, a moved origin) is taken at once.
+//! The controllers (and so this) start only once the heading has settled
+//! ([`super::estimator::EstimatorState::heading_settled`]: the first heading, from a short chord
+//! of a slow receiver's fixes, can be tenths of a radian out, and the dead reckoning would carry
+//! it into the position). A difference beyond [`SNAP_M`] (a restarted estimate, a moved
+//! origin) is taken at once.
 use crate::math;
 use crate::model::kinematic::Pose;
 
@@ -39,10 +40,6 @@ pub const DRIFT_DIFFUSION_M2_PER_S: f32 = 0.05;
 
 /// The jumps' mean square is averaged over about this long, s (a running mean until then).
 pub const JUMP_WINDOW_S: f32 = 5.0;
-
-/// The smoothing starts this many of the heading correction's time constants after the pose
-/// becomes valid.
-pub const SETTLE_TIME_CONSTANTS: f32 = 3.0;
 
 /// A difference between the estimate and the smoothed position beyond this is taken at once,
 /// m; a jump beyond it is not noise and stays out of the mean square.
@@ -59,10 +56,6 @@ pub struct Smoothing {
     jump_ms_per_tick: f32,
     /// Ticks in the mean square (saturating at the window's).
     jump_ticks: u32,
-    /// Ticks with a valid pose in a row (saturating).
-    valid_ticks: u32,
-    /// Ticks of valid pose before the pull applies.
-    settle_ticks: u32,
     /// Ticks per fix (at least 1).
     ticks_per_fix: f32,
     /// Process noise per fix, m^2.
@@ -78,14 +71,12 @@ impl Smoothing {
             last_estimate: None,
             jump_ms_per_tick: 0.0,
             jump_ticks: 0,
-            valid_ticks: 0,
-            settle_ticks: 0,
             ticks_per_fix: 1.0,
             drift_var_per_fix: 0.0,
         }
     }
 
-    /// For the receiver and heading correction of `cfg`; nothing measured yet.
+    /// For the receiver of `cfg`; nothing measured yet.
     pub fn for_estimator(cfg: &EstimatorConfig) -> Self {
         let tick_s = crate::SAMPLE_PERIOD_S;
         let period_s = if cfg.gnss_period_s.is_finite() {
@@ -93,27 +84,19 @@ impl Smoothing {
         } else {
             tick_s
         };
-        let settle = if cfg.course_gain > 0.0 {
-            SETTLE_TIME_CONSTANTS / cfg.course_gain
-        } else {
-            0.0
-        };
 
         Self {
-            // Saturating conversion: a few hundred ticks from the design's gains.
-            settle_ticks: settle as u32,
             ticks_per_fix: period_s / tick_s,
             drift_var_per_fix: DRIFT_DIFFUSION_M2_PER_S * period_s,
             ..Self::new()
         }
     }
 
-    /// Forgets the smoothed position (no pose, a new path): the next pose is taken as it is and
-    /// the settling starts again. The jumps' statistics (the receiver's) are kept.
+    /// Forgets the smoothed position (no pose, no path: nobody follows it): the next pose is
+    /// taken as it is. The jumps' statistics (the receiver's) are kept.
     pub fn forget(&mut self) {
         self.last = None;
         self.last_estimate = None;
-        self.valid_ticks = 0;
     }
 
     /// The pull towards the estimate per tick for the jumps measured so far (1: none).
@@ -145,10 +128,9 @@ impl Smoothing {
             y_m: pose.y_m + lever.y_m,
         };
         self.measure(estimate, dead_reckoned);
-        self.valid_ticks = self.valid_ticks.saturating_add(1);
         let gain = self.gain();
         let smoothed = match self.last {
-            Some((last, odo)) if self.valid_ticks > self.settle_ticks && gain < 1.0 => {
+            Some((last, odo)) if gain < 1.0 => {
                 let moved = Xy {
                     x_m: last.x_m + (dead_reckoned.x_m - odo.x_m),
                     y_m: last.y_m + (dead_reckoned.y_m - odo.y_m),
