@@ -237,28 +237,25 @@ fn forgetting_takes_the_next_estimate_as_it_is_and_keeps_the_receivers_statistic
 
 #[test]
 fn the_heading_settles_after_three_time_constants_of_its_correction() {
-    use catmodel::node::estimator::{EstimatorState, Rates, HEADING_SETTLE_TIME_CONSTANTS};
+    use catmodel::node::smoothing::{HeadingSettle, HEADING_SETTLE_TIME_CONSTANTS};
     for rate in [1.0, 5.0, 100.0] {
         let cfg = config(rate);
-        let needed = HEADING_SETTLE_TIME_CONSTANTS / cfg.course_gain;
-        let mut est = EstimatorState::default();
-        assert!(!est.heading_settled(), "{rate} Hz: no heading yet");
-        // The first course sets the heading; each further one corrects it.
-        est.correct_heading(&cfg, 0.4, 0.0, 5.0, Rates::default());
-        let mut corrections = 0u32;
-        while (corrections as f32) < needed - 1.0 {
-            assert!(!est.heading_settled(), "{rate} Hz after {corrections}");
-            est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
-            corrections += 1;
+        let needed = (HEADING_SETTLE_TIME_CONSTANTS / cfg.course_gain).ceil() as u32;
+        let mut settle = HeadingSettle::new();
+        let moving = cfg.course_min_speed_mps + 1.0;
+        // Standing, or moving without a heading: the heading is not corrected, nothing counts.
+        for _ in 0..10 * needed {
+            assert!(!settle.update(&cfg, true, 0.0));
+            assert!(!settle.update(&cfg, false, moving));
         }
-        est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
-        est.correct_heading(&cfg, 0.0, 0.0, 5.0, Rates::default());
-        assert!(est.heading_settled(), "{rate} Hz after {}", corrections + 2);
-        // By then the first course's 0.4 rad error is down to about e^-3 of it.
-        let left = est.heading_rad().unwrap().abs();
-        assert!(left < 0.4 * 0.06, "{rate} Hz: {left} rad left");
-        // A filter reset (a GNSS outage) keeps the heading, and it stays settled.
-        est.reset();
-        assert!(est.heading_settled());
+        for k in 1..needed {
+            assert!(!settle.update(&cfg, true, moving), "{rate} Hz after {k}");
+        }
+        assert!(
+            settle.update(&cfg, true, moving),
+            "{rate} Hz after {needed}"
+        );
+        // Once settled it stays so: stopped, the pose lost.
+        assert!(settle.update(&cfg, false, 0.0));
     }
 }

@@ -143,13 +143,14 @@ fn heavy_drive() -> Vec<TimedFrame> {
 }
 
 /// The tick (1-based, as in [`planner_bursts`]) that completes the last long path.
-const PATH_AGAIN_TICK: u64 = 171;
+const PATH_AGAIN_TICK: u64 = 230;
 
 /// Paths completing at the most one tick allows: a 6-point path begun two ticks earlier and
 /// two 2-point paths in one tick (one long, two short completions), then a short path begun a
-/// tick earlier and two more (three short completions); then, while the controller plans on
-/// the last of them, a 6-point path again (a tick that loads a long path with a plan to move
-/// on). Each tick's planner frames come first in it, so the cap leaves them all to the node.
+/// tick earlier and two more (three short completions); a 5-point path at tick 215, after the
+/// heading has settled (the controllers count its settling from the first path: 60 ticks at
+/// 100 Hz); then, while the controller plans on it, a 6-point path again (a tick that loads a
+/// long path with a plan to move on). Each tick's planner frames come first in it, so the cap leaves them all to the node.
 /// Every path lies on the car's own circle, from a metre behind where it is when the path's
 /// first frame goes out, 1 m apart: the car is on it (a car off its path is not planned for).
 fn planner_bursts(frames: &mut Vec<TimedFrame>) {
@@ -213,13 +214,15 @@ fn planner_bursts(frames: &mut Vec<TimedFrame>) {
     let (a, b) = (path(2, 2, 150), path(3, 2, 150));
     let carried = path(4, 2, 159);
     let (c, d) = (path(5, 2, 160), path(6, 2, 160));
+    let fresh = path(8, 5, 215);
     let again = path(7, 6, PATH_AGAIN_TICK - 1);
-    let ticks: [(u64, Vec<CanFrame>); 7] = [
+    let ticks: [(u64, Vec<CanFrame>); 8] = [
         (148, long[..7].to_vec()),
         (149, long[7..12].to_vec()),
         (150, [&long[12..], &a[..], &b[..]].concat()),
         (159, carried[..4].to_vec()),
         (160, [&carried[4..], &c[..], &d[..]].concat()),
+        (215, fresh),
         (PATH_AGAIN_TICK - 1, again[..7].to_vec()),
         (PATH_AGAIN_TICK, again[7..].to_vec()),
     ];
@@ -390,11 +393,15 @@ fn a_tick_that_loads_a_long_path_does_not_plan_and_the_next_one_does() {
         plans.contains(&(loads[1] - 1)),
         "a plan before the second load"
     );
-    for load in loads {
+    for &load in &loads {
         assert!(
             !plans.contains(&load),
             "tick {load} loaded a long path and planned"
         );
+    }
+    // After the first load the controller waits for the heading to settle (counted from the
+    // first path); after the second it plans in the very next tick.
+    for load in &loads[1..] {
         assert!(
             plans.contains(&(load + 1)),
             "no plan in the tick after {load}"

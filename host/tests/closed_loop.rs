@@ -431,10 +431,10 @@ fn the_rigs_node_knows_its_car_from_its_model_file() {
 #[test]
 fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
     // The van (host/vehicles/van.toml: slow steering, a 5 Hz uncorrected receiver) swerving
-    // round the obstacle on seed 1 overshoots its corridor by more than its body width and
+    // round the obstacle on seed 4 overshoots its corridor by more than its body width and
     // spins. Before the controllers knew when they had lost the path, the MPC went on
-    // "tracking" (status 1) in this run for the whole 300 s, driving the path's line the wrong
-    // way, 2 km past its start.
+    // "tracking" (status 1) in such a run (seed 1 then) for the whole 300 s, driving the path's
+    // line the wrong way, 2 km past its start.
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let (vehicle, node) = load_setup(
         Some(&root.join("host/vehicles/van.toml")),
@@ -446,7 +446,7 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
     let controller = controller_named("mpc", receiver_rms_m(&vehicle, receiver)).unwrap();
     let mut driver = NodeDriver::new(node, controller);
     let options = RunOptions {
-        seed: 1,
+        seed: 4,
         receiver,
         max_time_s: 120.0,
         replan_s: None,

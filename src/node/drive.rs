@@ -22,7 +22,7 @@
 //!
 //! CONTROL_COMMAND goes out every tick: status 0 (no path: speed 0, steering held), 1 tracking,
 //! 2 avoiding (an obstacle decided a side), 3 fallback (no valid position or speed model yet,
-//! or a heading that has not settled yet, [`super::estimator::EstimatorState::heading_settled`]:
+//! or a heading that has not settled yet, [`super::smoothing::HeadingSettle`]:
 //! speed 0, for the driver to drive on until the controller reports tracking; the controller's
 //! own fallback: speed 0, steering along the last feasible plan; or the car
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
@@ -49,7 +49,7 @@ use crate::model::predictor::PredictedPoint;
 use crate::model::SsBlockState;
 
 use super::estimator::Xy;
-use super::smoothing::Smoothing;
+use super::smoothing::{HeadingSettle, Smoothing};
 use super::stage::{Stage, StageProbe, SHORT_PATH_POINTS};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
 
@@ -87,9 +87,6 @@ pub struct DriveInputs<'a> {
     /// The antenna's dead-reckoned position ([`super::estimator::EstimatorState::dead_reckoned`]):
     /// its change over a tick is the car's motion, free of the fixes' jumps.
     pub dead_reckoned: Xy,
-    /// The heading has settled ([`super::estimator::EstimatorState::heading_settled`]): until
-    /// it has, the controllers do not drive (status 3).
-    pub heading_settled: bool,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// The active lateral model's state.
@@ -153,6 +150,8 @@ pub struct Drive {
     last_tracking: Option<Tracking>,
     /// The position the controllers follow ([`Smoothing`]).
     smoothing: Smoothing,
+    /// Whether the heading has settled: until it has, the controllers do not drive.
+    heading: HeadingSettle,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
@@ -191,6 +190,7 @@ impl Drive {
             },
             last_tracking: None,
             smoothing: Smoothing::new(),
+            heading: HeadingSettle::new(),
             unconfigured: true,
         }
     }
@@ -210,6 +210,7 @@ impl Drive {
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
         self.smoothing = Smoothing::for_estimator(&config.estimator);
+        self.heading = HeadingSettle::new();
         self.mpc_config = match config.controller {
             Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
             Controller::PurePursuit => None,
@@ -324,8 +325,12 @@ impl Drive {
             self.smoothing.forget();
             return self.hold(ControlStatus::NoPath);
         };
-        let (Some(pose), Some(speed_model), true) =
-            (inputs.pose, inputs.speed_model, inputs.heading_settled)
+        // Counted with a path only: the ticks without one are the estimating ticks, whose
+        // bound has no room for it (docs/firmware.md, "Worst-case tick").
+        let settled =
+            self.heading
+                .update(&config.estimator, inputs.pose.is_some(), inputs.speed_mps);
+        let (Some(pose), Some(speed_model), true) = (inputs.pose, inputs.speed_model, settled)
         else {
             self.smoothing.forget();
             return self.hold(ControlStatus::Fallback);

@@ -66,10 +66,6 @@ const _: () = assert!(ODO_LEN >= TRACK_LEN + 16);
 /// carried forward with the current yaw rate for the rest.
 pub const TURN_HISTORY_TICKS: usize = 128;
 
-/// The heading counts as settled after this many time constants of its course correction
-/// ([`EstimatorState::heading_settled`]): the first heading's error is down to 5 %.
-pub const HEADING_SETTLE_TIME_CONSTANTS: f32 = 3.0;
-
 /// Estimator tuning. Immutable configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EstimatorConfig {
@@ -242,10 +238,6 @@ pub struct EstimatorState {
     turned_len: usize,
     /// Every course correction applied to the heading, summed (rad, wrapped to +-pi).
     corrected_rad: f32,
-    /// Course corrections applied since the first course set the heading, until settled.
-    corrections: u32,
-    /// The heading has settled ([`Self::heading_settled`]).
-    settled: bool,
 }
 
 impl Default for EstimatorState {
@@ -269,8 +261,6 @@ impl Default for EstimatorState {
             turned_head: 0,
             turned_len: 0,
             corrected_rad: 0.0,
-            corrections: 0,
-            settled: false,
         }
     }
 }
@@ -669,37 +659,16 @@ impl EstimatorState {
         };
         let course_now = math::wrap_pi(course_rad - lead_rad + turned);
         match self.heading_rad {
-            None => {
-                self.heading_rad = Some(course_now);
-                // A filter that never corrects (gain 0) is as settled as it will be.
-                self.settled = cfg.course_gain <= 0.0;
-            }
-            Some(h) => self.turn_heading(cfg, h, math::wrap_pi(course_now - h)),
+            None => self.heading_rad = Some(course_now),
+            Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
         }
     }
 
-    /// The heading moved by a course correction (`course_gain` times `error_rad`), which is
-    /// remembered for [`Self::correct_heading_on_track`].
-    fn turn_heading(&mut self, cfg: &EstimatorConfig, heading_rad: f32, error_rad: f32) {
-        let correction_rad = cfg.course_gain * error_rad;
+    /// The heading moved by a course correction, which is remembered for
+    /// [`Self::correct_heading_on_track`].
+    fn turn_heading(&mut self, heading_rad: f32, correction_rad: f32) {
         self.heading_rad = Some(math::wrap_pi(heading_rad + correction_rad));
         self.corrected_rad = math::wrap_pi(self.corrected_rad + correction_rad);
-        if !self.settled {
-            self.corrections = self.corrections.saturating_add(1);
-            self.settled =
-                self.corrections as f32 * cfg.course_gain >= HEADING_SETTLE_TIME_CONSTANTS;
-        }
-    }
-
-    /// Whether the heading has settled: corrected towards the courses for
-    /// [`HEADING_SETTLE_TIME_CONSTANTS`] of its complementary filter's time constant
-    /// (`1 / course_gain` corrections) since the first course set it. The first course comes
-    /// from a short chord of fixes; with a slow receiver it can be tenths of a radian out (0.4
-    /// rad at 1 Hz), and a controller that drives on it steers at an error of its own making.
-    /// Once settled it stays so (the heading is never forgotten; dead reckoning carries it
-    /// through GNSS gaps).
-    pub fn heading_settled(&self) -> bool {
-        self.settled
     }
 
     /// The course corrections applied over the last `age_s` (rad).
@@ -762,7 +731,7 @@ impl EstimatorState {
         let error_then = math::atan2(dy * gx - dx * gy, dx * gx + dy * gy);
         let age_s = (span as f32 * 0.5 + delay) * cfg.gnss_period_s + since_fix_s;
         let error_now = math::wrap_pi(error_then - self.corrected_since(age_s));
-        self.turn_heading(cfg, heading, error_now);
+        self.turn_heading(heading, cfg.course_gain * error_now);
         true
     }
 

@@ -63,11 +63,6 @@ impl Gnss {
         changed
     }
 
-    /// Whether the heading has settled ([`EstimatorState::heading_settled`]).
-    pub fn heading_settled(&self) -> bool {
-        self.estimator.heading_settled()
-    }
-
     /// The antenna's dead-reckoned position ([`EstimatorState::dead_reckoned`]).
     pub fn dead_reckoned(&self) -> Xy {
         self.estimator.dead_reckoned()

@@ -666,7 +666,6 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let inputs = DriveInputs {
             pose: estimate.pose,
             dead_reckoned: self.gnss.dead_reckoned(),
-            heading_settled: self.gnss.heading_settled(),
             speed_mps: motion.speed_mps,
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,

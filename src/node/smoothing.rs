@@ -23,7 +23,7 @@
 //!   without lag.
 //!
 //! The controllers (and so this) start only once the heading has settled
-//! ([`super::estimator::EstimatorState::heading_settled`]: the first heading, from a short chord
+//! ([`HeadingSettle`]: the first heading, from a short chord
 //! of a slow receiver's fixes, can be tenths of a radian out, and the dead reckoning would carry
 //! it into the position). A difference beyond [`SNAP_M`] (a restarted estimate, a moved
 //! origin) is taken at once.
@@ -175,5 +175,50 @@ impl Smoothing {
 impl Default for Smoothing {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+/// The heading counts as settled after this many time constants of its course correction
+/// ([`HeadingSettle`]): the first heading's error is down to 5 %.
+pub const HEADING_SETTLE_TIME_CONSTANTS: f32 = 3.0;
+
+/// Whether the heading has settled, for the controllers to start. The first course comes from
+/// a short chord of fixes; with a slow receiver it can be tenths of a radian out (0.36 rad at
+/// 1 Hz), and a controller that drives on it steers at an error of its own making. The
+/// estimator corrects the heading towards the course on every tick the car moves at
+/// `course_min_speed_mps` or faster with a heading; after [`HEADING_SETTLE_TIME_CONSTANTS`]
+/// of its complementary filter's time constant (`1 / course_gain` such ticks: 6 s at 1 Hz,
+/// 1.2 s at 100 Hz) the first heading's error is gone. Once settled it stays so (the heading
+/// is never forgotten; dead reckoning carries it through GNSS gaps). Counted in the drive stage
+/// from the tick's pose and speed, and only while there is a path: the estimator's stages and
+/// the ticks without a path make up the estimating tick's bound, which has no room for it
+/// (docs/firmware.md, "Worst-case tick"). So a car driven before the planner's first path
+/// waits the settling time again once the path is in.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HeadingSettle {
+    /// Ticks with a pose while moving at the course speed, until settled.
+    ticks: u32,
+    settled: bool,
+}
+
+impl HeadingSettle {
+    /// Nothing seen. `const`: the drive stage is built at compile time.
+    pub const fn new() -> Self {
+        Self {
+            ticks: 0,
+            settled: false,
+        }
+    }
+
+    /// This tick: a pose (`has_pose`: position and heading) at `speed_mps`; returns whether
+    /// the heading has settled.
+    pub fn update(&mut self, cfg: &EstimatorConfig, has_pose: bool, speed_mps: f32) -> bool {
+        if !self.settled && has_pose && speed_mps >= cfg.course_min_speed_mps {
+            self.ticks = self.ticks.saturating_add(1);
+            // A filter that never corrects (gain 0) is as settled as it will be.
+            self.settled = cfg.course_gain <= 0.0
+                || self.ticks as f32 * cfg.course_gain >= HEADING_SETTLE_TIME_CONSTANTS;
+        }
+        self.settled
     }
 }
