@@ -423,3 +423,66 @@ fn a_tick_that_loads_a_long_path_does_not_plan_and_the_next_one_does() {
     assert_eq!(branch(Stage::PathCompleteShort), Branch::Common);
     assert_eq!(branch(Stage::Origin), Branch::Common);
 }
+
+/// Runs a plain node over `frames` with a counting probe, each frame handed to the first tick
+/// at or after its release time (later than its timestamp: a backlog the receive queue held
+/// back); returns the counts and, per tick, the node's `gnss_gate_rejects` after it.
+fn run_released(frames: &[(u64, TimedFrame)]) -> (Counting, Vec<u32>) {
+    let mut node = catmodel_host::new_node(config());
+    let mut counting = Counting::default();
+    let mut rejects = Vec::new();
+    let mut now = first_tick_us(frames[0].0);
+    let mut next = 0;
+    while next < frames.len() {
+        let start = next;
+        while next < frames.len() && frames[next].0 <= now {
+            next += 1;
+        }
+        let due: Vec<TimedFrame> = frames[start..next].iter().map(|(_, f)| *f).collect();
+        let tick = Tick {
+            now_us: now,
+            platform: PlatformStats::default(),
+        };
+        let mut tx = TxFrames::new();
+        node.step_probed(&tick, &due, &mut tx, &mut counting);
+        counting.end_tick();
+        rejects.push(node.counters().gnss_gate_rejects);
+        now += 20_000;
+    }
+    (counting, rejects)
+}
+
+#[test]
+fn a_tick_fills_missing_fixes_or_restarts_the_lowpass_not_both() {
+    // The tick's bound counts the dearer of filling and restarting (Exclusive::GnssGap), so no
+    // tick may do both. A backlog makes a tick want both: the receive queue held fix A (one
+    // fix after a skipped one: a fill) back to the tick of fix B, 40 ms after A (three missing:
+    // a restart). The 100 Hz receiver's fixes between them are lost.
+    let base = drive(8.0, 10.0, 6.0);
+    let gnss: Vec<u64> = base
+        .iter()
+        .filter(|l| l.kind == Kind::Gnss)
+        .map(|l| l.frame.t_us)
+        .collect();
+    let p = gnss.iter().position(|&t| t >= START_US + 3_000_000).unwrap();
+    let (a, b) = (gnss[p + 2], gnss[p + 6]);
+    let mut frames: Vec<(u64, TimedFrame)> = Vec::new();
+    for Labelled { kind, frame } in base {
+        let t = frame.t_us;
+        if kind == Kind::Gnss && t > gnss[p] && t < b && t != a {
+            continue;
+        }
+        let release = if t == a && kind == Kind::Gnss { b } else { t };
+        frames.push((release, frame));
+    }
+    frames.sort_by_key(|(r, f)| (*r, f.t_us));
+    let (counting, rejects) = run_released(&frames);
+    assert_eq!(counting.mixed, None, "a tick filled and restarted");
+    let fills = counting.ticks_with(Stage::GnssFill);
+    let t = *fills.first().expect("fix A fills the skipped fix");
+    // Fix B and the fix 10 ms after it (the tick's other fix, as far from A) were not placed
+    // in A's tick: counted, not dropped; no restart in that tick.
+    assert_eq!(rejects[t] - rejects[t - 1], 2, "B and the next fix are counted");
+    // The next tick restarts the lowpass on the track from A.
+    assert_eq!(counting.ticks_with(Stage::GnssRestart), vec![t + 1]);
+}

@@ -16,7 +16,9 @@ use super::{bump, NodeConfig};
 /// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
 pub type TickFixes = heapless::Vec<GnssFix, GNSS_FIXES_PER_TICK>;
 
-/// What one tick may still spend on gaps.
+/// What one tick may still spend on gaps: filling missing fixes one by one, or one restart on
+/// the dead-reckoned track, not both ([`super::stage::Exclusive::GnssGap`]: the tick's bound
+/// counts the dearer of the two, not their sum).
 struct GapBudget {
     /// Missing fixes it may still fill one by one.
     fills_left: u32,
@@ -185,6 +187,7 @@ impl Gnss {
             let missing = ((gap_periods + 0.5) as u32).saturating_sub(1);
             if missing > 0 && missing <= gaps.fills_left {
                 gaps.fills_left -= missing;
+                gaps.restart_left = false;
                 for k in (1..=missing).rev() {
                     let age_k = age_s + k as f32 * cfg.gnss_period_s;
                     let p = self.estimator.dead_reckoned_back(antenna, age_k, speed_mps);
@@ -193,12 +196,15 @@ impl Gnss {
                 }
             } else if missing > 0 && gaps.restart_left {
                 gaps.restart_left = false;
+                gaps.fills_left = 0;
                 self.estimator
                     .restart_on_track(cfg, antenna, age_s, missing, speed_mps);
                 probe.lap(Stage::GnssRestart);
             } else if missing > 0 {
-                // A second long gap within one tick (only a backlog of fixes makes one): this
-                // fix cannot be placed now; counted, and the next one fills in after it.
+                // A second gap within one tick that the tick can no longer fill or restart on
+                // (only a backlog of fixes makes one: a fill and a restart exclude each other
+                // in a tick, see GapBudget): this fix cannot be placed now; counted, and the
+                // next one fills in after it.
                 bump(&mut inputs.counters.gnss_gate_rejects);
                 self.last_reject_us = Some(t_us);
                 probe.lap(Stage::GnssFixFilter);

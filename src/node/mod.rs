@@ -52,7 +52,7 @@ use gnss::Gnss;
 use inputs::{GnssMessage, Inputs, Routed, Snapshot};
 use publish::Health;
 pub use stage::{
-    Branch, BranchTaken, NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK,
+    Branch, BranchTaken, Exclusive, NoProbe, Stage, StageBound, StageProbe, GAP_FILL_PER_TICK,
     GNSS_FIXES_PER_TICK, MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS,
     TICK_STAGES,
 };

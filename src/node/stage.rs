@@ -6,10 +6,11 @@
 //! among them ([`GNSS_FIXES_PER_TICK`]), the missing fixes filled after a gap
 //! ([`GAP_FILL_PER_TICK`]); everything else runs once per tick, with fixed loop counts inside.
 //! Some stages exclude one another: a tick that completes a long path does not also plan
-//! ([`Branch`]). So a tick's work is at most
+//! ([`Branch`]), and a tick that fills missing GNSS fixes does not also restart the lowpass
+//! after a long gap, nor the other way round ([`Exclusive`]). So a tick's work is at most
 //! `sum over the common stages of max_per_tick(stage) x most expensive run of the stage`
 //! `+ max over the branches of the same sum over the branch's stages`,
-//! whatever the input. [`TICK_STAGES`] writes the first factor and the branches down next to
+//! whatever the input, where the stages of one exclusive set count as the dearest of them. [`TICK_STAGES`] writes the first factor and the branches down next to
 //! the code;
 //! `cargo xtask bench-target` measures the second in QEMU on each stage's costliest path
 //! (`firmware/src/bin/qemu_bench.rs`) and `cargo qemu` adds the product up into
@@ -52,7 +53,8 @@ pub const SHORT_PATH_POINTS: usize = (MAX_RX_FRAMES_PER_TICK - 1) / 2;
 pub const GNSS_FIXES_PER_TICK: usize = 3;
 /// Missing fixes one tick fills by dead reckoning at most (a receiver that skipped one or two
 /// fixes); a longer gap restarts the lowpass on the dead-reckoned track in one step instead
-/// ([`super::estimator::EstimatorState::restart_on_track`]), at most once per tick.
+/// ([`super::estimator::EstimatorState::restart_on_track`]), at most once per tick, and not in
+/// a tick that filled ([`Exclusive::GnssGap`]).
 pub const GAP_FILL_PER_TICK: u32 = 2;
 
 /// A piece of a tick's work, for measuring it.
@@ -151,28 +153,65 @@ impl Branch {
     }
 }
 
-/// The branch a tick has taken, for checking that it takes one at most (the stage
-/// measurement in QEMU and `host-tests/tests/tick_stages.rs`).
+/// Stages of which one tick runs one at most, whatever its branch: the bound counts the
+/// dearest of them (its runs per tick times its most expensive run), not their sum.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Exclusive {
+    /// A gap in the GNSS fixes: missing fixes filled one by one ([`Stage::GnssFill`]) or the
+    /// lowpass restarted on the dead-reckoned track ([`Stage::GnssRestart`]). A tick that did
+    /// one does not do the other (`super::gnss`, `GapBudget`); a gap it can no longer deal
+    /// with has its fix rejected and counted, and the next tick fills in after it.
+    GnssGap,
+}
+
+impl Exclusive {
+    /// Short name (the stage measurement's output, `timing.json`).
+    pub const fn key(self) -> &'static str {
+        match self {
+            Exclusive::GnssGap => "gnss_gap",
+        }
+    }
+}
+
+/// The branch a tick has taken and the stage of each exclusive set it has run, for checking
+/// that it takes one branch at most and runs one stage of each [`Exclusive`] set at most (the
+/// stage measurement in QEMU and `host-tests/tests/tick_stages.rs`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct BranchTaken(Option<Branch>);
+pub struct BranchTaken {
+    branch: Option<Branch>,
+    gnss_gap: Option<Stage>,
+}
 
 impl BranchTaken {
-    /// A new tick: no branch yet.
+    /// A new tick: no branch yet, no exclusive stage run.
     pub const fn new() -> Self {
-        Self(None)
+        Self {
+            branch: None,
+            gnss_gap: None,
+        }
     }
 
-    /// `stage` ran; false if its branch is not the one this tick took before.
+    /// `stage` ran; false if its branch is not the one this tick took before, or if another
+    /// stage of its exclusive set ran in this tick before.
     pub fn enter(&mut self, stage: Stage) -> bool {
-        match bound_of(stage).map(|row| row.branch) {
-            None | Some(Branch::Common) => true,
-            Some(branch) => *self.0.get_or_insert(branch) == branch,
-        }
+        let Some(row) = bound_of(stage) else {
+            return true;
+        };
+        let branch_ok = match row.branch {
+            Branch::Common => true,
+            branch => *self.branch.get_or_insert(branch) == branch,
+        };
+        let exclusive_ok = match row.exclusive {
+            None => true,
+            Some(Exclusive::GnssGap) => *self.gnss_gap.get_or_insert(stage) == stage,
+        };
+        branch_ok && exclusive_ok
     }
 
     /// The branch taken, if any.
     pub const fn taken(&self) -> Option<Branch> {
-        self.0
+        self.branch
     }
 }
 
@@ -189,6 +228,8 @@ pub struct StageBound {
     pub because: &'static str,
     /// Which stages it may run beside.
     pub branch: Branch,
+    /// The set of stages of which a tick runs one at most, if it is in one.
+    pub exclusive: Option<Exclusive>,
 }
 
 /// The tick's structure, in the order the stages run. Each stage's `max_per_tick` is enforced
@@ -200,6 +241,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Frame,
@@ -207,6 +249,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: MAX_RX_FRAMES_PER_TICK as u32,
         because: "MAX_RX_FRAMES_PER_TICK",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::PathComplete,
@@ -214,6 +257,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "one path assembled at a time; only a path begun in an earlier tick is long",
         branch: Branch::PathLoad,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::PathCompleteShort,
@@ -221,6 +265,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 3,
         because: "SHORT_PATH_POINTS: the carried-over path and 2 x 5 frames of the 12",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Origin,
@@ -228,6 +273,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "the tick's last LOCAL_ORIGIN only, after the frames",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::GnssOrigin,
@@ -235,6 +281,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once in the node's life (the local frame is never rebuilt)",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::GnssFixCheck,
@@ -242,20 +289,23 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: GNSS_FIXES_PER_TICK as u32,
         because: "GNSS_FIXES_PER_TICK",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::GnssFill,
         key: "gnss_fill",
         max_per_tick: GAP_FILL_PER_TICK,
-        because: "GAP_FILL_PER_TICK",
+        because: "GAP_FILL_PER_TICK; not in a tick that restarts",
         branch: Branch::Common,
+        exclusive: Some(Exclusive::GnssGap),
     },
     StageBound {
         stage: Stage::GnssRestart,
         key: "gnss_restart",
         max_per_tick: 1,
-        because: "at most one restart on the track per tick",
+        because: "at most one restart on the track per tick, not in a tick that fills",
         branch: Branch::Common,
+        exclusive: Some(Exclusive::GnssGap),
     },
     StageBound {
         stage: Stage::GnssFixFilter,
@@ -263,6 +313,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: GNSS_FIXES_PER_TICK as u32,
         because: "GNSS_FIXES_PER_TICK",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Models,
@@ -270,6 +321,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Estimate,
@@ -277,6 +329,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::DriveReference,
@@ -284,6 +337,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick, over the reference's fixed stations",
         branch: Branch::Plan,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::MpcSolve,
@@ -291,6 +345,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick; ADMM iterations capped (MpcTuning::admm), worst case from catmodel-qemu-mpc-bench",
         branch: Branch::Plan,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::DriveCoast,
@@ -298,6 +353,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick, in place of the solve",
         branch: Branch::PathLoad,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Drive,
@@ -305,6 +361,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Predict,
@@ -312,6 +369,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
     StageBound {
         stage: Stage::Publish,
@@ -319,6 +377,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         max_per_tick: 1,
         because: "once per tick",
         branch: Branch::Common,
+        exclusive: None,
     },
 ];
 

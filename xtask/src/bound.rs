@@ -8,7 +8,9 @@
 //! `      + max over the branches of the same sum over the branch's rows`
 //!
 //! (a tick runs the stages of one branch at most, `catmodel::node::stage::Branch`: a tick that
-//! loads a long path does not also plan; the stage measurement fails if one does).
+//! loads a long path does not also plan; the stage measurement fails if one does), where the
+//! rows of one exclusive set (`catmodel::node::stage::Exclusive`: a tick that fills missing
+//! GNSS fixes does not also restart the lowpass) count as the dearest of them.
 //!
 //! Two bounds: `worst_case_bound_instructions` over the ticks in which no controller plans
 //! (each stage's maximum over such ticks; budget `TICK_BUDGET_INSTRUCTIONS`) and
@@ -62,6 +64,8 @@ pub struct Row {
     /// Which stages it may run beside: `common` (any), else only the rows of its own branch
     /// and the common ones.
     pub branch: String,
+    /// The exclusive set it is in (a tick runs one of its rows at most), if any.
+    pub exclusive: Option<String>,
     /// Why no more runs.
     pub because: String,
 }
@@ -88,21 +92,40 @@ pub struct Composition {
 }
 
 impl Composition {
+    /// The rows' parts summed by branch; the rows of one exclusive set count as the dearest.
     fn of<'a>(rows: impl Iterator<Item = (&'a Row, u64)>) -> Self {
         let mut c = Composition {
             common: 0,
             branches: Vec::new(),
         };
+        // (branch, set, the dearest part so far)
+        let mut sets: Vec<(&str, &str, u64)> = Vec::new();
         for (row, part) in rows {
-            if row.branch == COMMON {
-                c.common += part;
-            } else if let Some((_, sum)) = c.branches.iter_mut().find(|(b, _)| *b == row.branch) {
-                *sum += part;
-            } else {
-                c.branches.push((row.branch.clone(), part));
+            match row.exclusive.as_deref() {
+                Some(set) => match sets
+                    .iter_mut()
+                    .find(|(b, s, _)| *b == row.branch && *s == set)
+                {
+                    Some((_, _, dearest)) => *dearest = (*dearest).max(part),
+                    None => sets.push((&row.branch, set, part)),
+                },
+                None => c.add(&row.branch, part),
             }
         }
+        for (branch, _, part) in sets {
+            c.add(branch, part);
+        }
         c
+    }
+
+    fn add(&mut self, branch: &str, part: u64) {
+        if branch == COMMON {
+            self.common += part;
+        } else if let Some((_, sum)) = self.branches.iter_mut().find(|(b, _)| b == branch) {
+            *sum += part;
+        } else {
+            self.branches.push((branch.to_string(), part));
+        }
     }
 
     /// The bound: the common rows and the most expensive branch.
@@ -229,9 +252,10 @@ impl Bound {
         );
         let _ = writeln!(
             t,
-            "  {:<20}{:<10}{:>9}{:>8}{:>9}{:>7}{:>9}{:>10}{:>7}  {:<26}bounded by",
+            "  {:<20}{:<10}{:<10}{:>9}{:>8}{:>9}{:>7}{:>9}{:>10}{:>7}  {:<26}bounded by",
             "stage",
             "branch",
+            "one of",
             "max/tick",
             "max",
             "part",
@@ -253,9 +277,10 @@ impl Bound {
             };
             let _ = writeln!(
                 t,
-                "  {:<20}{:<10}{:>9}{:>8}{:>9}{:>6.1}%{:>9}{:>10}{:>6.1}%  {:<26}{}",
+                "  {:<20}{:<10}{:<10}{:>9}{:>8}{:>9}{:>6.1}%{:>9}{:>10}{:>6.1}%  {:<26}{}",
                 r.key,
                 r.branch,
+                r.exclusive.as_deref().unwrap_or("-"),
                 r.max_per_tick,
                 r.max,
                 r.part(),
@@ -269,7 +294,7 @@ impl Bound {
         }
         let _ = writeln!(
             t,
-            "  (a tick runs the common rows and the rows of one other branch at most; shares are of the bound)"
+            "  (a tick runs the common rows and the rows of one other branch at most, and one row of each 'one of' set, which counts as its dearest row; shares are of the bound)"
         );
         let _ = writeln!(
             t,
@@ -304,15 +329,16 @@ impl Bound {
         let mut t = String::new();
         let _ = writeln!(
             t,
-            "| stage | branch | runs per tick, at most | bounded by | most expensive run | share of the bound | most expensive run, controller ticks | share of the controller bound |"
+            "| stage | branch | one of | runs per tick, at most | bounded by | most expensive run | share of the bound | most expensive run, controller ticks | share of the controller bound |"
         );
-        let _ = writeln!(t, "|---|---|---:|---|---:|---:|---:|---:|");
+        let _ = writeln!(t, "|---|---|---|---:|---|---:|---:|---:|---:|");
         for r in &self.rows {
             let _ = writeln!(
                 t,
-                "| {} | {} | {} | {} | {} | {:.1} % | {} | {:.1} % |",
+                "| {} | {} | {} | {} | {} | {} | {:.1} % | {} | {:.1} % |",
                 r.key,
                 r.branch,
+                r.exclusive.as_deref().unwrap_or("-"),
                 r.max_per_tick,
                 r.because,
                 r.max,
@@ -323,7 +349,7 @@ impl Bound {
         }
         let _ = writeln!(
             t,
-            "| **bound** ({}; {}) | | | | **{total}** | | **{total_control}** | |",
+            "| **bound** ({}; {}) | | | | | **{total}** | | **{total_control}** | |",
             self.composition().describe(),
             self.composition_control().describe()
         );
@@ -340,7 +366,7 @@ impl Bound {
             })
         };
         serde_json::json!({
-            "method": "sum over the tick's common stages of (runs per tick at most, from catmodel::node::stage::TICK_STAGES and the app) x (most expensive run measured in QEMU on dedicated drives), plus the largest such sum over the stages of one branch (a tick runs one branch at most); in the controller's bound the solve at its worst case (catmodel-qemu-mpc-bench)",
+            "method": "sum over the tick's common stages of (runs per tick at most, from catmodel::node::stage::TICK_STAGES and the app) x (most expensive run measured in QEMU on dedicated drives), plus the largest such sum over the stages of one branch (a tick runs one branch at most), the stages of one exclusive set (a tick runs one of them at most) counted as the dearest of them; in the controller's bound the solve at its worst case (catmodel-qemu-mpc-bench)",
             "drives": self.drives,
             "ticks_measured": self.ticks,
             "largest_tick_measured": self.max_tick.0,
@@ -354,6 +380,7 @@ impl Bound {
             "stages": self.rows.iter().map(|r| serde_json::json!({
                 "stage": r.key,
                 "branch": r.branch,
+                "exclusive": r.exclusive,
                 "max_per_tick": r.max_per_tick,
                 "runs_measured": r.runs,
                 "max_instructions": r.max,
@@ -409,7 +436,7 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
     for line in stderr.lines() {
         let fields: Vec<&str> = line.split('\t').collect();
         match fields.as_slice() {
-            ["stage", key, max_per_tick, runs, max, drive, max_control, drive_control, branch, because] => {
+            ["stage", key, max_per_tick, runs, max, drive, max_control, drive_control, branch, exclusive, because] => {
                 rows.push(Row {
                     key: key.to_string(),
                     max_per_tick: max_per_tick.parse()?,
@@ -419,6 +446,7 @@ pub fn parse(stderr: &str, drives: Vec<String>) -> Result<Bound> {
                     max_control: max_control.parse()?,
                     drive_control: name(drive_control)?,
                     branch: branch.to_string(),
+                    exclusive: (*exclusive != "-").then(|| exclusive.to_string()),
                     because: because.to_string(),
                 })
             }
@@ -574,8 +602,8 @@ mod tests {
 
     #[test]
     fn bound_is_the_sum_of_runs_times_maxima() {
-        let text = "noise\nstage\tframe\t16\t100\t200\t0\t300\t1\tcommon\tMAX\n\
-                    stage\tpredict\t1\t9\t5000\t1\t90000\t0\tcommon\tonce\n\
+        let text = "noise\nstage\tframe\t16\t100\t200\t0\t300\t1\tcommon\t-\tMAX\n\
+                    stage\tpredict\t1\t9\t5000\t1\t90000\t0\tcommon\t-\tonce\n\
                     stage-ticks\t9\t7000\t1\t80000\t0\nstage-done\n";
         let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
         assert_eq!(b.total(), 16 * 200 + 5000);
@@ -605,11 +633,11 @@ mod tests {
     fn branches_count_once_the_most_expensive() {
         // A tick runs the common rows and one branch: loading a path (two rows) or planning
         // (two rows, one of them the solve), never both.
-        let text = "stage\tframe\t12\t9\t10\t0\t20\t0\tcommon\tcap\n\
-                    stage\tpath_complete\t1\t4\t0\t0\t90000\t1\tpath_load\tone\n\
-                    stage\tdrive_reference\t1\t5\t0\t0\t100000\t1\tplan\tonce\n\
-                    stage\tmpc_solve\t1\t5\t0\t0\t300000\t1\tplan\tcap\n\
-                    stage\tdrive_coast\t1\t2\t0\t0\t2000\t1\tpath_load\tonce\n\
+        let text = "stage\tframe\t12\t9\t10\t0\t20\t0\tcommon\t-\tcap\n\
+                    stage\tpath_complete\t1\t4\t0\t0\t90000\t1\tpath_load\t-\tone\n\
+                    stage\tdrive_reference\t1\t5\t0\t0\t100000\t1\tplan\t-\tonce\n\
+                    stage\tmpc_solve\t1\t5\t0\t0\t300000\t1\tplan\t-\tcap\n\
+                    stage\tdrive_coast\t1\t2\t0\t0\t2000\t1\tpath_load\t-\tonce\n\
                     stage-ticks\t9\t100\t0\t400240\t1\nstage-done\n";
         let mut b = parse(text, vec!["a".into(), "b".into()]).unwrap();
         let c = b.composition_control();
@@ -640,9 +668,30 @@ mod tests {
     }
 
     #[test]
+    fn an_exclusive_set_counts_its_dearest_row() {
+        // Filling two missing fixes (2 x 500) or one restart (1 x 2000): a tick does one or
+        // the other, so the bound takes 2000, not 3000; rows outside the set still add up.
+        let text = "stage\tframe\t12\t9\t10\t0\t10\t0\tcommon\t-\tcap\n\
+                    stage\tgnss_fill\t2\t9\t500\t0\t500\t0\tcommon\tgnss_gap\tcap\n\
+                    stage\tgnss_restart\t1\t9\t2000\t0\t2000\t0\tcommon\tgnss_gap\tonce\n\
+                    stage\tmpc_solve\t1\t5\t0\t0\t9000\t1\tplan\t-\tcap\n\
+                    stage-ticks\t9\t100\t0\t9000\t1\nstage-done\n";
+        let mut b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        assert_eq!(b.rows[1].exclusive.as_deref(), Some("gnss_gap"));
+        assert_eq!(b.rows[0].exclusive, None);
+        assert_eq!(b.total(), 120 + 2000);
+        assert_eq!(b.total_control(), 120 + 2000 + 9000);
+        // The dearer member decides: fills dearer than the restart.
+        b.rows[1].max = 1500;
+        assert_eq!(b.total(), 120 + 3000);
+        assert!(b.table().contains("gnss_gap"));
+        assert!(b.markdown().contains("| gnss_fill | common | gnss_gap | 2 |"));
+    }
+
+    #[test]
     fn the_solve_row_takes_the_worst_case_where_the_drives_showed_less() {
-        let text = "stage\tmpc_solve\t1\t5\t0\t0\t200000\t1\tplan\tcap\n\
-                    stage\tdrive\t1\t9\t70\t0\t3000\t1\tcommon\tonce\n\
+        let text = "stage\tmpc_solve\t1\t5\t0\t0\t200000\t1\tplan\t-\tcap\n\
+                    stage\tdrive\t1\t9\t70\t0\t3000\t1\tcommon\t-\tonce\n\
                     stage-ticks\t9\t70\t0\t203000\t1\nstage-done\n";
         let mut b = parse(text, vec!["a".into(), "b".into()]).unwrap();
         assert_eq!(b.total_control(), 203_000);

@@ -10,10 +10,11 @@
 //! reported as its own row. Every count is TIM2's, one per instruction under `-icount shift=0`.
 //!
 //! Output (semihosting stderr), tab-separated: one
-//! `stage KEY MAX_PER_TICK RUNS MAX DRIVE MAX_CONTROL DRIVE_CONTROL BRANCH WHY` line per row
-//! (the node's rows of `TICK_STAGES`, then the app's; MAX over the ticks in which no controller
-//! planned, MAX_CONTROL over every tick; DRIVE is the index of the drive that showed the
-//! maximum; BRANCH the row's `Branch::key`, the app's rows are common), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
+//! `stage KEY MAX_PER_TICK RUNS MAX DRIVE MAX_CONTROL DRIVE_CONTROL BRANCH EXCLUSIVE WHY` line
+//! per row (the node's rows of `TICK_STAGES`, then the app's; MAX over the ticks in which no
+//! controller planned, MAX_CONTROL over every tick; DRIVE is the index of the drive that showed
+//! the maximum; BRANCH the row's `Branch::key`, the app's rows are common; EXCLUSIVE the row's
+//! `Exclusive::key`, `-` when it is in no exclusive set), one `stage-ticks TICKS MAX_TICK DRIVE MAX_CONTROL_TICK DRIVE_CONTROL` line (the
 //! largest whole ticks measured, without and with a controller planning), and `stage-done`.
 //! A tick is a controller tick when a controller planned in it or a planner path was completed
 //! in it (`TickEstimate::controller_tick`), as the app flags it (`TickReport::controller`).
@@ -253,7 +254,7 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
             laps.any.get(i).copied().unwrap_or((0, 0)),
         );
         semihosting::eprintln!(
-            "stage\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
+            "stage\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
             row.key,
             row.max_per_tick,
             laps.runs.get(i).copied().unwrap_or(0),
@@ -262,6 +263,7 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
             any.0,
             any.1,
             row.branch.key(),
+            row.exclusive.map_or("-", |e| e.key()),
             row.because
         );
     }
@@ -285,7 +287,7 @@ pub fn measure(paths: &[&CStr]) -> Result<(), StageError> {
     ] {
         let [plain, any] = max;
         semihosting::eprintln!(
-            "stage\t{key}\t1\t{}\t{}\t{}\t{}\t{}\t{}\t{why}",
+            "stage\t{key}\t1\t{}\t{}\t{}\t{}\t{}\t{}\t-\t{why}",
             app.ticks,
             plain.0,
             plain.1,
