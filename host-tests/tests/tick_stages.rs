@@ -464,7 +464,10 @@ fn a_tick_fills_missing_fixes_or_restarts_the_lowpass_not_both() {
         .filter(|l| l.kind == Kind::Gnss)
         .map(|l| l.frame.t_us)
         .collect();
-    let p = gnss.iter().position(|&t| t >= START_US + 3_000_000).unwrap();
+    let p = gnss
+        .iter()
+        .position(|&t| t >= START_US + 3_000_000)
+        .unwrap();
     let (a, b) = (gnss[p + 2], gnss[p + 6]);
     let mut frames: Vec<(u64, TimedFrame)> = Vec::new();
     for Labelled { kind, frame } in base {
@@ -482,7 +485,11 @@ fn a_tick_fills_missing_fixes_or_restarts_the_lowpass_not_both() {
     let t = *fills.first().expect("fix A fills the skipped fix");
     // Fix B and the fix 10 ms after it (the tick's other fix, as far from A) were not placed
     // in A's tick: counted, not dropped; no restart in that tick.
-    assert_eq!(rejects[t] - rejects[t - 1], 2, "B and the next fix are counted");
+    assert_eq!(
+        rejects[t] - rejects[t - 1],
+        2,
+        "B and the next fix are counted"
+    );
     // The next tick restarts the lowpass on the track from A.
     assert_eq!(counting.ticks_with(Stage::GnssRestart), vec![t + 1]);
 }

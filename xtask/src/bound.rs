@@ -685,7 +685,9 @@ mod tests {
         b.rows[1].max = 1500;
         assert_eq!(b.total(), 120 + 3000);
         assert!(b.table().contains("gnss_gap"));
-        assert!(b.markdown().contains("| gnss_fill | common | gnss_gap | 2 |"));
+        assert!(b
+            .markdown()
+            .contains("| gnss_fill | common | gnss_gap | 2 |"));
     }
 
     #[test]
