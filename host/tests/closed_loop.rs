@@ -471,6 +471,32 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
             );
         }
     }
+    // Once lost, it stays stopped: the estimate straying back into the corridor does not hand
+    // the car back to the controller (without the latch, on this seed, the node tracked again
+    // 0.3 s after the loss, with a hard steering command). The loss: the first fallback with
+    // the wheels commanded straight (the solver's own fallback steers along its last plan).
+    let lost = out
+        .samples
+        .iter()
+        .position(|s| {
+            s.engaged
+                && s.command.status == ControlStatus::Fallback
+                && s.command.steer_cmd_pct == Some(0.0)
+        })
+        .expect("the car loses its path on this seed");
+    for s in &out.samples[lost..] {
+        assert_eq!(
+            (
+                s.command.status,
+                s.command.speed_cmd_mps,
+                s.command.steer_cmd_pct
+            ),
+            (ControlStatus::Fallback, Some(0.0), Some(0.0)),
+            "t {}: the node took the car back after losing the path at {}",
+            s.t_s,
+            out.samples[lost].t_s
+        );
+    }
     // It braked to a stop with the wheels straight, in fallback, well before the time limit.
     let last = out.samples.last().unwrap();
     assert_eq!(last.command.status, ControlStatus::Fallback);

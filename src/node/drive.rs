@@ -26,7 +26,9 @@
 //! speed 0, for the driver to drive on until the controller reports tracking; the controller's
 //! own fallback: speed 0, steering along the last feasible plan; or the car
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
-//! sends a path it is on). Never a NaN: every command is checked finite, else the fallback.
+//! sends a new path; latched, so that a noisy estimate straying back into the corridor does
+//! not hand the car back to a controller). Never a NaN: every command is checked finite, else
+//! the fallback.
 //!
 //! The state (about 23 KiB: two paths of 256 points and the controller's warm start) is kept
 //! apart from [`super::Node`] so that a platform can place it in a static, initialised at
@@ -152,6 +154,9 @@ pub struct Drive {
     smoothing: Smoothing,
     /// Whether the heading has settled: until it has, the controllers do not drive.
     heading: HeadingSettle,
+    /// The car lost the path ([`Tracking::has_lost_path`]): it stays stopped until a new path
+    /// loads, however the noisy estimate judges the next ticks.
+    lost_path: bool,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
@@ -191,6 +196,7 @@ impl Drive {
             last_tracking: None,
             smoothing: Smoothing::new(),
             heading: HeadingSettle::new(),
+            lost_path: false,
             unconfigured: true,
         }
     }
@@ -211,6 +217,7 @@ impl Drive {
         self.last_steer_cmd_pct = 0.0;
         self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.heading = HeadingSettle::new();
+        self.lost_path = false;
         self.mpc_config = match config.controller {
             Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
             Controller::PurePursuit => None,
@@ -294,6 +301,7 @@ impl Drive {
         self.pursuit.projection = None;
         self.projection = None;
         self.planned_speeds = None;
+        self.lost_path = false;
     }
 
     /// Stage 4: this tick's commands. `probe` marks where the model-predictive controller's
@@ -340,6 +348,12 @@ impl Drive {
             .control_pose(&config.estimator, pose, inputs.dead_reckoned);
         if self.unconfigured {
             return self.hold(ControlStatus::Fallback);
+        }
+        if self.lost_path {
+            // Latched: a noisy estimate that strays back into the corridor does not hand a
+            // car that left it back to a controller; the planner replans (a new path clears
+            // it, [`Drive::new_path`]).
+            return self.stop_lost();
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
             (Controller::Mpc, Some(mpc)) if path_loaded => {
@@ -401,6 +415,12 @@ impl Drive {
                     &car,
                 );
                 self.last_tracking = out.tracking;
+                if out
+                    .tracking
+                    .is_some_and(|t| t.has_lost_path(config.body.width_m))
+                {
+                    return self.stop_lost();
+                }
                 DriveOutput {
                     command: ControlCommand {
                         status: out.status,
@@ -425,6 +445,7 @@ impl Drive {
     /// straight (the actuator centres them at its rate), so that it brakes to a stop along a
     /// line instead of on the circle its last steering command would hold it on.
     fn stop_lost(&mut self) -> DriveOutput {
+        self.lost_path = true;
         self.last_steer_cmd_pct = 0.0;
         self.hold(ControlStatus::Fallback)
     }
