@@ -60,11 +60,10 @@ use catmodel::SAMPLE_PERIOD_US;
 
 pub use schedule::{ReplayClock, TickGrid};
 
-/// Frames the receive queue holds between two ticks. The acceptance filter admits the node's
-/// inputs only (at their highest rates 7 frames per tick), so 64 holds four full ticks of
-/// [`RX_BATCH_LEN`]; a full queue drops the newest frame and counts it
-/// ([`LinkCounters::rx_queue_drops`]).
-pub const RX_QUEUE_LEN: usize = 64;
+/// Frames the receive queue holds between two ticks: the core's
+/// [`catmodel::node::RX_QUEUE_LEN`] (host `sil` keeps the same queue); a full queue drops the
+/// newest frame and counts it ([`LinkCounters::rx_queue_drops`]).
+pub const RX_QUEUE_LEN: usize = catmodel::node::RX_QUEUE_LEN;
 /// Frames one tick hands to the node at most: the node's own cap
 /// ([`catmodel::node::MAX_RX_FRAMES_PER_TICK`]), so that its worst case holds. Any further due
 /// frames stay in the queue, in order, for the next tick (they are not dropped).

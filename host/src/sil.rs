@@ -3,15 +3,21 @@
 //! (README, "Software in the loop").
 //!
 //! Input, one item per line: a candump line (a frame the node reads), or `TICK SECONDS.UUUUUU`.
-//! On `TICK T` the node runs its tick at time T with every frame given since the previous tick
-//! (in the order given; frames stamped after T are the node's to reject, as on the bus), writes
-//! that tick's frames as candump lines stamped T, then the line `END SECONDS.UUUUUU` (T in the
-//! candump timestamp format), and flushes. End of input: success. A malformed line, or a TICK
+//! On `TICK T` the node runs its tick at time T with the frames given since the previous tick,
+//! through the firmware's receive path ([`RxQueue`]): the acceptance filter, a queue of
+//! [`RX_QUEUE_LEN`] frames (a frame given to a full queue is dropped and counted,
+//! NODE_STATUS's `rx_queue_drops`), and at most [`MAX_RX_FRAMES_PER_TICK`] frames a tick, in
+//! the order given, the rest left queued for the next tick (frames stamped after T are the
+//! node's to reject, as on the bus). It writes that tick's frames as candump lines stamped T,
+//! then the line `END SECONDS.UUUUUU` (T in the candump timestamp format), and flushes. End of input: success. A malformed line, or a TICK
 //! not later than the previous one: an error naming the line number, and nothing more is read.
 //! Blank lines are skipped (as in `replay`).
+use std::collections::VecDeque;
 use std::io::{BufRead, Write};
 
+use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, CanFrame, TimedFrame};
+use catmodel::node::{PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN};
 
 use crate::closed_loop::driver::Driver;
 use crate::replay::{candump_line, candump_reason};
@@ -41,6 +47,59 @@ impl std::fmt::Display for SilError {
 
 impl std::error::Error for SilError {}
 
+/// The firmware's receive path between the bus and the tick (the app's `receive_loop` and
+/// `drain_due`), so that a session gives the node the frames the firmware would: frames that are
+/// not node inputs are refused (the acceptance filter, counted in [`RxQueue::filtered`]); a
+/// frame given to a full queue of [`RX_QUEUE_LEN`] is dropped and counted
+/// ([`PlatformStats::rx_queue_drops`], on the bus); each tick takes at most
+/// [`MAX_RX_FRAMES_PER_TICK`] frames, oldest first.
+#[derive(Debug, Default)]
+pub struct RxQueue {
+    frames: VecDeque<TimedFrame>,
+    drops: u32,
+    filtered: u64,
+}
+
+impl RxQueue {
+    /// A frame arrives.
+    pub fn push(&mut self, frame: TimedFrame) {
+        if !is_node_input(frame.frame.id) {
+            self.filtered += 1;
+        } else if self.frames.len() < RX_QUEUE_LEN {
+            self.frames.push_back(frame);
+        } else {
+            self.drops = self.drops.saturating_add(1);
+        }
+    }
+
+    /// The next tick's frames (cleared first): the oldest, at most [`MAX_RX_FRAMES_PER_TICK`].
+    pub fn take_tick(&mut self, rx: &mut Vec<TimedFrame>) {
+        rx.clear();
+        let n = self.frames.len().min(MAX_RX_FRAMES_PER_TICK);
+        rx.extend(self.frames.drain(..n));
+    }
+
+    /// Frames dropped because the queue was full, since the start.
+    pub fn drops(&self) -> u32 {
+        self.drops
+    }
+
+    /// Frames refused by the acceptance filter, since the start.
+    pub fn filtered(&self) -> u64 {
+        self.filtered
+    }
+
+    /// Frames waiting.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether no frame waits.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+}
+
 /// `SECONDS.UUUUUU` as the candump timestamp writes it (seconds zero-padded to 10 digits).
 fn timestamp(t_us: u64) -> String {
     format!("{:010}.{:06}", t_us / 1_000_000, t_us % 1_000_000)
@@ -53,7 +112,8 @@ pub fn run(
     input: impl BufRead,
     mut output: impl Write,
 ) -> Result<u64, SilError> {
-    let mut pending: Vec<TimedFrame> = Vec::new();
+    let mut queue = RxQueue::default();
+    let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let mut last_tick: Option<u64> = None;
     let mut ticks = 0;
     let mut tx: Vec<CanFrame> = Vec::new();
@@ -86,8 +146,15 @@ pub fn run(
                 )));
             }
             tx.clear();
-            driver.tick(t_us, &pending, &mut tx);
-            pending.clear();
+            queue.take_tick(&mut rx);
+            let tick = Tick {
+                now_us: t_us,
+                platform: PlatformStats {
+                    rx_queue_drops: queue.drops(),
+                    ..PlatformStats::default()
+                },
+            };
+            driver.tick(&tick, &rx, &mut tx);
             for frame in &tx {
                 writeln!(output, "{}", candump_line(t_us, frame)).map_err(SilError::Io)?;
             }
@@ -98,7 +165,7 @@ pub fn run(
             continue;
         }
         match candump::parse_line(text) {
-            Ok(frame) => pending.push(frame),
+            Ok(frame) => queue.push(frame),
             Err(e) => {
                 return Err(malformed(format!(
                     "neither a candump line nor `TICK SECONDS.UUUUUU` ({}): {text:?}",
@@ -109,4 +176,90 @@ pub fn run(
     }
     output.flush().map_err(SilError::Io)?;
     Ok(ticks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::closed_loop::driver::{Controller, NodeDriver};
+    use crate::closed_loop::planner::{PlannedPoint, Planner};
+    use crate::replay::candump_line;
+    use catmodel::can::{CanFrame, CanId};
+
+    fn steering_frame(t_us: u64) -> TimedFrame {
+        TimedFrame {
+            t_us,
+            frame: CanFrame::new(CanId::Standard(0x100), &[0; 8]).unwrap(),
+        }
+    }
+
+    #[test]
+    fn the_queue_filters_holds_64_and_hands_12_a_tick() {
+        let mut q = RxQueue::default();
+        // Not a node input (the node's own CONTROL_COMMAND): refused, counted, not queued.
+        q.push(TimedFrame {
+            t_us: 0,
+            frame: CanFrame::new(CanId::Standard(0x320), &[0; 8]).unwrap(),
+        });
+        for k in 0..100 {
+            q.push(steering_frame(k));
+        }
+        assert_eq!((q.filtered(), q.len(), q.drops()), (1, RX_QUEUE_LEN, 36));
+        let mut rx = Vec::new();
+        q.take_tick(&mut rx);
+        // The oldest first; the rest wait.
+        let stamps: Vec<u64> = rx.iter().map(|f| f.t_us).collect();
+        assert_eq!(
+            stamps,
+            (0..MAX_RX_FRAMES_PER_TICK as u64).collect::<Vec<_>>()
+        );
+        assert_eq!(q.len(), RX_QUEUE_LEN - MAX_RX_FRAMES_PER_TICK);
+    }
+
+    #[test]
+    fn a_path_given_in_one_tick_loads_over_two_as_on_the_firmware() {
+        // A 6-point path is 13 frames: the node takes 12 in the first tick and the 13th in
+        // the next (before the receive queue, the 13th was counted over the cap and lost, so
+        // the path never loaded in SIL while it did in replay).
+        let mut planner = Planner::new();
+        let points: Vec<PlannedPoint> = (0..6)
+            .map(|i| PlannedPoint {
+                east_m: 0.0,
+                north_m: 5.0 * f64::from(i),
+                speed_mps: 3.0,
+                left_m: 2.0,
+                right_m: 2.0,
+            })
+            .collect();
+        planner.send_path(&points).unwrap();
+        let mut frames = Vec::new();
+        while planner.pending() > 0 {
+            frames.extend(planner.take_tick_frames());
+        }
+        assert_eq!(frames.len(), 13);
+        let t0 = 1_000_000;
+        let mut input: String = frames
+            .iter()
+            .map(|f| format!("{}\n", candump_line(t0, f)))
+            .collect();
+        input.push_str("TICK 1.020000\n");
+        let config = crate::node_config(None).unwrap();
+        let mut driver = NodeDriver::new(config.clone(), Controller::FromModel);
+        let mut out = Vec::new();
+        run(&mut driver, input.as_bytes(), &mut out).unwrap();
+        assert!(driver.node().drive().planner().path().is_none());
+        input.push_str("TICK 1.040000\n");
+        let mut driver = NodeDriver::new(config, Controller::FromModel);
+        run(&mut driver, input.as_bytes(), &mut out).unwrap();
+        assert_eq!(
+            driver
+                .node()
+                .drive()
+                .planner()
+                .path()
+                .map(|p| p.points().len()),
+            Some(6)
+        );
+        assert_eq!(driver.node().counters().rx_over_cap, 0);
+    }
 }

@@ -60,6 +60,11 @@ pub use stage::{
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
 /// controller's command are 14; 16 leaves room.
 pub const MAX_TX_FRAMES: usize = 16;
+/// Frames a platform's receive queue holds between two ticks (the firmware's app, and `sil`
+/// on the host). The acceptance filter admits the node's inputs only (at their highest rates
+/// 7 frames per tick), so 64 holds four full ticks of [`MAX_RX_FRAMES_PER_TICK`]; a full queue
+/// drops the newest frame and counts it ([`PlatformStats::rx_queue_drops`]).
+pub const RX_QUEUE_LEN: usize = 64;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
 /// Longest velocity-model input delay a model file may have: 64 samples = 1.28 s (eq 5 has
@@ -532,9 +537,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
             probe.lap(stage);
         }
         if let Some(origin) = origin {
-            // LOCAL_ORIGIN: the planner's map origin becomes the node's frame.
-            if self.gnss.set_origin(origin) {
-                self.drive.borrow_mut().frame_changed();
+            // LOCAL_ORIGIN: the planner's map origin becomes the node's frame; one the local
+            // frame cannot take is a value out of range (counted, the frame in use stays).
+            match self.gnss.set_origin(origin) {
+                Ok(true) => self.drive.borrow_mut().frame_changed(),
+                Ok(false) => {}
+                Err(_) => bump(&mut self.inputs.counters.range_errors),
             }
             probe.lap(Stage::Origin);
         }
@@ -739,6 +747,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             dxdt_mps: estimate.dxdt_mps,
             predictions,
             command: drive.command,
+            planner_rejects: self.drive.borrow().planner().counters().rejects(),
         };
         self.health
             .publish(tick, inputs, &mut self.inputs.counters, &out, tx);

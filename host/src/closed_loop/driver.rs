@@ -13,15 +13,15 @@ use catmodel::control::path::Tracking;
 use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::drive::Controller as NodeController;
-use catmodel::node::{NodeConfig, PlatformStats, Tick, TxFrames};
+use catmodel::node::{NodeConfig, Tick, TxFrames};
 
 use crate::HostNode;
 
 /// A node on the bus: one tick at a time.
 pub trait Driver {
-    /// Runs the tick at `now_us` over `rx` (frames stamped at or before it, in arrival order)
-    /// and appends the frames it sends to `tx`.
-    fn tick(&mut self, now_us: u64, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport;
+    /// Runs `tick` (its time, and the platform's counters) over `rx` (frames stamped at or
+    /// before it, in arrival order) and appends the frames it sends to `tx`.
+    fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport;
 }
 
 /// What a tick did, for the closed loop's records (never on the bus).
@@ -82,13 +82,9 @@ impl NodeDriver {
 }
 
 impl Driver for NodeDriver {
-    fn tick(&mut self, now_us: u64, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
+    fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
         let mut node_tx = TxFrames::new();
-        let tick = Tick {
-            now_us,
-            platform: PlatformStats::default(),
-        };
-        let estimate = self.node.step(&tick, rx, &mut node_tx);
+        let estimate = self.node.step(tick, rx, &mut node_tx);
         tx.extend_from_slice(&node_tx);
         let drive = self.node.drive();
         TickReport {

@@ -24,7 +24,7 @@ use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::path::{Path, Projection, Waypoint};
-use catmodel::node::{NodeConfig, MAX_RX_FRAMES_PER_TICK};
+use catmodel::node::{NodeConfig, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK};
 
 use crate::csv2can::LogEncoder;
 use crate::logcsv::{LogRow, TruthRow};
@@ -386,7 +386,11 @@ pub fn run(
         let take = backlog.len().min(MAX_RX_FRAMES_PER_TICK);
         let due: Vec<TimedFrame> = backlog.drain(..take).collect();
         let mut tx = Vec::new();
-        let report: TickReport = driver.tick(t_tick_us, &due, &mut tx);
+        let tick = Tick {
+            now_us: t_tick_us,
+            platform: PlatformStats::default(),
+        };
+        let report: TickReport = driver.tick(&tick, &due, &mut tx);
         let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
         outputs.extend(tx.iter().map(|&frame| TimedFrame {
             t_us: t_tick_us,
