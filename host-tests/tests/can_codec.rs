@@ -346,6 +346,7 @@ fn node_status_pages_round_trip_and_saturate() {
         watchdog_reset: true,
         overrun_recently: false,
         input_invalid: true,
+        planner_refused_recently: false,
     };
     let pages = [
         NodeStatus::Health {

@@ -570,3 +570,75 @@ fn pedal_stale_is_flagged_and_nothing_else_changes() {
         _ => unreachable!(),
     }
 }
+
+#[test]
+fn refused_planner_frames_and_a_polar_origin_reach_the_status_frame() {
+    use catmodel::can::codec::{LocalOrigin, Obstacle, ObstacleCircle};
+    let d = frames(&drive(10.0, 0.0, 6.0));
+    let t0 = d[0].t_us;
+    let at = |t_s: f64, frame: CanFrame| TimedFrame {
+        t_us: t0 + (t_s * 1e6) as u64,
+        frame,
+    };
+    let obstacle = Obstacle {
+        obstacle_id: 0,
+        circle: Some(ObstacleCircle {
+            east_m: 3.0,
+            north_m: 20.0,
+            radius_m: 0.5,
+        }),
+    };
+    let mut all = d.clone();
+    // A planner whose counter is stuck: the second frame is refused (1 s in), and again 3 s
+    // in; an origin at 85 degrees of latitude (the DBC's range, beyond the local frame's
+    // 80) 2 s in. Refusals show on NODE_STATUS page 0 (`planner_refused_recently`).
+    all.push(at(1.0, obstacle.encode(5)));
+    all.push(at(1.01, obstacle.encode(5)));
+    all.push(at(
+        2.0,
+        LocalOrigin::Latitude {
+            lat_e7: 850_000_000,
+        }
+        .encode(0),
+    ));
+    all.push(at(2.01, LocalOrigin::Longitude { lon_e7: 0 }.encode(1)));
+    all.push(at(3.0, obstacle.encode(5)));
+    all.sort_by_key(|f| f.t_us);
+    let ticks = run(&all);
+    let refused_recently = |t: &TickOut| match t.status() {
+        NodeStatus::Health { health, .. } => Some(health.planner_refused_recently),
+        _ => None,
+    };
+    let flags = |from_s, to_s| -> Vec<bool> {
+        window(&ticks, from_s, to_s)
+            .iter()
+            .filter_map(refused_recently)
+            .collect()
+    };
+    // Clear before the first refusal, set within a second after each, clear again after.
+    let (before, after, between, late, clear) = (
+        flags(0.2, 0.99),
+        flags(1.05, 1.95),
+        flags(2.1, 2.95),
+        flags(3.05, 3.95),
+        flags(4.1, 5.9),
+    );
+    for (name, seen, want) in [
+        ("before", &before, false),
+        ("after", &after, true),
+        ("between", &between, false),
+        ("late", &late, true),
+        ("clear", &clear, false),
+    ] {
+        assert!(
+            !seen.is_empty() && seen.iter().all(|b| *b == want),
+            "{name}: {seen:?}"
+        );
+    }
+    let c = ticks.last().unwrap().counters;
+    // The polar origin: counted as a value out of range, the frame in use stays.
+    assert_eq!(c.range_errors, 1, "{c:?}");
+    assert!(window(&ticks, 2.05, 5.9)
+        .iter()
+        .all(|t| t.estimate.pose.is_some()));
+}

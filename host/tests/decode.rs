@@ -130,6 +130,10 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                         assert_eq!(flag(&d, "position_invalid"), health.position_invalid);
                         assert_eq!(flag(&d, "gnss_stale"), health.gnss_stale);
                         assert_eq!(flag(&d, "input_invalid"), health.input_invalid);
+                        assert_eq!(
+                            flag(&d, "planner_refused_recently"),
+                            health.planner_refused_recently
+                        );
                         agree(&d, "overrun_count", Some(overrun_count as f32));
                         agree(&d, "last_step_us", last_step_us.map(|v| v as f32));
                     }
@@ -183,7 +187,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                 // Only the page's own signals (+ counter, page, crc) are shown.
                 let page_signals = d.signals.len() - 3;
                 assert!(
-                    (2..=14).contains(&page_signals),
+                    (2..=15).contains(&page_signals),
                     "{page_signals} signals on page {}",
                     m.page()
                 );

@@ -1127,9 +1127,11 @@ pub struct HealthFlags {
     pub overrun_recently: bool,
     /// An input carried its "invalid" sentinel within the last second.
     pub input_invalid: bool,
+    /// The node refused a planner frame or path within the last second.
+    pub planner_refused_recently: bool,
 }
 
-const HEALTH_BITS: [&SignalSpec; 11] = [
+const HEALTH_BITS: [&SignalSpec; 12] = [
     &sig::STEER_STALE,
     &sig::SPEED_STALE,
     &sig::PEDAL_STALE,
@@ -1141,10 +1143,11 @@ const HEALTH_BITS: [&SignalSpec; 11] = [
     &sig::WATCHDOG_RESET,
     &sig::OVERRUN_RECENTLY,
     &sig::INPUT_INVALID,
+    &sig::PLANNER_REFUSED_RECENTLY,
 ];
 
 impl HealthFlags {
-    const fn as_array(&self) -> [bool; 11] {
+    const fn as_array(&self) -> [bool; 12] {
         [
             self.steer_stale,
             self.speed_stale,
@@ -1157,9 +1160,10 @@ impl HealthFlags {
             self.watchdog_reset,
             self.overrun_recently,
             self.input_invalid,
+            self.planner_refused_recently,
         ]
     }
-    const fn from_array(b: [bool; 11]) -> Self {
+    const fn from_array(b: [bool; 12]) -> Self {
         Self {
             steer_stale: b[0],
             speed_stale: b[1],
@@ -1172,6 +1176,7 @@ impl HealthFlags {
             watchdog_reset: b[8],
             overrun_recently: b[9],
             input_invalid: b[10],
+            planner_refused_recently: b[11],
         }
     }
 }
@@ -1327,7 +1332,7 @@ impl NodeStatus {
         let r = Reader::standard(&spec::NODE_STATUS, frame)?;
         let msg = match r.required(&sig::PAGE)? {
             0 => {
-                let mut bits = [false; 11];
+                let mut bits = [false; 12];
                 for (b, s) in bits.iter_mut().zip(HEALTH_BITS) {
                     *b = r.flag(s);
                 }

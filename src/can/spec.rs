@@ -501,6 +501,11 @@ pub mod sig {
     pub const OVERRUN_RECENTLY: SignalSpec = SignalSpec::uint("overrun_recently", 18, 1).on_page(0);
     /// Page 0 health bit: an input carried its "invalid" sentinel within the last second.
     pub const INPUT_INVALID: SignalSpec = SignalSpec::uint("input_invalid", 19, 1).on_page(0);
+    /// Page 0 health bit: the node refused a planner frame or path within the last second (a
+    /// stuck counter, a duplicate or stray index, an abandoned or invalid path, a longitude
+    /// page without its latitude page; [`crate::control::planner::PlannerCounters::rejects`]).
+    pub const PLANNER_REFUSED_RECENTLY: SignalSpec =
+        SignalSpec::uint("planner_refused_recently", 20, 1).on_page(0);
     /// Page 0: ticks that overran since boot, saturating.
     pub const OVERRUN_COUNT: SignalSpec = SignalSpec::uint("overrun_count", 24, 16).on_page(0);
     /// Page 0: duration of the previous step, us; 0xFFFF = not available.
@@ -906,6 +911,7 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
         WATCHDOG_RESET,
         OVERRUN_RECENTLY,
         INPUT_INVALID,
+        PLANNER_REFUSED_RECENTLY,
         OVERRUN_COUNT,
         LAST_STEP_US,
         CRC_ERRORS,

@@ -39,6 +39,20 @@ pub struct PlannerCounters {
     pub origin_mismatches: u32,
 }
 
+impl PlannerCounters {
+    /// Frames and paths refused (NODE_STATUS `planner_rejects`): every count but the paths
+    /// activated and the counter jumps (a jump is a lost frame, not a refusal: the path it
+    /// breaks is counted abandoned).
+    pub const fn rejects(&self) -> u32 {
+        self.paths_abandoned
+            .saturating_add(self.paths_invalid)
+            .saturating_add(self.duplicates)
+            .saturating_add(self.stray_frames)
+            .saturating_add(self.stuck_counters)
+            .saturating_add(self.origin_mismatches)
+    }
+}
+
 fn bump(c: &mut u32) {
     *c = c.saturating_add(1);
 }

@@ -4,7 +4,7 @@
 //! Bounded per tick ([`super::stage`]): the fixes, the filled fixes and the restarts after a
 //! long gap each have a per-tick cap.
 use crate::can::freshness::Input;
-use crate::geodesy::LocalFrame;
+use crate::geodesy::{GeodesyError, LocalFrame};
 use crate::math;
 use crate::model::kinematic::Pose;
 
@@ -49,20 +49,20 @@ impl Gnss {
     /// The planner's map origin (LOCAL_ORIGIN, 1e-7 deg) becomes the local frame. If it differs
     /// from the frame in use, the filters restart in the new frame (the heading survives: it
     /// is the car's); returns whether the frame changed. A frame not set yet is simply set.
-    pub fn set_origin(&mut self, (lat_e7, lon_e7): (i32, i32)) -> bool {
+    /// An origin the local frame cannot take ([`LocalFrame::new`]: beyond 80 degrees of
+    /// latitude, where the DBC allows 90) is refused: `Err`, the frame in use stays.
+    pub fn set_origin(&mut self, (lat_e7, lon_e7): (i32, i32)) -> Result<bool, GeodesyError> {
         if self.origin_e7() == Some((lat_e7, lon_e7)) {
-            return false;
+            return Ok(false);
         }
-        let Ok(frame) = LocalFrame::new(lat_e7, lon_e7) else {
-            return false;
-        };
+        let frame = LocalFrame::new(lat_e7, lon_e7)?;
         let changed = self.frame.is_some();
         self.frame = Some(frame);
         if changed {
             self.estimator.reset();
             self.rejects_in_row = 0;
         }
-        changed
+        Ok(changed)
     }
 
     /// The antenna's dead-reckoned position ([`EstimatorState::dead_reckoned`]).

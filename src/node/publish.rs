@@ -49,6 +49,8 @@ pub struct Outputs<'a> {
     pub predictions: &'a [PredictedPoint],
     /// The controller's command.
     pub command: ControlCommand,
+    /// Planner frames and paths refused so far ([`crate::control::planner::PlannerCounters::rejects`]).
+    pub planner_rejects: u32,
 }
 
 /// The publishing stage's state: the tick counter and what the health bits remember.
@@ -64,6 +66,9 @@ pub struct Health {
     /// Range errors at the previous tick, and when they last grew.
     range_errors_seen: u32,
     last_range_error_us: Option<u64>,
+    /// Planner refusals at the previous tick, and when they last grew.
+    planner_rejects_seen: u32,
+    last_planner_reject_us: Option<u64>,
 }
 
 impl Health {
@@ -87,6 +92,10 @@ impl Health {
             self.last_range_error_us = Some(now);
         }
         self.range_errors_seen = counters.range_errors;
+        if out.planner_rejects > self.planner_rejects_seen {
+            self.last_planner_reject_us = Some(now);
+        }
+        self.planner_rejects_seen = out.planner_rejects;
         let gnss_rejected = recent(now, out.gnss_rejected_us);
         let r = &mut report;
         put(tx, r, |f| {
@@ -146,6 +155,7 @@ impl Health {
                     watchdog_reset: tick.platform.watchdog_reset,
                     overrun_recently: recent(now, self.last_overrun_us),
                     input_invalid: recent(now, self.last_range_error_us),
+                    planner_refused_recently: recent(now, self.last_planner_reject_us),
                 },
                 overrun_count: tick.platform.overruns,
                 last_step_us: tick.platform.last_step_us,
