@@ -1280,7 +1280,11 @@ fn candump_rejects_with_reasons() {
         ("(1.000000) can0 +12#00", BadId),
         ("(1.000000) can0 800#00", IdOutOfRange),
         ("(1.000000) can0 FFF#00", IdOutOfRange),
-        ("(1.000000) can0 20000000#00", IdOutOfRange),
+        ("(1.000000) can0 40000000#00", IdOutOfRange),
+        ("(1.000000) can0 80000000#00", IdOutOfRange),
+        // candump -e: CAN_ERR_FLAG with the error class (here a bus-off, 0x40).
+        ("(1.000000) can0 20000040#0000000000000000", ErrorFrame),
+        ("(1.000000) can0 20000000#00", ErrorFrame),
         ("(1.000000) can0 123#R", RemoteFrame),
         ("(1.000000) can0 123#R4", RemoteFrame),
         ("(1.000000) can0 123##100112233", FdFrame),
@@ -1294,6 +1298,13 @@ fn candump_rejects_with_reasons() {
     ];
     for (line, want) in cases {
         assert_eq!(parse_line(line), Err(*want), "{line:?}");
+        // Frames the node has no use for are skipped and counted by every reader; the rest
+        // refuse the log.
+        assert_eq!(
+            want.is_unsupported_frame(),
+            matches!(want, RemoteFrame | FdFrame | ErrorFrame),
+            "{want:?}"
+        );
     }
 }
 

@@ -514,7 +514,13 @@ pub fn decode_frames<W: Write>(
 pub fn run(log: &Path, messages: &[String], format: Format) -> Result<()> {
     let dbc = Dbc::catmodel().map_err(|e| anyhow::anyhow!("catmodel.dbc: {e}"))?;
     let selection = Selection::parse(&dbc, messages)?;
-    let frames = crate::replay::read_candump(log)?;
+    let crate::replay::CandumpLog {
+        frames,
+        unsupported,
+    } = crate::replay::read_candump_log(log)?;
+    if unsupported > 0 {
+        eprintln!("skipped {unsupported} remote/FD/error frames (not decoded)");
+    }
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let written = decode_frames(&dbc, &frames, selection.as_ref(), format, &mut out)

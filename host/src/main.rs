@@ -340,10 +340,18 @@ fn run(cli: Cli) -> Result<()> {
             progress.finish();
             let c = result.counters;
             eprintln!(
-                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}",
+                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
                 result.frames + result.filtered, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
-                c.range_errors, c.gnss_gate_rejects, result.filtered + u64::from(c.unknown_ids), c.time_errors
+                c.range_errors, c.gnss_gate_rejects, result.filtered + u64::from(c.unknown_ids), c.time_errors,
+                result.unsupported
             );
+            if result.ticks > 0 && result.valid_ticks == 0 {
+                eprintln!(
+                    "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
+                     Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",
+                    result.ticks, c.gnss_gate_rejects
+                );
+            }
             Ok(())
         }
         Command::Evaluate {
@@ -367,6 +375,15 @@ fn run(cli: Cli) -> Result<()> {
                 catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
             progress.set_message("evaluating");
             let e = data.evaluate();
+            if e.ticks == 0 {
+                progress.finish();
+                bail!(
+                    "{}: no prediction to score: the node had no valid position at any tick \
+                     (replay warns why: a receiver slower than the model file's gnss_rate_hz \
+                     times out between its fixes; GNSS missing or refused)",
+                    predictions.display()
+                );
+            }
             let written = match &plots {
                 Some(dir) => {
                     progress.set_message("plotting");
@@ -552,7 +569,8 @@ fn run(cli: Cli) -> Result<()> {
             );
             let stdin = std::io::stdin().lock();
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
-            catmodel_host::sil::run(&mut driver, stdin, stdout)?;
+            let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
+            eprintln!("sil: {summary}");
             Ok(())
         }
         Command::Decode { log, messages, csv } => {

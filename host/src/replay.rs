@@ -27,16 +27,38 @@ use catmodel::SAMPLE_PERIOD_US;
 /// Interface name written into candump output.
 pub const IFACE: &str = "can0";
 
+/// A candump log as read: its frames, and the lines of frames the node has no use for
+/// (remote, CAN FD, error frames: [`candump::CandumpError::is_unsupported_frame`]), skipped
+/// and counted as the firmware's receive path does.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CandumpLog {
+    /// The frames, in file order.
+    pub frames: Vec<TimedFrame>,
+    /// Remote, CAN FD and error frames skipped.
+    pub unsupported: u64,
+}
+
+/// The longest pause between two frames of one log: a day. Ticks run through a pause (the
+/// node sees its inputs time out and recovers, docs/faults.md), 4.3 M of them for a day,
+/// about 2 s of replay; a longer jump is a clock step or logs joined, and would tick for hours
+/// (a jump of 1.7e9 s: 9 hours at 2.6 M ticks/s), so it is refused with its line.
+pub const MAX_LOG_PAUSE_US: u64 = 86_400 * 1_000_000;
+
+/// Reads a candump log ([`read_candump_log`] without the count of skipped frames).
+pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
+    read_candump_log(path).map(|log| log.frames)
+}
+
 /// Reads a candump log. Errors name the file, the line and the reason; time going backwards
 /// is an error with the line.
-pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
+pub fn read_candump_log(path: &Path) -> Result<CandumpLog> {
     let mut file =
         std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut bytes = Vec::new();
     file.read_to_end(&mut bytes)
         .with_context(|| format!("{}: reading", path.display()))?;
     match std::str::from_utf8(&bytes) {
-        Ok(text) => parse_candump(path, text),
+        Ok(text) => parse_candump_log(path, text),
         // Not UTF-8 somewhere: the line-by-line reader names the line.
         Err(_) => read_candump_lines(path, BufReader::new(bytes.as_slice())),
     }
@@ -44,39 +66,53 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
 
 /// [`read_candump`] over text already in memory; `path` names the file in errors.
 pub fn parse_candump(path: &Path, text: &str) -> Result<Vec<TimedFrame>> {
+    parse_candump_log(path, text).map(|log| log.frames)
+}
+
+/// [`read_candump_log`] over text already in memory; `path` names the file in errors.
+pub fn parse_candump_log(path: &Path, text: &str) -> Result<CandumpLog> {
     // Lines are ~48 bytes; one allocation for the whole log in the usual case.
-    let mut frames = Vec::with_capacity(text.len() / 40 + 1);
+    let mut log = CandumpLog {
+        frames: Vec::with_capacity(text.len() / 40 + 1),
+        unsupported: 0,
+    };
     let mut last_t = None;
     for (i, line) in text.lines().enumerate() {
-        push_line(path, i + 1, line, &mut last_t, &mut frames)?;
+        push_line(path, i + 1, line, &mut last_t, &mut log)?;
     }
-    Ok(frames)
+    Ok(log)
 }
 
 /// The line-by-line reader (kept for its error on a line that is not UTF-8).
-fn read_candump_lines(path: &Path, reader: impl BufRead) -> Result<Vec<TimedFrame>> {
-    let mut frames = Vec::new();
+fn read_candump_lines(path: &Path, reader: impl BufRead) -> Result<CandumpLog> {
+    let mut log = CandumpLog::default();
     let mut last_t = None;
     for (i, line) in reader.lines().enumerate() {
         let lineno = i + 1;
         let line = line.with_context(|| format!("{}:{lineno}: reading", path.display()))?;
-        push_line(path, lineno, &line, &mut last_t, &mut frames)?;
+        push_line(path, lineno, &line, &mut last_t, &mut log)?;
     }
-    Ok(frames)
+    Ok(log)
 }
 
-/// Parses one line (blank lines are skipped) and appends its frame, checking the time order.
+/// Parses one line (blank lines are skipped, unsupported frames counted) and appends its
+/// frame, checking the time order.
 #[inline]
 fn push_line(
     path: &Path,
     lineno: usize,
     line: &str,
     last_t: &mut Option<u64>,
-    frames: &mut Vec<TimedFrame>,
+    log: &mut CandumpLog,
 ) -> Result<()> {
+    let frames = &mut log.frames;
     let frame = match candump::parse_line(line) {
         Ok(frame) => frame,
         Err(_) if line.trim().is_empty() => return Ok(()),
+        Err(e) if e.is_unsupported_frame() => {
+            log.unsupported += 1;
+            return Ok(());
+        }
         Err(e) => bail!(
             "{}:{lineno}: malformed candump line ({}): {line:?}",
             path.display(),
@@ -100,6 +136,15 @@ fn push_line(
                 prev
             );
         }
+        if frame.t_us - prev > MAX_LOG_PAUSE_US {
+            bail!(
+                "{}:{lineno}: the clock jumps {:.0} s forward, more than the {} s a log may \
+                 pause (a clock step or two logs joined): split the log at this line",
+                path.display(),
+                (frame.t_us - prev) as f64 * 1e-6,
+                MAX_LOG_PAUSE_US / 1_000_000
+            );
+        }
     }
     *last_t = Some(frame.t_us);
     frames.push(frame);
@@ -120,6 +165,7 @@ pub fn candump_reason(e: candump::CandumpError) -> &'static str {
         E::IdOutOfRange => "identifier above 0x7FF (3 digits) or 0x1FFFFFFF (8 digits)",
         E::RemoteFrame => "remote frame (`#R`), not supported",
         E::FdFrame => "CAN FD frame (`##`), not supported",
+        E::ErrorFrame => "error frame (CAN_ERR_FLAG in the identifier), not a bus frame",
         E::BadHex => "data is not hex",
         E::OddHex => "odd number of data hex digits",
         E::TooLong => "more than 8 data bytes",
@@ -163,8 +209,12 @@ pub struct ReplayStats {
     pub frames: u64,
     /// Frames the acceptance filter refused (not node inputs), as the firmware's bus does.
     pub filtered: u64,
+    /// Remote, CAN FD and error frames skipped ([`CandumpLog::unsupported`]).
+    pub unsupported: u64,
     /// Ticks run.
     pub ticks: u64,
+    /// Ticks with a valid position (the others' predictions are "not available").
+    pub valid_ticks: u64,
     /// The node's rejection counters at the end.
     pub counters: Counters,
     /// Origin used, 1e-7 deg.
@@ -213,7 +263,9 @@ pub fn replay_with_progress(
     let stats = replay_into(frames, config, &mut csv, tx_sink, progress).unwrap_or(ReplayStats {
         frames: 0,
         filtered: 0,
+        unsupported: 0,
         ticks: 0,
+        valid_ticks: 0,
         counters: Counters::default(),
         origin_e7: None,
     });
@@ -266,24 +318,31 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
 ) -> Result<ReplayStats> {
     let (to_node, chunks) = std::sync::mpsc::sync_channel::<Result<Vec<TimedFrame>>>(16);
     std::thread::scope(|scope| {
-        scope.spawn(move || {
-            let mut chunk = Vec::with_capacity(PARSE_CHUNK_FRAMES);
+        // Returns the unsupported frames it skipped.
+        let parser = scope.spawn(move || {
+            let mut chunk = CandumpLog {
+                frames: Vec::with_capacity(PARSE_CHUNK_FRAMES),
+                unsupported: 0,
+            };
             let mut last_t = None;
             for (i, line) in text.lines().enumerate() {
                 if let Err(e) = push_line(path, i + 1, line, &mut last_t, &mut chunk) {
                     // Note: a send fails only if the node stopped listening.
                     let _ = to_node.send(Err(e));
-                    return;
+                    return chunk.unsupported;
                 }
-                if chunk.len() == PARSE_CHUNK_FRAMES {
-                    let full =
-                        std::mem::replace(&mut chunk, Vec::with_capacity(PARSE_CHUNK_FRAMES));
+                if chunk.frames.len() == PARSE_CHUNK_FRAMES {
+                    let full = std::mem::replace(
+                        &mut chunk.frames,
+                        Vec::with_capacity(PARSE_CHUNK_FRAMES),
+                    );
                     if to_node.send(Ok(full)).is_err() {
-                        return;
+                        return chunk.unsupported;
                     }
                 }
             }
-            let _ = to_node.send(Ok(chunk));
+            let _ = to_node.send(Ok(chunk.frames));
+            chunk.unsupported
         });
         let source = StreamSource {
             chunks,
@@ -292,10 +351,14 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
             finished: false,
             error: None,
         };
-        let (stats, written, parse_error) = run(source, config, csv, tx_log, progress);
+        let (mut stats, written, parse_error) = run(source, config, csv, tx_log, progress);
         if let Some(e) = parse_error {
             return Err(e);
         }
+        stats.unsupported = match parser.join() {
+            Ok(n) => n,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
         written.context("writing the output")?;
         Ok(stats)
     })
@@ -319,8 +382,11 @@ pub fn replay_file(
         Ok(text) => replay_text_into(log, text, config, csv, tx, progress),
         Err(_) => {
             // Not UTF-8 somewhere: the line-by-line reader names the line.
-            let frames = read_candump_lines(log, BufReader::new(text))?;
-            replay_into(&frames, config, csv, tx, progress).context("writing the output")
+            let log = read_candump_lines(log, BufReader::new(text))?;
+            let mut stats = replay_into(&log.frames, config, csv, tx, progress)
+                .context("writing the output")?;
+            stats.unsupported = log.unsupported;
+            Ok(stats)
         }
     }
 }
@@ -542,6 +608,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
     let mut filtered = 0u64;
+    let mut valid_ticks = 0u64;
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
@@ -593,7 +660,9 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     source.take();
                 }
                 frames += rx.len() as u64;
-                node.step(&tick, &rx, &mut tx);
+                if node.step(&tick, &rx, &mut tx).pose.is_some() {
+                    valid_ticks += 1;
+                }
                 batch.push((now, tx));
                 step += 1;
                 if step.is_multiple_of(500) {
@@ -633,7 +702,9 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let stats = ReplayStats {
         frames,
         filtered,
+        unsupported: 0,
         ticks,
+        valid_ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
     };
@@ -1280,7 +1351,9 @@ mod tests {
         let p = dir.join("a.log");
         std::fs::write(&p, text).unwrap();
         let fast = read_candump(&p).unwrap();
-        let slow = read_candump_lines(&p, BufReader::new(text.as_bytes())).unwrap();
+        let slow = read_candump_lines(&p, BufReader::new(text.as_bytes()))
+            .unwrap()
+            .frames;
         assert_eq!(fast, slow);
         assert_eq!(fast.len(), 3);
         assert_eq!(fast[2].t_us, 2_000_000);
@@ -1290,5 +1363,80 @@ mod tests {
         let err = format!("{:#}", read_candump(&p).unwrap_err());
         assert!(err.contains("a.log:6: reading"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Remote, CAN FD and error frames (`candump -e`) are skipped and counted by every reader,
+    /// as the firmware's receive path skips them, instead of refusing the log; replay reports
+    /// them; the node gets the same frames as without them.
+    #[test]
+    fn unsupported_frames_are_skipped_and_counted() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut with = String::new();
+        for (i, line) in text.lines().enumerate() {
+            with.push_str(line);
+            with.push('\n');
+            if i % 100 == 7 {
+                let stamp = &line[..line.find(')').unwrap() + 1];
+                with.push_str(&format!("{stamp} can0 20000080#0000000000000000\n"));
+                with.push_str(&format!("{stamp} can0 100#R\n"));
+                with.push_str(&format!("{stamp} can0 100##1DEADBEEF\n"));
+            }
+        }
+        let plain = parse_candump_log(&path, &text).unwrap();
+        let log = parse_candump_log(&path, &with).unwrap();
+        assert_eq!(plain.unsupported, 0);
+        assert_eq!(log.frames, plain.frames);
+        let inserted = 3 * (0..text.lines().count()).filter(|i| i % 100 == 7).count();
+        assert_eq!(log.unsupported, inserted as u64);
+        let config = crate::model_file::paper().node_config();
+        let (mut csv_a, mut csv_b) = (vec![], vec![]);
+        let a = replay_text_into(
+            &path,
+            &text,
+            config.clone(),
+            &mut csv_a,
+            None::<&mut Vec<u8>>,
+            |_| {},
+        )
+        .unwrap();
+        let b = replay_text_into(
+            &path,
+            &with,
+            config,
+            &mut csv_b,
+            None::<&mut Vec<u8>>,
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!((a.unsupported, b.unsupported), (0, inserted as u64));
+        assert_eq!(
+            ReplayStats {
+                unsupported: 0,
+                ..b
+            },
+            a
+        );
+        assert_eq!(csv_a, csv_b);
+    }
+
+    /// A forward clock jump beyond a day (a clock step, logs joined) is refused with its line,
+    /// instead of ticking through it for hours; a day's pause is replayed.
+    #[test]
+    fn a_clock_jump_beyond_a_day_is_refused_with_its_line() {
+        let path = Path::new("jump.log");
+        let day = MAX_LOG_PAUSE_US / 1_000_000;
+        let ok = format!("(1.000000) can0 100#01\n({}.000000) can0 100#01\n", 1 + day);
+        assert_eq!(parse_candump(path, &ok).unwrap().len(), 2);
+        let jump = format!(
+            "(1.000000) can0 100#01\n(1.020000) can0 100#01\n({}.000000) can0 100#01\n",
+            1_700_000_000u64
+        );
+        let err = format!("{:#}", parse_candump(path, &jump).unwrap_err());
+        assert!(
+            err.starts_with("jump.log:3: the clock jumps 1699999999 s forward")
+                && err.contains("split the log"),
+            "{err}"
+        );
     }
 }

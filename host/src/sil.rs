@@ -9,9 +9,13 @@
 //! NODE_STATUS's `rx_queue_drops`), and at most [`MAX_RX_FRAMES_PER_TICK`] frames a tick, in
 //! the order given, the rest left queued for the next tick (frames stamped after T are the
 //! node's to reject, as on the bus). It writes that tick's frames as candump lines stamped T,
-//! then the line `END SECONDS.UUUUUU` (T in the candump timestamp format), and flushes. End of input: success. A malformed line, or a TICK
-//! not later than the previous one: an error naming the line number, and nothing more is read.
-//! Blank lines are skipped (as in `replay`).
+//! then the line `END SECONDS.UUUUUU` (T in the candump timestamp format), and flushes.
+//! Remote, CAN FD and error frames are skipped and counted, as the firmware's receive path
+//! skips them; blank lines are skipped (as in `replay`). End of input: success, and a summary
+//! of the frames not given to the node ([`SilSummary`]). A malformed line (not UTF-8, neither a
+//! candump line nor a TICK), or a TICK not later than the previous one or beyond year 292 000:
+//! an error naming the line number (quoting at most 80 characters of it), and nothing more is
+//! read.
 use std::collections::VecDeque;
 use std::io::{BufRead, Write};
 
@@ -58,6 +62,7 @@ pub struct RxQueue {
     frames: VecDeque<TimedFrame>,
     drops: u32,
     filtered: u64,
+    unsupported: u64,
 }
 
 impl RxQueue {
@@ -105,39 +110,53 @@ fn timestamp(t_us: u64) -> String {
     format!("{:010}.{:06}", t_us / 1_000_000, t_us % 1_000_000)
 }
 
-/// Runs a session: reads `input` to its end, ticking `driver`, writing to `output`. Returns the
-/// number of ticks run.
+/// Runs a session: reads `input` to its end, ticking `driver`, writing to `output`. Returns
+/// what it did.
 pub fn run(
     driver: &mut dyn Driver,
-    input: impl BufRead,
+    mut input: impl BufRead,
     mut output: impl Write,
-) -> Result<u64, SilError> {
+) -> Result<SilSummary, SilError> {
     let mut queue = RxQueue::default();
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let mut last_tick: Option<u64> = None;
     let mut ticks = 0;
     let mut tx: Vec<CanFrame> = Vec::new();
-    for (i, line) in input.lines().enumerate() {
-        let line_no = i + 1;
-        let line = line.map_err(SilError::Io)?;
-        let text = line.trim_end();
-        if text.trim().is_empty() {
-            continue;
+    let mut bytes = Vec::new();
+    for line_no in 1.. {
+        bytes.clear();
+        if input.read_until(b'\n', &mut bytes).map_err(SilError::Io)? == 0 {
+            break;
         }
         let malformed = |reason: String| SilError::Malformed {
             line: line_no,
             reason,
         };
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| malformed(format!("not UTF-8 (byte {})", e.valid_up_to() + 1)))?
+            .trim_end();
+        if text.trim().is_empty() {
+            continue;
+        }
         if let Some(rest) = text.strip_prefix("TICK") {
             let t_us = rest
                 .strip_prefix(' ')
-                .ok_or(())
-                .and_then(|t| candump::parse_timestamp(t).map_err(|_| ()))
-                .map_err(|()| {
+                .and_then(|t| candump::parse_timestamp(t).ok())
+                .ok_or_else(|| {
                     malformed(format!(
-                        "expected `TICK SECONDS.UUUUUU` (six decimals), got {text:?}"
+                        "expected `TICK SECONDS.UUUUUU` (six decimals), got {}",
+                        quoted(text)
                     ))
                 })?;
+            // As replay refuses a frame time beyond it (year 292 000): keeps the node's tick
+            // arithmetic from overflowing.
+            if t_us > MAX_TIME_US {
+                return Err(malformed(format!(
+                    "TICK {} out of range (above {} s)",
+                    timestamp(t_us),
+                    MAX_TIME_US / 1_000_000
+                )));
+            }
             if let Some(prev) = last_tick.filter(|p| t_us <= *p) {
                 return Err(malformed(format!(
                     "TICK {} is not later than the previous TICK {}",
@@ -166,16 +185,63 @@ pub fn run(
         }
         match candump::parse_line(text) {
             Ok(frame) => queue.push(frame),
+            // What the firmware's receive path does with them: skipped and counted.
+            Err(e) if e.is_unsupported_frame() => queue.unsupported += 1,
             Err(e) => {
                 return Err(malformed(format!(
-                    "neither a candump line nor `TICK SECONDS.UUUUUU` ({}): {text:?}",
-                    candump_reason(e)
+                    "neither a candump line nor `TICK SECONDS.UUUUUU` ({}): {}",
+                    candump_reason(e),
+                    quoted(text)
                 )))
             }
         }
     }
     output.flush().map_err(SilError::Io)?;
-    Ok(ticks)
+    Ok(SilSummary {
+        ticks,
+        filtered: queue.filtered,
+        unsupported: queue.unsupported,
+        rx_queue_drops: queue.drops,
+    })
+}
+
+/// Frame and tick times above this are refused (as `replay` refuses them), us.
+const MAX_TIME_US: u64 = u64::MAX / 2;
+
+/// Longest part of a bad line an error repeats, characters.
+const QUOTE_CHARS: usize = 80;
+
+/// `text` quoted for an error message, cut to [`QUOTE_CHARS`] characters (a bad line can be
+/// megabytes long).
+fn quoted(text: &str) -> String {
+    match text.char_indices().nth(QUOTE_CHARS) {
+        None => format!("{text:?}"),
+        Some((cut, _)) => format!("{:?}... ({} bytes)", &text[..cut], text.len()),
+    }
+}
+
+/// What a session did, for its closing line on stderr.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SilSummary {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Frames the acceptance filter refused (not node inputs).
+    pub filtered: u64,
+    /// Remote, CAN FD and error frames skipped.
+    pub unsupported: u64,
+    /// Frames dropped because the receive queue was full.
+    pub rx_queue_drops: u32,
+}
+
+impl std::fmt::Display for SilSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} ticks; frames not given to the node: {} not node inputs (acceptance filter), \
+             {} remote/FD/error frames, {} dropped by the full receive queue",
+            self.ticks, self.filtered, self.unsupported, self.rx_queue_drops
+        )
+    }
 }
 
 #[cfg(test)]
@@ -261,5 +327,58 @@ mod tests {
             Some(6)
         );
         assert_eq!(driver.node().counters().rx_over_cap, 0);
+    }
+
+    fn session(input: &[u8]) -> (Result<SilSummary, SilError>, String) {
+        let config = crate::node_config(None).unwrap();
+        let mut driver = NodeDriver::new(config, Controller::FromModel);
+        let mut out = Vec::new();
+        let result = run(&mut driver, input, &mut out);
+        (result, String::from_utf8(out).unwrap())
+    }
+
+    fn malformed(input: &[u8]) -> (usize, String) {
+        match session(input).0 {
+            Err(SilError::Malformed { line, reason }) => (line, reason),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_lines_name_their_line_and_quote_at_most_80_characters() {
+        // Not UTF-8: the line, not a bare I/O error.
+        let (line, reason) = malformed(b"TICK 0.020000\n(0.030000) can0 100#\xff\n");
+        assert_eq!(line, 2);
+        assert!(reason.contains("not UTF-8 (byte 21)"), "{reason}");
+        // A megabyte of garbage: quoted in part, with its length.
+        let mut long = b"TICK 0.020000\n".to_vec();
+        long.extend(std::iter::repeat_n(b'x', 1 << 20));
+        let (line, reason) = malformed(&long);
+        assert_eq!(line, 2);
+        assert!(
+            reason.len() < 300 && reason.contains("... (1048576 bytes)"),
+            "{reason}"
+        );
+        // A tick beyond what replay accepts for a frame.
+        let (line, reason) = malformed(b"TICK 0.020000\nTICK 9223372036855.000000\n");
+        assert_eq!(line, 2);
+        assert!(reason.contains("out of range"), "{reason}");
+    }
+
+    #[test]
+    fn unsupported_and_foreign_frames_are_skipped_and_summed_up() {
+        let input = b"(0.001000) can0 20000080#0000000000000000\n(0.002000) can0 100#R\n\
+            (0.003000) can0 320#0000000000000000\nTICK 0.020000\n";
+        let (result, out) = session(input);
+        assert_eq!(
+            result.unwrap(),
+            SilSummary {
+                ticks: 1,
+                filtered: 1,
+                unsupported: 2,
+                rx_queue_drops: 0
+            }
+        );
+        assert!(out.ends_with("END 0000000000.020000\n"));
     }
 }

@@ -7,8 +7,11 @@
 //! - Interface: 1 to 15 printable characters (Linux `IFNAMSIZ` - 1).
 //! - Identifier: exactly 3 hex digits = 11-bit (<= 0x7FF), exactly 8 = 29-bit (<= 0x1FFFFFFF).
 //! - Data: 0 to 8 bytes as pairs of hex digits, either case; [`format_line`] writes upper case.
-//! - Rejected with a reason: remote frames (`123#R`), CAN FD frames (`123##1...`), anything after
-//!   the data other than trailing whitespace / CR / LF.
+//! - Rejected with a reason: anything after the data other than trailing whitespace / CR / LF.
+//! - Frames the node does not use, well-formed lines that readers skip and count
+//!   ([`CandumpError::is_unsupported_frame`]): remote frames (`123#R`), CAN FD frames
+//!   (`123##1...`) and error frames (`candump -e`: an 8-digit identifier with the kernel's
+//!   `CAN_ERR_FLAG` 0x20000000 set, `20000080#...`).
 //!
 //! No allocation, no panic: this is what the QEMU replay bus parses on the target.
 use core::fmt::Write;
@@ -40,6 +43,9 @@ pub enum CandumpError {
     RemoteFrame,
     /// A CAN FD frame (`##`): the bus is classic CAN.
     FdFrame,
+    /// An error frame (`candump -e`): the identifier carries `CAN_ERR_FLAG` (0x20000000,
+    /// linux/can.h) and the error class, not a bus identifier.
+    ErrorFrame,
     /// A data character that is not a hex digit.
     BadHex,
     /// An odd number of data hex digits.
@@ -49,6 +55,21 @@ pub enum CandumpError {
     /// Something other than whitespace after the data.
     TrailingGarbage,
 }
+
+impl CandumpError {
+    /// A well-formed line of a frame the node has no use for (remote, CAN FD, error frame):
+    /// readers skip it and count it, as the firmware's receive path does, instead of refusing
+    /// the log.
+    pub const fn is_unsupported_frame(self) -> bool {
+        matches!(
+            self,
+            CandumpError::RemoteFrame | CandumpError::FdFrame | CandumpError::ErrorFrame
+        )
+    }
+}
+
+/// The kernel's error-frame flag in a candump identifier (linux/can.h `CAN_ERR_FLAG`).
+const CAN_ERR_FLAG: u32 = 0x2000_0000;
 
 /// Longest interface name (Linux IFNAMSIZ 16, minus the terminating NUL).
 pub const MAX_IFACE_LEN: usize = 15;
@@ -99,6 +120,9 @@ fn parse_id(text: &str) -> Result<CanId, CandumpError> {
     let value = parse_hex_u32(text).ok_or(CandumpError::BadId)?;
     let id = match text.len() {
         3 => CanId::Standard(u16::try_from(value).map_err(|_| CandumpError::IdOutOfRange)?),
+        8 if value & !(CAN_ERR_FLAG | 0x1FFF_FFFF) == 0 && value & CAN_ERR_FLAG != 0 => {
+            return Err(CandumpError::ErrorFrame)
+        }
         8 => CanId::Extended(value),
         _ => return Err(CandumpError::BadId),
     };

@@ -529,6 +529,48 @@ pub fn load_all(
         .collect()
 }
 
+/// How far the logs' GNSS rate may stray from the base file's before the identified file takes
+/// the logs' (a receiver's nominal rate and its measured median interval agree far better).
+const GNSS_RATE_TOLERANCE: f64 = 0.25;
+
+/// The identified file describes the receiver that made the training logs: when their GNSS
+/// rate (the median of the logs' [`Experiment::gnss_rate_hz`]) differs from the base file's by
+/// more than [`GNSS_RATE_TOLERANCE`], the file takes the logs' rate (rounded to 0.1 Hz, within
+/// the model file's 1..100 Hz), and the note says so. Without this, identify on 1 Hz logs wrote
+/// the base's 100 Hz, and the node built from the file never accepted a position from that
+/// receiver (replay: no prediction at all).
+fn receiver_rate(model: &mut ModelFile, training: &[Experiment]) -> Option<String> {
+    let mut rates: Vec<f64> = training
+        .iter()
+        .map(|e| e.gnss_rate_hz)
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .collect();
+    rates.sort_by(f64::total_cmp);
+    let measured = *rates.get(rates.len() / 2)?;
+    let base = model.vehicle.gnss_rate_hz;
+    if (measured / base - 1.0).abs() <= GNSS_RATE_TOLERANCE {
+        return None;
+    }
+    let rate = ((measured * 10.0).round() / 10.0).clamp(1.0, 100.0);
+    model.vehicle.gnss_rate_hz = rate;
+    let mut note = format!(
+        "vehicle.gnss_rate_hz = {rate}: the training logs' GNSS fixes come at {measured:.2} Hz \
+         (median interval), the base file said {base} Hz"
+    );
+    // The outage bridged by dead reckoning must outlast the GNSS timeout at the new rate.
+    let timeout_s = model_file::InputsSection::gnss_timeout_s(rate);
+    if model.inputs.gnss_lost_s <= timeout_s {
+        let lost_s = 2.0 * timeout_s;
+        note.push_str(&format!(
+            "; inputs.gnss_lost_s = {lost_s} (twice the GNSS timeout at that rate; the base \
+             file's {} s is shorter than the timeout)",
+            model.inputs.gnss_lost_s
+        ));
+        model.inputs.gnss_lost_s = lost_s;
+    }
+    Some(note)
+}
+
 /// The whole pipeline on preprocessed experiments. `base` provides the vehicle, the hybrid
 /// thresholds and the models kept when the data cannot identify them (the published file).
 pub fn identify(
@@ -604,6 +646,9 @@ pub fn identify(
 
     let mut model = base.clone();
     model.name = "identified".into();
+    if let Some(note) = receiver_rate(&mut model, &training) {
+        notes.push(note);
+    }
     if let Some(fit) = &identified_dynamics {
         model.dynamics = Some(fit.section);
     }
@@ -777,4 +822,39 @@ pub fn summary(id: &Identification) -> String {
 
 fn fmt_opt(v: Option<f64>) -> String {
     v.map_or("-".into(), |x| format!("{x:.2}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_file_takes_the_logs_receiver_rate_when_it_differs() {
+        let base = model_file::paper();
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.csv");
+        let log = preprocess::load_experiment(&path, &base.vehicle, &Default::default()).unwrap();
+        // The bundled logs' receiver is the paper's 100 Hz: nothing to change.
+        let mut model = base.clone();
+        assert_eq!(receiver_rate(&mut model, std::slice::from_ref(&log)), None);
+        assert_eq!(model, base);
+        // Logs from a 1 Hz receiver (the median wins over one odd log).
+        let at = |hz: f64| Experiment {
+            gnss_rate_hz: hz,
+            ..log.clone()
+        };
+        let note = receiver_rate(&mut model, &[at(1.02), at(0.98), at(50.0)]).unwrap();
+        assert_eq!(model.vehicle.gnss_rate_hz, 1.0);
+        // The outage bridged must outlast the 2.5 s timeout at 1 Hz: the file is readable.
+        assert_eq!(model.inputs.gnss_lost_s, 5.0);
+        assert!(
+            note.contains("gnss_rate_hz = 1") && note.contains("gnss_lost_s = 5"),
+            "{note}"
+        );
+        let dir = std::env::temp_dir().join(format!("catmodel-rate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("m.toml");
+        model_file::save(&file, &model).unwrap();
+        assert_eq!(model_file::load(&file).unwrap().vehicle.gnss_rate_hz, 1.0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

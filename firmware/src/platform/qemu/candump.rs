@@ -14,15 +14,18 @@ pub const LINE_CAP: usize = 64;
 pub enum LineError {
     /// Not a candump frame line.
     Syntax(CandumpError),
-    /// A remote or CAN FD frame, which the node does not use (skipped and counted).
+    /// A remote, CAN FD or error frame, which the node does not use (skipped and counted).
     Unsupported,
 }
 
 /// Parses one candump line (without its line break).
 pub fn parse(line: &str) -> Result<TimedFrame, LineError> {
-    parse_line(line).map_err(|error| match error {
-        CandumpError::RemoteFrame | CandumpError::FdFrame => LineError::Unsupported,
-        other => LineError::Syntax(other),
+    parse_line(line).map_err(|error| {
+        if error.is_unsupported_frame() {
+            LineError::Unsupported
+        } else {
+            LineError::Syntax(error)
+        }
     })
 }
 
