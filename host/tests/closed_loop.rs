@@ -504,3 +504,17 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
     assert_eq!(last.command.steer_cmd_pct, Some(0.0));
     assert!(last.truth.speed < 0.05 && last.t_s < 60.0, "{:?}", last);
 }
+
+#[test]
+fn corridor_exit_hand_derived() {
+    use catmodel_host::closed_loop::metrics::corridor_exit_m;
+    // A 2 m body on a corridor 3 m left and 1.5 m right of the path.
+    let corridor = (3.0, 1.5);
+    assert_eq!(corridor_exit_m(0.0, 2.0, corridor), 0.0);
+    // 0.5 m right: its right side exactly on the edge.
+    assert_eq!(corridor_exit_m(0.5, 2.0, corridor), 0.0);
+    assert!((corridor_exit_m(1.25, 2.0, corridor) - 0.75).abs() < 1e-12);
+    // 3 m left: its left side 1 m over; wholly outside from 4 m left (exit = its width).
+    assert!((corridor_exit_m(-3.0, 2.0, corridor) - 1.0).abs() < 1e-12);
+    assert!((corridor_exit_m(-4.0, 2.0, corridor) - 2.0).abs() < 1e-12);
+}

@@ -167,6 +167,15 @@ impl Scorer {
     }
 }
 
+/// How far the side of a body `width_m` wide, its rear axle `lateral_m` right of the path
+/// (negative: left), is outside the corridor `(left_m, right_m)` there, m (0: inside).
+pub fn corridor_exit_m(lateral_m: f64, width_m: f64, (left_m, right_m): (f64, f64)) -> f64 {
+    let half = width_m / 2.0;
+    (lateral_m + half - right_m)
+        .max(-lateral_m + half - left_m)
+        .max(0.0)
+}
+
 /// The scores of a run (`metrics.json`).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Metrics {
@@ -194,6 +203,9 @@ pub struct Metrics {
     pub lateral_rms_m: Option<f64>,
     /// Largest |lateral error| over the scored range, m.
     pub lateral_max_m: Option<f64>,
+    /// How far the body's side at the rear axle (truth) went outside the planner's corridor
+    /// over the scored range, at most, m (0: never; `None`: nothing scored).
+    pub corridor_exit_m: Option<f64>,
     /// Time the rear axle took across the scored range, s.
     pub scored_time_s: Option<f64>,
     /// Time the controller drove (from engagement to the end of the run), s.
@@ -202,6 +214,10 @@ pub struct Metrics {
     pub total_time_s: f64,
     /// Ticks by CONTROL_COMMAND status while engaged: no path, tracking, avoiding, fallback.
     pub status_ticks: [u64; 4],
-    /// Whether the run is clean: no cone hit, no gate missed, no collision, completed.
+    /// Whether the run is clean: no cone hit, no gate missed, no collision, completed, and,
+    /// off the cone track (the obstacle, the loop), the body never wholly outside the corridor
+    /// ([`Self::corridor_exit_m`] below the body's width: the car never left the road). A
+    /// standard receiver's metre of bias puts the body's side over the corridor's edge on
+    /// most runs (the node cannot know that bias); `corridor_exit_m` reports by how much.
     pub clean: bool,
 }

@@ -338,6 +338,7 @@ pub fn run(
     let mut projection: Option<Projection> = None;
     let (scored_from, scored_to) = course.scored_stations_m;
     let mut entry_speed = None;
+    let mut corridor_exit: Option<f64> = None;
     let mut scored_span: (Option<f64>, Option<f64>) = (None, None);
     let mut stopped_since: Option<f64> = None;
     let front_ahead = vehicle.body.length_m - vehicle.body.rear_overhang_m;
@@ -403,6 +404,17 @@ pub fn run(
         let (station, lateral) = projection.map_or((f64::NAN, f64::NAN), |p| {
             (f64::from(p.station_m), f64::from(p.lateral_m))
         });
+        // The body's sides at the rear axle against the corridor there.
+        if station >= scored_from && station <= scored_to {
+            if let Some(at) = projection.and_then(|p| path.sample(p.station_m, p.segment)) {
+                let exit = metrics::corridor_exit_m(
+                    lateral,
+                    vehicle.body.width_m,
+                    (f64::from(at.left_m), f64::from(at.right_m)),
+                );
+                corridor_exit = Some(corridor_exit.map_or(exit, |e: f64| e.max(exit)));
+            }
+        }
         let t_s = t_tick_us as f64 * 1e-6;
         if entry_speed.is_none() && station + front_ahead >= scored_from {
             entry_speed = Some(truth.speed);
@@ -464,6 +476,7 @@ pub fn run(
         completed,
         lateral_rms_m: lateral_rms,
         lateral_max_m: lateral_max,
+        corridor_exit_m: corridor_exit,
         scored_time_s: match scored_span {
             (Some(a), Some(b)) => Some(b - a),
             _ => None,
@@ -474,7 +487,13 @@ pub fn run(
         clean: completed
             && cone_hits == 0
             && scorer.gates_missed() == 0
-            && min_obstacle.is_none_or(|d| d > 0.0),
+            && min_obstacle.is_none_or(|d| d > 0.0)
+            // The double lane change is scored by its cones and gates (ISO 3888-2): the
+            // body may pass over the lane's edge between two cones.
+            // Elsewhere the car must not have left the road: some of its body in the corridor
+            // at every tick.
+            && (course.kind == scenario::Kind::DoubleLaneChange
+                || corridor_exit.is_none_or(|e| e < vehicle.body.width_m)),
     };
     RunOutput {
         course: course.clone(),
