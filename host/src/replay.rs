@@ -300,7 +300,7 @@ pub fn replay_into<C: Write + Send, T: Write + Send>(
     progress: impl FnMut(u64),
 ) -> std::io::Result<ReplayStats> {
     let source = SliceSource { frames, next: 0 };
-    let (stats, written, _) = run(source, config, csv, tx_log, progress);
+    let (stats, written, _) = run(source, config, csv, tx_log, false, progress);
     written.map(|()| stats)
 }
 
@@ -314,6 +314,20 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
     config: NodeConfig,
     csv: C,
     tx_log: Option<T>,
+    progress: impl FnMut(u64),
+) -> Result<ReplayStats> {
+    replay_text(path, text, config, csv, tx_log, false, progress)
+}
+
+/// [`replay_text_into`]; with `stream`, the text reaches the sinks as the node runs, before
+/// the input is known to be valid (for sinks that are discarded on an error: [`PartialFile`]).
+fn replay_text<C: Write + Send, T: Write + Send>(
+    path: &Path,
+    text: &str,
+    config: NodeConfig,
+    csv: C,
+    tx_log: Option<T>,
+    stream: bool,
     progress: impl FnMut(u64),
 ) -> Result<ReplayStats> {
     let (to_node, chunks) = std::sync::mpsc::sync_channel::<Result<Vec<TimedFrame>>>(16);
@@ -351,7 +365,7 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
             finished: false,
             error: None,
         };
-        let (mut stats, written, parse_error) = run(source, config, csv, tx_log, progress);
+        let (mut stats, written, parse_error) = run(source, config, csv, tx_log, stream, progress);
         if let Some(e) = parse_error {
             return Err(e);
         }
@@ -365,9 +379,10 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
 }
 
 /// `catmodel replay`: the candump file at `log` through the node, the predictions CSV to
-/// `csv_path` and the TX log to `tx_path` if given (files, with their directories, created
-/// only once the whole log has parsed: an error leaves none behind). `progress` as in
-/// [`replay_into`]; [`estimate_ticks`] gives the total.
+/// `csv_path` and the TX log to `tx_path` if given (files, with their directories, written as
+/// `.partial` files while the node runs and renamed once the whole log has parsed: an error
+/// leaves none behind; [`PartialFile`]). `progress` as in [`replay_into`]; [`estimate_ticks`]
+/// gives the total.
 pub fn replay_file(
     log: &Path,
     text: &[u8],
@@ -376,19 +391,24 @@ pub fn replay_file(
     tx_path: Option<&Path>,
     progress: impl FnMut(u64),
 ) -> Result<ReplayStats> {
-    let csv = LazyFile::new(csv_path);
-    let tx = tx_path.map(LazyFile::new);
-    match std::str::from_utf8(text) {
-        Ok(text) => replay_text_into(log, text, config, csv, tx, progress),
+    let mut csv = PartialFile::new(csv_path);
+    let mut tx = tx_path.map(PartialFile::new);
+    let stats = match std::str::from_utf8(text) {
+        Ok(text) => replay_text(log, text, config, &mut csv, tx.as_mut(), true, progress)?,
         Err(_) => {
             // Not UTF-8 somewhere: the line-by-line reader names the line.
             let log = read_candump_lines(log, BufReader::new(text))?;
-            let mut stats = replay_into(&log.frames, config, csv, tx, progress)
+            let mut stats = replay_into(&log.frames, config, &mut csv, tx.as_mut(), progress)
                 .context("writing the output")?;
             stats.unsupported = log.unsupported;
-            Ok(stats)
+            stats
         }
+    };
+    csv.commit()?;
+    if let Some(tx) = tx {
+        tx.commit()?;
     }
+    Ok(stats)
 }
 
 /// Reads a whole file. Errors name it.
@@ -424,28 +444,63 @@ pub fn estimate_ticks(text: &[u8]) -> u64 {
 }
 
 /// A file created (with its directories) on the first write or flush.
-struct LazyFile<'a> {
+/// An output file written as `PATH.partial` beside `PATH` (created, with its directories, on
+/// the first write or flush) and renamed to `PATH` by [`PartialFile::commit`]; dropped without
+/// a commit (the input failed), it is removed. So the text streams to disk as the node runs
+/// (before, it was held in memory until the whole input had parsed: 3.6 times the input's
+/// size) and a failed replay still leaves no output behind.
+struct PartialFile<'a> {
     path: &'a Path,
+    partial: std::path::PathBuf,
     file: Option<std::fs::File>,
 }
 
-impl<'a> LazyFile<'a> {
+impl<'a> PartialFile<'a> {
     fn new(path: &'a Path) -> Self {
-        Self { path, file: None }
+        let mut name = path.as_os_str().to_owned();
+        name.push(".partial");
+        Self {
+            path,
+            partial: name.into(),
+            file: None,
+        }
     }
 
     fn file(&mut self) -> std::io::Result<&mut std::fs::File> {
         if self.file.is_none() {
-            let created = create_file(self.path).map_err(std::io::Error::other)?;
+            let created = create_file(&self.partial).map_err(std::io::Error::other)?;
             self.file = Some(created);
         }
         self.file
             .as_mut()
             .ok_or_else(|| std::io::Error::other("file not created"))
     }
+
+    /// The text is complete: `PATH.partial` becomes `PATH` (created empty if nothing was
+    /// written).
+    fn commit(mut self) -> Result<()> {
+        self.file()?.sync_data().ok();
+        self.file = None;
+        std::fs::rename(&self.partial, self.path).with_context(|| {
+            format!(
+                "renaming {} to {}",
+                self.partial.display(),
+                self.path.display()
+            )
+        })
+    }
 }
 
-impl Write for LazyFile<'_> {
+impl Drop for PartialFile<'_> {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            // Note: best effort; a partial file left behind is named as one.
+            let _ = std::fs::remove_file(&self.partial);
+        }
+    }
+}
+
+impl Write for PartialFile<'_> {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         self.file()?.write(buf)
     }
@@ -601,6 +656,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     config: NodeConfig,
     csv: C,
     tx_log: Option<T>,
+    stream: bool,
     mut progress: impl FnMut(u64),
 ) -> (ReplayStats, std::io::Result<()>, Option<anyhow::Error>) {
     let mut node = crate::new_node(config);
@@ -613,6 +669,10 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
             let mut out = TextOut::new(csv, tx_log);
+            if stream {
+                // The sinks are discarded on an input error ([`PartialFile`]): no need to hold.
+                out.release();
+            }
             for message in messages {
                 match message {
                     ToWriter::Batch(mut batch) => {
@@ -1438,5 +1498,35 @@ mod tests {
                 && err.contains("split the log"),
             "{err}"
         );
+    }
+
+    /// `replay`'s files stream to `.partial` files renamed at the end; an input error (here
+    /// on the last line) leaves neither the files nor their partial forms.
+    #[test]
+    fn output_files_appear_only_for_a_valid_log() {
+        let dir = std::env::temp_dir().join(format!("catmodel-partial-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
+        let text = std::fs::read(&log).unwrap();
+        let config = crate::model_file::paper().node_config();
+        let (csv, tx) = (dir.join("out/p.csv"), dir.join("out/tx.log"));
+        let mut bad = text.clone();
+        bad.extend_from_slice(b"(9999999999.000000) can0 100#0G\n");
+        let err = replay_file(&log, &bad, config.clone(), &csv, Some(&tx), |_| {}).unwrap_err();
+        assert!(err.to_string().contains("data is not hex"), "{err}");
+        let left: Vec<_> = std::fs::read_dir(dir.join("out"))
+            .map(|d| d.map(|e| e.unwrap().file_name()).collect())
+            .unwrap_or_default();
+        assert!(left.is_empty(), "{left:?}");
+        let stats = replay_file(&log, &text, config, &csv, Some(&tx), |_| {}).unwrap();
+        let mut names: Vec<_> = std::fs::read_dir(dir.join("out"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["p.csv", "tx.log"]);
+        let lines = std::fs::read_to_string(&tx).unwrap().lines().count() as u64;
+        assert_eq!(lines, 14 * stats.ticks);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -127,6 +127,117 @@ fn column(rows: &[LogRow], f: impl Fn(&LogRow) -> Option<f64>) -> (Vec<f64>, Vec
     rows.iter().filter_map(|r| f(r).map(|v| (r.t, v))).unzip()
 }
 
+/// How far a sample may stand apart from its neighbours on both sides before it is impossible:
+/// `tolerance` (the sensor's noise and resolution) plus `max_rate` times the time to the
+/// farthest neighbour compared (what the quantity can change in that time).
+#[derive(Clone, Copy, Debug)]
+struct Plausible {
+    /// Physical unit, for the note.
+    unit: &'static str,
+    tolerance: f64,
+    max_rate: f64,
+}
+
+/// Neighbours compared on each side.
+const OUTLIER_NEIGHBOURS: usize = 3;
+
+/// Wheel and commanded speed: 1 m/s of noise, 15 m/s^2 (1.5 g, beyond any car's braking).
+const SPEED_PLAUSIBLE: Plausible = Plausible {
+    unit: "m/s",
+    tolerance: 1.0,
+    max_rate: 15.0,
+};
+/// Steering: 5 % of noise, 1000 %/s (steering actuators turn at 50-400 %/s).
+const STEER_PLAUSIBLE: Plausible = Plausible {
+    unit: "%",
+    tolerance: 5.0,
+    max_rate: 1000.0,
+};
+/// GNSS fixes, metres from the first: the node's 10 m plausibility gate (docs/faults.md)
+/// plus 80 m/s (the log schema's top speed).
+const FIX_PLAUSIBLE: Plausible = Plausible {
+    unit: "m",
+    tolerance: 10.0,
+    max_rate: 80.0,
+};
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Indices of the samples of `t`, `values` (one or more coordinates per sample) that stand
+/// apart from the median of their [`OUTLIER_NEIGHBOURS`] neighbours before *and* after by more
+/// than `p` allows (a step stays with one side; a spike leaves both). The ends, without
+/// neighbours on both sides, are kept.
+fn impossible_samples<const N: usize>(t: &[f64], values: &[[f64; N]], p: Plausible) -> Vec<usize> {
+    let k = OUTLIER_NEIGHBOURS;
+    let mut out = Vec::new();
+    for i in 1..t.len().saturating_sub(1) {
+        let apart = |range: std::ops::Range<usize>| -> bool {
+            let mut dist2 = 0.0;
+            for c in 0..N {
+                let mut side: Vec<f64> = values[range.clone()].iter().map(|v| v[c]).collect();
+                let d = values[i][c] - median(&mut side);
+                dist2 += d * d;
+            }
+            let span = range
+                .clone()
+                .map(|j| (t[j] - t[i]).abs())
+                .fold(0.0, f64::max);
+            dist2.sqrt() > p.tolerance + p.max_rate * span
+        };
+        if apart(i.saturating_sub(k)..i) && apart(i + 1..(i + 1 + k).min(t.len())) {
+            out.push(i);
+        }
+    }
+    out
+}
+
+/// Leaves out the impossible samples of a column ([`impossible_samples`]), naming each in
+/// `notes` (time, value, neighbours), and returns their indices (ascending): one corrupt
+/// sample in range used to move the identified model without a word (a speed of 70 m/s in a
+/// drive at 5 m/s halved the speed delay).
+fn drop_impossible<const N: usize>(
+    log: &str,
+    name: &str,
+    t: &mut Vec<f64>,
+    values: &mut Vec<[f64; N]>,
+    p: Plausible,
+    show: impl Fn(&[f64; N]) -> String,
+    notes: &mut Vec<String>,
+) -> Vec<usize> {
+    let bad = impossible_samples(t, values, p);
+    for &i in bad.iter().take(3) {
+        notes.push(format!(
+            "{log}: column `{name}`: the sample at t = {} s ({} {}) is impossible beside its \
+             neighbours ({} and {} {}): left out",
+            t[i],
+            show(&values[i]),
+            p.unit,
+            show(&values[i - 1]),
+            show(&values[i + 1]),
+            p.unit
+        ));
+    }
+    if bad.len() > 3 {
+        notes.push(format!(
+            "{log}: column `{name}`: {} impossible samples left out in all",
+            bad.len()
+        ));
+    }
+    for &i in bad.iter().rev() {
+        t.remove(i);
+        values.remove(i);
+    }
+    bad
+}
+
 /// Linear interpolation of a column onto the grid.
 fn onto_grid(name: &str, t: &[f64], v: &[f64], grid: &[f64]) -> Result<Vec<f64>> {
     let mut out = vec![0.0; grid.len()];
@@ -239,7 +350,9 @@ pub fn load_experiment(
         .unwrap_or_else(|| "log".into());
     let mut e = preprocess_rows(&name, &log.rows, vehicle, opts)
         .with_context(|| format!("{}", path.display()))?;
-    e.log_notes = log.notes.messages();
+    let mut log_notes = log.notes.messages();
+    log_notes.append(&mut e.log_notes);
+    e.log_notes = log_notes;
     Ok(e)
 }
 
@@ -250,16 +363,59 @@ pub fn preprocess_rows(
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
-    let (tv, vel) = column(rows, |r| r.vel);
-    let (tc, cmd) = column(rows, |r| r.input_vel);
-    let (ts_, steer) = column(rows, |r| r.steer);
-    let (tg, latlon): (Vec<f64>, Vec<(f64, f64)>) = rows
+    let mut notes = Vec::new();
+    let log_name = name;
+    let scalar = |name: &str, get: fn(&LogRow) -> Option<f64>, p, notes: &mut Vec<String>| {
+        let (mut t, v) = column(rows, get);
+        let mut v: Vec<[f64; 1]> = v.into_iter().map(|x| [x]).collect();
+        drop_impossible(
+            log_name,
+            name,
+            &mut t,
+            &mut v,
+            p,
+            |x| format!("{}", x[0]),
+            notes,
+        );
+        (t, v.into_iter().map(|[x]| x).collect::<Vec<f64>>())
+    };
+    let (tv, vel) = scalar("vel", |r| r.vel, SPEED_PLAUSIBLE, &mut notes);
+    let (tc, cmd) = scalar("input_vel", |r| r.input_vel, SPEED_PLAUSIBLE, &mut notes);
+    let (ts_, steer) = scalar("steer", |r| r.steer, STEER_PLAUSIBLE, &mut notes);
+    let (mut tg, mut latlon): (Vec<f64>, Vec<(f64, f64)>) = rows
         .iter()
         .filter_map(|r| match (r.lat, r.lon) {
             (Some(a), Some(b)) => Some((r.t, (a, b))),
             _ => None,
         })
         .unzip();
+    if let Some(&first) = latlon.first() {
+        // Fixes in metres from the first, for the plausibility check.
+        let o = Geodetic {
+            lat_deg: first.0,
+            lon_deg: first.1,
+            height_m: 0.0,
+        };
+        let mut metres: Vec<[f64; 2]> = latlon
+            .iter()
+            .map(|(a, b)| {
+                let e = geodetic_to_enu(*a, *b, 0.0, &o);
+                [e.east_m, e.north_m]
+            })
+            .collect();
+        let dropped = drop_impossible(
+            name,
+            "lat/lon",
+            &mut tg,
+            &mut metres,
+            FIX_PLAUSIBLE,
+            |m| format!("{:.1} m east, {:.1} m north of the first fix", m[0], m[1]),
+            &mut notes,
+        );
+        for &i in dropped.iter().rev() {
+            latlon.remove(i);
+        }
+    }
     let mut missing = Vec::new();
     for (n, len) in [
         ("vel", tv.len()),
@@ -392,7 +548,7 @@ pub fn preprocess_rows(
         origin_deg: origin,
         yaw_half_width,
         gnss_rate_hz: 1.0 / median_interval(&tg),
-        log_notes: Vec::new(),
+        log_notes: notes,
     })
 }
 
