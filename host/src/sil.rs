@@ -21,7 +21,7 @@ use std::io::{BufRead, Write};
 
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, CanFrame, TimedFrame};
-use catmodel::node::{PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN};
+use catmodel::node::{Counters, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN};
 
 use crate::closed_loop::driver::Driver;
 use crate::replay::{candump_line, candump_reason};
@@ -202,6 +202,7 @@ pub fn run(
         filtered: queue.filtered,
         unsupported: queue.unsupported,
         rx_queue_drops: queue.drops,
+        counters: driver.counters(),
     })
 }
 
@@ -231,15 +232,31 @@ pub struct SilSummary {
     pub unsupported: u64,
     /// Frames dropped because the receive queue was full.
     pub rx_queue_drops: u32,
+    /// The node's rejection counters at the end (`time_errors`, frames stamped after the TICK
+    /// that delivered them, is on no status page).
+    pub counters: Counters,
 }
 
 impl std::fmt::Display for SilSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.counters;
         write!(
             f,
             "{} ticks; frames not given to the node: {} not node inputs (acceptance filter), \
-             {} remote/FD/error frames, {} dropped by the full receive queue",
-            self.ticks, self.filtered, self.unsupported, self.rx_queue_drops
+             {} remote/FD/error frames, {} dropped by the full receive queue; rejected by the \
+             node: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, \
+             stamped after their TICK {}",
+            self.ticks,
+            self.filtered,
+            self.unsupported,
+            self.rx_queue_drops,
+            c.crc_errors,
+            c.counter_errors,
+            c.dlc_errors,
+            c.range_errors,
+            c.gnss_gate_rejects,
+            c.unknown_ids,
+            c.time_errors
         )
     }
 }
@@ -367,17 +384,38 @@ mod tests {
 
     #[test]
     fn unsupported_and_foreign_frames_are_skipped_and_summed_up() {
-        let input = b"(0.001000) can0 20000080#0000000000000000\n(0.002000) can0 100#R\n\
-            (0.003000) can0 320#0000000000000000\nTICK 0.020000\n";
-        let (result, out) = session(input);
+        // And a steering report stamped after the TICK that delivers it: the node's to
+        // reject, counted in the summary (no status page carries `time_errors`).
+        let late = crate::replay::candump_line(
+            30_000,
+            &catmodel::can::SteeringReport {
+                steer_pct: Some(1.0),
+            }
+            .encode(0),
+        );
+        let input = format!(
+            "(0.001000) can0 20000080#0000000000000000\n(0.002000) can0 100#R\n\
+             (0.003000) can0 320#0000000000000000\n{late}\nTICK 0.020000\n"
+        );
+        let (result, out) = session(input.as_bytes());
+        let summary = result.unwrap();
         assert_eq!(
-            result.unwrap(),
+            summary,
             SilSummary {
                 ticks: 1,
                 filtered: 1,
                 unsupported: 2,
-                rx_queue_drops: 0
+                rx_queue_drops: 0,
+                counters: Counters {
+                    time_errors: 1,
+                    ..summary.counters
+                }
             }
+        );
+        assert_eq!(summary.counters.time_errors, 1);
+        assert!(
+            summary.to_string().ends_with("stamped after their TICK 1"),
+            "{summary}"
         );
         assert!(out.ends_with("END 0000000000.020000\n"));
     }

@@ -13,7 +13,7 @@ use catmodel::control::path::Tracking;
 use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::drive::Controller as NodeController;
-use catmodel::node::{NodeConfig, Tick, TxFrames};
+use catmodel::node::{Counters, NodeConfig, Tick, TxFrames};
 
 use crate::HostNode;
 
@@ -22,6 +22,9 @@ pub trait Driver {
     /// Runs `tick` (its time, and the platform's counters) over `rx` (frames stamped at or
     /// before it, in arrival order) and appends the frames it sends to `tx`.
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport;
+
+    /// The node's rejection counters so far (the ones no status page carries among them).
+    fn counters(&self) -> Counters;
 }
 
 /// What a tick did, for the closed loop's records (never on the bus).
@@ -82,6 +85,10 @@ impl NodeDriver {
 }
 
 impl Driver for NodeDriver {
+    fn counters(&self) -> Counters {
+        *self.node.counters()
+    }
+
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
         let mut node_tx = TxFrames::new();
         let estimate = self.node.step(tick, rx, &mut node_tx);
