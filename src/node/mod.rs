@@ -528,7 +528,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
                 }
                 Some(Routed::Planner(message)) => {
                     planner_frames = true;
-                    let received = self.drive.borrow_mut().receive(&message);
+                    let drive = self.drive.borrow_mut();
+                    let refused = drive.planner().counters().rejects();
+                    let received = drive.receive(&message);
+                    if drive.planner().counters().rejects() != refused {
+                        self.health.planner_refused(now_us);
+                    }
                     origin = received.origin.or(origin);
                     stage = received.completed.unwrap_or(stage);
                 }
@@ -747,7 +752,6 @@ impl<D: BorrowMut<Drive>> Node<D> {
             dxdt_mps: estimate.dxdt_mps,
             predictions,
             command: drive.command,
-            planner_rejects: self.drive.borrow().planner().counters().rejects(),
         };
         self.health
             .publish(tick, inputs, &mut self.inputs.counters, &out, tx);

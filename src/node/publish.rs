@@ -49,8 +49,6 @@ pub struct Outputs<'a> {
     pub predictions: &'a [PredictedPoint],
     /// The controller's command.
     pub command: ControlCommand,
-    /// Planner frames and paths refused so far ([`crate::control::planner::PlannerCounters::rejects`]).
-    pub planner_rejects: u32,
 }
 
 /// The publishing stage's state: the tick counter and what the health bits remember.
@@ -66,12 +64,17 @@ pub struct Health {
     /// Range errors at the previous tick, and when they last grew.
     range_errors_seen: u32,
     last_range_error_us: Option<u64>,
-    /// Planner refusals at the previous tick, and when they last grew.
-    planner_rejects_seen: u32,
+    /// When the node last refused a planner frame or path ([`Health::planner_refused`]).
     last_planner_reject_us: Option<u64>,
 }
 
 impl Health {
+    /// The node refused a planner frame or path at `now_us` (stage 1, as the frame arrives:
+    /// nothing to compare in the ticks without planner frames).
+    pub fn planner_refused(&mut self, now_us: u64) {
+        self.last_planner_reject_us = Some(now_us);
+    }
+
     /// Appends this tick's frames to `tx` and advances the tick counter.
     pub fn publish(
         &mut self,
@@ -92,10 +95,6 @@ impl Health {
             self.last_range_error_us = Some(now);
         }
         self.range_errors_seen = counters.range_errors;
-        if out.planner_rejects > self.planner_rejects_seen {
-            self.last_planner_reject_us = Some(now);
-        }
-        self.planner_rejects_seen = out.planner_rejects;
         let gnss_rejected = recent(now, out.gnss_rejected_us);
         let r = &mut report;
         put(tx, r, |f| {
