@@ -1295,6 +1295,22 @@ fn candump_rejects_with_reasons() {
         ("(1.000000) can0 123#010203040506070809", TooLong),
         ("(1.000000) can0 123#DEAD BEEF", TrailingGarbage),
         ("(1.000000) can0 123#DEAD R", TrailingGarbage),
+        // candump's screen format (`candump -ta`).
+        ("(1.000000)  can0  123   [2]  DE", LengthMismatch),
+        ("(1.000000)  can0  123   [1]  DE AD", TrailingGarbage),
+        ("(1.000000)  can0  123   [1]  DEA", BadHex),
+        ("(1.000000)  can0  123   [1]  ZZ", BadHex),
+        ("(1.000000)  can0  123   [x]  00", BadHex),
+        ("(1.000000)  can0  123   [0]  remote request", RemoteFrame),
+        (
+            "(1.000000)  can0  123  [12]  00 11 22 33 44 55 66 77 88 99 AA BB",
+            FdFrame,
+        ),
+        (
+            "(1.000000)  can0  20000080   [8]  00 00 00 00 00 00 00 00   ERRORFRAME",
+            ErrorFrame,
+        ),
+        ("(1.000000)  can0  800   [1]  00", IdOutOfRange),
     ];
     for (line, want) in cases {
         assert_eq!(parse_line(line), Err(*want), "{line:?}");
@@ -1305,6 +1321,31 @@ fn candump_rejects_with_reasons() {
             matches!(want, RemoteFrame | FdFrame | ErrorFrame),
             "{want:?}"
         );
+    }
+}
+
+/// candump's screen format with a timestamp (`candump -ta`, what `candump -t a can0 > file`
+/// records; spacing as can-utils prints it, and any other whitespace) reads as the log format's
+/// line of the same frame.
+#[test]
+fn candump_screen_format_reads_as_the_log_format() {
+    for (screen, log) in [
+        (
+            "(1700000000.123456)  can0  123   [4]  DE AD BE EF",
+            "(1700000000.123456) can0 123#DEADBEEF",
+        ),
+        (
+            "(0000000012.500000)  vcan0  09F80102   [8]  01 02 03 04 05 06 07 08",
+            "(0000000012.500000) vcan0 09F80102#0102030405060708",
+        ),
+        ("(0.020000)\tcan1 7FF [0]", "(0.020000) can1 7FF#"),
+        (
+            "(0.020000)  can0  100   [2]  0a ff  \r",
+            "(0.020000) can0 100#0AFF",
+        ),
+    ] {
+        assert_eq!(parse_line(screen), parse_line(log), "{screen:?}");
+        assert!(parse_line(screen).is_ok(), "{screen:?}");
     }
 }
 

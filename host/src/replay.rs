@@ -170,6 +170,7 @@ pub fn candump_reason(e: candump::CandumpError) -> &'static str {
         E::OddHex => "odd number of data hex digits",
         E::TooLong => "more than 8 data bytes",
         E::TrailingGarbage => "unexpected text after the data",
+        E::LengthMismatch => "fewer data bytes than the `[LEN]` field says",
     }
 }
 

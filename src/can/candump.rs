@@ -8,6 +8,10 @@
 //! - Identifier: exactly 3 hex digits = 11-bit (<= 0x7FF), exactly 8 = 29-bit (<= 0x1FFFFFFF).
 //! - Data: 0 to 8 bytes as pairs of hex digits, either case; [`format_line`] writes upper case.
 //! - Rejected with a reason: anything after the data other than trailing whitespace / CR / LF.
+//! - Also read: candump's screen format with a timestamp (`candump -ta` / `-td` / `-tz`, what
+//!   `candump -t a can0 > file` records): `(1700000000.123456)  can0  123   [4]  DE AD BE EF`,
+//!   any whitespace between the fields ([`parse_line`] tells the two apart by the `[LEN]`
+//!   field); [`format_line`] writes the log format only.
 //! - Frames the node does not use, well-formed lines that readers skip and count
 //!   ([`CandumpError::is_unsupported_frame`]): remote frames (`123#R`), CAN FD frames
 //!   (`123##1...`) and error frames (`candump -e`: an 8-digit identifier with the kernel's
@@ -54,6 +58,8 @@ pub enum CandumpError {
     TooLong,
     /// Something other than whitespace after the data.
     TrailingGarbage,
+    /// Screen format: fewer data bytes than its `[LEN]` says.
+    LengthMismatch,
 }
 
 impl CandumpError {
@@ -174,6 +180,13 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
         .ok_or(CandumpError::MissingTimestamp)?;
     let (stamp, rest) = rest.split_once(')').ok_or(CandumpError::BadTimestamp)?;
     let t_us = parse_timestamp(stamp)?;
+    if rest
+        .split_ascii_whitespace()
+        .nth(2)
+        .is_some_and(|t| t.starts_with('['))
+    {
+        return parse_screen(t_us, rest);
+    }
     let rest = rest
         .strip_prefix(' ')
         .ok_or(CandumpError::MissingInterface)?;
@@ -192,6 +205,70 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
     Ok(TimedFrame {
         t_us,
         frame: CanFrame { id, len, data },
+    })
+}
+
+/// The rest of a line in candump's screen format with a timestamp (`candump -ta`, `-td`,
+/// `-tz`: what `candump -t a can0 > file` records): `  IFACE  ID   [LEN]  B0 B1 ...`, any
+/// whitespace between the fields; `remote request` in place of the data for a remote frame, a
+/// length above 8 for a CAN FD frame.
+fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
+    let mut tokens = rest.split_ascii_whitespace();
+    let iface = tokens.next().ok_or(CandumpError::MissingInterface)?;
+    if iface.len() > MAX_IFACE_LEN || !iface.bytes().all(|c| c.is_ascii_graphic()) {
+        return Err(CandumpError::BadInterface);
+    }
+    let id = parse_id(tokens.next().ok_or(CandumpError::MissingSeparator)?)?;
+    let len_text = tokens
+        .next()
+        .and_then(|t| t.strip_prefix('['))
+        .and_then(|t| t.strip_suffix(']'))
+        .ok_or(CandumpError::MissingSeparator)?;
+    let len = parse_decimal(len_text)
+        .filter(|n| *n <= 64)
+        .ok_or(CandumpError::BadHex)?;
+    let mut data = [0u8; 8];
+    let mut n = 0u64;
+    for token in tokens.by_ref() {
+        if token == "remote" {
+            return Err(CandumpError::RemoteFrame);
+        }
+        if len > 8 {
+            return Err(CandumpError::FdFrame);
+        }
+        let &[hi, lo] = token.as_bytes() else {
+            return Err(if n < len {
+                CandumpError::BadHex
+            } else {
+                CandumpError::TrailingGarbage
+            });
+        };
+        let (Some(hi), Some(lo)) = (hex_value(hi), hex_value(lo)) else {
+            return Err(if n < len {
+                CandumpError::BadHex
+            } else {
+                CandumpError::TrailingGarbage
+            });
+        };
+        let Some(slot) = data.get_mut(n as usize).filter(|_| n < len) else {
+            return Err(CandumpError::TrailingGarbage);
+        };
+        *slot = (hi << 4) | lo;
+        n += 1;
+    }
+    if len > 8 {
+        return Err(CandumpError::FdFrame);
+    }
+    if n != len {
+        return Err(CandumpError::LengthMismatch);
+    }
+    Ok(TimedFrame {
+        t_us,
+        frame: CanFrame {
+            id,
+            len: len as u8,
+            data,
+        },
     })
 }
 
