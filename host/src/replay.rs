@@ -449,20 +449,28 @@ pub fn estimate_ticks(text: &[u8]) -> u64 {
 /// the first write or flush) and renamed to `PATH` by [`PartialFile::commit`]; dropped without
 /// a commit (the input failed), it is removed. So the text streams to disk as the node runs
 /// (before, it was held in memory until the whole input had parsed: 3.6 times the input's
-/// size) and a failed replay still leaves no output behind.
+/// size) and a failed replay still leaves no output behind. A `PATH` that exists and is not a
+/// regular file (`/dev/null`, a pipe) is written in place: renaming over it would replace the
+/// device with a file (as root, `--out /dev/null` did).
 struct PartialFile<'a> {
     path: &'a Path,
+    /// Where the text goes until the commit: `PATH.partial`, or `PATH` itself.
     partial: std::path::PathBuf,
+    in_place: bool,
     file: Option<std::fs::File>,
 }
 
 impl<'a> PartialFile<'a> {
     fn new(path: &'a Path) -> Self {
+        let in_place = std::fs::metadata(path).is_ok_and(|m| !m.file_type().is_file());
         let mut name = path.as_os_str().to_owned();
-        name.push(".partial");
+        if !in_place {
+            name.push(".partial");
+        }
         Self {
             path,
             partial: name.into(),
+            in_place,
             file: None,
         }
     }
@@ -480,8 +488,11 @@ impl<'a> PartialFile<'a> {
     /// The text is complete: `PATH.partial` becomes `PATH` (created empty if nothing was
     /// written).
     fn commit(mut self) -> Result<()> {
-        self.file()?.sync_data().ok();
+        self.file()?.flush()?;
         self.file = None;
+        if self.in_place {
+            return Ok(());
+        }
         std::fs::rename(&self.partial, self.path).with_context(|| {
             format!(
                 "renaming {} to {}",
@@ -494,7 +505,7 @@ impl<'a> PartialFile<'a> {
 
 impl Drop for PartialFile<'_> {
     fn drop(&mut self) {
-        if self.file.take().is_some() {
+        if self.file.take().is_some() && !self.in_place {
             // Note: best effort; a partial file left behind is named as one.
             let _ = std::fs::remove_file(&self.partial);
         }
@@ -1529,5 +1540,27 @@ mod tests {
         let lines = std::fs::read_to_string(&tx).unwrap().lines().count() as u64;
         assert_eq!(lines, 14 * stats.ticks);
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// An output that is not a regular file is written in place, never renamed over: as root,
+    /// `--out /dev/null` once replaced the device with a regular file.
+    #[test]
+    #[cfg(unix)]
+    fn an_output_device_is_written_in_place() {
+        use std::os::unix::fs::FileTypeExt;
+        let null = Path::new("/dev/null");
+        assert!(std::fs::metadata(null)
+            .unwrap()
+            .file_type()
+            .is_char_device());
+        let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
+        let text = std::fs::read(&log).unwrap();
+        let config = crate::model_file::paper().node_config();
+        replay_file(&log, &text, config, null, Some(null), |_| {}).unwrap();
+        assert!(std::fs::metadata(null)
+            .unwrap()
+            .file_type()
+            .is_char_device());
+        assert!(!Path::new("/dev/null.partial").exists());
     }
 }
