@@ -305,3 +305,66 @@ fn speed_plan_matches_the_qp_solution() {
         }
     }
 }
+
+/// The corridor's give for a car that starts outside it (`lateral::relax_corridor`), by hand:
+/// rows of `e_y` with the corridor 1 m either side; the car starts at `e_y = 3`, 2 m beyond the
+/// right-hand rows. A return at 1 m/s^2 takes `2 sqrt(2 / 1) = 2.828 s`; at stage `k` (the
+/// state 0.1 (k + 1) s ahead) the right bound gives `2 (1 - s(t / 2.828))`, `s` the quintic
+/// smoothstep: 1.99916 at 0.1 s (`s(0.035355) = 4.188e-4`), 1.0 at 1.414 s (`s(1/2) = 1/2`).
+/// The left rows and the obstacle row are untouched; a car inside changes nothing.
+#[test]
+fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
+    use catmodel::control::mpc::lateral::{relax_corridor, ROW_OBSTACLE};
+    use catmodel::control::mpc::STEPS as MPC_STEPS;
+    let corridor = |lower: f32, upper: f32| Row {
+        a: 1.0,
+        b: 0.0,
+        lower,
+        upper,
+        rho: 50.0,
+        soft_weight: 1000.0,
+        active: true,
+    };
+    let fresh = || {
+        let mut q = Problem::<NX, MPC_STEPS, ROWS>::zeroed();
+        for st in q.stages.iter_mut() {
+            st.rows[0] = corridor(-1.0, f32::INFINITY);
+            st.rows[1] = corridor(f32::NEG_INFINITY, 1.0);
+            st.rows[2] = corridor(-1.0, f32::INFINITY);
+            st.rows[3] = corridor(f32::NEG_INFINITY, 1.0);
+            st.rows[ROW_OBSTACLE] = corridor(2.5, f32::INFINITY);
+        }
+        q
+    };
+    let x = |e_y: f32| SVector::<f32, NX>::from([e_y, 0.0, 0.0, 0.0, 0.0]);
+
+    let mut inside = fresh();
+    assert_eq!(relax_corridor(&mut inside, &x(0.5), 1.0), 0.0);
+    for (a, b) in inside.stages.iter().zip(fresh().stages.iter()) {
+        assert_eq!(a.rows, b.rows, "a car inside its corridor changed the rows");
+    }
+
+    let mut q = fresh();
+    assert_eq!(relax_corridor(&mut q, &x(3.0), 1.0), 2.0);
+    let duration = 2.0 * 2.0f64.sqrt();
+    let mut previous = f64::INFINITY;
+    for (k, st) in q.stages.iter().enumerate() {
+        let u = ((k + 1) as f64 * 0.1 / duration).min(1.0);
+        let give = 2.0 * (1.0 - u * u * u * (10.0 - 15.0 * u + 6.0 * u * u));
+        for slot in [1, 3] {
+            let upper = f64::from(st.rows[slot].upper);
+            assert!((upper - 1.0 - give).abs() < 1e-5, "stage {k}: {upper}");
+            assert_eq!(st.rows[slot].lower, f32::NEG_INFINITY);
+        }
+        assert!(give <= previous, "the give grows at stage {k}");
+        previous = give;
+        for slot in [0, 2] {
+            assert_eq!(st.rows[slot], corridor(-1.0, f32::INFINITY), "stage {k}");
+        }
+        assert_eq!(st.rows[ROW_OBSTACLE], corridor(2.5, f32::INFINITY));
+    }
+    // Hand values: 0.1 s and half the return's duration (stage 13 is at 1.4 s, not 1.414 s:
+    // s(0.49497) = 0.49058).
+    assert!((f64::from(q.stages[0].rows[1].upper) - 2.99916).abs() < 2e-5);
+    assert!((f64::from(q.stages[13].rows[1].upper) - (1.0 + 2.0 * (1.0 - 0.49058))).abs() < 2e-4);
+}

@@ -160,6 +160,15 @@ enum Command {
         /// SECONDS (default: once).
         #[arg(long, value_name = "SECONDS")]
         replan_every: Option<f64>,
+        /// The car starts this far to the right of the path's first point (negative: left), m:
+        /// how the controller returns to a path it is not on.
+        #[arg(
+            long,
+            value_name = "METRES",
+            default_value_t = 0.0,
+            allow_negative_numbers = true
+        )]
+        start_offset: f64,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -503,6 +512,7 @@ fn run(cli: Cli) -> Result<()> {
             speed,
             seed,
             replan_every,
+            start_offset,
             out,
         } => {
             let progress = Progress::spinner(&format!("closed loop: {scenario}"));
@@ -516,6 +526,7 @@ fn run(cli: Cli) -> Result<()> {
                     speed_mps: speed,
                     seed,
                     replan_s: replan_every,
+                    start_offset_m: start_offset,
                     out,
                 })?;
             progress.finish();

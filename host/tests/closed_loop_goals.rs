@@ -50,6 +50,7 @@ fn drive_car(
         receiver,
         max_time_s: 120.0,
         replan_s: None,
+        start_offset_m: 0.0,
     };
     run(&vehicle, &course, &mut driver, "", &options).metrics
 }
@@ -192,6 +193,7 @@ fn drive_setup(
         receiver: Receiver::Standard,
         max_time_s: 120.0,
         replan_s: None,
+        start_offset_m: 0.0,
     };
     run(vehicle, &course, &mut driver, "", &options)
 }
@@ -260,12 +262,13 @@ fn second_car_with_a_1_hz_receiver_waits_for_its_heading() {
             Kind::Obstacle.default_speed_mps(),
             seed,
         );
-        // Seed 8 leaves the road: lateral 6.7 m, the body 2.33 m outside the corridor (wider
-        // than the car), while tracking. It was reported clean until `clean` looked at the
-        // corridor; docs/findings.md. Pinned both ways, so that a change shows.
-        assert_eq!(
+        // Seed 8 left the road (lateral 6.7 m, the body 2.33 m outside the corridor) until
+        // the controller returned to a corridor it starts outside of at a bounded lateral
+        // acceleration (`lateral::relax_corridor`; docs/findings.md): the receiver's 2 m
+        // bias put the estimate outside the corridor when the controller took over, and the
+        // corridor's exact penalty swung the car into a limit cycle.
+        assert!(
             out.metrics.clean,
-            seed != 8,
             "obstacle, seed {seed}: {:?}",
             out.metrics
         );

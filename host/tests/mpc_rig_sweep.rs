@@ -16,6 +16,7 @@ fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
         receiver: Receiver::Rtk,
         max_time_s: 120.0,
         replan_s: None,
+        start_offset_m: 0.0,
     };
     let m = run(&vehicle, &course, &mut driver, "mpc", &options).metrics;
     (

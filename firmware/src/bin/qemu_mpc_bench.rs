@@ -14,7 +14,8 @@
 //! - `mpc_obstacle`: straight road, one obstacle passed at 10 m/s (avoiding);
 //! - `mpc_blocked`: an obstacle that leaves no room (status 3, the fallback);
 //! - `mpc_worst_dynamic`, `mpc_worst_kinematic`: four large obstacles beside the road so that
-//!   every stage has all its rows, and no early exit: the worst case.
+//!   every stage has all its rows, a corridor narrower than the car so that every corridor row
+//!   gives way from the start, and no early exit: the worst case.
 //!
 //! Then the parts of a solve (`mpc_part_*`: problem build with every row, Riccati
 //! factorisation, one ADMM iteration with and without the residual check, the speed plan),
@@ -520,7 +521,9 @@ fn run_scenarios(b: &Bench, st: &mut Statics) {
 /// Every row active, no early exit: the worst case, in both modes.
 #[inline(never)]
 fn run_worst(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
-    let road = Straight { half_width: 25.0 };
+    // A corridor narrower than the car: the body starts outside it on both sides, so the
+    // corridor's give (`lateral::relax_corridor`) runs on every corridor row of every stage.
+    let road = Straight { half_width: 0.25 };
     for (v, key, name) in [
         (15.0, "mpc_worst_dynamic", "MPC solve, worst case (dynamic)"),
         (

@@ -36,6 +36,7 @@ pub fn clean_at(
             receiver,
             max_time_s: 120.0,
             replan_s: None,
+            start_offset_m: 0.0,
         };
         let m = run(vehicle, &course, &mut driver, "", &options).metrics;
         if !m.clean {

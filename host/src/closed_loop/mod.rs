@@ -93,6 +93,10 @@ impl Receiver {
     }
 }
 
+/// `--start-offset` is at most this far either side of the path, m (a start further off is not
+/// a path the planner would send).
+pub const MAX_START_OFFSET_M: f64 = 10.0;
+
 /// How to run.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RunOptions {
@@ -105,6 +109,8 @@ pub struct RunOptions {
     /// A planner that replans: the course's path (a new path id) and obstacles are sent again
     /// this often, s (each time the previous transfer has gone out); `None`: once, at the start.
     pub replan_s: Option<f64>,
+    /// The car starts this far to the right of the path's first point (negative: left), m.
+    pub start_offset_m: f64,
 }
 
 /// One tick of a run, for plots.
@@ -305,9 +311,11 @@ pub fn run(
         (next.east_m - start.east_m).atan2(next.north_m - start.north_m)
     };
     let b = vehicle.chassis.cg_to_rear_m;
+    // The car's rear axle, `start_offset_m` to the right of the path's first point.
+    let off = options.start_offset_m;
     let initial = PlantState {
-        x_m: start.east_m + b * heading0.sin(),
-        y_m: start.north_m + b * heading0.cos(),
+        x_m: start.east_m + b * heading0.sin() + off * heading0.cos(),
+        y_m: start.north_m + b * heading0.cos() - off * heading0.sin(),
         heading_rad: heading0,
         ..PlantState::default()
     };
@@ -523,6 +531,8 @@ pub struct ClosedLoopArgs {
     pub seed: u64,
     /// The planner sends the path again this often, s (`None`: once).
     pub replan_s: Option<f64>,
+    /// The car starts this far to the right of the path's first point, m.
+    pub start_offset_m: f64,
     /// Output directory.
     pub out: std::path::PathBuf,
 }
@@ -595,11 +605,18 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
             anyhow::bail!("--replan-every {r}: a period of at least 0.02 s");
         }
     }
+    if !(args.start_offset_m.is_finite() && args.start_offset_m.abs() <= MAX_START_OFFSET_M) {
+        anyhow::bail!(
+            "--start-offset {}: at most {MAX_START_OFFSET_M} m either side",
+            args.start_offset_m
+        );
+    }
     let options = RunOptions {
         seed: args.seed,
         receiver,
         max_time_s: 300.0,
         replan_s: args.replan_s,
+        start_offset_m: args.start_offset_m,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
     let mut files = write_session(&args.out, &output)?;

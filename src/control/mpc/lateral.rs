@@ -370,6 +370,55 @@ fn corner_row(
     }
 }
 
+/// Relaxes the corridor rows of a plan whose car starts outside them (`x0` violates stage 0's
+/// row): each row's bound gives way by the start's violation, tapering to none along a quintic
+/// smoothstep over the time a return at `return_mps2` of lateral acceleration takes,
+/// `2 sqrt(violation / return_mps2)` (a bang-bang return's duration; the smoothstep's peak is
+/// 1.44 times that acceleration). Without it the exact penalty, far above the tracking cost,
+/// asks for the return within the first steps whatever it costs: from 2 m outside the
+/// hatchback's corridor the plan steered to the lock and the car overshot the path by 4.5 m
+/// (docs/controller.md, "Starting outside the corridor"). A car inside its corridor is not
+/// affected. Returns the largest violation at the start, m.
+pub fn relax_corridor(
+    problem: &mut Problem<NX, STEPS, ROWS>,
+    x0: &SVector<f32, NX>,
+    return_mps2: f32,
+) -> f32 {
+    let Some(first) = problem.stages.first() else {
+        return 0.0;
+    };
+    let mut start = [0.0f32; ROW_OBSTACLE];
+    for (v, row) in start.iter_mut().zip(&first.rows) {
+        if row.active {
+            *v = row.violation(row.eval(x0));
+        }
+    }
+    let worst = start.iter().copied().fold(0.0, max);
+    if worst <= 0.0 {
+        return 0.0;
+    }
+    // Per row: the start's violation and the inverse of the return's duration.
+    let mut taper = [(0.0f32, 0.0f32); ROW_OBSTACLE];
+    for (t, v) in taper.iter_mut().zip(start) {
+        if v > 0.0 {
+            *t = (v, 0.5 * math::sqrt(return_mps2 / v));
+        }
+    }
+    for (k, st) in problem.stages.iter_mut().enumerate() {
+        let t = (k + 1) as f32 * STEP_S;
+        for (row, (v, rate)) in st.rows.iter_mut().zip(taper) {
+            if !(row.active && v > 0.0) {
+                continue;
+            }
+            let u = clamp(t * rate, 0.0, 1.0);
+            let give = v * (1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)));
+            row.lower -= give;
+            row.upper += give;
+        }
+    }
+    worst
+}
+
 /// One obstacle as the rows see it (inflated radius).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InflatedObstacle {

@@ -231,6 +231,10 @@ pub struct MpcTuning {
     pub steer_trust_s: f32,
     /// Share of the actuator's rate limit the plan may use (the rest is for feedback), 0..1.
     pub steer_rate_share: f32,
+    /// A car that starts outside its corridor returns at this lateral acceleration: the
+    /// corridor rows give way by the start's violation, tapering over the return's duration
+    /// (`lateral::relax_corridor`), m/s^2.
+    pub corridor_return_mps2: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
     pub obstacle_margin_m: f32,
     /// The other side of an obstacle must have this much more room to change the decision, m.
@@ -287,6 +291,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     steer_lead_s: 0.07,
     steer_trust_s: 0.15,
     steer_rate_share: 0.9,
+    corridor_return_mps2: 1.0,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
     obstacle_tolerance_m: 0.25,
@@ -466,7 +471,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 13] = [
+        let checks: [(bool, &'static str); 14] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -496,6 +501,10 @@ impl MpcConfig {
             ),
             (weights_ok(&tuning.weights), "lateral weights"),
             (positive(tuning.stop_delay_s), "stop_delay_s"),
+            (
+                positive(tuning.corridor_return_mps2),
+                "corridor_return_mps2",
+            ),
             (
                 tuning.preview_s.is_finite() && tuning.preview_s >= 0.0,
                 "preview_s",
@@ -597,6 +606,7 @@ impl MpcConfig {
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
             }
         };
+        lateral::relax_corridor(&mut state.problem, &x0, self.tuning.corridor_return_mps2);
         // Avoiding: some obstacle reaches the body within the horizon.
         let avoiding = state
             .problem
