@@ -52,6 +52,7 @@ fn sweep() {
                     "trust" => t.steer_trust_s = x,
                     "share" => t.steer_rate_share = x,
                     "iter" => t.admm.max_iterations = x as u16,
+                    "return" => t.corridor_return_mps2 = x,
                     _ => panic!("{k}"),
                 }
             }
