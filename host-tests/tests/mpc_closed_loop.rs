@@ -329,7 +329,38 @@ fn brakes_when_no_side_fits() {
     assert!(fallback
         .iter()
         .all(|t| t.out.fallback == Some(FallbackReason::NoPassage) && t.out.speed_cmd_mps == 0.0));
+    // Once stopping, it stays stopped: slowed down, its stopping distance and horizon no
+    // longer reach the obstacle, and before the blocked obstacle was latched the controller
+    // drove off again (tracking, speed command up) to brake again a tick later.
+    let first = l
+        .log
+        .iter()
+        .position(|t| t.out.status == ControlStatus::Fallback)
+        .unwrap();
+    let resumed = l.log[first..]
+        .iter()
+        .filter(|t| t.out.status != ControlStatus::Fallback)
+        .count();
+    assert_eq!(
+        resumed, 0,
+        "drove off again in {resumed} ticks after stopping"
+    );
     assert!(last.speed_mps < 0.05, "stopped");
+    // The planner takes the obstacle away: the latch goes with it and the car drives on.
+    l.obstacles[2] = None;
+    let n = l.log.len();
+    let mut t = 15.0;
+    while t < 20.0 {
+        l.tick(&path, t);
+        t += 0.02;
+    }
+    assert!(
+        l.log[n..]
+            .iter()
+            .all(|t| t.out.status == ControlStatus::Tracking),
+        "did not drive on without the obstacle"
+    );
+    assert!(l.log.last().unwrap().speed_mps > 1.0);
     assert!(
         clearance > 0.0,
         "stopped short of the obstacle: {clearance}"

@@ -416,6 +416,9 @@ pub struct MpcState {
     /// Linearisation for the next solve (the last plan's heading error and steering).
     lin: Option<Linearisation>,
     sides: [Option<ObstacleSide>; MAX_OBSTACLES],
+    /// Per obstacle slot: it left no passage once it was within reach, and still leaves none
+    /// (the car stays stopped short of it however far it is then: see `decide_sides`).
+    blocked: [bool; MAX_OBSTACLES],
     /// Steering of the last accepted plan, and ticks since it was made.
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
     /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
@@ -440,6 +443,7 @@ impl MpcState {
             speed: SpeedState::new(),
             lin: None,
             sides: [None; MAX_OBSTACLES],
+            blocked: [false; MAX_OBSTACLES],
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
             steer_ramp_rad: None,
@@ -453,6 +457,7 @@ impl MpcState {
         self.speed = SpeedState::new();
         self.lin = None;
         self.sides = [None; MAX_OBSTACLES];
+        self.blocked = [false; MAX_OBSTACLES];
         self.last_steer_plan = None;
         self.obstacle_violation_ticks = 0;
         self.steer_ramp_rad = None;
@@ -870,19 +875,22 @@ impl MpcConfig {
         let v = max(input.car.speed_mps, 0.0);
         let stopping_m = v * t.stop_delay_s + v * v / (2.0 * t.speed.decel_mps2);
         let reach_m = max(stopping_m, horizon_m(input));
-        for ((slot, memory), ob) in out
+        for (((slot, memory), blocked), ob) in out
             .iter_mut()
             .zip(state.sides.iter_mut())
+            .zip(state.blocked.iter_mut())
             .zip(input.obstacles)
         {
             let Some(ob) = ob else {
                 *memory = None;
+                *blocked = false;
                 continue;
             };
             let r = ob.radius_m + input.position_uncertainty_m + t.obstacle_margin_m;
             if ob.ahead_m + r < -body.rear_overhang_m {
                 // Passed: forget the decision.
                 *memory = None;
+                *blocked = false;
                 continue;
             }
             // Room between the corridor's edge and the inflated circle on each side.
@@ -909,7 +917,13 @@ impl MpcConfig {
                     };
                     if room(s) < need || room(s).is_nan() {
                         *memory = None;
-                        if ob.ahead_m - r - front <= reach_m {
+                        // Within reach it stops the car, and it keeps it stopped while it
+                        // leaves no passage: once the car has slowed, the stopping distance and
+                        // the horizon no longer reach the obstacle, and without the latch a
+                        // stopped van drove off again (a speed command of 11 m/s at full lock)
+                        // to stop again a tick later, 94 times in one run (docs/findings.md).
+                        if *blocked || ob.ahead_m - r - front <= reach_m {
+                            *blocked = true;
                             return Err(FallbackReason::NoPassage);
                         }
                         continue;
@@ -917,6 +931,7 @@ impl MpcConfig {
                     s
                 }
             };
+            *blocked = false;
             *memory = Some(side);
             *slot = Some((
                 InflatedObstacle {
