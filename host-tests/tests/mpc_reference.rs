@@ -368,3 +368,62 @@ fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
     assert!((f64::from(q.stages[0].rows[1].upper) - 2.99916).abs() < 2e-5);
     assert!((f64::from(q.stages[13].rows[1].upper) - (1.0 + 2.0 * (1.0 - 0.49058))).abs() < 2e-4);
 }
+
+/// The tracking targets' taper for a car far off its path (`lateral::taper_reference`), by
+/// hand: the start 3 m right (`e_y = 3`), the taper from 1 m, so 2 m are returned along the
+/// smoothstep over `2 sqrt(2 / 1) = 2.828 s`; at 10 m/s the heading target is
+/// `-2 s'(u) / 2.828 / 10` with `s'(u) = 30 u^2 (1 - u)^2`. At stage 13 (1.4 s, `u = 0.49497`):
+/// `e_y` target `2 (1 - 0.49058) = 1.01884`, `s'(u) = 1.87462`, heading `-0.13256` rad; the linear
+/// terms are `-q x_ref`. A car within 1 m changes nothing; a car on the left mirrors it.
+#[test]
+fn a_start_far_off_the_path_tapers_the_tracking_targets() {
+    use catmodel::control::mpc::lateral::{taper_reference, EPSI, EY};
+    use catmodel::control::mpc::STEPS as MPC_STEPS;
+    let fresh = || {
+        let mut q = Problem::<NX, MPC_STEPS, ROWS>::zeroed();
+        for st in q.stages.iter_mut() {
+            st.q_diag = SVector::<f32, NX>::from([10.0, 10.0, 0.0, 0.0, 1.0]);
+        }
+        q
+    };
+    let x = |e_y: f32| SVector::<f32, NX>::from([e_y, 0.0, 0.0, 0.0, 0.0]);
+    let speeds = [10.0f32; MPC_STEPS + 1];
+
+    let mut near = fresh();
+    assert_eq!(taper_reference(&mut near, &x(0.9), &speeds, 1.0, 1.0), 0.0);
+    assert!(near
+        .stages
+        .iter()
+        .all(|st| st.q_lin == SVector::<f32, NX>::zeros()));
+
+    let mut q = fresh();
+    assert_eq!(taper_reference(&mut q, &x(3.0), &speeds, 1.0, 1.0), 2.0);
+    let st = &q.stages[13];
+    assert!(
+        (f64::from(st.q_lin[EY]) - -10.0 * 1.01884).abs() < 2e-3,
+        "{}",
+        st.q_lin[EY]
+    );
+    assert!(
+        (f64::from(st.q_lin[EPSI]) - 10.0 * 0.13256).abs() < 2e-3,
+        "{}",
+        st.q_lin[EPSI]
+    );
+    // The e_y target falls and the heading target points back towards the path all along.
+    let mut previous = f32::INFINITY;
+    for st in &q.stages {
+        let target = -st.q_lin[EY] / 10.0;
+        assert!(target <= previous && target >= 0.0);
+        previous = target;
+        assert!(st.q_lin[EPSI] >= 0.0);
+    }
+    let mut left = fresh();
+    assert_eq!(
+        taper_reference(&mut left, &x(-3.0), &speeds, 1.0, 1.0),
+        -2.0
+    );
+    for (l, r) in left.stages.iter().zip(&q.stages) {
+        assert_eq!(l.q_lin[EY], -r.q_lin[EY]);
+        assert_eq!(l.q_lin[EPSI], -r.q_lin[EPSI]);
+    }
+}

@@ -15,7 +15,8 @@
 //! - `mpc_blocked`: an obstacle that leaves no room (status 3, the fallback);
 //! - `mpc_worst_dynamic`, `mpc_worst_kinematic`: four large obstacles beside the road so that
 //!   every stage has all its rows, a corridor narrower than the car so that every corridor row
-//!   gives way from the start, and no early exit: the worst case.
+//!   gives way from the start, the car 1.5 m off its path so that the tracking targets taper,
+//!   and no early exit: the worst case.
 //!
 //! Then the parts of a solve (`mpc_part_*`: problem build with every row, Riccati
 //! factorisation, one ADMM iteration with and without the residual check, the speed plan),
@@ -532,7 +533,9 @@ fn run_worst(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
             "MPC solve, worst case (kinematic)",
         ),
     ] {
-        let mut car = b.car(Pose::new(0.5, 0.0, 0.05), v);
+        // 1.5 m off the path: beyond `return_from_m`, so the tracking cost's targets taper too
+        // (`lateral::taper_reference`).
+        let mut car = b.car(Pose::new(1.5, 0.0, 0.05), v);
         st.state.reset();
         for _ in 0..100 {
             let obstacles = worst_obstacles(&car);

@@ -419,6 +419,46 @@ pub fn relax_corridor(
     worst
 }
 
+/// Tapers the tracking cost's target for a car that starts far off its path: of the start's
+/// lateral error, the part beyond `from_m` is returned along the same quintic smoothstep as
+/// [`relax_corridor`] over `2 sqrt(part / return_mps2)`, with the heading error that return
+/// needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least 1 m/s,
+/// at most 0.5 rad) as the heading's target. The costs' linear terms get the targets (`q_lin =
+/// -q_diag x_ref`, as the steering's feed-forward). Within `from_m` of the path nothing
+/// changes. Without it a 1.5 s horizon asks for the whole return at once and does not see the
+/// far side: the van taken over 3.6 m beside its path went 4.9 m through it (docs/controller.md,
+/// "Starting outside the corridor"). Returns the part returned along the taper, m.
+pub fn taper_reference(
+    problem: &mut Problem<NX, STEPS, ROWS>,
+    x0: &SVector<f32, NX>,
+    speeds_mps: &[f32; STEPS + 1],
+    return_mps2: f32,
+    from_m: f32,
+) -> f32 {
+    let e0 = x0.get(EY).copied().unwrap_or(0.0);
+    let size = if e0 < 0.0 { -e0 } else { e0 };
+    let part = max(size - from_m, 0.0);
+    if !part.is_finite() || part <= 0.0 {
+        return 0.0;
+    }
+    let rate = 0.5 * math::sqrt(return_mps2 / part);
+    let part = if e0 < 0.0 { -part } else { part };
+    for (k, st) in problem.stages.iter_mut().enumerate() {
+        let t = (k + 1) as f32 * STEP_S;
+        let u = clamp(t * rate, 0.0, 1.0);
+        let e_y = part * (1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)));
+        let de_y = -part * 30.0 * u * u * (1.0 - u) * (1.0 - u) * rate;
+        let v = max(speeds_mps.get(k + 1).copied().unwrap_or(0.0), 1.0);
+        let e_psi = clamp(de_y / v, -0.5, 0.5);
+        for (i, target) in [(EY, e_y), (EPSI, e_psi)] {
+            if let (Some(l), Some(q)) = (st.q_lin.get_mut(i), st.q_diag.get(i)) {
+                *l = -q * target;
+            }
+        }
+    }
+    part
+}
+
 /// One obstacle as the rows see it (inflated radius).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InflatedObstacle {

@@ -235,6 +235,9 @@ pub struct MpcTuning {
     /// corridor rows give way by the start's violation, tapering over the return's duration
     /// (`lateral::relax_corridor`), m/s^2.
     pub corridor_return_mps2: f32,
+    /// A lateral error beyond this at the start is returned at `corridor_return_mps2` too: the
+    /// tracking cost's target tapers (`lateral::taper_reference`), m.
+    pub return_from_m: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
     pub obstacle_margin_m: f32,
     /// The other side of an obstacle must have this much more room to change the decision, m.
@@ -292,6 +295,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     steer_trust_s: 0.15,
     steer_rate_share: 0.9,
     corridor_return_mps2: 1.0,
+    return_from_m: 1.0,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
     obstacle_tolerance_m: 0.25,
@@ -476,7 +480,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 14] = [
+        let checks: [(bool, &'static str); 15] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -509,6 +513,10 @@ impl MpcConfig {
             (
                 positive(tuning.corridor_return_mps2),
                 "corridor_return_mps2",
+            ),
+            (
+                tuning.return_from_m.is_finite() && tuning.return_from_m >= 0.0,
+                "return_from_m (>= 0)",
             ),
             (
                 tuning.preview_s.is_finite() && tuning.preview_s >= 0.0,
@@ -612,6 +620,13 @@ impl MpcConfig {
             }
         };
         lateral::relax_corridor(&mut state.problem, &x0, self.tuning.corridor_return_mps2);
+        lateral::taper_reference(
+            &mut state.problem,
+            &x0,
+            &speeds,
+            self.tuning.corridor_return_mps2,
+            self.tuning.return_from_m,
+        );
         // Avoiding: some obstacle reaches the body within the horizon.
         let avoiding = state
             .problem
