@@ -113,7 +113,7 @@ fn loop_lateral_rms_rtk() {
 /// take-over by 0.2 s: the clearances are centimetres at every speed and which speeds pass is
 /// chance at that scale, docs/controller.md); pure pursuit with the CAT Vehicle's tuning
 /// 6.25 m/s, with a lookahead tuned for this car 14.81 m/s; the obstacle passed with 0.5 m with the
-/// standard receiver (measured 2.13 m); the loop at 10 m/s within the goal's 0.10 m lateral
+/// standard receiver (measured 2.11 m); the loop at 10 m/s within the goal's 0.10 m lateral
 /// RMS (measured 0.031 m).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
