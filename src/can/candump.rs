@@ -236,14 +236,11 @@ fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
         if len > 8 {
             return Err(CandumpError::FdFrame);
         }
-        let &[hi, lo] = token.as_bytes() else {
-            return Err(if n < len {
-                CandumpError::BadHex
-            } else {
-                CandumpError::TrailingGarbage
-            });
+        let byte = match token.as_bytes() {
+            &[hi, lo] => hex_value(hi).zip(hex_value(lo)).map(|(h, l)| (h << 4) | l),
+            _ => None,
         };
-        let (Some(hi), Some(lo)) = (hex_value(hi), hex_value(lo)) else {
+        let Some(byte) = byte else {
             return Err(if n < len {
                 CandumpError::BadHex
             } else {
@@ -253,7 +250,7 @@ fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
         let Some(slot) = data.get_mut(n as usize).filter(|_| n < len) else {
             return Err(CandumpError::TrailingGarbage);
         };
-        *slot = (hi << 4) | lo;
+        *slot = byte;
         n += 1;
     }
     if len > 8 {

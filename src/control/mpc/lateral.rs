@@ -401,7 +401,7 @@ pub fn relax_corridor(
     let mut taper = [(0.0f32, 0.0f32); ROW_OBSTACLE];
     for (t, v) in taper.iter_mut().zip(start) {
         if v > 0.0 {
-            *t = (v, 0.5 * math::sqrt(return_mps2 / v));
+            *t = (v, return_rate(v, return_mps2));
         }
     }
     for (k, st) in problem.stages.iter_mut().enumerate() {
@@ -410,13 +410,30 @@ pub fn relax_corridor(
             if !(row.active && v > 0.0) {
                 continue;
             }
-            let u = clamp(t * rate, 0.0, 1.0);
-            let give = v * (1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)));
+            let give = v * return_ahead(t, rate).0;
             row.lower -= give;
             row.upper += give;
         }
     }
     worst
+}
+
+/// The inverse of the duration of a return over `distance_m` at `accel_mps2`: a bang-bang
+/// return's `2 sqrt(distance / accel)` (the smoothstep of [`return_ahead`] peaks at 1.44 times
+/// that acceleration).
+fn return_rate(distance_m: f32, accel_mps2: f32) -> f32 {
+    0.5 * math::sqrt(accel_mps2 / distance_m)
+}
+
+/// The share of a return still ahead at time `t_s` along the quintic smoothstep `10 u^3 -
+/// 15 u^4 + 6 u^5` of `u = t rate` (zero slope and curvature at both ends), and its rate of
+/// change, 1/s.
+fn return_ahead(t_s: f32, rate: f32) -> (f32, f32) {
+    let u = clamp(t_s * rate, 0.0, 1.0);
+    (
+        1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)),
+        -30.0 * u * u * (1.0 - u) * (1.0 - u) * rate,
+    )
 }
 
 /// Tapers the tracking cost's target for a car that starts far off its path: of the start's
@@ -441,13 +458,12 @@ pub fn taper_reference(
     if !part.is_finite() || part <= 0.0 {
         return 0.0;
     }
-    let rate = 0.5 * math::sqrt(return_mps2 / part);
+    let rate = return_rate(part, return_mps2);
     let part = if e0 < 0.0 { -part } else { part };
     for (k, st) in problem.stages.iter_mut().enumerate() {
-        let t = (k + 1) as f32 * STEP_S;
-        let u = clamp(t * rate, 0.0, 1.0);
-        let e_y = part * (1.0 - u * u * u * (10.0 + u * (-15.0 + 6.0 * u)));
-        let de_y = -part * 30.0 * u * u * (1.0 - u) * (1.0 - u) * rate;
+        let (ahead, d_ahead) = return_ahead((k + 1) as f32 * STEP_S, rate);
+        let e_y = part * ahead;
+        let de_y = part * d_ahead;
         let v = max(speeds_mps.get(k + 1).copied().unwrap_or(0.0), 1.0);
         let e_psi = clamp(de_y / v, -0.5, 0.5);
         for (i, target) in [(EY, e_y), (EPSI, e_psi)] {
