@@ -42,6 +42,7 @@ pub mod can;
 pub mod control;
 pub mod geodesy;
 pub mod image;
+mod in_place;
 pub mod math;
 pub mod metrics;
 pub mod model;

@@ -19,6 +19,7 @@
 
 pub mod baked {
     //! The model file baked in at build time (see the build script).
+    use core::mem::MaybeUninit;
     use core::sync::atomic::{AtomicBool, Ordering};
 
     use catmodel::image::ImageError;
@@ -35,17 +36,22 @@ pub mod baked {
         NodeConfig::from_image(&CONFIG_IMAGE)
     }
 
-    /// The drive stage's state (about 23 KiB), in a static initialised at compile time: built
-    /// at run time it would pass through the 16 KiB stack. `None` after the first call.
+    /// The drive stage's state (about 35 KiB), built in place in uninitialised RAM
+    /// ([`Drive::init`]): a value would pass through the 16 KiB stack, and a static initialised
+    /// with `Drive::new()` keeps a 35 KiB copy of it in flash (`.data`). `None` after the first
+    /// call.
     pub fn take_drive() -> Option<&'static mut Drive> {
         static TAKEN: AtomicBool = AtomicBool::new(false);
-        static mut DRIVE: Drive = Drive::new();
+        // `.uninit`: neither in flash nor zeroed at reset (cortex-m-rt's section).
+        #[link_section = ".uninit.catmodel.DRIVE"]
+        static mut DRIVE: MaybeUninit<Drive> = MaybeUninit::uninit();
         if TAKEN.swap(true, Ordering::AcqRel) {
             return None;
         }
         // SAFETY: `TAKEN` lets exactly one caller through, so this is the only reference to
         // `DRIVE` there will ever be.
-        Some(unsafe { &mut *core::ptr::addr_of_mut!(DRIVE) })
+        let slot = unsafe { &mut *core::ptr::addr_of_mut!(DRIVE) };
+        Some(Drive::init(slot))
     }
 
     /// Why the node could not be built.

@@ -6,7 +6,11 @@ use catmodel_host::closed_loop::scenario::{self, Kind};
 use catmodel_host::closed_loop::{load_setup, run, Receiver, RunOptions};
 
 fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
-    let (vehicle, node) = load_setup(None, None).unwrap();
+    // VEHICLE and MODEL: another car (paths from the repository's root, as the CLI's).
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let vehicle = std::env::var("VEHICLE").ok().map(|p| root.join(p));
+    let model = std::env::var("MODEL").ok().map(|p| root.join(p));
+    let (vehicle, node) = load_setup(vehicle.as_deref(), model.as_deref()).unwrap();
     let kind =
         std::env::var("SCENARIO").map_or(Kind::DoubleLaneChange, |s| Kind::from_name(&s).unwrap());
     let course = scenario::course(kind, &vehicle.body, speed);

@@ -26,6 +26,9 @@
 //! start) over that length.
 //!
 //! Never allocates, never panics; every loop runs at most [`MAX_PATH_POINTS`] times.
+use core::ptr::addr_of_mut;
+
+use crate::in_place::fill;
 use crate::math;
 use crate::model::kinematic::Pose;
 
@@ -242,6 +245,30 @@ impl Path {
             direction: [(0.0, 1.0); MAX_PATH_POINTS],
             reference_heading_rad: [0.0; MAX_PATH_POINTS],
             curvature_per_m: [0.0; MAX_PATH_POINTS],
+        }
+    }
+
+    /// Writes [`Path::new`] into `slot` in place (`crate::in_place`).
+    ///
+    /// # Safety
+    ///
+    /// `slot` must be valid for writes of a `Path` and aligned for it.
+    pub(crate) unsafe fn init_in_place(slot: *mut Self) {
+        let zero = Waypoint {
+            east_m: 0.0,
+            north_m: 0.0,
+            speed_mps: 0.0,
+            left_m: 0.0,
+            right_m: 0.0,
+        };
+        // SAFETY: every field of the `Path` the caller vouches for, once each.
+        unsafe {
+            addr_of_mut!((*slot).len).write(0);
+            fill(addr_of_mut!((*slot).points), zero);
+            fill(addr_of_mut!((*slot).station_m), 0.0);
+            fill(addr_of_mut!((*slot).direction), (0.0, 1.0));
+            fill(addr_of_mut!((*slot).reference_heading_rad), 0.0);
+            fill(addr_of_mut!((*slot).curvature_per_m), 0.0);
         }
     }
 

@@ -11,9 +11,12 @@
 //! No configuration; the state is [`PlannerInputs`]: the active [`Path`] (7 KiB) and the
 //! assembly buffer (5 KiB) at 256 points. Never allocates; every call is O(1) except the one
 //! that completes a path (one pass over its points to validate, one to load).
+use core::ptr::addr_of_mut;
+
 use crate::can::codec::{LocalOrigin, ObstacleCircle, PlannerMessage};
 use crate::can::counter::CounterChecker;
 use crate::can::spec::OBSTACLE_SLOTS;
+use crate::in_place::fill;
 
 use super::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
 
@@ -153,6 +156,39 @@ impl PlannerInputs {
                 counter_jumps: 0,
                 origin_mismatches: 0,
             },
+        }
+    }
+
+    /// Writes [`PlannerInputs::new`] into `slot` in place (`crate::in_place`): the path and
+    /// the assembly's waypoints are 15 KiB.
+    ///
+    /// # Safety
+    ///
+    /// `slot` must be valid for writes of a `PlannerInputs` and aligned for it.
+    pub(crate) unsafe fn init_in_place(slot: *mut Self) {
+        let zero = Waypoint {
+            east_m: 0.0,
+            north_m: 0.0,
+            speed_mps: 0.0,
+            left_m: 0.0,
+            right_m: 0.0,
+        };
+        // SAFETY: every field of the `PlannerInputs` the caller vouches for (and of its
+        // assembly), once each; the path by its own in-place constructor.
+        unsafe {
+            Path::init_in_place(addr_of_mut!((*slot).path));
+            addr_of_mut!((*slot).path_id).write(None);
+            let assembly = addr_of_mut!((*slot).assembly);
+            addr_of_mut!((*assembly).active).write(false);
+            addr_of_mut!((*assembly).path_id).write(0);
+            addr_of_mut!((*assembly).count).write(0);
+            addr_of_mut!((*assembly).next_point).write(0);
+            addr_of_mut!((*assembly).next_limits).write(0);
+            fill(addr_of_mut!((*assembly).waypoints), zero);
+            addr_of_mut!((*slot).obstacles).write([None; OBSTACLE_SLOTS]);
+            addr_of_mut!((*slot).origin_latitude).write(None);
+            addr_of_mut!((*slot).counters).write([CounterChecker::new(); MESSAGES]);
+            addr_of_mut!((*slot).stats).write(PlannerCounters::default());
         }
     }
 

@@ -30,9 +30,14 @@
 //! not hand the car back to a controller). Never a NaN: every command is checked finite, else
 //! the fallback.
 //!
-//! The state (about 23 KiB: two paths of 256 points and the controller's warm start) is kept
-//! apart from [`super::Node`] so that a platform can place it in a static, initialised at
-//! compile time ([`Drive::new`] is `const`): built on the 16 KiB stack it would overflow it.
+//! The state (about 35 KiB: two paths of 256 points, the controller's warm start and its
+//! reference) is kept apart from [`super::Node`] so that a platform can place it in a static:
+//! built on the 16 KiB stack it would overflow it. [`Drive::init`] builds it in place in
+//! uninitialised RAM (the firmware's way: nothing of it in flash); [`Drive::new`] is `const`
+//! (a static initialised with it keeps its 35 KiB image in flash).
+use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
+
 use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
 use crate::control::mpc::{
     self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample, SidePoint,
@@ -44,6 +49,7 @@ use crate::control::pure_pursuit::{
     self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
 };
 use crate::image::{Image, ImageError, ImageReader, ImageWriter};
+use crate::in_place::fill;
 use crate::model::dynamic::LateralState;
 use crate::model::hybrid::Mode;
 use crate::model::kinematic::Pose;
@@ -138,6 +144,9 @@ pub struct Drive {
     projection: Option<Projection>,
     /// The last plan's speeds (the reference's stations follow them).
     planned_speeds: Option<[f32; PLAN_STEPS + 1]>,
+    /// The solve's reference, filled each tick (kept in place: 3.4 KiB, a quarter of the
+    /// controller's stack when it was built there).
+    reference: [ReferencePoint; STEPS + 1],
     /// The model-predictive controller's last accepted output (kept in place: it is 0.6 KiB).
     last_plan: Option<MpcOutput>,
     /// ... and it is the previous tick's.
@@ -183,6 +192,7 @@ impl Drive {
             },
             projection: None,
             planned_speeds: None,
+            reference: [ReferencePoint::ZERO; STEPS + 1],
             last_plan: None,
             planned_last_tick: false,
             path_loaded: false,
@@ -198,6 +208,47 @@ impl Drive {
             heading: HeadingSettle::new(),
             lost_path: false,
             unconfigured: true,
+        }
+    }
+
+    /// Builds [`Drive::new`] in `slot`, in place: the state (35 KiB) is larger than the
+    /// firmware's stack, and a static initialised with `Drive::new()` keeps a copy of it in
+    /// flash (`crate::in_place`). The firmware keeps `slot` in uninitialised RAM.
+    pub fn init(slot: &mut MaybeUninit<Self>) -> &mut Self {
+        let p = slot.as_mut_ptr();
+        // SAFETY: `p` is valid for writes and aligned (it comes from `slot`); every field of
+        // the `Drive` is written exactly once below, through raw pointers (no reference to
+        // uninitialised memory is made), the large ones by their own in-place constructors,
+        // before `assume_init_mut`.
+        unsafe {
+            PlannerInputs::init_in_place(addr_of_mut!((*p).planner));
+            MpcState::init_in_place(addr_of_mut!((*p).mpc));
+            addr_of_mut!((*p).mpc_config).write(None);
+            addr_of_mut!((*p).pursuit_tuning).write(pure_pursuit::DEFAULT_TUNING);
+            addr_of_mut!((*p).pursuit).write(PurePursuitState {
+                integral_mps: 0.0,
+                projection: None,
+                steer_cmd_pct: 0.0,
+            });
+            addr_of_mut!((*p).projection).write(None);
+            addr_of_mut!((*p).planned_speeds).write(None);
+            fill(addr_of_mut!((*p).reference), ReferencePoint::ZERO);
+            addr_of_mut!((*p).last_plan).write(None);
+            addr_of_mut!((*p).planned_last_tick).write(false);
+            addr_of_mut!((*p).path_loaded).write(false);
+            addr_of_mut!((*p).last_speed_cmd_mps).write(0.0);
+            addr_of_mut!((*p).last_steer_cmd_pct).write(0.0);
+            addr_of_mut!((*p).last_command).write(ControlCommand {
+                status: ControlStatus::NoPath,
+                steer_cmd_pct: Some(0.0),
+                speed_cmd_mps: Some(0.0),
+            });
+            addr_of_mut!((*p).last_tracking).write(None);
+            addr_of_mut!((*p).smoothing).write(Smoothing::new());
+            addr_of_mut!((*p).heading).write(HeadingSettle::new());
+            addr_of_mut!((*p).lost_path).write(false);
+            addr_of_mut!((*p).unconfigured).write(true);
+            slot.assume_init_mut()
         }
     }
 
@@ -378,6 +429,7 @@ impl Drive {
                     self.planner.obstacles(),
                     &mut self.projection,
                     &mut self.planned_speeds,
+                    &mut self.reference,
                     pose,
                     inputs,
                     speed_model,
@@ -541,6 +593,7 @@ fn mpc_tick<P: StageProbe>(
     obstacles: &[Option<ObstacleCircle>],
     projection: &mut Option<Projection>,
     planned_speeds: &mut Option<[f32; PLAN_STEPS + 1]>,
+    reference: &mut [ReferencePoint; STEPS + 1],
     pose: Pose,
     inputs: &DriveInputs<'_>,
     speed_model: &SsBlockState<2, VELOCITY_DELAY_CAP>,
@@ -564,19 +617,7 @@ fn mpc_tick<P: StageProbe>(
     let rear = body.rear_overhang_m;
     // Expected stations: the last plan's speeds (the current speed before there is one).
     let speeds = planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]);
-    let none = SidePoint {
-        sample: sample(&tracking.reference, (0.0, 0.0)),
-        ahead_m: 0.0,
-    };
-    let mut reference = [ReferencePoint {
-        at: none.sample,
-        curvature_per_m: 0.0,
-        speed_mps: 0.0,
-        front_left: none,
-        front_right: none,
-        rear_left: none,
-        rear_right: none,
-    }; STEPS + 1];
+    // Every point is written below before the solve reads it (or the tick returns early).
     let mut s = s0;
     for (k, r) in reference.iter_mut().enumerate() {
         if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
@@ -618,7 +659,7 @@ fn mpc_tick<P: StageProbe>(
     let mut peek = *speed_model;
     let modelled_mps = config.velocity.step(&mut peek, 0.0);
     let input = MpcInput {
-        reference: &reference,
+        reference,
         obstacles: &placed,
         car: mpc::CarState {
             pose,
@@ -641,4 +682,32 @@ fn mpc_tick<P: StageProbe>(
     }
     *planned_speeds = Some(next);
     Some(Ok((out, tracking)))
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use core::mem::MaybeUninit;
+    use std::boxed::Box;
+    use std::format;
+
+    use super::Drive;
+
+    /// `Drive::init` builds what `Drive::new` is, whatever the memory held: built over zeros,
+    /// over a pattern and over ones (a field it forgot to write would show the pattern).
+    #[test]
+    fn built_in_place_it_is_new() {
+        let new = format!("{:?}", Drive::new());
+        for pattern in [0x00u8, 0x5A, 0xFF] {
+            let mut slot: Box<MaybeUninit<Drive>> = Box::new_uninit();
+            // SAFETY: bytes into a `MaybeUninit`, within its size.
+            unsafe {
+                slot.as_mut_ptr()
+                    .cast::<u8>()
+                    .write_bytes(pattern, size_of::<Drive>());
+            }
+            let built = Drive::init(&mut slot);
+            assert_eq!(format!("{built:?}"), new, "over 0x{pattern:02x}");
+        }
+    }
 }

@@ -41,9 +41,12 @@
 //!
 //! Only + - * / and comparisons on f32, in source order: bit-identical on the host and the
 //! Cortex-M4F.
+use core::ptr::addr_of_mut;
+
 use nalgebra::{SMatrix, SVector};
 
 use super::{clamp, max};
+use crate::in_place::fill;
 use crate::math;
 
 /// Range of the adaptive penalty factor.
@@ -211,6 +214,22 @@ impl<const NX: usize, const N: usize, const NR: usize> Problem<NX, N, NR> {
             box_rho: 1.0,
         }
     }
+
+    /// Writes [`Problem::zeroed`] into `slot` in place (`crate::in_place`).
+    ///
+    /// # Safety
+    ///
+    /// `slot` must be valid for writes of a `Problem` and aligned for it.
+    pub(crate) unsafe fn init_in_place(slot: *mut Self) {
+        // SAFETY: every field of the `Problem` the caller vouches for, once each.
+        unsafe {
+            fill(addr_of_mut!((*slot).stages), Stage::ZERO);
+            addr_of_mut!((*slot).r).write(1.0);
+            addr_of_mut!((*slot).u_rho).write(1.0);
+            addr_of_mut!((*slot).box_state).write(0);
+            addr_of_mut!((*slot).box_rho).write(1.0);
+        }
+    }
 }
 
 /// Why a solve could not produce a plan.
@@ -367,6 +386,22 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
             rho_scale: 1.0,
             factorisations: 0,
             stages: [StageIterate::ZERO; N],
+        }
+    }
+}
+
+impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
+    /// Writes [`Workspace::new`] into `slot` in place (`crate::in_place`).
+    ///
+    /// # Safety
+    ///
+    /// `slot` must be valid for writes of a `Workspace` and aligned for it.
+    pub(crate) unsafe fn init_in_place(slot: *mut Self) {
+        // SAFETY: every field of the `Workspace` the caller vouches for, once each.
+        unsafe {
+            addr_of_mut!((*slot).rho_scale).write(1.0);
+            addr_of_mut!((*slot).factorisations).write(0);
+            fill(addr_of_mut!((*slot).stages), StageIterate::ZERO);
         }
     }
 }

@@ -25,6 +25,8 @@ pub mod admm;
 pub mod lateral;
 pub mod longitudinal;
 
+use core::ptr::addr_of_mut;
+
 use nalgebra::SVector;
 
 use self::admm::{AdmmSettings, Problem, SolveError, Workspace};
@@ -42,7 +44,7 @@ use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
 
 /// MPC steps of the steering problem: 15 x 0.1 s = 1.5 s (measured: a longer horizon did not
 /// pass the double lane change faster, and costs a third more per iteration; docs/mpc.md).
-pub const STEPS: usize = 15;
+pub const STEPS: usize = 20;
 /// Steps of the plan the node sends: 20 x 0.1 s = 2 s, the PREDICTION frames' horizon. The
 /// speed plan covers it all; beyond [`STEPS`] the steering plan holds its last value.
 pub const PLAN_STEPS: usize = 20;
@@ -100,6 +102,37 @@ pub struct ReferencePoint {
     pub rear_left: SidePoint,
     /// ... its right side between the rear end and the axle.
     pub rear_right: SidePoint,
+}
+
+impl ReferencePoint {
+    /// Everything zero (north, straight, no corridor): the contents of a reference buffer
+    /// before it is filled. `const`, so that a platform can keep the buffer in a static.
+    pub const ZERO: Self = {
+        let sample = Sample {
+            pose: Pose {
+                x_m: 0.0,
+                y_m: 0.0,
+                heading_rad: 0.0,
+                sin_heading: 0.0,
+                cos_heading: 1.0,
+            },
+            left_m: 0.0,
+            right_m: 0.0,
+        };
+        let side = SidePoint {
+            sample,
+            ahead_m: 0.0,
+        };
+        Self {
+            at: sample,
+            curvature_per_m: 0.0,
+            speed_mps: 0.0,
+            front_left: side,
+            front_right: side,
+            rear_left: side,
+            rear_right: side,
+        }
+    };
 }
 
 /// A circular obstacle, in the frame of the path, with where it lies along the path (the
@@ -276,7 +309,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         rho_steer_rate: 10.0,
     },
     admm: AdmmSettings {
-        max_iterations: 20,
+        max_iterations: 12,
         primal_tolerance: 0.005,
         dual_tolerance: 0.05,
         relaxation: 1.6,
@@ -451,6 +484,27 @@ impl MpcState {
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
             steer_ramp_rad: None,
+        }
+    }
+
+    /// Writes [`MpcState::new`] into `slot` in place (`crate::in_place`).
+    ///
+    /// # Safety
+    ///
+    /// `slot` must be valid for writes of an `MpcState` and aligned for it.
+    pub(crate) unsafe fn init_in_place(slot: *mut Self) {
+        // SAFETY: every field of the `MpcState` the caller vouches for, once each; the solver's
+        // workspace and problem by their own in-place constructors.
+        unsafe {
+            Workspace::init_in_place(addr_of_mut!((*slot).workspace));
+            Problem::init_in_place(addr_of_mut!((*slot).problem));
+            addr_of_mut!((*slot).speed).write(SpeedState::new());
+            addr_of_mut!((*slot).lin).write(None);
+            addr_of_mut!((*slot).sides).write([None; MAX_OBSTACLES]);
+            addr_of_mut!((*slot).blocked).write([false; MAX_OBSTACLES]);
+            addr_of_mut!((*slot).last_steer_plan).write(None);
+            addr_of_mut!((*slot).obstacle_violation_ticks).write(0);
+            addr_of_mut!((*slot).steer_ramp_rad).write(None);
         }
     }
 
