@@ -640,13 +640,13 @@ fn run_parts(b: &Bench, st: &mut Statics) {
             "mpc_part_build",
             "MPC part: lateral problem",
             build,
-            "linearise, discretise, rows: all 15 stages, every row",
+            "linearise, discretise, rows: all 20 stages, every row",
         ),
         (
             "mpc_part_factor",
             "MPC part: Riccati factorisation",
             factor,
-            "gains of the 15 stages",
+            "gains of the 20 stages",
         ),
         (
             "mpc_part_iteration",
