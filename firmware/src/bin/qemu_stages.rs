@@ -4,7 +4,7 @@
 //! into `worst_case_bound_instructions` and `worst_case_bound_controller_instructions`
 //! (docs/firmware.md, "Worst-case tick"). The method and the output format are
 //! [`catmodel_firmware::platform::qemu::stages`]'s. Its own firmware (not a mode of
-//! `catmodel-qemu-bench`): two nodes with their drive stages (24 KiB each) do not fit in RAM
+//! `catmodel-qemu-bench`): two nodes with their drive stages (35 KiB each) do not fit in RAM
 //! beside the component benchmark's sample stores.
 #![no_std]
 #![no_main]

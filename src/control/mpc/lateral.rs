@@ -442,7 +442,7 @@ fn return_ahead(t_s: f32, rate: f32) -> (f32, f32) {
 /// needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least 1 m/s,
 /// at most 0.5 rad) as the heading's target. The costs' linear terms get the targets (`q_lin =
 /// -q_diag x_ref`, as the steering's feed-forward). Within `from_m` of the path nothing
-/// changes. Without it a 1.5 s horizon asks for the whole return at once and does not see the
+/// changes. Without it the (then 1.5 s) horizon asks for the whole return at once and does not see the
 /// far side: the van taken over 3.6 m beside its path went 4.9 m through it (docs/controller.md,
 /// "Starting outside the corridor"). Returns the part returned along the taper, m.
 pub fn taper_reference(

@@ -42,11 +42,14 @@ use crate::model::{SsBlock, SsBlockState};
 use crate::node::NodeConfig;
 use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
 
-/// MPC steps of the steering problem: 15 x 0.1 s = 1.5 s (measured: a longer horizon did not
-/// pass the double lane change faster, and costs a third more per iteration; docs/mpc.md).
+/// MPC steps of the steering problem: 20 x 0.1 s = 2 s, as long as the plan the node sends (it
+/// was 15: on the rig the lane change's limit rose by 0.7 m/s on the CAT Vehicle and 2.1 m/s on
+/// the hatchback with 20, at 12 ADMM iterations instead of 20 for less work per solve;
+/// docs/controller.md, "A 2 s horizon").
 pub const STEPS: usize = 20;
 /// Steps of the plan the node sends: 20 x 0.1 s = 2 s, the PREDICTION frames' horizon. The
-/// speed plan covers it all; beyond [`STEPS`] the steering plan holds its last value.
+/// speed plan covers it all; beyond [`STEPS`] (none now) the steering plan would hold its last
+/// value.
 pub const PLAN_STEPS: usize = 20;
 /// MPC step, s (every 5th node tick: the PREDICTION frames are every 0.2 s = 2 steps).
 pub const STEP_S: f32 = 0.1;
@@ -471,7 +474,7 @@ impl Default for MpcState {
 }
 
 impl MpcState {
-    /// No solve yet. `const`, so that the firmware can keep the state (10 KiB) in a static
+    /// No solve yet. `const`, so that the firmware can keep the state (13 KiB) in a static
     /// rather than build it on its 16 KiB stack.
     pub const fn new() -> Self {
         Self {
@@ -509,7 +512,7 @@ impl MpcState {
     }
 
     /// Forgets the warm start and the side decisions (a new path), in place (the state is
-    /// 10 KiB: a fresh value would be built on the stack first).
+    /// 13 KiB: a fresh value would be built on the stack first).
     pub fn reset(&mut self) {
         self.workspace.reset();
         self.speed = SpeedState::new();

@@ -172,7 +172,7 @@ static RX: RxQueue = RxQueue::new();
 static TX: TxQueue = TxQueue::new();
 static COUNTERS: LinkCounters = LinkCounters::new();
 /// The two nodes, their drive stages and the drive's reader live in statics: two nodes
-/// (2.6 KiB each), two drive stages (23 KiB each) and a reader (1 KiB) on the 16 KiB stack
+/// (2.6 KiB each), two drive stages (35 KiB each) and a reader (1 KiB) on the 16 KiB stack
 /// would leave too little for the ticks themselves.
 static mut PROBED: Option<Node<&'static mut Drive>> = None;
 static mut PLAIN: Option<Node<&'static mut Drive>> = None;
