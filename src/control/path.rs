@@ -78,6 +78,17 @@ pub struct Waypoint {
     pub right_m: f32,
 }
 
+impl Waypoint {
+    /// All zero: the contents of a point buffer before it is filled.
+    pub const ZERO: Self = Self {
+        east_m: 0.0,
+        north_m: 0.0,
+        speed_mps: 0.0,
+        left_m: 0.0,
+        right_m: 0.0,
+    };
+}
+
 /// Why a set of waypoints is not a path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -234,13 +245,7 @@ impl Path {
     pub const fn new() -> Self {
         Self {
             len: 0,
-            points: [Waypoint {
-                east_m: 0.0,
-                north_m: 0.0,
-                speed_mps: 0.0,
-                left_m: 0.0,
-                right_m: 0.0,
-            }; MAX_PATH_POINTS],
+            points: [Waypoint::ZERO; MAX_PATH_POINTS],
             station_m: [0.0; MAX_PATH_POINTS],
             direction: [(0.0, 1.0); MAX_PATH_POINTS],
             reference_heading_rad: [0.0; MAX_PATH_POINTS],
@@ -254,17 +259,10 @@ impl Path {
     ///
     /// `slot` must be valid for writes of a `Path` and aligned for it.
     pub(crate) unsafe fn init_in_place(slot: *mut Self) {
-        let zero = Waypoint {
-            east_m: 0.0,
-            north_m: 0.0,
-            speed_mps: 0.0,
-            left_m: 0.0,
-            right_m: 0.0,
-        };
         // SAFETY: every field of the `Path` the caller vouches for, once each.
         unsafe {
             addr_of_mut!((*slot).len).write(0);
-            fill(addr_of_mut!((*slot).points), zero);
+            fill(addr_of_mut!((*slot).points), Waypoint::ZERO);
             fill(addr_of_mut!((*slot).station_m), 0.0);
             fill(addr_of_mut!((*slot).direction), (0.0, 1.0));
             fill(addr_of_mut!((*slot).reference_heading_rad), 0.0);

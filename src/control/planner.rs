@@ -135,13 +135,7 @@ impl PlannerInputs {
                 count: 0,
                 next_point: 0,
                 next_limits: 0,
-                waypoints: [Waypoint {
-                    east_m: 0.0,
-                    north_m: 0.0,
-                    speed_mps: 0.0,
-                    left_m: 0.0,
-                    right_m: 0.0,
-                }; MAX_PATH_POINTS],
+                waypoints: [Waypoint::ZERO; MAX_PATH_POINTS],
             },
             obstacles: [None; OBSTACLE_SLOTS],
             origin_latitude: None,
@@ -166,13 +160,6 @@ impl PlannerInputs {
     ///
     /// `slot` must be valid for writes of a `PlannerInputs` and aligned for it.
     pub(crate) unsafe fn init_in_place(slot: *mut Self) {
-        let zero = Waypoint {
-            east_m: 0.0,
-            north_m: 0.0,
-            speed_mps: 0.0,
-            left_m: 0.0,
-            right_m: 0.0,
-        };
         // SAFETY: every field of the `PlannerInputs` the caller vouches for (and of its
         // assembly), once each; the path by its own in-place constructor.
         unsafe {
@@ -184,7 +171,7 @@ impl PlannerInputs {
             addr_of_mut!((*assembly).count).write(0);
             addr_of_mut!((*assembly).next_point).write(0);
             addr_of_mut!((*assembly).next_limits).write(0);
-            fill(addr_of_mut!((*assembly).waypoints), zero);
+            fill(addr_of_mut!((*assembly).waypoints), Waypoint::ZERO);
             addr_of_mut!((*slot).obstacles).write([None; OBSTACLE_SLOTS]);
             addr_of_mut!((*slot).origin_latitude).write(None);
             addr_of_mut!((*slot).counters).write([CounterChecker::new(); MESSAGES]);
