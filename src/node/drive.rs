@@ -132,6 +132,20 @@ pub struct Received {
     pub completed: Option<Stage>,
 }
 
+/// The reference controller before it has run (`Drive::new` and `Drive::init`).
+const IDLE_PURSUIT: PurePursuitState = PurePursuitState {
+    integral_mps: 0.0,
+    projection: None,
+    steer_cmd_pct: 0.0,
+};
+
+/// CONTROL_COMMAND before any was sent (`Drive::new` and `Drive::init`).
+const NO_COMMAND: ControlCommand = ControlCommand {
+    status: ControlStatus::NoPath,
+    steer_cmd_pct: Some(0.0),
+    speed_cmd_mps: Some(0.0),
+};
+
 /// The drive stage's state. See the module doc for why it lives apart from the node.
 #[derive(Clone, Debug)]
 pub struct Drive {
@@ -185,11 +199,7 @@ impl Drive {
             mpc: MpcState::new(),
             mpc_config: None,
             pursuit_tuning: pure_pursuit::DEFAULT_TUNING,
-            pursuit: PurePursuitState {
-                integral_mps: 0.0,
-                projection: None,
-                steer_cmd_pct: 0.0,
-            },
+            pursuit: IDLE_PURSUIT,
             projection: None,
             planned_speeds: None,
             reference: [ReferencePoint::ZERO; STEPS + 1],
@@ -198,11 +208,7 @@ impl Drive {
             path_loaded: false,
             last_speed_cmd_mps: 0.0,
             last_steer_cmd_pct: 0.0,
-            last_command: ControlCommand {
-                status: ControlStatus::NoPath,
-                steer_cmd_pct: Some(0.0),
-                speed_cmd_mps: Some(0.0),
-            },
+            last_command: NO_COMMAND,
             last_tracking: None,
             smoothing: Smoothing::new(),
             heading: HeadingSettle::new(),
@@ -225,11 +231,7 @@ impl Drive {
             MpcState::init_in_place(addr_of_mut!((*p).mpc));
             addr_of_mut!((*p).mpc_config).write(None);
             addr_of_mut!((*p).pursuit_tuning).write(pure_pursuit::DEFAULT_TUNING);
-            addr_of_mut!((*p).pursuit).write(PurePursuitState {
-                integral_mps: 0.0,
-                projection: None,
-                steer_cmd_pct: 0.0,
-            });
+            addr_of_mut!((*p).pursuit).write(IDLE_PURSUIT);
             addr_of_mut!((*p).projection).write(None);
             addr_of_mut!((*p).planned_speeds).write(None);
             fill(addr_of_mut!((*p).reference), ReferencePoint::ZERO);
@@ -238,11 +240,7 @@ impl Drive {
             addr_of_mut!((*p).path_loaded).write(false);
             addr_of_mut!((*p).last_speed_cmd_mps).write(0.0);
             addr_of_mut!((*p).last_steer_cmd_pct).write(0.0);
-            addr_of_mut!((*p).last_command).write(ControlCommand {
-                status: ControlStatus::NoPath,
-                steer_cmd_pct: Some(0.0),
-                speed_cmd_mps: Some(0.0),
-            });
+            addr_of_mut!((*p).last_command).write(NO_COMMAND);
             addr_of_mut!((*p).last_tracking).write(None);
             addr_of_mut!((*p).smoothing).write(Smoothing::new());
             addr_of_mut!((*p).heading).write(HeadingSettle::new());

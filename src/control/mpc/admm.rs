@@ -388,9 +388,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
             stages: [StageIterate::ZERO; N],
         }
     }
-}
 
-impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     /// Writes [`Workspace::new`] into `slot` in place (`crate::in_place`).
     ///
     /// # Safety
