@@ -202,6 +202,19 @@ fn drive_setup(
     run(vehicle, &course, &mut driver, "", &options)
 }
 
+/// Steering activity while engaged: the mean |change of the steering command| per second, %/s.
+fn steering_activity(out: &RunOutput) -> f64 {
+    let steer: Vec<f64> = out
+        .samples
+        .iter()
+        .filter(|s| s.engaged)
+        .filter_map(|s| s.command.steer_cmd_pct.map(f64::from))
+        .collect();
+    steer.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>()
+        / steer.len().saturating_sub(1).max(1) as f64
+        / 0.02
+}
+
 /// The hatchback at 5 Hz. Each fix moves the estimate by up to a metre (the filter's window
 /// holds three fixes); the control pose spreads those jumps by the scatter it measures
 /// (`catmodel::node::smoothing`). Without it the MPC steered at every jump: on the loop at
@@ -228,15 +241,7 @@ fn second_car_with_a_slow_noisy_receiver() {
     for seed in 0..3 {
         let out = drive_setup(&vehicle, &node, Kind::Loop, 10.0, seed);
         assert!(out.metrics.completed, "loop, seed {seed}");
-        let steer: Vec<f64> = out
-            .samples
-            .iter()
-            .filter(|s| s.engaged)
-            .filter_map(|s| s.command.steer_cmd_pct.map(f64::from))
-            .collect();
-        let rate = steer.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>()
-            / (steer.len() - 1) as f64
-            / 0.02;
+        let rate = steering_activity(&out);
         assert!(
             rate < 45.0,
             "loop, seed {seed}: steering moves {rate:.0} %/s"
@@ -287,4 +292,55 @@ fn second_car_with_a_1_hz_receiver_waits_for_its_heading() {
     // without the wait.
     assert!(worst < 0.1, "engaged with the heading {worst:.3} rad out");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The tables of docs/controller.md, "Slow receivers", measured again: the hatchback with its
+/// receiver's noise at 1 to 20 Hz (plant and model file), the obstacle on seeds 0-9 (0-14 at 1
+/// and 5 Hz) and the loop at 10 m/s at 5 Hz. Prints; `cargo test --release -p catmodel-host
+/// --test closed_loop_goals -- --ignored slow_receiver_tables --nocapture` (about 5 minutes).
+#[test]
+#[ignore = "measurement; prints the tables"]
+fn slow_receiver_tables() {
+    for rate in [1.0, 2.0, 5.0, 10.0, 20.0] {
+        let dir =
+            std::env::temp_dir().join(format!("catmodel-rates-{}-{rate}", std::process::id()));
+        let (vehicle, node) = hatchback_at(rate, &dir);
+        let seeds = if rate == 1.0 || rate == 5.0 { 15 } else { 10 };
+        let clearances: Vec<f64> = (0..seeds)
+            .map(|seed| {
+                let m = drive_setup(
+                    &vehicle,
+                    &node,
+                    Kind::Obstacle,
+                    Kind::Obstacle.default_speed_mps(),
+                    seed,
+                )
+                .metrics;
+                if m.clean {
+                    m.min_obstacle_clearance_m.unwrap_or(f64::NAN)
+                } else {
+                    f64::NEG_INFINITY
+                }
+            })
+            .collect();
+        let passed = |n: usize| clearances.iter().take(n).filter(|c| c.is_finite()).count();
+        let closest = clearances.iter().copied().fold(f64::INFINITY, f64::min);
+        println!(
+            "{rate} Hz obstacle: seeds 0-9 passed {}, seeds 0-{} passed {}, closest {closest:.2} m ({clearances:.2?})",
+            passed(10),
+            seeds - 1,
+            passed(seeds as usize),
+        );
+        if rate == 5.0 {
+            for seed in 0..3 {
+                let out = drive_setup(&vehicle, &node, Kind::Loop, 10.0, seed);
+                let activity = steering_activity(&out);
+                println!(
+                    "5 Hz loop at 10 m/s, seed {seed}: lateral RMS {:.2} m, steering activity {activity:.0} %/s",
+                    out.metrics.lateral_rms_m.unwrap_or(f64::NAN)
+                );
+            }
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
