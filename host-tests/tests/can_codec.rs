@@ -347,6 +347,7 @@ fn node_status_pages_round_trip_and_saturate() {
         overrun_recently: false,
         input_invalid: true,
         planner_refused_recently: false,
+        gnss_rate_mismatch: true,
     };
     let pages = [
         NodeStatus::Health {

@@ -642,3 +642,103 @@ fn refused_planner_frames_and_a_polar_origin_reach_the_status_frame() {
         .iter()
         .all(|t| t.estimate.pose.is_some()));
 }
+
+/// Fixes of `d` at `t` s (from the first fix) kept by `keep(fix index)` while `t` is in
+/// `[from_s, to_s)`.
+fn thin_fixes(
+    d: Vec<bus::Labelled>,
+    from_s: f64,
+    to_s: f64,
+    keep: impl Fn(u64) -> bool,
+) -> Vec<bus::Labelled> {
+    d.into_iter()
+        .filter(|l| {
+            let i = (l.frame.t_us - bus::START_US) / 10_000;
+            let t = i as f64 * 0.01;
+            l.kind != Kind::Gnss || !(from_s..to_s).contains(&t) || keep(i)
+        })
+        .collect()
+}
+
+/// A receiver at another rate than the model file declares: a 10 Hz one against the
+/// published file's 100 Hz for the first 12 s. The estimator counts in fixes of the declared
+/// period, so every fix would be a gap of nine filled by dead reckoning (here the node then
+/// never has a position and nothing says why; on the closed-loop rig it has one now and then,
+/// metres off: `closed_loop::a_receiver_at_another_rate_than_declared_is_named`). After
+/// `RATE_MISMATCH_FIXES` such intervals the fixes are not used: counted, flagged, no position;
+/// as many intervals at the declared rate end it, and the position comes back on the car.
+#[test]
+fn gnss_at_another_rate_than_declared_is_not_used_counted_and_flagged() {
+    use catmodel::node::gnss::RATE_MISMATCH_FIXES;
+    let d = thin_fixes(drive(10.0, 5.0, 18.0), 0.0, 12.0, |i| i % 10 == 0);
+    let ticks = run(&frames(&d));
+    // The 20th slow interval ends at the fix of 20 x 0.1 s.
+    let found_s = f64::from(RATE_MISMATCH_FIXES) * 0.1;
+    for t in window(&ticks, found_s + 0.02, 12.0) {
+        assert!(!t.position().position_valid, "t={}", t.t_s());
+        assert!(t.predictions().iter().all(|p| p.dx_m.is_none()));
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(
+                health.gnss_rate_mismatch && health.position_invalid,
+                "t={}",
+                t.t_s()
+            );
+        }
+    }
+    for t in window(&ticks, 0.0, found_s - 0.02) {
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(!health.gnss_rate_mismatch, "t={}", t.t_s());
+        }
+    }
+    // Not used: the 10 Hz fixes from the one that found it (2.0 s) to 11.9 s, then the
+    // 100 Hz fixes from 12.0 s until the 20th interval on the period (the fix at 12.20 s,
+    // used again).
+    let slow = (12.0 - found_s) / 0.1;
+    let expected = slow.round() as u32 + u32::from(RATE_MISMATCH_FIXES);
+    assert_eq!(ticks.last().unwrap().counters.gnss_rate_mismatch, expected);
+    assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 0);
+    for t in window(&ticks, 14.0, 18.0) {
+        assert!(t.position().position_valid, "t={}", t.t_s());
+        assert!(
+            position_error(t, 10.0, 5.0) < 0.3,
+            "t={}: {}",
+            t.t_s(),
+            position_error(t, 10.0, 5.0)
+        );
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(!health.gnss_rate_mismatch, "t={}", t.t_s());
+        }
+    }
+}
+
+/// The other way round (a 100 Hz receiver, the model file saying 10 Hz) is found as well; a
+/// receiver at the declared rate that loses 40 % of its fixes at random never is.
+#[test]
+fn gnss_rate_check_finds_a_faster_receiver_and_spares_a_lossy_one() {
+    let mut ten_hz = config();
+    ten_hz.estimator = catmodel::node::estimator::EstimatorConfig::design(
+        10.0,
+        ten_hz.estimator.antenna_ahead_m,
+        ten_hz.estimator.antenna_left_m,
+    )
+    .unwrap();
+    let ticks = run_with(ten_hz, &frames(&drive(10.0, 0.0, 6.0)), |_| {
+        PlatformStats::default()
+    });
+    assert!(health(&ticks).gnss_rate_mismatch);
+    assert!(ticks.last().unwrap().counters.gnss_rate_mismatch > 500);
+
+    // A fixed pseudo-random 40 % loss (a 64-bit LCG's top bits).
+    let lost = |i: u64| {
+        let x = i
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (x >> 33) % 100 < 40
+    };
+    let d = thin_fixes(drive(10.0, 5.0, 30.0), 0.0, 30.0, |i| !lost(i));
+    let ticks = run(&frames(&d));
+    assert_eq!(ticks.last().unwrap().counters.gnss_rate_mismatch, 0);
+    for t in window(&ticks, 1.5, 30.0) {
+        assert!(t.position().position_valid, "t={}", t.t_s());
+    }
+}

@@ -277,6 +277,32 @@ pub fn evaluate_files(
     Ok(EvaluationData::read(predictions, truth, inputs, origin_deg, car)?.evaluate())
 }
 
+/// Why the node did not use the GNSS fixes, when the receiver ran at another rate than the
+/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_s`: the mean
+/// interval the node measured between them): the message names the rate to declare.
+pub fn gnss_rate_note(
+    counters: &catmodel::node::Counters,
+    interval_s: Option<f64>,
+    declared_hz: f64,
+) -> Option<String> {
+    if counters.gnss_rate_mismatch == 0 {
+        return None;
+    }
+    let measured = interval_s
+        .filter(|s| *s > 0.0)
+        .map_or("another rate".to_string(), |s| {
+            format!("{:.1} Hz (every {:.0} ms)", 1.0 / s, s * 1e3)
+        });
+    Some(format!(
+        "{} GNSS fixes not used: the receiver's fixes came at {measured}, the model file declares \
+         gnss_rate_hz = {} (the GNSS lowpass and heading filter are designed for that \
+         rate); set [vehicle] gnss_rate_hz to the receiver's rate (`catmodel identify` writes it \
+         from the logs)",
+        counters.gnss_rate_mismatch,
+        (declared_hz * 10.0).round() / 10.0
+    ))
+}
+
 /// The node configuration for a model file (`None`: the published `models/paper.toml`, exactly
 /// as the firmware's default): the very configuration the firmware build bakes from that file.
 pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {

@@ -337,6 +337,7 @@ fn run(cli: Cli) -> Result<()> {
             reading.finish();
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
+            let declared_hz = 1.0 / f64::from(config.estimator.gnss_period_s);
             let progress = Progress::bar(replay::estimate_ticks(&text), "replay");
             let mut done = 0;
             // The log is parsed while the node runs; the files are written only if it all
@@ -349,12 +350,16 @@ fn run(cli: Cli) -> Result<()> {
             progress.finish();
             let c = result.counters;
             eprintln!(
-                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
+                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
                 result.frames + result.filtered, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
-                c.range_errors, c.gnss_gate_rejects, result.filtered + u64::from(c.unknown_ids), c.time_errors,
+                c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
                 result.unsupported
             );
-            if result.ticks > 0 && result.valid_ticks == 0 {
+            let interval_s = result.gnss_interval_us.map(|us| f64::from(us) * 1e-6);
+            if let Some(note) = catmodel_host::gnss_rate_note(&c, interval_s, declared_hz) {
+                eprintln!("catmodel: warning: {note}");
+            }
+            if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
                      Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",
@@ -582,6 +587,10 @@ fn run(cli: Cli) -> Result<()> {
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             eprintln!("sil: {summary}");
+            if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver)
+            {
+                eprintln!("sil: warning: {note}");
+            }
             Ok(())
         }
         Command::Decode { log, messages, csv } => {

@@ -220,6 +220,8 @@ pub struct ReplayStats {
     pub counters: Counters,
     /// Origin used, 1e-7 deg.
     pub origin_e7: Option<(i32, i32)>,
+    /// The mean interval between GNSS fixes at the end, us, as the node measured it.
+    pub gnss_interval_us: Option<u32>,
 }
 
 /// Number of ticks [`replay`] runs over `frames` (sorted by time).
@@ -269,6 +271,7 @@ pub fn replay_with_progress(
         valid_ticks: 0,
         counters: Counters::default(),
         origin_e7: None,
+        gnss_interval_us: None,
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -779,6 +782,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         valid_ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
+        gnss_interval_us: node.gnss_fix_interval_s().map(|s| (s * 1e6).round() as u32),
     };
     let error = if input_ok == Some(true) {
         None

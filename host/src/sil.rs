@@ -244,7 +244,7 @@ impl std::fmt::Display for SilSummary {
             f,
             "{} ticks; frames not given to the node: {} not node inputs (acceptance filter), \
              {} remote/FD/error frames, {} dropped by the full receive queue; rejected by the \
-             node: crc {}, counter {}, dlc {}, range {}, gnss gate {}, unknown id {}, \
+             node: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, \
              stamped after their TICK {}",
             self.ticks,
             self.filtered,
@@ -255,6 +255,7 @@ impl std::fmt::Display for SilSummary {
             c.dlc_errors,
             c.range_errors,
             c.gnss_gate_rejects,
+            c.gnss_rate_mismatch,
             c.unknown_ids,
             c.time_errors
         )

@@ -134,6 +134,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                             flag(&d, "planner_refused_recently"),
                             health.planner_refused_recently
                         );
+                        assert_eq!(flag(&d, "gnss_rate_mismatch"), health.gnss_rate_mismatch);
                         agree(&d, "overrun_count", Some(overrun_count as f32));
                         agree(&d, "last_step_us", last_step_us.map(|v| v as f32));
                     }

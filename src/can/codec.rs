@@ -1129,9 +1129,12 @@ pub struct HealthFlags {
     pub input_invalid: bool,
     /// The node refused a planner frame or path within the last second.
     pub planner_refused_recently: bool,
+    /// The GNSS receiver's fixes come at another rate than the model file declares: they are
+    /// not used.
+    pub gnss_rate_mismatch: bool,
 }
 
-const HEALTH_BITS: [&SignalSpec; 12] = [
+const HEALTH_BITS: [&SignalSpec; 13] = [
     &sig::STEER_STALE,
     &sig::SPEED_STALE,
     &sig::PEDAL_STALE,
@@ -1144,10 +1147,11 @@ const HEALTH_BITS: [&SignalSpec; 12] = [
     &sig::OVERRUN_RECENTLY,
     &sig::INPUT_INVALID,
     &sig::PLANNER_REFUSED_RECENTLY,
+    &sig::GNSS_RATE_MISMATCH,
 ];
 
 impl HealthFlags {
-    const fn as_array(&self) -> [bool; 12] {
+    const fn as_array(&self) -> [bool; 13] {
         [
             self.steer_stale,
             self.speed_stale,
@@ -1161,9 +1165,10 @@ impl HealthFlags {
             self.overrun_recently,
             self.input_invalid,
             self.planner_refused_recently,
+            self.gnss_rate_mismatch,
         ]
     }
-    const fn from_array(b: [bool; 12]) -> Self {
+    const fn from_array(b: [bool; 13]) -> Self {
         Self {
             steer_stale: b[0],
             speed_stale: b[1],
@@ -1177,6 +1182,7 @@ impl HealthFlags {
             overrun_recently: b[9],
             input_invalid: b[10],
             planner_refused_recently: b[11],
+            gnss_rate_mismatch: b[12],
         }
     }
 }
@@ -1332,7 +1338,7 @@ impl NodeStatus {
         let r = Reader::standard(&spec::NODE_STATUS, frame)?;
         let msg = match r.required(&sig::PAGE)? {
             0 => {
-                let mut bits = [false; 12];
+                let mut bits = [false; HEALTH_BITS.len()];
                 for (b, s) in bits.iter_mut().zip(HEALTH_BITS) {
                     *b = r.flag(s);
                 }

@@ -506,6 +506,11 @@ pub mod sig {
     /// page without its latitude page; [`crate::control::planner::PlannerCounters::rejects`]).
     pub const PLANNER_REFUSED_RECENTLY: SignalSpec =
         SignalSpec::uint("planner_refused_recently", 20, 1).on_page(0);
+    /// Page 0 health bit: the GNSS receiver's fixes come at another rate than the model file
+    /// declares (`gnss_rate_hz`), and the node does not use them
+    /// ([`crate::node::gnss::RATE_MISMATCH_FIXES`]).
+    pub const GNSS_RATE_MISMATCH: SignalSpec =
+        SignalSpec::uint("gnss_rate_mismatch", 21, 1).on_page(0);
     /// Page 0: ticks that overran since boot, saturating.
     pub const OVERRUN_COUNT: SignalSpec = SignalSpec::uint("overrun_count", 24, 16).on_page(0);
     /// Page 0: duration of the previous step, us; 0xFFFF = not available.
@@ -912,6 +917,7 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
         OVERRUN_RECENTLY,
         INPUT_INVALID,
         PLANNER_REFUSED_RECENTLY,
+        GNSS_RATE_MISMATCH,
         OVERRUN_COUNT,
         LAST_STEP_US,
         CRC_ERRORS,

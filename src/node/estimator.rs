@@ -375,6 +375,13 @@ impl EstimatorState {
         self.filtered = None;
     }
 
+    /// [`Self::reset`], and the heading forgotten too: for fixes that were not what the
+    /// configuration says (their rate), whose course cannot be trusted either.
+    pub fn forget(&mut self) {
+        self.reset();
+        self.heading_rad = None;
+    }
+
     /// The antenna's dead-reckoned position, m: continuous (fixes never move it), so its change
     /// over a tick is the car's motion alone.
     pub fn dead_reckoned(&self) -> Xy {

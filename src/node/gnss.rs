@@ -13,6 +13,75 @@ use super::inputs::{GnssCourse, GnssFix, Inputs};
 use super::stage::{Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK};
 use super::{bump, NodeConfig};
 
+/// Consecutive fix intervals off the model file's period (at least 1.5 periods, or under
+/// half a period) after which the receiver is taken to run at another rate than the model
+/// file declares (`gnss_rate_hz`); as many intervals on the period end it. A receiver at the
+/// declared rate that loses fixes at random makes such a run once in `1 / p^20` fixes at a loss
+/// rate `p` (`p` = 0.5: once in 10^6).
+pub const RATE_MISMATCH_FIXES: u16 = 20;
+
+/// Whether the receiver's fixes come at the rate the estimator was designed for
+/// ([`EstimatorConfig::design`] from the model file's `gnss_rate_hz`, never on the MCU). The
+/// lowpass, the course chord and the gap filling all count in fixes of that period: a 10 Hz
+/// receiver declared as 100 Hz makes every fix a gap of nine, filled by dead reckoning, and
+/// the heading follows the dead reckoning instead of the track (measured: 0 rad, north, for a
+/// car driving east; the position 9 m off). So fixes at another rate are not used: counted
+/// (`Counters::gnss_rate_mismatch`), flagged (NODE_STATUS `gnss_rate_mismatch`), no position.
+#[derive(Clone, Copy, Debug, Default)]
+struct RateCheck {
+    /// Receive time of the previous fix, us.
+    last_us: Option<u64>,
+    /// Consecutive intervals of at least 1.5 periods.
+    slow_in_row: u16,
+    /// Consecutive intervals under half a period.
+    fast_in_row: u16,
+    /// Consecutive intervals on the period, while in mismatch.
+    normal_in_row: u16,
+    /// The receiver runs at another rate than declared.
+    mismatch: bool,
+    /// Mean interval between fixes, s (exponential, an eighth per fix); 0 before the second.
+    interval_s: f32,
+}
+
+/// What one fix's interval changed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RateChange {
+    /// Nothing: use the fix if not in mismatch.
+    None,
+    /// The rate has just been found off the declared one.
+    Began,
+}
+
+impl RateCheck {
+    /// The fix received at `t_us`, with the estimator designed for fixes `period_s` apart.
+    fn observe(&mut self, t_us: u64, period_s: f32) -> RateChange {
+        let Some(last) = self.last_us.replace(t_us) else {
+            return RateChange::None;
+        };
+        let interval_s = math::u64_to_f32(t_us.saturating_sub(last)) * 1e-6;
+        self.interval_s = if self.interval_s > 0.0 {
+            self.interval_s + 0.125 * (interval_s - self.interval_s)
+        } else {
+            interval_s
+        };
+        let periods = interval_s / period_s;
+        let bump_if = |n: u16, yes: bool| if yes { n.saturating_add(1) } else { 0 };
+        self.slow_in_row = bump_if(self.slow_in_row, periods >= 1.5);
+        self.fast_in_row = bump_if(self.fast_in_row, periods < 0.5);
+        self.normal_in_row = bump_if(self.normal_in_row, (0.5..1.5).contains(&periods));
+        if !self.mismatch
+            && (self.slow_in_row >= RATE_MISMATCH_FIXES || self.fast_in_row >= RATE_MISMATCH_FIXES)
+        {
+            self.mismatch = true;
+            return RateChange::Began;
+        }
+        if self.mismatch && self.normal_in_row >= RATE_MISMATCH_FIXES {
+            self.mismatch = false;
+        }
+        RateChange::None
+    }
+}
+
 /// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
 pub type TickFixes = heapless::Vec<GnssFix, GNSS_FIXES_PER_TICK>;
 
@@ -38,6 +107,8 @@ pub struct Gnss {
     rejects_in_row: u16,
     /// When the gate last rejected a fix.
     last_reject_us: Option<u64>,
+    /// The receiver's rate against the model file's.
+    rate: RateCheck,
 }
 
 impl Gnss {
@@ -73,6 +144,17 @@ impl Gnss {
     /// When a fix was last rejected.
     pub fn last_reject_us(&self) -> Option<u64> {
         self.last_reject_us
+    }
+
+    /// Whether the receiver's fixes come at another rate than the model file declares
+    /// ([`RATE_MISMATCH_FIXES`]): they are not used.
+    pub fn rate_mismatch(&self) -> bool {
+        self.rate.mismatch
+    }
+
+    /// The mean interval between the receiver's fixes, s (`None` before the second fix).
+    pub fn fix_interval_s(&self) -> Option<f32> {
+        (self.rate.interval_s > 0.0).then_some(self.rate.interval_s)
     }
 
     /// Dead reckoning over `dt_s` (see [`EstimatorState::propagate`]).
@@ -133,6 +215,16 @@ impl Gnss {
             lon_e7,
         } = *fix;
         let counters = &mut inputs.counters;
+        let cfg = &config.estimator;
+        if self.rate.observe(t_us, cfg.gnss_period_s) == RateChange::Began {
+            self.estimator.forget();
+            self.cog = None;
+        }
+        if self.rate.mismatch {
+            bump(&mut counters.gnss_rate_mismatch);
+            probe.lap(Stage::GnssFixCheck);
+            return;
+        }
         if self.frame.is_none() {
             let origin = config.origin_e7.unwrap_or((lat_e7, lon_e7));
             // Once in the node's life: a frame, once built, is never rebuilt. A refused origin
@@ -153,7 +245,6 @@ impl Gnss {
             x_m: enu.east_m,
             y_m: enu.north_m,
         };
-        let cfg = &config.estimator;
         // Plausibility gate against where the car should be; repeated rejections mean the car
         // really is there (e.g. after a long gap): restart the filters on the fixes.
         let mut antenna = self.estimator.antenna_position(cfg);

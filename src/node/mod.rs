@@ -257,6 +257,9 @@ pub struct Counters {
     pub range_errors: u32,
     /// GNSS fixes rejected by the plausibility gate or the geodesy range.
     pub gnss_gate_rejects: u32,
+    /// GNSS fixes not used because the receiver runs at another rate than the model file's
+    /// `gnss_rate_hz` ([`gnss::RATE_MISMATCH_FIXES`]).
+    pub gnss_rate_mismatch: u32,
     /// Identifiers the node does not know (or GNSS from another source).
     pub unknown_ids: u32,
     /// Frames stamped after the tick that received them (clock mismatch), rejected.
@@ -412,6 +415,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
     /// Rejection counters since start.
     pub fn counters(&self) -> &Counters {
         &self.inputs.counters
+    }
+
+    /// The mean interval between the GNSS receiver's fixes, s (`None` before the second fix):
+    /// what a `gnss_rate_mismatch` measured.
+    pub fn gnss_fix_interval_s(&self) -> Option<f32> {
+        self.gnss.fix_interval_s()
     }
 
     /// Ticks run.
@@ -745,6 +754,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             pose: estimate.pose,
             gnss_fresh: estimate.gnss_fresh,
             gnss_rejected_us: self.gnss.last_reject_us(),
+            gnss_rate_mismatch: self.gnss.rate_mismatch(),
             mode: motion.mode,
             speed_mps: motion.speed_mps,
             yaw_rate_rps: self.models.yaw_rate_rps,

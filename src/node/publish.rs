@@ -35,6 +35,8 @@ pub struct Outputs<'a> {
     pub gnss_fresh: bool,
     /// When a fix was last rejected.
     pub gnss_rejected_us: Option<u64>,
+    /// The receiver's fixes come at another rate than the model file declares.
+    pub gnss_rate_mismatch: bool,
     /// Lateral model in use.
     pub mode: Mode,
     /// Speed used, m/s.
@@ -155,6 +157,7 @@ impl Health {
                     overrun_recently: recent(now, self.last_overrun_us),
                     input_invalid: recent(now, self.last_range_error_us),
                     planner_refused_recently: recent(now, self.last_planner_reject_us),
+                    gnss_rate_mismatch: out.gnss_rate_mismatch,
                 },
                 overrun_count: tick.platform.overruns,
                 last_step_us: tick.platform.last_step_us,

@@ -25,6 +25,12 @@ pub trait Driver {
 
     /// The node's rejection counters so far (the ones no status page carries among them).
     fn counters(&self) -> Counters;
+
+    /// Why the node did not use the GNSS fixes, if their rate was not the model file's
+    /// ([`crate::gnss_rate_note`]).
+    fn gnss_rate_note(&self) -> Option<String> {
+        None
+    }
 }
 
 /// What a tick did, for the closed loop's records (never on the bus).
@@ -87,6 +93,14 @@ impl NodeDriver {
 impl Driver for NodeDriver {
     fn counters(&self) -> Counters {
         *self.node.counters()
+    }
+
+    fn gnss_rate_note(&self) -> Option<String> {
+        crate::gnss_rate_note(
+            self.node.counters(),
+            self.node.gnss_fix_interval_s().map(f64::from),
+            1.0 / f64::from(self.node.config().estimator.gnss_period_s),
+        )
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {

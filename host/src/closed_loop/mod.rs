@@ -565,9 +565,18 @@ pub fn load_setup(
         Some(p) => VehicleConfig::load(p).map_err(|e| anyhow::anyhow!("{e}"))?,
         None => VehicleConfig::default(),
     };
-    let base = crate::node_config(model)?;
+    let from_vehicle = vehicle.is_some() && model.is_none();
+    let base = if from_vehicle {
+        // The published file for the plant's receiver: its rate, as `identify` would write it
+        // from the car's logs (a node designed for another rate does not use the fixes).
+        let mut file = crate::model_file::load(&crate::model_file::paper_path())?;
+        crate::identify::set_receiver_rate(&mut file, 1.0 / cfg.sensors.gnss.period_s);
+        file.node_config()
+    } else {
+        crate::node_config(model)?
+    };
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
-    let node = node_config_for(base, &cfg, vehicle.is_some() && model.is_none())?;
+    let node = node_config_for(base, &cfg, from_vehicle)?;
     Ok((cfg, node))
 }
 
@@ -619,6 +628,9 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         start_offset_m: args.start_offset_m,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
+    if let Some(note) = driver::Driver::gnss_rate_note(&driver) {
+        eprintln!("closed-loop: warning: {note}");
+    }
     let mut files = write_session(&args.out, &output)?;
     files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))

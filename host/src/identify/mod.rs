@@ -548,27 +548,45 @@ fn receiver_rate(model: &mut ModelFile, training: &[Experiment]) -> Option<Strin
     rates.sort_by(f64::total_cmp);
     let measured = *rates.get(rates.len() / 2)?;
     let base = model.vehicle.gnss_rate_hz;
-    if (measured / base - 1.0).abs() <= GNSS_RATE_TOLERANCE {
-        return None;
-    }
-    let rate = ((measured * 10.0).round() / 10.0).clamp(1.0, 100.0);
-    model.vehicle.gnss_rate_hz = rate;
+    let (rate, lost) = set_receiver_rate(model, measured)?;
     let mut note = format!(
         "vehicle.gnss_rate_hz = {rate}: the training logs' GNSS fixes come at {measured:.2} Hz \
          (median interval), the base file said {base} Hz"
     );
-    // The outage bridged by dead reckoning must outlast the GNSS timeout at the new rate.
-    let timeout_s = model_file::InputsSection::gnss_timeout_s(rate);
-    if model.inputs.gnss_lost_s <= timeout_s {
-        let lost_s = 2.0 * timeout_s;
+    if let Some((was, lost_s)) = lost {
         note.push_str(&format!(
             "; inputs.gnss_lost_s = {lost_s} (twice the GNSS timeout at that rate; the base \
-             file's {} s is shorter than the timeout)",
-            model.inputs.gnss_lost_s
+             file's {was} s is shorter than the timeout)"
         ));
-        model.inputs.gnss_lost_s = lost_s;
     }
     Some(note)
+}
+
+/// `model` made to describe a receiver at `measured_hz`, when that is more than
+/// [`GNSS_RATE_TOLERANCE`] off its `gnss_rate_hz`: the rate (rounded to 0.1 Hz, within the model
+/// file's 1..100 Hz) and, when the outage bridged by dead reckoning would not outlast the GNSS
+/// timeout at that rate, `gnss_lost_s` (twice the timeout). Returns the rate and the change of
+/// `gnss_lost_s` (was, now); `None` when the file's rate stands.
+pub fn set_receiver_rate(
+    model: &mut ModelFile,
+    measured_hz: f64,
+) -> Option<(f64, Option<(f64, f64)>)> {
+    let base = model.vehicle.gnss_rate_hz;
+    if !(measured_hz.is_finite() && measured_hz > 0.0)
+        || (measured_hz / base - 1.0).abs() <= GNSS_RATE_TOLERANCE
+    {
+        return None;
+    }
+    let rate = ((measured_hz * 10.0).round() / 10.0).clamp(1.0, 100.0);
+    model.vehicle.gnss_rate_hz = rate;
+    let timeout_s = model_file::InputsSection::gnss_timeout_s(rate);
+    let mut lost = None;
+    if model.inputs.gnss_lost_s <= timeout_s {
+        let lost_s = 2.0 * timeout_s;
+        lost = Some((model.inputs.gnss_lost_s, lost_s));
+        model.inputs.gnss_lost_s = lost_s;
+    }
+    Some((rate, lost))
 }
 
 /// The whole pipeline on preprocessed experiments. `base` provides the vehicle, the hybrid
