@@ -169,7 +169,9 @@ fn smoke_drive_through_every_command() {
         s(&tx),
     ]);
     assert!(
-        msg.contains("crc 0, counter 0, dlc 0, range 0, gnss gate 0, unknown id 0, time 0"),
+        msg.contains(
+            "crc 0, counter 0, dlc 0, range 0, gnss gate 0, gnss rate 0, unknown id 0, time 0"
+        ),
         "{msg}"
     );
     let pred_text = String::from_utf8(read(&pred)).unwrap();

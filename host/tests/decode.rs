@@ -188,7 +188,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                 // Only the page's own signals (+ counter, page, crc) are shown.
                 let page_signals = d.signals.len() - 3;
                 assert!(
-                    (2..=15).contains(&page_signals),
+                    (2..=16).contains(&page_signals),
                     "{page_signals} signals on page {}",
                     m.page()
                 );
