@@ -278,8 +278,9 @@ pub fn evaluate_files(
 }
 
 /// Why the node did not use the GNSS fixes, when the receiver ran at another rate than the
-/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_s`: the mean
-/// interval the node measured between them): the message names the rate to declare.
+/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_s`: the
+/// interval the node measured between them, off the declared period): the message names the
+/// rate to declare.
 pub fn gnss_rate_note(
     counters: &catmodel::node::Counters,
     interval_s: Option<f64>,

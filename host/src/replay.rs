@@ -220,7 +220,8 @@ pub struct ReplayStats {
     pub counters: Counters,
     /// Origin used, 1e-7 deg.
     pub origin_e7: Option<(i32, i32)>,
-    /// The mean interval between GNSS fixes at the end, us, as the node measured it.
+    /// The latest interval between GNSS fixes off the model file's period, us, as the node
+    /// measured it.
     pub gnss_interval_us: Option<u32>,
 }
 
@@ -782,7 +783,9 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         valid_ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
-        gnss_interval_us: node.gnss_fix_interval_s().map(|s| (s * 1e6).round() as u32),
+        gnss_interval_us: node
+            .gnss_off_rate_interval_s()
+            .map(|s| (s * 1e6).round() as u32),
     };
     let error = if input_ok == Some(true) {
         None

@@ -39,8 +39,9 @@ struct RateCheck {
     normal_in_row: u16,
     /// The receiver runs at another rate than declared.
     mismatch: bool,
-    /// Mean interval between fixes, s (exponential, an eighth per fix); 0 before the second.
-    interval_s: f32,
+    /// The latest interval off the period, us (0: none yet): the receiver's period when in
+    /// mismatch.
+    off_interval_us: u32,
 }
 
 /// What one fix's interval changed.
@@ -53,22 +54,22 @@ enum RateChange {
 }
 
 impl RateCheck {
-    /// The fix received at `t_us`, with the estimator designed for fixes `period_s` apart.
-    fn observe(&mut self, t_us: u64, period_s: f32) -> RateChange {
+    /// The fix received at `t_us`, with the estimator designed for fixes `period_us` apart.
+    /// Integer work only: it runs for every fix of the estimating tick.
+    fn observe(&mut self, t_us: u64, period_us: u32) -> RateChange {
         let Some(last) = self.last_us.replace(t_us) else {
             return RateChange::None;
         };
-        let interval_s = math::u64_to_f32(t_us.saturating_sub(last)) * 1e-6;
-        self.interval_s = if self.interval_s > 0.0 {
-            self.interval_s + 0.125 * (interval_s - self.interval_s)
-        } else {
-            interval_s
-        };
-        let periods = interval_s / period_s;
+        let interval = u32::try_from(t_us.saturating_sub(last)).unwrap_or(u32::MAX);
+        let slow = interval >= period_us.saturating_add(period_us / 2);
+        let fast = interval < period_us / 2;
+        if slow || fast {
+            self.off_interval_us = interval;
+        }
         let bump_if = |n: u16, yes: bool| if yes { n.saturating_add(1) } else { 0 };
-        self.slow_in_row = bump_if(self.slow_in_row, periods >= 1.5);
-        self.fast_in_row = bump_if(self.fast_in_row, periods < 0.5);
-        self.normal_in_row = bump_if(self.normal_in_row, (0.5..1.5).contains(&periods));
+        self.slow_in_row = bump_if(self.slow_in_row, slow);
+        self.fast_in_row = bump_if(self.fast_in_row, fast);
+        self.normal_in_row = bump_if(self.normal_in_row, !(slow || fast));
         if !self.mismatch
             && (self.slow_in_row >= RATE_MISMATCH_FIXES || self.fast_in_row >= RATE_MISMATCH_FIXES)
         {
@@ -152,9 +153,11 @@ impl Gnss {
         self.rate.mismatch
     }
 
-    /// The mean interval between the receiver's fixes, s (`None` before the second fix).
-    pub fn fix_interval_s(&self) -> Option<f32> {
-        (self.rate.interval_s > 0.0).then_some(self.rate.interval_s)
+    /// The latest interval between the receiver's fixes that was off the declared period, s
+    /// (`None` while there has been none): the receiver's period when [`Self::rate_mismatch`].
+    pub fn off_rate_interval_s(&self) -> Option<f32> {
+        (self.rate.off_interval_us > 0)
+            .then(|| math::u64_to_f32(u64::from(self.rate.off_interval_us)) * 1e-6)
     }
 
     /// Dead reckoning over `dt_s` (see [`EstimatorState::propagate`]).
@@ -216,7 +219,8 @@ impl Gnss {
         } = *fix;
         let counters = &mut inputs.counters;
         let cfg = &config.estimator;
-        if self.rate.observe(t_us, cfg.gnss_period_s) == RateChange::Began {
+        let period_us = (cfg.gnss_period_s * 1e6) as u32;
+        if self.rate.observe(t_us, period_us) == RateChange::Began {
             self.estimator.forget();
             self.cog = None;
         }

@@ -417,10 +417,10 @@ impl<D: BorrowMut<Drive>> Node<D> {
         &self.inputs.counters
     }
 
-    /// The mean interval between the GNSS receiver's fixes, s (`None` before the second fix):
-    /// what a `gnss_rate_mismatch` measured.
-    pub fn gnss_fix_interval_s(&self) -> Option<f32> {
-        self.gnss.fix_interval_s()
+    /// The latest interval between the GNSS receiver's fixes that was off the model file's
+    /// period, s: the receiver's period when NODE_STATUS says `gnss_rate_mismatch`.
+    pub fn gnss_off_rate_interval_s(&self) -> Option<f32> {
+        self.gnss.off_rate_interval_s()
     }
 
     /// Ticks run.
