@@ -432,6 +432,33 @@ fn the_rigs_node_knows_its_car_from_its_model_file() {
     let (_, lent) = load_setup(Some(&plant), None).unwrap();
     assert_eq!(lent.dynamics.unwrap().cornering_front_n_per_rad, 80000.0);
     assert_eq!(lent.estimator.antenna_ahead_m, 1.478);
+    // ... all of what its model file would say: the van's body, steering rate and 5 Hz
+    // receiver. (The node once kept the CAT Vehicle's body and steering rate here: on random
+    // plants the MPC kept a narrower body than the car's inside the lanes and hit cones at
+    // 6 m/s; and the published file's 100 Hz, whose estimator does not use 5 Hz fixes.)
+    let van = root.join("host/vehicles/van.toml");
+    let (plant, lent) = load_setup(Some(&van), None).unwrap();
+    assert_eq!(
+        f64::from(lent.body.width_m),
+        plant.body.width_m as f32 as f64
+    );
+    assert_eq!(
+        f64::from(lent.body.length_m),
+        plant.body.length_m as f32 as f64
+    );
+    assert_eq!(
+        f64::from(lent.body.rear_overhang_m),
+        plant.body.rear_overhang_m as f32 as f64
+    );
+    assert_eq!(
+        f64::from(lent.max_steer_rate_pct_per_s),
+        plant.steering.rate_limit_pct_per_s as f32 as f64
+    );
+    assert!((f64::from(lent.estimator.gnss_period_s) - plant.sensors.gnss.period_s).abs() < 1e-6);
+    assert_eq!(
+        f64::from(lent.vehicle.wheelbase_m),
+        plant.chassis.wheelbase_m as f32 as f64
+    );
 }
 
 #[test]

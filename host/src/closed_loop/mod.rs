@@ -149,26 +149,38 @@ pub struct RunOutput {
     pub metrics: Metrics,
 }
 
-/// The node's configuration for `vehicle` on top of `base` (the published models or a model
-/// file's). With `from_vehicle` (a plant vehicle and no model file for it) the plant lends the
-/// node its geometry, steering, antenna and single-track model; otherwise the node knows its
-/// car from its model file alone, as on the road (a file without `[dynamics]`: kinematic only).
-pub fn node_config_for(
-    base: NodeConfig,
-    vehicle: &VehicleConfig,
-    from_vehicle: bool,
-) -> anyhow::Result<NodeConfig> {
+/// The published model file (`models/paper.toml`) made to describe the plant `vehicle`, as its
+/// owner's tape measure and data sheet would (README, "A second car"): geometry, body, steering
+/// range and rate, antenna, receiver rate (as `identify` writes it, with the outage time it
+/// needs) and the linear-tyre single-track model; the identified models stay the CAT
+/// Vehicle's. For a plant given without a model file: the node then knows everything of the
+/// car that a model file's `[vehicle]` and `[dynamics]` say, and is built by the one reader.
+pub fn model_file_for(vehicle: &VehicleConfig) -> anyhow::Result<crate::model_file::ModelFile> {
+    let mut file = crate::model_file::load(&crate::model_file::paper_path())?;
     let c = &vehicle.chassis;
-    let mut config = base;
-    if from_vehicle {
-        config.vehicle.wheelbase_m = c.wheelbase_m as f32;
-        config.vehicle.track_m = c.track_m as f32;
-        config.vehicle.max_steer_rad = c.max_steer_deg.to_radians() as f32;
-        config.vehicle.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2() as f32;
-        config.estimator.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m as f32;
-        config.dynamics = Some(vehicle.dynamic_params());
-    }
-    Ok(config)
+    let v = &mut file.vehicle;
+    v.wheelbase_m = c.wheelbase_m;
+    v.track_m = c.track_m;
+    v.max_steer_deg = c.max_steer_deg;
+    v.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2();
+    v.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m;
+    v.width_m = vehicle.body.width_m;
+    v.length_m = vehicle.body.length_m;
+    v.rear_overhang_m = vehicle.body.rear_overhang_m;
+    v.max_steer_rate_pct_per_s = vehicle.steering.rate_limit_pct_per_s;
+    file.dynamics = Some(crate::model_file::DynamicsSection {
+        mass_kg: c.mass_kg,
+        yaw_inertia_kg_m2: c.yaw_inertia_kg_m2,
+        cg_to_front_m: c.cg_to_front_m,
+        cg_to_rear_m: c.cg_to_rear_m,
+        cornering_front_n_per_rad: vehicle.tyre_front.cornering_stiffness_n_per_rad,
+        cornering_rear_n_per_rad: vehicle.tyre_rear.cornering_stiffness_n_per_rad,
+    });
+    crate::identify::set_receiver_rate(&mut file, 1.0 / vehicle.sensors.gnss.period_s);
+    // Through the reader, as any model file: validated, and built as the firmware would.
+    let text = crate::model_file::to_toml(&file);
+    crate::model_file::parse(&text, std::path::Path::new("<the plant's description>"))
+        .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 /// The planner's path as the core's `Path` (for scoring lateral error on truth).
@@ -556,7 +568,7 @@ pub fn controller_named(name: &str, receiver_rms_m: f64) -> anyhow::Result<drive
 
 /// Loads the plant's vehicle (`vehicle`, default the CAT Vehicle) and the node's configuration
 /// from the car's model file (`model`, default `models/paper.toml`, the CAT Vehicle's; without
-/// one, a plant vehicle lends the node its geometry and steering).
+/// one, a plant vehicle is described to the node as its model file would: [`model_file_for`]).
 pub fn load_setup(
     vehicle: Option<&std::path::Path>,
     model: Option<&std::path::Path>,
@@ -565,18 +577,12 @@ pub fn load_setup(
         Some(p) => VehicleConfig::load(p).map_err(|e| anyhow::anyhow!("{e}"))?,
         None => VehicleConfig::default(),
     };
-    let from_vehicle = vehicle.is_some() && model.is_none();
-    let base = if from_vehicle {
-        // The published file for the plant's receiver: its rate, as `identify` would write it
-        // from the car's logs (a node designed for another rate does not use the fixes).
-        let mut file = crate::model_file::load(&crate::model_file::paper_path())?;
-        crate::identify::set_receiver_rate(&mut file, 1.0 / cfg.sensors.gnss.period_s);
-        file.node_config()
+    let node = if vehicle.is_some() && model.is_none() {
+        model_file_for(&cfg)?.node_config()
     } else {
         crate::node_config(model)?
     };
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
-    let node = node_config_for(base, &cfg, from_vehicle)?;
     Ok((cfg, node))
 }
 
