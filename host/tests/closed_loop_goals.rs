@@ -344,3 +344,116 @@ fn slow_receiver_tables() {
         std::fs::remove_dir_all(&dir).ok();
     }
 }
+
+/// Cars nothing was tuned on: plants drawn at random around the hatchback (seeded; wheelbase
+/// 2.3-3.8 m, 0.9-3.5 t, width 1.6-2.1 m, steering 40-120 %/s at 28-40 deg, a speed loop's
+/// delay of 0.2-0.8 s, receivers at 5-100 Hz with the antenna anywhere along the car; the
+/// oversteering ones, which a model file refuses, are drawn again), each described to the node
+/// as its model file would (`closed_loop::model_file_for`). Prints, per car, the double lane
+/// change at 6 / 8 / 10 / 12 m/s (clean seeds of 0 and 1, RTK; in brackets with the lateral
+/// weight at 1), the obstacle with the standard receiver and the loop at 10 m/s with RTK
+/// (docs/controller.md, "What is left").
+/// `cargo test --release -p catmodel-host --test closed_loop_goals -- --ignored random_plants --nocapture`
+#[test]
+#[ignore = "measurement; prints the table"]
+fn random_plants() {
+    let (base, _) = hatchback();
+    let base = VehicleConfig::load(&base).unwrap();
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = |lo: f64, hi: f64| {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    let mut cars = Vec::new();
+    while cars.len() < 10 {
+        let mut v = base.clone();
+        let c = &mut v.chassis;
+        c.wheelbase_m = (uniform(2.3, 3.8) * 1e3).round() / 1e3;
+        c.cg_to_front_m = (c.wheelbase_m * uniform(0.38, 0.52) * 1e3).round() / 1e3;
+        c.cg_to_rear_m = c.wheelbase_m - c.cg_to_front_m;
+        c.mass_kg = uniform(900.0, 3500.0);
+        c.yaw_inertia_kg_m2 = c.mass_kg * c.cg_to_front_m * c.cg_to_rear_m * uniform(0.9, 1.1);
+        c.cg_height_m = uniform(0.45, 1.0);
+        c.max_steer_deg = uniform(28.0, 40.0);
+        v.body.width_m = uniform(1.6, 2.1);
+        c.track_m = v.body.width_m - 0.25;
+        v.body.length_m = c.wheelbase_m + uniform(1.2, 2.4);
+        v.body.rear_overhang_m = uniform(0.5, 1.2);
+        v.tyre_front.cornering_stiffness_n_per_rad = c.mass_kg * uniform(40.0, 60.0);
+        v.tyre_rear.cornering_stiffness_n_per_rad = c.mass_kg * uniform(45.0, 70.0);
+        v.steering.rate_limit_pct_per_s = uniform(40.0, 120.0);
+        v.steering.lag_s = uniform(0.03, 0.1);
+        v.speed_controller.command_delay_s =
+            [0.2, 0.3, 0.4, 0.5, 0.6, 0.8][uniform(0.0, 5.99) as usize];
+        v.speed_controller.actuator_lag_s = uniform(0.2, 0.6);
+        v.sensors.gnss.period_s = [0.01, 0.02, 0.05, 0.1, 0.2][uniform(0.0, 4.99) as usize];
+        v.sensors.gnss.antenna_ahead_of_rear_axle_m = uniform(-0.5, v.chassis.wheelbase_m + 0.5);
+        if v.validate().is_ok() && v.understeer_s2_per_m2() >= 0.0 {
+            cars.push(v);
+        }
+    }
+    for (i, v) in cars.iter().enumerate() {
+        let node = catmodel_host::closed_loop::model_file_for(v)
+            .unwrap()
+            .node_config();
+        let run_with = |controller: Controller, kind: Kind, speed: f64, seed: u64, receiver| {
+            let course = scenario::course(kind, &v.body, speed);
+            let mut driver = NodeDriver::new(node.clone(), controller);
+            let options = RunOptions {
+                seed,
+                receiver,
+                max_time_s: 120.0,
+                replan_s: None,
+                start_offset_m: 0.0,
+            };
+            run(v, &course, &mut driver, "", &options).metrics
+        };
+        let run_one =
+            |kind, speed, seed, receiver| run_with(Controller::Mpc, kind, speed, seed, receiver);
+        // The lateral weight at 1 instead of 10 (docs/controller.md, "What is left").
+        let mut light = catmodel::control::mpc::DEFAULT_TUNING;
+        light.weights.lateral_per_m2 = 1.0;
+        let mut line = format!(
+            "car {i}: L {:.2} m, {:.0} kg, {:.2} m wide, {:.0} %/s, {:.0} Hz |",
+            v.chassis.wheelbase_m,
+            v.chassis.mass_kg,
+            v.body.width_m,
+            v.steering.rate_limit_pct_per_s,
+            1.0 / v.sensors.gnss.period_s
+        );
+        for speed in [6.0, 8.0, 10.0, 12.0] {
+            let clean = (0..2)
+                .filter(|&s| run_one(Kind::DoubleLaneChange, speed, s, Receiver::Rtk).clean)
+                .count();
+            let light_clean = (0..2)
+                .filter(|&s| {
+                    run_with(
+                        Controller::MpcTuned(light),
+                        Kind::DoubleLaneChange,
+                        speed,
+                        s,
+                        Receiver::Rtk,
+                    )
+                    .clean
+                })
+                .count();
+            line += &format!(" dlc {speed}: {clean}/2 ({light_clean}/2)");
+        }
+        let o = run_one(
+            Kind::Obstacle,
+            Kind::Obstacle.default_speed_mps(),
+            0,
+            Receiver::Standard,
+        );
+        let l = run_one(Kind::Loop, 10.0, 0, Receiver::Rtk);
+        line += &format!(
+            " | obstacle {} {:.2} m | loop {:.3} m",
+            if o.clean { "passed" } else { "NOT passed" },
+            o.min_obstacle_clearance_m.unwrap_or(f64::NAN),
+            l.lateral_rms_m.unwrap_or(f64::NAN)
+        );
+        println!("{line}");
+    }
+}
