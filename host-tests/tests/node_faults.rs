@@ -43,6 +43,15 @@ fn position_error(t: &TickOut, v: f32, steer_pct: f32) -> f64 {
     (f64::from(p.east_m.unwrap()) - e).hypot(f64::from(p.north_m.unwrap()) - n)
 }
 
+/// Every tick of `ticks` has a position within `tol_m` of the known drive at `v`, `steer_pct`.
+fn assert_on_the_car(ticks: &[TickOut], v: f32, steer_pct: f32, tol_m: f64) {
+    for t in ticks {
+        assert!(t.position().position_valid, "t={}", t.t_s());
+        let error = position_error(t, v, steer_pct);
+        assert!(error < tol_m, "t={}: {error}", t.t_s());
+    }
+}
+
 #[test]
 fn crc_error_is_rejected_and_counted() {
     let mut d = drive(10.0, 0.0, 6.0);
@@ -238,15 +247,7 @@ fn gnss_gap_is_dead_reckoned_then_invalid_then_reacquired() {
         }
     }
     // Back within half a second of fixes, on the car.
-    for t in window(&ticks, 13.5, 18.0) {
-        assert!(t.position().position_valid, "t={}", t.t_s());
-        assert!(
-            position_error(t, 10.0, 10.0) < 0.2,
-            "t={}: {}",
-            t.t_s(),
-            position_error(t, 10.0, 10.0)
-        );
-    }
+    assert_on_the_car(window(&ticks, 13.5, 18.0), 10.0, 10.0, 0.2);
 }
 
 /// Replaces GNSS fixes in `[from_s, to_s)` by fixes moved `offset_m` north.
@@ -697,14 +698,9 @@ fn gnss_at_another_rate_than_declared_is_not_used_counted_and_flagged() {
     let expected = slow.round() as u32 + u32::from(RATE_MISMATCH_FIXES);
     assert_eq!(ticks.last().unwrap().counters.gnss_rate_mismatch, expected);
     assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 0);
-    for t in window(&ticks, 14.0, 18.0) {
-        assert!(t.position().position_valid, "t={}", t.t_s());
-        assert!(
-            position_error(t, 10.0, 5.0) < 0.3,
-            "t={}: {}",
-            t.t_s(),
-            position_error(t, 10.0, 5.0)
-        );
+    let back = window(&ticks, 14.0, 18.0);
+    assert_on_the_car(back, 10.0, 5.0, 0.3);
+    for t in back {
         if let NodeStatus::Health { health, .. } = t.status() {
             assert!(!health.gnss_rate_mismatch, "t={}", t.t_s());
         }

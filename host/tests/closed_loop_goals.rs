@@ -43,16 +43,7 @@ fn drive_car(
         Some((v, m)) => load_setup(Some(v), Some(m)).unwrap(),
         None => load_setup(None, None).unwrap(),
     };
-    let course = scenario::course(kind, &vehicle.body, speed);
-    let mut driver = NodeDriver::new(node, controller);
-    let options = RunOptions {
-        seed,
-        receiver,
-        max_time_s: 120.0,
-        replan_s: None,
-        start_offset_m: 0.0,
-    };
-    run(&vehicle, &course, &mut driver, "", &options).metrics
+    drive_with(&vehicle, &node, controller, receiver, kind, speed, seed).metrics
 }
 
 /// The double lane change: the MPC clean on every seed up to 14.5 m/s (its limit by
@@ -190,16 +181,49 @@ fn drive_setup(
     speed: f64,
     seed: u64,
 ) -> RunOutput {
+    drive_with(
+        vehicle,
+        node,
+        Controller::Mpc,
+        Receiver::Standard,
+        kind,
+        speed,
+        seed,
+    )
+}
+
+/// `kind` at `speed` with `controller` and `receiver` on seed `seed`.
+fn drive_with(
+    vehicle: &VehicleConfig,
+    node: &NodeConfig,
+    controller: Controller,
+    receiver: Receiver,
+    kind: Kind,
+    speed: f64,
+    seed: u64,
+) -> RunOutput {
     let course = scenario::course(kind, &vehicle.body, speed);
-    let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+    let mut driver = NodeDriver::new(node.clone(), controller);
     let options = RunOptions {
         seed,
-        receiver: Receiver::Standard,
+        receiver,
         max_time_s: 120.0,
         replan_s: None,
         start_offset_m: 0.0,
     };
     run(vehicle, &course, &mut driver, "", &options)
+}
+
+/// The obstacle at its default speed on seed `seed` (the car's own receiver).
+fn obstacle(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> Metrics {
+    drive_setup(
+        vehicle,
+        node,
+        Kind::Obstacle,
+        Kind::Obstacle.default_speed_mps(),
+        seed,
+    )
+    .metrics
 }
 
 /// Steering activity while engaged: the mean |change of the steering command| per second, %/s.
@@ -228,14 +252,7 @@ fn second_car_with_a_slow_noisy_receiver() {
     let dir = std::env::temp_dir().join(format!("catmodel-5hz-{}", std::process::id()));
     let (vehicle, node) = hatchback_at(5.0, &dir);
     for seed in 0..10 {
-        let m = drive_setup(
-            &vehicle,
-            &node,
-            Kind::Obstacle,
-            Kind::Obstacle.default_speed_mps(),
-            seed,
-        )
-        .metrics;
+        let m = obstacle(&vehicle, &node, seed);
         assert!(m.clean, "obstacle, seed {seed}: {m:?}");
     }
     for seed in 0..3 {
@@ -308,14 +325,7 @@ fn slow_receiver_tables() {
         let seeds = if rate == 1.0 || rate == 5.0 { 15 } else { 10 };
         let clearances: Vec<f64> = (0..seeds)
             .map(|seed| {
-                let m = drive_setup(
-                    &vehicle,
-                    &node,
-                    Kind::Obstacle,
-                    Kind::Obstacle.default_speed_mps(),
-                    seed,
-                )
-                .metrics;
+                let m = obstacle(&vehicle, &node, seed);
                 if m.clean {
                     m.min_obstacle_clearance_m.unwrap_or(f64::NAN)
                 } else {
@@ -398,17 +408,8 @@ fn random_plants() {
         let node = catmodel_host::closed_loop::model_file_for(v)
             .unwrap()
             .node_config();
-        let run_with = |controller: Controller, kind: Kind, speed: f64, seed: u64, receiver| {
-            let course = scenario::course(kind, &v.body, speed);
-            let mut driver = NodeDriver::new(node.clone(), controller);
-            let options = RunOptions {
-                seed,
-                receiver,
-                max_time_s: 120.0,
-                replan_s: None,
-                start_offset_m: 0.0,
-            };
-            run(v, &course, &mut driver, "", &options).metrics
+        let run_with = |controller, kind, speed, seed, receiver| {
+            drive_with(v, &node, controller, receiver, kind, speed, seed).metrics
         };
         let run_one =
             |kind, speed, seed, receiver| run_with(Controller::Mpc, kind, speed, seed, receiver);
