@@ -278,20 +278,21 @@ pub fn evaluate_files(
 }
 
 /// Why the node did not use the GNSS fixes, when the receiver ran at another rate than the
-/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_s`: the
+/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_us`: the
 /// interval the node measured between them, off the declared period): the message names the
 /// rate to declare.
 pub fn gnss_rate_note(
     counters: &catmodel::node::Counters,
-    interval_s: Option<f64>,
+    interval_us: Option<u32>,
     declared_hz: f64,
 ) -> Option<String> {
     if counters.gnss_rate_mismatch == 0 {
         return None;
     }
-    let measured = interval_s
-        .filter(|s| *s > 0.0)
-        .map_or("another rate".to_string(), |s| {
+    let measured = interval_us
+        .filter(|us| *us > 0)
+        .map_or("another rate".to_string(), |us| {
+            let s = f64::from(us) * 1e-6;
             format!("{:.1} Hz (every {:.0} ms)", 1.0 / s, s * 1e3)
         });
     Some(format!(

@@ -355,8 +355,9 @@ fn run(cli: Cli) -> Result<()> {
                 c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
                 result.unsupported
             );
-            let interval_s = result.gnss_interval_us.map(|us| f64::from(us) * 1e-6);
-            if let Some(note) = catmodel_host::gnss_rate_note(&c, interval_s, declared_hz) {
+            if let Some(note) =
+                catmodel_host::gnss_rate_note(&c, result.gnss_interval_us, declared_hz)
+            {
                 eprintln!("catmodel: warning: {note}");
             }
             if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {

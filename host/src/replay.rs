@@ -783,9 +783,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         valid_ticks,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
-        gnss_interval_us: node
-            .gnss_off_rate_interval_s()
-            .map(|s| (s * 1e6).round() as u32),
+        gnss_interval_us: node.gnss_off_rate_interval_us(),
     };
     let error = if input_ok == Some(true) {
         None

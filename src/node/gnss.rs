@@ -24,8 +24,8 @@ pub const RATE_MISMATCH_FIXES: u16 = 20;
 /// ([`EstimatorConfig::design`] from the model file's `gnss_rate_hz`, never on the MCU). The
 /// lowpass, the course chord and the gap filling all count in fixes of that period: a 10 Hz
 /// receiver declared as 100 Hz makes every fix a gap of nine, filled by dead reckoning, and
-/// the heading follows the dead reckoning instead of the track (measured: 0 rad, north, for a
-/// car driving east; the position 9 m off). So fixes at another rate are not used: counted
+/// the heading follows the dead reckoning instead of the track (measured on the closed-loop
+/// rig: north for a car driving east, the position metres off). So fixes at another rate are not used: counted
 /// (`Counters::gnss_rate_mismatch`), flagged (NODE_STATUS `gnss_rate_mismatch`), no position.
 #[derive(Clone, Copy, Debug, Default)]
 struct RateCheck {
@@ -35,7 +35,7 @@ struct RateCheck {
     slow_in_row: u16,
     /// Consecutive intervals under half a period.
     fast_in_row: u16,
-    /// Consecutive intervals on the period, while in mismatch.
+    /// Consecutive intervals on the period (they end a mismatch).
     normal_in_row: u16,
     /// The receiver runs at another rate than declared.
     mismatch: bool,
@@ -153,11 +153,10 @@ impl Gnss {
         self.rate.mismatch
     }
 
-    /// The latest interval between the receiver's fixes that was off the declared period, s
+    /// The latest interval between the receiver's fixes that was off the declared period, us
     /// (`None` while there has been none): the receiver's period when [`Self::rate_mismatch`].
-    pub fn off_rate_interval_s(&self) -> Option<f32> {
-        (self.rate.off_interval_us > 0)
-            .then(|| math::u64_to_f32(u64::from(self.rate.off_interval_us)) * 1e-6)
+    pub fn off_rate_interval_us(&self) -> Option<u32> {
+        (self.rate.off_interval_us > 0).then_some(self.rate.off_interval_us)
     }
 
     /// Dead reckoning over `dt_s` (see [`EstimatorState::propagate`]).

@@ -418,9 +418,9 @@ impl<D: BorrowMut<Drive>> Node<D> {
     }
 
     /// The latest interval between the GNSS receiver's fixes that was off the model file's
-    /// period, s: the receiver's period when NODE_STATUS says `gnss_rate_mismatch`.
-    pub fn gnss_off_rate_interval_s(&self) -> Option<f32> {
-        self.gnss.off_rate_interval_s()
+    /// period, us: the receiver's period when NODE_STATUS says `gnss_rate_mismatch`.
+    pub fn gnss_off_rate_interval_us(&self) -> Option<u32> {
+        self.gnss.off_rate_interval_us()
     }
 
     /// Ticks run.

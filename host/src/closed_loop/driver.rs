@@ -98,7 +98,7 @@ impl Driver for NodeDriver {
     fn gnss_rate_note(&self) -> Option<String> {
         crate::gnss_rate_note(
             self.node.counters(),
-            self.node.gnss_off_rate_interval_s().map(f64::from),
+            self.node.gnss_off_rate_interval_us(),
             1.0 / f64::from(self.node.config().estimator.gnss_period_s),
         )
     }
