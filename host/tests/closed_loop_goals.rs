@@ -46,19 +46,54 @@ fn drive_car(
     drive_with(&vehicle, &node, controller, receiver, kind, speed, seed).metrics
 }
 
-/// The double lane change: the MPC clean on every seed up to 14.5 m/s (its limit by
-/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 14.56 m/s, 13.88 with the 1.5 s
-/// horizon; pure pursuit's 13.13 m/s).
+/// The double lane change: the MPC clean on every seed up to 14.25 m/s (its limit by
+/// `catmodel dlc-limits --controllers pure-pursuit,mpc`: 14.38 m/s; pure pursuit's 13.06 m/s;
+/// 14.56 and 13.13 when the planner's stop reached into the track).
 /// Goal: 2 m/s above pure pursuit and within 1 m/s of the optimiser's limit (16.94 m/s): not
 /// reached (docs/controller.md, "What is left").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn double_lane_change_mpc_clean_up_to_its_limit() {
     let (vehicle, node) = load_setup(None, None).unwrap();
-    for speed in [5.0, 8.0, 10.0, 12.5, 14.0, 14.5] {
+    for speed in [5.0, 8.0, 10.0, 12.5, 14.0, 14.25] {
         let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, speed);
         assert!(clean, "MPC not clean at {speed} m/s on seeds {SEEDS:?}");
     }
+}
+
+/// The lane change is driven at its speed, as the optimiser's trials are (speed command held):
+/// the car's speed stays within 0.4 m/s of the target from the first cone to the last. With
+/// the planner's stop 40 m after the track, the MPC braked into the exit lane from 14 m/s
+/// (14.5 m/s target: 11.6 m/s at its slowest, seed 0) and its limit was not the optimiser's
+/// manoeuvre.
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn double_lane_change_is_driven_at_its_speed() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let speed = 14.5;
+    let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, speed);
+    let (from, to) = course.scored_stations_m;
+    let out = drive_with(
+        &vehicle,
+        &node,
+        Controller::Mpc,
+        Receiver::Rtk,
+        Kind::DoubleLaneChange,
+        speed,
+        0,
+    );
+    let scored: Vec<f64> = out
+        .samples
+        .iter()
+        .filter(|s| s.station_m >= from && s.station_m <= to)
+        .map(|s| s.truth.speed)
+        .collect();
+    assert!(scored.len() > 150, "{} samples in the track", scored.len());
+    let slowest = scored.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(
+        slowest >= speed - 0.4,
+        "{slowest} m/s in the track at {speed} m/s"
+    );
 }
 
 /// The obstacle on the path with the standard receiver (1.2 m horizontal RMS): passed with at
@@ -99,9 +134,10 @@ fn loop_lateral_rms_rtk() {
     }
 }
 
-/// The second car: the MPC clean at 12.5 and 14.5 m/s (`catmodel dlc-limits --controllers
+/// The second car: the MPC clean at 12.5 and 14.25 m/s (`catmodel dlc-limits --controllers
 /// pure-pursuit,mpc --vehicle host/vehicles/hatchback.toml --model models/hatchback.toml`:
-/// MPC 15.19 m/s; 13.06 with the 1.5 s horizon, 12.88 before the corridor gave way to a start
+/// MPC 14.44 m/s; 15.19 when the planner's stop reached into the track, 13.06 with the 1.5 s
+/// horizon, 12.88 before the corridor gave way to a start
 /// outside it, 13.5 m/s before the controllers waited for the heading to settle, which moved
 /// the take-over by 0.2 s: the clearances are centimetres at every speed and which speeds pass
 /// is chance at that scale, docs/controller.md); pure pursuit with the CAT Vehicle's tuning
@@ -113,7 +149,7 @@ fn loop_lateral_rms_rtk() {
 fn second_car_goals() {
     let (v, m) = hatchback();
     let (vehicle, node) = load_setup(Some(&v), Some(&m)).unwrap();
-    for speed in [12.5, 14.5] {
+    for speed in [12.5, 14.25] {
         let (clean, _) = clean_at(&vehicle, &node, Controller::Mpc, Receiver::Rtk, speed);
         assert!(clean, "MPC not clean at {speed} m/s");
     }

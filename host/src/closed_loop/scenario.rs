@@ -32,6 +32,13 @@ pub const DLC_EXIT_WIDTH_MAX_M: f64 = 3.0;
 /// Deceleration the planner's speed profile uses to bring the car to rest at the path's end,
 /// m/s^2.
 pub const PLANNER_DECEL_MPS2: f64 = 2.0;
+/// After the double lane change's last cones the planner holds the target speed this long
+/// before its stop begins, s: longer than a controller looks ahead (the MPC's speed plan, 2 s)
+/// plus the speed loop's delay, so that no controller brakes inside the track. The optimiser's
+/// trials hold the speed command through it, and ISO 3888-2 is driven at the entry speed; with
+/// a fixed 40 m exit the stop reached into the track from 14 m/s and the MPC slowed by up to
+/// 3 m/s in the exit lane (docs/findings.md).
+pub const DLC_HOLD_AFTER_S: f64 = 3.0;
 
 /// Which course.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -411,13 +418,18 @@ pub fn double_lane_change(body: &Body, speed_mps: f64) -> Course {
     let y_at = |x: f64| design.y_at(x);
     let edges = |x: f64| dlc_edges(&lanes, x);
     let run_up = run_up_m(speed_mps);
-    let exit = 40.0;
+    let exit = (speed_mps * DLC_HOLD_AFTER_S + speed_mps * speed_mps / (2.0 * PLANNER_DECEL_MPS2))
+        .max(40.0);
     let approach_spacing = (run_up / 80.0).max(1.0);
     let mut xs: Vec<f64> = stations(-run_up, 0.0, approach_spacing).collect();
     xs.pop();
     xs.extend(stations(0.0, s5.x_end_m, 0.5));
     xs.pop();
-    xs.extend(stations(s5.x_end_m, s5.x_end_m + exit, 2.0));
+    xs.extend(stations(
+        s5.x_end_m,
+        s5.x_end_m + exit,
+        (exit / 40.0).max(2.0),
+    ));
     let points: Vec<CoursePoint> = xs
         .iter()
         .map(|&x| {
