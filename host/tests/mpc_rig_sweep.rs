@@ -1,16 +1,23 @@
 //! Tuning sweeps of the model-predictive controller on the closed-loop rig (the node, the bus,
 //! the built-in plant): ignored; they print, the goals are pinned in `closed_loop_goals.rs`.
-use catmodel::control::mpc::{MpcTuning, DEFAULT_TUNING};
+use catmodel::control::mpc::MpcTuning;
+use catmodel::node::drive::mpc_tuning;
+use catmodel::node::NodeConfig;
 use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::scenario::{self, Kind};
 use catmodel_host::closed_loop::{load_setup, run, Receiver, RunOptions};
+use catmodel_host::sim::config::VehicleConfig;
 
-fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
-    // VEHICLE and MODEL: another car (paths from the repository's root, as the CLI's).
+/// The car: VEHICLE and MODEL name another (paths from the repository's root, as the CLI's).
+fn setup() -> (VehicleConfig, NodeConfig) {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let vehicle = std::env::var("VEHICLE").ok().map(|p| root.join(p));
     let model = std::env::var("MODEL").ok().map(|p| root.join(p));
-    let (vehicle, node) = load_setup(vehicle.as_deref(), model.as_deref()).unwrap();
+    load_setup(vehicle.as_deref(), model.as_deref()).unwrap()
+}
+
+fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
+    let (vehicle, node) = setup();
     let kind =
         std::env::var("SCENARIO").map_or(Kind::DoubleLaneChange, |s| Kind::from_name(&s).unwrap());
     let course = scenario::course(kind, &vehicle.body, speed);
@@ -35,10 +42,12 @@ fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
 #[ignore = "tuning sweep on the rig; prints"]
 fn sweep() {
     let variants: Vec<(&str, MpcTuning)> = {
-        let mut v = vec![("default", DEFAULT_TUNING)];
+        // The car's own tuning: the built-in one with what its model file sets.
+        let base = mpc_tuning(&setup().1);
+        let mut v = vec![("default", base)];
         let var = std::env::var("SWEEP").unwrap_or_default();
         for item in var.split(';').filter(|s| !s.is_empty()) {
-            let mut t = DEFAULT_TUNING;
+            let mut t = base;
             for kv in item.split(',') {
                 let (k, val) = kv.split_once('=').unwrap();
                 let x: f32 = val.parse().unwrap();

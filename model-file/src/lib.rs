@@ -29,7 +29,8 @@
 //!   `cornering_front_n_per_rad`, `cornering_rear_n_per_rad`;
 //! - `[inputs]`: `steer_timeout_s`, `speed_timeout_s`, `pedal_timeout_s`,
 //!   `gnss_source_address`, `gnss_gate_m`, `gnss_lost_s`;
-//! - `[control]`: `controller` (`"mpc"` or `"pure-pursuit"`), `position_uncertainty_m`;
+//! - `[control]`: `controller` (`"mpc"` or `"pure-pursuit"`), `position_uncertainty_m`,
+//!   `mpc_lateral_weight_per_m2` (optional);
 //! - `[hybrid]`: `enter_dynamic_speed_mps`, `enter_dynamic_lat_accel_mps2`,
 //!   `exit_dynamic_speed_mps`, `exit_dynamic_lat_accel_mps2`, `min_dwell_ticks`;
 //! - `[speed]` (eq 5: `input_vel` -> `vel`) and `[dx_dt]` (eq 7: `v_m`, `x`, `y`, `phi` ->
@@ -42,14 +43,14 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use catmodel::can::freshness::FreshnessConfig;
-use catmodel::control::mpc::{MpcConfig, DEFAULT_TUNING};
+use catmodel::control::mpc::MpcConfig;
 use catmodel::model::block::{MisoBlock, SsBlock};
 use catmodel::model::dynamic::{DynamicParams, MIN_SPEED_MPS};
 use catmodel::model::hybrid::HybridConfig;
 use catmodel::model::predictor::DEFAULT_HORIZON;
 use catmodel::model::tf::{ModelError, TransferFunction};
 use catmodel::model::zoh::{self, DiscreteStateSpace};
-use catmodel::node::drive::Controller;
+use catmodel::node::drive::{mpc_tuning, Controller};
 use catmodel::node::estimator::EstimatorConfig;
 use catmodel::node::{NodeConfig, DXDT_DELAY_CAP, VELOCITY_DELAY_CAP};
 use catmodel::vehicle::{Body, VehicleParams};
@@ -349,6 +350,12 @@ pub struct ControlSection {
     /// Bound on the error of the node's position estimate with this car's receiver (2 sigma),
     /// m: the controller inflates obstacles by it.
     pub position_uncertainty_m: f64,
+    /// The MPC's weight on the lateral offset from the planner's line, per m^2 (absent: the
+    /// built-in tuning's, 10, tuned on the CAT Vehicle). A car that cannot follow the line
+    /// closely (a line past its steering lock, docs/controller.md) drives the lane change
+    /// better with less.
+    #[serde(default)]
+    pub mpc_lateral_weight_per_m2: Option<f64>,
 }
 
 /// The controller's name in the file.
@@ -765,6 +772,19 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             ),
         ));
     }
+    if let Some(w) = c.mpc_lateral_weight_per_m2 {
+        if !(w.is_finite()
+            && (MPC_LATERAL_WEIGHT_RANGE.0..=MPC_LATERAL_WEIGHT_RANGE.1).contains(&w))
+        {
+            return Err(err(
+                path,
+                format!(
+                    "control.mpc_lateral_weight_per_m2 = {w}: must be within {}..{} (the heading weight is 10, the steering's 1)",
+                    MPC_LATERAL_WEIGHT_RANGE.0, MPC_LATERAL_WEIGHT_RANGE.1
+                ),
+            ));
+        }
+    }
     let h = &raw.hybrid;
     for (key, val) in [
         ("hybrid.enter_dynamic_speed_mps", h.enter_dynamic_speed_mps),
@@ -946,11 +966,12 @@ impl ModelFile {
                 ControllerName::PurePursuit => Controller::PurePursuit,
             },
             position_uncertainty_m: self.control.position_uncertainty_m as f32,
+            mpc_lateral_weight_per_m2: self.control.mpc_lateral_weight_per_m2.map(|w| w as f32),
         })
         .and_then(|config| {
             // The controller must be buildable for this car, or the node could not drive it.
             if config.controller == Controller::Mpc {
-                MpcConfig::for_node(&config, DEFAULT_TUNING).map_err(|e| {
+                MpcConfig::for_node(&config, mpc_tuning(&config)).map_err(|e| {
                     err(
                         path,
                         format!(
@@ -963,6 +984,9 @@ impl ModelFile {
         })
     }
 }
+
+/// Accepted range of `[control] mpc_lateral_weight_per_m2`.
+pub const MPC_LATERAL_WEIGHT_RANGE: (f64, f64) = (0.1, 100.0);
 
 /// Reads and validates a model file.
 pub fn load(path: &Path) -> Result<ModelFile, ModelFileError> {
@@ -1171,6 +1195,13 @@ pub fn to_toml(f: &ModelFile) -> String {
         "position_uncertainty_m = {}  # the position estimate's error bound (2 sigma): obstacles are inflated by it",
         num(c.position_uncertainty_m)
     );
+    if let Some(w) = c.mpc_lateral_weight_per_m2 {
+        let _ = writeln!(
+            o,
+            "mpc_lateral_weight_per_m2 = {}  # the MPC's weight on the offset from the planner's line (built-in: 10)",
+            num(w)
+        );
+    }
     let h = &f.hybrid;
     let _ = writeln!(o, "\n[hybrid]");
     let _ = writeln!(

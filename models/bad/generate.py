@@ -120,6 +120,14 @@ BAD = {
         lambda t: replace(t, "exit_dynamic_speed_mps = 4.0", "exit_dynamic_speed_mps = 8.0"),
         "hybrid: exit thresholds must not exceed enter thresholds",
     ),
+    "lateral-weight-zero": (
+        lambda t: replace(t, "position_uncertainty_m = 1.6", "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = 0.0"),
+        "control.mpc_lateral_weight_per_m2 = 0: must be within 0.1..100",
+    ),
+    "lateral-weight-nan": (
+        lambda t: replace(t, "position_uncertainty_m = 1.6", "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = nan"),
+        "control.mpc_lateral_weight_per_m2 = NaN: must be within 0.1..100",
+    ),
     "unknown-key": (
         lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_mm = 2620"),
         "unknown field `wheelbase_mm`",

@@ -268,7 +268,7 @@ impl Drive {
         self.heading = HeadingSettle::new();
         self.lost_path = false;
         self.mpc_config = match config.controller {
-            Controller::Mpc => MpcConfig::for_node(config, DEFAULT_TUNING).ok(),
+            Controller::Mpc => MpcConfig::for_node(config, mpc_tuning(config)).ok(),
             Controller::PurePursuit => None,
         };
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
@@ -290,7 +290,7 @@ impl Drive {
     }
 
     /// Replaces the model-predictive controller's tuning (host tools that sweep it; the node
-    /// runs [`DEFAULT_TUNING`] otherwise) for the car of `config`; `false` (and the controller
+    /// runs [`mpc_tuning`] otherwise) for the car of `config`; `false` (and the controller
     /// unconfigured: fallback) if the tuning is refused.
     pub fn tune_mpc(&mut self, config: &NodeConfig, tuning: MpcTuning) -> bool {
         self.mpc.reset();
@@ -515,6 +515,16 @@ impl Drive {
 }
 
 /// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
+/// The model-predictive controller's tuning for the car of `config`: [`DEFAULT_TUNING`] (tuned on
+/// the CAT Vehicle) with what the car's model file sets (`[control] mpc_lateral_weight_per_m2`).
+pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
+    let mut tuning = DEFAULT_TUNING;
+    if let Some(w) = config.mpc_lateral_weight_per_m2 {
+        tuning.weights.lateral_per_m2 = w;
+    }
+    tuning
+}
+
 fn mpc_command(out: &MpcOutput) -> DriveOutput {
     DriveOutput {
         command: ControlCommand {

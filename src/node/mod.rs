@@ -152,6 +152,9 @@ pub struct NodeConfig {
     /// Bound on the error of the node's position estimate with this receiver (2 sigma), m:
     /// the controller inflates obstacles by it.
     pub position_uncertainty_m: f32,
+    /// The MPC's lateral-offset weight for this car, per m^2 (`None`: the tuning's,
+    /// [`crate::control::mpc::DEFAULT_TUNING`]); see [`drive::mpc_tuning`].
+    pub mpc_lateral_weight_per_m2: Option<f32>,
 }
 
 impl Image for FreshnessConfig {
@@ -186,6 +189,7 @@ impl Image for NodeConfig {
             max_steer_rate_pct_per_s,
             controller,
             position_uncertainty_m,
+            mpc_lateral_weight_per_m2,
         } = self;
         vehicle.write(w);
         body.write(w);
@@ -205,6 +209,7 @@ impl Image for NodeConfig {
         max_steer_rate_pct_per_s.write(w);
         controller.write(w);
         position_uncertainty_m.write(w);
+        mpc_lateral_weight_per_m2.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         Ok(Self {
@@ -226,6 +231,7 @@ impl Image for NodeConfig {
             max_steer_rate_pct_per_s: Image::read(r)?,
             controller: Image::read(r)?,
             position_uncertainty_m: Image::read(r)?,
+            mpc_lateral_weight_per_m2: Image::read(r)?,
         })
     }
 }
