@@ -685,3 +685,66 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
     assert!(m.clean && m.completed, "{m:?}");
     assert!(catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver).is_none());
 }
+
+/// The steering a path asks for, hand-derived on the loop (20 m arcs: `atan(L / 20)`), and the
+/// note `closed-loop` and `dlc-limits` print for a car whose lock the lane change's path needs
+/// (the van without a lateral weight in its model file: 36.1 deg against its 35.4) and for no
+/// other: not for the van whose model file sets the weight, the CAT Vehicle (0.53 of its lock)
+/// or the hatchback (0.44).
+#[test]
+fn a_path_that_needs_the_lock_is_named() {
+    let cat = VehicleConfig::default();
+    let ring = scenario::course(Kind::Loop, &cat.body, 4.0);
+    let demand = scenario::path_steer_demand_rad(&ring, 2.62);
+    assert!((demand - (2.62f64 / 20.0).atan()).abs() < 1e-3, "{demand}");
+
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let van = root.join("host/vehicles/van.toml");
+    let with_weight = root.join("models/van.toml");
+    let text = std::fs::read_to_string(&with_weight).unwrap();
+    let without: String = text
+        .lines()
+        .filter(|l| !l.starts_with("mpc_lateral_weight_per_m2"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_ne!(without, text);
+    let dir = tmp_dir("line_demand");
+    let bare = dir.join("van-without-weight.toml");
+    std::fs::write(&bare, without).unwrap();
+    let note = |vehicle: Option<&Path>, model: Option<&Path>| {
+        let (v, node) = load_setup(vehicle, model).unwrap();
+        let course = scenario::course(Kind::DoubleLaneChange, &v.body, 10.0);
+        catmodel_host::closed_loop::line_demand_note(&course, &node)
+    };
+    let named = note(Some(&van), Some(&bare)).expect("the van without its weight is named");
+    assert!(
+        named.contains("35.4 deg lock") && named.contains("mpc_lateral_weight_per_m2 = 1"),
+        "{named}"
+    );
+    assert_eq!(note(Some(&van), Some(&with_weight)), None);
+    assert_eq!(note(None, None), None);
+    let hatchback = root.join("host/vehicles/hatchback.toml");
+    assert_eq!(
+        note(Some(&hatchback), Some(&root.join("models/hatchback.toml"))),
+        None
+    );
+    // The command prints it.
+    let out = cl(&[
+        "--scenario",
+        "dlc",
+        "--speed",
+        "4",
+        "--vehicle",
+        van.to_str().unwrap(),
+        "--model",
+        bare.to_str().unwrap(),
+        "--out",
+        dir.join("run").to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("closed-loop: note: the planner's path asks for"),
+        "{stderr}"
+    );
+}
