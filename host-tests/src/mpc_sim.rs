@@ -719,6 +719,12 @@ impl Loop {
                 last_speed_cmd_mps: self.last_speed_cmd,
             },
             position_uncertainty_m: self.position_error.uncertainty_m,
+            // The bench's path is the horizon's reference (its cars' paths ask for less of the
+            // lock than MpcTuning::line_rule looks for).
+            path_max_curvature_per_m: reference
+                .iter()
+                .map(|r| r.curvature_per_m.abs())
+                .fold(0.0, f32::max),
         };
         let out = self.mpc.solve(&mut self.mpc_state, &input);
         for (p, pt) in self.planned_speeds.iter_mut().zip(&out.plan) {

@@ -173,25 +173,29 @@ fn errors_name_the_file_and_the_key() {
     );
 }
 
-/// `[control] mpc_lateral_weight_per_m2`: the van's file sets it, the node's MPC runs with it
-/// (the rest of the tuning the built-in one), it survives writing, reading and the firmware's
-/// image; a file without it runs the built-in tuning.
+/// `[control] mpc_lateral_weight_per_m2`: a file that sets it runs the MPC with that weight on
+/// every path (the rest of the tuning the built-in one, its rule for paths that need the lock
+/// off); it survives writing, reading and the firmware's image; a file without it runs the
+/// built-in tuning.
 #[test]
 fn a_car_sets_its_lateral_weight_in_its_model_file() {
     use catmodel::control::mpc::DEFAULT_TUNING;
     use catmodel::node::drive::mpc_tuning;
-    let root = model_file::paper_path().parent().unwrap().to_path_buf();
-    let van = model_file::load(&root.join("van.toml")).unwrap();
-    assert_eq!(van.control.mpc_lateral_weight_per_m2, Some(1.0));
-    let config = van.node_config();
-    assert_eq!(config.mpc_lateral_weight_per_m2, Some(1.0));
+    let text = paper_text().replace(
+        "position_uncertainty_m = 1.6",
+        "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = 2.5",
+    );
+    let file = parse(&text, Path::new("weighted.toml")).unwrap();
+    assert_eq!(file.control.mpc_lateral_weight_per_m2, Some(2.5));
+    let config = file.node_config();
+    assert_eq!(config.mpc_lateral_weight_per_m2, Some(2.5));
     let tuning = mpc_tuning(&config);
-    assert_eq!(tuning.weights.lateral_per_m2, 1.0);
     let mut expected = DEFAULT_TUNING;
-    expected.weights.lateral_per_m2 = 1.0;
+    expected.weights.lateral_per_m2 = 2.5;
+    expected.line_rule = None;
     assert_eq!(tuning, expected);
-    let again = parse(&to_toml(&van), Path::new("<written>")).unwrap();
-    assert_eq!(again, van);
+    let again = parse(&to_toml(&file), Path::new("<written>")).unwrap();
+    assert_eq!(again, file);
     let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
     let n = config.to_image(&mut words);
     let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();

@@ -139,6 +139,10 @@ proptest! {
                     last_speed_cmd_mps: c.speed as f32,
                 },
                 position_uncertainty_m: uncertainty,
+                path_max_curvature_per_m: reference
+                    .iter()
+                    .map(|r| r.curvature_per_m.abs())
+                    .fold(0.0, f32::max),
             };
             let out = mpc.solve(&mut state, &input);
             prop_assert!(out.steer_cmd_pct.is_finite() && out.steer_cmd_pct.abs() <= 100.0);
@@ -196,4 +200,61 @@ proptest! {
             }
         }
     }
+}
+
+/// `MpcTuning::line_rule`: a path that asks for the lock (here its largest curvature is the
+/// lock's) is weighed with the rule's lateral weight, a path that does not (or a non-finite
+/// curvature) with the tuning's; without the rule the path's curvature changes nothing. Seen
+/// in the command of a car 5 cm right of a straight path: the weight of 10 steers back
+/// harder than the weight of 1.
+#[test]
+fn a_path_that_needs_the_lock_is_weighed_with_the_rules_weight() {
+    let cfg = VehicleConfig::default();
+    let path = arc(0.0, 3.0, 3.0, 10.0);
+    let speeds = [10.0f32; PLAN_STEPS + 1];
+    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+    let (x, y, h) = path.pose(5.0);
+    let pose = Pose::new(x as f32 + 0.05, y as f32, h as f32);
+    let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let model_state = eq5.steady_state_for_output(10.0).unwrap();
+    let obstacles = [None; MAX_OBSTACLES];
+    let lock_curvature =
+        (cfg.chassis.max_steer_deg as f32).to_radians().tan() / cfg.chassis.wheelbase_m as f32;
+    let command = |tuning, path_max_curvature_per_m: f32| {
+        let mpc = mpc_for(&cfg, ESCAPE_BODY, tuning);
+        let mut state = MpcState::default();
+        let input = MpcInput {
+            reference: &reference,
+            obstacles: &obstacles,
+            car: CarState {
+                pose,
+                speed_mps: 10.0,
+                lateral: LateralState::default(),
+                steer_rad: 0.0,
+                mode: Mode::Dynamic,
+                speed_model: &model_state,
+                speed_bias_mps: 0.0,
+                last_speed_cmd_mps: 10.0,
+            },
+            position_uncertainty_m: 0.1,
+            path_max_curvature_per_m,
+        };
+        mpc.solve(&mut state, &input).steer_cmd_pct
+    };
+    let tracked = command(DEFAULT_TUNING, 0.0);
+    let past_lock = command(DEFAULT_TUNING, lock_curvature);
+    assert!(tracked < 0.0 && past_lock < 0.0, "{tracked} {past_lock}");
+    assert!(
+        past_lock.abs() < 0.8 * tracked.abs(),
+        "{tracked} {past_lock}"
+    );
+    assert_eq!(command(DEFAULT_TUNING, -lock_curvature), past_lock);
+    assert_eq!(command(DEFAULT_TUNING, f32::NAN), tracked);
+    let mut weight_one = DEFAULT_TUNING;
+    weight_one.weights.lateral_per_m2 = 1.0;
+    weight_one.line_rule = None;
+    assert_eq!(command(weight_one, 0.0), past_lock);
+    let mut no_rule = DEFAULT_TUNING;
+    no_rule.line_rule = None;
+    assert_eq!(command(no_rule, lock_curvature), tracked);
 }

@@ -556,14 +556,6 @@ fn run(cli: Cli) -> Result<()> {
             let limits =
                 catmodel_host::closed_loop::limits::dlc_limits(&cfg, &node, &controllers, optimal)?;
             progress.finish();
-            let course = catmodel_host::closed_loop::scenario::course(
-                catmodel_host::closed_loop::scenario::Kind::DoubleLaneChange,
-                &cfg.body,
-                10.0,
-            );
-            if let Some(note) = catmodel_host::closed_loop::line_demand_note(&course, &node) {
-                eprintln!("catmodel: note: {note}");
-            }
             let text = serde_json::to_string_pretty(&limits)?;
             println!("{text}");
             if let Some(path) = json {

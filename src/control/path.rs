@@ -427,6 +427,16 @@ impl Path {
         self.station_m.get(..self.len)?.get(i).copied()
     }
 
+    /// The largest reference curvature of any point, 1/m, without its sign (0 for an empty
+    /// path): how tight the path is at its tightest.
+    pub fn max_curvature_per_m(&self) -> f32 {
+        self.curvature_per_m
+            .iter()
+            .take(self.len)
+            .map(|k| if *k < 0.0 { -*k } else { *k })
+            .fold(0.0, |m, k| if k > m { k } else { m })
+    }
+
     /// Length along the path, m.
     pub fn length_m(&self) -> f32 {
         self.station_of(self.len.saturating_sub(1)).unwrap_or(0.0)

@@ -521,6 +521,7 @@ pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
     let mut tuning = DEFAULT_TUNING;
     if let Some(w) = config.mpc_lateral_weight_per_m2 {
         tuning.weights.lateral_per_m2 = w;
+        tuning.line_rule = None;
     }
     tuning
 }
@@ -680,6 +681,7 @@ fn mpc_tick<P: StageProbe>(
             last_speed_cmd_mps,
         },
         position_uncertainty_m: config.position_uncertainty_m,
+        path_max_curvature_per_m: path.max_curvature_per_m(),
     };
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);

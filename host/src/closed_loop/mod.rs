@@ -637,43 +637,9 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     if let Some(note) = driver::Driver::gnss_rate_note(&driver) {
         eprintln!("closed-loop: warning: {note}");
     }
-    if let Some(note) = line_demand_note(&course, driver.node().config()) {
-        eprintln!("closed-loop: note: {note}");
-    }
     let mut files = write_session(&args.out, &output)?;
     files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))
-}
-
-/// The share of the car's lock above which [`line_demand_note`] speaks.
-pub const LINE_DEMAND_NOTE_SHARE: f64 = 0.9;
-
-/// A note when the course's path asks the car for most of its steering lock and the MPC pulls
-/// towards it with the built-in weight (the model file sets none): such a car starts its swings
-/// late and drives the lane change better with a lower `[control] mpc_lateral_weight_per_m2`
-/// (docs/controller.md, "A car the line asks too much of"; the van: 5.38 -> 9.38 m/s).
-pub fn line_demand_note(course: &Course, node: &NodeConfig) -> Option<String> {
-    if node.controller != catmodel::node::drive::Controller::Mpc
-        || node.mpc_lateral_weight_per_m2.is_some()
-    {
-        return None;
-    }
-    let lock = f64::from(node.vehicle.max_steer_rad);
-    let demand = scenario::path_steer_demand_rad(course, f64::from(node.vehicle.wheelbase_m));
-    (demand >= LINE_DEMAND_NOTE_SHARE * lock).then(|| {
-        format!(
-            "the planner's path asks for {:.1} deg of steering at its tightest, {:.0} % of \
-             this car's {:.1} deg lock; the MPC's built-in weight on the path ({}) makes such a \
-             car start its swings late: `[control] mpc_lateral_weight_per_m2 = 1` in its model \
-             file drives it better (docs/controller.md, \"A car the line asks too much of\")",
-            demand.to_degrees(),
-            100.0 * demand / lock,
-            lock.to_degrees(),
-            catmodel::control::mpc::DEFAULT_TUNING
-                .weights
-                .lateral_per_m2,
-        )
-    })
 }
 
 /// Writes a run's files into `dir` (created).

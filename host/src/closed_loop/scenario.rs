@@ -578,25 +578,6 @@ pub fn parking_loop(speed_mps: f64) -> Course {
     }
 }
 
-/// The steering the course's path asks of a car with wheelbase `wheelbase_m` at its tightest,
-/// rad: `atan(L kappa)` (the kinematic steady state) with `kappa` the largest curvature of the
-/// circle through any three consecutive path points.
-pub fn path_steer_demand_rad(course: &Course, wheelbase_m: f64) -> f64 {
-    let mut kappa_max: f64 = 0.0;
-    for w in course.path.windows(3) {
-        let [a, b, c] = [&w[0], &w[1], &w[2]];
-        let cross = (b.east_m - a.east_m) * (c.north_m - a.north_m)
-            - (b.north_m - a.north_m) * (c.east_m - a.east_m);
-        let sides = (b.east_m - a.east_m).hypot(b.north_m - a.north_m)
-            * (c.east_m - b.east_m).hypot(c.north_m - b.north_m)
-            * (c.east_m - a.east_m).hypot(c.north_m - a.north_m);
-        if sides > 1e-12 {
-            kappa_max = kappa_max.max(2.0 * cross.abs() / sides);
-        }
-    }
-    (wheelbase_m * kappa_max).atan()
-}
-
 /// The course of `kind` at `speed_mps` for a car with `body`.
 pub fn course(kind: Kind, body: &Body, speed_mps: f64) -> Course {
     match kind {

@@ -203,6 +203,9 @@ pub struct MpcInput<'a> {
     /// Bound on the error of the position estimate, m (the estimator's 2-sigma or worse):
     /// obstacles are inflated by it.
     pub position_uncertainty_m: f32,
+    /// The largest reference curvature of the whole path, 1/m (either sign; for
+    /// [`MpcTuning::line_rule`]).
+    pub path_max_curvature_per_m: f32,
 }
 
 /// Cost weights and ADMM penalties of the lateral problem.
@@ -291,6 +294,22 @@ pub struct MpcTuning {
     /// an obstacle that leaves no room is acted on once it is within the stopping distance
     /// `v stop_delay + v^2 / (2 decel)` (or the horizon, if that reaches further).
     pub stop_delay_s: f32,
+    /// The lateral weight for a path the car cannot follow closely (`None`: the weights' always).
+    pub line_rule: Option<LineRule>,
+}
+
+/// A path whose tightest point asks for `lock_share` of the car's steering lock or more
+/// (`atan(L kappa_max)`, the kinematic steady state, with the path's largest reference
+/// curvature) is weighed with `lateral_per_m2` instead of [`Weights::lateral_per_m2`]: pulled
+/// hard towards a line it can follow only at full lock, a car starts its swings late (the van
+/// of docs/controller.md, "A car the line asks too much of").
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LineRule {
+    /// Share of the lock from which the rule applies.
+    pub lock_share: f32,
+    /// The lateral weight then, per m^2.
+    pub lateral_per_m2: f32,
 }
 
 /// Tuned on the built-in plant (docs/mpc.md, "Tuning").
@@ -340,6 +359,12 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     // 0.4 s delay + 0.4 s actuator lag. 0.8 s covers the plant, conservatively.
     stop_delay_s: 0.8,
     preview_s: 1.5,
+    // The lane change's path asks 0.47 of the CAT Vehicle's lock, 0.40 of the hatchback's,
+    // 0.87 of the van's (on the node's reference); the van is clean to 9.38 m/s at 1, 5.38 at 10.
+    line_rule: Some(LineRule {
+        lock_share: 0.75,
+        lateral_per_m2: 1.0,
+    }),
 };
 
 /// Why a configuration is refused.
@@ -537,7 +562,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 15] = [
+        let checks: [(bool, &'static str); 16] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -566,6 +591,14 @@ impl MpcConfig {
                 "ADMM relaxation (0 .. 2)",
             ),
             (weights_ok(&tuning.weights), "lateral weights"),
+            (
+                tuning.line_rule.is_none_or(|r| {
+                    positive(r.lock_share)
+                        && r.lateral_per_m2.is_finite()
+                        && r.lateral_per_m2 >= 0.0
+                }),
+                "line_rule",
+            ),
             (positive(tuning.stop_delay_s), "stop_delay_s"),
             (
                 positive(tuning.corridor_return_mps2),
@@ -660,7 +693,8 @@ impl MpcConfig {
         for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
             *s = *v;
         }
-        let setup = self.setup(self.mode(input), &speeds);
+        let weights = self.weights_for(input);
+        let setup = self.setup(self.mode(input), &speeds, &weights);
         let preview_m = max(car.speed_mps, 0.0) * self.tuning.preview_s;
         let built = lateral::build(
             &mut state.problem,
@@ -843,17 +877,37 @@ impl MpcConfig {
         }
     }
 
-    fn setup<'a>(&'a self, mode: Mode, speeds: &'a [f32; STEPS + 1]) -> LateralSetup<'a> {
+    fn setup<'a>(
+        &'a self,
+        mode: Mode,
+        speeds: &'a [f32; STEPS + 1],
+        weights: &'a Weights,
+    ) -> LateralSetup<'a> {
         LateralSetup {
             vehicle: &self.vehicle,
             dynamics: self.dynamics.as_ref(),
             body: &self.body,
-            weights: &self.tuning.weights,
+            weights,
             mode,
             speeds_mps: speeds,
             max_steer_rad: self.vehicle.max_steer_rad,
             max_steer_rate_rad_per_s: self.max_steer_rate_rad_per_s * self.tuning.steer_rate_share,
         }
+    }
+
+    /// The weights of this solve: the tuning's, with [`MpcTuning::line_rule`]'s lateral weight
+    /// when the path asks for that share of the lock (a non-finite curvature never applies it).
+    fn weights_for(&self, input: &MpcInput) -> Weights {
+        let mut weights = self.tuning.weights;
+        if let Some(rule) = self.tuning.line_rule {
+            let kappa = input.path_max_curvature_per_m;
+            let demand_rad =
+                math::atan(self.vehicle.wheelbase_m * if kappa < 0.0 { -kappa } else { kappa });
+            if demand_rad >= rule.lock_share * self.vehicle.max_steer_rad {
+                weights.lateral_per_m2 = rule.lateral_per_m2;
+            }
+        }
+        weights
     }
 
     /// Error state now: offsets from the reference's first point.
