@@ -350,10 +350,9 @@ pub struct ControlSection {
     /// Bound on the error of the node's position estimate with this car's receiver (2 sigma),
     /// m: the controller inflates obstacles by it.
     pub position_uncertainty_m: f64,
-    /// The MPC's weight on the lateral offset from the planner's line, per m^2 (absent: the
-    /// built-in tuning's, 10, tuned on the CAT Vehicle). A car that cannot follow the line
-    /// closely (a line past its steering lock, docs/controller.md) drives the lane change
-    /// better with less.
+    /// The MPC's weight on the lateral offset from the planner's path, per m^2, for every path
+    /// (absent: the built-in tuning's, 10, tuned on the CAT Vehicle, and 1 on a path that asks
+    /// for most of the car's lock: `MpcTuning::line_rule`, docs/controller.md).
     #[serde(default)]
     pub mpc_lateral_weight_per_m2: Option<f64>,
 }

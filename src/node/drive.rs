@@ -516,7 +516,8 @@ impl Drive {
 
 /// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
 /// The model-predictive controller's tuning for the car of `config`: [`DEFAULT_TUNING`] (tuned on
-/// the CAT Vehicle) with what the car's model file sets (`[control] mpc_lateral_weight_per_m2`).
+/// the CAT Vehicle) with what the car's model file sets (`[control] mpc_lateral_weight_per_m2`:
+/// that weight on every path, in place of the tuning's rule for a path that needs the lock).
 pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
     let mut tuning = DEFAULT_TUNING;
     if let Some(w) = config.mpc_lateral_weight_per_m2 {
