@@ -162,6 +162,44 @@ fn circle_curvature_within_the_documented_bound() {
 }
 
 #[test]
+fn the_largest_curvature_is_the_loaded_paths_and_follows_every_load() {
+    // A circle's largest reference curvature is its own, phi / c (the chords' rounding, as
+    // above); mirrored into a left turn it counts without its sign.
+    let r = 5.58;
+    let circle = clockwise_circle(r, 30, 1.0);
+    let phi: f64 = 1.0 / r;
+    let expected = phi / (2.0 * r * (phi / 2.0).sin());
+    let mut p = path_of(&circle);
+    let k = f64::from(p.max_curvature_per_m());
+    assert!((k - expected).abs() < 1e-5 * expected, "{k} vs {expected}");
+    let left: Vec<Waypoint> = circle
+        .iter()
+        .map(|w| Waypoint {
+            east_m: -w.east_m,
+            ..*w
+        })
+        .collect();
+    let mut q = path_of(&left);
+    assert_eq!(q.max_curvature_per_m(), p.max_curvature_per_m());
+    // A refused load leaves the path, and its largest curvature, as they were.
+    let mut bad = circle.clone();
+    bad[3].east_m = f32::NAN;
+    assert!(p.load(&bad).is_err());
+    assert_eq!(p.max_curvature_per_m(), q.max_curvature_per_m());
+    // A straight path loaded over the circle has none; a cleared path none either.
+    p.load(&straight(0.0, 0.0, 0.3, 20, 1.0))
+        .expect("valid path");
+    assert!(
+        p.max_curvature_per_m() < 1e-4,
+        "{}",
+        p.max_curvature_per_m()
+    );
+    q.clear();
+    assert_eq!(q.max_curvature_per_m(), 0.0);
+    assert_eq!(Path::new().max_curvature_per_m(), 0.0);
+}
+
+#[test]
 fn reference_is_insensitive_to_the_bus_quantisation() {
     // A right-hand circle of R = 25 m from north (heading = arc / R; 0.04 1/m: the double lane change's curves at 10 m/s) sampled
     // every 0.5 m and rounded to the bus's 0.02 m: the single segments' headings scatter by up

@@ -232,6 +232,8 @@ pub struct Path {
     reference_heading_rad: [f32; MAX_PATH_POINTS],
     /// Reference curvature at point `i`, 1/m, positive turning right.
     curvature_per_m: [f32; MAX_PATH_POINTS],
+    /// The largest of `curvature_per_m`'s magnitudes, 1/m: taken once at load, not per query.
+    max_curvature_per_m: f32,
 }
 
 impl Default for Path {
@@ -250,6 +252,7 @@ impl Path {
             direction: [(0.0, 1.0); MAX_PATH_POINTS],
             reference_heading_rad: [0.0; MAX_PATH_POINTS],
             curvature_per_m: [0.0; MAX_PATH_POINTS],
+            max_curvature_per_m: 0.0,
         }
     }
 
@@ -267,6 +270,7 @@ impl Path {
             fill(addr_of_mut!((*slot).direction), (0.0, 1.0));
             fill(addr_of_mut!((*slot).reference_heading_rad), 0.0);
             fill(addr_of_mut!((*slot).curvature_per_m), 0.0);
+            addr_of_mut!((*slot).max_curvature_per_m).write(0.0);
         }
     }
 
@@ -380,6 +384,7 @@ impl Path {
             }
         }
         let last = n.saturating_sub(1);
+        let mut max_curvature = 0.0f32;
         for (i, &k) in chord_points.iter().enumerate().take(n) {
             let (lo, hi) = (i.saturating_sub(k as usize), (i + k as usize).min(last));
             let (Some(&h_lo), Some(&h_hi), Some(&s_lo), Some(&s_hi)) = (
@@ -399,12 +404,22 @@ impl Path {
             if let Some(k) = self.curvature_per_m.get_mut(i) {
                 *k = curvature;
             }
+            let magnitude = if curvature < 0.0 {
+                -curvature
+            } else {
+                curvature
+            };
+            if magnitude > max_curvature {
+                max_curvature = magnitude;
+            }
         }
+        self.max_curvature_per_m = max_curvature;
     }
 
     /// Forgets every point.
     pub fn clear(&mut self) {
         self.len = 0;
+        self.max_curvature_per_m = 0.0;
     }
 
     /// Number of points (0 = no path).
@@ -428,13 +443,9 @@ impl Path {
     }
 
     /// The largest reference curvature of any point, 1/m, without its sign (0 for an empty
-    /// path): how tight the path is at its tightest.
-    pub fn max_curvature_per_m(&self) -> f32 {
-        self.curvature_per_m
-            .iter()
-            .take(self.len)
-            .map(|k| if *k < 0.0 { -*k } else { *k })
-            .fold(0.0, |m, k| if k > m { k } else { m })
+    /// path): how tight the path is at its tightest. Taken when the path is loaded.
+    pub const fn max_curvature_per_m(&self) -> f32 {
+        self.max_curvature_per_m
     }
 
     /// Length along the path, m.
