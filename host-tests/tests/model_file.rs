@@ -204,3 +204,50 @@ fn a_car_sets_its_lateral_weight_in_its_model_file() {
     assert_eq!(paper.mpc_lateral_weight_per_m2, None);
     assert_eq!(mpc_tuning(&paper), DEFAULT_TUNING);
 }
+
+#[test]
+fn a_car_declares_its_steering_lag_in_its_model_file() {
+    use catmodel::control::mpc::{MpcConfig, DEFAULT_TUNING, MAX_STEER_LEAD_S};
+    use catmodel::node::drive::mpc_tuning;
+    let with_lag = |lag: &str| {
+        paper_text().replace(
+            "\n\n[dynamics]",
+            &format!("\nsteer_lag_s = {lag}\n\n[dynamics]"),
+        )
+    };
+    let file = parse(&with_lag("0.09"), Path::new("slow.toml")).unwrap();
+    assert_eq!(file.vehicle.steer_lag_s, Some(0.09));
+    let config = file.node_config();
+    assert_eq!(config.steer_lag_s, Some(0.09));
+    // The command leads the plan by the lag and the tick it takes to reach the actuator.
+    let tuning = mpc_tuning(&config);
+    assert!(
+        (tuning.steer_lead_s - 0.11).abs() < 1e-6,
+        "{}",
+        tuning.steer_lead_s
+    );
+    let mut expected = DEFAULT_TUNING;
+    expected.steer_lead_s = tuning.steer_lead_s;
+    assert_eq!(tuning, expected);
+    // Written and read back, through the firmware image too.
+    let again = parse(&to_toml(&file), Path::new("<written>")).unwrap();
+    assert_eq!(again, file);
+    let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
+    let n = config.to_image(&mut words);
+    let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();
+    assert_eq!(back, config);
+    // The longest lag the reader takes gives a lead the controller takes.
+    let longest = parse(&with_lag("0.25"), Path::new("slowest.toml"))
+        .unwrap()
+        .node_config();
+    assert!(mpc_tuning(&longest).steer_lead_s <= MAX_STEER_LEAD_S);
+    assert!(MpcConfig::for_node(&longest, mpc_tuning(&longest)).is_ok());
+    for bad in ["-0.01", "0.26", "nan"] {
+        let e = parse(&with_lag(bad), Path::new("bad.toml")).unwrap_err();
+        assert!(e.to_string().contains("vehicle.steer_lag_s"), "{bad}: {e}");
+    }
+    // Without the key: the built-in lead, the published car's.
+    let paper = model_file::paper().node_config();
+    assert_eq!(paper.steer_lag_s, None);
+    assert_eq!(mpc_tuning(&paper).steer_lead_s, DEFAULT_TUNING.steer_lead_s);
+}

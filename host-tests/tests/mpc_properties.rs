@@ -258,3 +258,89 @@ fn a_path_that_needs_the_lock_is_weighed_with_the_rules_weight() {
     no_rule.line_rule = None;
     assert_eq!(command(no_rule, lock_curvature), tracked);
 }
+
+/// `MpcTuning::steer_lead_s`: the steering command is the plan's steering the lead after the
+/// commanded ramp's tick. Within the first stage (the built-in 0.07 s) that is the ramp plus
+/// the first stage's rate; a lead that reaches past the stage (a slow actuator's, declared in
+/// its model file) takes the plan's later stages, where a reversal of the rate shows.
+#[test]
+fn a_lead_past_the_first_stage_commands_the_plans_later_steering() {
+    let cfg = VehicleConfig::default();
+    let path = arc(0.0, 3.0, 3.0, 10.0);
+    let speeds = [10.0f32; PLAN_STEPS + 1];
+    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+    let (x, y, h) = path.pose(5.0);
+    // 0.3 m right of the path: the plan steers back left, then straightens.
+    let pose = Pose::new(x as f32 + 0.3, y as f32, h as f32);
+    let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let model_state = eq5.steady_state_for_output(10.0).unwrap();
+    let obstacles = [None; MAX_OBSTACLES];
+    let max_steer_rad = (cfg.chassis.max_steer_deg as f32).to_radians();
+    let solve = |lead_s: f32| {
+        let mut tuning = DEFAULT_TUNING;
+        tuning.steer_lead_s = lead_s;
+        let mpc = mpc_for(&cfg, ESCAPE_BODY, tuning);
+        let mut state = MpcState::default();
+        let input = MpcInput {
+            reference: &reference,
+            obstacles: &obstacles,
+            car: CarState {
+                pose,
+                speed_mps: 10.0,
+                lateral: LateralState::default(),
+                steer_rad: 0.0,
+                mode: Mode::Dynamic,
+                speed_model: &model_state,
+                speed_bias_mps: 0.0,
+                last_speed_cmd_mps: 10.0,
+            },
+            position_uncertainty_m: 0.1,
+            path_max_curvature_per_m: 0.0,
+        };
+        let out = mpc.solve(&mut state, &input);
+        let plan: Vec<f32> = out
+            .plan
+            .iter()
+            .map(|p| p.steer_rad * 100.0 / max_steer_rad)
+            .collect();
+        (out.steer_cmd_pct, plan)
+    };
+    let (built_in, plan) = solve(DEFAULT_TUNING.steer_lead_s);
+    // The lead does not change the plan, only where on it the command is taken.
+    for lead in [0.0, 0.13, 0.18, 0.25] {
+        assert_eq!(solve(lead).1, plan, "lead {lead}");
+    }
+    assert!(plan[1] < -1.0, "the plan steers back left: {plan:?}");
+    let at = |t: f32| {
+        let k = (t / 0.1) as usize;
+        let f = t / 0.1 - k as f32;
+        plan[k] + (plan[k + 1] - plan[k]) * f
+    };
+    let near = |a: f32, b: f32| (a - b).abs() < 1e-3 * (1.0 + b.abs());
+    // The tick and the lead: 0.02 + 0.07 s; 0.02 s with none.
+    assert!(near(built_in, at(0.09)), "{built_in} vs {}", at(0.09));
+    assert!(
+        near(solve(0.0).0, at(0.02)),
+        "{} vs {}",
+        solve(0.0).0,
+        at(0.02)
+    );
+    // Past the first stage: the plan's own steering there, not the first rate extrapolated.
+    assert!(
+        near(solve(0.18).0, plan[2]),
+        "{} vs {}",
+        solve(0.18).0,
+        plan[2]
+    );
+    assert!(
+        near(solve(0.13).0, at(0.15)),
+        "{} vs {}",
+        solve(0.13).0,
+        at(0.15)
+    );
+    let extrapolated = plan[0] + (plan[1] - plan[0]) * 2.0;
+    assert!(
+        (plan[2] - extrapolated).abs() > 0.5,
+        "the plan's rate changes after its first stage: {plan:?}"
+    );
+}

@@ -23,7 +23,8 @@
 //!   the node's 0.02 s);
 //! - `[vehicle]`: `wheelbase_m`, `track_m`, `max_steer_deg`, `understeer_s2_per_m2`,
 //!   `antenna_ahead_m`, `antenna_left_m` (default 0), `gnss_rate_hz` (1..100), `width_m`,
-//!   `length_m`, `rear_overhang_m`, `max_speed_mps`, `max_steer_rate_pct_per_s`;
+//!   `length_m`, `rear_overhang_m`, `max_speed_mps`, `max_steer_rate_pct_per_s`,
+//!   `steer_lag_s` (optional);
 //! - `[dynamics]` (optional; without it the node stays on the kinematic model): `mass_kg`,
 //!   `yaw_inertia_kg_m2`, `cg_to_front_m`, `cg_to_rear_m` (summing to the wheelbase),
 //!   `cornering_front_n_per_rad`, `cornering_rear_n_per_rad`;
@@ -248,6 +249,12 @@ pub struct VehicleSection {
     pub max_speed_mps: f64,
     /// Fastest steering change of the car's actuator, % per second.
     pub max_steer_rate_pct_per_s: f64,
+    /// The steering actuator's first-order lag (time constant), s: the MPC's steering command
+    /// leads its plan by it (absent: a 0.05 s lag is assumed, the CAT Vehicle's simulated
+    /// actuator). A lag the node does not know costs the lane change at low speed
+    /// (docs/controller.md, "A slow steering actuator").
+    #[serde(default)]
+    pub steer_lag_s: Option<f64>,
 }
 
 impl VehicleSection {
@@ -700,6 +707,17 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
         "vehicle.max_steer_rate_pct_per_s",
         v.max_steer_rate_pct_per_s,
     )?;
+    if let Some(lag) = v.steer_lag_s {
+        if !(lag.is_finite() && (STEER_LAG_RANGE_S.0..=STEER_LAG_RANGE_S.1).contains(&lag)) {
+            return Err(err(
+                path,
+                format!(
+                    "vehicle.steer_lag_s = {lag}: must be within {}..{} s (the steering actuator's time constant)",
+                    STEER_LAG_RANGE_S.0, STEER_LAG_RANGE_S.1
+                ),
+            ));
+        }
+    }
     if let Some(d) = &raw.dynamics {
         check.positive("dynamics.mass_kg", d.mass_kg)?;
         check.positive("dynamics.yaw_inertia_kg_m2", d.yaw_inertia_kg_m2)?;
@@ -960,6 +978,7 @@ impl ModelFile {
             gnss_reacquire_fixes: InputsSection::gnss_reacquire_fixes(v.gnss_rate_hz),
             max_speed_mps: v.max_speed_mps as f32,
             max_steer_rate_pct_per_s: v.max_steer_rate_pct_per_s as f32,
+            steer_lag_s: v.steer_lag_s.map(|lag| lag as f32),
             controller: match self.control.controller {
                 ControllerName::Mpc => Controller::Mpc,
                 ControllerName::PurePursuit => Controller::PurePursuit,
@@ -983,6 +1002,10 @@ impl ModelFile {
         })
     }
 }
+
+/// Accepted range of `[vehicle] steer_lag_s`, s: the MPC's lead (the lag plus a tick) stays
+/// within `catmodel::control::mpc::MAX_STEER_LEAD_S`.
+pub const STEER_LAG_RANGE_S: (f64, f64) = (0.0, 0.25);
 
 /// Accepted range of `[control] mpc_lateral_weight_per_m2`.
 pub const MPC_LATERAL_WEIGHT_RANGE: (f64, f64) = (0.1, 100.0);
@@ -1146,6 +1169,13 @@ pub fn to_toml(f: &ModelFile) -> String {
     ];
     for (key, value, comment) in rows {
         let _ = writeln!(o, "{key} = {}  # {comment}", num(value));
+    }
+    if let Some(lag) = v.steer_lag_s {
+        let _ = writeln!(
+            o,
+            "steer_lag_s = {}  # the steering actuator's lag: the MPC's command leads its plan by it",
+            num(lag)
+        );
     }
     if let Some(d) = &f.dynamics {
         let _ = writeln!(o, "\n[dynamics]");

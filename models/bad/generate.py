@@ -128,6 +128,14 @@ BAD = {
         lambda t: replace(t, "position_uncertainty_m = 1.6", "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = nan"),
         "control.mpc_lateral_weight_per_m2 = NaN: must be within 0.1..100",
     ),
+    "steer-lag-negative": (
+        lambda t: replace(t, "\n\n[dynamics]", "\nsteer_lag_s = -0.05\n\n[dynamics]"),
+        "vehicle.steer_lag_s = -0.05: must be within 0..0.25 s",
+    ),
+    "steer-lag-too-long": (
+        lambda t: replace(t, "\n\n[dynamics]", "\nsteer_lag_s = 0.5\n\n[dynamics]"),
+        "vehicle.steer_lag_s = 0.5: must be within 0..0.25 s",
+    ),
     "unknown-key": (
         lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_mm = 2620"),
         "unknown field `wheelbase_mm`",

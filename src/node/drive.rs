@@ -514,12 +514,18 @@ impl Drive {
     }
 }
 
-/// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
 /// The model-predictive controller's tuning for the car of `config`: [`DEFAULT_TUNING`] (tuned on
-/// the CAT Vehicle) with what the car's model file sets (`[control] mpc_lateral_weight_per_m2`:
-/// that weight on every path, in place of the tuning's rule for a path that needs the lock).
+/// the CAT Vehicle) with what the car's model file sets: `[control] mpc_lateral_weight_per_m2`
+/// (that weight on every path, in place of the tuning's rule for a path that needs the lock),
+/// and `[vehicle] steer_lag_s`, from which the steering command leads the plan by the lag plus
+/// the tick the command takes to reach the actuator (the built-in lead, 0.07 s, is a 0.05 s
+/// lag's: the CAT Vehicle's simulated actuator; docs/controller.md, "A slow steering
+/// actuator").
 pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
     let mut tuning = DEFAULT_TUNING;
+    if let Some(lag) = config.steer_lag_s {
+        tuning.steer_lead_s = lag + crate::SAMPLE_PERIOD_S;
+    }
     if let Some(w) = config.mpc_lateral_weight_per_m2 {
         tuning.weights.lateral_per_m2 = w;
         tuning.line_rule = None;
@@ -527,6 +533,7 @@ pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
     tuning
 }
 
+/// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
 fn mpc_command(out: &MpcOutput) -> DriveOutput {
     DriveOutput {
         command: ControlCommand {

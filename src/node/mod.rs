@@ -147,6 +147,9 @@ pub struct NodeConfig {
     pub max_speed_mps: f32,
     /// Fastest steering change the car's actuator makes, % per second.
     pub max_steer_rate_pct_per_s: f32,
+    /// The steering actuator's first-order lag, s (`None`: not given; the MPC's built-in lead
+    /// assumes 0.05 s); see [`drive::mpc_tuning`].
+    pub steer_lag_s: Option<f32>,
     /// The controller that follows the planner's path.
     pub controller: Controller,
     /// Bound on the error of the node's position estimate with this receiver (2 sigma), m:
@@ -187,6 +190,7 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes,
             max_speed_mps,
             max_steer_rate_pct_per_s,
+            steer_lag_s,
             controller,
             position_uncertainty_m,
             mpc_lateral_weight_per_m2,
@@ -207,6 +211,7 @@ impl Image for NodeConfig {
         gnss_reacquire_fixes.write(w);
         max_speed_mps.write(w);
         max_steer_rate_pct_per_s.write(w);
+        steer_lag_s.write(w);
         controller.write(w);
         position_uncertainty_m.write(w);
         mpc_lateral_weight_per_m2.write(w);
@@ -229,6 +234,7 @@ impl Image for NodeConfig {
             gnss_reacquire_fixes: Image::read(r)?,
             max_speed_mps: Image::read(r)?,
             max_steer_rate_pct_per_s: Image::read(r)?,
+            steer_lag_s: Image::read(r)?,
             controller: Image::read(r)?,
             position_uncertainty_m: Image::read(r)?,
             mpc_lateral_weight_per_m2: Image::read(r)?,

@@ -151,7 +151,7 @@ pub struct RunOutput {
 
 /// The published model file (`models/paper.toml`) made to describe the plant `vehicle`, as its
 /// owner's tape measure and data sheet would (README, "A second car"): geometry, body, steering
-/// range and rate, antenna, receiver rate (as `identify` writes it, with the outage time it
+/// range, rate and lag, antenna, receiver rate (as `identify` writes it, with the outage time it
 /// needs) and the linear-tyre single-track model; the identified models stay the CAT
 /// Vehicle's. For a plant given without a model file: the node then knows everything of the
 /// car that a model file's `[vehicle]` and `[dynamics]` say, and is built by the one reader.
@@ -168,6 +168,7 @@ pub fn model_file_for(vehicle: &VehicleConfig) -> anyhow::Result<crate::model_fi
     v.length_m = vehicle.body.length_m;
     v.rear_overhang_m = vehicle.body.rear_overhang_m;
     v.max_steer_rate_pct_per_s = vehicle.steering.rate_limit_pct_per_s;
+    v.steer_lag_s = Some(vehicle.steering.lag_s);
     file.dynamics = Some(crate::model_file::DynamicsSection {
         mass_kg: c.mass_kg,
         yaw_inertia_kg_m2: c.yaw_inertia_kg_m2,

@@ -53,6 +53,8 @@ pub const STEPS: usize = 20;
 pub const PLAN_STEPS: usize = 20;
 /// MPC step, s (every 5th node tick: the PREDICTION frames are every 0.2 s = 2 steps).
 pub const STEP_S: f32 = 0.1;
+/// Longest steering lead, s: three stages of the plan.
+pub const MAX_STEER_LEAD_S: f32 = 0.3;
 /// Node ticks (20 ms, [`crate::SAMPLE_PERIOD_S`]) per MPC step.
 pub const TICKS_PER_STEP: usize = 5;
 /// Obstacles the controller keeps clear of (the OBSTACLE frame's `obstacle_id` 0..3).
@@ -257,8 +259,11 @@ pub struct MpcTuning {
     pub admm: AdmmSettings,
     /// Speed plan.
     pub speed: SpeedTuning,
-    /// Steering command = the commanded steering ramp plus the planned rate times this: the
-    /// actuator's lag, s (a first-order lag follows a ramp this far behind).
+    /// The steering command is the plan's steering this long after the tick, beyond the
+    /// commanded ramp's own tick: the actuator's lag plus the tick the command takes to reach
+    /// it, s (a first-order lag follows a ramp its time constant behind). Within the plan's
+    /// first stage the ramp plus the first stage's rate times this; a lead that reaches past
+    /// the stage takes the plan's steering there. 0 ..= [`MAX_STEER_LEAD_S`].
     pub steer_lead_s: f32,
     /// The plan starts from the steering the controller commanded (its own ramp, which the
     /// actuator follows after the bus and its lag), not from the steering report, which is
@@ -575,8 +580,9 @@ impl MpcConfig {
             (positive(vehicle.max_steer_rad), "vehicle max_steer"),
             (positive(vehicle.wheelbase_m), "vehicle wheelbase_m"),
             (
-                tuning.steer_lead_s.is_finite() && (0.0..=STEP_S).contains(&tuning.steer_lead_s),
-                "steer_lead_s (0 .. 0.1 s)",
+                tuning.steer_lead_s.is_finite()
+                    && (0.0..=MAX_STEER_LEAD_S).contains(&tuning.steer_lead_s),
+                "steer_lead_s (0 .. 0.3 s)",
             ),
             (
                 tuning.steer_trust_s.is_finite() && tuning.steer_trust_s >= 0.0,
@@ -788,7 +794,14 @@ impl MpcConfig {
         // actuator's lag.
         let ramp_rad = steer.first().copied().unwrap_or(0.0) + crate::SAMPLE_PERIOD_S * first_rate;
         state.steer_ramp_rad = Some(ramp_rad);
-        let steer_cmd_rad = ramp_rad + self.tuning.steer_lead_s * first_rate;
+        // Within the first stage the first stage's rate; a lead that reaches past it takes the
+        // plan's steering there (its next stages' rates, a reversal among them).
+        let lead_at = (crate::SAMPLE_PERIOD_S + self.tuning.steer_lead_s) / STEP_S;
+        let steer_cmd_rad = if lead_at <= 1.0 {
+            ramp_rad + self.tuning.steer_lead_s * first_rate
+        } else {
+            interpolate(&steer, lead_at)
+        };
         let plan = self.rollout(input, &steer, &speed_plan.speeds_mps);
         MpcOutput {
             steer_cmd_pct: self.steer_pct(steer_cmd_rad),
