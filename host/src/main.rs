@@ -120,6 +120,21 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// The steering actuator's lag (`[vehicle] steer_lag_s`) from candump logs of a session in
+    /// which the controller drove: its CONTROL_COMMAND frames and the car's STEERING_REPORT.
+    IdentifySteering {
+        /// candump logs (e.g. a recorder's of the whole bus, or closed-loop's session.can.log
+        /// and session.tx.log), merged by time.
+        #[arg(required = true)]
+        logs: Vec<PathBuf>,
+        /// Model file whose steering rate limit the actuator has (default: models/paper.toml).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// The fit's window starts here, s of the logs' clock (default: a second after the
+        /// first tracking command).
+        #[arg(long)]
+        from: Option<f64>,
+    },
     /// Simulate each model of a model file over one log, beside the kinematic model.
     Compare {
         /// Log CSV.
@@ -592,6 +607,39 @@ fn run(cli: Cli) -> Result<()> {
             {
                 eprintln!("sil: warning: {note}");
             }
+            Ok(())
+        }
+        Command::IdentifySteering { logs, model, from } => {
+            let file = load_base(model.as_deref())?;
+            let rate = file.vehicle.max_steer_rate_pct_per_s;
+            let mut frames = Vec::new();
+            for log in &logs {
+                frames.extend(replay::read_candump(log)?);
+            }
+            let series = identify::steering::SteeringSeries::from_frames(&frames);
+            let f = identify::steering::fit(&series, rate, from)?;
+            println!(
+                "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %), rate limit {rate} %/s from the model file",
+                f.reports, f.commands, f.from_s, f.to_s, f.span_pct
+            );
+            if series.rejected > 0 {
+                println!(
+                    "  {} frames of the two messages rejected (CRC, range, length)",
+                    series.rejected
+                );
+            }
+            println!(
+                "  lag {:.3} s and delay {:.3} s: the steering trails a ramp by {:.3} s; report error RMS {:.2} % ({:.2} % with neither)",
+                f.lag_s,
+                f.delay_s,
+                f.trail_s(),
+                f.rms_pct,
+                f.rms_without_pct
+            );
+            println!(
+                "  for the car's model file, [vehicle]: steer_lag_s = {:.3}",
+                f.trail_s()
+            );
             Ok(())
         }
         Command::Decode { log, messages, csv } => {

@@ -685,3 +685,71 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
     assert!(m.clean && m.completed, "{m:?}");
     assert!(catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver).is_none());
 }
+
+/// `catmodel identify-steering` finds the plant's steering lag from a closed-loop session's two
+/// logs (the node's CONTROL_COMMAND and the car's STEERING_REPORT): the CAT Vehicle's plant with
+/// its 0.05 s lag and with 0.09 s, the key it prints within 8 ms of the plant's lag (the
+/// steering trails a ramp by the lag plus the bus's few milliseconds).
+#[test]
+fn identify_steering_finds_the_plants_lag_from_a_session() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cat = std::fs::read_to_string(root.join("vehicles/cat-vehicle.toml")).unwrap();
+    for lag in [0.05, 0.09] {
+        let dir = tmp_dir(&format!("steering-lag-{lag}"));
+        let vehicle = dir.join("vehicle.toml");
+        assert_eq!(cat.matches("\nlag_s = 0.05").count(), 1);
+        std::fs::write(
+            &vehicle,
+            cat.replace("\nlag_s = 0.05", &format!("\nlag_s = {lag}")),
+        )
+        .unwrap();
+        let out = cl(&[
+            "--scenario",
+            "dlc",
+            "--speed",
+            "8",
+            "--receiver",
+            "rtk",
+            "--vehicle",
+            vehicle.to_str().unwrap(),
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = Command::new(BIN)
+            .args([
+                "identify-steering",
+                dir.join("session.can.log").to_str().unwrap(),
+                dir.join("session.tx.log").to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let key: f64 = text
+            .split("steer_lag_s = ")
+            .nth(1)
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!(key >= lag && key <= lag + 0.008, "{lag}: {text}");
+    }
+    // Only the reports: the commands are needed, and the error says so.
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("closed_loop_steering-lag-0.09");
+    let out = Command::new(BIN)
+        .args([
+            "identify-steering",
+            dir.join("session.can.log").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("CONTROL_COMMAND"));
+}

@@ -452,13 +452,17 @@ fn slow_receiver_tables() {
 /// change at 6 / 8 / 10 / 12 m/s (clean seeds of 0 and 1, RTK; in brackets with the lateral
 /// weight at 1 on every path), the obstacle with the standard receiver and the loop at 10 m/s with RTK
 /// (docs/controller.md, "What is left").
-/// `cargo test --release -p catmodel-host --test closed_loop_goals -- --ignored random_plants --nocapture`
+/// `[PLANTS_SEED=N] [PLANTS_OUT=DIR] cargo test --release -p catmodel-host --test closed_loop_goals -- --ignored random_plants --nocapture`
 #[test]
 #[ignore = "measurement; prints the table"]
 fn random_plants() {
     let (base, _) = hatchback();
     let base = VehicleConfig::load(&base).unwrap();
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    // Another draw of ten: PLANTS_SEED=N (any u64; the table in the docs is the default's).
+    let mut state = std::env::var("PLANTS_SEED")
+        .ok()
+        .and_then(|s| s.parse::<u64>().ok())
+        .unwrap_or(0x2545_f491_4f6c_dd1d_u64);
     let mut uniform = |lo: f64, hi: f64| {
         state = state
             .wrapping_mul(6_364_136_223_846_793_005)
@@ -493,7 +497,16 @@ fn random_plants() {
             cars.push(v);
         }
     }
+    let out = std::env::var("PLANTS_OUT")
+        .ok()
+        .map(std::path::PathBuf::from);
     for (i, v) in cars.iter().enumerate() {
+        if let Some(dir) = &out {
+            // Each car's plant file, for `catmodel closed-loop --vehicle DIR/car-N.toml`.
+            std::fs::create_dir_all(dir).unwrap();
+            let text = toml::to_string(v).unwrap();
+            std::fs::write(dir.join(format!("car-{i}.toml")), text).unwrap();
+        }
         let node = catmodel_host::closed_loop::model_file_for(v)
             .unwrap()
             .node_config();

@@ -249,8 +249,9 @@ pub struct VehicleSection {
     pub max_speed_mps: f64,
     /// Fastest steering change of the car's actuator, % per second.
     pub max_steer_rate_pct_per_s: f64,
-    /// The steering actuator's first-order lag (time constant), s: the MPC's steering command
-    /// leads its plan by it (absent: a 0.05 s lag is assumed, the CAT Vehicle's simulated
+    /// How far the steering trails a ramp command, s: the actuator's first-order lag plus the
+    /// drive-by-wire's delay (`catmodel identify-steering` measures it). The MPC's steering
+    /// command leads its plan by it (absent: 0.05 s is assumed, the CAT Vehicle's simulated
     /// actuator). A lag the node does not know costs the lane change at low speed
     /// (docs/controller.md, "A slow steering actuator").
     #[serde(default)]

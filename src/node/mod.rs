@@ -147,8 +147,9 @@ pub struct NodeConfig {
     pub max_speed_mps: f32,
     /// Fastest steering change the car's actuator makes, % per second.
     pub max_steer_rate_pct_per_s: f32,
-    /// The steering actuator's first-order lag, s (`None`: not given; the MPC's built-in lead
-    /// assumes 0.05 s); see [`drive::mpc_tuning`].
+    /// How far the steering trails a ramp command (the actuator's lag plus the drive-by-wire's
+    /// delay), s (`None`: not given; the MPC's built-in lead assumes 0.05 s); see
+    /// [`drive::mpc_tuning`].
     pub steer_lag_s: Option<f32>,
     /// The controller that follows the planner's path.
     pub controller: Controller,

@@ -22,6 +22,7 @@ pub mod oe;
 pub mod preprocess;
 pub mod report;
 pub mod simulate;
+pub mod steering;
 pub mod validate;
 
 use std::path::PathBuf;
