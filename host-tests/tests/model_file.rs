@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use catmodel::model::paper;
 use catmodel::vehicle::VehicleParams;
-use catmodel_host::model_file::{self, parse, to_toml};
+use catmodel_host::model_file::{self, parse, to_toml, ModelFile};
 
 fn paper_text() -> String {
     std::fs::read_to_string(model_file::paper_path()).expect("models/paper.toml")
@@ -177,6 +177,18 @@ fn errors_name_the_file_and_the_key() {
 /// every path (the rest of the tuning the built-in one, its rule for paths that need the lock
 /// off); it survives writing, reading and the firmware's image; a file without it runs the
 /// built-in tuning.
+/// `file` written by the writer reads back equal, and its node configuration comes back equal
+/// from the firmware's image.
+fn written_and_imaged_alike(file: &ModelFile) {
+    let again = parse(&to_toml(file), Path::new("<written>")).unwrap();
+    assert_eq!(&again, file);
+    let config = file.node_config();
+    let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
+    let n = config.to_image(&mut words);
+    let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();
+    assert_eq!(back, config);
+}
+
 #[test]
 fn a_car_sets_its_lateral_weight_in_its_model_file() {
     use catmodel::control::mpc::DEFAULT_TUNING;
@@ -194,12 +206,7 @@ fn a_car_sets_its_lateral_weight_in_its_model_file() {
     expected.weights.lateral_per_m2 = 2.5;
     expected.line_rule = None;
     assert_eq!(tuning, expected);
-    let again = parse(&to_toml(&file), Path::new("<written>")).unwrap();
-    assert_eq!(again, file);
-    let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
-    let n = config.to_image(&mut words);
-    let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();
-    assert_eq!(back, config);
+    written_and_imaged_alike(&file);
     let paper = model_file::paper().node_config();
     assert_eq!(paper.mpc_lateral_weight_per_m2, None);
     assert_eq!(mpc_tuning(&paper), DEFAULT_TUNING);
@@ -230,12 +237,7 @@ fn a_car_declares_its_steering_lag_in_its_model_file() {
     expected.steer_lead_s = tuning.steer_lead_s;
     assert_eq!(tuning, expected);
     // Written and read back, through the firmware image too.
-    let again = parse(&to_toml(&file), Path::new("<written>")).unwrap();
-    assert_eq!(again, file);
-    let mut words = vec![0u32; catmodel::node::CONFIG_IMAGE_MAX_WORDS];
-    let n = config.to_image(&mut words);
-    let back = catmodel::node::NodeConfig::from_image(&words[..n]).unwrap();
-    assert_eq!(back, config);
+    written_and_imaged_alike(&file);
     // The longest lag the reader takes gives a lead the controller takes.
     let longest = parse(&with_lag("0.25"), Path::new("slowest.toml"))
         .unwrap()

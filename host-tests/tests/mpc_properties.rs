@@ -4,8 +4,8 @@
 //! counts stay within their caps, a non-finite input gives the fallback (status 3) without
 //! a NaN anywhere, and a tick without a solve (`MpcConfig::coast`) moves the plan on by one tick.
 use catmodel::control::mpc::{
-    CarState, ControlStatus, FallbackReason, MpcInput, MpcState, DEFAULT_TUNING, MAX_OBSTACLES,
-    PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
+    CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning,
+    DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::Mode;
@@ -202,6 +202,44 @@ proptest! {
     }
 }
 
+/// One solve from a fresh state with `tuning` for a car at 10 m/s with straight wheels,
+/// `offset_m` right of a straight path at its station 5 m, on the escape body; the path's
+/// largest curvature as given.
+fn solve_beside_a_straight(
+    cfg: &VehicleConfig,
+    tuning: MpcTuning,
+    offset_m: f32,
+    path_max_curvature_per_m: f32,
+) -> MpcOutput {
+    let path = arc(0.0, 3.0, 3.0, 10.0);
+    let speeds = [10.0f32; PLAN_STEPS + 1];
+    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+    let (x, y, h) = path.pose(5.0);
+    let pose = Pose::new(x as f32 + offset_m, y as f32, h as f32);
+    let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let model_state = eq5.steady_state_for_output(10.0).unwrap();
+    let obstacles = [None; MAX_OBSTACLES];
+    let mpc = mpc_for(cfg, ESCAPE_BODY, tuning);
+    let mut state = MpcState::default();
+    let input = MpcInput {
+        reference: &reference,
+        obstacles: &obstacles,
+        car: CarState {
+            pose,
+            speed_mps: 10.0,
+            lateral: LateralState::default(),
+            steer_rad: 0.0,
+            mode: Mode::Dynamic,
+            speed_model: &model_state,
+            speed_bias_mps: 0.0,
+            last_speed_cmd_mps: 10.0,
+        },
+        position_uncertainty_m: 0.1,
+        path_max_curvature_per_m,
+    };
+    mpc.solve(&mut state, &input)
+}
+
 /// `MpcTuning::line_rule`: a path that asks for the lock (here its largest curvature is the
 /// lock's) is weighed with the rule's lateral weight, a path that does not (or a non-finite
 /// curvature) with the tuning's; without the rule the path's curvature changes nothing. Seen
@@ -210,36 +248,10 @@ proptest! {
 #[test]
 fn a_path_that_needs_the_lock_is_weighed_with_the_rules_weight() {
     let cfg = VehicleConfig::default();
-    let path = arc(0.0, 3.0, 3.0, 10.0);
-    let speeds = [10.0f32; PLAN_STEPS + 1];
-    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
-    let (x, y, h) = path.pose(5.0);
-    let pose = Pose::new(x as f32 + 0.05, y as f32, h as f32);
-    let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
-    let model_state = eq5.steady_state_for_output(10.0).unwrap();
-    let obstacles = [None; MAX_OBSTACLES];
     let lock_curvature =
         (cfg.chassis.max_steer_deg as f32).to_radians().tan() / cfg.chassis.wheelbase_m as f32;
     let command = |tuning, path_max_curvature_per_m: f32| {
-        let mpc = mpc_for(&cfg, ESCAPE_BODY, tuning);
-        let mut state = MpcState::default();
-        let input = MpcInput {
-            reference: &reference,
-            obstacles: &obstacles,
-            car: CarState {
-                pose,
-                speed_mps: 10.0,
-                lateral: LateralState::default(),
-                steer_rad: 0.0,
-                mode: Mode::Dynamic,
-                speed_model: &model_state,
-                speed_bias_mps: 0.0,
-                last_speed_cmd_mps: 10.0,
-            },
-            position_uncertainty_m: 0.1,
-            path_max_curvature_per_m,
-        };
-        mpc.solve(&mut state, &input).steer_cmd_pct
+        solve_beside_a_straight(&cfg, tuning, 0.05, path_max_curvature_per_m).steer_cmd_pct
     };
     let tracked = command(DEFAULT_TUNING, 0.0);
     let past_lock = command(DEFAULT_TUNING, lock_curvature);
@@ -266,38 +278,12 @@ fn a_path_that_needs_the_lock_is_weighed_with_the_rules_weight() {
 #[test]
 fn a_lead_past_the_first_stage_commands_the_plans_later_steering() {
     let cfg = VehicleConfig::default();
-    let path = arc(0.0, 3.0, 3.0, 10.0);
-    let speeds = [10.0f32; PLAN_STEPS + 1];
-    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
-    let (x, y, h) = path.pose(5.0);
-    // 0.3 m right of the path: the plan steers back left, then straightens.
-    let pose = Pose::new(x as f32 + 0.3, y as f32, h as f32);
-    let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
-    let model_state = eq5.steady_state_for_output(10.0).unwrap();
-    let obstacles = [None; MAX_OBSTACLES];
     let max_steer_rad = (cfg.chassis.max_steer_deg as f32).to_radians();
+    // 0.3 m right of the path: the plan steers back left, then straightens.
     let solve = |lead_s: f32| {
         let mut tuning = DEFAULT_TUNING;
         tuning.steer_lead_s = lead_s;
-        let mpc = mpc_for(&cfg, ESCAPE_BODY, tuning);
-        let mut state = MpcState::default();
-        let input = MpcInput {
-            reference: &reference,
-            obstacles: &obstacles,
-            car: CarState {
-                pose,
-                speed_mps: 10.0,
-                lateral: LateralState::default(),
-                steer_rad: 0.0,
-                mode: Mode::Dynamic,
-                speed_model: &model_state,
-                speed_bias_mps: 0.0,
-                last_speed_cmd_mps: 10.0,
-            },
-            position_uncertainty_m: 0.1,
-            path_max_curvature_per_m: 0.0,
-        };
-        let out = mpc.solve(&mut state, &input);
+        let out = solve_beside_a_straight(&cfg, tuning, 0.3, 0.0);
         let plan: Vec<f32> = out
             .plan
             .iter()

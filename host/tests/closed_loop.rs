@@ -264,10 +264,20 @@ fn cl(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// `closed-loop` with `args`, which must succeed (its errors shown if not).
+fn cl_ok(args: &[&str]) {
+    let out = cl(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
     let dir = tmp_dir("session");
-    let out = cl(&[
+    cl_ok(&[
         "--scenario",
         "dlc",
         "--speed",
@@ -275,11 +285,6 @@ fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
         "--out",
         dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let metrics: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["scenario"], "dlc");
@@ -703,7 +708,7 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
             cat.replace("\nlag_s = 0.05", &format!("\nlag_s = {lag}")),
         )
         .unwrap();
-        let out = cl(&[
+        cl_ok(&[
             "--scenario",
             "dlc",
             "--speed",
@@ -715,11 +720,6 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
             "--out",
             dir.to_str().unwrap(),
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
         let out = Command::new(BIN)
             .args([
                 "identify-steering",
