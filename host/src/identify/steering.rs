@@ -127,7 +127,10 @@ pub fn fit(
         bail!("no CONTROL_COMMAND (0x320) with a steering command in the logs: give the log of the frames sent to the drive-by-wire too");
     }
     if series.reports.is_empty() {
-        bail!("no STEERING_REPORT (0x100) with a value in the logs");
+        bail!(
+            "no STEERING_REPORT (0x100) with a value in the logs ({} frames of the two messages rejected: CRC, range or length)",
+            series.rejected
+        );
     }
     let from = match from_s {
         Some(t) => t,
@@ -332,6 +335,14 @@ mod tests {
         }
         let e = fit(&idle, 60.0, None).unwrap_err().to_string();
         assert!(e.contains("never drove"), "{e}");
+        let mut corrupt = series(0.05, 0.0, 60.0);
+        corrupt.rejected = corrupt.reports.len();
+        corrupt.reports.clear();
+        let e = fit(&corrupt, 60.0, None).unwrap_err().to_string();
+        assert!(
+            e.contains("1000 frames of the two messages rejected"),
+            "{e}"
+        );
         let e = fit(&SteeringSeries::default(), 60.0, None)
             .unwrap_err()
             .to_string();
