@@ -713,7 +713,7 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             return Err(err(
                 path,
                 format!(
-                    "vehicle.steer_lag_s = {lag}: must be within {}..{} s (the steering actuator's time constant)",
+                    "vehicle.steer_lag_s = {lag}: must be within {}..{} s (how far the steering trails a ramp command)",
                     STEER_LAG_RANGE_S.0, STEER_LAG_RANGE_S.1
                 ),
             ));
@@ -1174,7 +1174,7 @@ pub fn to_toml(f: &ModelFile) -> String {
     if let Some(lag) = v.steer_lag_s {
         let _ = writeln!(
             o,
-            "steer_lag_s = {}  # the steering actuator's lag: the MPC's command leads its plan by it",
+            "steer_lag_s = {}  # how far the steering trails a ramp command (identify-steering): the MPC's command leads its plan by it",
             num(lag)
         );
     }
