@@ -16,6 +16,9 @@ use anyhow::{bail, Result};
 use catmodel::can::codec::{ControlCommand, ControlStatus, SteeringReport};
 use catmodel::can::frame::TimedFrame;
 
+use crate::sim::config::SteeringActuator as SteerParams;
+use crate::sim::controller::SteeringActuator;
+
 /// Grid of the coarse search, s.
 const COARSE_S: f64 = 0.005;
 /// Grid of the fine search around the coarse best, s.
@@ -217,7 +220,9 @@ pub fn fit(
     })
 }
 
-/// RMS error at `reports` of the actuator model started at `start_pct` at the first report.
+/// RMS error at `reports` of the actuator model started at `start_pct` at the first report:
+/// the built-in plant's actuator (`sim::controller::SteeringActuator`, the same rate-limited
+/// first-order lag) with this rate limit and lag, stepped every millisecond.
 fn simulate_rms(
     commands: &[(f64, f64, ControlStatus)],
     reports: &[(f64, f64)],
@@ -226,24 +231,45 @@ fn simulate_rms(
     lag_s: f64,
     delay_s: f64,
 ) -> f64 {
-    let Some(&(t0, _)) = reports.first() else {
+    let positions = simulate(commands, reports, start_pct, rate_pct_per_s, lag_s, delay_s);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, r) in positions.iter().zip(reports) {
+        let e = p - r.1;
+        sum += e * e;
+        n += 1;
+    }
+    if n == 0 {
         return f64::INFINITY;
+    }
+    (sum / n as f64).sqrt()
+}
+
+/// The actuator's position at each report's time, from `start_pct` at the first report; the
+/// command in force at `t` is the last one sent at or before `t - delay_s`.
+fn simulate(
+    commands: &[(f64, f64, ControlStatus)],
+    reports: &[(f64, f64)],
+    start_pct: f64,
+    rate_pct_per_s: f64,
+    lag_s: f64,
+    delay_s: f64,
+) -> Vec<f64> {
+    let Some(&(t0, _)) = reports.first() else {
+        return Vec::new();
     };
-    let max_step = rate_pct_per_s * STEP_S;
-    let alpha = if lag_s > 0.0 {
-        1.0 - (-STEP_S / lag_s).exp()
-    } else {
-        1.0
+    let params = SteerParams {
+        rate_limit_pct_per_s: rate_pct_per_s,
+        lag_s,
     };
-    // The command in force at `t`: the last one sent at or before `t - delay`.
+    let mut actuator = SteeringActuator::new(&params, STEP_S, start_pct);
     let mut next = commands.partition_point(|c| c.0 + delay_s <= t0);
     let mut target = next
         .checked_sub(1)
         .and_then(|i| commands.get(i))
         .map_or(start_pct, |c| c.1);
-    let (mut limited, mut position) = (start_pct, start_pct);
-    let (mut t, mut sum, mut n) = (t0, 0.0, 0usize);
-    for &(tr, value) in reports {
+    let (mut t, mut position) = (t0, start_pct);
+    let mut out = Vec::with_capacity(reports.len());
+    for &(tr, _) in reports {
         while t + STEP_S <= tr {
             t += STEP_S;
             while let Some(c) = commands.get(next) {
@@ -253,21 +279,19 @@ fn simulate_rms(
                 target = c.1;
                 next += 1;
             }
-            limited += (target - limited).clamp(-max_step, max_step);
-            position += alpha * (limited - position);
+            position = actuator.step(target);
         }
-        let e = position - value;
-        sum += e * e;
-        n += 1;
+        out.push(position);
     }
-    (sum / n.max(1) as f64).sqrt()
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Reports of the same actuator model, hand-driven: a square wave of commands.
+    /// Reports of a known actuator, hand-driven by a square wave of commands: its simulated
+    /// positions rounded to the report's 0.1 %.
     fn series(lag_s: f64, delay_s: f64, rate: f64) -> SteeringSeries {
         let commands: Vec<(f64, f64, ControlStatus)> = (0..1000)
             .map(|i| {
@@ -276,28 +300,16 @@ mod tests {
                 (t, cmd, ControlStatus::Tracking)
             })
             .collect();
-        let reports: Vec<(f64, f64)> = (0..1000).map(|i| (i as f64 * 0.02 + 0.01, 0.0)).collect();
-        // The reports of the model itself, through the same simulation, one report at a time.
-        let mut out = Vec::new();
-        let (mut limited, mut position, mut target) = (0.0f64, 0.0f64, 0.0f64);
-        let alpha = 1.0 - (-STEP_S / lag_s).exp();
-        let mut next = 0;
-        let mut t = 0.0;
-        for &(tr, _) in &reports {
-            while t + STEP_S <= tr {
-                t += STEP_S;
-                while next < commands.len() && commands[next].0 + delay_s <= t {
-                    target = commands[next].1;
-                    next += 1;
-                }
-                limited += (target - limited).clamp(-rate * STEP_S, rate * STEP_S);
-                position += alpha * (limited - position);
-            }
-            out.push((tr, (position * 10.0).round() / 10.0));
-        }
+        let times: Vec<(f64, f64)> = (0..1000).map(|i| (i as f64 * 0.02 + 0.01, 0.0)).collect();
+        let positions = simulate(&commands, &times, 0.0, rate, lag_s, delay_s);
+        let reports = times
+            .iter()
+            .zip(positions)
+            .map(|(&(t, _), p)| (t, (p * 10.0).round() / 10.0))
+            .collect();
         SteeringSeries {
             commands,
-            reports: out,
+            reports,
             rejected: 0,
         }
     }
