@@ -120,14 +120,16 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// The steering actuator's lag (`[vehicle] steer_lag_s`) from candump logs of a session in
-    /// which the controller drove: its CONTROL_COMMAND frames and the car's STEERING_REPORT.
+    /// The steering actuator's lag (`[vehicle] steer_lag_s`) and, when the session shows it, its
+    /// rate limit (`max_steer_rate_pct_per_s`) from candump logs of a session in which the
+    /// controller drove: its CONTROL_COMMAND frames and the car's STEERING_REPORT.
     IdentifySteering {
         /// candump logs (e.g. a recorder's of the whole bus, or closed-loop's session.can.log
         /// and session.tx.log), merged by time.
         #[arg(required = true)]
         logs: Vec<PathBuf>,
-        /// Model file whose steering rate limit the actuator has (default: models/paper.toml).
+        /// The car's model file: its steering rate limit is used when the session does not
+        /// show the limit, and compared with it when it does.
         #[arg(long)]
         model: Option<PathBuf>,
         /// The fit's window starts here, s of the logs' clock (default: a second after the
@@ -610,16 +612,19 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::IdentifySteering { logs, model, from } => {
-            let file = load_base(model.as_deref())?;
-            let rate = file.vehicle.max_steer_rate_pct_per_s;
+            use identify::steering::RateLimit;
+            let file_rate = match &model {
+                Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
+                None => None,
+            };
             let mut frames = Vec::new();
             for log in &logs {
                 frames.extend(replay::read_candump(log)?);
             }
             let series = identify::steering::SteeringSeries::from_frames(&frames);
-            let f = identify::steering::fit(&series, rate, from)?;
+            let f = identify::steering::fit(&series, file_rate, from)?;
             println!(
-                "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %), rate limit {rate} %/s from the model file",
+                "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %)",
                 f.reports, f.commands, f.from_s, f.to_s, f.span_pct
             );
             if series.rejected > 0 {
@@ -627,6 +632,35 @@ fn run(cli: Cli) -> Result<()> {
                     "  {} frames of the two messages rejected (CRC, range, length)",
                     series.rejected
                 );
+            }
+            match f.rate {
+                RateLimit::Measured {
+                    pct_per_s,
+                    rms_unlimited_pct,
+                } => {
+                    println!(
+                        "  rate limit {pct_per_s:.1} %/s (report error RMS {rms_unlimited_pct:.2} % without a limit)"
+                    );
+                    if let Some(r) = file_rate.filter(|r| (pct_per_s / r - 1.0).abs() > 0.1) {
+                        println!(
+                            "  warning: the model file says {r} %/s: the steering does not move at that rate"
+                        );
+                    }
+                }
+                RateLimit::NotShown { at_least_pct_per_s } => {
+                    let used = match file_rate {
+                        Some(r) => format!("the model file's {r} %/s used"),
+                        None => "fitted with no limit".to_string(),
+                    };
+                    println!(
+                        "  rate limit not shown: the commands never asked for more than the steering gave (it moved at up to {at_least_pct_per_s:.1} %/s, so the limit is at least that); {used}"
+                    );
+                    if let Some(r) = file_rate.filter(|r| *r < at_least_pct_per_s) {
+                        println!(
+                            "  warning: the model file says {r} %/s, slower than the steering moved"
+                        );
+                    }
+                }
             }
             println!(
                 "  lag {:.3} s and delay {:.3} s: the steering trails a ramp by {:.3} s; report error RMS {:.2} % ({:.2} % with neither)",
@@ -636,10 +670,11 @@ fn run(cli: Cli) -> Result<()> {
                 f.rms_pct,
                 f.rms_without_pct
             );
-            println!(
-                "  for the car's model file, [vehicle]: steer_lag_s = {:.3}",
-                f.trail_s()
-            );
+            println!("  for the car's model file, [vehicle]:");
+            if let RateLimit::Measured { pct_per_s, .. } = f.rate {
+                println!("  max_steer_rate_pct_per_s = {pct_per_s:.1}");
+            }
+            println!("  steer_lag_s = {:.3}", f.trail_s());
             Ok(())
         }
         Command::Decode { log, messages, csv } => {

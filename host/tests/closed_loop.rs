@@ -691,21 +691,28 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
     assert!(catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver).is_none());
 }
 
-/// `catmodel identify-steering` finds the plant's steering lag from a closed-loop session's two
-/// logs (the node's CONTROL_COMMAND and the car's STEERING_REPORT): the CAT Vehicle's plant with
-/// its 0.05 s lag and with 0.09 s, the key it prints within 8 ms of the plant's lag (the
-/// steering trails a ramp by the lag plus the bus's few milliseconds).
+/// `catmodel identify-steering` finds the plant's steering lag and rate limit from a
+/// closed-loop session's two logs (the node's CONTROL_COMMAND and the car's STEERING_REPORT):
+/// the CAT Vehicle's plant with its 0.05 s lag and 60 %/s, and with 0.09 s and 43 %/s; the lag
+/// key it prints within 8 ms of the plant's lag (the steering trails a ramp by the lag plus the
+/// bus's few milliseconds), the rate limit within 3 % (the lane change at 8 m/s steers at the
+/// limit).
 #[test]
 fn identify_steering_finds_the_plants_lag_from_a_session() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cat = std::fs::read_to_string(root.join("vehicles/cat-vehicle.toml")).unwrap();
-    for lag in [0.05, 0.09] {
+    for (lag, rate) in [(0.05, 60.0), (0.09, 43.0)] {
         let dir = tmp_dir(&format!("steering-lag-{lag}"));
         let vehicle = dir.join("vehicle.toml");
         assert_eq!(cat.matches("\nlag_s = 0.05").count(), 1);
+        assert_eq!(cat.matches("\nrate_limit_pct_per_s = 60.0 ").count(), 1);
         std::fs::write(
             &vehicle,
-            cat.replace("\nlag_s = 0.05", &format!("\nlag_s = {lag}")),
+            cat.replace("\nlag_s = 0.05", &format!("\nlag_s = {lag}"))
+                .replace(
+                    "\nrate_limit_pct_per_s = 60.0 ",
+                    &format!("\nrate_limit_pct_per_s = {rate} "),
+                ),
         )
         .unwrap();
         cl_ok(&[
@@ -740,6 +747,13 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
             .and_then(|s| s.trim().parse().ok())
             .unwrap_or_else(|| panic!("{text}"));
         assert!(key >= lag && key <= lag + 0.008, "{lag}: {text}");
+        let measured: f64 = text
+            .split("max_steer_rate_pct_per_s = ")
+            .nth(1)
+            .and_then(|s| s.lines().next())
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!((measured / rate - 1.0).abs() <= 0.03, "{rate}: {text}");
     }
     // Only the reports: the commands are needed, and the error says so.
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("closed_loop_steering-lag-0.09");

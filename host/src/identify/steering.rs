@@ -4,14 +4,22 @@
 //! them (`catmodel identify-steering`; docs/controller.md, "A slow steering actuator").
 //!
 //! The actuator is taken to be what a steer-by-wire actuator is to first order, and what the
-//! model file says of it: the command, after a transport delay `d`, is followed at most at the
-//! rate limit the model file gives (`max_steer_rate_pct_per_s`), and the steering follows that
-//! rate-limited target through a first-order lag of time constant `tau`. `(tau, d)` is the pair
-//! whose simulation from the reports' first value matches the reports best (least squares, a
-//! grid of 5 ms and then of 1 ms around its best): the lag is what `[vehicle] steer_lag_s`
-//! declares; the delay is the bus's and the drive-by-wire's, which the controller's one tick
-//! already covers. Only the window in which the controller drove counts: from a second after
-//! its first tracking command (a drive-by-wire arms once it sees one) or from `--from`.
+//! model file says of it: the command, after a transport delay `d`, is followed at most at a
+//! rate limit `R` (`max_steer_rate_pct_per_s`), and the steering follows that rate-limited
+//! target through a first-order lag of time constant `tau`. `(tau, d)` is the pair whose
+//! simulation from the reports' first value matches the reports best (least squares, a grid of
+//! 5 ms and then of 1 ms around its best): the lag is what `[vehicle] steer_lag_s` declares;
+//! the delay is the bus's and the drive-by-wire's, which the controller's one tick already
+//! covers. Only the window in which the controller drove counts: from a second after its first
+//! tracking command (a drive-by-wire arms once it sees one) or from `--from`.
+//!
+//! The rate limit is measured when the session shows it: the pair is fitted first with no limit,
+//! then `R` on a 1 % grid from the steering's fastest movement (a rate-limited lag never moves
+//! faster than `R`) to twice that, and the pair again at the best `R`. The limit is taken as
+//! measured only if it explains the reports: their error with it at most [`RATE_SHOWN_RATIO`]
+//! of the error without any. A session whose commands never ask for more than the actuator
+//! gives does not show it (the lag alone slows every step): then the model file's limit is used
+//! if one is given, and the fastest movement is reported as what the limit is at least.
 use anyhow::{bail, Result};
 use catmodel::can::codec::{ControlCommand, ControlStatus, SteeringReport};
 use catmodel::can::frame::TimedFrame;
@@ -34,6 +42,30 @@ pub const ARM_S: f64 = 1.0;
 /// The commands must move the steering at least this much in the window, %: with less the
 /// lag does not show above the reports' resolution and noise.
 pub const MIN_SPAN_PCT: f64 = 5.0;
+/// A rate limit is measured when it takes from the reports' mean square error more than this
+/// share of their noise's variance ([`report_noise`]; the built-in plant's reports have 0.2 %
+/// RMS). Commands held a tick each step, and a limit slows the steps within the tick: that
+/// shows in reports free of noise, and is not what a limit is measured from.
+pub const RATE_SHOWN_SHARE: f64 = 0.1;
+/// The fastest movement is the largest change of the steering, averaged over
+/// [`MOVE_AVERAGE`] reports, over this span, s: the reports' noise, differenced over a short
+/// span, would read as speed (0.2 % over 0.1 s: 2.8 %/s of noise, whose largest of a thousand
+/// windows is three times that).
+const MOVE_SPAN_S: f64 = 0.2;
+/// Reports averaged for the fastest movement.
+const MOVE_AVERAGE: usize = 5;
+/// The rate limit is searched from this many times the fastest movement (the average's noise
+/// may still read as a little speed) ...
+const RATE_SEARCH_LOW: f64 = 0.8;
+/// ... to this many times it (a short ramp ends before the lag has caught up with it).
+const RATE_SEARCH_FACTOR: f64 = 2.0;
+/// Step of the joint grid's limit, as a share of the fastest movement, and of its lag and delay, s.
+const COARSE_RATE_STEP: f64 = 0.02;
+const COARSE_JOINT_S: f64 = 0.01;
+/// The joint searches around the best: the limit's step (a share of it), the lag's and the
+/// delay's, s, and how many times at most each is repeated while the best moves.
+const JOINT_STEPS: [(f64, f64, usize); 3] =
+    [(0.01, 0.005, 4), (0.005, 0.002, 4), (0.0025, 0.001, 8)];
 
 /// The session's steering: commands and reports, in time order.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -83,9 +115,32 @@ impl SteeringSeries {
     }
 }
 
+/// The actuator's rate limit, as the session shows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RateLimit {
+    /// The reports are explained by the limit: `pct_per_s`; their error RMS without a limit
+    /// was `rms_unlimited_pct`.
+    Measured {
+        /// The limit, %/s.
+        pct_per_s: f64,
+        /// Report error RMS of the best fit with no limit, %.
+        rms_unlimited_pct: f64,
+    },
+    /// The commands never asked for more than the actuator gives: the limit is at least the
+    /// steering's fastest movement, `at_least_pct_per_s`.
+    NotShown {
+        /// The steering's fastest movement (over 0.1 s), %/s.
+        at_least_pct_per_s: f64,
+    },
+}
+
 /// What the fit found.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SteeringFit {
+    /// The rate limit.
+    pub rate: RateLimit,
+    /// The rate limit the lag and delay were fitted with, %/s (`inf`: none).
+    pub fitted_with_pct_per_s: f64,
     /// First-order lag, s (`[vehicle] steer_lag_s`).
     pub lag_s: f64,
     /// Transport delay, s.
@@ -116,15 +171,18 @@ impl SteeringFit {
     }
 }
 
-/// Fits the lag and the delay of an actuator with rate limit `rate_pct_per_s` to `series`,
-/// over the window from `from_s` (or [`ARM_S`] after the first tracking or avoiding command).
+/// Fits the rate limit, the lag and the delay of the actuator to `series`, over the window
+/// from `from_s` (or [`ARM_S`] after the first tracking or avoiding command). `file_rate`: the
+/// model file's rate limit, %/s, used when the session does not show the limit.
 pub fn fit(
     series: &SteeringSeries,
-    rate_pct_per_s: f64,
+    file_rate: Option<f64>,
     from_s: Option<f64>,
 ) -> Result<SteeringFit> {
-    if !(rate_pct_per_s.is_finite() && rate_pct_per_s > 0.0) {
-        bail!("steering rate limit {rate_pct_per_s} %/s: must be positive");
+    if let Some(r) = file_rate {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("steering rate limit {r} %/s: must be positive");
+        }
     }
     if series.commands.is_empty() {
         bail!("no CONTROL_COMMAND (0x320) with a steering command in the logs: give the log of the frames sent to the drive-by-wire too");
@@ -172,52 +230,164 @@ pub fn fit(
             last.0
         );
     }
-    let cost = |lag: f64, delay: f64| {
-        simulate_rms(
-            &series.commands,
-            &window,
-            first.1,
-            rate_pct_per_s,
-            lag,
-            delay,
-        )
+    let cost = |rate: f64, lag: f64, delay: f64| {
+        simulate_rms(&series.commands, &window, first.1, rate, lag, delay)
     };
-    let mut best = (f64::INFINITY, 0.0, 0.0);
-    let grid =
-        |max: f64, step: f64| (0..=(max / step).round() as usize).map(move |i| i as f64 * step);
-    for lag in grid(MAX_LAG_S, COARSE_S) {
-        for delay in grid(MAX_DELAY_S, COARSE_S) {
-            let c = cost(lag, delay);
-            if c < best.0 {
-                best = (c, lag, delay);
+    let lag_and_delay = |rate: f64| {
+        let mut best = (f64::INFINITY, 0.0, 0.0);
+        let grid =
+            |max: f64, step: f64| (0..=(max / step).round() as usize).map(move |i| i as f64 * step);
+        for lag in grid(MAX_LAG_S, COARSE_S) {
+            for delay in grid(MAX_DELAY_S, COARSE_S) {
+                let c = cost(rate, lag, delay);
+                if c < best.0 {
+                    best = (c, lag, delay);
+                }
+            }
+        }
+        let (_, lag0, delay0) = best;
+        let around = |centre: f64, max: f64| {
+            (-5..=5)
+                .map(move |i| centre + f64::from(i) * FINE_S)
+                .filter(move |v| (0.0..=max + 1e-9).contains(v))
+        };
+        for lag in around(lag0, MAX_LAG_S) {
+            for delay in around(delay0, MAX_DELAY_S) {
+                let c = cost(rate, lag, delay);
+                if c < best.0 {
+                    best = (c, lag, delay);
+                }
+            }
+        }
+        best
+    };
+    // With no limit; and with a limit: a joint grid of the three (the limit from the fastest
+    // movement, which a saturated ramp approaches, to twice it), then joint searches around
+    // the best on finer steps (the limit and the lag trade along a valley that a search of
+    // one at a time crawls down).
+    let moved = fastest_movement(&window);
+    let unlimited = lag_and_delay(f64::INFINITY);
+    let mut limited = (f64::INFINITY, f64::INFINITY);
+    let mut at_limit = unlimited;
+    if moved > 0.0 {
+        let grid =
+            |max: f64, step: f64| (0..=(max / step).round() as usize).map(move |i| i as f64 * step);
+        for r in grid(RATE_SEARCH_FACTOR - RATE_SEARCH_LOW, COARSE_RATE_STEP) {
+            let rate = moved * (RATE_SEARCH_LOW + r);
+            for lag in grid(MAX_LAG_S, COARSE_JOINT_S) {
+                for delay in grid(MAX_DELAY_S, COARSE_JOINT_S) {
+                    let c = cost(rate, lag, delay);
+                    if c < at_limit.0 || !limited.1.is_finite() {
+                        at_limit = (c, lag, delay);
+                        limited = (c, rate);
+                    }
+                }
+            }
+        }
+        for (rate_step, time_step, rounds) in JOINT_STEPS {
+            for _ in 0..rounds {
+                let start = (at_limit, limited.1);
+                for i in -2..=2 {
+                    let rate = start.1 * (1.0 + f64::from(i) * rate_step);
+                    for j in -2..=2 {
+                        let lag = start.0 .1 + f64::from(j) * time_step;
+                        for k in -2..=2 {
+                            let delay = start.0 .2 + f64::from(k) * time_step;
+                            if !((0.0..=MAX_LAG_S + 1e-9).contains(&lag)
+                                && (0.0..=MAX_DELAY_S + 1e-9).contains(&delay))
+                            {
+                                continue;
+                            }
+                            let c = cost(rate, lag, delay);
+                            if c < at_limit.0 {
+                                at_limit = (c, lag, delay);
+                                limited = (c, rate);
+                            }
+                        }
+                    }
+                }
+                if at_limit == start.0 {
+                    break;
+                }
             }
         }
     }
-    let (_, lag0, delay0) = best;
-    let around = |centre: f64, max: f64| {
-        (-5..=5)
-            .map(move |i| centre + f64::from(i) * FINE_S)
-            .filter(move |v| (0.0..=max + 1e-9).contains(v))
-    };
-    for lag in around(lag0, MAX_LAG_S) {
-        for delay in around(delay0, MAX_DELAY_S) {
-            let c = cost(lag, delay);
-            if c < best.0 {
-                best = (c, lag, delay);
-            }
+    // The limit shows when it explains more of the reports' mean square error than a share of
+    // their noise's: an error that is mostly noise does not tell a limit from none.
+    let noise = report_noise(&window);
+    let explained = unlimited.0 * unlimited.0 - at_limit.0 * at_limit.0;
+    let shown = limited.1.is_finite() && explained > RATE_SHOWN_SHARE * noise * noise;
+    let (rate, best) = if shown {
+        let rate = RateLimit::Measured {
+            pct_per_s: limited.1,
+            rms_unlimited_pct: unlimited.0,
+        };
+        (rate, (limited.1, at_limit))
+    } else {
+        let rate = RateLimit::NotShown {
+            at_least_pct_per_s: moved,
+        };
+        match file_rate {
+            Some(r) => (rate, (r, lag_and_delay(r))),
+            None => (rate, (f64::INFINITY, unlimited)),
         }
-    }
+    };
+    let (fitted_with, best) = best;
     Ok(SteeringFit {
+        rate,
+        fitted_with_pct_per_s: fitted_with,
         lag_s: best.1,
         delay_s: best.2,
         rms_pct: best.0,
-        rms_without_pct: cost(0.0, 0.0),
+        rms_without_pct: cost(fitted_with, 0.0, 0.0),
         from_s: from,
         to_s: last.0,
         reports: window.len(),
         commands,
         span_pct,
     })
+}
+
+/// The largest change of the reported steering (each averaged with its neighbours over
+/// [`MOVE_AVERAGE`] reports) over [`MOVE_SPAN_S`] (or the next report after it), per second: a
+/// rate-limited actuator never moves faster than its limit.
+fn fastest_movement(reports: &[(f64, f64)]) -> f64 {
+    let averaged: Vec<(f64, f64)> = reports
+        .windows(MOVE_AVERAGE)
+        .map(|w| {
+            let n = w.len() as f64;
+            let t = w.iter().map(|r| r.0).sum::<f64>() / n;
+            (t, w.iter().map(|r| r.1).sum::<f64>() / n)
+        })
+        .collect();
+    let mut fastest = 0.0f64;
+    for (i, &(t, p)) in averaged.iter().enumerate() {
+        let later = averaged.get(i..).unwrap_or_default();
+        let Some(&(t2, p2)) = later.iter().find(|r| r.0 >= t + MOVE_SPAN_S) else {
+            break;
+        };
+        fastest = fastest.max((p2 - p).abs() / (t2 - t));
+    }
+    fastest
+}
+
+/// The reports' noise, %: the median absolute second difference over its value for white
+/// noise of unit deviation (`0.6745 sqrt(6)`); the steering itself, a lagged and rate-limited
+/// movement, bends only at a ramp's corners, which the median leaves out.
+fn report_noise(reports: &[(f64, f64)]) -> f64 {
+    let mut d2: Vec<f64> = reports
+        .windows(3)
+        .filter_map(|w| match w {
+            [a, b, c] => Some((a.1 - 2.0 * b.1 + c.1).abs()),
+            _ => None,
+        })
+        .collect();
+    if d2.is_empty() {
+        return 0.0;
+    }
+    d2.sort_by(f64::total_cmp);
+    let median = d2.get(d2.len() / 2).copied().unwrap_or(0.0);
+    median / (0.6745 * 6f64.sqrt())
 }
 
 /// RMS error at `reports` of the actuator model started at `start_pct` at the first report:
@@ -317,7 +487,7 @@ mod tests {
     #[test]
     fn the_lag_and_delay_of_a_known_actuator_are_found() {
         for (lag, delay) in [(0.04, 0.0), (0.09, 0.01), (0.15, 0.03)] {
-            let f = fit(&series(lag, delay, 60.0), 60.0, Some(0.0)).unwrap();
+            let f = fit(&series(lag, delay, 60.0), Some(60.0), Some(0.0)).unwrap();
             // What a ramp trails by (the lead the controller needs) to the millisecond; the
             // split between the lag and the delay, which trade against each other, to 6 ms.
             assert!(
@@ -333,32 +503,106 @@ mod tests {
         }
     }
 
+    /// The square wave asks for 40 % in a tick: the actuator's limit shows, and is measured to
+    /// 1 % whatever the model file says (or without one), with the lag as before.
+    #[test]
+    fn the_rate_limit_of_a_known_actuator_is_measured() {
+        for (rate, lag) in [(43.0, 0.087), (60.0, 0.05), (110.0, 0.02)] {
+            for file in [None, Some(60.0)] {
+                let f = fit(&series(lag, 0.0, rate), file, Some(0.0)).unwrap();
+                let RateLimit::Measured {
+                    pct_per_s,
+                    rms_unlimited_pct,
+                } = f.rate
+                else {
+                    panic!("{rate}: {f:?}");
+                };
+                assert!((pct_per_s / rate - 1.0).abs() <= 0.01, "{rate}: {f:?}");
+                assert_eq!(f.fitted_with_pct_per_s, pct_per_s);
+                assert!((f.trail_s() - lag).abs() <= 0.0015, "{lag}: {f:?}");
+                assert!(f.rms_pct < 0.1 && rms_unlimited_pct > 1.0, "{f:?}");
+            }
+        }
+    }
+
+    /// Commands slower than the actuator (a 0.3 Hz sine of 20 %, at most 37.7 %/s, to a 60 %/s
+    /// actuator; reports with the plant's noise) do not show its limit: it is reported as at
+    /// least the fastest movement, the lag is found all the same, with the model file's limit
+    /// or none.
+    #[test]
+    fn a_limit_the_commands_never_reach_is_not_measured() {
+        let commands: Vec<(f64, f64, ControlStatus)> = (0..1000)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                let cmd = 20.0 * (2.0 * std::f64::consts::PI * 0.3 * t).sin();
+                (t, (cmd * 10.0).round() / 10.0, ControlStatus::Tracking)
+            })
+            .collect();
+        let times: Vec<(f64, f64)> = (0..1000).map(|i| (i as f64 * 0.02 + 0.01, 0.0)).collect();
+        let positions = simulate(&commands, &times, 0.0, 60.0, 0.07, 0.0);
+        // The plant's report noise, 0.2 % RMS (uniform, from a fixed linear congruential
+        // sequence).
+        let mut state = 12345u64;
+        let reports = times
+            .iter()
+            .zip(positions)
+            .map(|(&(t, _), p)| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+                let noise = (u - 0.5) * 0.2 * 12f64.sqrt();
+                (t, ((p + noise) * 10.0).round() / 10.0)
+            })
+            .collect();
+        let s = SteeringSeries {
+            commands,
+            reports,
+            rejected: 0,
+        };
+        for file in [None, Some(60.0)] {
+            let f = fit(&s, file, Some(0.0)).unwrap();
+            let RateLimit::NotShown { at_least_pct_per_s } = f.rate else {
+                panic!("{f:?}");
+            };
+            // 37.7 %/s less the lag's loss, plus the reports' 0.1 % resolution over 0.1 s.
+            assert!(
+                at_least_pct_per_s > 35.0 && at_least_pct_per_s <= 38.7,
+                "{f:?}"
+            );
+            assert_eq!(f.fitted_with_pct_per_s, file.unwrap_or(f64::INFINITY));
+            // A sine tells a lag from a delay by its amplitude alone (0.9 % here, about the
+            // reports' resolution): the trail to 6 ms.
+            assert!((f.trail_s() - 0.07).abs() <= 0.006, "{f:?}");
+        }
+    }
+
     #[test]
     fn a_session_that_cannot_show_the_lag_is_refused_with_the_reason() {
         let mut s = series(0.05, 0.0, 60.0);
         for c in &mut s.commands {
             c.1 = 1.0;
         }
-        let e = fit(&s, 60.0, Some(0.0)).unwrap_err().to_string();
+        let e = fit(&s, Some(60.0), Some(0.0)).unwrap_err().to_string();
         assert!(e.contains("at least 5 %"), "{e}");
         let mut idle = series(0.05, 0.0, 60.0);
         for c in &mut idle.commands {
             c.2 = ControlStatus::NoPath;
         }
-        let e = fit(&idle, 60.0, None).unwrap_err().to_string();
+        let e = fit(&idle, Some(60.0), None).unwrap_err().to_string();
         assert!(e.contains("never drove"), "{e}");
         let mut corrupt = series(0.05, 0.0, 60.0);
         corrupt.rejected = corrupt.reports.len();
         corrupt.reports.clear();
-        let e = fit(&corrupt, 60.0, None).unwrap_err().to_string();
+        let e = fit(&corrupt, None, None).unwrap_err().to_string();
         assert!(
             e.contains("1000 frames of the two messages rejected"),
             "{e}"
         );
-        let e = fit(&SteeringSeries::default(), 60.0, None)
+        let e = fit(&SteeringSeries::default(), None, None)
             .unwrap_err()
             .to_string();
         assert!(e.contains("CONTROL_COMMAND"), "{e}");
-        assert!(fit(&series(0.05, 0.0, 60.0), f64::NAN, None).is_err());
+        assert!(fit(&series(0.05, 0.0, 60.0), Some(f64::NAN), None).is_err());
     }
 }
