@@ -233,96 +233,26 @@ pub fn fit(
     let cost = |rate: f64, lag: f64, delay: f64| {
         simulate_rms(&series.commands, &window, first.1, rate, lag, delay)
     };
-    let lag_and_delay = |rate: f64| {
-        let mut best = (f64::INFINITY, 0.0, 0.0);
-        let grid =
-            |max: f64, step: f64| (0..=(max / step).round() as usize).map(move |i| i as f64 * step);
-        for lag in grid(MAX_LAG_S, COARSE_S) {
-            for delay in grid(MAX_DELAY_S, COARSE_S) {
-                let c = cost(rate, lag, delay);
-                if c < best.0 {
-                    best = (c, lag, delay);
-                }
-            }
-        }
-        let (_, lag0, delay0) = best;
-        let around = |centre: f64, max: f64| {
-            (-5..=5)
-                .map(move |i| centre + f64::from(i) * FINE_S)
-                .filter(move |v| (0.0..=max + 1e-9).contains(v))
-        };
-        for lag in around(lag0, MAX_LAG_S) {
-            for delay in around(delay0, MAX_DELAY_S) {
-                let c = cost(rate, lag, delay);
-                if c < best.0 {
-                    best = (c, lag, delay);
-                }
-            }
-        }
-        best
-    };
-    // With no limit; and with a limit: a joint grid of the three (the limit from the fastest
-    // movement, which a saturated ramp approaches, to twice it), then joint searches around
-    // the best on finer steps (the limit and the lag trade along a valley that a search of
-    // one at a time crawls down).
+    let lag_and_delay = |rate: f64| lag_and_delay_at(&cost, rate);
+    // With no limit; and with a limit, the three fitted jointly.
     let moved = fastest_movement(&window);
     let unlimited = lag_and_delay(f64::INFINITY);
-    let mut limited = (f64::INFINITY, f64::INFINITY);
-    let mut at_limit = unlimited;
-    if moved > 0.0 {
-        let grid =
-            |max: f64, step: f64| (0..=(max / step).round() as usize).map(move |i| i as f64 * step);
-        for r in grid(RATE_SEARCH_FACTOR - RATE_SEARCH_LOW, COARSE_RATE_STEP) {
-            let rate = moved * (RATE_SEARCH_LOW + r);
-            for lag in grid(MAX_LAG_S, COARSE_JOINT_S) {
-                for delay in grid(MAX_DELAY_S, COARSE_JOINT_S) {
-                    let c = cost(rate, lag, delay);
-                    if c < at_limit.0 || !limited.1.is_finite() {
-                        at_limit = (c, lag, delay);
-                        limited = (c, rate);
-                    }
-                }
-            }
-        }
-        for (rate_step, time_step, rounds) in JOINT_STEPS {
-            for _ in 0..rounds {
-                let start = (at_limit, limited.1);
-                for i in -2..=2 {
-                    let rate = start.1 * (1.0 + f64::from(i) * rate_step);
-                    for j in -2..=2 {
-                        let lag = start.0 .1 + f64::from(j) * time_step;
-                        for k in -2..=2 {
-                            let delay = start.0 .2 + f64::from(k) * time_step;
-                            if !((0.0..=MAX_LAG_S + 1e-9).contains(&lag)
-                                && (0.0..=MAX_DELAY_S + 1e-9).contains(&delay))
-                            {
-                                continue;
-                            }
-                            let c = cost(rate, lag, delay);
-                            if c < at_limit.0 {
-                                at_limit = (c, lag, delay);
-                                limited = (c, rate);
-                            }
-                        }
-                    }
-                }
-                if at_limit == start.0 {
-                    break;
-                }
-            }
-        }
-    }
+    let (limit, at_limit) = if moved > 0.0 {
+        rate_lag_and_delay(&cost, moved)
+    } else {
+        (f64::INFINITY, unlimited)
+    };
     // The limit shows when it explains more of the reports' mean square error than a share of
     // their noise's: an error that is mostly noise does not tell a limit from none.
     let noise = report_noise(&window);
     let explained = unlimited.0 * unlimited.0 - at_limit.0 * at_limit.0;
-    let shown = limited.1.is_finite() && explained > RATE_SHOWN_SHARE * noise * noise;
+    let shown = limit.is_finite() && explained > RATE_SHOWN_SHARE * noise * noise;
     let (rate, best) = if shown {
         let rate = RateLimit::Measured {
-            pct_per_s: limited.1,
+            pct_per_s: limit,
             rms_unlimited_pct: unlimited.0,
         };
-        (rate, (limited.1, at_limit))
+        (rate, (limit, at_limit))
     } else {
         let rate = RateLimit::NotShown {
             at_least_pct_per_s: moved,
@@ -346,6 +276,87 @@ pub fn fit(
         commands,
         span_pct,
     })
+}
+
+/// `0, step, 2 step, ...` up to `max`.
+fn grid(max: f64, step: f64) -> impl Iterator<Item = f64> {
+    (0..=(max / step).round() as usize).map(move |i| i as f64 * step)
+}
+
+/// Whether a lag and a delay lie in the searched ranges.
+fn in_range(lag: f64, delay: f64) -> bool {
+    (0.0..=MAX_LAG_S + 1e-9).contains(&lag) && (0.0..=MAX_DELAY_S + 1e-9).contains(&delay)
+}
+
+/// The `(cost, lag, delay)` of least `cost(rate, lag, delay)` at a given rate limit: a grid
+/// of [`COARSE_S`], then of [`FINE_S`] around its best.
+fn lag_and_delay_at(cost: &impl Fn(f64, f64, f64) -> f64, rate: f64) -> (f64, f64, f64) {
+    let mut best = (f64::INFINITY, 0.0, 0.0);
+    for lag in grid(MAX_LAG_S, COARSE_S) {
+        for delay in grid(MAX_DELAY_S, COARSE_S) {
+            let c = cost(rate, lag, delay);
+            if c < best.0 {
+                best = (c, lag, delay);
+            }
+        }
+    }
+    let (_, lag0, delay0) = best;
+    for i in -5..=5 {
+        for j in -5..=5 {
+            let (lag, delay) = (lag0 + f64::from(i) * FINE_S, delay0 + f64::from(j) * FINE_S);
+            if in_range(lag, delay) {
+                let c = cost(rate, lag, delay);
+                if c < best.0 {
+                    best = (c, lag, delay);
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The rate limit and the `(cost, lag, delay)` of least cost, the three jointly: a grid of the
+/// limit from [`RATE_SEARCH_LOW`] to [`RATE_SEARCH_FACTOR`] times the fastest movement `moved`
+/// (which a saturated ramp approaches), then searches around the best on the finer steps of
+/// [`JOINT_STEPS`] (the limit and the lag trade along a valley that a search of one at a time
+/// crawls down: 44 %/s and 0.098 s for a 43 %/s, 0.087 s actuator).
+fn rate_lag_and_delay(cost: &impl Fn(f64, f64, f64) -> f64, moved: f64) -> (f64, (f64, f64, f64)) {
+    let mut best = (f64::INFINITY, (f64::INFINITY, 0.0, 0.0));
+    for r in grid(RATE_SEARCH_FACTOR - RATE_SEARCH_LOW, COARSE_RATE_STEP) {
+        let rate = moved * (RATE_SEARCH_LOW + r);
+        for lag in grid(MAX_LAG_S, COARSE_JOINT_S) {
+            for delay in grid(MAX_DELAY_S, COARSE_JOINT_S) {
+                let c = cost(rate, lag, delay);
+                if c < best.1 .0 {
+                    best = (rate, (c, lag, delay));
+                }
+            }
+        }
+    }
+    for (rate_step, time_step, rounds) in JOINT_STEPS {
+        for _ in 0..rounds {
+            let (rate0, (c0, lag0, delay0)) = best;
+            for i in -2..=2 {
+                let rate = rate0 * (1.0 + f64::from(i) * rate_step);
+                for j in -2..=2 {
+                    for k in -2..=2 {
+                        let lag = lag0 + f64::from(j) * time_step;
+                        let delay = delay0 + f64::from(k) * time_step;
+                        if in_range(lag, delay) {
+                            let c = cost(rate, lag, delay);
+                            if c < best.1 .0 {
+                                best = (rate, (c, lag, delay));
+                            }
+                        }
+                    }
+                }
+            }
+            if best.1 .0 == c0 {
+                break;
+            }
+        }
+    }
+    best
 }
 
 /// The largest change of the reported steering (each averaged with its neighbours over
