@@ -194,8 +194,8 @@ fn a_car_sets_its_lateral_weight_in_its_model_file() {
     use catmodel::control::mpc::DEFAULT_TUNING;
     use catmodel::node::drive::mpc_tuning;
     let text = paper_text().replace(
-        "position_uncertainty_m = 1.6",
-        "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = 2.5",
+        "position_uncertainty_m = 2.0",
+        "position_uncertainty_m = 2.0\nmpc_lateral_weight_per_m2 = 2.5",
     );
     let file = parse(&text, Path::new("weighted.toml")).unwrap();
     assert_eq!(file.control.mpc_lateral_weight_per_m2, Some(2.5));

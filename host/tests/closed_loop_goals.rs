@@ -149,11 +149,14 @@ fn a_slow_steering_actuator_declared_in_the_model_file() {
 }
 
 /// The obstacle on the path with the standard receiver (1.2 m horizontal RMS): passed with at
-/// least 0.5 m between the body and the obstacle on every seed (measured: 2.00 m at least).
+/// least 0.5 m between the body and the obstacle on each of ten seeds (measured: 0.84 m at
+/// least, seed 3, whose receiver bias reaches 2.07 m to the side of the obstacle; with the
+/// 1.6 m the model file declared before, 0.41 m: docs/controller.md, "The obstacle and the
+/// receiver").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn obstacle_passed_with_half_a_metre_standard_receiver() {
-    for seed in SEEDS {
+    for seed in 0..10 {
         let m = drive(
             Kind::Obstacle,
             Controller::Mpc,
@@ -194,8 +197,9 @@ fn loop_lateral_rms_rtk() {
 /// the take-over by 0.2 s: the clearances are centimetres at every speed and which speeds pass
 /// is chance at that scale, docs/controller.md); pure pursuit with the CAT Vehicle's tuning
 /// 6.25 m/s, with a lookahead tuned for this car 14.81 m/s; the obstacle passed with 0.5 m with the
-/// standard receiver (measured 2.11 m); the loop at 10 m/s within the goal's 0.10 m lateral
-/// RMS (measured 0.031 m).
+/// standard receiver on each of ten seeds (measured 0.70 m at least, seed 3; 0.29 m with the
+/// 1.6 m its file declared before); the loop at 10 m/s within the goal's 0.10 m lateral RMS
+/// (measured 0.031 m).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn second_car_goals() {
@@ -206,19 +210,21 @@ fn second_car_goals() {
         assert!(clean, "MPC not clean at {speed} m/s");
     }
     let car = Some((v, m));
-    let obstacle = drive_car(
-        car.clone(),
-        Kind::Obstacle,
-        Controller::Mpc,
-        Receiver::Standard,
-        Kind::Obstacle.default_speed_mps(),
-        0,
-    );
-    assert!(obstacle.completed);
-    assert!(
-        obstacle.min_obstacle_clearance_m.unwrap() >= 0.5,
-        "{obstacle:?}"
-    );
+    for seed in 0..10 {
+        let obstacle = drive_car(
+            car.clone(),
+            Kind::Obstacle,
+            Controller::Mpc,
+            Receiver::Standard,
+            Kind::Obstacle.default_speed_mps(),
+            seed,
+        );
+        assert!(obstacle.completed, "seed {seed}");
+        assert!(
+            obstacle.min_obstacle_clearance_m.unwrap() >= 0.5,
+            "seed {seed}: {obstacle:?}"
+        );
+    }
     let fast = drive_car(car, Kind::Loop, Controller::Mpc, Receiver::Rtk, 10.0, 0);
     let rms = fast.lateral_rms_m.unwrap();
     assert!(fast.completed && rms <= 0.10, "10 m/s: {rms} m");

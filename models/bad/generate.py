@@ -121,11 +121,11 @@ BAD = {
         "hybrid: exit thresholds must not exceed enter thresholds",
     ),
     "lateral-weight-zero": (
-        lambda t: replace(t, "position_uncertainty_m = 1.6", "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = 0.0"),
+        lambda t: replace(t, "position_uncertainty_m = 2.0", "position_uncertainty_m = 2.0\nmpc_lateral_weight_per_m2 = 0.0"),
         "control.mpc_lateral_weight_per_m2 = 0: must be within 0.1..100",
     ),
     "lateral-weight-nan": (
-        lambda t: replace(t, "position_uncertainty_m = 1.6", "position_uncertainty_m = 1.6\nmpc_lateral_weight_per_m2 = nan"),
+        lambda t: replace(t, "position_uncertainty_m = 2.0", "position_uncertainty_m = 2.0\nmpc_lateral_weight_per_m2 = nan"),
         "control.mpc_lateral_weight_per_m2 = NaN: must be within 0.1..100",
     ),
     "steer-lag-negative": (
