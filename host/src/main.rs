@@ -23,7 +23,7 @@ enum Command {
     /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
     SimulateDrive {
         /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
-        /// circle-left, circle-right, validation, smoke, standstill, suburb, steps-at-speed.
+        /// circle-left, circle-right, validation, smoke, standstill, parked-1h, suburb, steps-at-speed.
         #[arg(long)]
         scenario: String,
         /// Output directory.
@@ -136,6 +136,17 @@ enum Command {
         /// first tracking command).
         #[arg(long)]
         from: Option<f64>,
+    },
+    /// The GNSS receiver's error (`[control] position_uncertainty_m`) from candump logs of the
+    /// car parked: each axis's deviation and correlation time, and the bound to declare.
+    ReceiverError {
+        /// candump logs, merged by time.
+        #[arg(required = true)]
+        logs: Vec<PathBuf>,
+        /// The car's model file: the receiver's NMEA 2000 source address (default: the
+        /// published car's).
+        #[arg(long)]
+        model: Option<PathBuf>,
     },
     /// Simulate each model of a model file over one log, beside the kinematic model.
     Compare {
@@ -675,6 +686,60 @@ fn run(cli: Cli) -> Result<()> {
                 println!("  max_steer_rate_pct_per_s = {pct_per_s:.1}");
             }
             println!("  steer_lag_s = {:.3}", f.trail_s());
+            Ok(())
+        }
+        Command::ReceiverError { logs, model } => {
+            use identify::receiver::{AVERAGE_S, MIN_INDEPENDENT, MIN_LOG_S, SIGMAS};
+            let file = load_base(model.as_deref())?;
+            let source = file.inputs.gnss_source_address;
+            let mut frames = Vec::new();
+            for log in &logs {
+                frames.extend(replay::read_candump(log)?);
+            }
+            let r = identify::receiver::measure(&frames, source)?;
+            println!(
+                "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {} speed reports, all parked{}",
+                r.fixes,
+                r.duration_s,
+                r.interval_s,
+                r.speed_reports,
+                if r.rejected > 0 {
+                    format!("; {} fixes rejected (not available, range)", r.rejected)
+                } else {
+                    String::new()
+                }
+            );
+            for (name, a) in [("east", r.east), ("north", r.north)] {
+                let tau = a
+                    .correlation_s
+                    .map_or("not determined".to_string(), |t| format!("{t:.1} s"));
+                println!(
+                    "  {name}: deviation {:.3} m, averaged over {AVERAGE_S} s {:.3} m, correlation time {tau}",
+                    a.sigma_m, a.slow_sigma_m
+                );
+            }
+            match r.independent {
+                Some(n) => println!("  the log holds about {n:.0} independent values of the bias"),
+                None => println!("  the error did not forget itself within a quarter of the log"),
+            }
+            if r.long_enough() {
+                println!(
+                    "  for the car's model file, [control] ({SIGMAS} standard deviations of the averaged error):"
+                );
+                println!("  position_uncertainty_m = {:.1}", r.uncertainty_m());
+            } else {
+                let need = r.log_needed_s().map_or("far longer".to_string(), |t| {
+                    format!(
+                        "at least {:.0} minutes ({MIN_INDEPENDENT} independent values of the bias, and {:.0} minutes at least)",
+                        (t / 60.0).ceil(),
+                        MIN_LOG_S / 60.0
+                    )
+                });
+                println!(
+                    "  not determined: too short a log to bound the bias ({SIGMAS} standard deviations would be {:.1} m now); record the car parked for {need}",
+                    r.uncertainty_m()
+                );
+            }
             Ok(())
         }
         Command::Decode { log, messages, csv } => {

@@ -437,3 +437,57 @@ fn bad_input_is_reported_with_file_and_line() {
     let err = fails(&["replay", s(&dir.join("nope.log")), "--out", s(&pred)]);
     assert!(err.contains("nope.log"), "{err}");
 }
+
+/// `receiver-error` on the simulator's receiver parked for an hour gives the bound the built-in
+/// files declare (the simulator's bias, 0.8 m per axis: 2.0 m, 2.5 standard deviations; seeds
+/// 1 and 2 give 2.1 and 2.0 m); a 20 s standstill is too short and says how long is enough; a
+/// drive is refused.
+#[test]
+fn receiver_error_from_a_parked_car() {
+    let dir = tmp_dir("receiver-error");
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "parked-1h",
+        "--out",
+        s(&dir),
+    ]);
+    let stdout = |args: &[&str]| {
+        let out = run(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let text = stdout(&["receiver-error", s(&dir.join("parked-1h.can.log"))]);
+    let bound: f64 = text
+        .split("position_uncertainty_m = ")
+        .nth(1)
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!((1.8..=2.2).contains(&bound), "{text}");
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "standstill",
+        "--out",
+        s(&dir),
+    ]);
+    let short = stdout(&["receiver-error", s(&dir.join("standstill.can.log"))]);
+    assert!(
+        short.contains("not determined") && short.contains("at least 10 minutes"),
+        "{short}"
+    );
+    assert!(!short.contains("position_uncertainty_m ="), "{short}");
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "straight-5",
+        "--out",
+        s(&dir),
+    ]);
+    let moved = fails(&["receiver-error", s(&dir.join("straight-5.can.log"))]);
+    assert!(moved.contains("the car moved"), "{moved}");
+}

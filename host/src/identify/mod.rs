@@ -20,6 +20,7 @@ pub mod dynamics;
 pub mod floor;
 pub mod oe;
 pub mod preprocess;
+pub mod receiver;
 pub mod report;
 pub mod simulate;
 pub mod steering;
