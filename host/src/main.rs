@@ -697,12 +697,15 @@ fn run(cli: Cli) -> Result<()> {
                 frames.extend(replay::read_candump(log)?);
             }
             let r = identify::receiver::measure(&frames, source)?;
+            let parked = match r.speed_reports {
+                0 => "no speed reports: the car is taken to be parked".to_string(),
+                n => format!("{n} speed reports, all parked"),
+            };
             println!(
-                "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {} speed reports, all parked{}",
+                "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {parked}{}",
                 r.fixes,
                 r.duration_s,
                 r.interval_s,
-                r.speed_reports,
                 if r.rejected > 0 {
                     format!("; {} fixes rejected (not available, range)", r.rejected)
                 } else {

@@ -46,7 +46,7 @@ pub struct AxisError {
 /// What the log shows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReceiverError {
-    /// East and north.
+    /// East.
     pub east: AxisError,
     /// North.
     pub north: AxisError,
