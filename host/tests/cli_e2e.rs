@@ -490,4 +490,17 @@ fn receiver_error_from_a_parked_car() {
     ]);
     let moved = fails(&["receiver-error", s(&dir.join("straight-5.can.log"))]);
     assert!(moved.contains("the car moved"), "{moved}");
+    // Every fix stamped alike (a recorder that lost its clock): refused with the reason.
+    let stamped = std::fs::read_to_string(dir.join("standstill.can.log")).unwrap();
+    let same: String = stamped
+        .lines()
+        .filter_map(|l| {
+            l.split_once(' ')
+                .map(|(_, rest)| format!("(1700000000.000000) {rest}\n"))
+        })
+        .collect();
+    let same_path = dir.join("same-stamp.can.log");
+    std::fs::write(&same_path, same).unwrap();
+    let e = fails(&["receiver-error", s(&same_path)]);
+    assert!(e.contains("fixes span 0.000 s"), "{e}");
 }

@@ -137,6 +137,12 @@ pub fn measure(frames: &[TimedFrame], source: u8) -> Result<ReceiverError> {
         north.push(f64::from(enu.north_m));
     }
     let duration_s = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
+    if duration_s.is_nan() || duration_s < AVERAGE_S {
+        bail!(
+            "the {} fixes span {duration_s:.3} s of the logs' clock: the receiver's error needs their times (a log of the car parked for 10 minutes or more)",
+            fixes.len()
+        );
+    }
     let interval_s = duration_s / (t.len() - 1) as f64;
     let per = ((AVERAGE_S / interval_s).round() as usize).max(1);
     let (e, n) = (axis(&east, per, interval_s), axis(&north, per, interval_s));
