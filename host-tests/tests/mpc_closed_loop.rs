@@ -613,3 +613,64 @@ fn rigs_lane_change_limit_per_delay() {
         println!("{name}: limit {limit:?} m/s;{line}");
     }
 }
+
+/// The smallest clearance between the body and the cones of the rig's lane change on the
+/// bench, fed the truth, at `speed`, m (the cones as the rig places them: their edges on the
+/// lanes' edges).
+fn rigs_lane_change_cone_clearance(speed: f64) -> f64 {
+    use catmodel_host::closed_loop::metrics::distance_to_body;
+    use catmodel_host::closed_loop::scenario::{cone_stations, dlc_lanes, CONE_RADIUS_M};
+    let cfg = VehicleConfig::default();
+    let path = rigs_lane_change(speed);
+    let mut l = Loop::new(
+        cfg.clone(),
+        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
+        &path,
+        speed,
+        0.0,
+        0.0,
+    );
+    l.run(&path, path.length_m() - 20.0, 30.0);
+    let body = catmodel_host::sim::config::Body {
+        width_m: f64::from(ESCAPE_BODY.width_m),
+        length_m: f64::from(ESCAPE_BODY.length_m),
+        rear_overhang_m: f64::from(ESCAPE_BODY.rear_overhang_m),
+    };
+    // The bench's path runs north from the lane change's course x = -40 m; course y (left) is
+    // west.
+    let cones: Vec<(f64, f64)> = dlc_lanes(body.width_m)
+        .iter()
+        .flat_map(|lane| {
+            cone_stations(lane).flat_map(move |x| {
+                [
+                    lane.y_left_m + CONE_RADIUS_M,
+                    lane.y_right_m - CONE_RADIUS_M,
+                ]
+                .map(|y| (-y, x + 40.0))
+            })
+        })
+        .collect();
+    let body = &body;
+    l.log
+        .iter()
+        .flat_map(|t| {
+            cones.iter().map(move |&(e, n)| {
+                distance_to_body(body, t.x_m, t.y_m, t.heading_rad, e, n) - CONE_RADIUS_M
+            })
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The smallest cone clearance of the rig's lane change on the truth-fed bench, per speed
+/// (docs/controller.md, "Where the corridor binds the body").
+#[test]
+#[ignore = "measurement; prints the cone clearance per speed"]
+fn rigs_lane_change_cone_clearance_per_speed() {
+    for v4 in 48..=62 {
+        let speed = f64::from(v4) / 4.0;
+        println!(
+            "{speed} m/s: {:+.3} m",
+            rigs_lane_change_cone_clearance(speed)
+        );
+    }
+}

@@ -691,9 +691,12 @@ impl Path {
     /// between points, so its minimum is at an end or at a point in between; where it is equally
     /// narrow over a stretch (within [`NARROWEST_TIE_M`]), the station farthest from `from_m`
     /// is taken: in a lane that goes on past the body's end that is the end's corner, in a lane
-    /// that ends (or starts) between the axle and the end it is the lane's last (or first)
-    /// point, where the body's side meets it. `None` without a path. What a controller needs to
-    /// keep a body's side, between the axle and a corner, inside.
+    /// that ends beyond the axle (the front half in a lane it is leaving) the lane's last point,
+    /// in a lane that starts behind it (the rear half in a lane it is entering) its first point,
+    /// where the body's side meets it; in a lane that starts ahead of the axle, or ends behind
+    /// it, the end's corner (the side's other end of the stretch is not reported).
+    /// `None` without a path. What a controller needs to keep a body's side, between the axle
+    /// and a corner, inside.
     pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<Narrowest> {
         if !(from_m.is_finite() && to_m.is_finite()) {
             return None;

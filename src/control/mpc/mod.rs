@@ -79,8 +79,11 @@ pub struct Sample {
 /// the corridor binds it: the path and corridor at the station where the corridor is narrowest
 /// over that half ([`crate::control::path::Path::narrowest_corridor`]). The corridor row keeps
 /// the body's side there inside: at the end's corner while the lane goes on past it, at a lane's
-/// last (first) point when the lane ends (starts) beside the body, where the body turning out
-/// of the lane (into it) meets its edge.
+/// last point when the lane ends beside the front half and its first point when it starts
+/// beside the rear half, where the body turning out of the lane (into it) meets its edge. (A
+/// lane's first point beside the front half and its last beside the rear half are not held:
+/// the stretch's end farther from the axle is, docs/controller.md "Where the corridor binds the
+/// body".)
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SidePoint {
     /// Path pose and corridor there (the row reads the side's width only).
