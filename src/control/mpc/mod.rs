@@ -17,7 +17,9 @@
 //! warm starts from the previous solution moved one tick ahead. A problem that cannot be solved
 //! (an obstacle with no side that fits the corridor, a plan that still hits an obstacle after the
 //! cap, non-finite input) gives status 3 and the documented fallback, never a NaN: brake (speed
-//! command 0) and steer along the last feasible plan (the measured steering once it has run out).
+//! command 0) and steer along the last feasible plan (holding its last steering once it has run
+//! out; the measured steering when there is none), or, for an obstacle the plans do not clear,
+//! along the lane at the offset the car has.
 //!
 //! Frames: x east, y north (m); headings clockwise from north (rad); offsets and steering
 //! positive to the right.
@@ -53,6 +55,12 @@ pub const STEPS: usize = 20;
 pub const PLAN_STEPS: usize = 20;
 /// MPC step, s (every 5th node tick: the PREDICTION frames are every 0.2 s = 2 steps).
 pub const STEP_S: f32 = 0.1;
+/// The fallback for an obstacle the plans do not clear brakes along the lane: it steers
+/// towards a point this far ahead (at the car's speed) on the line parallel to the path through
+/// the car, s ([`FallbackReason::ObstacleNotCleared`]).
+pub const LANE_HOLD_PREVIEW_S: f32 = 1.0;
+/// ... and at least this far, m (at a crawl).
+pub const LANE_HOLD_MIN_PREVIEW_M: f32 = 3.0;
 /// Longest steering lead, s: three stages of the plan.
 pub const MAX_STEER_LEAD_S: f32 = 0.3;
 /// Node ticks (20 ms, [`crate::SAMPLE_PERIOD_S`]) per MPC step.
@@ -1200,7 +1208,21 @@ impl MpcConfig {
     ) -> MpcOutput {
         let measured = finite_or(input.car.steer_rad, 0.0);
         let mut steer = [measured; STEPS + 1];
-        if let Some((plan, age)) = &mut state.last_steer_plan {
+        if reason == FallbackReason::ObstacleNotCleared {
+            // The plans that led here kept entering the obstacle: their steering is not
+            // followed (nor held once they run out, which beside an obstacle passed on one side
+            // and returned from on the other turns the car back into it). The car brakes along
+            // the path's direction at the offset it has, the steering ramped there at the
+            // actuator's rate.
+            let target = self.lane_hold_steer_rad(input);
+            let step = self.max_steer_rate_rad_per_s * STEP_S;
+            let mut held = measured;
+            for s in steer.iter_mut().skip(1) {
+                held += clamp(target - held, -step, step);
+                *s = held;
+            }
+            state.last_steer_plan = None;
+        } else if let Some((plan, age)) = &mut state.last_steer_plan {
             *age = age.saturating_add(1);
             // The plan was made `age` ticks ago: index of "now" in it, in steps.
             let shift = *age as f32 / TICKS_PER_STEP as f32;
@@ -1231,6 +1253,31 @@ impl MpcConfig {
             corridor_violation_m: 0.0,
             sides: state.sides,
         }
+    }
+
+    /// The steering that turns the car to the path's direction at its station and holds it
+    /// there (pure pursuit of a point [`LANE_HOLD_PREVIEW_S`] ahead on the line parallel to the
+    /// path through the car, at least [`LANE_HOLD_MIN_PREVIEW_M`], plus the steering of the
+    /// path's curvature), within the steering range: braking along the lane at the offset the
+    /// car has, neither towards an obstacle beside it nor off the road.
+    fn lane_hold_steer_rad(&self, input: &MpcInput) -> f32 {
+        let Some(r) = input.reference.first() else {
+            return 0.0;
+        };
+        let heading_error = math::wrap_pi(input.car.pose.heading_rad - r.at.pose.heading_rad);
+        let v = max(finite_or(input.car.speed_mps, 0.0), 0.0);
+        let preview = max(v * LANE_HOLD_PREVIEW_S, LANE_HOLD_MIN_PREVIEW_M);
+        let l = self.vehicle.wheelbase_m;
+        let (sin_e, _) = math::sin_cos(heading_error);
+        let turn = math::atan(-2.0 * l * sin_e / preview);
+        let ff = lateral::feedforward_steer_rad(
+            l,
+            self.vehicle.understeer_s2_per_m2,
+            v,
+            r.curvature_per_m,
+        );
+        let max_steer = self.vehicle.max_steer_rad;
+        clamp(finite_or(ff + turn, 0.0), -max_steer, max_steer)
     }
 
     /// Centre-tyre angle to steering percent, within +-100 (0 if not finite).
