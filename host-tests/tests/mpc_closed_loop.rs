@@ -547,9 +547,9 @@ fn rigs_lane_change(speed: f64) -> TestPath {
     )
 }
 
-/// The largest corridor violation of the CAT Vehicle's body on the rig's lane-change path at
-/// `speed`, with `delays` and `position_error` between the plant and the controller, m.
-fn rigs_lane_change_violation(speed: f64, delays: Delays, position_error: PositionError) -> f64 {
+/// The CAT Vehicle through the rig's lane-change path at `speed` on the bench, with `delays`
+/// and `position_error` between the plant and the controller.
+fn rigs_lane_change_run(speed: f64, delays: Delays, position_error: PositionError) -> Loop {
     let cfg = VehicleConfig::default();
     let path = rigs_lane_change(speed);
     let mut l = Loop::new(
@@ -563,7 +563,13 @@ fn rigs_lane_change_violation(speed: f64, delays: Delays, position_error: Positi
     l.delays = delays;
     l.position_error = position_error;
     l.run(&path, path.length_m() - 20.0, 30.0);
-    l.worst_corridor_violation_m()
+    l
+}
+
+/// The largest corridor violation of the CAT Vehicle's body on the rig's lane-change path at
+/// `speed`, with `delays` and `position_error` between the plant and the controller, m.
+fn rigs_lane_change_violation(speed: f64, delays: Delays, position_error: PositionError) -> f64 {
+    rigs_lane_change_run(speed, delays, position_error).worst_corridor_violation_m()
 }
 
 /// The rig's lane-change path on the bench, as a check that the gap between the bench and the
@@ -620,17 +626,7 @@ fn rigs_lane_change_limit_per_delay() {
 fn rigs_lane_change_cone_clearance(speed: f64) -> f64 {
     use catmodel_host::closed_loop::metrics::distance_to_body;
     use catmodel_host::closed_loop::scenario::{cone_stations, dlc_lanes, CONE_RADIUS_M};
-    let cfg = VehicleConfig::default();
-    let path = rigs_lane_change(speed);
-    let mut l = Loop::new(
-        cfg.clone(),
-        mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING),
-        &path,
-        speed,
-        0.0,
-        0.0,
-    );
-    l.run(&path, path.length_m() - 20.0, 30.0);
+    let l = rigs_lane_change_run(speed, Delays::default(), PositionError::NONE);
     let body = catmodel_host::sim::config::Body {
         width_m: f64::from(ESCAPE_BODY.width_m),
         length_m: f64::from(ESCAPE_BODY.length_m),
