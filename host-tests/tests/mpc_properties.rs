@@ -330,3 +330,62 @@ fn a_lead_past_the_first_stage_commands_the_plans_later_steering() {
         "the plan's rate changes after its first stage: {plan:?}"
     );
 }
+
+/// The speed bias the plan works with (`SpeedState::filter_bias`), by hand: the first tick
+/// takes the bias as measured; a step of the measured bias from 0 to 1 m/s is followed at
+/// `1 - (1 - 0.02 / tau)^n` after `n` ticks (after `tau` = 1.5 s, 75 ticks: 0.6346, the
+/// continuous lowpass's 1 - 1/e = 0.6321 to within the discretisation); a time constant of 0
+/// (or below a tick) passes the bias through; a non-finite bias counts as 0 and never reaches
+/// the filter's state.
+#[test]
+fn a_low_passed_speed_bias() {
+    use catmodel::control::mpc::longitudinal::SpeedState;
+    let tau = DEFAULT_TUNING.speed.bias_time_constant_s;
+    assert_eq!(tau, 1.5);
+    let mut s = SpeedState::new();
+    assert_eq!(s.filter_bias(0.0, tau), 0.0);
+    let mut b = 0.0;
+    for _ in 0..75 {
+        b = s.filter_bias(1.0, tau);
+    }
+    let want = 1.0 - (1.0 - 0.02f64 / 1.5).powi(75);
+    assert!((f64::from(b) - want).abs() < 1e-5, "{b} vs {want}");
+    assert!((b - 0.6321).abs() < 0.005);
+    let before = b;
+    assert!((s.filter_bias(f32::NAN, tau) - before * (1.0 - 0.02 / 1.5)).abs() < 1e-6);
+    let mut raw = SpeedState::new();
+    assert_eq!(raw.filter_bias(0.3, 0.0), 0.3);
+    assert_eq!(raw.filter_bias(-2.0, 0.0), -2.0);
+    assert_eq!(raw.filter_bias(f32::INFINITY, 0.01), 0.0);
+}
+
+/// A car that brakes harder than its speed model (eq 5 rolled on from 3 m/s with the command
+/// at 0, the car measured at 0.5 m/s: a bias of about -2.5 m/s) asked to stop: the plan keeps
+/// the command at 0 over the whole horizon and predicts no speed below 0. Before, model plus
+/// bias went below zero after about a second and the plan commanded speed to bring the car
+/// back to a stop.
+#[test]
+fn the_speed_plan_does_not_predict_a_car_reversing() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+    let model_state = block.steady_state_for_output(3.0).unwrap();
+    let mut peek = model_state;
+    let modelled = block.step(&mut peek, 0.0);
+    let start = SpeedStart {
+        model_state: &model_state,
+        bias_mps: 0.5 - modelled,
+        speed_mps: 0.5,
+        last_command_mps: 0.0,
+    };
+    assert!(start.bias_mps < -2.4);
+    let free = planner.free_response(&start, 0.0);
+    assert!(free.iter().all(|v| *v >= 0.0), "{free:?}");
+    assert!(free.contains(&0.0), "the case no longer reaches below zero");
+    let mut state = SpeedState::new();
+    for _ in 0..50 {
+        let plan = planner.plan(&mut state, &start, &[0.0; PLAN_STEPS + 1]);
+        assert!(plan.commands_mps.iter().all(|c| *c < 0.01), "{plan:?}");
+        assert!(plan.speeds_mps.iter().all(|v| *v >= 0.0));
+    }
+}

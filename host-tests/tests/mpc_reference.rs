@@ -259,6 +259,8 @@ fn speed_tuning(r: &Value, iterations: u16) -> SpeedTuning {
         accel_mps2: f(&t["accel_mps2"]) as f32,
         decel_mps2: f(&t["decel_mps2"]) as f32,
         iterations,
+        // The plan itself takes the bias it is given (the controller filters it).
+        bias_time_constant_s: 0.0,
     }
 }
 

@@ -70,6 +70,8 @@ fn sweep() {
                     "share" => t.steer_rate_share = x,
                     "iter" => t.admm.max_iterations = x as u16,
                     "return" => t.corridor_return_mps2 = x,
+                    "bias" => t.speed.bias_time_constant_s = x,
+                    "norule" => t.line_rule = None,
                     _ => panic!("{k}"),
                 }
             }

@@ -361,6 +361,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         accel_mps2: 1.5,
         decel_mps2: 3.0,
         iterations: 10,
+        bias_time_constant_s: 1.5,
     },
     steer_lead_s: 0.07,
     steer_trust_s: 0.15,
@@ -681,9 +682,12 @@ impl MpcConfig {
     /// One solve: the commands to send now and the plan.
     pub fn solve(&self, state: &mut MpcState, input: &MpcInput) -> MpcOutput {
         let car = &input.car;
+        let bias_mps = state
+            .speed
+            .filter_bias(car.speed_bias_mps, self.speed.tuning().bias_time_constant_s);
         let speed_start = SpeedStart {
             model_state: car.speed_model,
-            bias_mps: finite_or(car.speed_bias_mps, 0.0),
+            bias_mps,
             speed_mps: car.speed_mps,
             last_command_mps: car.last_speed_cmd_mps,
         };
@@ -1287,7 +1291,6 @@ impl MpcConfig {
     }
 }
 
-/// Largest corridor and obstacle violations of the rows over the planned states.
 /// The last reference point's station ahead of the first, m (along the first's heading: the
 /// chord, which is the arc to within 1 % for turns up to 0.5 rad over the horizon).
 fn horizon_m(input: &MpcInput) -> f32 {
@@ -1310,6 +1313,7 @@ struct Violations {
     obstacle_imminent_m: f32,
 }
 
+/// Largest corridor and obstacle violations of the rows over the planned states.
 fn violations(
     p: &Problem<NX, STEPS, ROWS>,
     states: &[SVector<f32, NX>; STEPS + 1],
