@@ -255,13 +255,17 @@ def main():
     rng = random.Random(args.seed)
     car = Car(args)
     path = course(args.speed)
-    node = subprocess.Popen(
-        [args.catmodel, "sil", "--stdio", *args.model_args],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-        bufsize=1,
-    )
+    try:
+        node = subprocess.Popen(
+            [args.catmodel, "sil", "--stdio", *args.model_args],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            bufsize=1,
+        )
+    except OSError as e:
+        print(f"sil-sim: cannot run {args.catmodel}: {e.strerror} (build it: cargo build --release -p catmodel-host)", file=sys.stderr)
+        return 2
 
     # The planner's frames, paced at 4 a tick: LOCAL_ORIGIN (latitude page, then longitude
     # page with the next counter), PATH_HEADER, then each point's PATH_POINT and PATH_LIMITS.

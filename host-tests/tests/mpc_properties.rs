@@ -375,6 +375,7 @@ fn the_speed_plan_does_not_predict_a_car_reversing() {
     let start = SpeedStart {
         model_state: &model_state,
         bias_mps: 0.5 - modelled,
+        planning_bias_mps: 0.5 - modelled,
         speed_mps: 0.5,
         last_command_mps: 0.0,
     };

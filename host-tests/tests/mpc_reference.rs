@@ -289,6 +289,7 @@ fn speed_plan_matches_the_qp_solution() {
         let start = SpeedStart {
             model_state: &model_state,
             bias_mps: 0.0,
+            planning_bias_mps: 0.0,
             speed_mps: v0,
             last_command_mps: f(&case["last_command"]) as f32,
         };

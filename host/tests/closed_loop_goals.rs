@@ -74,15 +74,7 @@ fn double_lane_change_is_driven_at_its_speed() {
     let speed = 14.5;
     let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, speed);
     let (from, to) = course.scored_stations_m;
-    let out = drive_with(
-        &vehicle,
-        &node,
-        Controller::Mpc,
-        Receiver::Rtk,
-        Kind::DoubleLaneChange,
-        speed,
-        0,
-    );
+    let out = mpc_lane_change(&vehicle, &node, speed, 0);
     let scored: Vec<f64> = out
         .samples
         .iter()
@@ -100,10 +92,12 @@ fn double_lane_change_is_driven_at_its_speed() {
 /// The van (`host/vehicles/van.toml`: a 3.7 m wheelbase, 55 %/s steering, a 5 Hz receiver),
 /// whose lane change path asks for 0.87 of its lock: the MPC weighs the path with its
 /// `line_rule`'s lateral weight of 1, and the van passes its cones within 0.03 m at 5 to 9 m/s
-/// on every seed (its closest 0.01 m into a cone at 7 m/s, clean at 5 m/s by 0.06 m); with the
-/// weight of 10 on every path it hits a cone at 6 to 9 m/s on every seed (`mpc_rig_sweep`'s
-/// `norule=1`). The van passes by 0 to 0.02 m at every speed, so which seed touches is chance
-/// at the centimetre (docs/controller.md, "A car the line asks too much of").
+/// on every seed (measured clean on every seed, by 0.00 to 0.06 m; with the speed bias
+/// low-passed in the predictions too, 0.01 m into a cone at 7 m/s on one seed), clean at 5 m/s;
+/// with the weight of 10 on every path it hits a cone at 6 to 9 m/s on every seed
+/// (`mpc_rig_sweep`'s `norule=1`). The van passes by 0 to 0.02 m at every speed, so which seed
+/// touches is chance at the centimetre, and the test allows 0.03 m (docs/controller.md, "A car
+/// the line asks too much of").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn the_van_through_the_lane_change() {
@@ -116,16 +110,7 @@ fn the_van_through_the_lane_change() {
     assert_eq!(node.mpc_lateral_weight_per_m2, None);
     for speed in [5.0, 6.0, 7.0, 8.0, 9.0] {
         for seed in SEEDS {
-            let m = drive_with(
-                &vehicle,
-                &node,
-                Controller::Mpc,
-                Receiver::Rtk,
-                Kind::DoubleLaneChange,
-                speed,
-                seed,
-            )
-            .metrics;
+            let m = mpc_lane_change(&vehicle, &node, speed, seed).metrics;
             let clearance = m.min_cone_clearance_m.unwrap();
             assert!(
                 clearance >= -0.03 && (speed > 5.0 || m.clean),
@@ -380,6 +365,19 @@ fn drive_with(
         start_offset_m: 0.0,
     };
     run(vehicle, &course, &mut driver, "", &options)
+}
+
+/// The MPC through the double lane change, RTK receiver.
+fn mpc_lane_change(vehicle: &VehicleConfig, node: &NodeConfig, speed: f64, seed: u64) -> RunOutput {
+    drive_with(
+        vehicle,
+        node,
+        Controller::Mpc,
+        Receiver::Rtk,
+        Kind::DoubleLaneChange,
+        speed,
+        seed,
+    )
 }
 
 /// A long, heavy car with a slow, noisy receiver (`host/tests/data/long-heavy-5hz.toml`: a

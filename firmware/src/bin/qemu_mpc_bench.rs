@@ -628,6 +628,7 @@ fn run_parts(b: &Bench, st: &mut Statics) {
     let start = SpeedStart {
         model_state: &eq5_state,
         bias_mps: 0.0,
+        planning_bias_mps: 0.0,
         speed_mps: v,
         last_command_mps: car.last_cmd,
     };

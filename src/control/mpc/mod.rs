@@ -682,12 +682,14 @@ impl MpcConfig {
     /// One solve: the commands to send now and the plan.
     pub fn solve(&self, state: &mut MpcState, input: &MpcInput) -> MpcOutput {
         let car = &input.car;
-        let bias_mps = state
+        let bias_mps = finite_or(car.speed_bias_mps, 0.0);
+        let planning_bias_mps = state
             .speed
-            .filter_bias(car.speed_bias_mps, self.speed.tuning().bias_time_constant_s);
+            .filter_bias(bias_mps, self.speed.tuning().bias_time_constant_s);
         let speed_start = SpeedStart {
             model_state: car.speed_model,
             bias_mps,
+            planning_bias_mps,
             speed_mps: car.speed_mps,
             last_command_mps: car.last_speed_cmd_mps,
         };
