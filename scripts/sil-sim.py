@@ -246,8 +246,13 @@ def main():
     ap.add_argument("--speed-lag", type=float, default=0.6, help="speed loop lag, s")
     ap.add_argument("--max-rms-m", type=float, default=0.15, help="bound on the lateral RMS")
     ap.add_argument("--max-lateral-m", type=float, default=0.5, help="bound on |lateral error|")
-    ap.add_argument("--max-over-limit-mps", type=float, default=0.5, help="bound on the speed over the path's")
-    ap.add_argument("--out", help="CSV of the run (t, east, north, heading, speed, steering, speed command, status)")
+    ap.add_argument(
+        "--max-over-limit-mps", type=float, default=0.5, help="bound on the speed over the path's"
+    )
+    ap.add_argument(
+        "--out",
+        help="CSV of the run (t, east, north, heading, speed, steering, speed command, status)",
+    )
     ap.add_argument("model_args", nargs="*", help="passed to `catmodel sil` (e.g. --model F)")
     args = ap.parse_args()
 
@@ -264,7 +269,11 @@ def main():
             bufsize=1,
         )
     except OSError as e:
-        print(f"sil-sim: cannot run {args.catmodel}: {e.strerror} (build it: cargo build --release -p catmodel-host)", file=sys.stderr)
+        print(
+            f"sil-sim: cannot run {args.catmodel}: {e.strerror} "
+            "(build it: cargo build --release -p catmodel-host)",
+            file=sys.stderr,
+        )
         return 2
 
     # The planner's frames, paced at 4 a tick: LOCAL_ORIGIN (latitude page, then longitude
@@ -328,13 +337,19 @@ def main():
                 nn = an + rng.gauss(0.0, args.gnss_noise_m)
                 lat, lon = to_geodetic(ne, nn)
                 pos = msgs["GNSS_POSITION_RAPID"]
-                lines.append(candump(t, pos, encode(pos, {"latitude_deg": lat, "longitude_deg": lon})))
+                fix = encode(pos, {"latitude_deg": lat, "longitude_deg": lon})
+                lines.append(candump(t, pos, fix))
                 de, dn = ae - prev[0], an - prev[1]
                 prev = (ae, an)
                 cog = math.atan2(de, dn) % (2 * math.pi)
                 sog = math.hypot(de, dn) / gnss_period
                 cs = msgs["GNSS_COG_SOG_RAPID"]
-                values = {"sid": sid, "cog_reference": 0, "cog_rad": min(cog, 6.2831), "sog_mps": sog}
+                values = {
+                    "sid": sid,
+                    "cog_reference": 0,
+                    "cog_rad": min(cog, 6.2831),
+                    "sog_mps": sog,
+                }
                 lines.append(candump(t, cs, encode(cs, values, fill=0xFF)))
                 sid = (sid + 1) % 253
         t_rep = round(t_tick - 0.005, 6)
@@ -380,7 +395,8 @@ def main():
         status = int(command["status"])
         if valid and valid_since is None:
             valid_since = t_tick
-        if engaged_at is None and status == 1 and valid_since is not None and t_tick - valid_since >= 1.0:
+        settled = valid_since is not None and t_tick - valid_since >= 1.0
+        if engaged_at is None and status == 1 and settled:
             engaged_at = t_tick
             print(f"sil-sim: engaged at {t_tick:.2f} s", file=sys.stderr)
         if engaged_at is not None:
@@ -392,7 +408,10 @@ def main():
             if d is not None:
                 errors.append(d)
             # The path's speed limit where the car is (the highest of the nearest points').
-            near = min(range(len(path)), key=lambda i: (path[i][0] - car.e) ** 2 + (path[i][1] - car.n) ** 2)
+            near = min(
+                range(len(path)),
+                key=lambda i: (path[i][0] - car.e) ** 2 + (path[i][1] - car.n) ** 2,
+            )
             limit = max(p[2] for p in path[max(near - 2, 0) : near + 3])
             over_limit = max(over_limit, car.v - limit)
             to_end = math.hypot(car.e - path[-1][0], car.n - path[-1][1])
@@ -408,13 +427,17 @@ def main():
             for r in rows:
                 f.write(",".join(f"{x:.4f}" for x in r[:-1]) + f",{r[-1]}\n")
     if engaged_at is None:
-        print("sil-sim: FAIL: the node never reported tracking with a valid position", file=sys.stderr)
+        print(
+            "sil-sim: FAIL: the node never reported tracking with a valid position",
+            file=sys.stderr,
+        )
         return 1
     rms = math.sqrt(sum(e * e for e in errors) / len(errors))
     worst = max(errors)
     to_end = math.hypot(car.e - path[-1][0], car.n - path[-1][1])
     print(
-        f"sil-sim: {tick} ticks, engaged {t - engaged_at:.1f} s, statuses {dict(sorted(statuses.items()))}; "
+        f"sil-sim: {tick} ticks, engaged {t - engaged_at:.1f} s, "
+        f"statuses {dict(sorted(statuses.items()))}; "
         f"rear axle from the path: RMS {rms:.3f} m, largest {worst:.3f} m; "
         f"speed over the path's limit by {max(over_limit, 0.0):.2f} m/s at most; "
         f"stopped {to_end:.2f} m from the path's end at {car.v:.2f} m/s"

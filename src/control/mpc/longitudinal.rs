@@ -12,17 +12,19 @@
 //! exactly, which is how the delay is handled) and `p` the response to a command held over one
 //! knot (from the model, once, when the configuration is built). `p_m` is zero while the
 //! command is still in the delay line, so the first four steps are not the plan's to change.
-//! `f + bias` is taken as no less than 0: a car does not reverse ([`SpeedPlanner::free_response`]).
+//! `f + bias` is taken as no less than 0: a car does not reverse
+//! ([`SpeedPlanner::free_response`]).
 //!
 //! The bias (measured minus modelled speed, held over the horizon: the model's error and the
 //! disturbances it does not know, a grade, a load) is low-passed for planning the commands
 //! ([`SpeedTuning::bias_time_constant_s`], [`SpeedStart::planning_bias_mps`]); the predicted
-//! speeds, which the steering plan linearises at, keep it as measured. Used raw, a car whose speed loop answers faster than
-//! its model says turns each correction into a new bias of the opposite sign within the model's
-//! delay, and the plan chases it. On a car with a 0.3 s dead time and a 0.6 s lag, driven by eq
-//! 5's 0.42 s and 1.2 s, the commands swung between 0 and 14.5 m/s on a 5 m/s path and the car
-//! between 3.2 and 8.0 m/s; filtered over 1.5 s, 4.75 to 5.0 m/s (`scripts/sil-sim.py`;
-//! docs/controller.md, "A speed loop the model does not describe").
+//! speeds, which the steering plan linearises at, keep it as measured. Used raw, a car whose
+//! speed loop answers faster than its model says turns each correction into a new bias of the
+//! opposite sign within the model's delay, and the plan chases it. On a car with a 0.3 s dead
+//! time and a 0.6 s lag, driven by eq 5's 0.42 s and 1.2 s, the commands swung between 0 and
+//! 14.5 m/s on a 5 m/s path and the car between 3.2 and 8.0 m/s; filtered over 1.5 s, 4.75 to
+//! 5.0 m/s (`scripts/sil-sim.py`; docs/controller.md, "A speed loop the model does not
+//! describe").
 //!
 //! Cost `1/2 sum w_v (v_k - r_k)^2 + 1/2 sum w_du (du_j - du_{j-1})^2` (`du_{-1} = 0`: the change
 //! against the command sent last); hard bounds `0 <= u_j <= max_speed`; a soft (exact-penalty)
