@@ -205,7 +205,7 @@ impl SpeedPlanner {
     /// Free response at steps 1..=PLAN_STEPS with `command_mps` held, plus the bias, m/s; not
     /// below 0. The car does not reverse: a car that brakes harder than its model (a bias below
     /// zero while the model still rolls) would otherwise be predicted to go backwards, and the
-    /// plan would command speed to bring it back to a stop (2 m before the end of a path,
+    /// plan would command speed to bring it back to a stop (0.3 m before the end of a path,
     /// commands of up to 4.9 m/s on the CAT Vehicle's plant, before).
     pub fn free_response(&self, start: &SpeedStart, command_mps: f32) -> [f32; PLAN_STEPS] {
         let mut st = *start.model_state;
