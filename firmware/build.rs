@@ -28,12 +28,32 @@ fn main() {
         return;
     }
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    refuse_the_hosts_profile(&out);
     fs::copy("../memory.x", out.join("memory.x")).expect("memory.x is at the repository root");
     println!("cargo:rustc-link-search={}", out.display());
 
     if env::var_os("CARGO_FEATURE_QEMU").is_some() {
         let drive = fs::read(BUNDLED).unwrap_or_else(|_| placeholder_drive().into_bytes());
         fs::write(out.join("bundled.can.log"), drive).expect("OUT_DIR is writable");
+    }
+}
+
+/// The MCU's firmware is built with `--profile firmware` (fat LTO, one codegen unit: the profile
+/// its instruction counts and flash and RAM budgets are measured with). `--release` is the host's
+/// profile, without LTO; a board image built with it would differ from the one measured, so
+/// the build stops and says what to type. The profile is the directory cargo builds in:
+/// `OUT_DIR` is `<target dir>/<triple>/<profile>/build/<package>-<hash>/out`.
+fn refuse_the_hosts_profile(out: &std::path::Path) {
+    let profile = out.ancestors().nth(3).and_then(|p| p.file_name());
+    if profile.and_then(|p| p.to_str()) == Some("release") {
+        let message = "catmodel-firmware: build the MCU's firmware with `--profile firmware` \
+                       (fat LTO, the profile its budgets are measured with), not `--release` \
+                       (the host's profile): e.g. cargo build --profile firmware -p \
+                       catmodel-firmware --features board --bin catmodel-board --target \
+                       thumbv7em-none-eabihf";
+        eprintln!("{message}");
+        println!("cargo:warning={message}");
+        std::process::exit(1);
     }
 }
 

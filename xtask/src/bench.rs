@@ -1,6 +1,6 @@
 //! `cargo xtask bench-target [--check]`: instructions per call of each node component on QEMU.
 //!
-//! Builds `catmodel-qemu-bench` (release: opt-level 3, fat LTO, thumbv7em-none-eabihf), runs it
+//! Builds `catmodel-qemu-bench` (profile `firmware`: opt-level 3, fat LTO, thumbv7em-none-eabihf), runs it
 //! on `-M netduinoplus2` under `-icount shift=0` (TIM2 counts one per instruction, as in
 //! `cargo qemu`), and prints a markdown table (docs/firmware.md, "Per component"). The firmware
 //! prints one tab-separated line per component: `bench KEY NAME CALLS MIN MEDIAN MAX WHAT`.
@@ -157,8 +157,8 @@ pub fn bench_target(args: &[String]) -> Result<()> {
     }
     let _ = writeln!(
         table,
-        "\nInstructions per call (QEMU -icount shift=0, TIM2; not Cortex-M4 cycles), release \
-         profile (opt-level 3, fat LTO), timing overhead of {overhead} instructions subtracted."
+        "\nInstructions per call (QEMU -icount shift=0, TIM2; not Cortex-M4 cycles), \
+         profile firmware (opt-level 3, fat LTO), timing overhead of {overhead} instructions subtracted."
     );
     // The tick's worst case from its structure and each stage's maximum (docs/firmware.md,
     // "Worst-case tick"), measured by the same firmware in its `--stages` mode.

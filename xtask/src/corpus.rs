@@ -27,7 +27,8 @@ fn firmware_build(model: &Path) -> Result<(bool, String)> {
         .env("CATMODEL_MODEL", model)
         .args([
             "build",
-            "--release",
+            "--profile",
+            crate::FIRMWARE_PROFILE,
             "-p",
             "catmodel-firmware",
             "--features",

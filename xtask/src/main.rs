@@ -1,8 +1,8 @@
 //! catmodel automation.
 //!
 //! - `cargo qemu [-- FILE.log]` (= `cargo xtask qemu`): checks the MCU target and
-//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (release, the profile we ship),
-//!   runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
+//!   qemu-system-arm first ([`prereq`]), builds the QEMU firmware (profile `firmware`, the one
+//!   we ship), runs it on QEMU's netduinoplus2 over the bundled drive or FILE.log, writes
 //!   `target/qemu/tx.log` (candump) and `target/qemu/timing.json`, prints the timing table and
 //!   one summary line (drive, machine, PASS or FAIL, slowest tick against the budget, bound),
 //!   and fails if the run failed or a tick exceeded the instruction budget.
@@ -42,6 +42,9 @@ mod schedule;
 mod txcompare;
 
 const TARGET: &str = "thumbv7em-none-eabihf";
+/// The cargo profile the firmware is built, shipped and measured with (Cargo.toml: fat LTO, one
+/// codegen unit); `release` is the host's.
+const FIRMWARE_PROFILE: &str = "firmware";
 use catmodel::SAMPLE_PERIOD_US as TICK_US;
 use catmodel_app::budget::{
     CONTROL_TICK_BUDGET_INSTRUCTIONS as CONTROL_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK,
@@ -101,7 +104,8 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
         .current_dir(root())
         .args([
             "build",
-            "--release",
+            "--profile",
+            FIRMWARE_PROFILE,
             "-p",
             "catmodel-firmware",
             "--features",
@@ -113,7 +117,7 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
     if !status.success() {
         bail!("building {bin} failed");
     }
-    Ok(root().join("target").join(TARGET).join("release").join(bin))
+    Ok(root().join("target").join(TARGET).join(FIRMWARE_PROFILE).join(bin))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -815,7 +819,7 @@ fn size() -> Result<()> {
     let stack_bottom = elf_symbol(&bytes, "_stack_end").context("no _stack_end symbol")?;
     let data_start = elf_symbol(&bytes, "__sdata").context("no __sdata symbol")?;
     let stack = u64::from(stack_top.saturating_sub(stack_bottom));
-    println!("catmodel-board (release, {TARGET}):");
+    println!("catmodel-board (profile {FIRMWARE_PROFILE}, {TARGET}):");
     println!(
         "  flash {:>7} B = {:6.1} KiB of {} KiB budget",
         flash,

@@ -1,7 +1,7 @@
 //! `cargo xtask no-panic`: the link-time proof that the core has no panic path.
 //!
-//! Builds `firmware/src/bin/nopanic.rs` (release, fat LTO, thumbv7em-none-eabihf: the profile we ship),
-//! whose panic handler calls a symbol that does not exist. It links only if no panic entry is
+//! Builds `firmware/src/bin/nopanic.rs` (profile `firmware`, fat LTO, thumbv7em-none-eabihf: the
+//! one we ship), whose panic handler calls a symbol that does not exist. It links only if no panic entry is
 //! reachable from `baked::node` (`NodeConfig::from_image`, `Node::new`) and `Node::step` on inputs the optimiser cannot
 //! see. On failure it rebuilds with a harmless handler and lists the call sites of the panic
 //! entries with their source lines (needs `llvm-objdump`; `apt-get install -y llvm`).
@@ -43,7 +43,8 @@ fn build(locate: bool) -> Result<(PathBuf, Option<String>)> {
         .env("RUSTFLAGS", rustflags)
         .args([
             "build",
-            "--release",
+            "--profile",
+            crate::FIRMWARE_PROFILE,
             "-p",
             "catmodel-firmware",
             "--features",
@@ -53,7 +54,7 @@ fn build(locate: bool) -> Result<(PathBuf, Option<String>)> {
         .arg(&target_dir)
         .output()
         .context("running cargo build")?;
-    let elf = target_dir.join(TARGET).join("release").join(BIN);
+    let elf = target_dir.join(TARGET).join(crate::FIRMWARE_PROFILE).join(BIN);
     if output.status.success() {
         return Ok((elf, None));
     }
@@ -119,7 +120,7 @@ pub fn no_panic() -> Result<()> {
     let Some(linker) = failure else {
         println!(
             "no-panic: {} linked with an undefined panic handler: no panic path from \
-             baked::node / Node::new / Node::step (release, LTO, {TARGET})",
+             baked::node / Node::new / Node::step (profile firmware, LTO, {TARGET})",
             elf.display()
         );
         return Ok(());

@@ -1,5 +1,5 @@
 //! Instructions per call of each component of the node, on QEMU `-M netduinoplus2` with the
-//! shipped release profile. Run it with `cargo xtask bench-target` (docs/firmware.md, "Per
+//! shipped profile, `firmware`. Run it with `cargo xtask bench-target` (docs/firmware.md, "Per
 //! component"), which builds it, runs it and prints the table.
 //!
 //! Method: TIM2 counts one per executed instruction under `-icount shift=0` (the same counter

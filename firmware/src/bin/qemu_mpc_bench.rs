@@ -1,5 +1,5 @@
 //! Instructions per solve of the model-predictive controller (`catmodel::control::mpc`) on QEMU
-//! `-M netduinoplus2` with the shipped release profile; run by `cargo xtask bench-target`
+//! `-M netduinoplus2` with the shipped profile, `firmware`; run by `cargo xtask bench-target`
 //! (docs/mpc.md, "Cost on the target").
 //!
 //! Method as `catmodel-qemu-bench`: TIM2 counts one per executed instruction under
