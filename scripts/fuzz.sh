@@ -31,14 +31,28 @@ export RUSTC_BOOTSTRAP=1
 cd fuzz
 cargo fuzz build -O
 mkdir -p ../target/fuzz-logs
-for t in "${targets[@]}"; do
+# The targets run side by side, as many at once as the machine has cores (each libFuzzer run is
+# one process on one core); each one's exit status goes to a file beside its log.
+run_target() {
+  local t=$1 status=0
   mkdir -p "corpus/$t"
-  log="../target/fuzz-logs/$t.log"
-  echo "==> fuzz $t (${limit[*]}), log: target/fuzz-logs/$t.log"
   # corpus/<t> grows (git-ignored); seeds/<t> are committed starting points and regressions.
-  status=0
   cargo fuzz run -O "$t" "corpus/$t" "seeds/$t" -- "${limit[@]}" -print_final_stats=1 \
-    >"$log" 2>&1 || status=$?
+    >"../target/fuzz-logs/$t.log" 2>&1 || status=$?
+  echo "$status" >"../target/fuzz-logs/$t.status"
+}
+cores=$(nproc 2>/dev/null || echo 1)
+for t in "${targets[@]}"; do
+  while [ "$(jobs -rp | wc -l)" -ge "$cores" ]; do wait -n || true; done
+  echo "==> fuzz $t (${limit[*]}), log: target/fuzz-logs/$t.log"
+  rm -f "../target/fuzz-logs/$t.status"
+  run_target "$t" &
+done
+wait
+for t in "${targets[@]}"; do
+  log="../target/fuzz-logs/$t.log"
+  status=$(cat "../target/fuzz-logs/$t.status" 2>/dev/null || echo "no status")
+  echo "--- $t"
   grep -E '^(stat::number_of_executed_units|stat::average_exec_per_sec|stat::peak_rss_mb)' "$log" || true
   if [ "$status" != 0 ]; then
     grep -E -A12 'panicked|ERROR|SUMMARY' "$log" | head -40 >&2 || tail -20 "$log" >&2

@@ -117,7 +117,11 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
     if !status.success() {
         bail!("building {bin} failed");
     }
-    Ok(root().join("target").join(TARGET).join(FIRMWARE_PROFILE).join(bin))
+    Ok(root()
+        .join("target")
+        .join(TARGET)
+        .join(FIRMWARE_PROFILE)
+        .join(bin))
 }
 
 // ---------------------------------------------------------------------------------------------

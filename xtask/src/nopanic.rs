@@ -54,7 +54,10 @@ fn build(locate: bool) -> Result<(PathBuf, Option<String>)> {
         .arg(&target_dir)
         .output()
         .context("running cargo build")?;
-    let elf = target_dir.join(TARGET).join(crate::FIRMWARE_PROFILE).join(BIN);
+    let elf = target_dir
+        .join(TARGET)
+        .join(crate::FIRMWARE_PROFILE)
+        .join(BIN);
     if output.status.success() {
         return Ok((elf, None));
     }
