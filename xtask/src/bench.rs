@@ -1,9 +1,10 @@
 //! `cargo xtask bench-target [--check]`: instructions per call of each node component on QEMU.
 //!
-//! Builds `catmodel-qemu-bench` (profile `firmware`: opt-level 3, fat LTO, thumbv7em-none-eabihf), runs it
-//! on `-M netduinoplus2` under `-icount shift=0` (TIM2 counts one per instruction, as in
-//! `cargo qemu`), and prints a markdown table (docs/firmware.md, "Per component"). The firmware
-//! prints one tab-separated line per component: `bench KEY NAME CALLS MIN MEDIAN MAX WHAT`.
+//! Builds `catmodel-qemu-bench` (profile `firmware`: opt-level 3, fat LTO,
+//! thumbv7em-none-eabihf), runs it on `-M netduinoplus2` under `-icount shift=0` (TIM2 counts
+//! one per instruction, as in `cargo qemu`), and prints a markdown table (docs/firmware.md, "Per
+//! component"). The firmware prints one tab-separated line per component: `bench KEY NAME CALLS
+//! MIN MEDIAN MAX WHAT`.
 //! `--check` fails if a component's max exceeds its budget in [`BUDGETS`], or the tick's
 //! worst-case bound ([`bound`], printed after the table) exceeds the tick budget.
 use std::fmt::Write as _;
@@ -158,7 +159,8 @@ pub fn bench_target(args: &[String]) -> Result<()> {
     let _ = writeln!(
         table,
         "\nInstructions per call (QEMU -icount shift=0, TIM2; not Cortex-M4 cycles), \
-         profile firmware (opt-level 3, fat LTO), timing overhead of {overhead} instructions subtracted."
+         profile firmware (opt-level 3, fat LTO), timing overhead of {overhead} instructions \
+         subtracted."
     );
     // The tick's worst case from its structure and each stage's maximum (docs/firmware.md,
     // "Worst-case tick"), measured by the same firmware in its `--stages` mode.

@@ -1,9 +1,9 @@
 //! `cargo xtask no-panic`: the link-time proof that the core has no panic path.
 //!
 //! Builds `firmware/src/bin/nopanic.rs` (profile `firmware`, fat LTO, thumbv7em-none-eabihf: the
-//! one we ship), whose panic handler calls a symbol that does not exist. It links only if no panic entry is
-//! reachable from `baked::node` (`NodeConfig::from_image`, `Node::new`) and `Node::step` on inputs the optimiser cannot
-//! see. On failure it rebuilds with a harmless handler and lists the call sites of the panic
+//! one we ship), whose panic handler calls a symbol that does not exist. It links only if no
+//! panic entry is reachable from `baked::node` (`NodeConfig::from_image`, `Node::new`) and
+//! `Node::step` on inputs the optimiser cannot see. On failure it rebuilds with a harmless handler and lists the call sites of the panic
 //! entries with their source lines (needs `llvm-objdump`; `apt-get install -y llvm`).
 use std::path::PathBuf;
 use std::process::Command;

@@ -1,6 +1,7 @@
 //! catmodel on an STM32F405RG: bxCAN1 at 500 kbit/s in, `Node::step` every 20 ms, bxCAN1 out.
-//! Build: `cargo build --profile firmware -p catmodel-firmware --features board --bin catmodel-board
-//! --target thumbv7em-none-eabihf`; flash and watch the defmt log: `cargo run ...` (probe-rs runner).
+//! Build: `cargo build --profile firmware -p catmodel-firmware --features board --bin
+//! catmodel-board --target thumbv7em-none-eabihf`; flash and watch the defmt log: `cargo run
+//! ...` (probe-rs runner).
 #![no_std]
 #![no_main]
 

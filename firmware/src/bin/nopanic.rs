@@ -2,10 +2,10 @@
 //! the node from the baked model and runs `Node::step` forever on inputs the compiler cannot see
 //! (volatile reads of every field: frame IDs, lengths and bytes, tick times, platform counters).
 //! Its panic handler calls a function that does not exist, so the program links only if the
-//! optimised firmware build (profile `firmware`) has no path from `baked::node` or `Node::step` to a panic: any bounds
-//! check, `unwrap`, overflow check or assertion the optimiser cannot remove makes the link fail
-//! with "undefined symbol: catmodel_core_can_panic". `cargo xtask no-panic` builds it (CI).
-//! It is never run.
+//! optimised firmware build (profile `firmware`) has no path from `baked::node` or `Node::step`
+//! to a panic: any bounds check, `unwrap`, overflow check or assertion the optimiser cannot
+//! remove makes the link fail with "undefined symbol: catmodel_core_can_panic". `cargo xtask
+//! no-panic` builds it (CI). It is never run.
 //!
 //! It is built without defmt (feature `nopanic-check` only): defmt's linker script keeps its
 //! default panic entry whether anything calls it or not, which would fail the link for nothing.
