@@ -6,6 +6,7 @@
 #   scripts/fuzz.sh 120             # 120 s per target
 #   scripts/fuzz.sh --runs 10000000 # 10 million executions per target
 #   scripts/fuzz.sh --runs 10000000 node_step   # one target
+#   scripts/fuzz.sh --build         # install cargo-fuzz if missing and build the targets only
 #
 # cargo-fuzz needs nightly-only rustc flags (sanitizers, coverage); the machine has only the
 # pinned stable toolchain, so RUSTC_BOOTSTRAP=1 enables them on it. cargo-fuzz itself is
@@ -14,7 +15,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 limit=(-max_total_time=30)
+build_only=0
 case "${1:-}" in
+  --build) build_only=1; shift ;;
   --runs) limit=(-runs="$2"); shift 2 ;;
   ''|*[!0-9]*) ;;
   *) limit=(-max_total_time="$1"); shift ;;
@@ -30,6 +33,7 @@ fi
 export RUSTC_BOOTSTRAP=1
 cd fuzz
 cargo fuzz build -O
+[ "$build_only" = 0 ] || exit 0
 mkdir -p ../target/fuzz-logs
 # The targets run side by side, as many at once as the machine has cores (each libFuzzer run is
 # one process on one core); each one's exit status goes to a file beside its log.
