@@ -14,7 +14,7 @@ of docs/bus.md and the README's "Software in the loop" from the outside:
 - the DBW reports (rolling counter in bits 52..55, CRC-8/SAE-J1850 over the identifier and bytes
   0..6), NMEA 2000 position and COG/SOG at the model file's receiver rate (29-bit identifiers),
   the planner's LOCAL_ORIGIN and path paced at 4 frames a tick;
-- a "safety driver" launch (3 m/s, wheels straight) until the node reports a valid position for
+- a "safety driver" launch (3 m/s or the course's speed if lower, wheels straight) until the node reports a valid position for
   a second and status 1 (tracking), then the node's CONTROL_COMMAND drives the car.
 
 The course: 40 m east, a left half circle of 20 m radius, 40 m back west, at 5 m/s, stopping at
@@ -34,6 +34,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 TICK_S = 0.02
+# The stretch before the path's end over which the commands are watched, m.
+STOP_WINDOW_M = 5.0
 SUBSTEP_S = 0.001
 
 # ---------------------------------------------------------------------------------- the DBC
@@ -250,6 +252,16 @@ def main():
         "--max-over-limit-mps", type=float, default=0.5, help="bound on the speed over the path's"
     )
     ap.add_argument(
+        "--max-past-end-m", type=float, default=1.25, help="bound on the stop past the path's end"
+    )
+    ap.add_argument(
+        "--max-stop-rise-mps",
+        type=float,
+        default=1.0,
+        help="bound on a rise of the speed command over the path's last metres (the node creeps"
+        " at up to 1 m/s in the stop)",
+    )
+    ap.add_argument(
         "--out",
         help="CSV of the run (t, east, north, heading, speed, steering, speed command, status)",
     )
@@ -309,9 +321,10 @@ def main():
     status = 0
     valid_since = None
     engaged_at = None
-    steer_cmd, speed_cmd = 0.0, 3.0  # the launch
+    steer_cmd, speed_cmd = 0.0, min(3.0, args.speed)  # the launch
     errors = []
     over_limit = 0.0
+    low, stop_rise = math.inf, 0.0
     statuses = {}
     rows = []
     prev = car.antenna()
@@ -415,6 +428,10 @@ def main():
             limit = max(p[2] for p in path[max(near - 2, 0) : near + 3])
             over_limit = max(over_limit, car.v - limit)
             to_end = math.hypot(car.e - path[-1][0], car.n - path[-1][1])
+            if to_end < STOP_WINDOW_M:
+                # The commands in the stop: their largest rise over a lower one before.
+                low = min(low, speed_cmd)
+                stop_rise = max(stop_rise, speed_cmd - low)
             if to_end < 5.0 and car.v < 0.05:
                 break
         rows.append((t_tick, car.e, car.n, car.heading, car.v, car.steer, speed_cmd, status))
@@ -434,15 +451,21 @@ def main():
         return 1
     rms = math.sqrt(sum(e * e for e in errors) / len(errors))
     worst = max(errors)
-    to_end = math.hypot(car.e - path[-1][0], car.n - path[-1][1])
+    # Along the last segment: positive short of the end, negative past it.
+    (e1, n1, _), (e2, n2, _) = path[-2], path[-1]
+    seg = math.hypot(e2 - e1, n2 - n1)
+    short = ((e2 - car.e) * (e2 - e1) + (n2 - car.n) * (n2 - n1)) / seg
+    where = f"{abs(short):.2f} m {'short of' if short >= 0 else 'past'}"
     print(
         f"sil-sim: {tick} ticks, engaged {t - engaged_at:.1f} s, "
         f"statuses {dict(sorted(statuses.items()))}; "
         f"rear axle from the path: RMS {rms:.3f} m, largest {worst:.3f} m; "
         f"speed over the path's limit by {max(over_limit, 0.0):.2f} m/s at most; "
-        f"stopped {to_end:.2f} m from the path's end at {car.v:.2f} m/s"
+        f"stopped {where} the path's end at {car.v:.2f} m/s; "
+        f"over its last {STOP_WINDOW_M:.0f} m the speed command rose by {stop_rise:.2f} m/s at most"
     )
-    ok = rms <= args.max_rms_m and worst <= args.max_lateral_m and to_end <= 3.0 and car.v < 0.05
+    ok = rms <= args.max_rms_m and worst <= args.max_lateral_m and car.v < 0.05
+    ok = ok and -args.max_past_end_m <= short <= 3.0 and stop_rise <= args.max_stop_rise_mps
     ok = ok and over_limit <= args.max_over_limit_mps
     ok = ok and statuses.get(3, 0) == 0
     print(f"sil-sim: {'PASS' if ok else 'FAIL'}", file=sys.stderr)

@@ -3,6 +3,7 @@
 //! the plan meets the steering range and rate limits exactly, the iteration and factorisation
 //! counts stay within their caps, a non-finite input gives the fallback (status 3) without
 //! a NaN anywhere, and a tick without a solve (`MpcConfig::coast`) moves the plan on by one tick.
+use catmodel::control::mpc::longitudinal::SpeedTuning;
 use catmodel::control::mpc::{
     CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning,
     DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
@@ -143,6 +144,7 @@ proptest! {
                     .iter()
                     .map(|r| r.curvature_per_m.abs())
                     .fold(0.0, f32::max),
+                to_end_m: f32::INFINITY,
             };
             let out = mpc.solve(&mut state, &input);
             prop_assert!(out.steer_cmd_pct.is_finite() && out.steer_cmd_pct.abs() <= 100.0);
@@ -236,6 +238,7 @@ fn solve_beside_a_straight(
         },
         position_uncertainty_m: 0.1,
         path_max_curvature_per_m,
+        to_end_m: f32::INFINITY,
     };
     mpc.solve(&mut state, &input)
 }
@@ -385,8 +388,185 @@ fn the_speed_plan_does_not_predict_a_car_reversing() {
     assert!(free.contains(&0.0), "the case no longer reaches below zero");
     let mut state = SpeedState::new();
     for _ in 0..50 {
-        let plan = planner.plan(&mut state, &start, &[0.0; PLAN_STEPS + 1]);
+        let plan = planner.plan(&mut state, &start, &[0.0; PLAN_STEPS + 1], f32::INFINITY);
         assert!(plan.commands_mps.iter().all(|c| *c < 0.01), "{plan:?}");
         assert!(plan.speeds_mps.iter().all(|v| *v >= 0.0));
     }
+}
+
+/// The stop at the path's end, by hand: it begins when the end is within the horizon's 2 s at
+/// the car's speed or the path's (at least [`STOP_CREEP_MPS`]) and the last command is not
+/// above the car's speed (cruising or braking, not launching), or within the creep's 2 m
+/// whatever the command; it is held until the end moves more than [`STOP_END_MOVED_M`] away.
+/// NaN is at the end, an infinite distance never stops.
+#[test]
+fn the_stop_at_the_path_end_is_held_until_the_end_moves_away() {
+    use catmodel::control::mpc::longitudinal::{SpeedState, STOP_CREEP_MPS, STOP_END_MOVED_M};
+    assert_eq!((STOP_CREEP_MPS, STOP_END_MOVED_M), (1.0, 1.0));
+    // (speed, path's target here, last command, end ahead)
+    let mut s = SpeedState::new();
+    assert!(!s.in_stop(4.0, 4.0, 4.0, 8.1), "8.1 m ahead, 8 m reach");
+    assert!(s.in_stop(4.0, 4.0, 4.0, 8.0));
+    // Braking harder than the end comes nearer: 3 m of reach, 4 m to go, still in the stop.
+    assert!(s.in_stop(1.5, 1.5, 1.5, 4.0));
+    assert!(
+        s.in_stop(1.5, 1.5, 1.5, 4.9),
+        "0.9 m farther: noise, not a new end"
+    );
+    assert!(
+        !s.in_stop(1.5, 1.5, 1.5, 6.0),
+        "1.1 m farther: a longer path"
+    );
+    // The path's speed sets the reach too: a car below it, braking, 5 m before the end.
+    let mut s = SpeedState::new();
+    assert!(!s.in_stop(2.0, 3.0, 1.0, 6.1));
+    assert!(s.in_stop(2.0, 3.0, 1.0, 6.0));
+    // Launching (the command above the speed) on a path shorter than 2 s at its speed: not
+    // until the creep's 2 m.
+    let mut s = SpeedState::new();
+    assert!(!s.in_stop(1.0, 5.0, 6.0, 9.0));
+    assert!(!s.in_stop(3.0, 5.0, 6.0, 2.1));
+    assert!(s.in_stop(3.0, 5.0, 6.0, 2.0));
+    let mut s = SpeedState::new();
+    assert!(!s.in_stop(30.0, 30.0, 30.0, f32::INFINITY));
+    assert!(s.in_stop(f32::NAN, f32::NAN, f32::NAN, f32::NAN));
+    let mut s = SpeedState::new();
+    assert!(s.in_stop(0.5, 0.0, 1.0, -3.0), "past the end");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 500, ..ProptestConfig::default() })]
+
+    /// The speed reference against the path's end, whatever the targets and the speed: no step
+    /// above what stops it at the end at the tuning's deceleration unless that deceleration
+    /// already binds (`r_k <= max(sqrt(2 decel d_k), r_{k-1} - decel dt)`, `d_k` the distance
+    /// left after its own travel), never above the car's speed (or the creep's) in the stop,
+    /// never outside `[0, max speed]`; with room to stop (`v0^2 / (2 decel)`), an end within
+    /// 1 m is reached by the horizon's last step at 0, no more than 5 mm past it (the last
+    /// step's partial deceleration: at most `decel dt^2 / 8`, 4 mm).
+    #[test]
+    fn the_speed_reference_stops_at_the_path_end(
+        v0 in 0.0f32..20.0,
+        targets in prop::collection::vec(0.0f32..25.0, PLAN_STEPS + 1),
+        to_end in 0.0f32..80.0,
+        stopping in any::<bool>(),
+    ) {
+        use catmodel::control::mpc::longitudinal::{SpeedPlanner, STOP_CREEP_MPS};
+        let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+        let tuning = DEFAULT_TUNING.speed;
+        let planner = SpeedPlanner::new(&block, tuning).unwrap();
+        let targets: [f32; PLAN_STEPS + 1] = targets.try_into().unwrap();
+        let r = planner.reference(v0, &targets, to_end, stopping);
+        let (a, dt) = (tuning.decel_mps2, STEP_S);
+        let (mut prev, mut travelled) = (v0, 0.0f32);
+        for (k, &v) in r.iter().enumerate() {
+            let bound = (2.0 * a * (to_end - travelled).max(0.0)).sqrt();
+            prop_assert!(v >= 0.0 && v <= tuning.max_speed_mps, "step {k}: {v}");
+            prop_assert!(v <= bound.max(prev - a * dt) + 1e-4, "step {k}: {v} over {bound}");
+            if stopping {
+                prop_assert!(v <= v0.max(STOP_CREEP_MPS) + 1e-6, "step {k}: {v} rises");
+            }
+            travelled += 0.5 * (prev + v) * dt;
+            prev = v;
+        }
+        // Room to stop, an end near enough to be reached within the horizon's 2 s.
+        if v0 * v0 / (2.0 * a) <= to_end && to_end <= 1.0 {
+            prop_assert_eq!(r[PLAN_STEPS - 1], 0.0);
+            prop_assert!(travelled <= to_end + 0.005, "{travelled} m for {to_end} m");
+        }
+    }
+}
+
+/// The speed plan in the stop at the path's end, against a car that brakes harder than its
+/// model (eq 5 rolled on at 1.0 m/s, the car measured slower: a bias below zero): past the
+/// end every command is 0 (before, the plan held 0.19 m/s: against the bias it saw no gain in
+/// a lower command; a car of scripts/sil-sim.py rolled 2.3 m past the end); 3 m before it, no
+/// command above the last one or the creep's 1 m/s, where without an end the same start is
+/// commanded higher to hold a reference above the car.
+#[test]
+fn the_speed_plan_in_the_stop_does_not_rise() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+    let model_state = block.steady_state_for_output(1.0).unwrap();
+    let mut peek = model_state;
+    let modelled = block.step(&mut peek, 0.19);
+    let past = SpeedStart {
+        model_state: &model_state,
+        bias_mps: 0.19 - modelled,
+        planning_bias_mps: -0.8,
+        speed_mps: 0.19,
+        last_command_mps: 0.19,
+    };
+    let mut state = SpeedState::new();
+    let plan = planner.plan(&mut state, &past, &[0.0; PLAN_STEPS + 1], -1.5);
+    assert_eq!(plan.command_mps, 0.0, "{plan:?}");
+    assert!(plan.commands_mps.iter().all(|c| *c == 0.0), "{plan:?}");
+
+    let model_state = block.steady_state_for_output(3.0).unwrap();
+    let mut peek = model_state;
+    let modelled = block.step(&mut peek, 0.5);
+    let before = SpeedStart {
+        model_state: &model_state,
+        bias_mps: 1.4 - modelled,
+        planning_bias_mps: -1.5,
+        speed_mps: 1.4,
+        last_command_mps: 0.5,
+    };
+    // The rig's taper (2 m/s^2) 3 m before the end, where the car is expected over the plan.
+    let taper: [f32; PLAN_STEPS + 1] =
+        std::array::from_fn(|k| (2.0 * 2.0 * (3.0 - 1.4 * STEP_S * k as f32).max(0.0)).sqrt());
+    let mut state = SpeedState::new();
+    let plan = planner.plan(&mut state, &before, &taper, 3.0);
+    assert!(plan.commands_mps.iter().all(|c| *c <= 1.0), "{plan:?}");
+    let mut state = SpeedState::new();
+    let endless = planner.plan(&mut state, &before, &taper, f32::INFINITY);
+    let highest = endless.commands_mps.iter().copied().fold(0.0, f32::max);
+    assert!(highest > 1.5, "without the stop: {endless:?}");
+}
+
+/// The commands are bounded by the steady-state command that holds the plan's highest target
+/// plus the tuning's lead (`(max target - bias) / dc gain + 2 m/s`): a launch from 3 to 8 m/s
+/// on eq 5 with a reference rising at 6 m/s^2 (eq 5's response is slow: the plan would lead
+/// the target by more) is commanded no more than 8 / 1.01662 + 2 = 9.87 m/s, and with a bias
+/// of -1 m/s (a car settling below its command) 10.85 m/s; without the bound (an infinite
+/// lead) the same plan commands more.
+#[test]
+fn the_speed_commands_lead_the_steady_state_by_the_tunings_lead() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let g = 0.7647 / 0.7522;
+    assert!((block.dc_gain().unwrap() - g).abs() < 1e-5);
+    assert_eq!(DEFAULT_TUNING.speed.command_lead_mps, 2.0);
+    // A reference that rises at 6 m/s^2: the plan leads it by far more than 2 m/s.
+    let tuning = SpeedTuning {
+        accel_mps2: 6.0,
+        ..DEFAULT_TUNING.speed
+    };
+    let model_state = block.steady_state_for_output(3.0).unwrap();
+    let targets = [8.0f32; PLAN_STEPS + 1];
+    let highest = |tuning, bias: f32| {
+        let planner = SpeedPlanner::new(&block, tuning).unwrap();
+        let start = SpeedStart {
+            model_state: &model_state,
+            bias_mps: bias,
+            planning_bias_mps: bias,
+            speed_mps: 3.0 + bias,
+            last_command_mps: 3.0 / g,
+        };
+        let plan = planner.plan(&mut SpeedState::new(), &start, &targets, f32::INFINITY);
+        plan.commands_mps.iter().copied().fold(0.0, f32::max)
+    };
+    let bounded = highest(tuning, 0.0);
+    assert!((bounded - (8.0 / g + 2.0)).abs() < 1e-3, "{bounded}");
+    let offset = highest(tuning, -1.0);
+    assert!((offset - (9.0 / g + 2.0)).abs() < 1e-3, "{offset}");
+    let unbounded = highest(
+        SpeedTuning {
+            command_lead_mps: f32::INFINITY,
+            ..tuning
+        },
+        0.0,
+    );
+    assert!(unbounded > bounded + 1.0, "{unbounded} vs {bounded}");
 }

@@ -261,6 +261,8 @@ fn speed_tuning(r: &Value, iterations: u16) -> SpeedTuning {
         iterations,
         // The plan itself takes the bias it is given (the controller filters it).
         bias_time_constant_s: 0.0,
+        // Nor does it bound the commands: scipy's QP has no such bound.
+        command_lead_mps: f32::INFINITY,
     }
 }
 
@@ -294,7 +296,7 @@ fn speed_plan_matches_the_qp_solution() {
             last_command_mps: f(&case["last_command"]) as f32,
         };
         let targets: [f32; PLAN_STEPS + 1] = vec_f32(&case["targets"]).try_into().unwrap();
-        let plan = planner.plan(&mut SpeedState::default(), &start, &targets);
+        let plan = planner.plan(&mut SpeedState::default(), &start, &targets, f32::INFINITY);
         let want = vec_f32(&case["commands"]);
         for (j, (g, w)) in plan.commands_mps.iter().zip(&want).enumerate() {
             assert!((g - w).abs() < 0.02, "v0 {v0}: command {j}: {g} vs {w}");

@@ -690,6 +690,7 @@ fn mpc_tick<P: StageProbe>(
         },
         position_uncertainty_m: config.position_uncertainty_m,
         path_max_curvature_per_m: path.max_curvature_per_m(),
+        to_end_m: path.length_m() - s0,
     };
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);

@@ -38,8 +38,14 @@
 //! loop (time constant about 1.2 s for eq 5) cannot follow a finer command anyway.
 use nalgebra::{SMatrix, SVector};
 
-use super::{clamp, finite_or, max, PLAN_STEPS, TICKS_PER_STEP};
+use super::{clamp, finite_or, max, min, PLAN_STEPS, TICKS_PER_STEP};
+use crate::math;
 
+/// Speed to which the reference may still rise in the stop at a path's end, m/s
+/// ([`SpeedPlanner::reference`]): a car at rest short of the end creeps on to it.
+pub const STOP_CREEP_MPS: f32 = 1.0;
+/// The stop at a path's end ends when the end moves this much farther away, m (a longer path).
+pub const STOP_END_MOVED_M: f32 = 1.0;
 /// MPC steps per command knot (0.2 s).
 pub const KNOT_STEPS: usize = 2;
 /// Command knots over the plan.
@@ -72,6 +78,11 @@ pub struct SpeedTuning {
     /// Time constant of the first-order lowpass on the speed bias (measured minus modelled
     /// speed), s; 0: the bias as measured each tick.
     pub bias_time_constant_s: f32,
+    /// How far a command may go above the steady-state command that holds the plan's highest
+    /// target speed, m/s (the lead a sluggish speed loop needs to follow the reference's
+    /// acceleration; infinite: no bound; docs/controller.md, "A speed loop the model does not
+    /// describe").
+    pub command_lead_mps: f32,
 }
 
 /// Why a speed planner cannot be built.
@@ -112,6 +123,10 @@ pub struct SpeedState {
     /// `Option<f32>` here the solve took 13 600 more instructions in QEMU, from the state's
     /// layout alone).
     bias_mps: f32,
+    /// In the stop at the path's end ([`Self::in_stop`]).
+    stopping: bool,
+    /// The path's end ahead of the car last tick, m (infinite before the first plan).
+    to_end_m: f32,
 }
 
 /// A speed plan.
@@ -151,7 +166,8 @@ impl SpeedPlanner {
             && positive(tuning.accel_mps2)
             && positive(tuning.decel_mps2)
             && tuning.bias_time_constant_s.is_finite()
-            && tuning.bias_time_constant_s >= 0.0)
+            && tuning.bias_time_constant_s >= 0.0
+            && tuning.command_lead_mps >= 0.0)
         {
             return Err(SpeedPlanError::BadTuning);
         }
@@ -213,13 +229,16 @@ impl SpeedPlanner {
         offset(&all, start.bias_mps)
     }
 
-    /// Plans the commands: reference from the targets (`targets_mps[k]`, k = 0..=PLAN_STEPS, the
-    /// path's target speed where the car is expected at step k), then the QP.
+    /// Plans the commands: the reference ([`Self::reference`]) from the targets
+    /// (`targets_mps[k]`, k = 0..=PLAN_STEPS, the path's target speed where the car is expected
+    /// at step k) and the distance `to_end_m` from the car to the path's end (infinite: no end),
+    /// then the QP.
     pub fn plan(
         &self,
         state: &mut SpeedState,
         start: &SpeedStart,
         targets_mps: &[f32; PLAN_STEPS + 1],
+        to_end_m: f32,
     ) -> SpeedPlan {
         let t = &self.tuning;
         let last = clamp(finite_or(start.last_command_mps, 0.0), 0.0, t.max_speed_mps);
@@ -230,19 +249,36 @@ impl SpeedPlanner {
         let all = roll(&self.model, &mut st, last);
         let f = SVector::<f32, PLAN_STEPS>::from(offset(&all, start.planning_bias_mps));
         let f_now = SVector::<f32, PLAN_STEPS>::from(offset(&all, start.bias_mps));
-        // Reference: the targets, reached within the acceleration limits.
-        let dt = super::STEP_S;
-        let mut r = SVector::<f32, PLAN_STEPS>::zeros();
-        let mut prev = v0;
-        for (rk, target) in r.iter_mut().zip(targets_mps.iter().skip(1)) {
-            let goal = clamp(finite_or(*target, 0.0), 0.0, t.max_speed_mps);
-            prev = clamp(goal, prev - t.decel_mps2 * dt, prev + t.accel_mps2 * dt);
-            *rk = prev;
-        }
+        let here = targets_mps.first().copied().unwrap_or(0.0);
+        let stopping = state.in_stop(v0, here, last, to_end_m);
+        let r =
+            SVector::<f32, PLAN_STEPS>::from(self.reference(v0, targets_mps, to_end_m, stopping));
         // Linear cost of du: w_v P' (f - r).
         let lin = self.p.tr_mul(&(f - r)) * t.speed_weight;
+        // In the stop at the path's end the commands do not rise either (a car that brakes
+        // harder than its model leaves a bias below zero, against which holding even a
+        // non-rising reference takes rising commands: on the rig's loop 0.69 -> 2.02 -> 0.40 ->
+        // 3.16 m/s with the reference's rule alone), and none asks for more than stops the car
+        // at the end from where it is: at the end, 0. The plan's speeds are linear in the
+        // commands and a car does not reverse, so against a bias below zero the plan saw no
+        // gain in a lower command and held 0.19 m/s past the end (a car of scripts/sil-sim.py
+        // with a 0.1 s dead time, 2.3 m past it).
+        let top = if stopping {
+            let to_end = max(to_end_m, 0.0);
+            let creep = max(last, STOP_CREEP_MPS);
+            min(
+                min(creep, math::sqrt(2.0 * t.decel_mps2 * to_end)),
+                t.max_speed_mps,
+            )
+        } else {
+            t.max_speed_mps
+        };
+        let top = min(
+            top,
+            self.steady_command(targets_mps, start.planning_bias_mps),
+        );
         let lo = -last;
-        let hi = t.max_speed_mps - last;
+        let hi = top - last;
         let speed_room = SVector::<f32, PLAN_STEPS>::from_element(t.max_speed_mps) - f;
         state.shift();
         let mut du = SVector::<f32, KNOTS>::zeros();
@@ -281,7 +317,7 @@ impl SpeedPlanner {
         // The commands are clamped to their bounds exactly (ADMM meets them only in the limit).
         let mut commands = [0.0f32; KNOTS];
         for (c, d) in commands.iter_mut().zip(du.iter()) {
-            *c = clamp(finite_or(last + d, 0.0), 0.0, t.max_speed_mps);
+            *c = clamp(finite_or(last + d, 0.0), 0.0, top);
         }
         let speeds = self.predict(&f_now, last, &commands, v0);
         SpeedPlan {
@@ -289,6 +325,87 @@ impl SpeedPlanner {
             commands_mps: commands,
             speeds_mps: speeds,
         }
+    }
+
+    /// The most a command may ask: the steady-state command that holds the highest target of
+    /// the plan, `(max target - bias) / dc gain` with the bias the commands are planned with
+    /// (the model's steady state plus the offset it does not know, a grade or a load: a car
+    /// that settles below its command is still commanded above the target), plus
+    /// [`SpeedTuning::command_lead_mps`]. Never more: the plan's commands beyond that drive a
+    /// model slower than the car, and a car whose speed loop is faster than its model
+    /// (`scripts/sil-sim.py`'s default car on an 8 m/s course) was commanded 16 m/s, went
+    /// 2.9 m/s over the path's speed and swung between 3 and 11 m/s for 10 s. The maximum speed
+    /// without a finite positive DC gain (an integrator).
+    fn steady_command(&self, targets_mps: &[f32; PLAN_STEPS + 1], bias_mps: f32) -> f32 {
+        let t = &self.tuning;
+        let limit = targets_mps.iter().fold(0.0f32, |m, v| {
+            max(m, clamp(finite_or(*v, 0.0), 0.0, t.max_speed_mps))
+        });
+        match self.model.dc_gain() {
+            Some(g) if g.is_finite() && g > 0.0 => {
+                let steady = (limit - finite_or(bias_mps, 0.0)) / g;
+                clamp(steady + t.command_lead_mps, 0.0, t.max_speed_mps)
+            }
+            _ => t.max_speed_mps,
+        }
+    }
+
+    /// The speed reference at steps 1..=PLAN_STEPS, from the car's speed `v0_mps` now: the
+    /// targets (`targets_mps[k]`: the path's target speed where the car is expected at step k),
+    /// reached within the tuning's acceleration and deceleration, under two rules of the stop at
+    /// the path's end, `to_end_m` ahead of the car (negative or NaN: there; infinite: no end):
+    ///
+    /// - **Travel bound.** No step ends faster than stops the reference at the end at the
+    ///   tuning's deceleration: its own travel (trapezoidal) plus `v^2 / (2 decel)` within the
+    ///   distance left (below `sqrt(2 decel d)`); from a speed with room to stop the reference
+    ///   stops within a few millimetres of the end (the last step's partial deceleration). The
+    ///   node stops at its path's end whether or not the planner's speeds taper to it.
+    /// - **No rise into the stop.** In the stop (`stopping`, [`SpeedState::in_stop`]) the
+    ///   reference does not rise above `max(v0, STOP_CREEP_MPS)`: a car that has
+    ///   slowed below the path's taper (its brakes are harder than the speed model) is not asked
+    ///   to speed up to it before stopping; it rolls on at its speed, or creeps at
+    ///   [`STOP_CREEP_MPS`] from a near standstill, until the taper meets it. [`Self::plan`]
+    ///   keeps the commands from rising there as well. Before these rules the commands near
+    ///   the end of the rig's loop went 4 -> 0.79 -> 3.04 -> 0 m/s (docs/findings.md).
+    pub fn reference(
+        &self,
+        v0_mps: f32,
+        targets_mps: &[f32; PLAN_STEPS + 1],
+        to_end_m: f32,
+        stopping: bool,
+    ) -> [f32; PLAN_STEPS] {
+        let t = &self.tuning;
+        let dt = super::STEP_S;
+        let v0 = clamp(finite_or(v0_mps, 0.0), 0.0, t.max_speed_mps);
+        // NaN and negative: at the end; +infinity passes (no end).
+        let to_end = max(to_end_m, 0.0);
+        let ceiling = if stopping {
+            max(v0, STOP_CREEP_MPS)
+        } else {
+            t.max_speed_mps
+        };
+        let mut r = [0.0f32; PLAN_STEPS];
+        let mut prev = v0;
+        let mut travelled = 0.0f32;
+        for (rk, target) in r.iter_mut().zip(targets_mps.iter().skip(1)) {
+            let left = max(to_end - travelled, 0.0);
+            // The fastest this step may end at and still stop at the end: its own travel
+            // (trapezoidal) and then the deceleration's v^2 / (2 decel) within what is left.
+            let (qa, qb, qc) = (0.5 / t.decel_mps2, 0.5 * dt, 0.5 * prev * dt - left);
+            let disc = qb * qb - 4.0 * qa * qc;
+            let stoppable = if disc > 0.0 {
+                (math::sqrt(disc) - qb) / (2.0 * qa)
+            } else {
+                0.0
+            };
+            let bound = clamp(stoppable, 0.0, ceiling);
+            let goal = clamp(finite_or(*target, 0.0), 0.0, min(t.max_speed_mps, bound));
+            let v = clamp(goal, prev - t.decel_mps2 * dt, prev + t.accel_mps2 * dt);
+            travelled += 0.5 * (prev + v) * dt;
+            prev = v;
+            *rk = v;
+        }
+        r
     }
 
     /// The predicted speeds (step 0 = `v0`) of a command sequence, from the free response `f`
@@ -355,6 +472,8 @@ impl SpeedState {
             z_speed: [0.0; PLAN_STEPS],
             w_speed: [0.0; PLAN_STEPS],
             bias_mps: f32::INFINITY,
+            stopping: false,
+            to_end_m: f32::INFINITY,
         }
     }
 
@@ -376,6 +495,40 @@ impl SpeedState {
         };
         self.bias_mps = bias;
         bias
+    }
+
+    /// Whether the car is in the stop at the path's end, once per tick. `v0_mps` is its speed,
+    /// `target_mps` the path's target where it is, `last_command_mps` the command sent last and
+    /// `to_end_m` the end's distance ahead (NaN or negative: there; infinite: no end). The stop
+    /// begins on the first tick the end is within the horizon's travel at the car's speed or
+    /// the path's (at least [`STOP_CREEP_MPS`]) with the last command not above the car's
+    /// speed (the plan cruising or braking, not launching: a path shorter than 2 s at its speed
+    /// is still driven up to it), or within the creep's own 2 m whatever the command; it lasts
+    /// until the end moves more than [`STOP_END_MOVED_M`] away (a longer path) or the state is
+    /// reset (a new path). Held, not judged afresh each tick: a car that brakes harder than its
+    /// model slows faster than the end comes nearer, and judged each tick at its own speed it
+    /// left the stop 4 m before the end (2 m/s on the rig's loop) and was commanded back up to
+    /// 2.5 m/s.
+    pub fn in_stop(
+        &mut self,
+        v0_mps: f32,
+        target_mps: f32,
+        last_command_mps: f32,
+        to_end_m: f32,
+    ) -> bool {
+        let to_end = max(to_end_m, 0.0);
+        if to_end > self.to_end_m + STOP_END_MOVED_M {
+            self.stopping = false;
+        }
+        self.to_end_m = to_end;
+        let horizon_s = PLAN_STEPS as f32 * super::STEP_S;
+        let v0 = finite_or(v0_mps, 0.0);
+        let pace = max(max(v0, finite_or(target_mps, 0.0)), STOP_CREEP_MPS);
+        let cruising = !(finite_or(last_command_mps, 0.0) > v0);
+        if !(to_end > STOP_CREEP_MPS * horizon_s) || (cruising && !(to_end > pace * horizon_s)) {
+            self.stopping = true;
+        }
+        self.stopping
     }
 
     /// Warm start for the next tick: one tick is a fifth of a step, a tenth of a knot.

@@ -219,6 +219,9 @@ pub struct MpcInput<'a> {
     /// The largest reference curvature of the whole path, 1/m (either sign; for
     /// [`MpcTuning::line_rule`]).
     pub path_max_curvature_per_m: f32,
+    /// Distance along the path from the rear axle's projection to the path's end, m (infinite:
+    /// a path without an end): the speed plan stops there ([`SpeedPlanner::reference`]).
+    pub to_end_m: f32,
 }
 
 /// Cost weights and ADMM penalties of the lateral problem.
@@ -362,6 +365,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         decel_mps2: 3.0,
         iterations: 10,
         bias_time_constant_s: 1.5,
+        command_lead_mps: 2.0,
     },
     steer_lead_s: 0.07,
     steer_trust_s: 0.15,
@@ -703,7 +707,9 @@ impl MpcConfig {
         for (t, r) in targets.iter_mut().zip(input.reference.iter()) {
             *t = r.speed_mps;
         }
-        let speed_plan = self.speed.plan(&mut state.speed, &speed_start, &targets);
+        let speed_plan = self
+            .speed
+            .plan(&mut state.speed, &speed_start, &targets, input.to_end_m);
         // 2. Obstacles: inflate, decide sides.
         let obstacles = match self.decide_sides(state, input) {
             Ok(o) => o,
@@ -1456,6 +1462,7 @@ fn input_ok(input: &MpcInput) -> bool {
         && car.lateral.yaw_rate_rps.is_finite()
         && input.position_uncertainty_m.is_finite()
         && input.position_uncertainty_m >= 0.0
+        && !input.to_end_m.is_nan()
         && reference_ok
         && obstacles_ok
 }
