@@ -27,9 +27,12 @@
 //! describe").
 //!
 //! Cost `1/2 sum w_v (v_k - r_k)^2 + 1/2 sum w_du (du_j - du_{j-1})^2` (`du_{-1} = 0`: the change
-//! against the command sent last); hard bounds `0 <= u_j <= max_speed`; a soft (exact-penalty)
-//! bound `v_k <= max_speed` on the prediction. The reference `r` is the path's target speed
-//! reached within the acceleration and deceleration limits from the current speed.
+//! against the command sent last); hard bounds `0 <= u_j <= top`, `top` the least of the maximum
+//! speed, the steady-state command that holds the plan's highest target plus a lead, and in the
+//! stop at the path's end the last command or the creep (`SpeedPlanner::plan`); a soft
+//! (exact-penalty) bound `v_k <= max_speed` on the prediction. The reference `r` is the path's
+//! target speed reached within the acceleration and deceleration limits from the current speed,
+//! never past the path's end and not rising in the stop (`SpeedPlanner::reference`).
 //!
 //! Solver: ADMM on the condensed problem (constraints `z = [du; P du]`). Its matrix
 //! `H + rho_u I + rho_v P'P` never changes, so its inverse is computed once, in f64, when the
