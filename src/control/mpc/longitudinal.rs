@@ -527,8 +527,9 @@ impl SpeedState {
         let horizon_s = PLAN_STEPS as f32 * super::STEP_S;
         let v0 = finite_or(v0_mps, 0.0);
         let pace = max(max(v0, finite_or(target_mps, 0.0)), STOP_CREEP_MPS);
-        let cruising = !(finite_or(last_command_mps, 0.0) > v0);
-        if !(to_end > STOP_CREEP_MPS * horizon_s) || (cruising && !(to_end > pace * horizon_s)) {
+        // Every operand finite, or `to_end` infinite: no NaN reaches these comparisons.
+        let cruising = finite_or(last_command_mps, 0.0) <= v0;
+        if to_end <= STOP_CREEP_MPS * horizon_s || (cruising && to_end <= pace * horizon_s) {
             self.stopping = true;
         }
         self.stopping
