@@ -14,8 +14,9 @@ of docs/bus.md and the README's "Software in the loop" from the outside:
 - the DBW reports (rolling counter in bits 52..55, CRC-8/SAE-J1850 over the identifier and bytes
   0..6), NMEA 2000 position and COG/SOG at the model file's receiver rate (29-bit identifiers),
   the planner's LOCAL_ORIGIN and path paced at 4 frames a tick;
-- a "safety driver" launch (3 m/s or the course's speed if lower, wheels straight) until the node reports a valid position for
-  a second and status 1 (tracking), then the node's CONTROL_COMMAND drives the car.
+- a "safety driver" launch (3 m/s, or the course's speed if lower but at least 2 m/s, wheels
+  straight) until the node reports a valid position for a second and status 1 (tracking),
+  then the node's CONTROL_COMMAND drives the car.
 
 The course: 40 m east, a left half circle of 20 m radius, 40 m back west, at 5 m/s, stopping at
 the end. The car's rear axle is scored against the path (the node's reference point). Exit
@@ -321,14 +322,18 @@ def main():
     status = 0
     valid_since = None
     engaged_at = None
-    steer_cmd, speed_cmd = 0.0, min(3.0, args.speed)  # the launch
+    # The launch: 3 m/s, or the course's speed if lower, but at least 2 m/s (the node settles
+    # its heading from the course over the ground above 1.5 m/s, docs/controller.md).
+    steer_cmd, speed_cmd = 0.0, min(3.0, max(args.speed, 2.0))
     errors = []
     over_limit = 0.0
     low, stop_rise = math.inf, 0.0
     statuses = {}
     rows = []
     prev = car.antenna()
-    end_t = 90.0
+    # Time enough for the course at its speed, twice over, and the launch.
+    length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(path, path[1:]))
+    end_t = max(90.0, 2.0 * length / args.speed + 30.0)
 
     def fail(reason, code=2):
         node.kill()

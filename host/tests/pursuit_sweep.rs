@@ -6,7 +6,9 @@
 //!
 //! `cargo test --release -p catmodel-host --test pursuit_sweep -- --ignored --nocapture`
 //!
-//! `MINS` and `TIMES` (comma-separated) replace the grid.
+//! `MINS` and `TIMES` (comma-separated) replace the grid; `VEHICLE=FILE` (and `MODEL=FILE`, its
+//! model file; without it the rig describes the car to the node; paths from the workspace's root)
+//! sweeps that car instead.
 use catmodel::control::pure_pursuit::{PurePursuitTuning, DEFAULT_TUNING};
 use catmodel_host::closed_loop::driver::Controller;
 use catmodel_host::closed_loop::limits::{clean_at, highest_clean_speed, SCAN_FROM_MPS};
@@ -24,21 +26,29 @@ fn grid(var: &str, default: &str) -> Vec<f32> {
 #[ignore = "tuning sweep on the rig; prints"]
 fn lookahead_sweep() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let cars = [
-        ("CAT Vehicle", None),
-        (
-            "hatchback",
-            Some((
-                root.join("vehicles/hatchback.toml"),
-                root.join("../models/hatchback.toml"),
-            )),
-        ),
-    ];
+    // Paths in VEHICLE and MODEL are taken from the workspace's root (the test runs in host/).
+    let at = |p: String| root.join("..").join(p);
+    let cars = match std::env::var("VEHICLE") {
+        Ok(v) => vec![(
+            v.clone(),
+            Some((at(v), std::env::var("MODEL").ok().map(at))),
+        )],
+        Err(_) => vec![
+            ("CAT Vehicle".to_string(), None),
+            (
+                "hatchback".to_string(),
+                Some((
+                    root.join("vehicles/hatchback.toml"),
+                    Some(root.join("../models/hatchback.toml")),
+                )),
+            ),
+        ],
+    };
     let mins = grid("MINS", "1,2,3,4,5");
     let times = grid("TIMES", "0.3,0.4,0.5,0.55,0.6,0.7,0.8");
     for (name, files) in cars {
         let (vehicle, node) = match &files {
-            Some((v, m)) => load_setup(Some(v), Some(m)).unwrap(),
+            Some((v, m)) => load_setup(Some(v), m.as_deref()).unwrap(),
             None => load_setup(None, None).unwrap(),
         };
         println!(
