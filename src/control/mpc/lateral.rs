@@ -340,6 +340,14 @@ pub fn body_offset(
     (n_dot, b, k)
 }
 
+/// How far inside a corridor `left_m` + `right_m` wide the corner rows keep a body point
+/// `half_width_m` from the centre line: [`Weights::corridor_margin_m`], but never more than
+/// half of the room the body has on each side, m.
+pub fn corridor_margin_m(w: &Weights, left_m: f32, right_m: f32, half_width_m: f32) -> f32 {
+    let room_m = 0.5 * (left_m + right_m) - half_width_m;
+    math::min(w.corridor_margin_m, math::max(0.5 * room_m, 0.0))
+}
+
 /// A corridor row for a point of the body's side: `lower <= offset` (left side) or
 /// `offset <= upper` (right side).
 fn corner_row(
@@ -351,9 +359,7 @@ fn corner_row(
 ) -> Row {
     let (s0, c0, e0) = lin;
     let (a, b, k) = body_offset(at, sample, point, s0, c0, e0);
-    // The margin never takes more than half of the room the body has on each side.
-    let room_m = 0.5 * (sample.left_m + sample.right_m) - point.right_m.abs();
-    let margin_m = math::min(w.corridor_margin_m, math::max(0.5 * room_m, 0.0));
+    let margin_m = corridor_margin_m(w, sample.left_m, sample.right_m, point.right_m.abs());
     let (lower, upper) = if point.right_m < 0.0 {
         (-(sample.left_m - margin_m) - k, f32::INFINITY)
     } else {

@@ -1055,10 +1055,15 @@ impl MpcConfig {
                 *blocked = false;
                 continue;
             }
-            // Room between the corridor's edge and the inflated circle on each side.
+            // Room between the corridor's edge and the inflated circle on each side, and what
+            // the plan's rows need there: the body and the corner rows' margin from the edge.
+            // Through less, no plan satisfies its own rows: the pickup of docs/findings.md
+            // (2.05 m wide, 2.15 m of room, a 0.15 m margin) fought the corridor beside the
+            // obstacle, fell back and passed it by 0.29 m where 0.6 m was planned.
             let room_left = (ob.path_offset_m - r) + ob.left_m;
             let room_right = ob.right_m - (ob.path_offset_m + r);
-            let need = body.width_m;
+            let need = body.width_m
+                + lateral::corridor_margin_m(&t.weights, ob.left_m, ob.right_m, 0.5 * body.width_m);
             let room = |s: ObstacleSide| match s {
                 ObstacleSide::Left => room_left,
                 ObstacleSide::Right => room_right,
