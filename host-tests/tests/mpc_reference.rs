@@ -395,14 +395,20 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
     let speeds = [10.0f32; MPC_STEPS + 1];
 
     let mut near = fresh();
-    assert_eq!(taper_reference(&mut near, &x(0.9), &speeds, 1.0, 1.0), 0.0);
+    assert_eq!(
+        taper_reference(&mut near, &x(0.9), &speeds, 1.0, 1.0, 0.2),
+        0.0
+    );
     assert!(near
         .stages
         .iter()
         .all(|st| st.q_lin == SVector::<f32, NX>::zeros()));
 
     let mut q = fresh();
-    assert_eq!(taper_reference(&mut q, &x(3.0), &speeds, 1.0, 1.0), 2.0);
+    assert_eq!(
+        taper_reference(&mut q, &x(3.0), &speeds, 1.0, 1.0, 0.2),
+        2.0
+    );
     let st = &q.stages[13];
     assert!(
         (f64::from(st.q_lin[EY]) - -10.0 * 1.01884).abs() < 2e-3,
@@ -424,11 +430,38 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
     }
     let mut left = fresh();
     assert_eq!(
-        taper_reference(&mut left, &x(-3.0), &speeds, 1.0, 1.0),
+        taper_reference(&mut left, &x(-3.0), &speeds, 1.0, 1.0, 0.2),
         -2.0
     );
     for (l, r) in left.stages.iter().zip(&q.stages) {
         assert_eq!(l.q_lin[EY], -r.q_lin[EY]);
         assert_eq!(l.q_lin[EPSI], -r.q_lin[EPSI]);
     }
+    // At 10 m/s the 2 m return at 1 m/s^2 (2.83 s, 1.33 m/s at its fastest) asks less than
+    // 0.2 rad allows (1.99 m/s): the heading bound does not bind, as above. At 2 m/s it allows
+    // 2 sin 0.2 = 0.397 m/s, so the return takes 1.875 x 2 / 0.397 = 9.438 s: at stage 13
+    // (1.4 s, u = 0.1483) the target is 2 x 0.97419 = 1.9484 m and the heading target
+    // 0.10147 m/s over the stage's 2 m/s, 0.0507 rad.
+    let slow = [2.0f32; MPC_STEPS + 1];
+    let mut crawl = fresh();
+    assert_eq!(
+        taper_reference(&mut crawl, &x(3.0), &slow, 1.0, 1.0, 0.2),
+        2.0
+    );
+    let st = &crawl.stages[13];
+    assert!(
+        (f64::from(st.q_lin[EY]) - -10.0 * 1.94838).abs() < 2e-3,
+        "{}",
+        st.q_lin[EY]
+    );
+    assert!(
+        (f64::from(st.q_lin[EPSI]) - 10.0 * 0.05073).abs() < 2e-3,
+        "{}",
+        st.q_lin[EPSI]
+    );
+    // Nowhere more than 0.2 rad of heading.
+    assert!(crawl
+        .stages
+        .iter()
+        .all(|st| st.q_lin[EPSI] / 10.0 <= 0.2f32.sin() + 1e-4));
 }

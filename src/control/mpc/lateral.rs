@@ -424,6 +424,10 @@ pub fn relax_corridor(
     worst
 }
 
+/// The smoothstep's fastest rate of change, in units of its span per its duration (at the
+/// midpoint: `30 u^2 (1 - u)^2` at `u = 1/2`).
+const RETURN_PEAK_SPEED: f32 = 1.875;
+
 /// The inverse of the duration of a return over `distance_m` at `accel_mps2`: a bang-bang
 /// return's `2 sqrt(distance / accel)` (the smoothstep of [`return_ahead`] peaks at 1.44 times
 /// that acceleration).
@@ -444,9 +448,14 @@ fn return_ahead(t_s: f32, rate: f32) -> (f32, f32) {
 
 /// Tapers the tracking cost's target for a car that starts far off its path: of the start's
 /// lateral error, the part beyond `from_m` is returned along the same quintic smoothstep as
-/// [`relax_corridor`] over `2 sqrt(part / return_mps2)`, with the heading error that return
-/// needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least 1 m/s,
-/// at most 0.5 rad) as the heading's target. The costs' linear terms get the targets (`q_lin =
+/// [`relax_corridor`] over `2 sqrt(part / return_mps2)`, or longer where that return's
+/// fastest lateral speed (1.875 part / duration, the smoothstep's peak) would ask more heading
+/// than `heading_rad` at the speed the car has (at least 1 m/s), with the heading error that
+/// return needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least
+/// 1 m/s, at most 0.5 rad) as the heading's target. The heading bound is for a car that is
+/// slow when it starts back: a long car braked to 2 m/s 3.4 m beside its path was asked for
+/// the whole return within 3 s, steered to 90 % of its lock, sped up with 0.6 rad of heading
+/// and swung 3.9 m through the path, off the road (docs/findings.md). The costs' linear terms get the targets (`q_lin =
 /// -q_diag x_ref`, as the steering's feed-forward). Within `from_m` of the path nothing
 /// changes. Without it the (then 1.5 s) horizon asks for the whole return at once and does not see the
 /// far side: the van taken over 3.6 m beside its path went 4.9 m through it (docs/controller.md,
@@ -457,6 +466,7 @@ pub fn taper_reference(
     speeds_mps: &[f32; STEPS + 1],
     return_mps2: f32,
     from_m: f32,
+    heading_rad: f32,
 ) -> f32 {
     let e0 = x0.get(EY).copied().unwrap_or(0.0);
     let size = if e0 < 0.0 { -e0 } else { e0 };
@@ -464,7 +474,12 @@ pub fn taper_reference(
     if !part.is_finite() || part <= 0.0 {
         return 0.0;
     }
-    let rate = return_rate(part, return_mps2);
+    let v0 = max(speeds_mps.first().copied().unwrap_or(0.0), 1.0);
+    let (sin_heading, _) = math::sin_cos(heading_rad);
+    let rate = math::min(
+        return_rate(part, return_mps2),
+        v0 * sin_heading / (RETURN_PEAK_SPEED * part),
+    );
     let part = if e0 < 0.0 { -part } else { part };
     for (k, st) in problem.stages.iter_mut().enumerate() {
         let (ahead, d_ahead) = return_ahead((k + 1) as f32 * STEP_S, rate);

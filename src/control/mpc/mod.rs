@@ -296,6 +296,10 @@ pub struct MpcTuning {
     /// A lateral error beyond this at the start is returned at `corridor_return_mps2` too: the
     /// tracking cost's target tapers (`lateral::taper_reference`), m.
     pub return_from_m: f32,
+    /// ... and no faster than this heading at the speed the car has allows (its fastest
+    /// lateral speed `v sin` of it, at least 1 m/s): a slow car is not asked for a heading it
+    /// will carry into the speed it picks up (`lateral::taper_reference`), rad.
+    pub return_heading_rad: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
     pub obstacle_margin_m: f32,
     /// The other side of an obstacle must have this much more room to change the decision, m.
@@ -372,6 +376,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     steer_rate_share: 0.9,
     corridor_return_mps2: 1.0,
     return_from_m: 1.0,
+    return_heading_rad: 0.2,
     obstacle_margin_m: 0.6,
     side_hysteresis_m: 0.5,
     obstacle_tolerance_m: 0.25,
@@ -583,7 +588,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 16] = [
+        let checks: [(bool, &'static str); 17] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -629,6 +634,10 @@ impl MpcConfig {
             (
                 tuning.return_from_m.is_finite() && tuning.return_from_m >= 0.0,
                 "return_from_m (>= 0)",
+            ),
+            (
+                tuning.return_heading_rad > 0.0 && tuning.return_heading_rad <= 0.5,
+                "return_heading_rad (0 < h <= 0.5)",
             ),
             (
                 tuning.preview_s.is_finite() && tuning.preview_s >= 0.0,
@@ -746,6 +755,7 @@ impl MpcConfig {
             &speeds,
             self.tuning.corridor_return_mps2,
             self.tuning.return_from_m,
+            self.tuning.return_heading_rad,
         );
         // Avoiding: some obstacle reaches the body within the horizon.
         let avoiding = state
