@@ -409,17 +409,14 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
         taper_reference(&mut q, &x(3.0), &speeds, 1.0, 1.0, 0.2),
         2.0
     );
-    let st = &q.stages[13];
-    assert!(
-        (f64::from(st.q_lin[EY]) - -10.0 * 1.01884).abs() < 2e-3,
-        "{}",
-        st.q_lin[EY]
-    );
-    assert!(
-        (f64::from(st.q_lin[EPSI]) - 10.0 * 0.13256).abs() < 2e-3,
-        "{}",
-        st.q_lin[EPSI]
-    );
+    // Stage 13's targets (the linear terms are -10 times them), m and rad.
+    let targets_at_13 = |q: &Problem<NX, MPC_STEPS, ROWS>, e_y: f64, e_psi: f64| {
+        let st = &q.stages[13];
+        for (got, want) in [(st.q_lin[EY], -10.0 * e_y), (st.q_lin[EPSI], -10.0 * e_psi)] {
+            assert!((f64::from(got) - want).abs() < 2e-3, "{got} against {want}");
+        }
+    };
+    targets_at_13(&q, 1.01884, -0.13256);
     // The e_y target falls and the heading target points back towards the path all along.
     let mut previous = f32::INFINITY;
     for st in &q.stages {
@@ -448,17 +445,7 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
         taper_reference(&mut crawl, &x(3.0), &slow, 1.0, 1.0, 0.2),
         2.0
     );
-    let st = &crawl.stages[13];
-    assert!(
-        (f64::from(st.q_lin[EY]) - -10.0 * 1.94838).abs() < 2e-3,
-        "{}",
-        st.q_lin[EY]
-    );
-    assert!(
-        (f64::from(st.q_lin[EPSI]) - 10.0 * 0.05073).abs() < 2e-3,
-        "{}",
-        st.q_lin[EPSI]
-    );
+    targets_at_13(&crawl, 1.94838, -0.05073);
     // Nowhere more than 0.2 rad of heading.
     assert!(crawl
         .stages
