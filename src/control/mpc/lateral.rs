@@ -448,18 +448,19 @@ fn return_ahead(t_s: f32, rate: f32) -> (f32, f32) {
 
 /// Tapers the tracking cost's target for a car that starts far off its path: of the start's
 /// lateral error, the part beyond `from_m` is returned along the same quintic smoothstep as
-/// [`relax_corridor`] over `2 sqrt(part / return_mps2)`, or longer where that return's
-/// fastest lateral speed (1.875 part / duration, the smoothstep's peak) would ask more heading
-/// than `heading_rad` at the speed the car has (at least 1 m/s), with the heading error that
-/// return needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least
-/// 1 m/s, at most 0.5 rad) as the heading's target. The heading bound is for a car that is
-/// slow when it starts back: a long car braked to 2 m/s 3.4 m beside its path was asked for
-/// the whole return within 3 s, steered to 90 % of its lock, sped up with 0.6 rad of heading
-/// and swung 3.9 m through the path, off the road (docs/findings.md). The costs' linear terms get the targets (`q_lin =
+/// [`relax_corridor`] over `2 sqrt(part / return_mps2)`, or longer where that return's fastest
+/// lateral speed (1.875 part / duration, the smoothstep's peak) would ask more heading than
+/// `heading_rad` at the speed the car has (at least 1 m/s), with the heading error that return
+/// needs at each stage's speed (`d e_y / dt = v sin e_psi`, to first order; at least 1 m/s, at
+/// most 0.5 rad) as the heading's target. The costs' linear terms get the targets (`q_lin =
 /// -q_diag x_ref`, as the steering's feed-forward). Within `from_m` of the path nothing
-/// changes. Without it the (then 1.5 s) horizon asks for the whole return at once and does not see the
-/// far side: the van taken over 3.6 m beside its path went 4.9 m through it (docs/controller.md,
-/// "Starting outside the corridor"). Returns the part returned along the taper, m.
+/// changes. Without it the (then 1.5 s) horizon asks for the whole return at once and does
+/// not see the far side: the van taken over 3.6 m beside its path went 4.9 m through it
+/// (docs/controller.md, "Starting outside the corridor"). The heading bound is for a car that
+/// is slow when it starts back: a long car braked to 2 m/s 3.4 m beside its path was asked for
+/// the whole return within 3 s, steered to 90 % of its lock, sped up with 0.6 rad of heading
+/// and swung 3.9 m through the path, off the road (docs/findings.md). Returns the part
+/// returned along the taper, m.
 pub fn taper_reference(
     problem: &mut Problem<NX, STEPS, ROWS>,
     x0: &SVector<f32, NX>,
@@ -511,14 +512,15 @@ pub struct InflatedObstacle {
     pub path_offset_m: f32,
 }
 
-/// An end-of-horizon stage's row for an obstacle still ahead of the rear axle there (and at most the
-/// preview distance `preview_m` ahead of the body's front): the whole car already beside the
-/// obstacle, its centre line at least half the width plus the inflated radius from the
-/// obstacle's centre, measured from the path (the obstacle's path offset). The horizon ends before the car reaches the
-/// obstacle, and the stage's own geometric row would only ask the front corner to clear it,
-/// which a plan can meet by yawing towards the side at the last moment without moving the car
-/// aside (measured: such plans steer the wrong way first and leave no room for the rest of the
-/// manoeuvre); this terminal condition asks for the displacement the pass will need, early.
+/// An end-of-horizon stage's row for an obstacle still ahead of the rear axle there (and at
+/// most the preview distance `preview_m` ahead of the body's front): the whole car already
+/// beside the obstacle, its centre line at least half the width plus the inflated radius from
+/// the obstacle's centre, measured from the path (the obstacle's path offset). The horizon ends
+/// before the car reaches the obstacle, and the stage's own geometric row would only ask the
+/// front corner to clear it, which a plan can meet by yawing towards the side at the last
+/// moment without moving the car aside (measured: such plans steer the wrong way first and
+/// leave no room for the rest of the manoeuvre); this terminal condition asks for the
+/// displacement the pass will need, early.
 /// `horizon_m` is the stage's station ahead of the rear axle now.
 pub fn terminal_row(
     at: &Sample,

@@ -296,9 +296,10 @@ pub struct MpcTuning {
     /// A lateral error beyond this at the start is returned at `corridor_return_mps2` too: the
     /// tracking cost's target tapers (`lateral::taper_reference`), m.
     pub return_from_m: f32,
-    /// ... and no faster than this heading at the speed the car has allows (its fastest
-    /// lateral speed `v sin` of it, at least 1 m/s): a slow car is not asked for a heading it
-    /// will carry into the speed it picks up (`lateral::taper_reference`), rad.
+    /// That return is also no faster than this much heading allows at the speed the car has
+    /// (a lateral speed of `v sin h` at its fastest, `v` at least 1 m/s): a slow car is not
+    /// asked for a heading it would carry into the speed it picks up
+    /// (`lateral::taper_reference`), rad.
     pub return_heading_rad: f32,
     /// Added to each obstacle's radius (besides the position uncertainty), m.
     pub obstacle_margin_m: f32,
