@@ -421,6 +421,42 @@ fn a_long_car_braked_beside_an_obstacle_returns_without_a_swing() {
     assert!(exit < 1.0, "{exit:.2} m off the road: {m:?}");
 }
 
+/// The black-box review's pickup (`host/vehicles/pickup.toml`: 2.05 m wide, the CAT Vehicle's
+/// 2.0 m position bound) has 2.15 m between the road's edge and the inflated obstacle: room for
+/// its body, not for the body and the corner rows' 0.15 m margin. It took that passage, fought
+/// the corridor beside the obstacle and passed it by 0.29 m on seed 3. It stops before it
+/// now, no passage, on the seed that passed closest and on one that passed wide (docs/findings.md).
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn the_pickup_stops_before_an_obstacle_its_plan_cannot_pass() {
+    let car = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("vehicles/pickup.toml");
+    let (vehicle, node) = load_setup(Some(&car), None).unwrap();
+    for seed in [0, 3] {
+        let out = drive_setup(
+            &vehicle,
+            &node,
+            Kind::Obstacle,
+            Kind::Obstacle.default_speed_mps(),
+            seed,
+        );
+        let m = &out.metrics;
+        assert!(!m.completed, "seed {seed}: passed: {m:?}");
+        assert!(m.status_ticks[3] > 0, "seed {seed}: {m:?}");
+        let clearance = m.min_obstacle_clearance_m.unwrap_or(f64::NAN);
+        assert!(
+            clearance >= 1.0,
+            "seed {seed}: stopped {clearance:.2} m from it"
+        );
+        // Stopped and kept stopped: the last second at rest, commanded 0.
+        let end = out.samples.last().map_or(0.0, |s| s.t_s) - 1.0;
+        assert!(out
+            .samples
+            .iter()
+            .filter(|s| s.t_s >= end)
+            .all(|s| s.truth.speed < 0.05 && s.command.speed_cmd_mps == Some(0.0)));
+    }
+}
+
 /// The obstacle at its default speed on seed `seed` (the car's own receiver).
 fn obstacle(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> Metrics {
     drive_setup(
