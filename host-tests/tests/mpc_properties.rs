@@ -372,9 +372,7 @@ fn the_speed_plan_does_not_predict_a_car_reversing() {
     use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
     let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
     let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
-    let model_state = block.steady_state_for_output(3.0).unwrap();
-    let mut peek = model_state;
-    let modelled = block.step(&mut peek, 0.0);
+    let (model_state, modelled) = eq5_held_at(&block, 3.0, 0.0);
     let start = SpeedStart {
         model_state: &model_state,
         bias_mps: 0.5 - modelled,
@@ -488,9 +486,7 @@ fn the_speed_plan_in_the_stop_does_not_rise() {
     use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
     let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
     let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
-    let model_state = block.steady_state_for_output(1.0).unwrap();
-    let mut peek = model_state;
-    let modelled = block.step(&mut peek, 0.19);
+    let (model_state, modelled) = eq5_held_at(&block, 1.0, 0.19);
     let past = SpeedStart {
         model_state: &model_state,
         bias_mps: 0.19 - modelled,
@@ -503,9 +499,7 @@ fn the_speed_plan_in_the_stop_does_not_rise() {
     assert_eq!(plan.command_mps, 0.0, "{plan:?}");
     assert!(plan.commands_mps.iter().all(|c| *c == 0.0), "{plan:?}");
 
-    let model_state = block.steady_state_for_output(3.0).unwrap();
-    let mut peek = model_state;
-    let modelled = block.step(&mut peek, 0.5);
+    let (model_state, modelled) = eq5_held_at(&block, 3.0, 0.5);
     let before = SpeedStart {
         model_state: &model_state,
         bias_mps: 1.4 - modelled,
@@ -569,4 +563,17 @@ fn the_speed_commands_lead_the_steady_state_by_the_tunings_lead() {
         0.0,
     );
     assert!(unbounded > bounded + 1.0, "{unbounded} vs {bounded}");
+}
+
+/// Eq 5 settled at `speed_mps` and what it outputs on its next step with the command at
+/// `command_mps`: the model's state and its speed there (the bias a start is given against).
+fn eq5_held_at(
+    block: &SsBlock<2>,
+    speed_mps: f32,
+    command_mps: f32,
+) -> (catmodel::model::SsBlockState<2>, f32) {
+    let model_state = block.steady_state_for_output(speed_mps).unwrap();
+    let mut peek = model_state;
+    let modelled = block.step(&mut peek, command_mps);
+    (model_state, modelled)
 }

@@ -432,13 +432,7 @@ fn the_pickup_stops_before_an_obstacle_its_plan_cannot_pass() {
     let car = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("vehicles/pickup.toml");
     let (vehicle, node) = load_setup(Some(&car), None).unwrap();
     for seed in [0, 3] {
-        let out = drive_setup(
-            &vehicle,
-            &node,
-            Kind::Obstacle,
-            Kind::Obstacle.default_speed_mps(),
-            seed,
-        );
+        let out = obstacle_run(&vehicle, &node, seed);
         let m = &out.metrics;
         assert!(!m.completed, "seed {seed}: passed: {m:?}");
         assert!(m.status_ticks[3] > 0, "seed {seed}: {m:?}");
@@ -458,7 +452,7 @@ fn the_pickup_stops_before_an_obstacle_its_plan_cannot_pass() {
 }
 
 /// The obstacle at its default speed on seed `seed` (the car's own receiver).
-fn obstacle(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> Metrics {
+fn obstacle_run(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> RunOutput {
     drive_setup(
         vehicle,
         node,
@@ -466,7 +460,11 @@ fn obstacle(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> Metrics {
         Kind::Obstacle.default_speed_mps(),
         seed,
     )
-    .metrics
+}
+
+/// [`obstacle_run`]'s metrics.
+fn obstacle(vehicle: &VehicleConfig, node: &NodeConfig, seed: u64) -> Metrics {
+    obstacle_run(vehicle, node, seed).metrics
 }
 
 /// Steering activity while engaged: the mean |change of the steering command| per second, %/s.
@@ -524,13 +522,7 @@ fn second_car_with_a_1_hz_receiver_waits_for_its_heading() {
     let (vehicle, node) = hatchback_at(1.0, &dir);
     let mut worst = 0.0f64;
     for seed in 0..10 {
-        let out = drive_setup(
-            &vehicle,
-            &node,
-            Kind::Obstacle,
-            Kind::Obstacle.default_speed_mps(),
-            seed,
-        );
+        let out = obstacle_run(&vehicle, &node, seed);
         // Seed 8 left the road (lateral 6.7 m, the body 2.33 m outside the corridor) until
         // the controller returned to a corridor it starts outside of at a bounded lateral
         // acceleration (`lateral::relax_corridor`; docs/findings.md): the receiver's 2 m
