@@ -11,7 +11,9 @@
 #   turn-left-30s.{csv,can.log,truth.csv}  the first 30 s of `--scenario turn-left`, seed 0
 #                                          (log and truth cut at t <= 30 s, candump by csv2can)
 #   bundled.tx.golden.log                  the node's frames over bundled.can.log; NOT written
-#                                          here (review, then cp target/qemu/tx.log, see .ci/run)
+#                                          here (review, then `catmodel replay
+#                                          data/bundled.can.log --tx-out` into it; .ci/run checks
+#                                          that cargo qemu's frames equal it, stack field aside)
 #
 # Uses $CATMODEL if set, else builds the CLI with `cargo build -p catmodel-host` (the dev
 # profile is optimised; the simulator's f64 arithmetic gives the same bytes in every profile).
@@ -58,8 +60,8 @@ done
 if ! cmp -s "$tmp/smoke.can.log" data/bundled.can.log; then
   if [[ $mode == bundled ]]; then
     cp "$tmp/smoke.can.log" data/bundled.can.log
-    echo "data/bundled.can.log updated: rerun cargo qemu, review target/qemu/tx.log and" \
-         "copy it to data/bundled.tx.golden.log" >&2
+    echo "data/bundled.can.log updated: replay it with catmodel replay --tx-out into" \
+         "data/bundled.tx.golden.log, review, and check cargo qemu against it" >&2
   else
     echo "data/bundled.can.log differs from the smoke drive; left as is" \
          "(rerun with --bundled to replace it, then regenerate the golden frames)" >&2

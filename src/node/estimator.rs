@@ -52,9 +52,25 @@ const COURSE_GAIN_FULL_RATE_HZ: f64 = 25.0;
 /// Half the window the yaw rate at a course's time is averaged over, s (the antenna's lead
 /// correction).
 const LEAD_WINDOW_S: f32 = 0.1;
-/// Complementary-filter gain towards the course per 20 ms tick at 25 Hz and above: a 0.4 s
-/// time constant.
+/// The heading filter's gain towards the course per 20 ms tick at 25 Hz and above, at its
+/// largest (a 0.4 s time constant): while the heading is uncertain and, in steady state, for
+/// chords of [`COURSE_FULL_GAIN_CHORD_M`] or longer.
 const COURSE_GAIN: f32 = 0.05;
+/// In steady state the course gain is full for a chord this long or longer and falls as the
+/// square of the chord's length below it, m ([`EstimatorState::correct_heading_on_track`]):
+/// 0.63 s at 9.5 m/s.
+pub const COURSE_FULL_GAIN_CHORD_M: f32 = 6.0;
+/// A chord's error across it, m: a standard receiver's white noise left after the lowpass and
+/// its bias's wander over the chord's 0.63 s (0.8 m with a 60 s correlation: 0.12 m), together.
+const CHORD_NOISE_M: f32 = 0.13;
+/// Ticks over which the chords' errors are correlated (each chord shares all but one fix with
+/// the previous tick's): the chord's 0.63 s.
+const CHORD_CORRELATED_TICKS: f32 = 31.5;
+/// The heading's variance when a first course sets it, rad^2: one course at the lowest speed
+/// a course is read at, 0.5 rad (one sigma).
+const HEADING_INITIAL_VAR_RAD2: f32 = 0.25;
+/// The heading's variance never grows past this, rad^2 (1 rad, one sigma).
+const HEADING_MAX_VAR_RAD2: f32 = 1.0;
 /// Dead-reckoning history, one entry per fix: it must span the course chord (at most
 /// `TRACK_LEN - 1` fixes) beyond the group delay (14.5 fixes at 100 Hz), for
 /// [`EstimatorState::correct_heading_on_track`].
@@ -79,7 +95,9 @@ pub struct EstimatorConfig {
     pub course_min_baseline_m: f32,
     /// Fixes spanned by the chord of the course estimate (1..=`TRACK_LEN - 1`).
     pub track_span_fixes: u32,
-    /// Complementary-filter gain towards the GNSS course, per tick (0..1).
+    /// The heading filter's largest gain towards the GNSS course, per tick (0..1): the COG's
+    /// and the start's gain, and the cap of the chords' (see
+    /// [`EstimatorState::correct_heading_on_track`]).
     pub course_gain: f32,
     /// Heading is only corrected above this speed, m/s.
     pub course_min_speed_mps: f32,
@@ -204,6 +222,51 @@ impl Swept {
     }
 }
 
+/// What [`EstimatorState::correct_heading_on_track`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrackCorrection {
+    /// The heading was pulled towards the chords' agreement.
+    Applied,
+    /// The car moved less than `course_min_baseline_m` over the chord: nothing to learn, the
+    /// heading is left to the dead reckoning.
+    ShortChord,
+    /// No dead-reckoning history as long as the chord yet (at the start, after a restart of
+    /// the filters): the caller may use the track's own course instead.
+    NoHistory,
+}
+
+/// The variance the heading filter gives a chord's course error measured over a chord of
+/// `chord_sq_m2` squared length with a per-tick gain cap of `course_gain`, rad^2: the chord's
+/// error across it over its length, squared, for every tick it is correlated over, and larger
+/// in the proportion a lower rate's cap is lower (the cap falls as the square root of the
+/// rate: [`EstimatorConfig::design`]).
+fn chord_var_rad2(course_gain: f32, chord_sq_m2: f32) -> f32 {
+    let rate_scale = COURSE_GAIN / math::max(course_gain, 1e-6);
+    CHORD_NOISE_M * CHORD_NOISE_M / math::max(chord_sq_m2, 1e-6)
+        * CHORD_CORRELATED_TICKS
+        * rate_scale
+        * rate_scale
+}
+
+/// What the dead reckoning's heading drift adds to its variance over `dt_s` at `speed_mps`,
+/// rad^2. The yaw rate's error goes as the speed (a curvature error times the speed), so the
+/// variance it adds per tick goes as the square of the distance a chord spans at that speed.
+/// Its scale is what makes the steady-state gain the course gain at a chord of
+/// [`COURSE_FULL_GAIN_CHORD_M`] and fall as the chord's length squared below it: for a small
+/// gain the steady state is sqrt(drift / chord variance), and the chord's variance goes as
+/// 1 / length^2 ([`chord_var_rad2`]).
+fn heading_drift_var_rad2(cfg: &EstimatorConfig, speed_mps: f32, dt_s: f32) -> f32 {
+    let span_s = cfg.track_span_fixes as f32 * cfg.gnss_period_s;
+    let chord_m = speed_mps * span_s;
+    let full_var = chord_var_rad2(
+        COURSE_GAIN,
+        COURSE_FULL_GAIN_CHORD_M * COURSE_FULL_GAIN_CHORD_M,
+    );
+    let share = chord_m / COURSE_FULL_GAIN_CHORD_M;
+    full_var * COURSE_GAIN * COURSE_GAIN * share * share * math::max(dt_s, 0.0)
+        / crate::SAMPLE_PERIOD_S
+}
+
 /// Estimator state.
 #[derive(Clone, Debug)]
 pub struct EstimatorState {
@@ -238,6 +301,9 @@ pub struct EstimatorState {
     turned_len: usize,
     /// Every course correction applied to the heading, summed (rad, wrapped to +-pi).
     corrected_rad: f32,
+    /// The heading's error variance as the heading filter reckons it, rad^2
+    /// ([`Self::correct_heading_on_track`]).
+    heading_var_rad2: f32,
 }
 
 impl Default for EstimatorState {
@@ -261,6 +327,7 @@ impl Default for EstimatorState {
             turned_head: 0,
             turned_len: 0,
             corrected_rad: 0.0,
+            heading_var_rad2: HEADING_INITIAL_VAR_RAD2,
         }
     }
 }
@@ -418,6 +485,10 @@ impl EstimatorState {
         if let Some(h) = self.heading_rad.as_mut() {
             *h = math::wrap_pi(*h + rates.yaw_rps * dt_s);
         }
+        self.heading_var_rad2 = math::min(
+            self.heading_var_rad2 + heading_drift_var_rad2(cfg, speed_mps, dt_s),
+            HEADING_MAX_VAR_RAD2,
+        );
         let swept = self
             .turned
             .get(self.turned_head)
@@ -666,7 +737,10 @@ impl EstimatorState {
         };
         let course_now = math::wrap_pi(course_rad - lead_rad + turned);
         match self.heading_rad {
-            None => self.heading_rad = Some(course_now),
+            None => {
+                self.heading_rad = Some(course_now);
+                self.heading_var_rad2 = HEADING_INITIAL_VAR_RAD2;
+            }
             Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
         }
     }
@@ -695,20 +769,37 @@ impl EstimatorState {
     /// after the turns of a lane change is hundredths of a radian from the course at its
     /// middle: `tests::heading_in_a_weave`); the
     /// corrections applied since its middle are already in the heading and are taken off. The
-    /// lever arm and the rear axle's slide are in both chords. `since_fix_s`: time since the
-    /// latest fix. Returns `false`, doing nothing, until the dead reckoning has a history with a
-    /// heading as long as the chord plus the group delay (at the start, after a restart of the
-    /// filters): [`Self::correct_heading`] with [`Self::track_course`] then.
-    pub fn correct_heading_on_track(&mut self, cfg: &EstimatorConfig, since_fix_s: f32) -> bool {
+    /// lever arm and the rear axle's slide are in both chords.
+    ///
+    /// The gain is a scalar Kalman filter's on the heading's error variance, capped at the
+    /// course gain: a chord's course error has the variance `chord_var_rad2` (its ends' error
+    /// across it over its length, so 1 / length^2), the dead reckoning's drift adds
+    /// `heading_drift_var_rad2` per tick (as the speed^2). A first course sets the variance
+    /// large (0.5 rad), so a heading that starts off converges at the full gain; in steady
+    /// state the gain is the course gain for chords of [`COURSE_FULL_GAIN_CHORD_M`] and longer
+    /// (at 9.5 m/s and above) and falls as the chord's length squared below it, so that a
+    /// standard receiver's chords at a crawl no longer pull the heading about (0.1-0.14 rad
+    /// off the truth at 2-3 m/s with the full gain; docs/findings.md).
+    ///
+    /// `since_fix_s`: time since the latest fix. Does nothing while either chord is shorter than
+    /// `course_min_baseline_m` ([`TrackCorrection::ShortChord`]), and until the dead
+    /// reckoning has a history with a heading as long as the chord plus the group delay (at the
+    /// start, after a restart of the filters: [`TrackCorrection::NoHistory`];
+    /// [`Self::correct_heading`] with [`Self::track_course`] then).
+    pub fn correct_heading_on_track(
+        &mut self,
+        cfg: &EstimatorConfig,
+        since_fix_s: f32,
+    ) -> TrackCorrection {
         let Some(heading) = self.heading_rad else {
-            return false;
+            return TrackCorrection::NoHistory;
         };
         let span = (cfg.track_span_fixes as usize).clamp(1, TRACK_LEN - 1);
         let delay = cfg.group_delay_fixes.max(0.0);
         let k0 = delay as usize; // floor: delay >= 0
         let w = delay - k0 as f32;
         if (self.odo_valid as usize) < k0 + span + 2 || (self.fixes as usize) < span + 2 * k0 {
-            return false;
+            return TrackCorrection::NoHistory;
         }
         let odo_at = |k: usize| -> Option<Xy> {
             let a = self.odo_fixes_ago(k)?;
@@ -725,21 +816,27 @@ impl EstimatorState {
             odo_at(k0),
             odo_at(k0 + span),
         ) else {
-            return false;
+            return TrackCorrection::NoHistory;
         };
         let (gx, gy) = (now.x_m - then.x_m, now.y_m - then.y_m);
         let (dx, dy) = (odo_now.x_m - odo_then.x_m, odo_now.y_m - odo_then.y_m);
         let min2 = cfg.course_min_baseline_m * cfg.course_min_baseline_m;
         if gx * gx + gy * gy < min2 || dx * dx + dy * dy < min2 {
-            return false;
+            return TrackCorrection::ShortChord;
         }
         // The angle from the dead reckoning's chord to the track's, clockwise (headings are
         // clockwise from north: atan2(east, north)).
         let error_then = math::atan2(dy * gx - dx * gy, dx * gx + dy * gy);
         let age_s = (span as f32 * 0.5 + delay) * cfg.gnss_period_s + since_fix_s;
         let error_now = math::wrap_pi(error_then - self.corrected_since(age_s));
-        self.turn_heading(heading, cfg.course_gain * error_now);
-        true
+        // A scalar Kalman update of the heading's variance with the gain capped at the
+        // course gain (Joseph form: right for any gain).
+        let chord_var = chord_var_rad2(cfg.course_gain, dx * dx + dy * dy);
+        let var = self.heading_var_rad2;
+        let gain = math::min(cfg.course_gain, var / (var + chord_var));
+        self.heading_var_rad2 = (1.0 - gain) * (1.0 - gain) * var + gain * gain * chord_var;
+        self.turn_heading(heading, gain * error_now);
+        TrackCorrection::Applied
     }
 
     /// Course of the filtered track over the last `track_span_fixes` fixes, with its age in fixes
@@ -954,7 +1051,11 @@ mod tests {
                     }
                 }
                 let since_fix_s = (ms - last_fix_ms) as f32 * 1e-3;
-                if !(chords && st.correct_heading_on_track(&cfg, since_fix_s)) {
+                let on_track = chords.then(|| st.correct_heading_on_track(&cfg, since_fix_s));
+                if !matches!(
+                    on_track,
+                    Some(TrackCorrection::Applied | TrackCorrection::ShortChord)
+                ) {
                     if let Some((course, age_fixes)) = st.track_course(&cfg) {
                         let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
                         st.correct_heading(&cfg, course, age_s, v, rates);
@@ -993,6 +1094,89 @@ mod tests {
         );
         let (course, _) = run(false, 100.0);
         assert!(course > 0.015, "the chord's course: {course} rad");
+    }
+
+    /// A standard receiver at parking-lot speed: 100 Hz fixes with 0.3 m of white noise and a
+    /// 0.8 m bias wandering with a 60 s correlation (the CAT Vehicle's, paper II-A), the car at
+    /// 3 m/s on a 40 m circle, its dead reckoning turning 0.002 rad/m too fast (a 0.3 deg
+    /// steering error on a 2.6 m wheelbase). The heading set 0.5 rad off by a first course
+    /// comes within 0.1 rad in 3 s (0.015-0.059 rad on these seeds: the filter's variance
+    /// starts large, so does the gain; a gain falling with the chord's length alone left it
+    /// 0.31-0.33 rad off), and after 10 s its RMS error is 0.021-0.032 rad, the largest
+    /// 0.047-0.072 rad. With a constant gain (before) they were 0.043-0.050 and 0.12-0.13 rad:
+    /// 1.9 m chords at full gain carry their ends' noise into the heading.
+    #[test]
+    fn heading_at_a_crawl_with_a_noisy_receiver() {
+        let (v, radius, drift) = (3.0f64, 40.0f64, 0.002f64);
+        let mut results = [(0.0f32, 0.0f32, 0.0f32); 3];
+        for (seed, result) in results.iter_mut().enumerate() {
+            let cfg = EstimatorConfig::design(100.0, 0.0, 0.0).unwrap();
+            let mut st = EstimatorState::default();
+            // A xorshift stream and Box-Muller normals: the same draw on every machine.
+            let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ (seed as u64 + 1);
+            let mut uniform = move || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let mut normal = move || {
+                let (u1, u2) = (uniform(), uniform());
+                libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
+            };
+            let (white, bias_sigma, bias_tau) = (0.3f64, 0.8f64, 60.0f64);
+            let phi = libm::exp(-0.01 / bias_tau);
+            let mut bias = [bias_sigma * normal(), bias_sigma * normal()];
+            let yaw = v / radius;
+            let truth = |t: f64| yaw * t;
+            st.correct_heading(&cfg, 0.5, 0.0, v as f32, Rates::default());
+            let (mut sum_sq, mut n, mut worst, mut at_3s) = (0.0f32, 0u32, 0.0f32, 0.0f32);
+            for tick in 1..=3000u32 {
+                let rates = Rates {
+                    yaw_rps: (yaw + drift * v) as f32,
+                    rear_side_mps: 0.0,
+                };
+                st.propagate(&cfg, v as f32, rates, 0.02);
+                for k in 1..=2u32 {
+                    // Fixes at 100 Hz, the second at the tick's instant.
+                    let t = (tick as f64 - 1.0) * 0.02 + k as f64 * 0.01;
+                    for b in &mut bias {
+                        *b = phi * *b + bias_sigma * libm::sqrt(1.0 - phi * phi) * normal();
+                    }
+                    let (s, c) = (libm::sin(truth(t)), libm::cos(truth(t)));
+                    // A circle through the origin, turning clockwise: centre `radius` east.
+                    let fix = Xy {
+                        x_m: (radius * (1.0 - c) + bias[0] + white * normal()) as f32,
+                        y_m: (radius * s + bias[1] + white * normal()) as f32,
+                    };
+                    st.add_fix(&cfg, fix, (0.02 - k as f64 * 0.01) as f32, v as f32);
+                }
+                if st.correct_heading_on_track(&cfg, 0.0) == TrackCorrection::NoHistory {
+                    if let Some((course, age_fixes)) = st.track_course(&cfg) {
+                        let age_s = age_fixes * cfg.gnss_period_s;
+                        st.correct_heading(&cfg, course, age_s, v as f32, rates);
+                    }
+                }
+                let t = tick as f64 * 0.02;
+                let error = math::wrap_pi(st.heading_rad().unwrap() - truth(t) as f32).abs();
+                if tick == 150 {
+                    at_3s = error;
+                }
+                if t > 10.0 {
+                    sum_sq += error * error;
+                    n += 1;
+                    worst = worst.max(error);
+                }
+            }
+            *result = (at_3s, libm::sqrtf(sum_sq / n as f32), worst);
+        }
+        for (seed, (at_3s, rms, worst)) in results.iter().enumerate() {
+            assert!(*at_3s < 0.1, "seed {seed}: {at_3s} rad off after 3 s");
+            assert!(
+                *rms < 0.035 && *worst < 0.09,
+                "seed {seed}: {rms} rad RMS, {worst} at most"
+            );
+        }
     }
 
     /// The sideways travel is kept wrapped to +-1024 m; a window that spans the wrap still

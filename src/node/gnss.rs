@@ -8,7 +8,7 @@ use crate::geodesy::{GeodesyError, LocalFrame};
 use crate::math;
 use crate::model::kinematic::Pose;
 
-use super::estimator::{EstimatorConfig, EstimatorState, Rates, Xy};
+use super::estimator::{EstimatorConfig, EstimatorState, Rates, TrackCorrection, Xy};
 use super::inputs::{GnssCourse, GnssFix, Inputs};
 use super::stage::{Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK};
 use super::{bump, NodeConfig};
@@ -339,7 +339,8 @@ impl Gnss {
                     .last_us(Input::Gnss)
                     .map_or(0, |t| now_us.saturating_sub(t));
                 let since_fix_s = math::u64_to_f32(since_fix_us) * 1e-6;
-                if !self.estimator.correct_heading_on_track(cfg, since_fix_s) {
+                let on_track = self.estimator.correct_heading_on_track(cfg, since_fix_s);
+                if on_track == TrackCorrection::NoHistory {
                     if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
                         let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
                         self.estimator
