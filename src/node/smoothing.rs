@@ -190,7 +190,7 @@ pub const HEADING_SETTLE_TIME_CONSTANTS: f32 = 3.0;
 /// of its complementary filter's time constant (`1 / course_gain` such ticks: 6 s at 1 Hz,
 /// 1.2 s at 100 Hz) the first heading's error is gone (the chords' gain is the course gain
 /// while the heading's variance is large and falls with the chord's length after: from a
-/// 0.5 rad start at 3 m/s with a standard receiver, 0.02-0.06 rad are left 1.2 s after the
+/// 0.5 rad start at 3 m/s with a standard receiver, 0.02-0.07 rad are left 1.2 s after the
 /// corrections begin, `estimator::tests::heading_at_a_crawl_with_a_noisy_receiver`). Once settled it stays so (the heading
 /// is never forgotten; dead reckoning carries it through GNSS gaps). Counted in the drive stage
 /// from the tick's pose and speed, and only while there is a path: the estimator's stages and
