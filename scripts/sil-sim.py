@@ -329,6 +329,8 @@ def main():
     over_limit = 0.0
     low, stop_rise = math.inf, 0.0
     statuses = {}
+    # The fallback's ticks by CONTROL_COMMAND fallback_reason (raw; catmodel.dbc names them).
+    reasons = {}
     rows = []
     prev = car.antenna()
     # Time enough for the course at its speed, twice over, and the launch.
@@ -419,6 +421,9 @@ def main():
             print(f"sil-sim: engaged at {t_tick:.2f} s", file=sys.stderr)
         if engaged_at is not None:
             statuses[status] = statuses.get(status, 0) + 1
+            if status == 3:
+                reason = int(command["fallback_reason"])
+                reasons[reason] = reasons.get(reason, 0) + 1
             if command["steer_cmd_pct"] is None or command["speed_cmd_mps"] is None:
                 fail(f"status {status} without a command at {t_tick:.6f}", 1)
             steer_cmd, speed_cmd = command["steer_cmd_pct"], command["speed_cmd_mps"]
@@ -463,7 +468,9 @@ def main():
     where = f"{abs(short):.2f} m {'short of' if short >= 0 else 'past'}"
     print(
         f"sil-sim: {tick} ticks, engaged {t - engaged_at:.1f} s, "
-        f"statuses {dict(sorted(statuses.items()))}; "
+        f"statuses {dict(sorted(statuses.items()))}"
+        + (f" (fallback reasons {dict(sorted(reasons.items()))})" if reasons else "")
+        + "; "
         f"rear axle from the path: RMS {rms:.3f} m, largest {worst:.3f} m; "
         f"speed over the path's limit by {max(over_limit, 0.0):.2f} m/s at most; "
         f"stopped {where} the path's end at {car.v:.2f} m/s; "

@@ -615,19 +615,23 @@ fn path_limits_header_obstacle_origin_hand_packed() {
 
 #[test]
 fn control_command_hand_packed() {
-    // counter 11; status 2 (bits 4..5); steer -12.34 % = raw -1234 = 0xFB2E (8..23); speed
-    // 10 m/s = 1000 (24..39).
+    // counter 11; status 3 (bits 4..5); steer -12.34 % = raw -1234 = 0xFB2E (8..23); speed
+    // 10 m/s = 1000 (24..39); fallback reason 7, no passage (40..43).
     let m = ControlCommand {
-        status: ControlStatus::Avoiding,
+        status: ControlStatus::Fallback,
+        fallback: FallbackCause::NoPassage,
         steer_cmd_pct: Some(-12.34),
         speed_cmd_mps: Some(10.0),
     };
-    let word: u64 = 11 | (2 << 4) | (0xFB2E << 8) | (1000 << 24);
+    let word: u64 = 11 | (3 << 4) | (0xFB2E << 8) | (1000 << 24) | (7 << 40);
     let frame = m.encode(11);
     assert_eq!(frame.id, CanId::Standard(0x320));
     assert_eq!(frame.data, hand_frame(0x320, word));
     let (back, c) = ControlCommand::decode(&frame).unwrap();
-    assert_eq!((c, back.status), (11, ControlStatus::Avoiding));
+    assert_eq!(
+        (c, back.status, back.fallback),
+        (11, ControlStatus::Fallback, FallbackCause::NoPassage)
+    );
     assert!(close(back.steer_cmd_pct, m.steer_cmd_pct, 0.01));
     assert!(close(back.speed_cmd_mps, m.speed_cmd_mps, 0.01));
 }
@@ -706,13 +710,15 @@ fn controller_messages_round_trip_at_limits() {
                 ControlStatus::Avoiding,
                 ControlStatus::Fallback,
             ] {
+                let fallback = FallbackCause::ALL[(i + 4 * counter as usize) % 11];
                 let m = ControlCommand {
                     status,
+                    fallback,
                     steer_cmd_pct: [Some(-100.0), Some(100.0), None][i],
                     speed_cmd_mps: [Some(655.34), None, Some(0.0)][i],
                 };
                 let (back, c) = ControlCommand::decode(&m.encode(counter)).unwrap();
-                assert_eq!((c, back.status), (counter, status));
+                assert_eq!((c, back.status, back.fallback), (counter, status, fallback));
                 assert!(close(back.steer_cmd_pct, m.steer_cmd_pct, 0.01));
                 assert!(close(back.speed_cmd_mps, m.speed_cmd_mps, 0.01));
             }

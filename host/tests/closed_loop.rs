@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use catmodel::can::codec::ControlStatus;
+use catmodel::can::codec::{ControlStatus, FallbackCause};
 use catmodel::control::path::Path as CorePath;
 use catmodel_host::closed_loop::driver::{Controller, NodeDriver};
 use catmodel_host::closed_loop::metrics::{body_corners, distance_to_body, Scorer};
@@ -291,6 +291,36 @@ fn closed_loop_command_writes_the_session_and_it_replays_byte_for_byte() {
     assert_eq!(metrics["controller"], "mpc");
     assert_eq!(metrics["cone_hits"], 0);
     assert_eq!(metrics["clean"], true);
+    // Engaged, the controller never fell back; before, the bus said why it waited: no
+    // position yet, then the heading settling, each for a while, in that order
+    // (`samples.csv`'s `fallback`, CONTROL_COMMAND's `fallback_reason`).
+    assert_eq!(metrics["fallback_ticks"], serde_json::json!({}));
+    let samples = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
+    let header: Vec<&str> = samples.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let (status, fallback) = (column("status"), column("fallback"));
+    // Runs of equal (status, fallback) in tick order, with their lengths.
+    let mut phases: Vec<(&str, &str, usize)> = Vec::new();
+    for line in samples.lines().skip(1) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let key = (cells[status], cells[fallback]);
+        match phases.last_mut() {
+            Some((s, f, n)) if (*s, *f) == key => *n += 1,
+            _ => phases.push((key.0, key.1, 1)),
+        }
+    }
+    let names: Vec<(&str, &str)> = phases.iter().take(4).map(|p| (p.0, p.1)).collect();
+    assert_eq!(
+        names,
+        [
+            ("0", "none"),
+            ("3", "not_ready"),
+            ("3", "heading_settling"),
+            ("1", "none")
+        ],
+        "{phases:?}"
+    );
+    assert!(phases.iter().take(3).all(|p| p.2 >= 10), "{phases:?}");
     for f in ["path.svg", "lateral_error.svg", "steering.svg", "speed.svg"] {
         let text = std::fs::read_to_string(dir.join(f)).unwrap();
         assert!(
@@ -543,6 +573,10 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
             out.samples[lost].t_s
         );
     }
+    // The bus says why, from the loss on.
+    assert!(out.samples[lost..]
+        .iter()
+        .all(|s| s.command.fallback == FallbackCause::LostPath));
     // It braked to a stop with the wheels straight, in fallback, well before the time limit.
     let last = out.samples.last().unwrap();
     assert_eq!(last.command.status, ControlStatus::Fallback);

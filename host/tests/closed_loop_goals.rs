@@ -436,6 +436,12 @@ fn the_pickup_stops_before_an_obstacle_its_plan_cannot_pass() {
         let m = &out.metrics;
         assert!(!m.completed, "seed {seed}: passed: {m:?}");
         assert!(m.status_ticks[3] > 0, "seed {seed}: {m:?}");
+        // And it says why on the bus: every fallback tick names the missing passage.
+        assert_eq!(
+            m.fallback_ticks.keys().copied().collect::<Vec<_>>(),
+            ["no_passage"],
+            "seed {seed}: {m:?}"
+        );
         let clearance = m.min_obstacle_clearance_m.unwrap_or(f64::NAN);
         assert!(
             clearance >= 1.0,

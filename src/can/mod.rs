@@ -25,10 +25,10 @@ pub mod spec;
 
 pub use codec::{
     decode_input, decode_planner, ControlCommand, ControlStatus, DecodeError, EncodeReport,
-    GnssCogSog, GnssPosition, HealthFlags, InputMessage, LocalOrigin, ModelMode, ModelOutputs,
-    NodeStatus, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint, PedalReport,
-    PlannerMessage, Prediction, PredictionPoint, SpeedReport, StateMotion, StatePosition,
-    SteeringReport,
+    FallbackCause, GnssCogSog, GnssPosition, HealthFlags, InputMessage, LocalOrigin, ModelMode,
+    ModelOutputs, NodeStatus, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint,
+    PedalReport, PlannerMessage, Prediction, PredictionPoint, SpeedReport, StateMotion,
+    StatePosition, SteeringReport,
 };
 pub use crc::crc8_sae_j1850;
 pub use frame::{CanFrame, CanId, TimedFrame};

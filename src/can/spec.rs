@@ -472,6 +472,9 @@ pub mod sig {
         .scaled(0.01, "m/s")
         .raw_range(0, 65_534)
         .na(0xFFFF);
+    /// CONTROL_COMMAND: why the status is the fallback (0 when it is not; `FallbackCause`).
+    pub const FALLBACK_REASON: SignalSpec =
+        SignalSpec::uint("fallback_reason", 40, 4).raw_range(0, 10);
 
     /// NODE_STATUS page number (multiplexer switch).
     pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 5).switch();
@@ -885,6 +888,7 @@ pub const CONTROL_COMMAND: MessageSpec = MessageSpec {
         COMMAND_STATUS,
         STEER_CMD_PCT,
         COMMAND_SPEED_MPS,
+        FALLBACK_REASON,
         CRC,
     ],
     integrity: Integrity::CounterCrc(COUNTER_OUT),

@@ -38,10 +38,12 @@
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 
-use crate::can::codec::{ControlCommand, ControlStatus, ObstacleCircle, PlannerMessage};
+use crate::can::codec::{
+    ControlCommand, ControlStatus, FallbackCause, ObstacleCircle, PlannerMessage,
+};
 use crate::control::mpc::{
-    self, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint, Sample, SidePoint,
-    DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    self, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint,
+    Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
 use crate::control::planner::{PlannerEvent, PlannerInputs};
@@ -142,6 +144,7 @@ const IDLE_PURSUIT: PurePursuitState = PurePursuitState {
 /// CONTROL_COMMAND before any was sent (`Drive::new` and `Drive::init`).
 const NO_COMMAND: ControlCommand = ControlCommand {
     status: ControlStatus::NoPath,
+    fallback: FallbackCause::None,
     steer_cmd_pct: Some(0.0),
     speed_cmd_mps: Some(0.0),
 };
@@ -380,7 +383,7 @@ impl Drive {
     ) -> DriveOutput {
         let Some(path) = self.planner.path() else {
             self.smoothing.forget();
-            return self.hold(ControlStatus::NoPath);
+            return self.hold(ControlStatus::NoPath, FallbackCause::None);
         };
         // Counted with a path only: the ticks without one are the estimating ticks, whose
         // bound has no room for it (docs/firmware.md, "Worst-case tick").
@@ -390,13 +393,18 @@ impl Drive {
         let (Some(pose), Some(speed_model), true) = (inputs.pose, inputs.speed_model, settled)
         else {
             self.smoothing.forget();
-            return self.hold(ControlStatus::Fallback);
+            let cause = if inputs.pose.is_some() && inputs.speed_model.is_some() {
+                FallbackCause::HeadingSettling
+            } else {
+                FallbackCause::NotReady
+            };
+            return self.hold(ControlStatus::Fallback, cause);
         };
         let pose = self
             .smoothing
             .control_pose(&config.estimator, pose, inputs.dead_reckoned);
         if self.unconfigured {
-            return self.hold(ControlStatus::Fallback);
+            return self.hold(ControlStatus::Fallback, FallbackCause::Unconfigured);
         }
         if self.lost_path {
             // Latched: a noisy estimate that strays back into the corridor does not hand a
@@ -408,11 +416,12 @@ impl Drive {
             (Controller::Mpc, Some(mpc)) if path_loaded => {
                 let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
                     // Nothing to move on: the path takes effect next tick.
-                    let status = match self.last_command.status {
-                        ControlStatus::NoPath => ControlStatus::NoPath,
-                        _ => ControlStatus::Fallback,
+                    return match self.last_command.status {
+                        ControlStatus::NoPath => {
+                            self.hold(ControlStatus::NoPath, FallbackCause::None)
+                        }
+                        _ => self.hold(ControlStatus::Fallback, FallbackCause::PathLoading),
                     };
-                    return self.hold(status);
                 };
                 mpc.coast(&mut self.mpc, out);
                 probe.lap(Stage::DriveCoast);
@@ -435,7 +444,7 @@ impl Drive {
                     config,
                     probe,
                 ) else {
-                    return self.hold(ControlStatus::Fallback);
+                    return self.hold(ControlStatus::Fallback, FallbackCause::BadInput);
                 };
                 let (out, tracking) = match solved {
                     Ok(solved) => solved,
@@ -474,6 +483,13 @@ impl Drive {
                 DriveOutput {
                     command: ControlCommand {
                         status: out.status,
+                        // Pure pursuit's own fallbacks are all inputs it cannot use: no pose,
+                        // a path it cannot project the car on or sample ahead, a non-finite
+                        // result (its speed input is checked finite first).
+                        fallback: match out.status {
+                            ControlStatus::Fallback => FallbackCause::BadInput,
+                            _ => FallbackCause::None,
+                        },
                         steer_cmd_pct: Some(out.steer_cmd_pct),
                         speed_cmd_mps: Some(out.speed_cmd_mps),
                     },
@@ -487,7 +503,7 @@ impl Drive {
                 self.last_speed_cmd_mps = speed;
                 output
             }
-            _ => self.hold(ControlStatus::Fallback),
+            _ => self.hold(ControlStatus::Fallback, FallbackCause::NonFiniteCommand),
         }
     }
 
@@ -497,15 +513,16 @@ impl Drive {
     fn stop_lost(&mut self) -> DriveOutput {
         self.lost_path = true;
         self.last_steer_cmd_pct = 0.0;
-        self.hold(ControlStatus::Fallback)
+        self.hold(ControlStatus::Fallback, FallbackCause::LostPath)
     }
 
     /// Speed 0, steering held where it was last commanded.
-    fn hold(&mut self, status: ControlStatus) -> DriveOutput {
+    fn hold(&mut self, status: ControlStatus, fallback: FallbackCause) -> DriveOutput {
         self.last_speed_cmd_mps = 0.0;
         DriveOutput {
             command: ControlCommand {
                 status,
+                fallback,
                 steer_cmd_pct: Some(self.last_steer_cmd_pct),
                 speed_cmd_mps: Some(0.0),
             },
@@ -541,6 +558,17 @@ fn mpc_command(out: &MpcOutput) -> DriveOutput {
                 mpc::ControlStatus::Tracking => ControlStatus::Tracking,
                 mpc::ControlStatus::Avoiding => ControlStatus::Avoiding,
                 mpc::ControlStatus::Fallback => ControlStatus::Fallback,
+            },
+            fallback: match (out.status, out.fallback) {
+                (mpc::ControlStatus::Fallback, Some(reason)) => match reason {
+                    FallbackReason::BadInput => FallbackCause::BadInput,
+                    FallbackReason::NoPassage => FallbackCause::NoPassage,
+                    FallbackReason::Solver => FallbackCause::Solver,
+                    FallbackReason::ObstacleNotCleared => FallbackCause::ObstacleNotCleared,
+                },
+                // A fallback the solve did not name (none does today): an input it refused.
+                (mpc::ControlStatus::Fallback, None) => FallbackCause::BadInput,
+                _ => FallbackCause::None,
             },
             steer_cmd_pct: Some(out.steer_cmd_pct),
             speed_cmd_mps: Some(out.speed_cmd_mps),

@@ -6,7 +6,7 @@
 //! names (`[control]` of the model file) and sends CONTROL_COMMAND itself. The closed-loop
 //! tools may drive with another controller than the model file's ([`Controller`]), and tune
 //! the reference controller; a SIL session runs the node exactly as configured.
-use catmodel::can::codec::{ControlCommand, ControlStatus};
+use catmodel::can::codec::{ControlCommand, ControlStatus, FallbackCause};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::mpc::MpcTuning;
 use catmodel::control::path::Tracking;
@@ -120,6 +120,7 @@ impl Driver for NodeDriver {
 /// The command a driver sends when it has nothing (for records before the first tick).
 pub const IDLE_COMMAND: ControlCommand = ControlCommand {
     status: ControlStatus::NoPath,
+    fallback: FallbackCause::None,
     steer_cmd_pct: Some(0.0),
     speed_cmd_mps: Some(0.0),
 };

@@ -7,6 +7,8 @@
 //! centre to the rectangle <= its radius). Not touching a cone is not enough: the car must go
 //! *through* the track, so every pair of cones is a gate, and the rear axle must cross each gate
 //! between its two lane edges (a missed gate is scored by how far outside it the axle crossed).
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
 use super::scenario::{self, Cone, Course, CourseFrame};
@@ -214,6 +216,9 @@ pub struct Metrics {
     pub total_time_s: f64,
     /// Ticks by CONTROL_COMMAND status while engaged: no path, tracking, avoiding, fallback.
     pub status_ticks: [u64; 4],
+    /// The fallback's ticks while engaged by CONTROL_COMMAND `fallback_reason` (the DBC's
+    /// names: `lost_path`, `no_passage`, ...); only the reasons that occurred.
+    pub fallback_ticks: BTreeMap<&'static str, u64>,
     /// Whether the run is clean: no cone hit, no gate missed, no collision, completed, and,
     /// off the cone track (the obstacle, the loop), the body never wholly outside the corridor
     /// ([`Self::corridor_exit_m`] below the body's width: the car never left the road). A

@@ -20,6 +20,8 @@ pub mod planner;
 pub mod plots;
 pub mod scenario;
 
+use std::collections::BTreeMap;
+
 use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{CanFrame, TimedFrame};
@@ -213,6 +215,7 @@ struct DriveByWire {
     current: Command,
     pending: Option<(u64, Command)>,
     status_ticks: [u64; 4],
+    fallback_ticks: BTreeMap<&'static str, u64>,
     engaged_at_s: Option<f64>,
 }
 
@@ -229,6 +232,7 @@ impl DriveByWire {
             },
             pending: None,
             status_ticks: [0; 4],
+            fallback_ticks: BTreeMap::new(),
             engaged_at_s: None,
         }
     }
@@ -277,6 +281,12 @@ impl DriveByWire {
                 ));
                 if let Some(n) = self.status_ticks.get_mut(command.status as usize) {
                     *n += 1;
+                }
+                if command.status == ControlStatus::Fallback {
+                    *self
+                        .fallback_ticks
+                        .entry(command.fallback.name())
+                        .or_insert(0) += 1;
                 }
             }
         }
@@ -505,6 +515,7 @@ pub fn run(
         driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
         total_time_s,
         status_ticks: dbw.status_ticks,
+        fallback_ticks: dbw.fallback_ticks.clone(),
         clean: completed
             && cone_hits == 0
             && scorer.gates_missed() == 0
@@ -666,13 +677,14 @@ pub fn write_session(
 }
 
 /// The per-tick records as CSV: `t,x,y,heading,speed,est_x,est_y,est_heading,status,
-/// steer_cmd,speed_cmd,steer,engaged,station,lateral` (truth rear axle; the node's estimate;
-/// the command the drive-by-wire received; the actuator's steering; truth station and lateral
-/// error on the path; empty where not available).
+/// steer_cmd,speed_cmd,steer,engaged,station,lateral,fallback` (truth rear axle; the node's
+/// estimate; the command the drive-by-wire received; the actuator's steering; truth station and
+/// lateral error on the path; the CONTROL_COMMAND's `fallback_reason` by its DBC name; empty
+/// where not available).
 pub fn samples_csv(samples: &[Sample]) -> String {
     use std::fmt::Write;
     let mut out = String::from(
-        "t,x,y,heading,speed,est_x,est_y,est_heading,status,steer_cmd,speed_cmd,steer,engaged,station,lateral\n",
+        "t,x,y,heading,speed,est_x,est_y,est_heading,status,steer_cmd,speed_cmd,steer,engaged,station,lateral,fallback\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for s in samples {
@@ -682,7 +694,7 @@ pub fn samples_csv(samples: &[Sample]) -> String {
         };
         let _ = writeln!(
             out,
-            "{:.2},{:.4},{:.4},{:.5},{:.3},{},{},{},{},{},{},{:.2},{},{},{}",
+            "{:.2},{:.4},{:.4},{:.5},{:.3},{},{},{},{},{},{},{:.2},{},{},{},{}",
             s.t_s,
             s.truth.x,
             s.truth.y,
@@ -698,6 +710,7 @@ pub fn samples_csv(samples: &[Sample]) -> String {
             u8::from(s.engaged),
             opt(s.station_m.is_finite().then_some(s.station_m)),
             opt(s.lateral_m.is_finite().then_some(s.lateral_m)),
+            s.command.fallback.name(),
         );
     }
     out
