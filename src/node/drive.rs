@@ -28,7 +28,8 @@
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
 //! sends a new path; latched, so that a noisy estimate straying back into the corridor does
 //! not hand the car back to a controller). Never a NaN: every command is checked finite, else
-//! the fallback.
+//! the fallback. Its `fallback_reason` says which of these fallbacks it is ([`FallbackCause`];
+//! 0 when the status is not the fallback).
 //!
 //! The state (about 35 KiB: two paths of 256 points, the controller's warm start and its
 //! reference) is kept apart from [`super::Node`] so that a platform can place it in a static:
