@@ -585,6 +585,51 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
     assert!(last.truth.speed < 0.05 && last.t_s < 60.0, "{:?}", last);
 }
 
+/// A tuning the controller refuses (a return heading past its 0.5 rad bound) leaves it
+/// unconfigured: it never plans, the car is never engaged, and once the node is ready and its
+/// heading settled every CONTROL_COMMAND says why (`unconfigured`), not merely "fallback".
+#[test]
+fn a_refused_tuning_is_named_on_the_bus() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let course = scenario::course(Kind::Loop, &vehicle.body, 4.0);
+    let mut tuning = catmodel::control::mpc::DEFAULT_TUNING;
+    tuning.return_heading_rad = 0.9;
+    let mut driver = NodeDriver::new(node, Controller::MpcTuned(tuning));
+    let options = RunOptions {
+        seed: 0,
+        receiver: Receiver::Rtk,
+        max_time_s: 20.0,
+        replan_s: None,
+        start_offset_m: 0.0,
+    };
+    let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+    assert!(out.samples.iter().all(|s| !s.engaged));
+    // The fallback's reasons in tick order, each run of equal ones once: without a position
+    // the node is not ready; the heading then settles while the driver launches the car (it
+    // drives on until the controller reports tracking); after that the tuning is what stops it,
+    // to the end.
+    let mut causes: Vec<FallbackCause> = out
+        .samples
+        .iter()
+        .filter(|s| s.command.status == ControlStatus::Fallback)
+        .map(|s| s.command.fallback)
+        .collect();
+    let fallback_ticks = causes.len();
+    causes.dedup();
+    assert_eq!(
+        causes,
+        [
+            FallbackCause::NotReady,
+            FallbackCause::HeadingSettling,
+            FallbackCause::Unconfigured
+        ]
+    );
+    assert!(
+        fallback_ticks > 500,
+        "{fallback_ticks} fallback ticks of 1000"
+    );
+}
+
 /// A car taken over 2 m off its path, outside its corridor (the obstacle road's corridor ends
 /// 1.75 m right of the path: the body is 1 m over it): the controller returns it without
 /// swinging through to the other side. Before the corridor rows gave way to a start outside
