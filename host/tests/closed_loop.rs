@@ -585,6 +585,23 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
     assert!(last.truth.speed < 0.05 && last.t_s < 60.0, "{:?}", last);
 }
 
+/// The reasons' names come from `catmodel.dbc` alone: it names every cause the codec sends,
+/// one name per raw value, and nothing else.
+#[test]
+fn every_fallback_cause_has_its_dbc_name() {
+    let names = catmodel_host::closed_loop::fallback_names();
+    let raws: Vec<i64> = names.iter().map(|(v, _)| *v).collect();
+    let causes: Vec<i64> = FallbackCause::ALL
+        .iter()
+        .map(|c| i64::from(*c as u8))
+        .collect();
+    assert_eq!(raws, causes);
+    assert_eq!(
+        catmodel_host::closed_loop::fallback_name(&names, FallbackCause::LostPath as u8),
+        "lost_path"
+    );
+}
+
 /// A tuning the controller refuses (a return heading past its 0.5 rad bound) leaves it
 /// unconfigured: it never plans, the car is never engaged, and once the node is ready and its
 /// heading settled every CONTROL_COMMAND says why (`unconfigured`), not merely "fallback".

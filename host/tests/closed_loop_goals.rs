@@ -438,7 +438,10 @@ fn the_pickup_stops_before_an_obstacle_its_plan_cannot_pass() {
         assert!(m.status_ticks[3] > 0, "seed {seed}: {m:?}");
         // And it says why on the bus: every fallback tick names the missing passage.
         assert_eq!(
-            m.fallback_ticks.keys().copied().collect::<Vec<_>>(),
+            m.fallback_ticks
+                .keys()
+                .map(String::as_str)
+                .collect::<Vec<_>>(),
             ["no_passage"],
             "seed {seed}: {m:?}"
         );

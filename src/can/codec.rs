@@ -1058,86 +1058,41 @@ impl ControlStatus {
 }
 
 /// Why the controller is in its fallback (CONTROL_COMMAND `fallback_reason`): for the planner
-/// and whoever reads a log to tell a car that waits from one that stopped, and why.
+/// and whoever reads a log to tell a car that waits from one that stopped, and why. The
+/// discriminant is the raw value; `catmodel.dbc` names each (`VAL_ 800 fallback_reason`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
 pub enum FallbackCause {
-    /// Not in the fallback (status 0, 1 or 2), raw 0.
+    /// Not in the fallback (status 0, 1 or 2).
     #[default]
-    None,
-    /// No valid position or speed model yet, raw 1.
-    NotReady,
-    /// The heading has not settled since the car started moving with a path, raw 2.
-    HeadingSettling,
-    /// The controller's tuning from the model file was refused: it never plans, raw 3.
-    Unconfigured,
-    /// A new path was loaded this tick and there is no plan of the last tick to move on;
-    /// the controller plans on it next tick, raw 4.
-    PathLoading,
+    None = 0,
+    /// No valid position or speed model yet.
+    NotReady = 1,
+    /// The heading has not settled since the car started moving with a path.
+    HeadingSettling = 2,
+    /// The controller's tuning from the model file was refused: it never plans.
+    Unconfigured = 3,
+    /// A new path was loaded this tick and there is no plan of the last tick to move on; the
+    /// controller plans on it next tick.
+    PathLoading = 4,
     /// The car has lost its path (beside the corridor or facing against it): stopped with the
-    /// wheels straight until the planner sends a new path, raw 5.
-    LostPath,
+    /// wheels straight until the planner sends a new path.
+    LostPath = 5,
     /// An input the controller cannot use (non-finite, out of range, a path it cannot sample
-    /// there), raw 6.
-    BadInput,
-    /// An obstacle leaves no room for the body on either side within the corridor, raw 7.
-    NoPassage,
-    /// The steering problem could not be built or solved, raw 8.
-    Solver,
-    /// The plan after the iteration cap still enters an obstacle's inflated circle, raw 9.
-    ObstacleNotCleared,
-    /// The controller's command was not finite, raw 10.
-    NonFiniteCommand,
+    /// there).
+    BadInput = 6,
+    /// An obstacle leaves no room for the body on either side within the corridor.
+    NoPassage = 7,
+    /// The steering problem could not be built or solved.
+    Solver = 8,
+    /// The plan after the iteration cap still enters an obstacle's inflated circle.
+    ObstacleNotCleared = 9,
+    /// The controller's command was not finite.
+    NonFiniteCommand = 10,
 }
 
 impl FallbackCause {
-    const fn raw(self) -> i64 {
-        match self {
-            FallbackCause::None => 0,
-            FallbackCause::NotReady => 1,
-            FallbackCause::HeadingSettling => 2,
-            FallbackCause::Unconfigured => 3,
-            FallbackCause::PathLoading => 4,
-            FallbackCause::LostPath => 5,
-            FallbackCause::BadInput => 6,
-            FallbackCause::NoPassage => 7,
-            FallbackCause::Solver => 8,
-            FallbackCause::ObstacleNotCleared => 9,
-            FallbackCause::NonFiniteCommand => 10,
-        }
-    }
-    /// `raw` within the signal's range (0..=10, checked by the reader).
-    const fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => FallbackCause::NotReady,
-            2 => FallbackCause::HeadingSettling,
-            3 => FallbackCause::Unconfigured,
-            4 => FallbackCause::PathLoading,
-            5 => FallbackCause::LostPath,
-            6 => FallbackCause::BadInput,
-            7 => FallbackCause::NoPassage,
-            8 => FallbackCause::Solver,
-            9 => FallbackCause::ObstacleNotCleared,
-            10 => FallbackCause::NonFiniteCommand,
-            _ => FallbackCause::None,
-        }
-    }
-    /// The DBC's name for it (`VAL_ 800 fallback_reason`).
-    pub const fn name(self) -> &'static str {
-        match self {
-            FallbackCause::None => "none",
-            FallbackCause::NotReady => "not_ready",
-            FallbackCause::HeadingSettling => "heading_settling",
-            FallbackCause::Unconfigured => "unconfigured",
-            FallbackCause::PathLoading => "path_loading",
-            FallbackCause::LostPath => "lost_path",
-            FallbackCause::BadInput => "bad_input",
-            FallbackCause::NoPassage => "no_passage",
-            FallbackCause::Solver => "solver",
-            FallbackCause::ObstacleNotCleared => "obstacle_not_cleared",
-            FallbackCause::NonFiniteCommand => "nonfinite_command",
-        }
-    }
     /// Every cause, by raw value.
     pub const ALL: [FallbackCause; 11] = [
         FallbackCause::None,
@@ -1152,6 +1107,15 @@ impl FallbackCause {
         FallbackCause::ObstacleNotCleared,
         FallbackCause::NonFiniteCommand,
     ];
+
+    /// `raw` within the signal's range (0..=10, checked by the reader).
+    fn from_raw(raw: i64) -> Self {
+        usize::try_from(raw)
+            .ok()
+            .and_then(|i| Self::ALL.get(i))
+            .copied()
+            .unwrap_or_default()
+    }
 }
 
 /// CONTROL_COMMAND (0x320): the controller's steering and speed commands of this tick.
@@ -1186,7 +1150,7 @@ impl ControlCommand {
         w.raw(&sig::COMMAND_STATUS, self.status.raw());
         w.phys(&sig::STEER_CMD_PCT, self.steer_cmd_pct);
         w.phys(&sig::COMMAND_SPEED_MPS, self.speed_cmd_mps);
-        w.raw(&sig::FALLBACK_REASON, self.fallback.raw());
+        w.raw(&sig::FALLBACK_REASON, i64::from(self.fallback as u8));
         w.finish_into(spec::CONTROL_COMMAND.id, counter, out)
     }
     /// The message and its counter.

@@ -256,14 +256,13 @@ fn chord_var_rad2(course_gain: f32, chord_sq_m2: f32) -> f32 {
 /// gain the steady state is sqrt(drift / chord variance), and the chord's variance goes as
 /// 1 / length^2 ([`chord_var_rad2`]).
 fn heading_drift_var_rad2(cfg: &EstimatorConfig, speed_mps: f32, dt_s: f32) -> f32 {
+    /// `chord_var_rad2` of a full-gain chord at the full course gain.
+    const FULL_CHORD_VAR_RAD2: f32 = CHORD_NOISE_M * CHORD_NOISE_M
+        / (COURSE_FULL_GAIN_CHORD_M * COURSE_FULL_GAIN_CHORD_M)
+        * CHORD_CORRELATED_TICKS;
     let span_s = cfg.track_span_fixes as f32 * cfg.gnss_period_s;
-    let chord_m = speed_mps * span_s;
-    let full_var = chord_var_rad2(
-        COURSE_GAIN,
-        COURSE_FULL_GAIN_CHORD_M * COURSE_FULL_GAIN_CHORD_M,
-    );
-    let share = chord_m / COURSE_FULL_GAIN_CHORD_M;
-    full_var * COURSE_GAIN * COURSE_GAIN * share * share * math::max(dt_s, 0.0)
+    let share = speed_mps * span_s / COURSE_FULL_GAIN_CHORD_M;
+    FULL_CHORD_VAR_RAD2 * COURSE_GAIN * COURSE_GAIN * share * share * math::max(dt_s, 0.0)
         / crate::SAMPLE_PERIOD_S
 }
 

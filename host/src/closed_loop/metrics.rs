@@ -218,7 +218,7 @@ pub struct Metrics {
     pub status_ticks: [u64; 4],
     /// The fallback's ticks while engaged by CONTROL_COMMAND `fallback_reason` (the DBC's
     /// names: `lost_path`, `no_passage`, ...); only the reasons that occurred.
-    pub fallback_ticks: BTreeMap<&'static str, u64>,
+    pub fallback_ticks: BTreeMap<String, u64>,
     /// Whether the run is clean: no cone hit, no gate missed, no collision, completed, and,
     /// off the cone track (the obstacle, the loop), the body never wholly outside the corridor
     /// ([`Self::corridor_exit_m`] below the body's width: the car never left the road). A

@@ -215,7 +215,8 @@ struct DriveByWire {
     current: Command,
     pending: Option<(u64, Command)>,
     status_ticks: [u64; 4],
-    fallback_ticks: BTreeMap<&'static str, u64>,
+    /// The fallback's ticks by reason (raw `fallback_reason`).
+    fallback_ticks: BTreeMap<u8, u64>,
     engaged_at_s: Option<f64>,
 }
 
@@ -285,7 +286,7 @@ impl DriveByWire {
                 if command.status == ControlStatus::Fallback {
                     *self
                         .fallback_ticks
-                        .entry(command.fallback.name())
+                        .entry(command.fallback as u8)
                         .or_insert(0) += 1;
                 }
             }
@@ -515,7 +516,13 @@ pub fn run(
         driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
         total_time_s,
         status_ticks: dbw.status_ticks,
-        fallback_ticks: dbw.fallback_ticks.clone(),
+        fallback_ticks: {
+            let names = fallback_names();
+            dbw.fallback_ticks
+                .iter()
+                .map(|(raw, n)| (fallback_name(&names, *raw), *n))
+                .collect()
+        },
         clean: completed
             && cone_hits == 0
             && scorer.gates_missed() == 0
@@ -676,6 +683,27 @@ pub fn write_session(
     Ok(written)
 }
 
+/// CONTROL_COMMAND `fallback_reason`'s value names, from the built-in `catmodel.dbc` (the one
+/// source of the bus's names; empty if it could not be read, which its tests rule out).
+pub fn fallback_names() -> Vec<(i64, String)> {
+    crate::dbc::Dbc::catmodel()
+        .ok()
+        .and_then(|dbc| {
+            dbc.message("CONTROL_COMMAND")
+                .and_then(|m| m.signal("fallback_reason"))
+                .map(|sig| sig.values.clone())
+        })
+        .unwrap_or_default()
+}
+
+/// The DBC's name for the raw `fallback_reason` (the number itself where it has none).
+pub fn fallback_name(names: &[(i64, String)], raw: u8) -> String {
+    names
+        .iter()
+        .find(|(v, _)| *v == i64::from(raw))
+        .map_or_else(|| raw.to_string(), |(_, name)| name.clone())
+}
+
 /// The per-tick records as CSV: `t,x,y,heading,speed,est_x,est_y,est_heading,status,
 /// steer_cmd,speed_cmd,steer,engaged,station,lateral,fallback` (truth rear axle; the node's
 /// estimate; the command the drive-by-wire received; the actuator's steering; truth station and
@@ -683,6 +711,7 @@ pub fn write_session(
 /// where not available).
 pub fn samples_csv(samples: &[Sample]) -> String {
     use std::fmt::Write;
+    let names = fallback_names();
     let mut out = String::from(
         "t,x,y,heading,speed,est_x,est_y,est_heading,status,steer_cmd,speed_cmd,steer,engaged,station,lateral,fallback\n",
     );
@@ -710,7 +739,7 @@ pub fn samples_csv(samples: &[Sample]) -> String {
             u8::from(s.engaged),
             opt(s.station_m.is_finite().then_some(s.station_m)),
             opt(s.lateral_m.is_finite().then_some(s.lateral_m)),
-            s.command.fallback.name(),
+            fallback_name(&names, s.command.fallback as u8),
         );
     }
     out
