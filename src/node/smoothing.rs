@@ -33,8 +33,8 @@ use crate::model::kinematic::Pose;
 use super::estimator::{EstimatorConfig, Xy};
 
 /// How fast the dead reckoning's error against the truth wanders, as a random walk, m^2/s: the
-/// process noise per fix is this times the fix period (0.1 m per fix at 5 Hz, 0.07 m at 10 Hz,
-/// 0.03 m per tick at 100 Hz). The one setting of the control pose: docs/controller.md, "Slow
+/// process noise per window is this times the lowpass's window (0.03 m^2 over a 5 Hz
+/// receiver's 0.6 s). The one setting of the control pose: docs/controller.md, "Slow
 /// receivers", for what more and less of it do.
 pub const DRIFT_DIFFUSION_M2_PER_S: f32 = 0.05;
 
@@ -50,16 +50,18 @@ pub const SNAP_M: f32 = 3.0;
 pub struct Smoothing {
     /// The smoothed antenna and the dead reckoning it was last moved with.
     last: Option<(Xy, Xy)>,
-    /// The estimate's antenna last tick and the dead reckoning then.
-    last_estimate: Option<(Xy, Xy)>,
-    /// Mean square of the estimate's jumps per tick, m^2.
-    jump_ms_per_tick: f32,
-    /// Ticks in the mean square (saturating at the window's).
-    jump_ticks: u32,
-    /// Ticks per fix (at least 1).
-    ticks_per_fix: f32,
-    /// Process noise per fix, m^2.
-    drift_var_per_fix: f32,
+    /// The estimate's antenna less the dead reckoning at the start of this window.
+    window_start: Option<Xy>,
+    /// Ticks since the window started.
+    window_ticks: u32,
+    /// Mean square of the estimate's jumps against the dead reckoning per window, m^2.
+    jump_ms: f32,
+    /// Windows in the mean square (saturating at [`JUMP_WINDOW_S`]'s).
+    windows: u32,
+    /// Ticks per window: the lowpass's window, at least one tick.
+    window_len_ticks: u32,
+    /// Process noise per window, m^2.
+    drift_var: f32,
 }
 
 impl Smoothing {
@@ -68,15 +70,19 @@ impl Smoothing {
     pub const fn new() -> Self {
         Self {
             last: None,
-            last_estimate: None,
-            jump_ms_per_tick: 0.0,
-            jump_ticks: 0,
-            ticks_per_fix: 1.0,
-            drift_var_per_fix: 0.0,
+            window_start: None,
+            window_ticks: 0,
+            jump_ms: 0.0,
+            windows: 0,
+            window_len_ticks: 1,
+            drift_var: 0.0,
         }
     }
 
-    /// For the receiver of `cfg`; nothing measured yet.
+    /// For the receiver of `cfg`; nothing measured yet. The jumps are measured over the
+    /// lowpass's window (its taps and span, `2 x group delay + 1` fixes): within it the
+    /// filtered fixes share their noise, and what they jump by from one fix to the next is
+    /// the noise divided by the window's length (a 100 Hz receiver's 30 fixes; docs/findings.md).
     pub fn for_estimator(cfg: &EstimatorConfig) -> Self {
         let tick_s = crate::SAMPLE_PERIOD_S;
         let period_s = if cfg.gnss_period_s.is_finite() {
@@ -84,10 +90,16 @@ impl Smoothing {
         } else {
             tick_s
         };
-
+        let window_fixes = if cfg.group_delay_fixes.is_finite() {
+            math::max(2.0 * cfg.group_delay_fixes + 1.0, 1.0)
+        } else {
+            1.0
+        };
+        // At most a minute of ticks: any real receiver's window is seconds.
+        let ticks = math::clamp(libm::roundf(window_fixes * period_s / tick_s), 1.0, 3000.0);
         Self {
-            ticks_per_fix: period_s / tick_s,
-            drift_var_per_fix: DRIFT_DIFFUSION_M2_PER_S * period_s,
+            window_len_ticks: ticks as u32,
+            drift_var: DRIFT_DIFFUSION_M2_PER_S * ticks * tick_s,
             ..Self::new()
         }
     }
@@ -96,13 +108,19 @@ impl Smoothing {
     /// taken as it is. The jumps' statistics (the receiver's) are kept.
     pub fn forget(&mut self) {
         self.last = None;
-        self.last_estimate = None;
+        self.window_start = None;
+        self.window_ticks = 0;
     }
 
     /// The pull towards the estimate per tick for the jumps measured so far (1: none).
+    ///
+    /// Over a window the jump is the difference of two estimates' errors, uncorrelated a
+    /// window apart, and of the dead reckoning's drift in between: its mean square is
+    /// `2 r + q`, so the measurement noise is `r = (jump_ms - q) / 2` (none when the jumps are
+    /// no larger than the drift allowed for: a survey-grade receiver is followed as it is).
     pub fn gain(&self) -> f32 {
-        let r = 0.5 * self.jump_ms_per_tick * self.ticks_per_fix;
-        let q = self.drift_var_per_fix;
+        let q = self.drift_var;
+        let r = 0.5 * (self.jump_ms - q);
         if !(r > 0.0 && q > 0.0) {
             return 1.0;
         }
@@ -112,7 +130,7 @@ impl Smoothing {
         if keep.is_nan() || keep <= 0.0 {
             return 1.0;
         }
-        math::clamp(-libm::logf(keep) / self.ticks_per_fix, 0.0, 1.0)
+        math::clamp(-libm::logf(keep) / self.window_len_ticks as f32, 0.0, 1.0)
     }
 
     /// This tick's control pose for the estimate `pose` (rear axle) and the dead reckoning.
@@ -127,7 +145,10 @@ impl Smoothing {
             x_m: pose.x_m + lever.x_m,
             y_m: pose.y_m + lever.y_m,
         };
-        self.measure(estimate, dead_reckoned);
+        self.measure(Xy {
+            x_m: estimate.x_m - dead_reckoned.x_m,
+            y_m: estimate.y_m - dead_reckoned.y_m,
+        });
         let gain = self.gain();
         let smoothed = match self.last {
             Some((last, odo)) if gain < 1.0 => {
@@ -155,20 +176,30 @@ impl Smoothing {
         }
     }
 
-    /// Adds this tick's jump of the estimate against the dead reckoning to the mean square.
-    fn measure(&mut self, estimate: Xy, dead_reckoned: Xy) {
-        if let Some((e, d)) = self.last_estimate {
-            let jx = (estimate.x_m - e.x_m) - (dead_reckoned.x_m - d.x_m);
-            let jy = (estimate.y_m - e.y_m) - (dead_reckoned.y_m - d.y_m);
-            let j2 = jx * jx + jy * jy;
-            if j2 <= SNAP_M * SNAP_M {
-                let window = JUMP_WINDOW_S / crate::SAMPLE_PERIOD_S;
-                self.jump_ticks = self.jump_ticks.saturating_add(1);
-                let n = math::min(self.jump_ticks as f32, window);
-                self.jump_ms_per_tick += (j2 - self.jump_ms_per_tick) / n;
-            }
+    /// Counts this tick into the window; at its end adds the window's jump of the estimate
+    /// against the dead reckoning (`offset`: the estimate's antenna less the dead reckoning)
+    /// to the mean square.
+    fn measure(&mut self, offset: Xy) {
+        let Some(start) = self.window_start else {
+            self.window_start = Some(offset);
+            self.window_ticks = 0;
+            return;
+        };
+        self.window_ticks += 1;
+        if self.window_ticks < self.window_len_ticks {
+            return;
         }
-        self.last_estimate = Some((estimate, dead_reckoned));
+        let (jx, jy) = (offset.x_m - start.x_m, offset.y_m - start.y_m);
+        let j2 = jx * jx + jy * jy;
+        if j2 <= SNAP_M * SNAP_M {
+            let window_s = self.window_len_ticks as f32 * crate::SAMPLE_PERIOD_S;
+            let windows = math::max(JUMP_WINDOW_S / window_s, 1.0);
+            self.windows = self.windows.saturating_add(1);
+            let n = math::min(self.windows as f32, windows);
+            self.jump_ms += (j2 - self.jump_ms) / n;
+        }
+        self.window_start = Some(offset);
+        self.window_ticks = 0;
     }
 }
 
