@@ -386,7 +386,9 @@ fn mpc_lane_change(vehicle: &VehicleConfig, node: &NodeConfig, speed: f64, seed:
 /// inflated obstacle (status 3, the obstacle not cleared). The fallback used to follow those
 /// plans' steering and then hold their last, back towards the obstacle: the braking car turned
 /// into it, stopped 1.15 m from it and stayed there. Braking along the lane at the offset it
-/// has, it passes 1.63 m from it and completes the run (docs/findings.md).
+/// has, it passes 1.63 m from it and completes the run (docs/findings.md). Since the control
+/// pose measures the receiver's noise over the lowpass's window its plans enter the circle on
+/// 13 ticks instead of 119, and it passes 2.43 m from it (1.76 m before).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn a_car_braking_beside_an_obstacle_keeps_its_offset() {
@@ -407,15 +409,18 @@ fn a_car_braking_beside_an_obstacle_keeps_its_offset() {
 /// car sped up with 0.6 rad and swung through the path and 3.1 m off the road, then back 4.3 m.
 /// The return no faster than 0.2 rad of heading at the speed it has: 0.82 m over the road's
 /// edge (the receiver's bias puts the estimate 0.5 m inside it), the swing damped
-/// (docs/findings.md).
+/// (docs/findings.md). Seed 9: since the control pose smooths the 20 Hz receiver's lowpassed
+/// noise, seed 0's plan no longer enters the inflated circle (it passes by 2.52 m without a
+/// fallback); on seed 9 the fallback holds for 1.6 s, 3.4-3.9 m beside the path, and brakes
+/// the car to 3.3 m/s, and the return leaves the road by 0.49 m (0.24 m before the change).
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn a_long_car_braked_beside_an_obstacle_returns_without_a_swing() {
     let car = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/long-slow-steering-20hz.toml");
     let (vehicle, node) = load_setup(Some(&car), None).unwrap();
-    let m = obstacle(&vehicle, &node, 0);
-    assert!(m.status_ticks[3] > 0, "the fallback was not taken: {m:?}");
+    let m = obstacle(&vehicle, &node, 9);
+    assert!(m.status_ticks[3] > 40, "the fallback was not taken: {m:?}");
     assert!(m.completed, "{m:?}");
     let exit = m.corridor_exit_m.unwrap_or(f64::NAN);
     assert!(exit < 1.0, "{exit:.2} m off the road: {m:?}");
