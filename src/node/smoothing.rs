@@ -8,15 +8,20 @@
 //! three fixes), and a controller steering at each step drives a car with slow steering into a
 //! growing oscillation (docs/controller.md, "Slow receivers"). Which of the two a receiver is,
 //! the node learns on line: the control pose tracks the mean square of the estimate's jumps
-//! against the dead reckoning ([`JUMP_WINDOW_S`]), and weighs them as a steady-state Kalman
-//! filter weighs a measurement of that noise against a dead reckoning whose error wanders as a
-//! random walk ([`DRIFT_DIFFUSION_M2_PER_S`]):
-//! - measurement noise per fix `r = jump_ms / 2` (a jump is the difference of two estimates'
-//!   errors), process noise per fix `q = DRIFT_DIFFUSION_M2_PER_S x fix period`;
-//! - the correction per fix `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
-//!   scalar Riccati equation's fixed point): close to 1 for a receiver whose jumps are below
-//!   the drift (RTK: the estimate as it is), `sqrt(q / r)` for a noisy one;
-//! - spread over the fix period's ticks as a complementary filter: the smoothed antenna moves
+//! against the dead reckoning over the lowpass's window ([`JUMP_WINDOW_S`] of them), and
+//! weighs them as a steady-state Kalman filter weighs a measurement of that noise against a
+//! dead reckoning whose error wanders as a random walk ([`DRIFT_DIFFUSION_M2_PER_S`]):
+//! - the window is the lowpass's (its taps and span: 30 fixes, 0.3 s, at 100 Hz; three fixes,
+//!   0.6 s, at 5 Hz; one fix at 1 Hz): within it the filtered fixes share their noise, so from
+//!   one fix to the next a fast receiver's estimate moves by millimetres whatever its noise,
+//!   and measured per fix a standard receiver at 100 Hz looked survey-grade (docs/findings.md);
+//! - a window's jump is the difference of two estimates' errors and the drift between them,
+//!   mean square `2 r + q`: measurement noise `r = (jump_ms - q) / 2`, process noise per window
+//!   `q = DRIFT_DIFFUSION_M2_PER_S x window`;
+//! - the correction per window `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
+//!   scalar Riccati equation's fixed point): 1 for a receiver whose jumps are no larger than
+//!   the drift (RTK: the estimate as it is), about `sqrt(q / r)` for a noisy one;
+//! - spread over the window's ticks as a complementary filter: the smoothed antenna moves
 //!   with the dead reckoning and is pulled towards the estimate by `g` per tick, with
 //!   `(1 - g)^ticks = 1 - K` (`g = -ln(1 - K) / ticks`, at most 1). The lowpass acts only on
 //!   the estimate's difference from the dead reckoning, so the car's own motion passes
