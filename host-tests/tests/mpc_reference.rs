@@ -263,6 +263,8 @@ fn speed_tuning(r: &Value, iterations: u16) -> SpeedTuning {
         bias_time_constant_s: 0.0,
         // Nor does it bound the commands: scipy's QP has no such bound.
         command_lead_mps: f32::INFINITY,
+        command_band_mps: f32::INFINITY,
+        command_band_per_mps: 0.0,
     }
 }
 

@@ -150,10 +150,11 @@ fn a_slow_steering_actuator_declared_in_the_model_file() {
 /// A car whose speed loop answers faster than its model file's speed model says (the CAT
 /// Vehicle's plant with a 0.2 s command delay, a 0.1 s powertrain lag and twice the speed
 /// loop's gains, driven with eq 5's 0.42 s delay and 1.2 s poles) holds the loop's 5 m/s: with
-/// the speed bias low-passed over 1.5 s the speed stays within 0.35 m/s of it once settled
-/// (measured 0.27) and no command exceeds 6 m/s (5.03); with the bias as measured each tick the
-/// plan chases its own corrections (0.84 m/s off, commands up to 9.97 m/s). The CAT Vehicle's
-/// own plant: 0.17 m/s (0.10 with the raw bias: the lowpass settles the launch more slowly)
+/// the speed bias low-passed over 1.5 s the speed stays within 0.45 m/s of it once settled
+/// (measured 0.40; 0.27 before the commands' band narrowed on a car its model misses, which
+/// settles its launch more slowly) and no command exceeds 6 m/s (5.03); with the bias as
+/// measured each tick the plan chases its own corrections (0.83 m/s off, commands up to
+/// 8.36 m/s). The CAT Vehicle's own plant: 0.20 m/s (0.17 before the band)
 /// (docs/controller.md, "A speed loop the model does not describe").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
@@ -166,9 +167,12 @@ fn a_speed_loop_faster_than_its_model_holds_the_paths_speed() {
     sc.ki_per_s2 *= 2.0;
     let (default_vehicle, _) = load_setup(None, None).unwrap();
     // (largest |speed - 5| once settled, largest command) over the loop, m/s.
-    let swing_on = |vehicle: &VehicleConfig, bias_time_constant_s: f32| {
+    let swing_on = |vehicle: &VehicleConfig, bias_time_constant_s: f32, band: bool| {
         let mut tuning = catmodel::node::drive::mpc_tuning(&node);
         tuning.speed.bias_time_constant_s = bias_time_constant_s;
+        if !band {
+            tuning.speed.command_band_mps = f32::INFINITY;
+        }
         let out = drive_with(
             vehicle,
             &node,
@@ -194,21 +198,20 @@ fn a_speed_loop_faster_than_its_model_holds_the_paths_speed() {
             .fold(0.0f32, f32::max);
         (speed_error, command)
     };
-    let swing = |tau| swing_on(&vehicle, tau);
     let tau = DEFAULT_TUNING.speed.bias_time_constant_s;
-    let (error, command) = swing(tau);
+    let (error, command) = swing_on(&vehicle, tau, true);
     assert!(
-        error <= 0.35 && command <= 6.0,
+        error <= 0.45 && command <= 6.0,
         "low-passed bias: speed off by up to {error:.2} m/s, commands up to {command:.2} m/s"
     );
-    let (raw_error, raw_command) = swing(0.0);
+    let (raw_error, raw_command) = swing_on(&vehicle, 0.0, true);
     assert!(
         raw_error > 0.6 || raw_command > 7.0,
         "the bias as measured holds the speed too ({raw_error:.2} m/s, commands up to \
          {raw_command:.2}): the car no longer shows what the lowpass is for"
     );
-    // The car the model describes keeps its speed as well with the lowpass.
-    let (error, command) = swing_on(&default_vehicle, tau);
+    // The car the model describes keeps its speed as well with the lowpass and the band.
+    let (error, command) = swing_on(&default_vehicle, tau, true);
     assert!(
         error <= 0.25 && command <= 6.0,
         "the CAT Vehicle's own plant: {error:.2} m/s off, commands up to {command:.2} m/s"

@@ -62,6 +62,23 @@ const RHO_SPEED: f32 = 1.0;
 /// Exact-penalty weight of the predicted-speed bound, cost per m/s over.
 const SPEED_BOUND_WEIGHT: f32 = 100.0;
 
+/// How far the model's predictions may miss before the commands' lead is no longer trusted,
+/// m/s: the largest recent gap between the speed bias and its low-passed value
+/// ([`ModelFit::mismatch_mps`]) takes the band from the full lead (no gap) to its narrowest
+/// (this gap or more) ([`SpeedPlanner::command_band`]).
+pub const MISMATCH_NO_TRUST_MPS: f32 = 1.0;
+
+/// The largest gap of [`MISMATCH_NO_TRUST_MPS`] is forgotten with this time constant, s.
+pub const MISMATCH_TIME_CONSTANT_S: f32 = 3.0;
+
+/// The offset the band's centre corrects for ([`ModelFit::offset_mps`]): the speed bias through
+/// a lowpass of this time constant, s, fed only while the bias is steady.
+pub const OFFSET_TIME_CONSTANT_S: f32 = 3.0;
+
+/// The bias counts as steady while it is within this of its low-passed value (the planning
+/// bias), m/s: a car holding a speed, not one in a transient its model does not describe.
+pub const OFFSET_STEADY_MPS: f32 = 0.25;
+
 /// Speed-plan weights and limits. Immutable configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -86,6 +103,14 @@ pub struct SpeedTuning {
     /// acceleration; infinite: no bound; docs/controller.md, "A speed loop the model does not
     /// describe").
     pub command_lead_mps: f32,
+    /// Half the width of the band the commands stay in about the steady-state commands that
+    /// hold the plan's targets, for a car at its target speed, m/s
+    /// ([`SpeedPlanner::command_band`]; infinite: no band, the commands from 0 to the
+    /// steady-state command plus the lead).
+    pub command_band_mps: f32,
+    /// How much wider the band is per m/s the car is off the targets, up to
+    /// [`SpeedTuning::command_lead_mps`].
+    pub command_band_per_mps: f32,
 }
 
 /// Why a speed planner cannot be built.
@@ -126,10 +151,24 @@ pub struct SpeedState {
     /// `Option<f32>` here the solve took 13 600 more instructions in QEMU, from the state's
     /// layout alone).
     bias_mps: f32,
+    /// How well the speed model describes the car ([`Self::track_fit`]); the offset infinite
+    /// before the first plan.
+    fit: ModelFit,
     /// In the stop at the path's end ([`Self::in_stop`]).
     stopping: bool,
     /// The path's end ahead of the car last tick, m (infinite before the first plan).
     to_end_m: f32,
+}
+
+/// How well the speed model describes the car ([`SpeedState::track_fit`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelFit {
+    /// The offset the model does not know (a grade, a load), m/s: the speed bias while it is
+    /// steady, low-passed.
+    pub offset_mps: f32,
+    /// How far the model's predictions missed lately, m/s: the largest gap between the speed
+    /// bias and its low-passed value, forgotten over [`MISMATCH_TIME_CONSTANT_S`].
+    pub mismatch_mps: f32,
 }
 
 /// A speed plan.
@@ -170,7 +209,10 @@ impl SpeedPlanner {
             && positive(tuning.decel_mps2)
             && tuning.bias_time_constant_s.is_finite()
             && tuning.bias_time_constant_s >= 0.0
-            && tuning.command_lead_mps >= 0.0)
+            && tuning.command_lead_mps >= 0.0
+            && tuning.command_band_mps >= 0.0
+            && tuning.command_band_per_mps.is_finite()
+            && tuning.command_band_per_mps >= 0.0)
         {
             return Err(SpeedPlanError::BadTuning);
         }
@@ -276,11 +318,11 @@ impl SpeedPlanner {
         } else {
             t.max_speed_mps
         };
-        let top = min(
-            top,
-            self.steady_command(targets_mps, start.planning_bias_mps),
-        );
-        let lo = -last;
+        let fit = state.track_fit(start.bias_mps, start.planning_bias_mps);
+        let (floor, ceiling) = self.command_band(targets_mps, &fit, v0);
+        let top = min(top, ceiling);
+        let floor = if stopping { 0.0 } else { min(floor, top) };
+        let lo = floor - last;
         let hi = top - last;
         let speed_room = SVector::<f32, PLAN_STEPS>::from_element(t.max_speed_mps) - f;
         state.shift();
@@ -320,7 +362,7 @@ impl SpeedPlanner {
         // The commands are clamped to their bounds exactly (ADMM meets them only in the limit).
         let mut commands = [0.0f32; KNOTS];
         for (c, d) in commands.iter_mut().zip(du.iter()) {
-            *c = clamp(finite_or(last + d, 0.0), 0.0, top);
+            *c = clamp(finite_or(last + d, floor), floor, top);
         }
         let speeds = self.predict(&f_now, last, &commands, v0);
         SpeedPlan {
@@ -330,27 +372,76 @@ impl SpeedPlanner {
         }
     }
 
-    /// The most a command may ask: the steady-state command that holds the highest target of
-    /// the plan, `(max target - bias) / dc gain` with the bias the commands are planned with
-    /// (the model's steady state plus the offset it does not know, a grade or a load: a car
-    /// that settles below its command is still commanded above the target), plus
-    /// [`SpeedTuning::command_lead_mps`]. Never more: the plan's commands beyond that drive a
-    /// model slower than the car, and a car whose speed loop is faster than its model
-    /// (`scripts/sil-sim.py`'s default car on an 8 m/s course) was commanded 16 m/s, went
-    /// 2.9 m/s over the path's speed and swung between 3 and 11 m/s for 10 s. The maximum speed
-    /// without a finite positive DC gain (an integrator).
-    fn steady_command(&self, targets_mps: &[f32; PLAN_STEPS + 1], bias_mps: f32) -> f32 {
+    /// The band the commands stay in, `(floor, top)`, m/s: about the steady-state commands that
+    /// hold the plan's lowest and highest targets, `(target - offset) / dc gain` with the
+    /// offset of `fit` (a grade, a load: [`ModelFit::offset_mps`]), by a half-width of
+    /// - [`SpeedTuning::command_lead_mps`] while the model predicts the car, falling to
+    /// - [`SpeedTuning::command_band_mps`] plus [`SpeedTuning::command_band_per_mps`] times the
+    ///   car's distance from that target (`v0_mps` is its speed), at most the lead, as its
+    ///   predictions miss by up to [`MISMATCH_NO_TRUST_MPS`] ([`ModelFit::mismatch_mps`]).
+    ///
+    /// A plan with a target of 0 (a stop) has its floor at 0; without a finite positive DC gain
+    /// (an integrator) the band is from 0 to the maximum speed; an infinite
+    /// [`SpeedTuning::command_band_mps`] leaves the floor at 0 and the top at the full lead.
+    ///
+    /// Eq 5's slow response needs the lead, and a car it describes keeps it ("A speed loop the
+    /// model does not describe", docs/controller.md). A car faster than its model is driven far
+    /// past the model's predictions by the commands of a plan that leads: `scripts/sil-sim.py`'s
+    /// car with a 0.1 s dead time and a 0.3 s lag swung between 0.2 and 11.8 m/s on its 10 m/s
+    /// course under commands from 0 to 14 m/s (the lead bounded only the top). Once the model
+    /// is seen to miss, the car is commanded what holds the target, give or take the band, and
+    /// led only as far as it is from the target: the same car holds the course's speed within
+    /// 1.0 m/s. The centre corrects for the steady offset, not for the planning bias: in that
+    /// car's launch the planning bias reached 3 m/s, all of it the model's slow transient, and a
+    /// band about it let the car fall by 3-4 m/s.
+    pub fn command_band(
+        &self,
+        targets_mps: &[f32; PLAN_STEPS + 1],
+        fit: &ModelFit,
+        v0_mps: f32,
+    ) -> (f32, f32) {
         let t = &self.tuning;
-        let limit = targets_mps.iter().fold(0.0f32, |m, v| {
-            max(m, clamp(finite_or(*v, 0.0), 0.0, t.max_speed_mps))
-        });
-        match self.model.dc_gain() {
-            Some(g) if g.is_finite() && g > 0.0 => {
-                let steady = (limit - finite_or(bias_mps, 0.0)) / g;
-                clamp(steady + t.command_lead_mps, 0.0, t.max_speed_mps)
-            }
-            _ => t.max_speed_mps,
+        let (low, high) = targets_mps
+            .iter()
+            .fold((t.max_speed_mps, 0.0f32), |(lo, hi), v| {
+                let v = clamp(finite_or(*v, 0.0), 0.0, t.max_speed_mps);
+                (min(lo, v), max(hi, v))
+            });
+        let Some(g) = self.model.dc_gain().filter(|g| g.is_finite() && *g > 0.0) else {
+            return (0.0, t.max_speed_mps);
+        };
+        let offset = finite_or(fit.offset_mps, 0.0);
+        let v0 = finite_or(v0_mps, 0.0);
+        // 1 with no miss, 0 from MISMATCH_NO_TRUST_MPS (and for a non-finite one).
+        let trust = clamp(
+            1.0 - finite_or(fit.mismatch_mps, MISMATCH_NO_TRUST_MPS) / MISMATCH_NO_TRUST_MPS,
+            0.0,
+            1.0,
+        );
+        let width = |off_target: f32| {
+            let narrow = min(
+                t.command_lead_mps,
+                max(t.command_band_mps, t.command_band_per_mps * off_target),
+            );
+            // (an infinite lead times no trust is no width, not NaN)
+            let trusted = if trust > 0.0 {
+                t.command_lead_mps * trust
+            } else {
+                0.0
+            };
+            max(narrow, trusted)
+        };
+        let top = clamp(
+            (high - offset) / g + width(libm::fabsf(high - v0)),
+            0.0,
+            t.max_speed_mps,
+        );
+        // A stop is held by no command at all, whatever the offset.
+        if !t.command_band_mps.is_finite() || low <= 0.0 {
+            return (0.0, top);
         }
+        let floor = clamp((low - offset) / g - width(libm::fabsf(v0 - low)), 0.0, top);
+        (floor, top)
     }
 
     /// The speed reference at steps 1..=PLAN_STEPS, from the car's speed `v0_mps` now: the
@@ -475,6 +566,10 @@ impl SpeedState {
             z_speed: [0.0; PLAN_STEPS],
             w_speed: [0.0; PLAN_STEPS],
             bias_mps: f32::INFINITY,
+            fit: ModelFit {
+                offset_mps: f32::INFINITY,
+                mismatch_mps: 0.0,
+            },
             stopping: false,
             to_end_m: f32::INFINITY,
         }
@@ -498,6 +593,30 @@ impl SpeedState {
         };
         self.bias_mps = bias;
         bias
+    }
+
+    /// How well the speed model describes the car, once per tick, from the speed bias `raw_mps`
+    /// (measured minus modelled speed) and the planning bias `planning_mps`
+    /// ([`Self::filter_bias`]): the gap between the two is how far the model's transient misses
+    /// (its largest recent value is [`ModelFit::mismatch_mps`]); while the gap is under
+    /// [`OFFSET_STEADY_MPS`] the bias is a steady offset, and [`ModelFit::offset_mps`] follows it
+    /// through the lowpass of [`OFFSET_TIME_CONSTANT_S`] (from 0: a new state, or after a
+    /// non-finite offset).
+    pub fn track_fit(&mut self, raw_mps: f32, planning_mps: f32) -> ModelFit {
+        let raw = finite_or(raw_mps, 0.0);
+        let gap = libm::fabsf(raw - finite_or(planning_mps, 0.0));
+        let fit = &mut self.fit;
+        let decay = 1.0 - crate::SAMPLE_PERIOD_S / MISMATCH_TIME_CONSTANT_S;
+        fit.mismatch_mps = max(gap, finite_or(fit.mismatch_mps, 0.0) * decay);
+        let o = fit.offset_mps;
+        fit.offset_mps = if !o.is_finite() {
+            0.0
+        } else if gap < OFFSET_STEADY_MPS {
+            o + (raw - o) * (crate::SAMPLE_PERIOD_S / OFFSET_TIME_CONSTANT_S)
+        } else {
+            o
+        };
+        *fit
     }
 
     /// Whether the car is in the stop at the path's end, once per tick. `v0_mps` is its speed,

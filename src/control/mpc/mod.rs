@@ -371,6 +371,8 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
         iterations: 10,
         bias_time_constant_s: 1.5,
         command_lead_mps: 2.0,
+        command_band_mps: 0.5,
+        command_band_per_mps: 0.5,
     },
     steer_lead_s: 0.07,
     steer_trust_s: 0.15,
