@@ -27,9 +27,11 @@
 //! describe").
 //!
 //! Cost `1/2 sum w_v (v_k - r_k)^2 + 1/2 sum w_du (du_j - du_{j-1})^2` (`du_{-1} = 0`: the change
-//! against the command sent last); hard bounds `0 <= u_j <= top`, `top` the least of the maximum
-//! speed, the steady-state command that holds the plan's highest target plus a lead, and in the
-//! stop at the path's end the last command or the creep (`SpeedPlanner::plan`); a soft
+//! against the command sent last); hard bounds `floor <= u_j <= top`: the band about the
+//! steady-state commands that hold the plan's targets, as wide as a lead while the model
+//! predicts the car and narrower once it misses (`SpeedPlanner::command_band`), within 0 and
+//! the maximum speed, and in the stop at the path's end from 0 to the last command or the creep
+//! (`SpeedPlanner::plan`); a soft
 //! (exact-penalty) bound `v_k <= max_speed` on the prediction. The reference `r` is the path's
 //! target speed reached within the acceleration and deceleration limits from the current speed,
 //! never past the path's end and not rising in the stop (`SpeedPlanner::reference`).
