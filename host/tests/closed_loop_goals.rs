@@ -167,12 +167,9 @@ fn a_speed_loop_faster_than_its_model_holds_the_paths_speed() {
     sc.ki_per_s2 *= 2.0;
     let (default_vehicle, _) = load_setup(None, None).unwrap();
     // (largest |speed - 5| once settled, largest command) over the loop, m/s.
-    let swing_on = |vehicle: &VehicleConfig, bias_time_constant_s: f32, band: bool| {
+    let swing_on = |vehicle: &VehicleConfig, bias_time_constant_s: f32| {
         let mut tuning = catmodel::node::drive::mpc_tuning(&node);
         tuning.speed.bias_time_constant_s = bias_time_constant_s;
-        if !band {
-            tuning.speed.command_band_mps = f32::INFINITY;
-        }
         let out = drive_with(
             vehicle,
             &node,
@@ -199,19 +196,19 @@ fn a_speed_loop_faster_than_its_model_holds_the_paths_speed() {
         (speed_error, command)
     };
     let tau = DEFAULT_TUNING.speed.bias_time_constant_s;
-    let (error, command) = swing_on(&vehicle, tau, true);
+    let (error, command) = swing_on(&vehicle, tau);
     assert!(
         error <= 0.45 && command <= 6.0,
         "low-passed bias: speed off by up to {error:.2} m/s, commands up to {command:.2} m/s"
     );
-    let (raw_error, raw_command) = swing_on(&vehicle, 0.0, true);
+    let (raw_error, raw_command) = swing_on(&vehicle, 0.0);
     assert!(
         raw_error > 0.6 || raw_command > 7.0,
         "the bias as measured holds the speed too ({raw_error:.2} m/s, commands up to \
          {raw_command:.2}): the car no longer shows what the lowpass is for"
     );
     // The car the model describes keeps its speed as well with the lowpass and the band.
-    let (error, command) = swing_on(&default_vehicle, tau, true);
+    let (error, command) = swing_on(&default_vehicle, tau);
     assert!(
         error <= 0.25 && command <= 6.0,
         "the CAT Vehicle's own plant: {error:.2} m/s off, commands up to {command:.2} m/s"
