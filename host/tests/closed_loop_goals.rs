@@ -636,9 +636,9 @@ fn slow_receiver_tables() {
 /// delay of 0.2-0.8 s, receivers at 5-100 Hz with the antenna anywhere along the car; the
 /// oversteering ones, which a model file refuses, are drawn again), each described to the node
 /// as its model file would (`closed_loop::model_file_for`). Prints, per car, the double lane
-/// change at 6 / 8 / 10 / 12 m/s (clean seeds of 0 and 1, RTK; in brackets with the lateral
-/// weight at 1 on every path), the obstacle with the standard receiver and the loop at 10 m/s with RTK
-/// (docs/controller.md, "What is left").
+/// change at 6 / 8 / 10 / 12 m/s (clean seeds of 0 and 1, RTK), the obstacle with the standard
+/// receiver and the loop at 10 m/s with RTK, each in brackets again with the lateral weight at 1
+/// on every path (docs/controller.md, "What is left").
 /// `[PLANTS_SEED=N] [PLANTS_OUT=DIR] cargo test --release -p catmodel-host --test closed_loop_goals -- --ignored random_plants --nocapture`
 #[test]
 #[ignore = "measurement; prints the table"]
@@ -740,11 +740,35 @@ fn random_plants() {
             Receiver::Standard,
         );
         let l = run_one(Kind::Loop, 10.0, 0, Receiver::Rtk);
+        let light_o = run_with(
+            Controller::MpcTuned(light),
+            Kind::Obstacle,
+            Kind::Obstacle.default_speed_mps(),
+            0,
+            Receiver::Standard,
+        );
+        let light_l = run_with(
+            Controller::MpcTuned(light),
+            Kind::Loop,
+            10.0,
+            0,
+            Receiver::Rtk,
+        );
+        let passed = |m: &catmodel_host::closed_loop::metrics::Metrics| {
+            if m.clean {
+                "passed"
+            } else {
+                "NOT passed"
+            }
+        };
         line += &format!(
-            " | obstacle {} {:.2} m | loop {:.3} m",
-            if o.clean { "passed" } else { "NOT passed" },
+            " | obstacle {} {:.2} m ({} {:.2} m) | loop {:.3} m ({:.3} m)",
+            passed(&o),
             o.min_obstacle_clearance_m.unwrap_or(f64::NAN),
-            l.lateral_rms_m.unwrap_or(f64::NAN)
+            passed(&light_o),
+            light_o.min_obstacle_clearance_m.unwrap_or(f64::NAN),
+            l.lateral_rms_m.unwrap_or(f64::NAN),
+            light_l.lateral_rms_m.unwrap_or(f64::NAN)
         );
         println!("{line}");
     }
