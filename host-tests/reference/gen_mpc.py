@@ -273,7 +273,9 @@ def speed_cases():
         v = f + pm @ du
         diff = cp.hstack([du[0], du[1:] - du[:-1]])
         cost = 0.5 * tuning["speed_weight"] * cp.sum_squares(v - ref) + 0.5 * tuning["command_change_weight"] * cp.sum_squares(diff)
-        cost += 100.0 * cp.sum(cp.pos(v - tuning["max_speed_mps"]))
+        # The path's target is a limit as well: v_k <= min(target_{k+1} + 0.2, max_speed).
+        limits = np.minimum(np.maximum(np.array(targets[1:]), 0.0) + 0.2, tuning["max_speed_mps"])
+        cost += 100.0 * cp.sum(cp.pos(v - limits))
         cons = [last + du >= 0.0, last + du <= tuning["max_speed_mps"]]
         prob = cp.Problem(cp.Minimize(cost), cons)
         prob.solve(solver=cp.CLARABEL, tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10)

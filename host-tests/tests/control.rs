@@ -161,6 +161,78 @@ fn circle_curvature_within_the_documented_bound() {
     }
 }
 
+/// A straight path north, a point every metre to 100 m, at `fast` m/s up to station
+/// `step_at` and `slow` from there on.
+fn stepped(fast: f32, slow: f32, step_at: usize) -> Vec<Waypoint> {
+    straight(0.0, 0.0, 0.0, 101, 1.0)
+        .into_iter()
+        .enumerate()
+        .map(|(i, w)| Waypoint {
+            speed_mps: if i < step_at { fast } else { slow },
+            ..w
+        })
+        .collect()
+}
+
+#[test]
+fn the_target_speed_meets_every_later_target_and_the_end_at_the_paths_braking() {
+    // Hand-derived: at braking a, the speed at station s is no more than
+    // sqrt(v_j^2 + 2 a (s_j - s)) for every later point j, the end (100 m) at 0.
+    let mut p = path_of(&stepped(20.0, 5.0, 60));
+    assert_eq!(p.braking_mps2(), 3.0);
+    let speed = |p: &Path, s: f32| p.sample(s, 0).expect("on the path").speed_mps;
+    let close = |got: f32, want: f64| {
+        assert!((f64::from(got) - want).abs() < 2e-3, "{got} vs {want}");
+    };
+    // 60 m before the step its 5 m/s binds already (19.62 < 20).
+    close(speed(&p, 0.0), (25.0f64 + 6.0 * 60.0).sqrt());
+    // Before the step: the step's 5 m/s at 3 m/s^2.
+    close(speed(&p, 30.0), (25.0f64 + 6.0 * 30.0).sqrt());
+    close(speed(&p, 59.5), (25.0f64 + 6.0 * 0.5).sqrt());
+    // Between the step's points (59 -> 60) the points' own line is lower: 20 -> 5.
+    close(
+        speed(&p, 59.9),
+        (20.0 - 15.0 * 0.9f64).min((25.0f64 + 0.6).sqrt()),
+    );
+    // After it the points' 5 m/s, until the end's stop binds: sqrt(2 a (100 - s)) < 5 from
+    // 95.83 m on.
+    close(speed(&p, 80.0), 5.0);
+    close(speed(&p, 99.0), 6.0f64.sqrt());
+    close(speed(&p, 100.0), 0.0);
+    // Another braking envelopes the loaded path again, and every later one.
+    assert!(p.set_braking(1.5));
+    close(speed(&p, 30.0), (25.0f64 + 3.0 * 30.0).sqrt());
+    assert!(!p.set_braking(f32::NAN) && !p.set_braking(0.0) && !p.set_braking(-1.0));
+    assert_eq!(p.braking_mps2(), 1.5);
+    p.load(&stepped(10.0, 10.0, 0)).expect("valid path");
+    close(speed(&p, 90.0), 10.0f64.min((3.0f64 * 10.0).sqrt()));
+}
+
+#[test]
+fn a_stop_ahead_is_the_first_point_with_no_speed_or_the_end() {
+    // A stop line at 70 m (every point from there at 0), from a launch at 0 m/s.
+    let mut points = stepped(8.0, 0.0, 70);
+    points[0].speed_mps = 0.0;
+    let p = path_of(&points);
+    // The launch point behind the car is not a stop ahead of it.
+    assert_eq!(p.stop_ahead_m(0.5, 0), 69.5);
+    assert_eq!(p.stop_ahead_m(10.0, 0), 60.0);
+    // At the line, and past it (on the line's own segment: negative).
+    assert_eq!(p.stop_ahead_m(69.5, 0), 0.5);
+    assert_eq!(p.stop_ahead_m(70.0, 69), 0.0);
+    assert_eq!(p.stop_ahead_m(70.5, 69), -0.5);
+    // A launch from several points at 0 has no stop either.
+    let mut launch = stepped(8.0, 8.0, 0);
+    launch[0].speed_mps = 0.0;
+    launch[1].speed_mps = 0.0;
+    assert_eq!(path_of(&launch).stop_ahead_m(0.0, 0), 100.0);
+    // No zero point: the end; beyond it negative.
+    let q = path_of(&stepped(8.0, 8.0, 0));
+    assert_eq!(q.stop_ahead_m(25.0, 0), 75.0);
+    assert_eq!(q.stop_ahead_m(101.0, 99), -1.0);
+    assert!(Path::new().stop_ahead_m(1.0, 0) < 0.0);
+}
+
 #[test]
 fn the_largest_curvature_is_the_loaded_paths_and_follows_every_load() {
     // A circle's largest reference curvature is its own, phi / c (the chords' rounding, as

@@ -25,6 +25,18 @@
 //! curvature is the mean over about 4 m of path, which rounds a curvature step (a clothoid's
 //! start) over that length.
 //!
+//! The target speed at a station is the points' target speeds, linear between points, and no
+//! more than lets the car slow to every later point's target, and to a stop at the path's end,
+//! at the path's braking deceleration ([`Path::set_braking`]: the controller's): a planner's
+//! speed is a limit to meet *at* its point, and a controller that looks only as far ahead as its
+//! horizon meets a drop beyond it too late (a 20 -> 5 m/s step 300 m down a straight was
+//! entered at 13 m/s, and a path's end at 20 m/s passed by 17 m on a car that brakes at
+//! 3.5 m/s^2; docs/findings.md). The envelope is taken once, when the path is loaded: per point,
+//! the most speed squared that still meets every later target, `R_i = min(v_i^2, R_{i+1} +
+//! 2 a (s_{i+1} - s_i))` with `R = 0` at the last point (relative to the point, so that no
+//! cancellation of kilometres of station enters it); between points `sqrt(R_{i+1} + 2 a
+//! (s_{i+1} - s))`.
+//!
 //! Never allocates, never panics; every loop runs at most [`MAX_PATH_POINTS`] times.
 use core::ptr::addr_of_mut;
 
@@ -62,6 +74,9 @@ pub const ACQUIRE_TIE_M: f32 = 1.2;
 /// foot on another segment to be taken (see `Path::nearest_in`): five times what the rounding
 /// of 0.3 m segments' headings 1 km from the origin can make of a tie.
 const VERTEX_TIE: f32 = 2e-3;
+/// The braking deceleration of a path's speed envelope until a controller sets its own
+/// ([`Path::set_braking`]), m/s^2: the model-predictive controller's (`SpeedTuning::decel_mps2`).
+pub const DEFAULT_BRAKING_MPS2: f32 = 3.0;
 
 /// One point of a path as the planner sends it: PATH_POINT and PATH_LIMITS of one index.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -117,7 +132,8 @@ pub struct PathSample {
     pub heading_rad: f32,
     /// Curvature, 1/m, positive = turning right.
     pub curvature_per_m: f32,
-    /// Target speed, m/s (0 beyond the last point: the path ends there).
+    /// Target speed, m/s: the points' (linear between them), within the path's speed envelope
+    /// (see the module doc); 0 beyond the last point: the path ends there.
     pub speed_mps: f32,
     /// Corridor to the left, m.
     pub left_m: f32,
@@ -234,6 +250,11 @@ pub struct Path {
     curvature_per_m: [f32; MAX_PATH_POINTS],
     /// The largest of `curvature_per_m`'s magnitudes, 1/m: taken once at load, not per query.
     max_curvature_per_m: f32,
+    /// Deceleration of the speed envelope, m/s^2 ([`Path::set_braking`]).
+    braking_mps2: f32,
+    /// The speed envelope at point `i`: the most speed squared that still meets every later
+    /// point's target and stops at the end at `braking_mps2`, m^2/s^2 (see the module doc).
+    reach_m2ps2: [f32; MAX_PATH_POINTS],
 }
 
 impl Default for Path {
@@ -253,6 +274,8 @@ impl Path {
             reference_heading_rad: [0.0; MAX_PATH_POINTS],
             curvature_per_m: [0.0; MAX_PATH_POINTS],
             max_curvature_per_m: 0.0,
+            braking_mps2: DEFAULT_BRAKING_MPS2,
+            reach_m2ps2: [0.0; MAX_PATH_POINTS],
         }
     }
 
@@ -271,7 +294,26 @@ impl Path {
             fill(addr_of_mut!((*slot).reference_heading_rad), 0.0);
             fill(addr_of_mut!((*slot).curvature_per_m), 0.0);
             addr_of_mut!((*slot).max_curvature_per_m).write(0.0);
+            addr_of_mut!((*slot).braking_mps2).write(DEFAULT_BRAKING_MPS2);
+            fill(addr_of_mut!((*slot).reach_m2ps2), 0.0);
         }
+    }
+
+    /// Sets the deceleration of the speed envelope (see the module doc), m/s^2: the one at
+    /// which the controller brakes for a lower target ahead. Kept for every later path; the
+    /// path loaded now (if any) is enveloped again. Not finite and positive: refused, `false`.
+    pub fn set_braking(&mut self, decel_mps2: f32) -> bool {
+        if !(decel_mps2.is_finite() && decel_mps2 > 0.0) {
+            return false;
+        }
+        self.braking_mps2 = decel_mps2;
+        self.speed_envelope();
+        true
+    }
+
+    /// The deceleration of the speed envelope, m/s^2.
+    pub const fn braking_mps2(&self) -> f32 {
+        self.braking_mps2
     }
 
     /// Checks `waypoints` without changing anything: the rules a path must follow.
@@ -343,7 +385,31 @@ impl Path {
         }
         self.len = n;
         self.reference_geometry();
+        self.speed_envelope();
         Ok(())
+    }
+
+    /// The speed envelope of every point, from the end back (see the module doc).
+    fn speed_envelope(&mut self) {
+        let two_a = 2.0 * self.braking_mps2;
+        let mut later: Option<(f32, f32)> = None;
+        for i in (0..self.len).rev() {
+            let (Some(p), Some(&s), Some(r)) = (
+                self.points.get(i),
+                self.station_m.get(i),
+                self.reach_m2ps2.get_mut(i),
+            ) else {
+                continue;
+            };
+            *r = match later {
+                // The end is a stop.
+                None => 0.0,
+                Some((s_next, r_next)) => {
+                    math::min(p.speed_mps * p.speed_mps, r_next + two_a * (s_next - s))
+                }
+            };
+            later = Some((s, *r));
+        }
     }
 
     /// The chord around point `i`: the points `k` before and `k` after it (clamped to the
@@ -446,6 +512,32 @@ impl Path {
     /// path): how tight the path is at its tightest. Taken when the path is loaded.
     pub const fn max_curvature_per_m(&self) -> f32 {
         self.max_curvature_per_m
+    }
+
+    /// Distance from `station_m` to where the path next asks for a stop, m: the first point
+    /// with a target speed of 0 after one with a speed (a stop line), from the start of the
+    /// segment `station_m` is on (negative past such a point on that segment), else the
+    /// path's end (negative beyond it). `hint` is a segment index to start the search from
+    /// (the projection's). A planner that stops the car short of its path's end (a stop line,
+    /// a blocked lane) sets the targets from there on to 0, and a controller brakes for that
+    /// point as for the end; a path that starts at 0 (a launch) has no stop there.
+    pub fn stop_ahead_m(&self, station_m: f32, hint: usize) -> f32 {
+        let end = self.length_m();
+        if self.len < 2 || !station_m.is_finite() {
+            return end - station_m;
+        }
+        let first = self.segment_at(math::clamp(station_m, 0.0, end), hint);
+        let mut before = first
+            .checked_sub(1)
+            .and_then(|b| self.points.get(b))
+            .map_or(0.0, |p| p.speed_mps);
+        for (p, &s) in self.points().iter().zip(self.station_m.iter()).skip(first) {
+            if p.speed_mps <= 0.0 && before > 0.0 {
+                return s - station_m;
+            }
+            before = p.speed_mps;
+        }
+        end - station_m
     }
 
     /// Length along the path, m.
@@ -654,7 +746,12 @@ impl Path {
             speed_mps: if beyond > 0.0 {
                 0.0
             } else {
-                lerp(a.speed_mps, b.speed_mps)
+                let r_b = self.reach_m2ps2.get(i + 1).copied().unwrap_or(0.0);
+                let envelope = math::sqrt(math::max(
+                    r_b + 2.0 * self.braking_mps2 * (seg_len - t),
+                    0.0,
+                ));
+                math::min(lerp(a.speed_mps, b.speed_mps), envelope)
             },
             left_m: lerp(a.left_m, b.left_m),
             right_m: lerp(a.right_m, b.right_m),

@@ -216,6 +216,13 @@ impl PlannerInputs {
         self.stats = PlannerCounters::default();
     }
 
+    /// Sets the deceleration at which the active controller brakes for a lower target speed
+    /// ahead: the paths' speed envelope ([`Path::set_braking`]); `false` if refused (not finite
+    /// and positive).
+    pub fn set_braking(&mut self, decel_mps2: f32) -> bool {
+        self.path.set_braking(decel_mps2)
+    }
+
     /// Forgets the active path (e.g. the local frame changed under it); the counters stay.
     pub fn drop_path(&mut self) {
         self.path.clear();

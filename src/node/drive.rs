@@ -276,6 +276,20 @@ impl Drive {
             Controller::PurePursuit => None,
         };
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+        self.set_braking(config);
+    }
+
+    /// The paths' speed envelope brakes at the active controller's deceleration: the
+    /// model-predictive controller's speed reference (`SpeedTuning::decel_mps2`), pure
+    /// pursuit's stop (`stop_decel_mps2`).
+    fn set_braking(&mut self, config: &NodeConfig) {
+        let decel = match (config.controller, self.mpc_config.as_ref()) {
+            (Controller::Mpc, Some(mpc)) => mpc.speed_planner().tuning().decel_mps2,
+            (Controller::Mpc, None) => crate::control::path::DEFAULT_BRAKING_MPS2,
+            (Controller::PurePursuit, _) => self.pursuit_tuning.stop_decel_mps2,
+        };
+        // Both tunings are checked positive and finite where they are built.
+        self.planner.set_braking(decel);
     }
 
     /// What the planner sent so far.
@@ -300,13 +314,15 @@ impl Drive {
         self.mpc.reset();
         self.mpc_config = MpcConfig::for_node(config, tuning).ok();
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+        self.set_braking(config);
         self.mpc_config.is_some()
     }
 
     /// Replaces the reference controller's tuning (host tools that sweep it; the node runs
-    /// [`pure_pursuit::DEFAULT_TUNING`] otherwise).
-    pub fn tune_pursuit(&mut self, tuning: PurePursuitTuning) {
+    /// [`pure_pursuit::DEFAULT_TUNING`] otherwise) for the car of `config`.
+    pub fn tune_pursuit(&mut self, config: &NodeConfig, tuning: PurePursuitTuning) {
         self.pursuit_tuning = tuning;
+        self.set_braking(config);
     }
 
     /// Applies one planner message (stage 1).
@@ -719,7 +735,7 @@ fn mpc_tick<P: StageProbe>(
         },
         position_uncertainty_m: config.position_uncertainty_m,
         path_max_curvature_per_m: path.max_curvature_per_m(),
-        to_end_m: path.length_m() - s0,
+        to_end_m: path.stop_ahead_m(s0, hint),
     };
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);

@@ -74,7 +74,7 @@ impl NodeDriver {
         }
         let mut node = crate::new_node(config.clone());
         match controller {
-            Controller::PurePursuit(tuning) => node.drive_mut().tune_pursuit(tuning),
+            Controller::PurePursuit(tuning) => node.drive_mut().tune_pursuit(&config, tuning),
             Controller::MpcTuned(tuning) => {
                 // A refused tuning leaves the controller in its fallback: the run shows it.
                 let _ = node.drive_mut().tune_mpc(&config, tuning);

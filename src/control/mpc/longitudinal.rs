@@ -32,9 +32,12 @@
 //! predicts the car and narrower once it misses (`SpeedPlanner::command_band`), within 0 and
 //! the maximum speed, and in the stop at the path's end from 0 to the last command or the creep
 //! (`SpeedPlanner::plan`); a soft
-//! (exact-penalty) bound `v_k <= max_speed` on the prediction. The reference `r` is the path's
-//! target speed reached within the acceleration and deceleration limits from the current speed,
-//! never past the path's end and not rising in the stop (`SpeedPlanner::reference`).
+//! (exact-penalty) bound `v_k <= min(target_k + SPEED_LIMIT_SLACK_MPS, max_speed)` on the
+//! prediction: the path's target is a limit as well as a reference. The reference `r` is the
+//! path's target speed (its speed envelope, which brakes for every lower target ahead, beyond
+//! the horizon too: `crate::control::path`) reached within the acceleration and deceleration
+//! limits from the current speed, never past the path's end and not rising in the stop
+//! (`SpeedPlanner::reference`).
 //!
 //! Solver: ADMM on the condensed problem (constraints `z = [du; P du]`). Its matrix
 //! `H + rho_u I + rho_v P'P` never changes, so its inverse is computed once, in f64, when the
@@ -63,6 +66,9 @@ const RHO_COMMAND: f32 = 1.0;
 const RHO_SPEED: f32 = 1.0;
 /// Exact-penalty weight of the predicted-speed bound, cost per m/s over.
 const SPEED_BOUND_WEIGHT: f32 = 100.0;
+/// How far a predicted speed may exceed the path's target before the exact penalty of
+/// [`SPEED_BOUND_WEIGHT`] holds it, m/s.
+pub const SPEED_LIMIT_SLACK_MPS: f32 = 0.2;
 
 /// How far the model's predictions may miss before the commands' lead is no longer trusted,
 /// m/s: the largest recent gap between the speed bias and its low-passed value
@@ -326,7 +332,19 @@ impl SpeedPlanner {
         let floor = if stopping { 0.0 } else { min(floor, top) };
         let lo = floor - last;
         let hi = top - last;
-        let speed_room = SVector::<f32, PLAN_STEPS>::from_element(t.max_speed_mps) - f;
+        // The path's target is a limit as well as a reference: no predicted speed above it by
+        // more than SPEED_LIMIT_SLACK_MPS, nor above the maximum speed. The path's speed
+        // envelope only ever asks for the reference's deceleration; a car above it (braking
+        // less than its model says, or a new path's lower target where it is) is braked as
+        // hard as the plan must to be under it again, the commands within their band.
+        let limits = SVector::<f32, PLAN_STEPS>::from_fn(|k, _| {
+            let goal = max(
+                finite_or(targets_mps.get(k + 1).copied().unwrap_or(0.0), 0.0),
+                0.0,
+            );
+            min(goal + SPEED_LIMIT_SLACK_MPS, t.max_speed_mps)
+        });
+        let speed_room = limits - f;
         state.shift();
         let mut du = SVector::<f32, KNOTS>::zeros();
         for _ in 0..t.iterations {
