@@ -1277,7 +1277,7 @@ fn candump_rejects_with_reasons() {
         ("(1.000000)", MissingInterface),
         ("(1.000000)can0 123#00", MissingInterface),
         ("(1.000000) can0", MissingInterface),
-        ("(1.000000)  can0 123#00", BadInterface),
+        ("(1.000000)\tcan0 123#00", MissingInterface),
         ("(1.000000) averyveryverylongname 123#00", BadInterface),
         ("(1.000000) can0 12300", MissingSeparator),
         ("(1.000000) can0 #00", BadId),
@@ -1301,7 +1301,15 @@ fn candump_rejects_with_reasons() {
         ("(1.000000) can0 123#DE.AD", BadHex),
         ("(1.000000) can0 123#010203040506070809", TooLong),
         ("(1.000000) can0 123#DEAD BEEF", TrailingGarbage),
-        ("(1.000000) can0 123#DEAD R", TrailingGarbage),
+        ("(1.000000) can0 123#DEAD X", TrailingGarbage),
+        ("(1.000000) can0 123#DEAD r", TrailingGarbage),
+        ("(1.000000) can0 123#DEAD R T", TrailingGarbage),
+        ("(1.000000) can0 123#DEAD  R", TrailingGarbage),
+        // candump -d: the socket's drop counter, not a frame.
+        (
+            "DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)",
+            DropCount,
+        ),
         // candump's screen format (`candump -ta`).
         ("(1.000000)  can0  123   [2]  DE", LengthMismatch),
         ("(1.000000)  can0  123   [1]  DE AD", TrailingGarbage),
@@ -1353,6 +1361,77 @@ fn candump_screen_format_reads_as_the_log_format() {
     ] {
         assert_eq!(parse_line(screen), parse_line(log), "{screen:?}");
         assert!(parse_line(screen).is_ok(), "{screen:?}");
+    }
+}
+
+/// What can-utils' candump.c writes, line for line (its `printf`s quoted): each reads as the
+/// plain log line of the same frame.
+#[test]
+fn candump_lines_as_can_utils_writes_them() {
+    for (written, log) in [
+        // Screen format: `printf(" %s", ...)` before the timestamp, `-ta` and `-tz`.
+        (
+            " (1700000000.003296)  can0  09F8011C   [8]  7F 32 36 13 F6 5B DE BD",
+            "(1700000000.003296) can0 09F8011C#7F323613F65BDEBD",
+        ),
+        (
+            " (014.945398)  can0       101   [2]  9B 00",
+            "(014.945398) can0 101#9B00",
+        ),
+        // `-l` with names of different lengths: `%*s` right-aligns them.
+        (
+            "(0000000000.003296)  can0 100#ECFF",
+            "(0000000000.003296) can0 100#ECFF",
+        ),
+        (
+            "(0000000000.003296)     can0 100#ECFF",
+            "(0000000000.003296) can0 100#ECFF",
+        ),
+        // `-l -x`: ` R` received, ` T` sent by this host.
+        (
+            "(1700000000.003745) can0 100#ECFF0000000000BB R",
+            "(1700000000.003745) can0 100#ECFF0000000000BB",
+        ),
+        (
+            "(1700000000.003745) can0 100#ECFF0000000000BB T\r\n",
+            "(1700000000.003745) can0 100#ECFF0000000000BB",
+        ),
+        ("(1.000000) can0 123# R", "(1.000000) can0 123#"),
+    ] {
+        assert_eq!(parse_line(written), parse_line(log), "{written:?}");
+        assert!(parse_line(written).is_ok(), "{written:?}");
+        assert_eq!(
+            catmodel::can::candump::interface_of(written),
+            Some("can0"),
+            "{written:?}"
+        );
+    }
+    // A remote frame stays a remote frame with `-x`.
+    assert_eq!(
+        parse_line("(1.000000) can0 123#R R"),
+        Err(CandumpError::RemoteFrame)
+    );
+}
+
+/// `candump -d`: `DROPCOUNT: dropped %u CAN frame%s on '%s' socket (total drops %u)`.
+#[test]
+fn candump_dropcount_lines_give_their_count() {
+    use catmodel::can::candump::dropped_frames;
+    assert_eq!(
+        dropped_frames("DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)"),
+        Some(3)
+    );
+    assert_eq!(
+        dropped_frames("DROPCOUNT: dropped 1 CAN frame on 'any' socket (total drops 17)\r"),
+        Some(1)
+    );
+    for not in [
+        "DROPCOUNT: dropped x CAN frames on 'can0' socket (total drops 3)",
+        "DROPCOUNT: dropped 3 CAN frames on 'can0' socket",
+        "DROPCOUNT: dropped 99999999999 CAN frames on 'can0' socket (total drops 3)",
+        "(1.000000) can0 123#00",
+    ] {
+        assert_eq!(dropped_frames(not), None, "{not:?}");
     }
 }
 

@@ -170,11 +170,12 @@ proptest! {
 }
 
 /// The candump format as a grammar, independently of the parser: `(SECONDS.UUUUUU) IFACE
-/// ID#DATA` with 1-20 second digits, exactly 6 decimals, an interface of 1-15 printable ASCII
-/// characters, 3 hex digits (<= 0x7FF) or 8 (<= 0x1FFFFFFF), 0-8 bytes as hex pairs, then only
-/// trailing whitespace. Returns the frame it describes.
+/// ID#DATA` with 1-20 second digits, exactly 6 decimals, one or more spaces, an interface of
+/// 1-15 printable ASCII characters, 3 hex digits (<= 0x7FF) or 8 (<= 0x1FFFFFFF), 0-8 bytes as
+/// hex pairs, optionally ` R` or ` T` (`candump -x`), with only whitespace around the line.
+/// Returns the frame it describes.
 fn grammar(line: &str) -> Option<TimedFrame> {
-    let line = line.trim_end();
+    let line = line.trim();
     let rest = line.strip_prefix('(')?;
     let close = rest.find(')')?;
     let (stamp, rest) = (&rest[..close], &rest[close + 1..]);
@@ -189,9 +190,13 @@ fn grammar(line: &str) -> Option<TimedFrame> {
         .checked_mul(1_000_000)?
         .checked_add(frac.parse::<u128>().ok()?)?;
     let t_us = u64::try_from(t_us).ok()?;
-    let rest = rest.strip_prefix(' ')?;
+    let rest = rest.strip_prefix(' ')?.trim_start_matches(' ');
     let space = rest.find(' ')?;
     let (iface, frame) = (&rest[..space], &rest[space + 1..]);
+    let frame = match frame.len().checked_sub(2).map(|n| frame.split_at(n)) {
+        Some((frame, " R" | " T")) => frame,
+        _ => frame,
+    };
     if iface.is_empty()
         || iface.len() > MAX_IFACE_LEN
         || !iface.bytes().all(|c| c.is_ascii_graphic())

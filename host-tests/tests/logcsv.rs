@@ -75,7 +75,7 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
         ("1,2,3,4,5,6,7,8\n", "drive.csv:1:1: missing header row"),
         ("t,vel,,accel\n", "drive.csv:1:7: empty column name in the header"),
         ("t,vel,t\n", "drive.csv:1:7: column `t`: column `t` appears twice in the header"),
-        ("t,vel,input_vel,accel,steer,brake,lat\n", "drive.csv:1: column `lon`: missing required column `lon`"),
+        ("t,vel,input_vel,accel,steer,brake,lat\n", "drive.csv:1: column `lon`: missing required column `lon` (the header found: `t,vel,input_vel,accel,steer,brake,lat`)"),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,abc,,,,,,\n",
             "drive.csv:2:5: column `vel`: not a number: `abc`",
@@ -485,4 +485,82 @@ proptest! {
             prop_assert!(e.to_string().starts_with("drive.csv:"));
         }
     }
+}
+
+/// A header that lacks a required column is shown, with the likely cause: units in the names,
+/// `;` separators, upper case (review: csv/units.csv, semi.csv, upper.csv).
+#[test]
+fn a_missing_column_shows_the_header_found_and_its_likely_cause() {
+    for (header, cause) in [
+        (
+            "t [s],vel [m/s],input_vel [m/s],accel [%],steer [%],brake [%],lat [deg],lon [deg]",
+            "carries a unit",
+        ),
+        (
+            "t;vel;input_vel;accel;steer;brake;lat;lon",
+            "separated by `;`",
+        ),
+        ("T,VEL,INPUT_VEL,ACCEL,STEER,BRAKE,LAT,LON", "lower case"),
+    ] {
+        let message = error_message(&format!("{header}\n0.02,,,,1,,,\n"));
+        assert!(
+            message.starts_with(&format!(
+                "drive.csv:1: column `t`: missing required column `t` (the header found: `{header}`): "
+            )),
+            "{message}"
+        );
+        assert!(message.contains(cause), "{message}");
+    }
+    // No guess when there is nothing to see.
+    assert_eq!(
+        error_message("vel,input_vel,steer,lat,lon\n"),
+        "drive.csv:1: column `t`: missing required column `t` (the header found: `vel,input_vel,steer,lat,lon`)"
+    );
+}
+
+/// The pedals are optional columns (docs/logs.md): a log without `accel` and `brake` reads as
+/// one whose pedal sensors never reported (review: csv/noped.csv was refused).
+#[test]
+fn the_pedal_columns_may_be_left_out() {
+    let rows = parse("t,vel,input_vel,steer,lat,lon\n0.00,3,3.5,-1,,\n0.02,3.1,,,32.23,-110.95\n")
+        .expect("valid");
+    assert_eq!(rows.len(), 2);
+    assert_eq!((rows[0].accel, rows[0].brake), (None, None));
+    assert_eq!(rows[0].steer, Some(-1.0));
+    assert_eq!(rows[1].lat, Some(32.23));
+    // The other columns stay required.
+    assert!(error_message("t,vel,input_vel,accel,brake,lat,lon\n")
+        .contains("missing required column `steer`"));
+}
+
+/// A `t` in milliseconds (20 ms samples 20 "s" apart) is refused by its median interval
+/// instead of making identify run for minutes on a log 1000 times too long (review:
+/// csv/msint.csv); a receiver's 1 s and a drive's 20 ms pass.
+#[test]
+fn a_time_in_milliseconds_is_refused_by_its_median_interval() {
+    let log = |step: f64| {
+        let mut text = format!("{HEADER}\n");
+        for i in 0..50 {
+            text += &format!("{},{},,,,,,\n", 12.0 + step * f64::from(i), 3.0);
+        }
+        text
+    };
+    let message = error_message(&log(20.0));
+    assert_eq!(
+        message,
+        "drive.csv: column `t`: the median interval between samples is 20.000 (in the unit of `t`), \
+         far from the 20 ms of the log schema (`t` in seconds, sensors every 20 ms or faster): \
+         `t` looks like milliseconds; divide it by 1000"
+    );
+    assert!(
+        error_message(&log(20_000.0)).ends_with("`t` looks like microseconds; divide it by 1e6")
+    );
+    assert!(error_message(&log(1.5)).contains("looks like milliseconds"));
+    for ok in [0.02, 0.2, 1.0] {
+        assert_eq!(parse(&log(ok)).expect("valid").len(), 50, "{ok}");
+    }
+    // The median, not a pause: a long stop in a 20 ms log passes this check.
+    let mut text = log(0.02);
+    text += "100,3,,,,,,\n";
+    assert!(parse(&text).is_ok());
 }

@@ -509,15 +509,17 @@ pub fn decode_frames<W: Write>(
     Ok(summary)
 }
 
-/// `catmodel decode LOG [--messages ...] [--csv]`: decodes the log to stdout, the summary to
+/// `catmodel decode LOG [--interface NAME] [--messages ...] [--csv]`: decodes the log (its
+/// frames on `interface` only, if given) to stdout, the summary to
 /// stderr. A closed stdout (`| head`) ends the output quietly.
-pub fn run(log: &Path, messages: &[String], format: Format) -> Result<()> {
+pub fn run(log: &Path, interface: Option<&str>, messages: &[String], format: Format) -> Result<()> {
     let dbc = Dbc::catmodel().map_err(|e| anyhow::anyhow!("catmodel.dbc: {e}"))?;
     let selection = Selection::parse(&dbc, messages)?;
     let crate::replay::CandumpLog {
         frames,
         unsupported,
-    } = crate::replay::read_candump_log(log)?;
+        ..
+    } = crate::replay::read_candump_reporting(log, interface)?;
     if unsupported > 0 {
         eprintln!("skipped {unsupported} remote/FD/error frames (not decoded)");
     }

@@ -108,6 +108,9 @@ pub const LOG_COLUMNS: [&str; 8] = [
     "lat",
     "lon",
 ];
+/// Columns of the log schema a log may leave out: the pedals (`identify` and `csv2can` use
+/// them when present; a missing column reads as a sensor that never reported).
+pub const OPTIONAL_LOG_COLUMNS: [&str; 2] = ["accel", "brake"];
 /// Columns of the truth CSV.
 pub const TRUTH_COLUMNS: [&str; 6] = ["t", "x", "y", "heading", "yaw_rate", "speed"];
 
@@ -124,8 +127,18 @@ pub enum LogErrorKind {
     EmptyColumnName,
     /// The header names a column twice.
     DuplicateColumn(String),
-    /// A column the schema requires is absent.
-    MissingColumn(&'static str),
+    /// A column the schema requires is absent: the column, and the header found.
+    MissingColumn {
+        /// The column missing.
+        column: &'static str,
+        /// The header row as found.
+        header: String,
+    },
+    /// The median interval between the log's instants is far from the schema's 20 ms.
+    SampleInterval {
+        /// The median interval, in the file's unit of `t`.
+        median: f64,
+    },
     /// A blank line before the end of the file.
     BlankLine,
     /// A row has a different number of cells than the header.
@@ -162,6 +175,40 @@ pub enum LogErrorKind {
     HalfFix,
 }
 
+/// The largest median interval between a log's instants, s: the schema's sensors report every
+/// 20 ms (a receiver once a second at the slowest), so a median over a second is a `t` in
+/// another unit. A `t` in milliseconds put 20 ms samples 20 "s" apart: identify ran for
+/// minutes on the 20 ms grid of a log a thousand times too long, compare fitted nonsense.
+pub const MAX_MEDIAN_INTERVAL_S: f64 = 1.0;
+
+/// Why a header lacks `column`, when the header shows it: `;` separators, units in the names,
+/// upper case.
+fn header_hint(column: &str, header: &str) -> Option<&'static str> {
+    let cells: Vec<&str> = header.split(',').map(str::trim).collect();
+    if cells.len() == 1 && header.contains(';') {
+        return Some("the header is separated by `;`: the schema's separator is `,` (a spreadsheet's export with a `;` list separator)");
+    }
+    if cells.len() == 1 && header.contains('\t') {
+        return Some("the header is separated by tabs: the schema's separator is `,`");
+    }
+    let names = |c: &&str| c.trim_matches('"').trim().to_string();
+    if cells.iter().map(names).any(|c| {
+        c.strip_prefix(column).is_some_and(|rest| {
+            rest.trim_start().starts_with(['[', '(', '_', '/']) || rest.starts_with(' ')
+        })
+    }) {
+        return Some("a column name carries a unit or suffix: name the columns exactly `t`, `vel`, ... (the units are the schema's, docs/logs.md)");
+    }
+    if cells
+        .iter()
+        .map(names)
+        .any(|c| c.eq_ignore_ascii_case(column))
+    {
+        return Some("column names are lower case (`vel`, not `VEL`)");
+    }
+    None
+}
+
 /// A rejected file: where and why.
 #[derive(Debug)]
 pub struct LogError {
@@ -187,7 +234,31 @@ impl fmt::Display for LogErrorKind {
             LogErrorKind::DuplicateColumn(c) => {
                 write!(f, "column `{c}` appears twice in the header")
             }
-            LogErrorKind::MissingColumn(c) => write!(f, "missing required column `{c}`"),
+            LogErrorKind::MissingColumn { column, header } => {
+                write!(
+                    f,
+                    "missing required column `{column}` (the header found: `{header}`)"
+                )?;
+                match header_hint(column, header) {
+                    Some(hint) => write!(f, ": {hint}"),
+                    None => Ok(()),
+                }
+            }
+            LogErrorKind::SampleInterval { median } => {
+                write!(
+                    f,
+                    "the median interval between samples is {median:.3} (in the unit of `t`), far \
+                     from the 20 ms of the log schema (`t` in seconds, sensors every 20 ms or \
+                     faster)"
+                )?;
+                if (MAX_MEDIAN_INTERVAL_S..=1000.0).contains(median) {
+                    write!(f, ": `t` looks like milliseconds; divide it by 1000")
+                } else if *median > 1000.0 {
+                    write!(f, ": `t` looks like microseconds; divide it by 1e6")
+                } else {
+                    Ok(())
+                }
+            }
             LogErrorKind::BlankLine => write!(f, "blank line inside the data"),
             LogErrorKind::FieldCount { expected, found } => {
                 write!(
@@ -435,8 +506,9 @@ impl LogNotes {
     }
 }
 
-/// Reads a driving log. All eight schema columns are required (a sensor that never reported is
-/// an empty column).
+/// Reads a driving log. The schema's columns are required but for the pedals, `accel` and
+/// `brake` (a sensor that never reported is an empty column, or for the pedals no column);
+/// a log whose median interval between instants is over [`MAX_MEDIAN_INTERVAL_S`] is refused.
 pub fn read_log(path: &Path) -> Result<Log, LogError> {
     let text = read_text(path)?;
     parse_log(&text, path)
@@ -478,7 +550,7 @@ impl PendingRow {
 
 /// Parses log text; `path` only names the source in errors.
 pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
-    let table = Table::new(text, path, &LOG_COLUMNS)?;
+    let table = Table::new(text, path, &LOG_COLUMNS, &OPTIONAL_LOG_COLUMNS)?;
     let mut notes = LogNotes {
         path: path.to_path_buf(),
         extra_columns: table.extra_columns(),
@@ -555,7 +627,28 @@ pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
         lines.push(p.line);
         rows.push(p.finish(path)?);
     }
+    check_sample_interval(&rows, path)?;
     Ok(Log { rows, lines, notes })
+}
+
+/// Refuses a log whose median interval between instants is over [`MAX_MEDIAN_INTERVAL_S`].
+fn check_sample_interval(rows: &[LogRow], path: &Path) -> Result<(), LogError> {
+    let mut intervals: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
+    if intervals.len() < 2 {
+        return Ok(());
+    }
+    let mid = intervals.len() / 2;
+    let median = *intervals.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if median > MAX_MEDIAN_INTERVAL_S {
+        return Err(LogError {
+            path: path.to_path_buf(),
+            line: 0,
+            char_column: 0,
+            column: Some("t".to_string()),
+            kind: LogErrorKind::SampleInterval { median },
+        });
+    }
+    Ok(())
 }
 
 /// Reads a truth CSV (every cell required).
@@ -566,7 +659,7 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, LogError> {
 
 /// Parses truth text; `path` only names the source in errors.
 pub fn parse_truth(text: &str, path: &Path) -> Result<Vec<TruthRow>, LogError> {
-    let table = Table::new(text, path, &TRUTH_COLUMNS)?;
+    let table = Table::new(text, path, &TRUTH_COLUMNS, &[])?;
     let mut rows = Vec::new();
     let mut previous: Option<f64> = None;
     for line in table.lines() {
@@ -786,8 +879,9 @@ fn split_cells(line: &str) -> Vec<Cell<'_>> {
 struct Table<'a> {
     path: &'a Path,
     header_len: usize,
-    /// For each wanted column, its index among the header cells.
-    index: Vec<usize>,
+    /// For each wanted column, its index among the header cells (`None`: an optional column
+    /// the header lacks, read as empty).
+    index: Vec<Option<usize>>,
     names: &'static [&'static str],
     /// Header cells that are not wanted columns, in file order.
     extra: Vec<String>,
@@ -800,6 +894,7 @@ impl<'a> Table<'a> {
         text: &'a str,
         path: &'a Path,
         wanted: &'static [&'static str],
+        optional: &[&str],
     ) -> Result<Self, LogError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut lines = text
@@ -837,13 +932,17 @@ impl<'a> Table<'a> {
         let mut index = Vec::with_capacity(wanted.len());
         for name in wanted {
             match cells.iter().position(|c| c.text == *name) {
-                Some(i) => index.push(i),
+                Some(i) => index.push(Some(i)),
+                None if optional.contains(name) => index.push(None),
                 None => {
                     return Err(err(
                         1,
                         0,
                         Some((*name).to_string()),
-                        LogErrorKind::MissingColumn(name),
+                        LogErrorKind::MissingColumn {
+                            column: name,
+                            header: header.to_string(),
+                        },
                     ))
                 }
             }
@@ -914,7 +1013,9 @@ impl Line<'_> {
         self.table
             .index
             .get(i)
-            .and_then(|&h| self.cells.get(h))
+            .copied()
+            .flatten()
+            .and_then(|h| self.cells.get(h))
             .map_or(0, |c| c.char_column)
     }
 
@@ -936,7 +1037,8 @@ impl Line<'_> {
         i: usize,
         range: Option<&'static ColumnRange>,
     ) -> Result<Option<f64>, LogError> {
-        let text = match self.table.index.get(i).and_then(|&h| self.cells.get(h)) {
+        let cell = self.table.index.get(i).copied().flatten();
+        let text = match cell.and_then(|h| self.cells.get(h)) {
             Some(c) => c.text,
             None => "",
         };

@@ -67,6 +67,10 @@ enum Command {
         /// Model file (default: the published models, models/paper.toml, as in the firmware).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+        /// holds several.
+        #[arg(long, value_name = "NAME")]
+        interface: Option<String>,
     },
     /// Score predictions against ground truth, beside a kinematic raw-GNSS baseline.
     Evaluate {
@@ -136,6 +140,10 @@ enum Command {
         /// first tracking command).
         #[arg(long)]
         from: Option<f64>,
+        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+        /// holds several.
+        #[arg(long, value_name = "NAME")]
+        interface: Option<String>,
     },
     /// The GNSS receiver's error (`[control] position_uncertainty_m`) from candump logs of the
     /// car parked: each axis's deviation and correlation time, and the bound to declare.
@@ -147,6 +155,10 @@ enum Command {
         /// published car's).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+        /// holds several.
+        #[arg(long, value_name = "NAME")]
+        interface: Option<String>,
     },
     /// Simulate each model of a model file over one log, beside the kinematic model.
     Compare {
@@ -248,6 +260,10 @@ enum Command {
         /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
         #[arg(long)]
         csv: bool,
+        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+        /// holds several.
+        #[arg(long, value_name = "NAME")]
+        interface: Option<String>,
     },
     /// Print the discrete state-space matrices of every model block as JSON.
     Discretize {
@@ -359,6 +375,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             tx_out,
             model,
+            interface,
         } => {
             let reading = Progress::spinner(&format!("reading {}", log.display()));
             let text = replay::read_bytes(&log)?;
@@ -370,12 +387,20 @@ fn run(cli: Cli) -> Result<()> {
             let mut done = 0;
             // The log is parsed while the node runs; the files are written only if it all
             // parses.
-            let result =
-                replay::replay_file(&log, &text, config, &out, tx_out.as_deref(), |ticks| {
+            let (result, report) = replay::replay_file(
+                &log,
+                &text,
+                interface.as_deref(),
+                config,
+                &out,
+                tx_out.as_deref(),
+                |ticks| {
                     progress.inc(ticks - done);
                     done = ticks;
-                })?;
+                },
+            )?;
             progress.finish();
+            replay::print_report(&log, &report);
             let c = result.counters;
             eprintln!(
                 "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
@@ -512,6 +537,15 @@ fn run(cli: Cli) -> Result<()> {
                 );
             }
             identify::floor::mark_forced(&mut id.model, &violations);
+            // Only a file every reader loads is written (the firmware build's too): a model
+            // the reader refuses (an unstable pole, an absurd gain) is named, not saved.
+            model_file::parse(&model_file::to_toml(&id.model), &out).map_err(|e| {
+                anyhow::anyhow!(
+                    "{} not written: the identified model is refused: {}",
+                    out.display(),
+                    e.message
+                )
+            })?;
             model_file::save(&out, &id.model)
                 .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
             eprintln!("wrote {}", out.display());
@@ -622,7 +656,12 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::IdentifySteering { logs, model, from } => {
+        Command::IdentifySteering {
+            logs,
+            model,
+            from,
+            interface,
+        } => {
             use identify::steering::RateLimit;
             let file_rate = match &model {
                 Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
@@ -630,7 +669,7 @@ fn run(cli: Cli) -> Result<()> {
             };
             let mut frames = Vec::new();
             for log in &logs {
-                frames.extend(replay::read_candump(log)?);
+                frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
             }
             let series = identify::steering::SteeringSeries::from_frames(&frames);
             let f = identify::steering::fit(&series, file_rate, from)?;
@@ -688,13 +727,17 @@ fn run(cli: Cli) -> Result<()> {
             println!("  steer_lag_s = {:.3}", f.trail_s());
             Ok(())
         }
-        Command::ReceiverError { logs, model } => {
+        Command::ReceiverError {
+            logs,
+            model,
+            interface,
+        } => {
             use identify::receiver::{AVERAGE_S, MIN_INDEPENDENT, MIN_LOG_S, SIGMAS};
             let file = load_base(model.as_deref())?;
             let source = file.inputs.gnss_source_address;
             let mut frames = Vec::new();
             for log in &logs {
-                frames.extend(replay::read_candump(log)?);
+                frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
             }
             let r = identify::receiver::measure(&frames, source)?;
             let parked = match r.speed_reports {
@@ -745,13 +788,18 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Decode { log, messages, csv } => {
+        Command::Decode {
+            log,
+            messages,
+            csv,
+            interface,
+        } => {
             let format = if csv {
                 decode::Format::Csv
             } else {
                 decode::Format::Table
             };
-            decode::run(&log, &messages, format)
+            decode::run(&log, interface.as_deref(), &messages, format)
         }
         Command::Discretize { model, ts } => {
             let file = model_file::load(&model)?;

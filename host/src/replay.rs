@@ -11,7 +11,7 @@
 //! candump TX text are written into one growing buffer by hand-written formatters that give
 //! exactly the text of `format!`'s `{:.N}` (round half to even on the exact binary value; tested
 //! against `format!` below), and the TX text is built only when asked for.
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -36,6 +36,95 @@ pub struct CandumpLog {
     pub frames: Vec<TimedFrame>,
     /// Remote, CAN FD and error frames skipped.
     pub unsupported: u64,
+    /// What the reader noticed without refusing the log.
+    pub report: LogReport,
+}
+
+/// What reading a candump log noticed without refusing it: the user must see it
+/// ([`LogReport::notes`], [`LogReport::warnings`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LogReport {
+    /// The interfaces of the log's frame lines, in order of first appearance, with their
+    /// number of lines.
+    pub interfaces: Vec<(String, u64)>,
+    /// The interface kept (`--interface`), if one was asked for.
+    pub kept: Option<String>,
+    /// Frame lines of the other interfaces, skipped because of `--interface`.
+    pub other_interfaces: u64,
+    /// `candump -d` lines (`DROPCOUNT: dropped N CAN frames ...`): how many, the first's line
+    /// number, and the frames they say the recording lost.
+    pub drop_lines: u64,
+    pub first_drop_line: Option<usize>,
+    pub dropped_frames: u64,
+    /// The last line, cut short without a line end (the recorder lost power): its number;
+    /// the line was left out.
+    pub truncated_last_line: Option<usize>,
+}
+
+impl LogReport {
+    /// Notes: what the log holds that the user may not expect (frames of several interfaces).
+    pub fn notes(&self, path: &Path) -> Vec<String> {
+        if self.interfaces.len() < 2 {
+            return Vec::new();
+        }
+        let list = self
+            .interfaces
+            .iter()
+            .map(|(name, n)| format!("`{name}` ({n} lines)"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        vec![match &self.kept {
+            Some(kept) => format!(
+                "{}: frames of {} interfaces, {list}: only `{kept}`'s are read ({} lines of the others skipped)",
+                path.display(),
+                self.interfaces.len(),
+                self.other_interfaces
+            ),
+            None => format!(
+                "{}: frames of {} interfaces, {list}: all are read as one bus; `--interface NAME` keeps one",
+                path.display(),
+                self.interfaces.len()
+            ),
+        }]
+    }
+
+    /// Warnings: the recording lost frames, or its last line was cut short.
+    pub fn warnings(&self, path: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(line) = self.first_drop_line {
+            out.push(format!(
+                "{}:{line}: the recording lost {} frame(s): candump -d reported drops on {} line(s) (`DROPCOUNT: ...`, skipped); the node saw gaps there",
+                path.display(),
+                self.dropped_frames,
+                self.drop_lines
+            ));
+        }
+        if let Some(line) = self.truncated_last_line {
+            out.push(format!(
+                "{}:{line}: the last line is cut short and has no line end (the recorder stopped mid-line): left out",
+                path.display()
+            ));
+        }
+        out
+    }
+}
+
+/// [`read_candump_log_on`] for the CLI: prints the report's notes and warnings on stderr
+/// (`catmodel: note: ...`, `catmodel: warning: ...`).
+pub fn read_candump_reporting(path: &Path, interface: Option<&str>) -> Result<CandumpLog> {
+    let log = read_candump_log_on(path, interface)?;
+    print_report(path, &log.report);
+    Ok(log)
+}
+
+/// Prints a [`LogReport`]'s notes and warnings on stderr.
+pub fn print_report(path: &Path, report: &LogReport) {
+    for note in report.notes(path) {
+        eprintln!("catmodel: note: {note}");
+    }
+    for warning in report.warnings(path) {
+        eprintln!("catmodel: warning: {warning}");
+    }
 }
 
 /// The longest pause between two frames of one log: a day. Ticks run through a pause (the
@@ -52,16 +141,14 @@ pub fn read_candump(path: &Path) -> Result<Vec<TimedFrame>> {
 /// Reads a candump log. Errors name the file, the line and the reason; time going backwards
 /// is an error with the line.
 pub fn read_candump_log(path: &Path) -> Result<CandumpLog> {
-    let mut file =
-        std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut bytes = Vec::new();
-    file.read_to_end(&mut bytes)
-        .with_context(|| format!("{}: reading", path.display()))?;
-    match std::str::from_utf8(&bytes) {
-        Ok(text) => parse_candump_log(path, text),
-        // Not UTF-8 somewhere: the line-by-line reader names the line.
-        Err(_) => read_candump_lines(path, BufReader::new(bytes.as_slice())),
-    }
+    read_candump_log_on(path, None)
+}
+
+/// [`read_candump_log`] keeping only the frames of `interface` (all if `None`); an interface
+/// with no frame in the log is an error naming the log's interfaces.
+pub fn read_candump_log_on(path: &Path, interface: Option<&str>) -> Result<CandumpLog> {
+    let bytes = read_bytes(path)?;
+    parse_candump_bytes(path, &bytes, interface)
 }
 
 /// [`read_candump`] over text already in memory; `path` names the file in errors.
@@ -71,84 +158,205 @@ pub fn parse_candump(path: &Path, text: &str) -> Result<Vec<TimedFrame>> {
 
 /// [`read_candump_log`] over text already in memory; `path` names the file in errors.
 pub fn parse_candump_log(path: &Path, text: &str) -> Result<CandumpLog> {
-    // Lines are ~48 bytes; one allocation for the whole log in the usual case.
-    let mut log = CandumpLog {
-        frames: Vec::with_capacity(text.len() / 40 + 1),
-        unsupported: 0,
-    };
-    let mut last_t = None;
-    for (i, line) in text.lines().enumerate() {
-        push_line(path, i + 1, line, &mut last_t, &mut log)?;
-    }
-    Ok(log)
+    parse_candump_bytes(path, text.as_bytes(), None)
 }
 
-/// The line-by-line reader (kept for its error on a line that is not UTF-8).
-fn read_candump_lines(path: &Path, reader: impl BufRead) -> Result<CandumpLog> {
-    let mut log = CandumpLog::default();
-    let mut last_t = None;
-    for (i, line) in reader.lines().enumerate() {
-        let lineno = i + 1;
-        let line = line.with_context(|| format!("{}:{lineno}: reading", path.display()))?;
-        push_line(path, lineno, &line, &mut last_t, &mut log)?;
-    }
-    Ok(log)
-}
-
-/// Parses one line (blank lines are skipped, unsupported frames counted) and appends its
-/// frame, checking the time order.
-#[inline]
-fn push_line(
+/// [`read_candump_log_on`] over bytes already in memory; `path` names the file in errors (a
+/// line that is not UTF-8 among them).
+pub fn parse_candump_bytes(
     path: &Path,
-    lineno: usize,
-    line: &str,
-    last_t: &mut Option<u64>,
-    log: &mut CandumpLog,
-) -> Result<()> {
-    let frames = &mut log.frames;
-    let frame = match candump::parse_line(line) {
-        Ok(frame) => frame,
-        Err(_) if line.trim().is_empty() => return Ok(()),
-        Err(e) if e.is_unsupported_frame() => {
-            log.unsupported += 1;
+    bytes: &[u8],
+    interface: Option<&str>,
+) -> Result<CandumpLog> {
+    // Lines are ~48 bytes; one allocation for the whole log in the usual case.
+    let mut reader = LineReader::new(path, interface);
+    reader.log.frames.reserve(bytes.len() / 40 + 1);
+    for (lineno, line, unterminated) in byte_lines(bytes) {
+        let line = std::str::from_utf8(line)
+            .map_err(|e| anyhow::anyhow!("{}:{lineno}: reading: {e}", path.display()))?;
+        reader.push(lineno, line, unterminated)?;
+    }
+    reader.finish()
+}
+
+/// The lines of `bytes` with their numbers (from 1), and whether the line is the last one
+/// and has no line end; as `str::lines`, a final line end does not start another line.
+fn byte_lines(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8], bool)> {
+    let terminated = bytes.ends_with(b"\n");
+    let mut lines = bytes.split(|&c| c == b'\n').peekable();
+    let mut lineno = 0;
+    std::iter::from_fn(move || {
+        let line = lines.next()?;
+        lineno += 1;
+        let last = lines.peek().is_none();
+        if last && terminated {
+            return None;
+        }
+        Some((lineno, line, last))
+    })
+}
+
+/// The lines of `text` as [`byte_lines`].
+fn text_lines(text: &str) -> impl Iterator<Item = (usize, &str, bool)> {
+    // Note: the pieces split at '\n' of UTF-8 text are UTF-8.
+    byte_lines(text.as_bytes()).map(|(n, l, u)| (n, std::str::from_utf8(l).unwrap_or_default(), u))
+}
+
+/// Reads a candump log line by line into a [`CandumpLog`].
+struct LineReader<'a> {
+    path: &'a Path,
+    interface: Option<&'a str>,
+    last_t: Option<u64>,
+    log: CandumpLog,
+}
+
+impl<'a> LineReader<'a> {
+    fn new(path: &'a Path, interface: Option<&'a str>) -> Self {
+        let mut log = CandumpLog::default();
+        log.report.kept = interface.map(str::to_owned);
+        Self {
+            path,
+            interface,
+            last_t: None,
+            log,
+        }
+    }
+
+    /// Parses one line (blank lines are skipped, unsupported frames counted, `candump -d`
+    /// lines counted, a malformed last line without a line end left out with a warning) and
+    /// appends its frame, checking the time order.
+    #[inline]
+    fn push(&mut self, lineno: usize, line: &str, unterminated_last: bool) -> Result<()> {
+        let path = self.path;
+        let parsed = candump::parse_line(line);
+        let frame = match parsed {
+            Ok(frame) => Some(frame),
+            Err(_) if line.trim().is_empty() => return Ok(()),
+            Err(e) if e.is_unsupported_frame() => None,
+            Err(candump::CandumpError::DropCount) => {
+                let Some(n) = candump::dropped_frames(line) else {
+                    bail!(
+                        "{}:{lineno}: malformed candump -d line (expected `DROPCOUNT: dropped N CAN frames on 'IFACE' socket (total drops M)`): {line:?}",
+                        path.display()
+                    );
+                };
+                let report = &mut self.log.report;
+                report.drop_lines += 1;
+                report.dropped_frames += u64::from(n);
+                report.first_drop_line.get_or_insert(lineno);
+                return Ok(());
+            }
+            Err(_) if unterminated_last => {
+                self.log.report.truncated_last_line = Some(lineno);
+                return Ok(());
+            }
+            Err(e) => bail!(
+                "{}:{lineno}: malformed candump line ({}): {line:?}",
+                path.display(),
+                candump_reason(e)
+            ),
+        };
+        if !self.keep(line) {
             return Ok(());
         }
-        Err(e) => bail!(
-            "{}:{lineno}: malformed candump line ({}): {line:?}",
-            path.display(),
-            candump_reason(e)
-        ),
-    };
-    // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
-    if frame.t_us > u64::MAX / 2 {
-        bail!(
-            "{}:{lineno}: timestamp {} us out of range",
-            path.display(),
-            frame.t_us
-        );
-    }
-    if let Some(prev) = *last_t {
-        if frame.t_us < prev {
+        let Some(frame) = frame else {
+            self.log.unsupported += 1;
+            return Ok(());
+        };
+        // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
+        if frame.t_us > u64::MAX / 2 {
             bail!(
-                "{}:{lineno}: time goes backwards ({} us after {} us)",
+                "{}:{lineno}: timestamp {} us out of range",
                 path.display(),
-                frame.t_us,
-                prev
+                frame.t_us
             );
         }
-        if frame.t_us - prev > MAX_LOG_PAUSE_US {
-            bail!(
-                "{}:{lineno}: the clock jumps {:.0} s forward, more than the {} s a log may \
-                 pause (a clock step or two logs joined): split the log at this line",
-                path.display(),
-                (frame.t_us - prev) as f64 * 1e-6,
-                MAX_LOG_PAUSE_US / 1_000_000
-            );
+        if let Some(prev) = self.last_t {
+            if frame.t_us < prev {
+                bail!(
+                    "{}:{lineno}: time goes backwards ({} us after {} us){}",
+                    path.display(),
+                    frame.t_us,
+                    prev,
+                    if short_timestamp(line) {
+                        ": the timestamps look like `candump -td`'s, each the time since the \
+                         frame before, which cannot be replayed: record with `-ta` (absolute) \
+                         or `-tz` (from the first frame)"
+                    } else {
+                        ""
+                    }
+                );
+            }
+            if frame.t_us - prev > MAX_LOG_PAUSE_US {
+                bail!(
+                    "{}:{lineno}: the clock jumps {:.0} s forward, more than the {} s a log may \
+                     pause (a clock step or two logs joined): split the log at this line",
+                    path.display(),
+                    (frame.t_us - prev) as f64 * 1e-6,
+                    MAX_LOG_PAUSE_US / 1_000_000
+                );
+            }
         }
+        self.last_t = Some(frame.t_us);
+        self.log.frames.push(frame);
+        Ok(())
     }
-    *last_t = Some(frame.t_us);
-    frames.push(frame);
-    Ok(())
+
+    /// Counts the line's interface; whether its frame is kept (`--interface`).
+    #[inline]
+    fn keep(&mut self, line: &str) -> bool {
+        let name = candump::interface_of(line).unwrap_or_default();
+        let report = &mut self.log.report;
+        match report.interfaces.iter_mut().find(|(n, _)| n == name) {
+            Some((_, count)) => *count += 1,
+            None => report.interfaces.push((name.to_owned(), 1)),
+        }
+        let keep = self.interface.is_none_or(|kept| kept == name);
+        if !keep {
+            report.other_interfaces += 1;
+        }
+        keep
+    }
+
+    /// The log; an error if `--interface` named an interface the log does not have.
+    fn finish(self) -> Result<CandumpLog> {
+        self.log.report.check_interface(self.path)?;
+        Ok(self.log)
+    }
+}
+
+impl LogReport {
+    /// An error if the interface kept is not among the log's.
+    fn check_interface(&self, path: &Path) -> Result<()> {
+        if let Some(kept) = &self.kept {
+            if !self.interfaces.iter().any(|(n, _)| n == kept) {
+                let found = self
+                    .interfaces
+                    .iter()
+                    .map(|(n, _)| format!("`{n}`"))
+                    .collect::<Vec<_>>();
+                bail!(
+                    "{}: no frame on interface `{kept}` (--interface); the log's interfaces: {}",
+                    path.display(),
+                    if found.is_empty() {
+                        "none (no frame)".to_string()
+                    } else {
+                        found.join(", ")
+                    }
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether the line's timestamp has fewer than the 10 digits of seconds of candump's absolute
+/// time (`%010lu`): `candump -td` and `-tz` write `%03lu`.
+fn short_timestamp(line: &str) -> bool {
+    line.trim_start()
+        .strip_prefix('(')
+        .and_then(|rest| rest.split_once('.'))
+        .is_some_and(|(secs, _)| secs.len() < 10)
 }
 
 /// What is wrong with a rejected candump line, in words.
@@ -171,6 +379,7 @@ pub fn candump_reason(e: candump::CandumpError) -> &'static str {
         E::TooLong => "more than 8 data bytes",
         E::TrailingGarbage => "unexpected text after the data",
         E::LengthMismatch => "fewer data bytes than the `[LEN]` field says",
+        E::DropCount => "a `candump -d` drop count, not a frame",
     }
 }
 
@@ -321,47 +530,51 @@ pub fn replay_text_into<C: Write + Send, T: Write + Send>(
     tx_log: Option<T>,
     progress: impl FnMut(u64),
 ) -> Result<ReplayStats> {
-    replay_text(path, text, config, csv, tx_log, false, progress)
+    replay_text(path, text, None, config, csv, tx_log, false, progress).map(|(stats, _)| stats)
 }
 
-/// [`replay_text_into`]; with `stream`, the text reaches the sinks as the node runs, before
-/// the input is known to be valid (for sinks that are discarded on an error: [`PartialFile`]).
+/// [`replay_text_into`] keeping the frames of `interface` (all if `None`), with what the
+/// reader noticed; with `stream`, the text reaches the sinks as the node runs, before the
+/// input is known to be valid (for sinks that are discarded on an error: [`PartialFile`]).
+#[allow(clippy::too_many_arguments)]
 fn replay_text<C: Write + Send, T: Write + Send>(
     path: &Path,
     text: &str,
+    interface: Option<&str>,
     config: NodeConfig,
     csv: C,
     tx_log: Option<T>,
     stream: bool,
     progress: impl FnMut(u64),
-) -> Result<ReplayStats> {
+) -> Result<(ReplayStats, CandumpLog)> {
     let (to_node, chunks) = std::sync::mpsc::sync_channel::<Result<Vec<TimedFrame>>>(16);
     std::thread::scope(|scope| {
-        // Returns the unsupported frames it skipped.
+        // Returns the log without its frames: the counts and the report.
         let parser = scope.spawn(move || {
-            let mut chunk = CandumpLog {
-                frames: Vec::with_capacity(PARSE_CHUNK_FRAMES),
-                unsupported: 0,
-            };
-            let mut last_t = None;
-            for (i, line) in text.lines().enumerate() {
-                if let Err(e) = push_line(path, i + 1, line, &mut last_t, &mut chunk) {
+            let mut reader = LineReader::new(path, interface);
+            reader.log.frames = Vec::with_capacity(PARSE_CHUNK_FRAMES);
+            for (lineno, line, unterminated) in text_lines(text) {
+                if let Err(e) = reader.push(lineno, line, unterminated) {
                     // Note: a send fails only if the node stopped listening.
                     let _ = to_node.send(Err(e));
-                    return chunk.unsupported;
+                    return reader.log;
                 }
-                if chunk.frames.len() == PARSE_CHUNK_FRAMES {
+                if reader.log.frames.len() == PARSE_CHUNK_FRAMES {
                     let full = std::mem::replace(
-                        &mut chunk.frames,
+                        &mut reader.log.frames,
                         Vec::with_capacity(PARSE_CHUNK_FRAMES),
                     );
                     if to_node.send(Ok(full)).is_err() {
-                        return chunk.unsupported;
+                        return reader.log;
                     }
                 }
             }
-            let _ = to_node.send(Ok(chunk.frames));
-            chunk.unsupported
+            let last = std::mem::take(&mut reader.log.frames);
+            let _ = match reader.log.report.check_interface(path) {
+                Ok(()) => to_node.send(Ok(last)),
+                Err(e) => to_node.send(Err(e)),
+            };
+            reader.log
         });
         let source = StreamSource {
             chunks,
@@ -374,46 +587,61 @@ fn replay_text<C: Write + Send, T: Write + Send>(
         if let Some(e) = parse_error {
             return Err(e);
         }
-        stats.unsupported = match parser.join() {
-            Ok(n) => n,
+        let log = match parser.join() {
+            Ok(log) => log,
             Err(panic) => std::panic::resume_unwind(panic),
         };
+        stats.unsupported = log.unsupported;
         written.context("writing the output")?;
-        Ok(stats)
+        Ok((stats, log))
     })
 }
 
-/// `catmodel replay`: the candump file at `log` through the node, the predictions CSV to
-/// `csv_path` and the TX log to `tx_path` if given (files, with their directories, written as
-/// `.partial` files while the node runs and renamed once the whole log has parsed: an error
-/// leaves none behind; [`PartialFile`]). `progress` as in [`replay_into`]; [`estimate_ticks`]
-/// gives the total.
+/// `catmodel replay`: the candump file at `log` through the node (its frames on `interface`
+/// only, if given), the predictions CSV to `csv_path` and the TX log to `tx_path` if given
+/// (files, with their directories, written as `.partial` files while the node runs and renamed
+/// once the whole log has parsed: an error leaves none behind; [`PartialFile`]). `progress` as
+/// in [`replay_into`]; [`estimate_ticks`] gives the total. Returns what the reader noticed
+/// too ([`LogReport`]).
 pub fn replay_file(
     log: &Path,
     text: &[u8],
+    interface: Option<&str>,
     config: NodeConfig,
     csv_path: &Path,
     tx_path: Option<&Path>,
     progress: impl FnMut(u64),
-) -> Result<ReplayStats> {
+) -> Result<(ReplayStats, LogReport)> {
     let mut csv = PartialFile::new(csv_path);
     let mut tx = tx_path.map(PartialFile::new);
-    let stats = match std::str::from_utf8(text) {
-        Ok(text) => replay_text(log, text, config, &mut csv, tx.as_mut(), true, progress)?,
+    let (stats, report) = match std::str::from_utf8(text) {
+        Ok(text) => {
+            let (stats, read) = replay_text(
+                log,
+                text,
+                interface,
+                config,
+                &mut csv,
+                tx.as_mut(),
+                true,
+                progress,
+            )?;
+            (stats, read.report)
+        }
         Err(_) => {
-            // Not UTF-8 somewhere: the line-by-line reader names the line.
-            let log = read_candump_lines(log, BufReader::new(text))?;
-            let mut stats = replay_into(&log.frames, config, &mut csv, tx.as_mut(), progress)
+            // Not UTF-8 somewhere: the byte reader names the line.
+            let read = parse_candump_bytes(log, text, interface)?;
+            let mut stats = replay_into(&read.frames, config, &mut csv, tx.as_mut(), progress)
                 .context("writing the output")?;
-            stats.unsupported = log.unsupported;
-            stats
+            stats.unsupported = read.unsupported;
+            (stats, read.report)
         }
     };
     csv.commit()?;
     if let Some(tx) = tx {
         tx.commit()?;
     }
-    Ok(stats)
+    Ok((stats, report))
 }
 
 /// Reads a whole file. Errors name it.
@@ -1428,7 +1656,7 @@ mod tests {
         let p = dir.join("a.log");
         std::fs::write(&p, text).unwrap();
         let fast = read_candump(&p).unwrap();
-        let slow = read_candump_lines(&p, BufReader::new(text.as_bytes()))
+        let slow = parse_candump_bytes(&p, text.as_bytes(), None)
             .unwrap()
             .frames;
         assert_eq!(fast, slow);
@@ -1529,13 +1757,14 @@ mod tests {
         let (csv, tx) = (dir.join("out/p.csv"), dir.join("out/tx.log"));
         let mut bad = text.clone();
         bad.extend_from_slice(b"(9999999999.000000) can0 100#0G\n");
-        let err = replay_file(&log, &bad, config.clone(), &csv, Some(&tx), |_| {}).unwrap_err();
+        let err =
+            replay_file(&log, &bad, None, config.clone(), &csv, Some(&tx), |_| {}).unwrap_err();
         assert!(err.to_string().contains("data is not hex"), "{err}");
         let left: Vec<_> = std::fs::read_dir(dir.join("out"))
             .map(|d| d.map(|e| e.unwrap().file_name()).collect())
             .unwrap_or_default();
         assert!(left.is_empty(), "{left:?}");
-        let stats = replay_file(&log, &text, config, &csv, Some(&tx), |_| {}).unwrap();
+        let (stats, _) = replay_file(&log, &text, None, config, &csv, Some(&tx), |_| {}).unwrap();
         let mut names: Vec<_> = std::fs::read_dir(dir.join("out"))
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())
@@ -1561,7 +1790,7 @@ mod tests {
         let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
         let text = std::fs::read(&log).unwrap();
         let config = crate::model_file::paper().node_config();
-        replay_file(&log, &text, config, null, Some(null), |_| {}).unwrap();
+        replay_file(&log, &text, None, config, null, Some(null), |_| {}).unwrap();
         assert!(std::fs::metadata(null)
             .unwrap()
             .file_type()

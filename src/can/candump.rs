@@ -4,10 +4,20 @@
 //! - Timestamp: decimal seconds, a dot, exactly six decimals; converted to integer microseconds
 //!   without any float. [`format_line`] pads the seconds to 10 digits as can-utils does
 //!   (`%010lu.%06lu`); [`parse_line`] accepts 1 to 20 digits.
-//! - Interface: 1 to 15 printable characters (Linux `IFNAMSIZ` - 1).
+//! - Interface: 1 to 15 printable characters (Linux `IFNAMSIZ` - 1), after one or more spaces:
+//!   candump right-aligns the names to the longest one it has seen (`%*s`), so a log of `can0`
+//!   and `vcan0` writes `(...)  can0 123#00`.
 //! - Identifier: exactly 3 hex digits = 11-bit (<= 0x7FF), exactly 8 = 29-bit (<= 0x1FFFFFFF).
 //! - Data: 0 to 8 bytes as pairs of hex digits, either case; [`format_line`] writes upper case.
-//! - Rejected with a reason: anything after the data other than trailing whitespace / CR / LF.
+//! - `candump -l -x` appends ` R` (received) or ` T` (sent by this host) after the data:
+//!   read and ignored.
+//! - Leading and trailing whitespace (and CR / LF) are ignored: the screen format starts every
+//!   line with a space.
+//! - Rejected with a reason: anything else after the data.
+//! - `candump -d` writes `DROPCOUNT: dropped N CAN frame(s) on 'IFACE' socket (total drops M)`
+//!   lines between the frames when the socket lost frames: [`parse_line`] refuses them with
+//!   [`CandumpError::DropCount`], [`dropped_frames`] reads the count, so a reader can skip
+//!   them and say how many frames the recording lost.
 //! - Also read: candump's screen format with a timestamp (`candump -ta` / `-td` / `-tz`, what
 //!   `candump -t a can0 > file` records): `(1700000000.123456)  can0  123   [4]  DE AD BE EF`,
 //!   any whitespace between the fields ([`parse_line`] tells the two apart by the `[LEN]`
@@ -60,6 +70,9 @@ pub enum CandumpError {
     TrailingGarbage,
     /// Screen format: fewer data bytes than its `[LEN]` says.
     LengthMismatch,
+    /// A `candump -d` line, `DROPCOUNT: dropped N CAN frames on 'IFACE' socket (total drops
+    /// M)`: not a frame; the recording lost N frames here ([`dropped_frames`]).
+    DropCount,
 }
 
 impl CandumpError {
@@ -169,11 +182,40 @@ fn parse_data(text: &str) -> Result<([u8; 8], u8), CandumpError> {
     Ok((data, (bytes.len() / 2) as u8))
 }
 
-/// Parses one candump line (a trailing CR/LF or whitespace is ignored).
+/// The start of a `candump -d` line.
+const DROPCOUNT_PREFIX: &str = "DROPCOUNT: dropped ";
+
+/// The number of frames a `candump -d` line says the socket dropped, `N` in `DROPCOUNT:
+/// dropped N CAN frame(s) on 'IFACE' socket (total drops M)` (can-utils candump.c); `None`
+/// for any other line.
+pub fn dropped_frames(line: &str) -> Option<u32> {
+    let rest = line.trim().strip_prefix(DROPCOUNT_PREFIX)?;
+    let (count, rest) = rest.split_once(' ')?;
+    let rest = rest
+        .strip_prefix("CAN frames on '")
+        .or_else(|| rest.strip_prefix("CAN frame on '"))?;
+    let (_iface, rest) = rest.split_once("' socket (total drops ")?;
+    let total = rest.strip_suffix(')')?;
+    parse_decimal(total).filter(|t| *t <= u64::from(u32::MAX))?;
+    parse_decimal(count).and_then(|n| u32::try_from(n).ok())
+}
+
+/// The interface name of a candump line (log or screen format), or `None` if the line has no
+/// `(timestamp)` followed by a name. Does not check the rest of the line: [`parse_line`] does.
+pub fn interface_of(line: &str) -> Option<&str> {
+    let rest = line.trim_start().strip_prefix('(')?;
+    let (_, rest) = rest.split_once(')')?;
+    rest.split_ascii_whitespace().next()
+}
+
+/// Parses one candump line (leading and trailing whitespace, CR and LF are ignored).
 pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
-    let line = line.trim_end();
+    let line = line.trim();
     if line.is_empty() {
         return Err(CandumpError::Empty);
+    }
+    if line.starts_with(DROPCOUNT_PREFIX) {
+        return Err(CandumpError::DropCount);
     }
     let rest = line
         .strip_prefix('(')
@@ -187,10 +229,17 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
     {
         return parse_screen(t_us, rest);
     }
+    // One space, more when candump right-aligned the name to a longer one (`%*s`).
     let rest = rest
         .strip_prefix(' ')
-        .ok_or(CandumpError::MissingInterface)?;
+        .ok_or(CandumpError::MissingInterface)?
+        .trim_start_matches(' ');
     let (iface, frame_text) = rest.split_once(' ').ok_or(CandumpError::MissingInterface)?;
+    // `candump -l -x`: ` R` (received) or ` T` (transmitted) after the frame.
+    let frame_text = frame_text
+        .strip_suffix(" R")
+        .or_else(|| frame_text.strip_suffix(" T"))
+        .unwrap_or(frame_text);
     if iface.is_empty()
         || iface.len() > MAX_IFACE_LEN
         || !iface.bytes().all(|c| c.is_ascii_graphic())

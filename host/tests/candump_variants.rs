@@ -1,0 +1,228 @@
+//! candump files as can-utils' candump.c writes them, through the built `catmodel` binary
+//! (docs/logs.md, "candump"; docs/findings.md, "Fixed"): the screen format with its leading
+//! space, `-l` with right-aligned interface names, `-l -x` flags, `-d` drop counts, a last line
+//! cut short, delta timestamps, and logs of several interfaces. Each variant of the smoke drive
+//! replays to the same predictions as the plain log.
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_catmodel");
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("candump_variants_{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn smoke() -> String {
+    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log"))
+        .unwrap()
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().unwrap()
+}
+
+/// Replays `text` (written to DIR/NAME), with `extra` arguments: exit status, predictions,
+/// stderr.
+fn replay(dir: &Path, name: &str, text: &str, extra: &[&str]) -> (i32, String, String) {
+    let log = dir.join(name);
+    std::fs::write(&log, text).unwrap();
+    let out = dir.join(format!("{name}.csv"));
+    let _ = std::fs::remove_file(&out);
+    let mut args = vec![
+        "replay",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    (
+        o.status.code().unwrap(),
+        std::fs::read_to_string(&out).unwrap_or_default(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// Rewrites each line of the plain log with `f`.
+fn each_line(text: &str, mut f: impl FnMut(&str) -> String) -> String {
+    text.lines().map(|l| f(l) + "\n").collect()
+}
+
+/// `(TS) can0 ID#DATA` as candump's screen format writes it: `printf(" %s", ...)`, the
+/// timestamp, a space, the name, two spaces, the identifier right-aligned, `[LEN]`, the bytes.
+fn screen(line: &str) -> String {
+    let (stamp, rest) = line.split_once(' ').unwrap();
+    let (iface, frame) = rest.split_once(' ').unwrap();
+    let (id, data) = frame.split_once('#').unwrap();
+    let bytes: Vec<&str> = (0..data.len() / 2)
+        .map(|i| &data[2 * i..2 * i + 2])
+        .collect();
+    format!(
+        " {stamp}  {iface}  {id:>8}   [{}]  {}",
+        bytes.len(),
+        bytes.join(" ")
+    )
+}
+
+#[test]
+fn the_screen_format_as_candump_prints_it_replays_like_the_log() {
+    let dir = tmp_dir("screen");
+    let plain = smoke();
+    let (code, want, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        !stderr.contains("note:") && !stderr.contains("warning:"),
+        "{stderr}"
+    );
+    // `candump -ta can0 > file`: every line starts with a space.
+    let ta = each_line(&plain, screen);
+    assert!(ta.starts_with(" (0000000000.003296)  can0  09F8011C   [8]  7F 32"));
+    let (code, got, stderr) = replay(&dir, "ta.log", &ta, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+}
+
+#[test]
+fn delta_timestamps_are_refused_by_name() {
+    let dir = tmp_dir("delta");
+    // `candump -td`: `(%03lu.%06lu)`, the time since the frame before.
+    let mut last = None;
+    let td = each_line(&smoke(), |l| {
+        let close = l.find(')').unwrap();
+        let (s, us) = l[1..close].split_once('.').unwrap();
+        let t = s.parse::<u64>().unwrap() * 1_000_000 + us.parse::<u64>().unwrap();
+        let d = t - last.replace(t).unwrap_or(t);
+        screen(&format!(
+            "({:03}.{:06}){}",
+            d / 1_000_000,
+            d % 1_000_000,
+            &l[close + 1..]
+        ))
+    });
+    let (code, _, stderr) = replay(&dir, "td.log", &td, &[]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(stderr.contains("td.log:"), "{stderr}");
+    assert!(stderr.contains("time goes backwards"), "{stderr}");
+    assert!(stderr.contains("look like `candump -td`'s"), "{stderr}");
+}
+
+#[test]
+fn candump_l_variants_replay_like_the_plain_log() {
+    let dir = tmp_dir("variants");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    // `-l` on can0 and vcan10: `%*s` right-aligns the names to the longest.
+    let padded = plain.replace(") can0 ", ")   can0 ");
+    // `-l -x`: ` R` received, ` T` sent by this host.
+    let flagged = each_line(&plain, |l| format!("{l} R"));
+    for (name, text) in [("padded.log", padded), ("xflag.log", flagged)] {
+        let (code, got, stderr) = replay(&dir, name, &text, &[]);
+        assert_eq!(code, 0, "{name}: {stderr}");
+        assert_eq!(got, want, "{name}");
+    }
+    // `-d`: the socket's drop counter, skipped and reported with its line and count.
+    let mut lines: Vec<&str> = plain.lines().collect();
+    lines.insert(
+        500,
+        "DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)",
+    );
+    lines.insert(
+        900,
+        "DROPCOUNT: dropped 1 CAN frame on 'can0' socket (total drops 4)",
+    );
+    let (code, got, stderr) = replay(&dir, "drops.log", &(lines.join("\n") + "\n"), &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains(
+            "catmodel: warning: ",
+        ) && stderr.contains("drops.log:501: the recording lost 4 frame(s): candump -d reported drops on 2 line(s)"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_last_line_cut_short_is_left_out_and_one_elsewhere_refused() {
+    let dir = tmp_dir("trunc");
+    let plain = smoke();
+    let lines: Vec<&str> = plain.lines().collect();
+    let n = lines.len();
+    let all_but_last = lines[..n - 1].join("\n") + "\n";
+    let (_, want, _) = replay(&dir, "shorter.log", &all_but_last, &[]);
+    for cut in [10, 30] {
+        // Power lost mid-line: no line end.
+        let text = all_but_last.clone() + &lines[n - 1][..cut];
+        let (code, got, stderr) = replay(&dir, "cut.log", &text, &[]);
+        assert_eq!(code, 0, "{stderr}");
+        assert_eq!(got, want);
+        assert!(
+            stderr.contains(&format!("cut.log:{n}: the last line is cut short")),
+            "{stderr}"
+        );
+    }
+    // The same line with its line end, or in the middle: an error.
+    let ended = all_but_last.clone() + &lines[n - 1][..30] + "\n";
+    let (code, _, stderr) = replay(&dir, "ended.log", &ended, &[]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains(&format!("ended.log:{n}: malformed candump line")),
+        "{stderr}"
+    );
+    let middle = lines[..10].join("\n") + "\n" + &lines[10][..30] + "\n" + &lines[11..].join("\n");
+    let (code, _, stderr) = replay(&dir, "middle.log", &middle, &[]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("middle.log:11: malformed candump line"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn frames_of_two_interfaces_are_named_and_one_is_kept_on_request() {
+    let dir = tmp_dir("twoif");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    // A second bus with the same identifiers and other data, as a recorder on can0 and can1.
+    let two = each_line(&plain, |l| {
+        if let Some((head, data)) = l.split_once(" can0 101#") {
+            format!("{l}\n{head} can1 101#{}", data.replace('0', "1"))
+        } else {
+            l.to_string()
+        }
+    });
+    let (code, got, stderr) = replay(&dir, "two.log", &two, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    // can1's frames reach the node (and fail its CRC check).
+    assert!(got.len() > 1000);
+    assert!(!stderr.contains("rejected: crc 0,"), "{stderr}");
+    assert!(
+        stderr.contains("two.log: frames of 2 interfaces, `can0` ("),
+        "{stderr}"
+    );
+    assert!(stderr.contains("`--interface NAME` keeps one"), "{stderr}");
+    let (code, got, stderr) = replay(&dir, "two.log", &two, &["--interface", "can0"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(stderr.contains("only `can0`'s are read"), "{stderr}");
+    let (code, _, stderr) = replay(&dir, "two.log", &two, &["--interface", "can9"]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains(
+            "no frame on interface `can9` (--interface); the log's interfaces: `can0`, `can1`"
+        ),
+        "{stderr}"
+    );
+    // decode keeps the same frames.
+    let decode = |log: &Path, extra: &[&str]| {
+        let mut args = vec!["decode", log.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        String::from_utf8(run(&args).stdout).unwrap()
+    };
+    assert_eq!(
+        decode(&dir.join("two.log"), &["--interface", "can0"]),
+        decode(&dir.join("plain.log"), &[])
+    );
+}
