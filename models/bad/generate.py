@@ -48,6 +48,25 @@ def reorder(text):
     return text[:first] + "".join(reversed(parts)) + text[last:]
 
 
+def with_lateral(text, steer_gain="1.0", den="[1.0, 25.0]"):
+    """The published file with a lateral section as `catmodel identify` writes one."""
+    return text + f"""
+[lateral]
+steer_gain = {steer_gain}
+understeer_s2_per_m2 = 0.0015
+equation = "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order"
+output = "yaw_rate"
+output_unit = "rad/s"
+
+[[lateral.blocks]]
+input = "yaw_rate_kinematic"
+input_unit = "rad/s"
+num = [0.0, 25.0]
+den = {den}
+delay_s = 0.0
+"""
+
+
 BAD = {
     "misnamed-input": (
         lambda t: replace(t, 'input = "phi"', 'input = "psi"'),
@@ -83,6 +102,43 @@ BAD = {
     "integrating-speed-model": (
         lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, 1.629, 0.0]"),
         "speed.blocks[input_vel]: the model has a pole at s = 0",
+    ),
+    # Stability and gains (docs/findings.md, "unstable, near-integrating and absurd models").
+    "unstable-speed-model": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, -0.5, 0.2]"),
+        "speed.blocks[input_vel]: pole at s = 0.25 +/- 0.3708j in the right half-plane",
+    ),
+    "undamped-speed-model": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, 0.0, 0.7522]"),
+        "speed.blocks[input_vel]: pole at s = 0 +/- 0.8673j on the imaginary axis",
+    ),
+    "slow-speed-model": (
+        lambda t: replace(t, "den = [1.0, 1.629, 0.7522]", "den = [1.0, 1e-6, 1e-12]"),
+        "speed.blocks[input_vel]: pole at s = -5e-7 +/- 8.66e-7j decays slower than 0.1 1/s",
+    ),
+    "huge-speed-gain": (
+        lambda t: replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [0.0, 1e30, 1e30]"),
+        "speed.blocks[input_vel]: DC gain 1.329e30 is outside 0.5..2",
+    ),
+    "unstable-dxdt-model": (
+        lambda t: replace(t, "den = [1.0, 6.211, 26.79]", "den = [1.0, -2.0, 1.0]"),
+        "dx_dt.blocks[v_m]: pole at s = 1 in the right half-plane",
+    ),
+    "dxdt-steering-gain": (
+        lambda t: replace(t, "num = [-22.3, 371.5, -26.08]", "num = [-22.3, 371.5, -26080.0]"),
+        "dx_dt.blocks[phi]: DC gain -1389 is outside -193.7..193.7",
+    ),
+    "dxdt-position-gain": (
+        lambda t: replace(t, "num = [20.55, -110.4, 12.08]", "num = [20.55, -110.4, 1208.0]"),
+        "dx_dt.blocks[x]: DC gain 10.81 is outside -1..1",
+    ),
+    "unstable-lateral-model": (
+        lambda t: with_lateral(t, den="[1.0, -25.0]"),
+        "lateral.blocks[yaw_rate_kinematic]: pole at s = 25 in the right half-plane",
+    ),
+    "steer-gain-lock": (
+        lambda t: with_lateral(t, steer_gain="50.98"),
+        "lateral.steer_gain = 50.98: the lock would be max_steer_deg 35.5 x 50.98 = 1810 deg",
     ),
     "negative-wheelbase": (
         lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_m = -2.62"),

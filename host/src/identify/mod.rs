@@ -419,8 +419,12 @@ pub fn identify_lateral(
             break;
         }
     }
-    if !(g.is_finite() && g > 0.1 && g < 10.0) {
-        return Ok(Err(format!("steering gain estimate {g} is implausible")));
+    // The reader's bound (a gain within 0.1..10 and a lock below 90 degrees), so that the file
+    // written loads.
+    if let Some(why) = model_file::steer_gain_problem(vehicle.max_steer_deg, g) {
+        return Ok(Err(format!(
+            "steering gain estimate {g} is implausible ({why})"
+        )));
     }
     // Dynamic part over whole experiments.
     let r_kin: Vec<Vec<f64>> = training

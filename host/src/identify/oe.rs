@@ -177,7 +177,10 @@ pub fn lstsq(cols: &[Vec<f64>], y: &[f64]) -> Result<Vec<f64>> {
 /// experiments, and on rate-limited speed ramps the unconstrained output-error optimum drifts
 /// to a near-integrator (a pole at ~0 with a tiny residue) that fits the training ramps
 /// slightly better and generalises badly (measured: 63 % vs 87-90 % validation fit).
-pub const MIN_DECAY_RATE_PER_S: f64 = 0.1;
+///
+/// The model file's reader refuses a slower pole in any file (the same constant), so every
+/// file `identify` writes loads.
+pub const MIN_DECAY_RATE_PER_S: f64 = crate::model_file::MIN_POLE_DECAY_RATE_PER_S;
 
 fn min_decay_rate() -> f64 {
     MIN_DECAY_RATE_PER_S
