@@ -199,6 +199,19 @@ fn the_target_speed_meets_every_later_target_and_the_end_at_the_paths_braking() 
     close(speed(&p, 80.0), 5.0);
     close(speed(&p, 99.0), 6.0f64.sqrt());
     close(speed(&p, 100.0), 0.0);
+    // The geometry's sample is the same but for the speed: the points' own.
+    let (full, geometry) = (
+        p.sample(30.0, 0).unwrap(),
+        p.sample_geometry(30.0, 0).unwrap(),
+    );
+    assert_eq!(geometry.speed_mps, 20.0);
+    assert_eq!(
+        catmodel::control::path::PathSample {
+            speed_mps: full.speed_mps,
+            ..geometry
+        },
+        full
+    );
     // Another braking envelopes the loaded path again, and every later one.
     assert!(p.set_braking(1.5));
     close(speed(&p, 30.0), (25.0f64 + 3.0 * 30.0).sqrt());

@@ -722,6 +722,17 @@ impl Path {
     /// values, beyond its end the last point extended straight ahead at speed 0). `hint` is a
     /// segment index to start searching from (e.g. the projection's); `None` without a path.
     pub fn sample(&self, station_m: f32, hint: usize) -> Option<PathSample> {
+        self.sample_with(station_m, hint, true)
+    }
+
+    /// [`Path::sample`] for its geometry and corridor only: its `speed_mps` is the points'
+    /// targets, linear between them, without the speed envelope (whose square root a tick
+    /// that samples the corridor at many stations need not take).
+    pub fn sample_geometry(&self, station_m: f32, hint: usize) -> Option<PathSample> {
+        self.sample_with(station_m, hint, false)
+    }
+
+    fn sample_with(&self, station_m: f32, hint: usize, envelope: bool) -> Option<PathSample> {
         if self.len < 2 || !station_m.is_finite() {
             return None;
         }
@@ -737,22 +748,28 @@ impl Path {
         // Beyond the end, the last segment extends straight: position moves on, speed is 0.
         let beyond = (station_m - length).max(0.0);
         let (heading_rad, curvature_per_m) = self.heading_and_curvature(i, t, seg_len);
+        let target = lerp(a.speed_mps, b.speed_mps);
+        let speed_mps = if beyond > 0.0 {
+            0.0
+        } else if envelope {
+            // The square root only where the envelope binds.
+            let r_b = self.reach_m2ps2.get(i + 1).copied().unwrap_or(0.0);
+            let reach = math::max(r_b + 2.0 * self.braking_mps2 * (seg_len - t), 0.0);
+            if target * target <= reach {
+                target
+            } else {
+                math::sqrt(reach)
+            }
+        } else {
+            target
+        };
         Some(PathSample {
             station_m: s + beyond,
             east_m: a.east_m + (t + beyond) * sin_h,
             north_m: a.north_m + (t + beyond) * cos_h,
             heading_rad,
             curvature_per_m: if beyond > 0.0 { 0.0 } else { curvature_per_m },
-            speed_mps: if beyond > 0.0 {
-                0.0
-            } else {
-                let r_b = self.reach_m2ps2.get(i + 1).copied().unwrap_or(0.0);
-                let envelope = math::sqrt(math::max(
-                    r_b + 2.0 * self.braking_mps2 * (seg_len - t),
-                    0.0,
-                ));
-                math::min(lerp(a.speed_mps, b.speed_mps), envelope)
-            },
+            speed_mps,
             left_m: lerp(a.left_m, b.left_m),
             right_m: lerp(a.right_m, b.right_m),
         })

@@ -631,14 +631,14 @@ fn side_points(
     let n = path.narrowest_corridor(axle_m, end_m, hint)?;
     let widths = (n.left_m, n.right_m);
     let left = SidePoint {
-        sample: sample(&path.sample(n.left_station_m, hint)?, widths),
+        sample: sample(&path.sample_geometry(n.left_station_m, hint)?, widths),
         ahead_m: n.left_station_m - axle_m,
     };
     let right = if n.right_station_m == n.left_station_m {
         left
     } else {
         SidePoint {
-            sample: sample(&path.sample(n.right_station_m, hint)?, widths),
+            sample: sample(&path.sample_geometry(n.right_station_m, hint)?, widths),
             ahead_m: n.right_station_m - axle_m,
         }
     };
@@ -706,7 +706,7 @@ fn mpc_tick<P: StageProbe>(
         let Some(p) = path.project(o.east_m, o.north_m, None) else {
             continue;
         };
-        let at = path.sample(p.station_m, p.segment)?;
+        let at = path.sample_geometry(p.station_m, p.segment)?;
         *slot = Some(mpc::Obstacle {
             east_m: o.east_m,
             north_m: o.north_m,
