@@ -68,6 +68,31 @@ impl<const N: usize> MovingAverage<N> {
         state.count = self.span;
     }
 
+    /// Replaces `state`'s window with the span's last inputs: `input(k)` is the input `k`
+    /// samples before the newest (k = 0 the newest, up to span - 1), exactly as if those
+    /// samples had just been pushed in order (the same slots, so the same sums, bit for bit);
+    /// the slots beyond the span hold 0, as [`Self::prime`] leaves them. For a span shorter than
+    /// N, [`MovingAverageState::load`] (which fills all N) would leave inputs in slots that
+    /// [`Self::process`] sums but never overwrites: a 4 Hz receiver's filters restarted on the
+    /// dead-reckoned track after a gap put the position 5.6 m behind the car, for good
+    /// (docs/findings.md).
+    pub fn load(&self, state: &mut MovingAverageState<N>, mut input: impl FnMut(usize) -> f32) {
+        let span = self.span.min(N);
+        // `span` pushes from `next` fill slots next, next + 1, ... (mod span), oldest first,
+        // and leave `next` where it was.
+        let start = if state.next < span { state.next } else { 0 };
+        for (i, slot) in state.window.iter_mut().enumerate() {
+            *slot = if i < span {
+                let pushed = (i + span - start) % span;
+                input(span - 1 - pushed)
+            } else {
+                0.0
+            };
+        }
+        state.next = start;
+        state.count = span;
+    }
+
     /// Window length in samples.
     pub const fn len(&self) -> usize {
         self.span
@@ -169,6 +194,27 @@ impl<const N: usize> MovingAverageState<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A span of 3 in storage for 8: the loaded window averages the last three inputs and
+    /// goes on as if they had been pushed (hand-derived: (3 + 4 + 5) / 3 = 4 after 5 is
+    /// pushed), from any slot, and whatever the slots beyond the span held.
+    #[test]
+    fn load_fills_the_span_only() {
+        let ma = MovingAverage::<8>::with_span(3).unwrap();
+        let mut state = MovingAverageState::<8>::primed(100.0);
+        for first in 0..3 {
+            state.next = first;
+            // input(k): k samples before the newest; the newest is 4.
+            ma.load(&mut state, |k| 4.0 - k as f32);
+            let mut pushed = MovingAverageState::<8>::new();
+            for x in [2.0, 3.0, 4.0] {
+                ma.process(&mut pushed, x);
+            }
+            assert_eq!(ma.process(&mut state, 5.0), 4.0);
+            assert_eq!(ma.process(&mut pushed, 5.0), 4.0);
+            assert_eq!(ma.process(&mut state, 6.0), 5.0);
+        }
+    }
 
     #[test]
     fn mean_of_last_n() {
