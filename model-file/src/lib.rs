@@ -349,9 +349,14 @@ impl InputsSection {
         (2.5 / gnss_rate_hz).max(0.2)
     }
 
-    /// Gate rejections in a row after which the fixes win: one second of fixes, at least 3.
-    pub fn gnss_reacquire_fixes(gnss_rate_hz: f64) -> u16 {
-        gnss_rate_hz.round().clamp(3.0, 1000.0) as u16
+    /// Gate rejections in a row after which the fixes win: `gnss_lost_s` of fixes (at least
+    /// 3), the longest outage dead reckoning bridges. Fixes the gate rejects are an outage to
+    /// the estimate, and it treats them as one: a multipath burst shorter than that is bridged
+    /// (a review's 30 m burst of 1 to 2 s was adopted after 1 s at every rate, 30 m off, and
+    /// the true fixes rejected in turn when they came back, docs/findings.md); fixes that stay
+    /// elsewhere for longer win, as the fixes after an outage do.
+    pub fn gnss_reacquire_fixes(gnss_rate_hz: f64, gnss_lost_s: f64) -> u16 {
+        (gnss_rate_hz * gnss_lost_s).round().clamp(3.0, 60_000.0) as u16
     }
 }
 
@@ -1007,7 +1012,10 @@ impl ModelFile {
             },
             gnss_lost_us: micros(i.gnss_lost_s),
             gnss_gate_m: i.gnss_gate_m as f32,
-            gnss_reacquire_fixes: InputsSection::gnss_reacquire_fixes(v.gnss_rate_hz),
+            gnss_reacquire_fixes: InputsSection::gnss_reacquire_fixes(
+                v.gnss_rate_hz,
+                i.gnss_lost_s,
+            ),
             max_speed_mps: v.max_speed_mps as f32,
             max_steer_rate_pct_per_s: v.max_steer_rate_pct_per_s as f32,
             steer_lag_s: v.steer_lag_s.map(|lag| lag as f32),
