@@ -383,6 +383,7 @@ fn run(cli: Cli) -> Result<()> {
             let mut config = catmodel_host::node_config(model.as_deref())?;
             config.origin_e7 = origin.map(to_e7);
             let declared_hz = 1.0 / f64::from(config.estimator.gnss_period_s);
+            let config_course_min_speed_mps = config.estimator.course_min_speed_mps;
             let progress = Progress::bar(replay::estimate_ticks(&text), "replay");
             let mut done = 0;
             // The log is parsed while the node runs; the files are written only if it all
@@ -413,7 +414,18 @@ fn run(cli: Cli) -> Result<()> {
             {
                 eprintln!("catmodel: warning: {note}");
             }
-            if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {
+            let still = config_course_min_speed_mps;
+            if result.ticks > 0
+                && result.valid_ticks == 0
+                && c.gnss_rate_mismatch == 0
+                && result.max_speed_mps < still
+            {
+                eprintln!(
+                    "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \
+                     A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
+                    result.ticks, result.max_speed_mps
+                );
+            } else if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
                      Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",

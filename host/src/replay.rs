@@ -413,7 +413,7 @@ pub struct ReplayText {
 }
 
 /// What a replay did, its text aside.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReplayStats {
     /// Frames handed to the node.
     pub frames: u64,
@@ -425,6 +425,9 @@ pub struct ReplayStats {
     pub ticks: u64,
     /// Ticks with a valid position (the others' predictions are "not available").
     pub valid_ticks: u64,
+    /// The highest speed the node used at any tick, m/s (0 for a car that never moved: no
+    /// heading from its course, so no position).
+    pub max_speed_mps: f32,
     /// The node's rejection counters at the end.
     pub counters: Counters,
     /// Origin used, 1e-7 deg.
@@ -479,6 +482,7 @@ pub fn replay_with_progress(
         unsupported: 0,
         ticks: 0,
         valid_ticks: 0,
+        max_speed_mps: 0.0,
         counters: Counters::default(),
         origin_e7: None,
         gnss_interval_us: None,
@@ -909,6 +913,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let mut frames = 0u64;
     let mut filtered = 0u64;
     let mut valid_ticks = 0u64;
+    let mut max_speed_mps = 0.0f32;
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
@@ -964,8 +969,12 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     source.take();
                 }
                 frames += rx.len() as u64;
-                if node.step(&tick, &rx, &mut tx).pose.is_some() {
+                let estimate = node.step(&tick, &rx, &mut tx);
+                if estimate.pose.is_some() {
                     valid_ticks += 1;
+                }
+                if estimate.speed_mps.is_finite() {
+                    max_speed_mps = max_speed_mps.max(estimate.speed_mps);
                 }
                 batch.push((now, tx));
                 step += 1;
@@ -1009,6 +1018,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         unsupported: 0,
         ticks,
         valid_ticks,
+        max_speed_mps,
         counters: *node.counters(),
         origin_e7: node.origin_e7(),
         gnss_interval_us: node.gnss_off_rate_interval_us(),

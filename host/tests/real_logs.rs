@@ -321,3 +321,34 @@ fn a_validation_drive_outside_the_training_range_is_named() {
     assert!(stderr.contains("trained up to 2."), "{stderr}");
     assert!(!model.exists());
 }
+
+/// A parked car's log (the receiver measured, the car never moving): replay says why the node
+/// had no position, instead of suspecting the receiver's rate (a review; the rate was right).
+#[test]
+fn a_parked_cars_replay_says_the_car_never_moved() {
+    let dir = tmp_dir("parked");
+    status(
+        0,
+        &[
+            "simulate-drive",
+            "--scenario",
+            "standstill",
+            "--out",
+            s(&dir),
+        ],
+    );
+    let stderr = status(
+        0,
+        &[
+            "replay",
+            s(&dir.join("standstill.can.log")),
+            "--out",
+            s(&dir.join("p.csv")),
+        ],
+    );
+    assert!(
+        stderr.contains("no valid position") && stderr.contains("the car never moved"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("gnss_rate_hz"), "{stderr}");
+}
