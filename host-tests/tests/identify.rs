@@ -395,7 +395,15 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
             identify::identify_lateral(&drives, &car.vehicle, &IdentifyOptions::default())
                 .unwrap()
                 .unwrap();
-        assert!(lateral.understeer_estimated);
+        // Determined by these drives (RTK, steps at speed), its standard error small.
+        assert!(
+            matches!(
+                lateral.understeer,
+                identify::Understeer::Estimated { relative_std_error } if relative_std_error < 0.1
+            ),
+            "{name}: {:?}",
+            lateral.understeer
+        );
         let (gain, k) = (lateral.steer_gain, lateral.understeer_s2_per_m2);
         let plant_k = plant.understeer_s2_per_m2();
         println!("{name}: steering gain {gain:.4}, understeer {k:.5} (plant {plant_k:.5})");
@@ -452,4 +460,35 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
     let prior = base.dynamics.unwrap();
     let why = identify::dynamics::identify_dynamics(&set, &base.vehicle, &prior, 1.0).unwrap_err();
     assert!(why.contains("step steers at speed"), "{why}");
+}
+
+/// The understeer from drives with a standard receiver (the CAT Vehicle's 100 Hz, 1.2 m): the
+/// steady turns' yaw rate, read off the course, does not determine it (a review's 4 Hz car gave
+/// 0.0017 to 0.0057 over three seeds for the plant's 0.00215, and the node used it): the car
+/// file's is kept, the estimate and its standard error said.
+#[test]
+fn an_understeer_the_drives_do_not_determine_is_the_car_files() {
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let plant = VehicleConfig::default();
+    let drives: Vec<Experiment> = [1, 2]
+        .iter()
+        .map(|&s| sim_experiment_of("steps-at-speed", s, &plant, &base.vehicle))
+        .collect();
+    let lateral = identify::identify_lateral(&drives, &base.vehicle, &IdentifyOptions::default())
+        .unwrap()
+        .unwrap();
+    println!("{:?}", lateral.understeer);
+    assert!(
+        matches!(
+            lateral.understeer,
+            identify::Understeer::Undetermined { relative_std_error, .. }
+                if relative_std_error > identify::MAX_UNDERSTEER_RELATIVE_STD_ERROR
+        ),
+        "{:?}",
+        lateral.understeer
+    );
+    assert_eq!(
+        lateral.understeer_s2_per_m2,
+        base.vehicle.understeer_s2_per_m2
+    );
 }

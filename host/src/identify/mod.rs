@@ -384,40 +384,78 @@ pub fn identify_lateral(
         )));
     }
     let l = vehicle.wheelbase_m;
-    let (mut g, mut k) = (1.0, vehicle.understeer_s2_per_m2);
-    let speed_span = span(pts.iter().map(|p| p.0));
-    let estimate_k = speed_span > 2.0;
-    for _ in 0..30 {
-        let (mut jtj, mut jtr) = ([[0.0; 2]; 2], [0.0; 2]);
-        for &(v, d, r) in &pts {
-            let den = 1.0 + k * v * v;
-            let arg = g * d / den;
-            let sec2 = 1.0 / arg.cos().powi(2);
-            let res = r - v * arg.tan() / l;
-            let jg = v / l * sec2 * d / den;
-            let jk = -v / l * sec2 * g * d * v * v / (den * den);
-            let j = [jg, if estimate_k { jk } else { 0.0 }];
-            for a in 0..2 {
-                for b in 0..2 {
-                    jtj[a][b] += j[a] * j[b];
+    // Gauss-Newton on (g, K), or on g alone with K the car file's; with J'J and the residuals'
+    // sum of squares at the end, for K's standard error.
+    let gauss_newton = |estimate_k: bool| {
+        let (mut g, mut k) = (1.0, vehicle.understeer_s2_per_m2);
+        let mut jtj = [[0.0; 2]; 2];
+        let mut cost = 0.0;
+        for _ in 0..30 {
+            let mut jtr = [0.0; 2];
+            (jtj, cost) = ([[0.0; 2]; 2], 0.0);
+            for &(v, d, r) in &pts {
+                let den = 1.0 + k * v * v;
+                let arg = g * d / den;
+                let sec2 = 1.0 / arg.cos().powi(2);
+                let res = r - v * arg.tan() / l;
+                let jg = v / l * sec2 * d / den;
+                let jk = -v / l * sec2 * g * d * v * v / (den * den);
+                let j = [jg, if estimate_k { jk } else { 0.0 }];
+                for a in 0..2 {
+                    for b in 0..2 {
+                        jtj[a][b] += j[a] * j[b];
+                    }
+                    jtr[a] += j[a] * res;
                 }
-                jtr[a] += j[a] * res;
+                cost += res * res;
+            }
+            let mut solve = jtj;
+            if !estimate_k {
+                solve[1][1] = 1.0;
+            }
+            let det = solve[0][0] * solve[1][1] - solve[0][1] * solve[1][0];
+            if det.abs() < 1e-300 {
+                break;
+            }
+            let dg = (jtr[0] * solve[1][1] - jtr[1] * solve[0][1]) / det;
+            let dk = (solve[0][0] * jtr[1] - solve[1][0] * jtr[0]) / det;
+            g += dg;
+            k = (k + dk).max(0.0);
+            if dg.abs() < 1e-10 && dk.abs() < 1e-12 {
+                break;
             }
         }
-        if !estimate_k {
-            jtj[1][1] = 1.0;
-        }
+        (g, k, jtj, cost)
+    };
+    let speed_span = span(pts.iter().map(|p| p.0));
+    let (mut g, mut k, jtj, cost) = gauss_newton(speed_span > 2.0);
+    let understeer = if speed_span > 2.0 {
+        // K's standard error, s^2 (J'J)^-1, with the yaw rate's central difference over
+        // 2 hw + 1 samples counted as one independent error (as the stiffnesses', dynamics.rs).
+        let hw = training.first().map_or(1, |e| e.yaw_half_width);
+        let s2 = cost / (pts.len() as f64 - 2.0).max(1.0) * (2 * hw + 1) as f64;
         let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
-        if det.abs() < 1e-300 {
-            break;
+        let se = if det > 0.0 {
+            (s2 * jtj[0][0] / det).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let relative = se / k;
+        if relative.is_finite() && relative <= MAX_UNDERSTEER_RELATIVE_STD_ERROR {
+            Understeer::Estimated {
+                relative_std_error: relative,
+            }
+        } else {
+            Understeer::Undetermined {
+                estimate: k,
+                relative_std_error: relative,
+            }
         }
-        let dg = (jtr[0] * jtj[1][1] - jtr[1] * jtj[0][1]) / det;
-        let dk = (jtj[0][0] * jtr[1] - jtj[1][0] * jtr[0]) / det;
-        g += dg;
-        k = (k + dk).max(0.0);
-        if dg.abs() < 1e-10 && dk.abs() < 1e-12 {
-            break;
-        }
+    } else {
+        Understeer::SpeedSpan
+    };
+    if let Understeer::Undetermined { .. } = understeer {
+        (g, k, _, _) = gauss_newton(false);
     }
     // The reader's bound (a gain within 0.1..10 and a lock below 90 degrees), so that the file
     // written loads.
@@ -475,7 +513,7 @@ pub fn identify_lateral(
     Ok(Ok(LateralFit {
         steer_gain: g,
         understeer_s2_per_m2: k,
-        understeer_estimated: estimate_k,
+        understeer,
         tf,
     }))
 }
@@ -487,11 +525,37 @@ pub struct LateralFit {
     pub steer_gain: f64,
     /// Understeer K, s^2/m^2.
     pub understeer_s2_per_m2: f64,
-    /// Whether K was estimated (the steady turns span more than 2 m/s of speed); else it is
-    /// the car file's.
-    pub understeer_estimated: bool,
+    /// Whether K was estimated, or why it is the car file's.
+    pub understeer: Understeer,
     /// The lag G(s) from the kinematic yaw rate to the measured one.
     pub tf: TransferFunction,
+}
+
+/// Largest standard error of the understeer K, relative to its value, for it to be written
+/// (else the car file's is kept). K weighs the steady yaw rate by `1 / (1 + K v^2)`: a quarter
+/// of a typical 0.002 s^2/m^2 moves it by 5 % at 10 m/s. A review's 4 Hz receiver on a long car
+/// gave 0.0017 to 0.0057 over three seeds for a plant's 0.00215 (RTK: 0.00225), unchecked,
+/// and the node's lateral model used it in place of the car file's.
+pub const MAX_UNDERSTEER_RELATIVE_STD_ERROR: f64 = 0.25;
+
+/// How the lateral model's understeer was decided ([`LateralFit::understeer`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Understeer {
+    /// Estimated, with this standard error relative to the value.
+    Estimated {
+        /// Standard error / value.
+        relative_std_error: f64,
+    },
+    /// The car file's: the steady turns span less than 2 m/s of speed.
+    SpeedSpan,
+    /// The car file's: the estimate's standard error is above
+    /// [`MAX_UNDERSTEER_RELATIVE_STD_ERROR`].
+    Undetermined {
+        /// What the drives gave.
+        estimate: f64,
+        /// Its standard error / value.
+        relative_std_error: f64,
+    },
 }
 
 /// How long steering and speed must have been steady for a sample to count in the lateral
@@ -711,11 +775,23 @@ pub fn identify(
             fit: Fit::default(),
         };
     }
-    if let Some(l) = lateral.as_ref().filter(|l| !l.understeer_estimated) {
-        notes.push(format!(
-            "lateral model: the understeer is the car file's ({} s^2/m^2), not estimated: the steady turns span less than 2 m/s of speed (drive circles at two speeds, or steps-at-speed)",
-            l.understeer_s2_per_m2
-        ));
+    if let Some(l) = lateral.as_ref() {
+        match l.understeer {
+            Understeer::Estimated { .. } => {}
+            Understeer::SpeedSpan => notes.push(format!(
+                "lateral model: the understeer is the car file's ({} s^2/m^2), not estimated: the steady turns span less than 2 m/s of speed (drive circles at two speeds, or steps-at-speed)",
+                l.understeer_s2_per_m2
+            )),
+            Understeer::Undetermined {
+                estimate,
+                relative_std_error,
+            } => notes.push(format!(
+                "lateral model: the understeer is the car file's ({} s^2/m^2): the drives gave {estimate:.5} with a standard error of {:.0} % (at most {:.0} %): they do not determine it (drive circles at several speeds, or a receiver with a steadier course)",
+                l.understeer_s2_per_m2,
+                100.0 * relative_std_error,
+                100.0 * MAX_UNDERSTEER_RELATIVE_STD_ERROR
+            )),
+        }
     }
     model.lateral = lateral.map(|l| Lateral {
         steer_gain: l.steer_gain,
