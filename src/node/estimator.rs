@@ -614,8 +614,10 @@ impl EstimatorState {
         self.fir_x.load(|k| at(back_m(k + 1, 0.0)).x_m);
         self.fir_y.load(|k| at(back_m(k + 1, 0.0)).y_m);
         let fir_delay = cfg.fir.group_delay_samples();
-        cfg.ma.load(&mut self.ma_x, |k| at(back_m(k + 1, fir_delay)).x_m);
-        cfg.ma.load(&mut self.ma_y, |k| at(back_m(k + 1, fir_delay)).y_m);
+        cfg.ma
+            .load(&mut self.ma_x, |k| at(back_m(k + 1, fir_delay)).x_m);
+        cfg.ma
+            .load(&mut self.ma_y, |k| at(back_m(k + 1, fir_delay)).y_m);
         // The histories get one entry per missing fix, oldest first, as filling would give:
         // the dead-reckoned position then, and the filters' output then. Of the dead-reckoning
         // history only the entries the delay compensation can still read are written (it reads

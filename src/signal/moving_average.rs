@@ -81,13 +81,17 @@ impl<const N: usize> MovingAverage<N> {
         // `span` pushes from `next` fill slots next, next + 1, ... (mod span), oldest first,
         // and leave `next` where it was.
         let start = if state.next < span { state.next } else { 0 };
-        for (i, slot) in state.window.iter_mut().enumerate() {
-            *slot = if i < span {
-                let pushed = (i + span - start) % span;
-                input(span - 1 - pushed)
-            } else {
-                0.0
-            };
+        let (window, beyond) = state.window.split_at_mut(span);
+        let (older, newer) = window.split_at_mut(start.min(span));
+        for (slot, k) in newer
+            .iter_mut()
+            .chain(older.iter_mut())
+            .zip((0..span).rev())
+        {
+            *slot = input(k);
+        }
+        for slot in beyond {
+            *slot = 0.0;
         }
         state.next = start;
         state.count = span;
