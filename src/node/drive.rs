@@ -271,24 +271,26 @@ impl Drive {
         self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.heading = HeadingSettle::new();
         self.lost_path = false;
+        let tuning = mpc_tuning(config);
+        self.set_braking(config, &tuning);
         self.mpc_config = match config.controller {
-            Controller::Mpc => MpcConfig::for_node(config, mpc_tuning(config)).ok(),
+            Controller::Mpc => MpcConfig::for_node(config, tuning).ok(),
             Controller::PurePursuit => None,
         };
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
-        self.set_braking(config);
     }
 
     /// The paths' speed envelope brakes at the active controller's deceleration: the
-    /// model-predictive controller's speed reference (`SpeedTuning::decel_mps2`), pure
-    /// pursuit's stop (`stop_decel_mps2`).
-    fn set_braking(&mut self, config: &NodeConfig) {
-        let decel = match (config.controller, self.mpc_config.as_ref()) {
-            (Controller::Mpc, Some(mpc)) => mpc.speed_planner().tuning().decel_mps2,
-            (Controller::Mpc, None) => crate::control::path::DEFAULT_BRAKING_MPS2,
-            (Controller::PurePursuit, _) => self.pursuit_tuning.stop_decel_mps2,
+    /// model-predictive controller's speed reference (`SpeedTuning::decel_mps2` of `tuning`),
+    /// pure pursuit's stop (`stop_decel_mps2`). Taken from the tunings, not from the built
+    /// configuration: reading the configuration back here made the compiler build it on the
+    /// stack before moving it into place (1.3 KiB more stack at boot).
+    fn set_braking(&mut self, config: &NodeConfig, tuning: &MpcTuning) {
+        let decel = match config.controller {
+            Controller::Mpc => tuning.speed.decel_mps2,
+            Controller::PurePursuit => self.pursuit_tuning.stop_decel_mps2,
         };
-        // Both tunings are checked positive and finite where they are built.
+        // A refused value (not finite and positive) leaves the path's braking as it was.
         self.planner.set_braking(decel);
     }
 
@@ -312,9 +314,9 @@ impl Drive {
     /// unconfigured: fallback) if the tuning is refused.
     pub fn tune_mpc(&mut self, config: &NodeConfig, tuning: MpcTuning) -> bool {
         self.mpc.reset();
+        self.set_braking(config, &tuning);
         self.mpc_config = MpcConfig::for_node(config, tuning).ok();
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
-        self.set_braking(config);
         self.mpc_config.is_some()
     }
 
@@ -322,7 +324,7 @@ impl Drive {
     /// [`pure_pursuit::DEFAULT_TUNING`] otherwise) for the car of `config`.
     pub fn tune_pursuit(&mut self, config: &NodeConfig, tuning: PurePursuitTuning) {
         self.pursuit_tuning = tuning;
-        self.set_braking(config);
+        self.set_braking(config, &mpc_tuning(config));
     }
 
     /// Applies one planner message (stage 1).
