@@ -618,7 +618,7 @@ def main():
     except Exception:
         err = ""
     M["rc"] = node.returncode
-    M["stderr_tail"] = err.strip().splitlines()[-3:] if err else []
+    M["stderr_tail"] = err.strip().splitlines()[-int(os.environ.get("TAIL","3")):] if err else []
     try:
         model.unlink()
     except Exception:

@@ -305,6 +305,26 @@ pub fn gnss_rate_note(
     ))
 }
 
+/// What the node's steering check ([`catmodel::node::steering`]) found, when it used a steering
+/// gain other than the model file's at the end of a run: the gain, its standard deviation, and
+/// what to change in the model file.
+pub fn steering_note(check: &catmodel::node::steering::SteeringCheck) -> Option<String> {
+    if !check.mismatch() {
+        return None;
+    }
+    let (gain, _) = check.fit();
+    let std = check
+        .gain_std()
+        .map_or(String::new(), |s| format!(" +- {s:.3}"));
+    Some(format!(
+        "the car turned {gain:.3}{std} times the yaw rate the model file's steering gives \
+         (fitted over the drive's turns against the GNSS course): the node used that gain \
+         (NODE_STATUS steering_mismatch). Scale the model file's steering by it \
+         ([lateral] steer_gain, or [vehicle] max_steer_deg in a file without [lateral]), or \
+         identify the car's model file from its drives (`catmodel identify`)"
+    ))
+}
+
 /// The node configuration for a model file (`None`: the published `models/paper.toml`, exactly
 /// as the firmware's default): the very configuration the firmware build bakes from that file.
 pub fn node_config(model: Option<&Path>) -> Result<catmodel::node::NodeConfig> {

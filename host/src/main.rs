@@ -414,6 +414,12 @@ fn run(cli: Cli) -> Result<()> {
             {
                 eprintln!("catmodel: warning: {note}");
             }
+            if let Some(note) = catmodel_host::steering_note(&result.steering) {
+                eprintln!(
+                    "catmodel: warning: {note}; it did over {:.1} s of the log",
+                    result.steering_mismatch_ticks as f64 * f64::from(catmodel::SAMPLE_PERIOD_S)
+                );
+            }
             let still = config_course_min_speed_mps;
             if result.ticks > 0
                 && result.valid_ticks == 0
@@ -664,6 +670,9 @@ fn run(cli: Cli) -> Result<()> {
             eprintln!("sil: {summary}");
             if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver)
             {
+                eprintln!("sil: warning: {note}");
+            }
+            if let Some(note) = catmodel_host::closed_loop::driver::Driver::steering_note(&driver) {
                 eprintln!("sil: warning: {note}");
             }
             Ok(())

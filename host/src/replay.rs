@@ -19,6 +19,7 @@ use catmodel::can::candump;
 use catmodel::can::codec::{ModelMode, Prediction, StateMotion, StatePosition};
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
+use catmodel::node::steering::SteeringCheck;
 use catmodel::node::{
     first_tick_us, Counters, NodeConfig, PlatformStats, Tick, TxFrames, MAX_RX_FRAMES_PER_TICK,
 };
@@ -430,6 +431,10 @@ pub struct ReplayStats {
     pub max_speed_mps: f32,
     /// The node's rejection counters at the end.
     pub counters: Counters,
+    /// The node's steering check at the end ([`catmodel::node::steering`]).
+    pub steering: SteeringCheck,
+    /// Ticks at which the node used a steering gain other than the model file's.
+    pub steering_mismatch_ticks: u64,
     /// Origin used, 1e-7 deg.
     pub origin_e7: Option<(i32, i32)>,
     /// The latest interval between GNSS fixes off the model file's period, us, as the node
@@ -484,6 +489,8 @@ pub fn replay_with_progress(
         valid_ticks: 0,
         max_speed_mps: 0.0,
         counters: Counters::default(),
+        steering: SteeringCheck::new(),
+        steering_mismatch_ticks: 0,
         origin_e7: None,
         gnss_interval_us: None,
     });
@@ -914,6 +921,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let mut filtered = 0u64;
     let mut valid_ticks = 0u64;
     let mut max_speed_mps = 0.0f32;
+    let mut steering_mismatch_ticks = 0u64;
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
@@ -976,6 +984,9 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 if estimate.speed_mps.is_finite() {
                     max_speed_mps = max_speed_mps.max(estimate.speed_mps);
                 }
+                if node.steering().mismatch() {
+                    steering_mismatch_ticks += 1;
+                }
                 batch.push((now, tx));
                 step += 1;
                 if step.is_multiple_of(500) {
@@ -1020,6 +1031,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         valid_ticks,
         max_speed_mps,
         counters: *node.counters(),
+        steering: *node.steering(),
+        steering_mismatch_ticks,
         origin_e7: node.origin_e7(),
         gnss_interval_us: node.gnss_off_rate_interval_us(),
     };

@@ -865,3 +865,89 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("CONTROL_COMMAND"));
 }
+
+/// Each tick's NODE_STATUS page 0 `steering_mismatch` bit of a run, with the tick's time.
+fn steering_mismatch_bits(out: &catmodel_host::closed_loop::RunOutput) -> Vec<(f64, bool)> {
+    use catmodel::can::NodeStatus;
+    out.outputs
+        .iter()
+        .filter_map(|f| match NodeStatus::decode(&f.frame) {
+            Ok((NodeStatus::Health { health, .. }, _)) => {
+                Some((f.t_us as f64 * 1e-6, health.steering_mismatch))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// A model file whose steering is 25 % stronger than the car's (`max_steer_deg` 44.375 for the
+/// plant's 35.5: the car turns 0.8 of what the file says, a steering ratio measured wrong). On
+/// the loop at 10 m/s the node's steering check finds the 0.8 over the first arc, says so on
+/// the bus, and drives the second arc as with the right file; without the check (before it)
+/// the heading settled 0.05-0.1 rad off and the rear axle ran 0.5-1 m outside both arcs
+/// (lateral RMS 0.98 m). With the right file the check never acts, on the loop or the lane
+/// change, with either receiver.
+#[test]
+fn a_steering_weaker_than_the_model_file_says_is_found_and_used() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("models/paper.toml")).unwrap();
+    assert!(text.contains("\nmax_steer_deg = 35.5 "));
+    let dir = tmp_dir("strong_steering");
+    let model = dir.join("strong-steering.toml");
+    std::fs::write(
+        &model,
+        text.replace("\nmax_steer_deg = 35.5 ", "\nmax_steer_deg = 44.375 "),
+    )
+    .unwrap();
+    let drive = |model: Option<&Path>, kind, speed, receiver, seed| {
+        let (vehicle, node) = load_setup(None, model).unwrap();
+        let course = scenario::course(kind, &vehicle.body, speed);
+        let mut driver = NodeDriver::new(node, Controller::Mpc);
+        let options = RunOptions {
+            seed,
+            receiver,
+            max_time_s: 120.0,
+            replan_s: None,
+            start_offset_m: 0.0,
+        };
+        let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+        let fit = driver.node().steering().fit();
+        (out, fit)
+    };
+    let (out, (gain, _)) = drive(Some(&model), Kind::Loop, 10.0, Receiver::Rtk, 0);
+    assert!((gain - 0.8).abs() < 0.02, "fitted gain {gain}");
+    let bits = steering_mismatch_bits(&out);
+    let engaged_s = bits.iter().find(|(_, on)| *on).expect("flagged").0;
+    assert!(bits
+        .iter()
+        .filter(|(t, _)| *t >= engaged_s)
+        .all(|(_, on)| *on));
+    // The first arc is where it learns and leaves its path; from 5 s after the check acts
+    // (back on the path on the straight) the car keeps to it.
+    let worst_after = out
+        .samples
+        .iter()
+        .filter(|s| s.engaged && s.t_s > engaged_s + 5.0)
+        .map(|s| s.lateral_m.abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst_after < 0.15,
+        "{worst_after} m off after {engaged_s} s"
+    );
+    assert!(out.metrics.completed, "{:?}", out.metrics);
+
+    for (kind, speed, receiver) in [
+        (Kind::Loop, 10.0, Receiver::Rtk),
+        (Kind::Loop, 6.0, Receiver::Standard),
+        (Kind::DoubleLaneChange, 14.0, Receiver::Rtk),
+        (Kind::Obstacle, 8.0, Receiver::Standard),
+    ] {
+        for seed in 0..3 {
+            let (out, fit) = drive(None, kind, speed, receiver, seed);
+            assert!(
+                steering_mismatch_bits(&out).iter().all(|(_, on)| !on),
+                "{kind:?} {speed} m/s {receiver:?} seed {seed}: {fit:?}"
+            );
+        }
+    }
+}

@@ -1197,9 +1197,12 @@ pub struct HealthFlags {
     /// The GNSS receiver's fixes come at another rate than the model file declares: they are
     /// not used.
     pub gnss_rate_mismatch: bool,
+    /// The car turns by another share of its steering than the model file says: the node uses
+    /// the gain it measured.
+    pub steering_mismatch: bool,
 }
 
-const HEALTH_BITS: [&SignalSpec; 13] = [
+const HEALTH_BITS: [&SignalSpec; 14] = [
     &sig::STEER_STALE,
     &sig::SPEED_STALE,
     &sig::PEDAL_STALE,
@@ -1213,10 +1216,11 @@ const HEALTH_BITS: [&SignalSpec; 13] = [
     &sig::INPUT_INVALID,
     &sig::PLANNER_REFUSED_RECENTLY,
     &sig::GNSS_RATE_MISMATCH,
+    &sig::STEERING_MISMATCH,
 ];
 
 impl HealthFlags {
-    const fn as_array(&self) -> [bool; 13] {
+    const fn as_array(&self) -> [bool; 14] {
         [
             self.steer_stale,
             self.speed_stale,
@@ -1231,9 +1235,10 @@ impl HealthFlags {
             self.input_invalid,
             self.planner_refused_recently,
             self.gnss_rate_mismatch,
+            self.steering_mismatch,
         ]
     }
-    const fn from_array(b: [bool; 13]) -> Self {
+    const fn from_array(b: [bool; 14]) -> Self {
         Self {
             steer_stale: b[0],
             speed_stale: b[1],
@@ -1248,6 +1253,7 @@ impl HealthFlags {
             input_invalid: b[10],
             planner_refused_recently: b[11],
             gnss_rate_mismatch: b[12],
+            steering_mismatch: b[13],
         }
     }
 }

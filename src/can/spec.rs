@@ -514,6 +514,10 @@ pub mod sig {
     /// ([`crate::node::gnss::RATE_MISMATCH_FIXES`]).
     pub const GNSS_RATE_MISMATCH: SignalSpec =
         SignalSpec::uint("gnss_rate_mismatch", 21, 1).on_page(0);
+    /// Page 0 health bit: the car turns by another share of its steering than the model file
+    /// says, and the node uses the gain it measured ([`crate::node::steering`]).
+    pub const STEERING_MISMATCH: SignalSpec =
+        SignalSpec::uint("steering_mismatch", 22, 1).on_page(0);
     /// Page 0: ticks that overran since boot, saturating.
     pub const OVERRUN_COUNT: SignalSpec = SignalSpec::uint("overrun_count", 24, 16).on_page(0);
     /// Page 0: duration of the previous step, us; 0xFFFF = not available.
@@ -922,6 +926,7 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
         INPUT_INVALID,
         PLANNER_REFUSED_RECENTLY,
         GNSS_RATE_MISMATCH,
+        STEERING_MISMATCH,
         OVERRUN_COUNT,
         LAST_STEP_US,
         CRC_ERRORS,

@@ -105,8 +105,11 @@ pub struct DriveInputs<'a> {
     /// The rear axle's sideways velocity (tyre slip), m/s: its course is the heading turned by
     /// `rear_side / speed`.
     pub rear_side_mps: f32,
-    /// Measured centre-tyre steering angle, rad.
+    /// Measured centre-tyre steering angle, rad, times `steer_scale`.
     pub steer_rad: f32,
+    /// The steering gain the node's steering check uses (1: the model file's,
+    /// [`super::steering`]): the controllers' lock and rate limit are scaled by it.
+    pub steer_scale: f32,
     /// Lateral model the hybrid switch chose.
     pub mode: Mode,
     /// Eq 5's state after this tick (its next step consumes the command sent now); `None`
@@ -385,6 +388,9 @@ impl Drive {
         probe: &mut P,
     ) -> DriveOutput {
         self.last_tracking = None;
+        if let Some(mpc) = self.mpc_config.as_mut() {
+            mpc.set_steer_scale(inputs.steer_scale);
+        }
         let path_loaded = core::mem::take(&mut self.path_loaded);
         let planned_last_tick = core::mem::take(&mut self.planned_last_tick);
         let out = self.decide(config, inputs, path_loaded, planned_last_tick, probe);
@@ -486,7 +492,9 @@ impl Drive {
                     speed_mps: inputs.speed_mps,
                     rear_side_mps: inputs.rear_side_mps,
                 };
-                let out = PurePursuitConfig::for_node(config, self.pursuit_tuning).process(
+                let mut pursuit = PurePursuitConfig::for_node(config, self.pursuit_tuning);
+                pursuit.vehicle.max_steer_rad *= inputs.steer_scale;
+                let out = pursuit.process(
                     &mut self.pursuit,
                     Some(path),
                     self.planner.obstacles(),

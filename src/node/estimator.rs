@@ -223,10 +223,14 @@ impl Swept {
 }
 
 /// What [`EstimatorState::correct_heading_on_track`] did.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrackCorrection {
     /// The heading was pulled towards the chords' agreement.
-    Applied,
+    Applied {
+        /// The heading the chords measured now: the heading before the correction plus the
+        /// error they found, rad.
+        measured_rad: f32,
+    },
     /// The car moved less than `course_min_baseline_m` over the chord: nothing to learn, the
     /// heading is left to the dead reckoning.
     ShortChord,
@@ -711,7 +715,8 @@ impl EstimatorState {
     /// removed first, and the course is carried to now by the heading change the dead reckoning
     /// integrated since (`swept_since`; carrying it with the current yaw rate instead
     /// lags the truth in every transient, e.g. 0.05 rad in a lane change at 10 m/s with a
-    /// 0.47 s old course). The first course initialises the heading.
+    /// 0.47 s old course). The first course initialises the heading. Returns the heading the
+    /// course measured now (the course carried to now, its lead removed).
     pub fn correct_heading(
         &mut self,
         cfg: &EstimatorConfig,
@@ -719,7 +724,7 @@ impl EstimatorState {
         age_s: f32,
         speed_mps: f32,
         rates: Rates,
-    ) {
+    ) -> f32 {
         // The antenna's speed along the heading; the course says nothing when it is not ahead.
         // The rates when the course was measured: the sweep over a window around then.
         let turned = self.swept_since(age_s, rates).turned_rad;
@@ -744,6 +749,7 @@ impl EstimatorState {
             }
             Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
         }
+        course_now
     }
 
     /// The heading moved by a course correction, which is remembered for
@@ -837,7 +843,9 @@ impl EstimatorState {
         let gain = math::min(cfg.course_gain, var / (var + chord_var));
         self.heading_var_rad2 = (1.0 - gain) * (1.0 - gain) * var + gain * gain * chord_var;
         self.turn_heading(heading, gain * error_now);
-        TrackCorrection::Applied
+        TrackCorrection::Applied {
+            measured_rad: math::wrap_pi(heading + error_now),
+        }
     }
 
     /// Course of the filtered track over the last `track_span_fixes` fixes, with its age in fixes
@@ -1113,7 +1121,7 @@ mod tests {
                 let on_track = chords.then(|| st.correct_heading_on_track(&cfg, since_fix_s));
                 if !matches!(
                     on_track,
-                    Some(TrackCorrection::Applied | TrackCorrection::ShortChord)
+                    Some(TrackCorrection::Applied { .. } | TrackCorrection::ShortChord)
                 ) {
                     if let Some((course, age_fixes)) = st.track_course(&cfg) {
                         let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;

@@ -312,8 +312,9 @@ impl Gnss {
 
     /// Stage 3's GNSS part: the heading pulled towards the receiver's COG when it is fresh, else
     /// towards the filtered track's course, while the car moves; then the rear axle's position
-    /// (`None` while invalid) and whether GNSS is fresh. A receiver silent for longer than
-    /// `gnss_lost_us` restarts the filters.
+    /// (`None` while invalid), whether GNSS is fresh, and the heading the course measured this
+    /// tick (`None` when none was). A receiver silent for longer than `gnss_lost_us` restarts
+    /// the filters.
     pub fn estimate(
         &mut self,
         config: &NodeConfig,
@@ -321,15 +322,17 @@ impl Gnss {
         speed_mps: f32,
         rates: Rates,
         inputs: &Inputs,
-    ) -> (Option<Pose>, bool) {
+    ) -> (Option<Pose>, bool, Option<f32>) {
         let cfg = &config.estimator;
         let gnss_timeout_us = config.freshness.timeout_us(Input::Gnss);
         let moving = speed_mps >= cfg.course_min_speed_mps;
-        match self.cog {
+        let measured = match self.cog {
             Some((cog, t)) if moving && now_us.saturating_sub(t) <= gnss_timeout_us => {
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
-                self.estimator
-                    .correct_heading(cfg, cog, age_s, speed_mps, rates);
+                Some(
+                    self.estimator
+                        .correct_heading(cfg, cog, age_s, speed_mps, rates),
+                )
             }
             _ if moving => {
                 // The time since the latest fix: with a slow receiver the same chord steers
@@ -339,17 +342,20 @@ impl Gnss {
                     .last_us(Input::Gnss)
                     .map_or(0, |t| now_us.saturating_sub(t));
                 let since_fix_s = math::u64_to_f32(since_fix_us) * 1e-6;
-                let on_track = self.estimator.correct_heading_on_track(cfg, since_fix_s);
-                if on_track == TrackCorrection::NoHistory {
-                    if let Some((course, age_fixes)) = self.estimator.track_course(cfg) {
-                        let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
-                        self.estimator
-                            .correct_heading(cfg, course, age_s, speed_mps, rates);
+                match self.estimator.correct_heading_on_track(cfg, since_fix_s) {
+                    TrackCorrection::Applied { measured_rad } => Some(measured_rad),
+                    TrackCorrection::ShortChord => None,
+                    TrackCorrection::NoHistory => {
+                        self.estimator.track_course(cfg).map(|(course, age_fixes)| {
+                            let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
+                            self.estimator
+                                .correct_heading(cfg, course, age_s, speed_mps, rates)
+                        })
                     }
                 }
             }
-            _ => {}
-        }
+            _ => None,
+        };
 
         let gnss_age = inputs
             .freshness
@@ -365,6 +371,6 @@ impl Gnss {
             }
             _ => None,
         };
-        (pose, gnss_fresh)
+        (pose, gnss_fresh, measured)
     }
 }

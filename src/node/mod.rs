@@ -32,6 +32,7 @@ pub mod inputs;
 pub mod publish;
 pub mod smoothing;
 pub mod stage;
+pub mod steering;
 
 use core::borrow::BorrowMut;
 
@@ -56,6 +57,7 @@ pub use stage::{
     GNSS_FIXES_PER_TICK, MAX_RX_FRAMES_PER_TICK, PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS,
     TICK_STAGES,
 };
+use steering::SteeringCheck;
 
 /// Most frames one tick can send: 2 state frames, 10 predictions, 1 status page and the
 /// controller's command are 14; 16 leaves room.
@@ -357,7 +359,12 @@ struct Motion {
     speed_model_mps: Option<f32>,
     /// The speed command the roll-out holds, m/s.
     speed_cmd_mps: Option<f32>,
+    /// The centre tyre's angle the models use: the measured one times `steer_scale`, rad.
     center_steer_rad: f32,
+    /// The centre tyre's angle as the model file converts the steering percent, rad.
+    measured_steer_rad: f32,
+    /// The steering check's gain in use ([`steering`]).
+    steer_scale: f32,
     mode: Mode,
 }
 
@@ -381,6 +388,7 @@ pub struct Node<D: BorrowMut<Drive>> {
     models: Models,
     drive: D,
     health: Health,
+    steering: SteeringCheck,
     last_tick_us: Option<u64>,
 }
 
@@ -405,6 +413,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             models,
             drive,
             health: Health::default(),
+            steering: SteeringCheck::new(),
             last_tick_us: None,
         }
     }
@@ -434,6 +443,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
     /// period, us: the receiver's period when NODE_STATUS says `gnss_rate_mismatch`.
     pub fn gnss_off_rate_interval_us(&self) -> Option<u32> {
         self.gnss.off_rate_interval_us()
+    }
+
+    /// The on-line check of the steering's effect on the yaw rate ([`steering`]): its fitted
+    /// gain against the model file's and whether the node uses it.
+    pub fn steering(&self) -> &SteeringCheck {
+        &self.steering
     }
 
     /// Ticks run.
@@ -505,12 +520,11 @@ impl<D: BorrowMut<Drive>> Node<D> {
             _ => SAMPLE_PERIOD_S,
         };
         self.last_tick_us = Some(now_us);
-        self.gnss.propagate(
-            &self.config.estimator,
-            self.models.speed_mps,
-            self.models.rates(),
-            dt_s,
-        );
+        let rates = self.models.rates();
+        self.gnss
+            .propagate(&self.config.estimator, self.models.speed_mps, rates, dt_s);
+        self.steering
+            .turned(rates.yaw_rps, self.models.speed_mps, dt_s);
         dt_s
     }
 
@@ -584,13 +598,17 @@ impl<D: BorrowMut<Drive>> Node<D> {
         planner_frames
     }
 
-    /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks.
+    /// Stage 2: the speed model (eq 5) and the lateral model the hybrid switch picks, with the
+    /// steering scaled by the gain the steering check found ([`steering`]; 1 while the model
+    /// file's steering agrees with the car's).
     fn run_models(&mut self, inputs: &Snapshot, dt_s: f32) -> Motion {
         let cfg = &self.config;
         let m = &mut self.models;
-        let center_steer_rad = cfg
+        let steer_scale = self.steering.scale();
+        let measured_steer_rad = cfg
             .vehicle
             .steer_pct_to_center_rad(inputs.steer_pct.unwrap_or(0.0));
+        let center_steer_rad = steer_scale * measured_steer_rad;
 
         // Eq 5: started at equilibrium on the first measured speed, then driven by the
         // commanded speed (or, without a command, by the measured speed: hold).
@@ -663,6 +681,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
             speed_model_mps,
             speed_cmd_mps,
             center_steer_rad,
+            measured_steer_rad,
+            steer_scale,
             mode,
         }
     }
@@ -670,18 +690,19 @@ impl<D: BorrowMut<Drive>> Node<D> {
     /// Stage 3: heading, filtered rear-axle position, and eq 7 on it.
     fn estimate(&mut self, now_us: u64, motion: &Motion) -> Estimate {
         let cfg = &self.config;
-        let (pose, gnss_fresh) = self.gnss.estimate(
+        let (pose, gnss_fresh, measured_heading) = self.gnss.estimate(
             cfg,
             now_us,
             motion.speed_mps,
             self.models.rates(),
             &self.inputs,
         );
+        self.steering.observe(measured_heading, motion.speed_mps);
         // Eq 7: inputs [v_m, x, y, phi] with phi the steering angle, rad.
         let dxdt_mps = pose.map(|p| {
             cfg.dxdt.step(
                 &mut self.models.dxdt,
-                &[motion.speed_mps, p.x_m, p.y_m, motion.center_steer_rad],
+                &[motion.speed_mps, p.x_m, p.y_m, motion.measured_steer_rad],
             )
         });
         Estimate {
@@ -705,6 +726,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,
             steer_rad: motion.center_steer_rad,
+            steer_scale: motion.steer_scale,
             mode: motion.mode,
             speed_model: self.models.velocity.as_ref(),
         };
@@ -768,6 +790,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             gnss_fresh: estimate.gnss_fresh,
             gnss_rejected_us: self.gnss.last_reject_us(),
             gnss_rate_mismatch: self.gnss.rate_mismatch(),
+            steering_mismatch: self.steering.mismatch(),
             mode: motion.mode,
             speed_mps: motion.speed_mps,
             yaw_rate_rps: self.models.yaw_rate_rps,

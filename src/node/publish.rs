@@ -37,6 +37,8 @@ pub struct Outputs<'a> {
     pub gnss_rejected_us: Option<u64>,
     /// The receiver's fixes come at another rate than the model file declares.
     pub gnss_rate_mismatch: bool,
+    /// The node uses a steering gain other than the model file's.
+    pub steering_mismatch: bool,
     /// Lateral model in use.
     pub mode: Mode,
     /// Speed used, m/s.
@@ -158,6 +160,7 @@ impl Health {
                     input_invalid: recent(now, self.last_range_error_us),
                     planner_refused_recently: recent(now, self.last_planner_reject_us),
                     gnss_rate_mismatch: out.gnss_rate_mismatch,
+                    steering_mismatch: out.steering_mismatch,
                 },
                 overrun_count: tick.platform.overruns,
                 last_step_us: tick.platform.last_step_us,

@@ -31,6 +31,12 @@ pub trait Driver {
     fn gnss_rate_note(&self) -> Option<String> {
         None
     }
+
+    /// What the node's steering check found, if it used a gain other than the model file's
+    /// ([`crate::steering_note`]).
+    fn steering_note(&self) -> Option<String> {
+        None
+    }
 }
 
 /// What a tick did, for the closed loop's records (never on the bus).
@@ -101,6 +107,10 @@ impl Driver for NodeDriver {
             self.node.gnss_off_rate_interval_us(),
             1.0 / f64::from(self.node.config().estimator.gnss_period_s),
         )
+    }
+
+    fn steering_note(&self) -> Option<String> {
+        crate::steering_note(self.node.steering())
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {

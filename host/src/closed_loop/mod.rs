@@ -656,6 +656,9 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     if let Some(note) = driver::Driver::gnss_rate_note(&driver) {
         eprintln!("closed-loop: warning: {note}");
     }
+    if let Some(note) = driver::Driver::steering_note(&driver) {
+        eprintln!("closed-loop: warning: {note}");
+    }
     let mut files = write_session(&args.out, &output)?;
     files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))

@@ -416,6 +416,9 @@ pub struct MpcConfig {
     max_steer_rate_rad_per_s: f32,
     tuning: MpcTuning,
     speed: SpeedPlanner,
+    /// The lock and the rate limit as the model file gives them (`vehicle.max_steer_rad` and
+    /// `max_steer_rate_rad_per_s` are these times the steering gain in use, [`Self::set_steer_scale`]).
+    file_steer: (f32, f32),
 }
 
 /// What the controller sends.
@@ -652,6 +655,7 @@ impl MpcConfig {
         }
         let speed = SpeedPlanner::new(speed_model, tuning.speed).map_err(MpcConfigError::Speed)?;
         Ok(Self {
+            file_steer: (vehicle.max_steer_rad, max_steer_rate_rad_per_s),
             vehicle,
             dynamics,
             body,
@@ -659,6 +663,17 @@ impl MpcConfig {
             tuning,
             speed,
         })
+    }
+
+    /// Plans with the steering turning the car `scale` times what the model file says (the
+    /// node's steering check, [`crate::node::steering`]): the lock and the rate limit in
+    /// centre-tyre angle are scaled, and so the conversion of the plan's angles to percent.
+    /// Not finite or not positive: ignored.
+    pub fn set_steer_scale(&mut self, scale: f32) {
+        if scale.is_finite() && scale > 0.0 {
+            self.vehicle.max_steer_rad = self.file_steer.0 * scale;
+            self.max_steer_rate_rad_per_s = self.file_steer.1 * scale;
+        }
     }
 
     /// The controller of the car a node is configured for: its geometry, body, dynamic model
