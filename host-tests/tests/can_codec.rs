@@ -348,6 +348,7 @@ fn node_status_pages_round_trip_and_saturate() {
         input_invalid: true,
         planner_refused_recently: false,
         gnss_rate_mismatch: true,
+        steering_mismatch: false,
     };
     let pages = [
         NodeStatus::Health {

@@ -306,23 +306,40 @@ pub fn gnss_rate_note(
 }
 
 /// What the node's steering check ([`catmodel::node::steering`]) found, when it used a steering
-/// gain other than the model file's at the end of a run: the gain, its standard deviation, and
-/// what to change in the model file.
-pub fn steering_note(check: &catmodel::node::steering::SteeringCheck) -> Option<String> {
-    if !check.mismatch() {
+/// gain other than the model file's (at the end of a run, or for `used_ticks` of it): the
+/// gain, its standard deviation, and what to change in the model file.
+pub fn steering_note(
+    check: &catmodel::node::steering::SteeringCheck,
+    used_ticks: Option<u64>,
+) -> Option<String> {
+    let used = used_ticks.map_or(String::new(), |n| {
+        format!(
+            " for {:.1} s",
+            n as f64 * f64::from(catmodel::SAMPLE_PERIOD_S)
+        )
+    });
+    if !check.mismatch() && used_ticks.unwrap_or(0) == 0 {
         return None;
     }
     let (gain, _) = check.fit();
     let std = check
         .gain_std()
         .map_or(String::new(), |s| format!(" +- {s:.3}"));
-    Some(format!(
+    let fit = format!(
         "the car turned {gain:.3}{std} times the yaw rate the model file's steering gives \
-         (fitted over the drive's turns against the GNSS course): the node used that gain \
-         (NODE_STATUS steering_mismatch). Scale the model file's steering by it \
-         ([lateral] steer_gain, or [vehicle] max_steer_deg in a file without [lateral]), or \
-         identify the car's model file from its drives (`catmodel identify`)"
-    ))
+         (fitted over the drive's turns against the GNSS course)"
+    );
+    let advice = "Scale the model file's steering by it ([lateral] steer_gain, or [vehicle] \
+                  max_steer_deg in a file without [lateral]), or identify the car's model file \
+                  from its drives (`catmodel identify`)";
+    Some(if check.mismatch() {
+        format!("{fit}: the node used that gain{used} (NODE_STATUS steering_mismatch). {advice}")
+    } else {
+        format!(
+            "the node used a steering gain other than the model file's{used} (NODE_STATUS \
+             steering_mismatch) and dropped it again; at the end {fit}"
+        )
+    })
 }
 
 /// The node configuration for a model file (`None`: the published `models/paper.toml`, exactly

@@ -414,11 +414,10 @@ fn run(cli: Cli) -> Result<()> {
             {
                 eprintln!("catmodel: warning: {note}");
             }
-            if let Some(note) = catmodel_host::steering_note(&result.steering) {
-                eprintln!(
-                    "catmodel: warning: {note}; it did over {:.1} s of the log",
-                    result.steering_mismatch_ticks as f64 * f64::from(catmodel::SAMPLE_PERIOD_S)
-                );
+            if let Some(note) =
+                catmodel_host::steering_note(&result.steering, Some(result.steering_mismatch_ticks))
+            {
+                eprintln!("catmodel: warning: {note}");
             }
             let still = config_course_min_speed_mps;
             if result.ticks > 0

@@ -41,7 +41,7 @@ pub const MIN_INFO_RAD2: f32 = 0.5;
 /// the measure of the blocks' error.
 pub const MIN_BLOCKS: f32 = 5.0;
 /// How many standard deviations of its fit the gain must be from 1 for the node to act on it.
-pub const MIN_SIGMAS: f32 = 4.0;
+pub const MIN_SIGMAS: f32 = 5.0;
 /// How far from 1 the gain must be for the node to use it.
 pub const ENGAGE: f32 = 0.10;
 /// How close to 1 the gain must come back for the node to drop it.
@@ -51,6 +51,9 @@ pub const SCALE_RANGE: (f32, f32) = (0.5, 2.0);
 /// Blocks are driven at this speed or faster, m/s: below it a standard receiver's course is
 /// too noisy for a block to say anything.
 pub const MIN_SPEED_MPS: f32 = 4.0;
+/// Blocks driven at this mean speed or faster weigh fully; slower ones as the speed squared
+/// (a course's error goes as 1 / the chord's length), m/s.
+pub const FULL_WEIGHT_SPEED_MPS: f32 = 10.0;
 /// A block whose measured turn is further than this (plus half the modelled turn) from the
 /// fit's is not taken (a heading jump: a course after a multipath burst), rad.
 pub const OUTLIER_RAD: f32 = 0.1;
@@ -166,10 +169,11 @@ impl SteeringCheck {
         if self.block_s < BLOCK_S {
             return;
         }
-        let (x, d, y) = (
+        let (x, d, y, block_s) = (
             self.block_modelled_rad,
             self.block_distance_m,
             self.block_measured_rad,
+            self.block_s,
         );
         self.restart_block();
         if !(x.is_finite() && d.is_finite() && y.is_finite()) {
@@ -180,12 +184,17 @@ impl SteeringCheck {
             return;
         }
         let keep = 1.0 - BLOCK_S / FORGET_S;
-        self.sxx = keep * self.sxx + x * x;
-        self.sxd = keep * self.sxd + x * d;
-        self.sdd = keep * self.sdd + d * d;
-        self.sxy = keep * self.sxy + x * y;
-        self.sdy = keep * self.sdy + d * y;
-        self.syy = keep * self.syy + y * y;
+        // A course's error goes as 1 / the chord's length: a block's weight as its speed^2.
+        let w = {
+            let share = d / (block_s * FULL_WEIGHT_SPEED_MPS);
+            math::min(share * share, 1.0)
+        };
+        self.sxx = keep * self.sxx + w * x * x;
+        self.sxd = keep * self.sxd + w * x * d;
+        self.sdd = keep * self.sdd + w * d * d;
+        self.sxy = keep * self.sxy + w * x * y;
+        self.sdy = keep * self.sdy + w * d * y;
+        self.syy = keep * self.syy + w * y * y;
         self.blocks = keep * self.blocks + 1.0;
         self.solve();
     }

@@ -110,7 +110,7 @@ impl Driver for NodeDriver {
     }
 
     fn steering_note(&self) -> Option<String> {
-        crate::steering_note(self.node.steering())
+        crate::steering_note(self.node.steering(), None)
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
