@@ -388,9 +388,6 @@ impl Drive {
         probe: &mut P,
     ) -> DriveOutput {
         self.last_tracking = None;
-        if let Some(mpc) = self.mpc_config.as_mut() {
-            mpc.set_steer_scale(inputs.steer_scale);
-        }
         let path_loaded = core::mem::take(&mut self.path_loaded);
         let planned_last_tick = core::mem::take(&mut self.planned_last_tick);
         let out = self.decide(config, inputs, path_loaded, planned_last_tick, probe);
@@ -436,6 +433,10 @@ impl Drive {
             // car that left it back to a controller; the planner replans (a new path clears
             // it, [`Drive::new_path`]).
             return self.stop_lost();
+        }
+        // Here, with a path only: the estimating ticks' bound has no room for it.
+        if let Some(mpc) = self.mpc_config.as_mut() {
+            mpc.set_steer_scale(inputs.steer_scale);
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
             (Controller::Mpc, Some(mpc)) if path_loaded => {
