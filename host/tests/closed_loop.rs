@@ -903,13 +903,7 @@ fn a_steering_weaker_than_the_model_file_says_is_found_and_used() {
         let (vehicle, node) = load_setup(None, model).unwrap();
         let course = scenario::course(kind, &vehicle.body, speed);
         let mut driver = NodeDriver::new(node, Controller::Mpc);
-        let options = RunOptions {
-            seed,
-            receiver,
-            max_time_s: 120.0,
-            replan_s: None,
-            start_offset_m: 0.0,
-        };
+        let options = RunOptions::new(seed, receiver);
         let out = run(&vehicle, &course, &mut driver, "mpc", &options);
         let fit = driver.node().steering().fit();
         (out, fit)

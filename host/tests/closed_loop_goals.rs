@@ -357,13 +357,7 @@ fn drive_with(
 ) -> RunOutput {
     let course = scenario::course(kind, &vehicle.body, speed);
     let mut driver = NodeDriver::new(node.clone(), controller);
-    let options = RunOptions {
-        seed,
-        receiver,
-        max_time_s: 120.0,
-        replan_s: None,
-        start_offset_m: 0.0,
-    };
+    let options = RunOptions::new(seed, receiver);
     run(vehicle, &course, &mut driver, "", &options)
 }
 

@@ -22,13 +22,7 @@ fn dlc(tuning: MpcTuning, speed: f64, seed: u64) -> (usize, f64, f64, f64) {
         std::env::var("SCENARIO").map_or(Kind::DoubleLaneChange, |s| Kind::from_name(&s).unwrap());
     let course = scenario::course(kind, &vehicle.body, speed);
     let mut driver = NodeDriver::new(node, Controller::MpcTuned(tuning));
-    let options = RunOptions {
-        seed,
-        receiver: Receiver::Rtk,
-        max_time_s: 120.0,
-        replan_s: None,
-        start_offset_m: 0.0,
-    };
+    let options = RunOptions::new(seed, Receiver::Rtk);
     let m = run(&vehicle, &course, &mut driver, "mpc", &options).metrics;
     (
         m.cone_hits + m.gates_missed,

@@ -31,13 +31,7 @@ pub fn clean_at(
     let mut entry = 0.0;
     for &seed in &SEEDS {
         let mut driver = NodeDriver::new(node.clone(), controller);
-        let options = RunOptions {
-            seed,
-            receiver,
-            max_time_s: 120.0,
-            replan_s: None,
-            start_offset_m: 0.0,
-        };
+        let options = RunOptions::new(seed, receiver);
         let m = run(vehicle, &course, &mut driver, "", &options).metrics;
         if !m.clean {
             return (false, f64::NAN);

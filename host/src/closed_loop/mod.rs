@@ -115,6 +115,19 @@ pub struct RunOptions {
     pub start_offset_m: f64,
 }
 
+impl RunOptions {
+    /// A run of at most 120 s with `seed` and `receiver`, one path, the car on the path's start.
+    pub fn new(seed: u64, receiver: Receiver) -> Self {
+        Self {
+            seed,
+            receiver,
+            max_time_s: 120.0,
+            replan_s: None,
+            start_offset_m: 0.0,
+        }
+    }
+}
+
 /// One tick of a run, for plots.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
