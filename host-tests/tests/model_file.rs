@@ -321,3 +321,53 @@ fn a_car_declares_its_steering_lag_in_its_model_file() {
     assert_eq!(paper.steer_lag_s, None);
     assert_eq!(mpc_tuning(&paper).steer_lead_s, DEFAULT_TUNING.steer_lead_s);
 }
+
+/// Without a lateral weight in its file, a car whose steering changes its curvature more slowly
+/// than the CAT Vehicle's (rate over wheelbase) gets the built-in weight times the square of
+/// its share, 1 at least (hand-derived); the CAT Vehicle, the hatchback (faster) and a file
+/// that sets its own weight keep theirs.
+#[test]
+fn a_slower_steering_gets_a_lighter_weight_on_the_line() {
+    use catmodel::control::mpc::DEFAULT_TUNING;
+    use catmodel::node::drive::mpc_tuning;
+    let at_rate = |rate: &str| {
+        parse(
+            &paper_text().replace(
+                "max_steer_rate_pct_per_s = 60.0",
+                &format!("max_steer_rate_pct_per_s = {rate}"),
+            ),
+            Path::new("rate.toml"),
+        )
+        .unwrap()
+        .node_config()
+    };
+    let weight = |rate: &str| mpc_tuning(&at_rate(rate)).weights.lateral_per_m2;
+    assert_eq!(weight("60.0"), DEFAULT_TUNING.weights.lateral_per_m2);
+    assert_eq!(weight("90.0"), DEFAULT_TUNING.weights.lateral_per_m2);
+    // Half the rate: a quarter of 10.
+    assert!((weight("30.0") - 2.5).abs() < 1e-4, "{}", weight("30.0"));
+    // A fifth: 0.4, held at 1.
+    assert_eq!(weight("12.0"), 1.0);
+    // The line rule stays.
+    assert_eq!(
+        mpc_tuning(&at_rate("30.0")).line_rule,
+        DEFAULT_TUNING.line_rule
+    );
+    let hatchback =
+        model_file::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/hatchback.toml"))
+            .unwrap()
+            .node_config();
+    assert_eq!(mpc_tuning(&hatchback).weights, DEFAULT_TUNING.weights);
+    // A weight in the file wins.
+    let text = paper_text()
+        .replace(
+            "max_steer_rate_pct_per_s = 60.0",
+            "max_steer_rate_pct_per_s = 30.0",
+        )
+        .replace(
+            "position_uncertainty_m = 2.0",
+            "position_uncertainty_m = 2.0\nmpc_lateral_weight_per_m2 = 7.0",
+        );
+    let own = parse(&text, Path::new("own.toml")).unwrap().node_config();
+    assert_eq!(mpc_tuning(&own).weights.lateral_per_m2, 7.0);
+}

@@ -574,9 +574,32 @@ pub fn mpc_tuning(config: &NodeConfig) -> MpcTuning {
     if let Some(w) = config.mpc_lateral_weight_per_m2 {
         tuning.weights.lateral_per_m2 = w;
         tuning.line_rule = None;
+    } else {
+        // Below 0.99: the CAT Vehicle's own file, whose share rounds to either side of 1,
+        // keeps the weight it was tuned with.
+        let share = steering_agility(config) / REFERENCE_AGILITY_PER_M_S;
+        if share < 0.99 {
+            tuning.weights.lateral_per_m2 =
+                crate::math::max(tuning.weights.lateral_per_m2 * share * share, 1.0);
+        }
     }
     tuning
 }
+
+/// How fast the car's steering can change its path's curvature: the actuator's rate over the
+/// wheelbase, 1/(m s) (small angles: curvature = centre-tyre angle / wheelbase).
+fn steering_agility(config: &NodeConfig) -> f32 {
+    let rate_rad_per_s = config.max_steer_rate_pct_per_s / crate::vehicle::STEER_PCT_LIMIT
+        * config.vehicle.max_steer_rad;
+    rate_rad_per_s / config.vehicle.wheelbase_m
+}
+
+/// The CAT Vehicle's steering agility (60 %/s of 35.5 deg on a 2.62 m wheelbase), 1/(m s):
+/// the built-in lateral weight was tuned on it. A car whose steering changes its curvature
+/// more slowly gets the weight times the square of its share of this (1 at least): pulled
+/// towards the line with the CAT Vehicle's weight, a slow one swings through it (a 4.8 m
+/// wheelbase truck at 40 %/s of 32 deg on an S-curve, docs/findings.md).
+pub const REFERENCE_AGILITY_PER_M_S: f32 = 0.6 * 35.5 * core::f32::consts::PI / 180.0 / 2.62;
 
 /// CONTROL_COMMAND and the PREDICTION frames of a model-predictive controller's output.
 fn mpc_command(out: &MpcOutput) -> DriveOutput {
