@@ -649,3 +649,85 @@ fn eq5_held_at(
     let modelled = block.step(&mut peek, command_mps);
     (model_state, modelled)
 }
+
+/// The model's coast-out (`SpeedPlanner::coast_m`), by hand: eq 5 settled at 5 m/s, every
+/// later command 0, rolls `v T` to a standstill, `T` its mean response time: the delay plus
+/// `den1 / den0 - num1 / num0` of `(0.03679 s^2 - 0.1981 s + 0.7647) / (s^2 + 1.629 s +
+/// 0.7522)`, 0.42 + 2.16565 + 0.25906 = 2.84471 s (the first moment of its impulse response
+/// over its DC gain), 14.224 m, within half a 20 ms step of speed (the sum of the outputs
+/// counts the step it starts on). Stepping the model to rest says the same.
+#[test]
+fn the_coast_out_is_the_speed_times_the_models_mean_response() {
+    use catmodel::control::mpc::longitudinal::SpeedPlanner;
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+    let settled = block.steady_state_for_output(5.0).unwrap();
+    let coast = planner.coast_m(&settled).unwrap();
+    let by_hand = 5.0 * (0.42 + 1.629 / 0.7522 + 0.1981 / 0.7647);
+    assert!(
+        (coast - by_hand).abs() < 0.5 * 5.0 * 0.02 + 0.01,
+        "{coast} vs {by_hand}"
+    );
+    let mut rolled = settled;
+    let mut distance = 0.0f64;
+    for _ in 0..5000 {
+        distance += f64::from(block.step(&mut rolled, 0.0)) * 0.02;
+    }
+    assert!(
+        (f64::from(coast) - distance).abs() < 1e-3,
+        "{coast} vs {distance}"
+    );
+    // At rest with nothing in flight, nothing.
+    assert_eq!(planner.coast_m(&block.zero_state()), Some(0.0));
+}
+
+/// A car whose speed loop is eq 5 exactly stops at the path's end, not past it: the speed
+/// plan alone, with eq 5 as the car (no bias), from 6 m/s, 40 m before the end of a path whose
+/// targets taper to the end at 1 m/s^2 as `scripts/sil-sim.py`'s do, each tick's targets where
+/// the last plan's speeds take the car. Without the cap from the model's coast-out the car
+/// rolled 0.83 m past the end (the reference's taper asks for a deceleration eq 5 cannot give
+/// with commands of 0 or more, and the 2 s plan saw it too late); with it, 3 mm short.
+#[test]
+fn a_car_that_is_its_speed_model_stops_at_the_path_end() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+    let (cruise, length) = (6.0f32, 40.0f32);
+    let target = |s: f32| cruise.min((2.0 * 1.0 * (length - s).max(0.0)).sqrt());
+    let mut car = block.steady_state_for_output(cruise).unwrap();
+    let mut state = SpeedState::new();
+    let (mut s, mut v, mut last) = (0.0f32, cruise, cruise / block.dc_gain().unwrap());
+    let mut speeds = [cruise; PLAN_STEPS + 1];
+    for tick in 0..3000 {
+        let mut station = s;
+        let targets: [f32; PLAN_STEPS + 1] = std::array::from_fn(|k| {
+            if k > 0 {
+                station += 0.5 * (speeds[k - 1] + speeds[k]) * STEP_S;
+            }
+            target(station)
+        });
+        let mut peek = car;
+        let modelled = block.step(&mut peek, 0.0);
+        let start = SpeedStart {
+            model_state: &car,
+            bias_mps: v - modelled,
+            planning_bias_mps: v - modelled,
+            speed_mps: v,
+            last_command_mps: last,
+        };
+        let plan = planner.plan(&mut state, &start, &targets, length - s);
+        speeds = plan.speeds_mps;
+        last = plan.command_mps;
+        v = block.step(&mut car, last);
+        s += v * 0.02;
+        if tick > 100 && v < 0.01 {
+            break;
+        }
+    }
+    assert!(v < 0.01, "still moving at {v} m/s");
+    assert!(
+        s <= length && s > length - 0.05,
+        "stopped {} m from the end (+ past it)",
+        s - length
+    );
+}

@@ -58,6 +58,8 @@ pub const STOP_END_MOVED_M: f32 = 1.0;
 pub const KNOT_STEPS: usize = 2;
 /// Command knots over the plan.
 pub const KNOTS: usize = PLAN_STEPS / KNOT_STEPS;
+/// A knot's length, s.
+pub const KNOT_S: f32 = KNOT_STEPS as f32 * super::STEP_S;
 use crate::model::{SsBlock, SsBlockState};
 
 /// ADMM penalty of the command bounds (per (m/s)^2).
@@ -145,6 +147,11 @@ pub struct SpeedPlanner {
     p: SMatrix<f32, PLAN_STEPS, KNOTS>,
     /// `(H + rho_u I + rho_v P'P)^-1`.
     kkt_inv: SMatrix<f32, KNOTS, KNOTS>,
+    /// The model's coast-out ([`Self::coast_m`]): `r` with `r . x` the sum of the outputs of
+    /// all steps from state `x` with no input (`(I - A')^-1 C`), and the DC gain, which every
+    /// input in flight adds to that sum per unit. `None` for a model without a finite,
+    /// positive DC gain (the reader refuses those; no coast-out, no cap from it).
+    coast: Option<Coast>,
     tuning: SpeedTuning,
 }
 
@@ -257,8 +264,37 @@ impl SpeedPlanner {
             pulse,
             p,
             kkt_inv,
+            coast: coast_row(model),
             tuning,
         })
+    }
+
+    /// How far the model's car goes from `state` to a standstill with every command from now
+    /// on 0, m: the sum of its outputs over all later steps (the inputs in flight through the
+    /// delay included) times the step. The model is linear and stable (the reader refuses
+    /// unstable and integrating speed models), so the sum is `r . x + G sum(u in flight)`
+    /// ([`SpeedPlanner`]'s `coast`), whatever the delay. `None` without that row. Every input
+    /// in flight is summed whatever the caller does with it: the solve's cost does not depend
+    /// on where the car is (docs/firmware.md, "Worst-case tick").
+    pub fn coast_m(&self, state: &SsBlockState<2>) -> Option<f32> {
+        let c = self.coast.as_ref()?;
+        let (first, then) = self.model.delay().in_flight(&state.delay);
+        let in_flight: f32 = first.iter().chain(then).sum();
+        let sum = c.row.dot(&state.x) + c.gain * in_flight;
+        sum.is_finite().then_some(sum * crate::SAMPLE_PERIOD_S)
+    }
+
+    /// The highest command for the plan's first knot that leaves the model's car able to stop
+    /// within `to_end_m` with every later command 0 (its [`Self::coast_m`] then), m/s; not
+    /// below 0; infinite without an end or a coast-out.
+    fn stop_cap_mps(&self, state: &SsBlockState<2>, to_end_m: f32) -> f32 {
+        let (Some(coast), Some(c)) = (self.coast_m(state), self.coast.as_ref()) else {
+            return f32::INFINITY;
+        };
+        if to_end_m.is_nan() {
+            return 0.0;
+        }
+        max((to_end_m - coast) / (c.gain * KNOT_S), 0.0)
     }
 
     /// The configuration.
@@ -328,7 +364,17 @@ impl SpeedPlanner {
         };
         let fit = state.track_fit(start.bias_mps, start.planning_bias_mps);
         let (floor, ceiling) = self.command_band(targets_mps, &fit, v0);
-        let top = min(top, ceiling);
+        // The stop by the model: no command the model's car could not stop from at the end
+        // with every later command 0. The reference's taper alone asks for the deceleration
+        // of `decel_mps2` to the end, which eq 5's car cannot follow with commands of 0 or
+        // more: its response to a 0 fades with its own time constants, and the plan's 2 s
+        // horizon is shorter than its mean response (2.84 s), so it saw that too late (a car
+        // exactly eq 5, stopped 0.74-0.87 m past the end; docs/controller.md, "The stop at
+        // the path's end").
+        let top = min(
+            min(top, ceiling),
+            self.stop_cap_mps(start.model_state, to_end_m),
+        );
         let floor = if stopping { 0.0 } else { min(floor, top) };
         let lo = floor - last;
         let hi = top - last;
@@ -697,6 +743,33 @@ fn shift<const N: usize>(v: &mut [f32; N], f: f32) {
     for (cur, next) in v.iter_mut().zip(old.iter().skip(1)) {
         *cur += (next - *cur) * f;
     }
+}
+
+/// [`SpeedPlanner`]'s coast-out: the model's speed summed over all later steps with no input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Coast {
+    /// `r = (I - A')^-1 C`: the sum is `r . x` from state `x`, in m/s times steps.
+    row: SVector<f32, 2>,
+    /// The DC gain: what each input in flight adds to the sum per unit.
+    gain: f32,
+}
+
+/// The model's [`Coast`]; `None` without a finite, positive DC gain or with `I - A` singular.
+fn coast_row(model: &SsBlock<2>) -> Option<Coast> {
+    let gain = model.dc_gain().filter(|g| g.is_finite() && *g > 0.0)?;
+    let a = model.a();
+    let c = model.c();
+    // (I - A') r = C, 2 x 2 by Cramer's rule.
+    let m11 = 1.0 - a.m11;
+    let m12 = -a.m21;
+    let m21 = -a.m12;
+    let m22 = 1.0 - a.m22;
+    let det = m11 * m22 - m12 * m21;
+    if !(det.is_finite() && det != 0.0) {
+        return None;
+    }
+    let row = SVector::<f32, 2>::new((c.x * m22 - m12 * c.y) / det, (m11 * c.y - m21 * c.x) / det);
+    (row.x.is_finite() && row.y.is_finite()).then_some(Coast { row, gain })
 }
 
 /// The model's output at the start of each MPC step (calls 0, 5, 10, ... of `step`, the call
