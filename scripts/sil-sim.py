@@ -191,6 +191,11 @@ class Car:
         self.steer_cmd = self.steer_ramp = self.steer = 0.0  # %
         self.speed_queue = []  # (time it acts, command)
         self.speed_target = 0.0
+        # --speed-loop eq5: the paper's eq 5 (the CAT Vehicle's internal speed controller,
+        # identified: (0.03679 s^2 - 0.1981 s + 0.7647) / (s^2 + 1.629 s + 0.7522) after the
+        # dead time), as a state space of this script's own (controllable canonical form).
+        self.eq5 = args.speed_loop == "eq5"
+        self.eq5_x = (0.0, 0.0)
 
     def step(self, t, steer_cmd, speed_cmd):
         self.speed_queue.append((t + self.speed_dead, speed_cmd))
@@ -199,7 +204,15 @@ class Car:
         dstep = self.steer_rate * SUBSTEP_S
         self.steer_ramp += max(-dstep, min(dstep, steer_cmd - self.steer_ramp))
         self.steer += (self.steer_ramp - self.steer) * SUBSTEP_S / self.steer_lag
-        self.v += (self.speed_target - self.v) * SUBSTEP_S / self.speed_lag
+        if self.eq5:
+            (b0, b1, b2), (a1, a2) = (0.03679, -0.1981, 0.7647), (1.629, 0.7522)
+            x1, x2 = self.eq5_x
+            u = self.speed_target
+            x1, x2 = x1 + x2 * SUBSTEP_S, x2 + (u - a2 * x1 - a1 * x2) * SUBSTEP_S
+            self.eq5_x = (x1, x2)
+            self.v = (b2 - b0 * a2) * x1 + (b1 - b0 * a1) * x2 + b0 * u
+        else:
+            self.v += (self.speed_target - self.v) * SUBSTEP_S / self.speed_lag
         self.v = max(self.v, 0.0)
         delta = self.steer / 100.0 * self.max_steer
         yaw_rate = self.v * math.tan(delta) / (self.L * (1.0 + self.understeer * self.v**2))
@@ -250,6 +263,13 @@ def main():
     ap.add_argument("--steer-lag", type=float, default=0.05, help="actuator lag, s")
     ap.add_argument("--speed-dead-time", type=float, default=0.3, help="speed loop dead time, s")
     ap.add_argument("--speed-lag", type=float, default=0.6, help="speed loop lag, s")
+    ap.add_argument(
+        "--speed-loop",
+        choices=("lag", "eq5"),
+        default="lag",
+        help="the speed loop after its dead time: a first-order lag (--speed-lag), or the paper's"
+        " eq 5 (with --speed-dead-time 0.42: the car the model file describes)",
+    )
     ap.add_argument("--max-rms-m", type=float, default=0.15, help="bound on the lateral RMS")
     ap.add_argument("--max-lateral-m", type=float, default=0.5, help="bound on |lateral error|")
     ap.add_argument(
