@@ -186,6 +186,18 @@ pub struct ModelFit {
     pub mismatch_mps: f32,
 }
 
+impl ModelFit {
+    /// How far the model is trusted: 1 with no miss, 0 from [`MISMATCH_NO_TRUST_MPS`] (and for
+    /// a non-finite miss).
+    pub fn trust(&self) -> f32 {
+        clamp(
+            1.0 - finite_or(self.mismatch_mps, MISMATCH_NO_TRUST_MPS) / MISMATCH_NO_TRUST_MPS,
+            0.0,
+            1.0,
+        )
+    }
+}
+
 /// A speed plan.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpeedPlan {
@@ -287,14 +299,14 @@ impl SpeedPlanner {
     /// The highest command for the plan's first knot that leaves the model's car able to stop
     /// within `to_end_m` with every later command 0 (its [`Self::coast_m`] then), m/s; not
     /// below 0; infinite without an end or a coast-out.
-    fn stop_cap_mps(&self, state: &SsBlockState<2>, to_end_m: f32) -> f32 {
+    fn stop_cap_mps(&self, state: &SsBlockState<2>, to_end_m: f32, trust: f32) -> f32 {
         let (Some(coast), Some(c)) = (self.coast_m(state), self.coast.as_ref()) else {
             return f32::INFINITY;
         };
         if to_end_m.is_nan() {
             return 0.0;
         }
-        max((to_end_m - coast) / (c.gain * KNOT_S), 0.0)
+        max((to_end_m - trust * coast) / (c.gain * KNOT_S), 0.0)
     }
 
     /// The configuration.
@@ -373,7 +385,7 @@ impl SpeedPlanner {
         // the path's end").
         let top = min(
             min(top, ceiling),
-            self.stop_cap_mps(start.model_state, to_end_m),
+            self.stop_cap_mps(start.model_state, to_end_m, fit.trust()),
         );
         let floor = if stopping { 0.0 } else { min(floor, top) };
         let lo = floor - last;
@@ -478,12 +490,7 @@ impl SpeedPlanner {
         };
         let offset = finite_or(fit.offset_mps, 0.0);
         let v0 = finite_or(v0_mps, 0.0);
-        // 1 with no miss, 0 from MISMATCH_NO_TRUST_MPS (and for a non-finite one).
-        let trust = clamp(
-            1.0 - finite_or(fit.mismatch_mps, MISMATCH_NO_TRUST_MPS) / MISMATCH_NO_TRUST_MPS,
-            0.0,
-            1.0,
-        );
+        let trust = fit.trust();
         let width = |off_target: f32| {
             let narrow = min(
                 t.command_lead_mps,
