@@ -302,7 +302,7 @@ impl SpeedPlanner {
     /// reference's taper and the creep, not at the model's pace), m/s; not below 0; infinite
     /// without an end or a coast-out.
     fn stop_cap_mps(&self, state: &SsBlockState<2>, to_end_m: f32, trust: f32) -> f32 {
-        let (Some(coast), Some(c)) = (self.coast_m(state), self.coast.as_ref()) else {
+        let (Some(coast), Some(c)) = (self.coast_m(state), self.coast) else {
             return f32::INFINITY;
         };
         if to_end_m.is_nan() {
@@ -379,9 +379,9 @@ impl SpeedPlanner {
         let fit = state.track_fit(start.bias_mps, start.planning_bias_mps);
         let (floor, ceiling) = self.command_band(targets_mps, &fit, v0);
         // The stop by the model: no command the model's car could not stop from at the end
-        // with every later command 0 (as far as the model is trusted). The reference's taper alone asks for the deceleration
-        // of `decel_mps2` to the end, which eq 5's car cannot follow with commands of 0 or
-        // more: its response to a 0 fades with its own time constants, and the plan's 2 s
+        // with every later command 0 (as far as the model is trusted). The reference's taper
+        // alone asks for the deceleration of `decel_mps2` to the end, which eq 5's car cannot
+        // follow with commands of 0 or more: its response to a 0 fades with its own time constants, and the plan's 2 s
         // horizon is shorter than its mean response (2.84 s), so it saw that too late (a car
         // exactly eq 5, stopped 0.74-0.87 m past the end; docs/controller.md, "The stop at
         // the path's end").
