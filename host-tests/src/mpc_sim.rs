@@ -9,7 +9,7 @@
 //! the whole node over the bus).
 use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ReferencePoint,
-    Sample, SidePoint, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    Sample, SidePoint, StageClock, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::{HybridConfig, HybridState};
@@ -242,19 +242,22 @@ impl TestPath {
         }
     }
 
-    /// The controller's reference from station `s0` at the given speeds per step.
+    /// The controller's reference from station `s0` at the given speeds per step of the speed
+    /// plan, at the steering plan's stages (`stage`).
     pub fn reference(
         &self,
         s0: f64,
         speeds: &[f32; PLAN_STEPS + 1],
         body: &Body,
+        stage: &StageClock,
     ) -> [ReferencePoint; STEPS + 1] {
         let front = (body.length_m - body.rear_overhang_m) as f64;
         let rear = body.rear_overhang_m as f64;
+        let speeds = stage.stage_speeds(speeds);
         let mut s = s0;
         std::array::from_fn(|k| {
             if k > 0 {
-                s += 0.5 * (speeds[k - 1] + speeds[k]) as f64 * STEP_S as f64;
+                s += 0.5 * (speeds[k - 1] + speeds[k]) as f64 * stage.stage_s(k - 1) as f64;
             }
             let (left_f, right_f) = self.binding(s, s + front);
             let (left_r, right_r) = self.binding(s, s - rear);
@@ -448,6 +451,12 @@ impl CarSpec {
         cfg.speed_controller.command_delay_s = self.speed_delay_s;
         cfg.speed_controller.max_accel_mps2 = self.max_accel_mps2;
         cfg.speed_controller.actuator_lag_s = self.speed_lag_s;
+        // The plant's dynamics do not use the body; the bench's rows use the controller's.
+        cfg.body = catmodel_host::sim::config::Body {
+            width_m: f64::from(self.body.width_m),
+            length_m: f64::from(self.body.length_m),
+            rear_overhang_m: f64::from(self.body.rear_overhang_m),
+        };
         cfg.validate().expect("a valid vehicle");
         (cfg, self.body)
     }
@@ -507,6 +516,38 @@ pub fn van() -> (VehicleConfig, Body) {
         },
     }
     .build()
+}
+
+/// A long truck with slow steering (4.8 m wheelbase, 5.5 t, 32 deg lock at 40 %/s with a
+/// 60 ms lag), 2.3 m wide and 7.6 m long: its steering changes its curvature at a third of the
+/// CAT Vehicle's rate (0.047 against 0.142 1/m per s; `mpc::StageClock`). Figures of the class
+/// (`scripts/sil-drive.py`'s truck), not a specific model.
+pub fn truck() -> (VehicleConfig, Body) {
+    let (mut cfg, body) = CarSpec {
+        wheelbase_m: 4.8,
+        track_m: 2.0,
+        mass_kg: 5500.0,
+        cg_to_front_m: 2.0,
+        yaw_inertia_kg_m2: 28_000.0,
+        cg_height_m: 1.1,
+        max_steer_deg: 32.0,
+        cornering_n_per_rad: (160_000.0, 240_000.0),
+        steer_rate_pct_per_s: 40.0,
+        steer_lag_s: 0.06,
+        speed_delay_s: 0.4,
+        max_accel_mps2: 1.5,
+        speed_lag_s: 0.6,
+        body: Body {
+            width_m: 2.3,
+            length_m: 7.6,
+            rear_overhang_m: 1.4,
+        },
+    }
+    .build();
+    cfg.tyre_front.friction_mu = 0.8;
+    cfg.tyre_rear.friction_mu = 0.8;
+    cfg.validate().expect("a valid vehicle");
+    (cfg, body)
 }
 
 /// The controller configuration for a plant vehicle: its geometry and linear tyre figures,
@@ -687,7 +728,12 @@ impl Loop {
             .hybrid
             .update(&mut self.hybrid_state, vx as f32, (vx * r) as f32);
         let max_steer = (self.cfg.chassis.max_steer_deg as f32).to_radians();
-        let reference = path.reference(self.station_m, &self.planned_speeds, self.mpc.body());
+        let reference = path.reference(
+            self.station_m,
+            &self.planned_speeds,
+            self.mpc.body(),
+            self.mpc.stage(),
+        );
         let mut obstacles = [None; MAX_OBSTACLES];
         for (o, ob) in obstacles.iter_mut().zip(&self.obstacles) {
             *o = ob.map(|b| {

@@ -2,12 +2,13 @@
 //! it converges onto a straight path from an offset, holds a curve, passes an obstacle on the
 //! side with room, and brakes (status 3) when there is none.
 use catmodel::control::mpc::{
-    ControlStatus, FallbackReason, MpcConfig, MpcTuning, Obstacle, ObstacleSide, DEFAULT_TUNING,
+    ControlStatus, FallbackReason, MpcConfig, MpcTuning, Obstacle, ObstacleSide, StageClock,
+    DEFAULT_TUNING,
 };
 use catmodel::vehicle::Body;
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{
-    circle, hatchback, mpc_for, van, Delays, Loop, PositionError, TestPath, ESCAPE_BODY,
+    circle, hatchback, mpc_for, truck, van, Delays, Loop, PositionError, TestPath, ESCAPE_BODY,
 };
 
 fn straight(length: f64, lane: f64, speed: f64) -> TestPath {
@@ -719,4 +720,131 @@ fn rigs_lane_change_cone_clearance_per_speed() {
             rigs_lane_change_cone_clearance(speed)
         );
     }
+}
+
+/// An obstacle that appears beside the car, its inflated circle already over the body: no plan
+/// clears it, and the fallback (status 3, the obstacle not cleared) brakes along the lane at the
+/// offset the car has, its heading held to the path's, instead of following the plans that
+/// entered the circle and then holding their last steering (which, beside an obstacle passed on
+/// one side and returned from on the other, turned a braking car back into it; docs/mpc.md,
+/// "Fallback"). Once the obstacle is behind, the car tracks again. Straight road, 5 m a side,
+/// CAT Vehicle at 6 m/s; the obstacle 0.1 m beyond the body's left side, 2 m ahead of the rear
+/// axle, from t = 2 s.
+#[test]
+fn an_obstacle_beside_the_car_is_braked_past_along_the_lane() {
+    let path = straight(200.0, 5.0, 6.0);
+    let mut l = cat_loop(&path, 6.0, 0.0);
+    let mut t = 0.0;
+    while t < 2.0 {
+        l.tick(&path, t);
+        t += 0.02;
+    }
+    let now = *l.log.last().unwrap();
+    let north = now.station_m + 2.0;
+    let west = -(f64::from(ESCAPE_BODY.width_m) / 2.0 + 0.1 + 0.5) + now.e_y_m;
+    let obstacle = circle(west as f32, north as f32, 0.5);
+    let start = l.log.len();
+    let clearance = drive_past(&mut l, &path, obstacle, 0, north + 20.0, 10.0);
+    let after = &l.log[start..];
+    let fallback: Vec<_> = after
+        .iter()
+        .filter(|t| t.out.status == ControlStatus::Fallback)
+        .collect();
+    let swing = after
+        .iter()
+        .map(|t| (t.e_y_m - now.e_y_m).abs())
+        .fold(0.0f64, f64::max);
+    let steer = fallback
+        .iter()
+        .map(|t| f64::from(t.out.steer_cmd_pct.abs()))
+        .fold(0.0f64, f64::max);
+    let last = l.log.last().unwrap();
+    println!(
+        "beside: {} ticks not cleared, steering within {steer:.2} %, the rear axle within \
+         {swing:.3} m of its offset; body clearance {clearance:.2} m; then {:?}",
+        fallback.len(),
+        last.out.status
+    );
+    assert!(!fallback.is_empty(), "the fallback was not taken");
+    assert!(fallback.iter().all(|t| {
+        t.out.fallback == Some(FallbackReason::ObstacleNotCleared) && t.out.speed_cmd_mps == 0.0
+    }));
+    assert!(steer < 1.0, "steered {steer:.2} % in the fallback");
+    assert!(
+        swing < 0.05,
+        "the rear axle moved {swing:.3} m off its offset"
+    );
+    assert!(clearance > 0.0, "body {clearance:.2} m from the obstacle");
+    assert_eq!(last.out.status, ControlStatus::Tracking, "tracks again");
+}
+
+/// An S-curve without transitions (`scripts/sil-drive.py scurve`): 40 m straight, 25 m arcs
+/// turning left by 60 deg, right by 120 deg and left by 60 deg, 40 m straight; corridor 2.5 m a
+/// side. The curvature steps by 0.08 1/m at each reversal.
+fn s_curve_of_arcs(speed: f64) -> TestPath {
+    use std::f64::consts::FRAC_PI_3;
+    let r = 25.0;
+    let arcs = [(1.0, FRAC_PI_3), (-1.0, 2.0 * FRAC_PI_3), (1.0, FRAC_PI_3)];
+    let arc_len = |a: f64| r * a;
+    let total = 80.0 + arcs.iter().map(|(_, a)| arc_len(*a)).sum::<f64>();
+    TestPath::new(
+        total,
+        move |s| {
+            // Heading from north, clockwise; a left turn lowers it.
+            let (mut x, mut y, mut h) = (0.0f64, 0.0f64, 0.0f64);
+            let step = |x: &mut f64, y: &mut f64, h: f64, d: f64| {
+                *x += d * h.sin();
+                *y += d * h.cos();
+            };
+            let d = s.min(40.0);
+            step(&mut x, &mut y, h, d);
+            let mut left = s - d;
+            for (turn, a) in arcs {
+                let d = left.clamp(0.0, arc_len(a));
+                // The chord of an arc of `d`: half the turn, then the chord's length.
+                let dh = -turn * d / r;
+                let chord = 2.0 * r * (0.5 * d / r).sin();
+                step(&mut x, &mut y, h + 0.5 * dh, chord);
+                h += dh;
+                left -= d;
+            }
+            step(&mut x, &mut y, h, left.max(0.0));
+            (x, y)
+        },
+        |_| (2.5, 2.5),
+        move |_| speed,
+    )
+}
+
+/// A truck whose steering is slow for its wheelbase (`mpc_sim::truck`: 40 %/s of 32 deg on
+/// 4.8 m) through the S-curve at 10 m/s: reversing the steering that a 25 m arc asks for takes
+/// it about 2 s, as long as the tuning's horizon, and with 2 s the plan began each reversal too
+/// late to share the error between the arcs. Its horizon of 4 s (`StageClock::for_steering`:
+/// 0.1 s stages for the first second, 0.3 s after) starts the reversals earlier: the rear axle
+/// stays closer to the path (the largest offset at most two thirds of the 2 s horizon's).
+#[test]
+fn a_truck_with_slow_steering_anticipates_the_reversals() {
+    let (cfg, body) = truck();
+    let path = s_curve_of_arcs(10.0);
+    let run = |clock: Option<StageClock>| {
+        let mut mpc = mpc_for(&cfg, body, DEFAULT_TUNING);
+        if let Some(c) = clock {
+            mpc.set_stage(c);
+        }
+        let mut l = Loop::new(cfg.clone(), mpc, &path, 10.0, 0.0, 0.0);
+        l.run(&path, path.length_m() - 10.0, 40.0);
+        let (rms, max) = summary(&l, 1.0);
+        let horizon = l.mpc.stage().horizon_s();
+        (rms, max, horizon)
+    };
+    let (rms, max, horizon) = run(None);
+    let (rms2, max2, horizon2) = run(Some(StageClock::UNIFORM));
+    println!(
+        "truck, S-curve at 10 m/s: horizon {horizon:.1} s: lateral RMS {rms:.3} m, max {max:.3} m; \
+         {horizon2:.1} s: {rms2:.3} m, {max2:.3} m"
+    );
+    assert!((horizon - 4.0).abs() < 1e-4, "{horizon}");
+    assert!((horizon2 - 2.0).abs() < 1e-4, "{horizon2}");
+    assert!(max <= 2.0 / 3.0 * max2, "{max:.3} against {max2:.3} m");
+    assert!(rms < rms2, "{rms:.3} against {rms2:.3} m");
 }

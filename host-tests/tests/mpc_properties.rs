@@ -5,7 +5,7 @@
 //! a NaN anywhere, and a tick without a solve (`MpcConfig::coast`) moves the plan on by one tick.
 use catmodel::control::mpc::longitudinal::SpeedTuning;
 use catmodel::control::mpc::{
-    CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning,
+    CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning, StageClock,
     DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
 };
 use catmodel::model::dynamic::LateralState;
@@ -93,7 +93,7 @@ proptest! {
         let mpc = mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING);
         let path = arc(c.curvature, c.left, c.right, c.speed);
         let speeds = [c.speed as f32; PLAN_STEPS + 1];
-        let mut reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+        let mut reference = path.reference(5.0, &speeds, &ESCAPE_BODY, &StageClock::UNIFORM);
         let (x, y, h) = path.pose(5.0);
         let mut pose = Pose::new(
             x as f32 + c.offset * (h as f32).cos(),
@@ -215,7 +215,7 @@ fn solve_beside_a_straight(
 ) -> MpcOutput {
     let path = arc(0.0, 3.0, 3.0, 10.0);
     let speeds = [10.0f32; PLAN_STEPS + 1];
-    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY);
+    let reference = path.reference(5.0, &speeds, &ESCAPE_BODY, &StageClock::UNIFORM);
     let (x, y, h) = path.pose(5.0);
     let pose = Pose::new(x as f32 + offset_m, y as f32, h as f32);
     let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
@@ -730,4 +730,51 @@ fn a_car_that_is_its_speed_model_stops_at_the_path_end() {
         "stopped {} m from the end (+ past it)",
         s - length
     );
+}
+
+/// The steering plan's clock by hand (`mpc::StageClock`): the horizon is 2 s for a car whose
+/// steering changes its curvature at least at 0.14 1/m per s, 2 s times 0.14 over the car's
+/// rate for a slower one (the first second in 0.1 s stages, the rest in stages of whole ticks,
+/// rounded up), at most 4 s; and its times, indices and speeds agree with one another.
+#[test]
+fn the_stage_clock_by_hand() {
+    let rate = |pct: f32, lock_deg: f32| pct / 100.0 * lock_deg.to_radians();
+    // The CAT Vehicle: 60 % of 35.5 deg a second on 2.62 m is 0.142 1/m per s.
+    assert_eq!(
+        StageClock::for_steering(2.62, rate(60.0, 35.5)),
+        StageClock::UNIFORM
+    );
+    // A van, 55 % of 36 deg on 3.665 m: 0.0943 1/m per s asks for 2.97 s; 1 s + 10 x 0.2 s.
+    let van = StageClock::for_steering(3.665, rate(55.0, 36.0));
+    assert_eq!(van, StageClock::with_late_ticks(10));
+    assert!((van.horizon_s() - 3.0).abs() < 1e-5, "{}", van.horizon_s());
+    // 0.1 s short of what the van asks for: 9 ticks are not enough (1 + 10 x 0.18 = 2.8 s).
+    assert!(1.0 + 10.0 * 0.18 < 2.0 * 0.14 / (rate(55.0, 36.0) / 3.665));
+    // A truck, 40 % of 32 deg on 4.8 m: 0.0465 asks for 6.0 s; capped at 1 s + 10 x 0.3 s.
+    let truck = StageClock::for_steering(4.8, rate(40.0, 32.0));
+    assert_eq!(truck, StageClock::with_late_ticks(15));
+    assert!((truck.horizon_s() - 4.0).abs() < 1e-5);
+    // Nothing usable: the tuning's clock; a rate of 0: the longest.
+    assert_eq!(StageClock::for_steering(f32::NAN, 0.3), StageClock::UNIFORM);
+    assert_eq!(StageClock::for_steering(2.6, 0.0), truck);
+    for clock in [StageClock::UNIFORM, van, truck] {
+        let mut t = 0.0f32;
+        for k in 0..STEPS {
+            assert!((clock.time_s(k) - t).abs() < 1e-5, "stage {k}");
+            assert!((clock.index_at_s(t) - k as f32).abs() < 1e-4, "stage {k}");
+            let ticks = clock.stage_ticks(k);
+            assert!((clock.stage_s(k) - ticks as f32 * 0.02).abs() < 1e-6);
+            // A tick after stage k is its share of the stage; a stage's ticks reach the next.
+            assert!((clock.index_after(k, 1) - (k as f32 + 1.0 / ticks as f32)).abs() < 1e-6);
+            assert!((clock.index_after(k, ticks) - (k + 1) as f32).abs() < 1e-5);
+            t += clock.stage_s(k);
+        }
+        assert!((clock.horizon_s() - t).abs() < 1e-5);
+        // The speed plan's speeds at the stages: a ramp of 1 m/s per 0.1 s step, held past 2 s.
+        let plan: [f32; PLAN_STEPS + 1] = std::array::from_fn(|k| k as f32);
+        for (k, v) in clock.stage_speeds(&plan).iter().enumerate() {
+            let want = (clock.time_s(k) / STEP_S).min(PLAN_STEPS as f32);
+            assert!((v - want).abs() < 1e-4, "stage {k}: {v} against {want}");
+        }
+    }
 }

@@ -9,7 +9,7 @@
 use catmodel::control::mpc::admm::{AdmmSettings, Problem, Row, Workspace};
 use catmodel::control::mpc::lateral::tustin;
 use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState, SpeedTuning};
-use catmodel::control::mpc::{NX, PLAN_STEPS, ROWS};
+use catmodel::control::mpc::{StageClock, NX, PLAN_STEPS, ROWS};
 
 /// Stages of the reference problems (the solver is generic in the horizon).
 const STEPS: usize = 20;
@@ -346,13 +346,19 @@ fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
     let x = |e_y: f32| SVector::<f32, NX>::from([e_y, 0.0, 0.0, 0.0, 0.0]);
 
     let mut inside = fresh();
-    assert_eq!(relax_corridor(&mut inside, &x(0.5), 1.0), 0.0);
+    assert_eq!(
+        relax_corridor(&mut inside, &x(0.5), 1.0, &StageClock::UNIFORM),
+        0.0
+    );
     for (a, b) in inside.stages.iter().zip(fresh().stages.iter()) {
         assert_eq!(a.rows, b.rows, "a car inside its corridor changed the rows");
     }
 
     let mut q = fresh();
-    assert_eq!(relax_corridor(&mut q, &x(3.0), 1.0), 2.0);
+    assert_eq!(
+        relax_corridor(&mut q, &x(3.0), 1.0, &StageClock::UNIFORM),
+        2.0
+    );
     let duration = 2.0 * 2.0f64.sqrt();
     let mut previous = f64::INFINITY;
     for (k, st) in q.stages.iter().enumerate() {
@@ -398,7 +404,15 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
 
     let mut near = fresh();
     assert_eq!(
-        taper_reference(&mut near, &x(0.9), &speeds, 1.0, 1.0, 0.2),
+        taper_reference(
+            &mut near,
+            &x(0.9),
+            &speeds,
+            &StageClock::UNIFORM,
+            1.0,
+            1.0,
+            0.2
+        ),
         0.0
     );
     assert!(near
@@ -408,7 +422,15 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
 
     let mut q = fresh();
     assert_eq!(
-        taper_reference(&mut q, &x(3.0), &speeds, 1.0, 1.0, 0.2),
+        taper_reference(
+            &mut q,
+            &x(3.0),
+            &speeds,
+            &StageClock::UNIFORM,
+            1.0,
+            1.0,
+            0.2
+        ),
         2.0
     );
     // Stage 13's targets (the linear terms are -10 times them), m and rad.
@@ -429,7 +451,15 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
     }
     let mut left = fresh();
     assert_eq!(
-        taper_reference(&mut left, &x(-3.0), &speeds, 1.0, 1.0, 0.2),
+        taper_reference(
+            &mut left,
+            &x(-3.0),
+            &speeds,
+            &StageClock::UNIFORM,
+            1.0,
+            1.0,
+            0.2
+        ),
         -2.0
     );
     for (l, r) in left.stages.iter().zip(&q.stages) {
@@ -444,7 +474,15 @@ fn a_start_far_off_the_path_tapers_the_tracking_targets() {
     let slow = [2.0f32; MPC_STEPS + 1];
     let mut crawl = fresh();
     assert_eq!(
-        taper_reference(&mut crawl, &x(3.0), &slow, 1.0, 1.0, 0.2),
+        taper_reference(
+            &mut crawl,
+            &x(3.0),
+            &slow,
+            &StageClock::UNIFORM,
+            1.0,
+            1.0,
+            0.2
+        ),
         2.0
     );
     targets_at_13(&crawl, 1.94838, -0.05073);

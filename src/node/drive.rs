@@ -44,7 +44,7 @@ use crate::can::codec::{
 };
 use crate::control::mpc::{
     self, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint,
-    Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S,
+    Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
 use crate::control::path::{Path, PathSample, Projection, Tracking};
 use crate::control::planner::{PlannerEvent, PlannerInputs};
@@ -711,13 +711,16 @@ fn mpc_tick<P: StageProbe>(
     let body = mpc.body();
     let front = body.length_m - body.rear_overhang_m;
     let rear = body.rear_overhang_m;
-    // Expected stations: the last plan's speeds (the current speed before there is one).
-    let speeds = planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]);
+    // Expected stations: the last plan's speeds (the current speed before there is one) at
+    // the steering plan's stages.
+    let stage = mpc.stage();
+    let speeds =
+        stage.stage_speeds(&planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]));
     // Every point is written below before the solve reads it (or the tick returns early).
     let mut s = s0;
     for (k, r) in reference.iter_mut().enumerate() {
         if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
-            s += 0.5 * (v0 + v1) * STEP_S;
+            s += 0.5 * (v0 + v1) * stage.stage_s(k - 1);
         }
         let at = path.sample(s, hint)?;
         let (front_left, front_right) = side_points(path, s, s + front, hint)?;

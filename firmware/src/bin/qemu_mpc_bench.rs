@@ -36,8 +36,8 @@ use catmodel::control::mpc::lateral::{self, InflatedObstacle, LateralSetup, Line
 use catmodel::control::mpc::longitudinal::{SpeedStart, SpeedState};
 use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ObstacleSide,
-    ReferencePoint, Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, NX, PLAN_STEPS, ROWS, STEPS,
-    STEP_S,
+    ReferencePoint, Sample, SidePoint, StageClock, DEFAULT_TUNING, MAX_OBSTACLES, NX, PLAN_STEPS,
+    ROWS, STEPS, STEP_S,
 };
 use catmodel::math;
 use catmodel::model::dynamic::{DynamicParams, LateralState};
@@ -589,6 +589,9 @@ fn run_parts(b: &Bench, st: &mut Statics) {
         speeds_mps: &speeds,
         max_steer_rad: b.node.vehicle.max_steer_rad,
         max_steer_rate_rad_per_s: b.rate_rad_per_s,
+        // The bundled car's; a slower car's clock costs the same (the same loops, each stage's
+        // length one of two values).
+        stage: &StageClock::UNIFORM,
     };
     let lin = Linearisation {
         e_psi: [0.02; STEPS + 1],

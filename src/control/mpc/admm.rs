@@ -522,12 +522,17 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     /// (the time between two solves over the stage length), by linear interpolation; the last
     /// stage keeps its value. `fraction` is clamped to [0, 1].
     pub fn shift(&mut self, fraction: f32) {
-        let f = fraction.clamp(0.0, 1.0);
+        self.shift_each(&[fraction; N]);
+    }
+
+    /// [`Workspace::shift`] with a fraction per stage (stages of different lengths).
+    pub fn shift_each(&mut self, fractions: &[f32; N]) {
         // In time order, each stage towards its successor's old value (not yet moved).
         let mut rest = self.stages.as_mut_slice();
-        while let Some((it, tail)) = rest.split_first_mut() {
+        let mut f = fractions.iter();
+        while let (Some((it, tail)), Some(f)) = (rest.split_first_mut(), f.next()) {
             if let Some(next) = tail.first() {
-                it.lerp_towards(next, f);
+                it.lerp_towards(next, f.clamp(0.0, 1.0));
             }
             rest = tail;
         }

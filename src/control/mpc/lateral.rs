@@ -30,7 +30,7 @@ use nalgebra::{SMatrix, SVector};
 use super::admm::{Problem, Row};
 use super::{clamp, max};
 use super::{
-    ObstacleSide, ReferencePoint, Sample, Weights, MAX_OBSTACLES, NX, ROWS, STEPS, STEP_S,
+    ObstacleSide, ReferencePoint, Sample, StageClock, Weights, MAX_OBSTACLES, NX, ROWS, STEPS,
 };
 use crate::math;
 use crate::model::dynamic::DynamicParams;
@@ -92,6 +92,8 @@ pub struct LateralSetup<'a> {
     pub max_steer_rad: f32,
     /// Steering rate limit the plan may use, rad/s.
     pub max_steer_rate_rad_per_s: f32,
+    /// The stages' lengths.
+    pub stage: &'a StageClock,
 }
 
 /// Why the problem could not be built.
@@ -389,6 +391,7 @@ pub fn relax_corridor(
     problem: &mut Problem<NX, STEPS, ROWS>,
     x0: &SVector<f32, NX>,
     return_mps2: f32,
+    stage: &StageClock,
 ) -> f32 {
     let Some(first) = problem.stages.first() else {
         return 0.0;
@@ -411,7 +414,7 @@ pub fn relax_corridor(
         }
     }
     for (k, st) in problem.stages.iter_mut().enumerate() {
-        let t = (k + 1) as f32 * STEP_S;
+        let t = stage.time_s(k + 1);
         for (row, (v, rate)) in st.rows.iter_mut().zip(taper) {
             if !(row.active && v > 0.0) {
                 continue;
@@ -465,6 +468,7 @@ pub fn taper_reference(
     problem: &mut Problem<NX, STEPS, ROWS>,
     x0: &SVector<f32, NX>,
     speeds_mps: &[f32; STEPS + 1],
+    stage: &StageClock,
     return_mps2: f32,
     from_m: f32,
     heading_rad: f32,
@@ -483,7 +487,7 @@ pub fn taper_reference(
     );
     let part = if e0 < 0.0 { -part } else { part };
     for (k, st) in problem.stages.iter_mut().enumerate() {
-        let (ahead, d_ahead) = return_ahead((k + 1) as f32 * STEP_S, rate);
+        let (ahead, d_ahead) = return_ahead(stage.time_s(k + 1), rate);
         let e_y = part * ahead;
         let de_y = part * d_ahead;
         let v = max(speeds_mps.get(k + 1).copied().unwrap_or(0.0), 1.0);
@@ -659,16 +663,18 @@ pub fn build(
         let v = 0.5 * (v0 + v1);
         let kappa = 0.5 * (r0.curvature_per_m + r1.curvature_per_m);
         let (f, e) = continuous(setup, v, kappa, 0.5 * (e_a + e_b), 0.5 * (d_a + d_b));
-        let (ad, bd, cd) = tustin(&f, &e, STEP_S).ok_or(BuildError::Discretisation)?;
+        let h = setup.stage.stage_s(k);
+        let (ad, bd, cd) = tustin(&f, &e, h).ok_or(BuildError::Discretisation)?;
         st.a = ad;
         st.b = bd;
         st.c = cd;
-        // Cost of x_{k+1}: offsets and heading error to zero, steering near the feedforward.
+        // Cost of x_{k+1}: offsets and heading error to zero, steering near the feedforward;
+        // weighed by the stage's length (a longer stage stands for more of the horizon).
         let terminal = if k + 1 == STEPS {
             w.terminal_factor
         } else {
             1.0
-        };
+        } * (h / super::STEP_S);
         let ff = feedforward_steer_rad(
             setup.vehicle.wheelbase_m,
             understeer,

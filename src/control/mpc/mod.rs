@@ -33,9 +33,7 @@ use nalgebra::SVector;
 
 use self::admm::{AdmmSettings, Problem, SolveError, Workspace};
 use self::lateral::{BuildError, InflatedObstacle, LateralSetup, Linearisation};
-use self::longitudinal::{
-    SpeedPlan, SpeedPlanError, SpeedPlanner, SpeedStart, SpeedState, SpeedTuning,
-};
+use self::longitudinal::{SpeedPlanError, SpeedPlanner, SpeedStart, SpeedState, SpeedTuning};
 use crate::math::{self, clamp, finite_or, max, min};
 use crate::model::dynamic::{DynamicParams, LateralState};
 use crate::model::hybrid::Mode;
@@ -65,6 +63,15 @@ pub const LANE_HOLD_MIN_PREVIEW_M: f32 = 3.0;
 pub const MAX_STEER_LEAD_S: f32 = 0.3;
 /// Node ticks (20 ms, [`crate::SAMPLE_PERIOD_S`]) per MPC step.
 pub const TICKS_PER_STEP: usize = 5;
+/// Stages of [`STEP_S`] at the start of every steering plan ([`StageClock`]): the first second.
+pub const FINE_STAGES: usize = 10;
+/// Node ticks per later stage at most ([`StageClock`]): 0.3 s stages, a 4 s horizon.
+pub const MAX_LATE_TICKS: usize = 3 * TICKS_PER_STEP;
+/// How fast a car's steering changes the curvature it drives, at least, for the steering plan's
+/// 2 s horizon, 1/m per s (the steering rate limit over the wheelbase: the CAT Vehicle's 21.3
+/// deg/s over 2.62 m is 0.142, the hatchback's 0.169; the horizon was tuned on those two cars).
+/// A slower car's horizon is longer in proportion ([`StageClock`]).
+pub const TUNED_CURVATURE_RATE_PER_M_S: f32 = 0.14;
 /// Obstacles the controller keeps clear of (the OBSTACLE frame's `obstacle_id` 0..3).
 pub const MAX_OBSTACLES: usize = 4;
 /// Lateral states (see [`lateral`]).
@@ -406,6 +413,154 @@ pub enum MpcConfigError {
     Speed(SpeedPlanError),
 }
 
+/// The steering plan's clock: [`STEPS`] stages, the first [`FINE_STAGES`] (or all) of
+/// [`STEP_S`], the rest of `late_ticks` node ticks each. The speed plan and the PREDICTION
+/// frames keep their 0.1 s steps ([`PLAN_STEPS`]); the steering plan reads the speed plan's
+/// speeds at its stages (held past its 2 s) and the plan that is sent reads the steering plan
+/// at its own steps.
+///
+/// The horizon has to see a steering reversal coming in time to make it: reversing the
+/// steering a path's curvature asks for takes the curvature's change over the rate at which
+/// the car's steering changes its curvature (the rate limit over the wheelbase, at small
+/// angles). The horizon of 2 s was tuned on cars at least as quick as
+/// [`TUNED_CURVATURE_RATE_PER_M_S`]; a slower car's horizon is longer in proportion, so that
+/// it sees as much of a reversal, up to 4 s: its first second keeps the 0.1 s stages that
+/// the plan's first commands need, the later stages are longer (rounded up to whole ticks, at
+/// most [`MAX_LATE_TICKS`]). The count of stages, and so the solve's cost, is the same for
+/// every car. Measured (docs/controller.md, "A car whose steering is slow for its wheelbase"):
+/// uniformly longer stages helped a slow truck through an S-curve but cost slow cars the lane
+/// change's precision.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StageClock {
+    /// Stages of [`STEP_S`] at the start.
+    fine: usize,
+    /// Node ticks per later stage.
+    late_ticks: usize,
+    /// A later stage, s.
+    late_s: f32,
+    /// A later stage in steps of the speed plan.
+    late_plan_steps: f32,
+}
+
+impl StageClock {
+    /// Every stage [`STEP_S`]: the tuning's 2 s.
+    pub const UNIFORM: Self = Self {
+        fine: STEPS,
+        late_ticks: TICKS_PER_STEP,
+        late_s: STEP_S,
+        late_plan_steps: 1.0,
+    };
+
+    /// The clock of a car whose steering turns at most `max_steer_rate_rad_per_s` (centre-tyre
+    /// angle) on a `wheelbase_m` wheelbase; [`Self::UNIFORM`] for a car as quick as
+    /// [`TUNED_CURVATURE_RATE_PER_M_S`] or quicker, or if either is not positive and finite.
+    pub fn for_steering(wheelbase_m: f32, max_steer_rate_rad_per_s: f32) -> Self {
+        let agility = max_steer_rate_rad_per_s / wheelbase_m;
+        let want_s = STEPS as f32 * STEP_S * TUNED_CURVATURE_RATE_PER_M_S / agility;
+        let fine_s = FINE_STAGES as f32 * STEP_S;
+        let late = (STEPS - FINE_STAGES) as f32;
+        let mut ticks = TICKS_PER_STEP;
+        // A NaN compares false; a rate of 0 (+inf) stops at the cap.
+        while ticks < MAX_LATE_TICKS
+            && fine_s + late * ticks as f32 * crate::SAMPLE_PERIOD_S < want_s
+        {
+            ticks += 1;
+        }
+        Self::with_late_ticks(ticks)
+    }
+
+    /// [`FINE_STAGES`] of [`STEP_S`], then stages of `ticks` node ticks (within
+    /// [`TICKS_PER_STEP`] ..= [`MAX_LATE_TICKS`]); [`Self::UNIFORM`] for [`TICKS_PER_STEP`].
+    pub fn with_late_ticks(ticks: usize) -> Self {
+        let ticks = ticks.clamp(TICKS_PER_STEP, MAX_LATE_TICKS);
+        if ticks == TICKS_PER_STEP {
+            return Self::UNIFORM;
+        }
+        let late_plan_steps = ticks as f32 / TICKS_PER_STEP as f32;
+        Self {
+            fine: FINE_STAGES,
+            late_ticks: ticks,
+            late_s: STEP_S * late_plan_steps,
+            late_plan_steps,
+        }
+    }
+
+    /// Node ticks of stage `k` (from `x_k` to `x_{k+1}`).
+    pub fn stage_ticks(&self, k: usize) -> usize {
+        if k < self.fine {
+            TICKS_PER_STEP
+        } else {
+            self.late_ticks
+        }
+    }
+
+    /// Stage `k`'s length, s.
+    pub fn stage_s(&self, k: usize) -> f32 {
+        if k < self.fine {
+            STEP_S
+        } else {
+            self.late_s
+        }
+    }
+
+    /// The time of `x_k` from now, s.
+    pub fn time_s(&self, k: usize) -> f32 {
+        if k <= self.fine {
+            k as f32 * STEP_S
+        } else {
+            self.fine as f32 * STEP_S + (k - self.fine) as f32 * self.late_s
+        }
+    }
+
+    /// The steering plan's horizon, s.
+    pub fn horizon_s(&self) -> f32 {
+        self.time_s(STEPS)
+    }
+
+    /// The (fractional) stage index of the time `t_s` from now.
+    pub fn index_at_s(&self, t_s: f32) -> f32 {
+        let fine_s = self.fine as f32 * STEP_S;
+        if t_s <= fine_s {
+            t_s / STEP_S
+        } else {
+            self.fine as f32 + (t_s - fine_s) / self.late_s
+        }
+    }
+
+    /// The (fractional) stage index `ticks` node ticks after `x_k`.
+    pub fn index_after(&self, k: usize, ticks: usize) -> f32 {
+        let fine_left = self.fine.saturating_sub(k) * TICKS_PER_STEP;
+        if ticks <= fine_left {
+            k as f32 + ticks as f32 / TICKS_PER_STEP as f32
+        } else {
+            let from = k.max(self.fine);
+            from as f32 + (ticks - fine_left) as f32 / self.late_ticks as f32
+        }
+    }
+
+    /// Per stage, the share of it one node tick is (the warm start's shift).
+    pub fn tick_shares(&self) -> [f32; STEPS] {
+        core::array::from_fn(|k| 1.0 / self.stage_ticks(k) as f32)
+    }
+
+    /// The speed plan's speeds (at its steps) at the stages, held past its end.
+    pub fn stage_speeds(&self, plan: &[f32; PLAN_STEPS + 1]) -> [f32; STEPS + 1] {
+        core::array::from_fn(|k| {
+            let at = if k <= self.fine {
+                k as f32
+            } else {
+                self.fine as f32 + (k - self.fine) as f32 * self.late_plan_steps
+            };
+            interpolate(plan, at)
+        })
+    }
+
+    /// The steering plan (at its stages) at step `k` of the speed plan.
+    fn at_plan_step(&self, steer: &[f32; STEPS + 1], k: usize) -> f32 {
+        interpolate(steer, self.index_after(0, k * TICKS_PER_STEP))
+    }
+}
+
 /// The controller's configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MpcConfig {
@@ -419,6 +574,8 @@ pub struct MpcConfig {
     /// The lock and the rate limit as the model file gives them (`vehicle.max_steer_rad` and
     /// `max_steer_rate_rad_per_s` are these times the steering gain in use, [`Self::set_steer_scale`]).
     file_steer: (f32, f32),
+    /// The steering plan's stages, from the model file's steering and wheelbase.
+    stage: StageClock,
 }
 
 /// What the controller sends.
@@ -656,6 +813,7 @@ impl MpcConfig {
         let speed = SpeedPlanner::new(speed_model, tuning.speed).map_err(MpcConfigError::Speed)?;
         Ok(Self {
             file_steer: (vehicle.max_steer_rad, max_steer_rate_rad_per_s),
+            stage: StageClock::for_steering(vehicle.wheelbase_m, max_steer_rate_rad_per_s),
             vehicle,
             dynamics,
             body,
@@ -710,6 +868,18 @@ impl MpcConfig {
         &self.speed
     }
 
+    /// The steering plan's stages.
+    pub fn stage(&self) -> &StageClock {
+        &self.stage
+    }
+
+    /// Plans on `clock`'s stages instead of the ones the car's steering gives
+    /// ([`StageClock::for_steering`]); for comparisons (a controller state planned on other
+    /// stages is to be reset first).
+    pub fn set_stage(&mut self, clock: StageClock) {
+        self.stage = clock;
+    }
+
     /// One solve: the commands to send now and the plan.
     pub fn solve(&self, state: &mut MpcState, input: &MpcInput) -> MpcOutput {
         let car = &input.car;
@@ -744,11 +914,8 @@ impl MpcConfig {
         };
         // 3. Lateral problem about the previous plan.
         let x0 = self.initial_state(input, state.steer_ramp_rad);
-        let lin = self.linearisation(state, input, &x0, &speed_plan);
-        let mut speeds = [0.0f32; STEPS + 1];
-        for (s, v) in speeds.iter_mut().zip(&speed_plan.speeds_mps) {
-            *s = *v;
-        }
+        let speeds = self.stage.stage_speeds(&speed_plan.speeds_mps);
+        let lin = self.linearisation(state, input, &x0, &speeds);
         let weights = self.weights_for(input);
         let setup = self.setup(self.mode(input), &speeds, &weights);
         let preview_m = max(car.speed_mps, 0.0) * self.tuning.preview_s;
@@ -766,11 +933,17 @@ impl MpcConfig {
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
             }
         };
-        lateral::relax_corridor(&mut state.problem, &x0, self.tuning.corridor_return_mps2);
+        lateral::relax_corridor(
+            &mut state.problem,
+            &x0,
+            self.tuning.corridor_return_mps2,
+            &self.stage,
+        );
         lateral::taper_reference(
             &mut state.problem,
             &x0,
             &speeds,
+            &self.stage,
             self.tuning.corridor_return_mps2,
             self.tuning.return_from_m,
             self.tuning.return_heading_rad,
@@ -782,7 +955,7 @@ impl MpcConfig {
             .iter()
             .any(|st| st.rows.iter().skip(lateral::ROW_OBSTACLE).any(|r| r.active));
         if state.lin.is_some() {
-            state.workspace.shift(1.0 / TICKS_PER_STEP as f32);
+            state.workspace.shift_each(&self.stage.tick_shares());
         } else {
             state.workspace.cold_start(&state.problem);
         }
@@ -807,7 +980,7 @@ impl MpcConfig {
         // The plan may still enter an obstacle after the iteration cap: at once within the time
         // braking needs to take hold (then only braking can help), or for several ticks in a
         // row further out (a solve that has not converged yet resolves it on the next ticks).
-        let imminent = (self.tuning.stop_delay_s / STEP_S) as usize;
+        let imminent = self.stage.index_at_s(self.tuning.stop_delay_s) as usize;
         let v = violations(&state.problem, &states, &terminal_mask, imminent);
         let corridor_violation_m = v.corridor_m;
         let tolerance = self.tuning.obstacle_tolerance_m;
@@ -847,7 +1020,9 @@ impl MpcConfig {
         state.steer_ramp_rad = Some(ramp_rad);
         // Within the first stage the first stage's rate; a lead that reaches past it takes the
         // plan's steering there (its next stages' rates, a reversal among them).
-        let lead_at = (crate::SAMPLE_PERIOD_S + self.tuning.steer_lead_s) / STEP_S;
+        let lead_at = self
+            .stage
+            .index_at_s(crate::SAMPLE_PERIOD_S + self.tuning.steer_lead_s);
         let steer_cmd_rad = if lead_at <= 1.0 {
             ramp_rad + self.tuning.steer_lead_s * first_rate
         } else {
@@ -882,12 +1057,13 @@ impl MpcConfig {
     /// that no tick both loads a path and solves (docs/firmware.md, "Worst-case tick"). Its
     /// cost is fixed: no loop depends on the data.
     pub fn coast(&self, state: &mut MpcState, out: &mut MpcOutput) {
-        let tick_steps = 1.0 / TICKS_PER_STEP as f32;
+        let shares = self.stage.tick_shares();
         if let Some(lin) = state.lin.as_mut() {
-            shift_values(&mut lin.e_psi, tick_steps);
-            shift_values(&mut lin.delta, tick_steps);
-            state.workspace.shift(tick_steps);
+            shift_values(&mut lin.e_psi, &shares);
+            shift_values(&mut lin.delta, &shares);
+            state.workspace.shift_each(&shares);
         }
+        let tick_steps = 1.0 / TICKS_PER_STEP as f32;
         state.speed.shift();
         if let Some((_, age)) = &mut state.last_steer_plan {
             *age = age.saturating_add(1);
@@ -956,6 +1132,7 @@ impl MpcConfig {
             speeds_mps: speeds,
             max_steer_rad: self.vehicle.max_steer_rad,
             max_steer_rate_rad_per_s: self.max_steer_rate_rad_per_s * self.tuning.steer_rate_share,
+            stage: &self.stage,
         }
     }
 
@@ -1005,16 +1182,16 @@ impl MpcConfig {
         state: &MpcState,
         input: &MpcInput,
         x0: &SVector<f32, NX>,
-        speed: &SpeedPlan,
+        speeds: &[f32; STEPS + 1],
     ) -> Linearisation {
         let e0 = x0.get(lateral::EPSI).copied().unwrap_or(0.0);
         let d0 = x0.get(lateral::DELTA).copied().unwrap_or(0.0);
         let mut lin = match &state.lin {
             Some(prev) => {
-                let f = 1.0 / TICKS_PER_STEP as f32;
+                let shares = self.stage.tick_shares();
                 let mut l = *prev;
-                shift_values(&mut l.e_psi, f);
-                shift_values(&mut l.delta, f);
+                shift_values(&mut l.e_psi, &shares);
+                shift_values(&mut l.delta, &shares);
                 l
             }
             None => {
@@ -1027,7 +1204,7 @@ impl MpcConfig {
                     .delta
                     .iter_mut()
                     .zip(input.reference.iter())
-                    .zip(speed.speeds_mps.iter())
+                    .zip(speeds.iter())
                 {
                     *d = lateral::feedforward_steer_rad(
                         self.vehicle.wheelbase_m,
@@ -1157,8 +1334,9 @@ impl MpcConfig {
         for (k, (st, uk)) in p.stages.iter().zip(u).enumerate() {
             let delta = x.get(lateral::DELTA).copied().unwrap_or(0.0);
             // delta_{k+1} = delta_k + h u exactly (trapezoidal integrator).
-            let to_range_lo = (-max - delta) / STEP_S;
-            let to_range_hi = (max - delta) / STEP_S;
+            let h = self.stage.stage_s(k);
+            let to_range_lo = (-max - delta) / h;
+            let to_range_hi = (max - delta) / h;
             let mut rate = clamp(finite_or(*uk, 0.0), st.u_lower, st.u_upper);
             rate = clamp(rate, to_range_lo, to_range_hi);
             if let Some(r) = rates.get_mut(k) {
@@ -1173,7 +1351,8 @@ impl MpcConfig {
     }
 
     /// The planned trajectory: the lateral model of this solve's mode rolled forward from the
-    /// car's pose under the planned steering and speeds.
+    /// car's pose under the planned steering (at its stages, read at the speed plan's steps: a
+    /// stage is at least a step, so the steering plan covers the speed plan) and speeds.
     fn rollout(
         &self,
         input: &MpcInput,
@@ -1190,26 +1369,8 @@ impl MpcConfig {
         let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
         let mut prev_steer = steer.first().copied().unwrap_or(0.0);
         let mut prev_speed = speeds.first().copied().unwrap_or(0.0);
-        // Beyond the steering plan: towards the path's steady steering at its last reference
-        // point (the terminal cost brings the plan back to the path), at the rate limit.
-        let max_steer = self.vehicle.max_steer_rad;
-        let target = input.reference.last().map_or(0.0, |r| {
-            let ff = lateral::feedforward_steer_rad(
-                self.vehicle.wheelbase_m,
-                self.vehicle.understeer_s2_per_m2,
-                speeds.get(STEPS).copied().unwrap_or(0.0),
-                r.curvature_per_m,
-            );
-            clamp(ff, -max_steer, max_steer)
-        });
-        let step = self.max_steer_rate_rad_per_s * STEP_S;
-        let mut held = steer.last().copied().unwrap_or(0.0);
-        let beyond = core::iter::from_fn(|| {
-            held += clamp(target - held, -step, step);
-            Some(held)
-        });
-        let steer_all = steer.iter().copied().chain(beyond);
-        for (k, ((pt, s), v)) in plan.iter_mut().zip(steer_all).zip(speeds).enumerate() {
+        for (k, (pt, v)) in plan.iter_mut().zip(speeds).enumerate() {
+            let s = self.stage.at_plan_step(steer, k);
             if k > 0 {
                 let v_mid = 0.5 * (prev_speed + v);
                 let d_mid = 0.5 * (prev_steer + s);
@@ -1260,25 +1421,25 @@ impl MpcConfig {
             // the path's direction at the offset it has, the steering ramped there at the
             // actuator's rate.
             let target = self.lane_hold_steer_rad(input);
-            let step = self.max_steer_rate_rad_per_s * STEP_S;
             let mut held = measured;
-            for s in steer.iter_mut().skip(1) {
+            for (k, s) in steer.iter_mut().enumerate().skip(1) {
+                let step = self.max_steer_rate_rad_per_s * self.stage.stage_s(k - 1);
                 held += clamp(target - held, -step, step);
                 *s = held;
             }
             state.last_steer_plan = None;
         } else if let Some((plan, age)) = &mut state.last_steer_plan {
             *age = age.saturating_add(1);
-            // The plan was made `age` ticks ago: index of "now" in it, in steps.
-            let shift = *age as f32 / TICKS_PER_STEP as f32;
+            // The plan was made `age` ticks ago: stage k now is `age` ticks after its stage k.
+            let age = *age as usize;
             for (k, s) in steer.iter_mut().enumerate() {
-                *s = interpolate(plan, k as f32 + shift);
+                *s = interpolate(plan, self.stage.index_after(k, age));
             }
         }
         state.lin = None;
         state.steer_ramp_rad = None;
         let speeds = self.speed.stop(speed_start).speeds_mps;
-        let lead = self.tuning.steer_lead_s / STEP_S;
+        let lead = self.stage.index_at_s(self.tuning.steer_lead_s);
         let steer_cmd_rad = interpolate(&steer, lead);
         let plan = if pose_ok(&input.car.pose) {
             self.rollout(input, &steer, &speeds)
@@ -1396,8 +1557,8 @@ fn violations(
 }
 
 /// Linear interpolation in a per-step sequence at fractional step `at` (held beyond the ends).
-fn interpolate(v: &[f32; STEPS + 1], at: f32) -> f32 {
-    let at = clamp(at, 0.0, STEPS as f32);
+fn interpolate<const N: usize>(v: &[f32; N], at: f32) -> f32 {
+    let at = clamp(at, 0.0, N.saturating_sub(1) as f32);
     // `as` truncates towards zero (at >= 0): the step at or before `at`.
     let i = at as usize;
     let frac = at - i as f32;
@@ -1422,10 +1583,10 @@ fn between(a: &PlanPoint, b: &PlanPoint, f: f32) -> PlanPoint {
     }
 }
 
-/// Each value moved `f` of the way to the next one (the last held).
-fn shift_values(v: &mut [f32; STEPS + 1], f: f32) {
+/// Each value moved its stage's share `f[i]` of the way to the next one (the last held).
+fn shift_values(v: &mut [f32; STEPS + 1], f: &[f32; STEPS]) {
     let old = *v;
-    for (i, cur) in v.iter_mut().enumerate() {
+    for ((i, cur), f) in v.iter_mut().enumerate().zip(f) {
         if let Some(next) = old.get(i + 1) {
             *cur += (next - *cur) * f;
         }
