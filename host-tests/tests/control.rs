@@ -515,6 +515,28 @@ proptest! {
             prop_assert_eq!(*o, p.sample(*s, 0).unwrap());
         }
     }
+
+    /// The segment of a station is the same whatever segment its search starts from, and a
+    /// sample from it is the sample from the path's start: the drive stage chains each
+    /// reference station's search from the previous one's (`Path::segment_hint`).
+    #[test]
+    fn a_stations_segment_and_sample_do_not_depend_on_the_hint(
+        pts in arb_path(),
+        fs in prop::collection::vec(-0.2f32..1.2, 1..20),
+        hint in 0usize..300,
+    ) {
+        let p = path_of(&pts);
+        let mut stations: Vec<f32> = fs.iter().map(|f| f * p.length_m()).collect();
+        stations.sort_by(f32::total_cmp);
+        let mut chained = 0;
+        for s in stations {
+            let from_start = p.segment_hint(s, 0);
+            prop_assert_eq!(p.segment_hint(s, hint), from_start);
+            chained = p.segment_hint(s, chained);
+            prop_assert_eq!(chained, from_start);
+            prop_assert_eq!(p.sample(s, chained).unwrap(), p.sample(s, 0).unwrap());
+        }
+    }
 }
 
 fn narrowest(left_m: f32, left_station_m: f32, right_m: f32, right_station_m: f32) -> Narrowest {

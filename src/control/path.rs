@@ -718,6 +718,17 @@ impl Path {
         i
     }
 
+    /// The segment that holds `station_m` (clamped to the path), searched from segment `hint`:
+    /// the same whatever the hint, and cheaper from a nearby one. A caller sampling stations in
+    /// ascending order passes each one's segment on as the next one's hint, so that its searches
+    /// together walk the path once (`node::drive`'s reference over the horizon).
+    pub fn segment_hint(&self, station_m: f32, hint: usize) -> usize {
+        if !station_m.is_finite() {
+            return hint;
+        }
+        self.segment_at(math::clamp(station_m, 0.0, self.length_m()), hint)
+    }
+
     /// The reference at `station_m` (clamped to the path: before its start the first point's
     /// values, beyond its end the last point extended straight ahead at speed 0). `hint` is a
     /// segment index to start searching from (e.g. the projection's); `None` without a path.

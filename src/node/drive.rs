@@ -717,14 +717,19 @@ fn mpc_tick<P: StageProbe>(
     let speeds =
         stage.stage_speeds(&planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]));
     // Every point is written below before the solve reads it (or the tick returns early).
+    // The stations ascend: each one's segment is the next one's search start, so the searches
+    // walk the path once however far the horizon reaches (the side points' searches from
+    // there walk the body's length).
     let mut s = s0;
+    let mut seg = hint;
     for (k, r) in reference.iter_mut().enumerate() {
         if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
             s += 0.5 * (v0 + v1) * stage.stage_s(k - 1);
         }
-        let at = path.sample(s, hint)?;
-        let (front_left, front_right) = side_points(path, s, s + front, hint)?;
-        let (rear_left, rear_right) = side_points(path, s, s - rear, hint)?;
+        seg = path.segment_hint(s, seg);
+        let at = path.sample(s, seg)?;
+        let (front_left, front_right) = side_points(path, s, s + front, seg)?;
+        let (rear_left, rear_right) = side_points(path, s, s - rear, seg)?;
         *r = ReferencePoint {
             at: sample(&at, (at.left_m, at.right_m)),
             curvature_per_m: at.curvature_per_m,
