@@ -9,7 +9,7 @@ bias at a chosen rate. Planner: LOCAL_ORIGIN, paths (4 frames/tick), obstacles, 
 Usage: scripts/sil-drive.py SCENARIO [options]; prints one JSON line of metrics. Written for a
 black-box review (docs/findings.md: "A lower target speed beyond the controller's 2 s horizon",
 e.g. `python3 scripts/sil-drive.py speedstep --speed 20 --speed2 5 --step-at 300 --length 500`,
-`straight --speed 20 --length 600 --max-decel 3.5`); not part of CI (scripts/sil-sim.py is).
+`straight --speed 20 --length 600 --max-decel 3.5`); CI runs one of its drives (the truck's S-curve at 10 m/s, .ci/run); scripts/sil-sim.py is the CI's simulator.
 """
 import argparse, json, math, random, re, subprocess, sys, os
 from pathlib import Path
