@@ -3,7 +3,9 @@
 //! receiver's estimate passed as it is.
 use catmodel::model::kinematic::Pose;
 use catmodel::node::estimator::{EstimatorConfig, Xy};
-use catmodel::node::smoothing::{Smoothing, DRIFT_DIFFUSION_M2_PER_S, SNAP_M};
+use catmodel::node::smoothing::{
+    Smoothing, DRIFT_DIFFUSION_M2_PER_S, DRIFT_FLOOR_M2_PER_S, SNAP_M, SPEED_SCALE_ERROR,
+};
 use catmodel::SAMPLE_PERIOD_S;
 
 /// Antenna 1.2 m ahead of the rear axle, on the centre line.
@@ -29,18 +31,34 @@ impl Normal {
     }
 }
 
+/// The heading's variance the estimator reckons at speed with a 100 Hz receiver, rad^2 (about
+/// 7e-4, 0.027 rad, on the closed-loop rig's loop; rounded up here).
+const HEADING_VAR_RAD2: f32 = 1e-3;
+
 /// A car driving east at 5 m/s; its estimate's antenna off the truth by `error(tick)`; the dead
 /// reckoning exact. Returns, per tick, the truth's rear axle, the estimate and the control pose.
 fn drive(
     smoothing: &mut Smoothing,
     cfg: &EstimatorConfig,
     ticks: usize,
+    error: impl FnMut(usize) -> (f32, f32),
+) -> Vec<(Pose, Pose, Pose)> {
+    drive_at(smoothing, cfg, ticks, 5.0, HEADING_VAR_RAD2, error)
+}
+
+/// [`drive`] at `speed_mps` with the heading's variance `heading_var_rad2`.
+fn drive_at(
+    smoothing: &mut Smoothing,
+    cfg: &EstimatorConfig,
+    ticks: usize,
+    speed_mps: f32,
+    heading_var_rad2: f32,
     mut error: impl FnMut(usize) -> (f32, f32),
 ) -> Vec<(Pose, Pose, Pose)> {
     let heading = core::f32::consts::FRAC_PI_2;
     (0..ticks)
         .map(|k| {
-            let x = 5.0 * SAMPLE_PERIOD_S * k as f32;
+            let x = speed_mps * SAMPLE_PERIOD_S * k as f32;
             let truth = Pose::new(x, 0.0, heading);
             let (ex, ey) = error(k);
             let estimate = Pose::new(x + ex, ey, heading);
@@ -49,7 +67,7 @@ fn drive(
                 x_m: 100.0 + x + AHEAD_M,
                 y_m: -50.0,
             };
-            let control = smoothing.control_pose(cfg, estimate, odo);
+            let control = smoothing.control_pose(cfg, estimate, odo, speed_mps, heading_var_rad2);
             (truth, estimate, control)
         })
         .collect()
@@ -100,29 +118,47 @@ fn an_estimate_that_moves_with_the_dead_reckoning_is_followed_exactly() {
 fn the_pull_per_tick_is_the_kalman_gain_per_window_spread_over_its_ticks() {
     // 5 Hz: the lowpass's window is three fixes (0.6 s, 30 ticks). Fix errors independent from
     // fix to fix, so a window's jump has the mean square of two fixes' errors, 2 r, plus the
-    // drift allowed for over the window, q = DRIFT_DIFFUSION_M2_PER_S x 0.6 s (the jumps the
-    // node measures carry no drift here: the dead reckoning is exact). The node's pull per
-    // tick `g` must satisfy (1 - g)^30 = 1 - K for the steady-state gain K of process noise q
-    // against measurement noise (mean square jump - q) / 2.
+    // drift allowed for over the window, q (the jumps the node measures carry no drift here:
+    // the dead reckoning is exact). q is the heading's and the wheel speed's errors times the
+    // window's distance, plus the floor, at most the diffusion's: at 1 m/s (0.6 m a window)
+    // the distance's, at 20 m/s (12 m) the diffusion's. The node's pull per tick `g` must
+    // satisfy (1 - g)^30 = 1 - K for the steady-state gain K of process noise q against
+    // measurement noise (mean square jump - q) / 2.
     let cfg = config(5.0);
     let window_fixes = 2.0 * cfg.group_delay_fixes + 1.0;
     assert_eq!(window_fixes, 3.0);
-    for sigma in [0.2f32, 0.5, 1.0] {
-        let mut smoothing = Smoothing::for_estimator(&cfg);
-        drive(&mut smoothing, &cfg, 20_000, fix_errors(5.0, sigma, 7));
-        // The mean square jump the node saw over its last 5 s (8 windows) is noisy; take
-        // the one it would see on average: per axis 2 sigma^2, two axes.
-        let jump_ms = 4.0 * f64::from(sigma) * f64::from(sigma);
-        let q = f64::from(DRIFT_DIFFUSION_M2_PER_S) * 0.6;
-        let k = kalman_gain(q, (jump_ms - q) / 2.0);
-        let g = f64::from(smoothing.gain());
-        let k_node = 1.0 - (1.0 - g).powi(30);
-        // The window's estimate of the mean square scatters by about sqrt(2 / 8) = 50 %; K
-        // goes about as its square root.
-        assert!(
-            (k_node / k - 1.0).abs() < 0.3,
-            "sigma {sigma}: K {k:.3}, the node's {k_node:.3}"
-        );
+    let scale2 = f64::from(SPEED_SCALE_ERROR).powi(2);
+    let heading_var = f64::from(HEADING_VAR_RAD2);
+    for (speed, q) in [
+        (
+            1.0f32,
+            (heading_var + scale2) * 0.36 + f64::from(DRIFT_FLOOR_M2_PER_S) * 0.6,
+        ),
+        (20.0, f64::from(DRIFT_DIFFUSION_M2_PER_S) * 0.6),
+    ] {
+        for sigma in [0.2f32, 0.5, 1.0] {
+            let mut smoothing = Smoothing::for_estimator(&cfg);
+            drive_at(
+                &mut smoothing,
+                &cfg,
+                20_000,
+                speed,
+                HEADING_VAR_RAD2,
+                fix_errors(5.0, sigma, 7),
+            );
+            // The mean square jump the node saw over its last 5 s (8 windows) is noisy; take
+            // the one it would see on average: per axis 2 sigma^2, two axes.
+            let jump_ms = 4.0 * f64::from(sigma) * f64::from(sigma);
+            let k = kalman_gain(q, (jump_ms - q) / 2.0);
+            let g = f64::from(smoothing.gain());
+            let k_node = 1.0 - (1.0 - g).powi(30);
+            // The window's estimate of the mean square scatters by about sqrt(2 / 8) = 50 %; K
+            // goes about as its square root.
+            assert!(
+                (k_node / k - 1.0).abs() < 0.3,
+                "{speed} m/s, sigma {sigma}: K {k:.3}, the node's {k_node:.3}"
+            );
+        }
     }
 }
 
@@ -207,6 +243,44 @@ fn a_fast_noisy_receivers_lowpassed_noise_is_measured_over_the_window() {
         assert_eq!((control.x_m, control.y_m), (estimate.x_m, estimate.y_m));
     }
     assert_eq!(smoothing.gain(), 1.0);
+}
+
+#[test]
+fn a_survey_grade_receiver_is_followed_at_a_stop_and_a_noisy_one_smoothed_most_at_a_crawl() {
+    // Standing, the dead reckoning drifts by the floor alone (0.003 m^2 over a 100 Hz
+    // receiver's 0.6 s window): a survey-grade receiver's jumps are below it and its estimate
+    // passes exactly as it is.
+    let cfg = config(100.0);
+    let mut smoothing = Smoothing::for_estimator(&cfg);
+    for (_, estimate, control) in drive_at(
+        &mut smoothing,
+        &cfg,
+        5_000,
+        0.0,
+        HEADING_VAR_RAD2,
+        lowpassed_fast_receiver(0.01, 0.01, 5),
+    ) {
+        assert_eq!((control.x_m, control.y_m), (estimate.x_m, estimate.y_m));
+    }
+    // A receiver with white noise alone (0.3 m per axis) is pulled in less per tick the less
+    // the car moves per window: its noise is the same, the dead reckoning's drift smaller.
+    let pull = |speed| {
+        let mut smoothing = Smoothing::for_estimator(&cfg);
+        drive_at(
+            &mut smoothing,
+            &cfg,
+            5_000,
+            speed,
+            HEADING_VAR_RAD2,
+            lowpassed_fast_receiver(0.3, 0.0, 6),
+        );
+        smoothing.gain()
+    };
+    let (crawl, town, road) = (pull(1.0), pull(4.0), pull(15.0));
+    assert!(
+        crawl < 0.5 * town && town < road,
+        "pull per tick at 1 / 4 / 15 m/s: {crawl} / {town} / {road}"
+    );
 }
 
 #[test]

@@ -98,6 +98,8 @@ pub struct DriveInputs<'a> {
     /// The antenna's dead-reckoned position ([`super::estimator::EstimatorState::dead_reckoned`]):
     /// its change over a tick is the car's motion, free of the fixes' jumps.
     pub dead_reckoned: Xy,
+    /// The heading's error variance as the estimator reckons it, rad^2.
+    pub heading_var_rad2: f32,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// The active lateral model's state.
@@ -422,9 +424,13 @@ impl Drive {
             };
             return self.hold(ControlStatus::Fallback, cause);
         };
-        let pose = self
-            .smoothing
-            .control_pose(&config.estimator, pose, inputs.dead_reckoned);
+        let pose = self.smoothing.control_pose(
+            &config.estimator,
+            pose,
+            inputs.dead_reckoned,
+            inputs.speed_mps,
+            inputs.heading_var_rad2,
+        );
         if self.unconfigured {
             return self.hold(ControlStatus::Fallback, FallbackCause::Unconfigured);
         }

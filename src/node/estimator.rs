@@ -458,6 +458,11 @@ impl EstimatorState {
         self.odo_now
     }
 
+    /// The heading's error variance as the heading filter reckons it, rad^2.
+    pub fn heading_var_rad2(&self) -> f32 {
+        self.heading_var_rad2
+    }
+
     /// Current heading estimate, rad.
     pub fn heading_rad(&self) -> Option<f32> {
         self.heading_rad

@@ -142,6 +142,11 @@ impl Gnss {
         self.estimator.dead_reckoned()
     }
 
+    /// The heading's error variance, rad^2 ([`EstimatorState::heading_var_rad2`]).
+    pub fn heading_var_rad2(&self) -> f32 {
+        self.estimator.heading_var_rad2()
+    }
+
     /// When a fix was last rejected.
     pub fn last_reject_us(&self) -> Option<u64> {
         self.last_reject_us

@@ -722,6 +722,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let inputs = DriveInputs {
             pose: estimate.pose,
             dead_reckoned: self.gnss.dead_reckoned(),
+            heading_var_rad2: self.gnss.heading_var_rad2(),
             speed_mps: motion.speed_mps,
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,

@@ -9,18 +9,27 @@
 //! growing oscillation (docs/controller.md, "Slow receivers"). Which of the two a receiver is,
 //! the node learns on line: the control pose tracks the mean square of the estimate's jumps
 //! against the dead reckoning over the lowpass's window ([`JUMP_WINDOW_S`] of them), and
-//! weighs them as a steady-state Kalman filter weighs a measurement of that noise against a
-//! dead reckoning whose error wanders as a random walk ([`DRIFT_DIFFUSION_M2_PER_S`]):
-//! - the window is the lowpass's (its taps and span: 30 fixes, 0.3 s, at 100 Hz; three fixes,
-//!   0.6 s, at 5 Hz; one fix at 1 Hz): within it the filtered fixes share their noise, so from
-//!   one fix to the next a fast receiver's estimate moves by millimetres whatever its noise,
-//!   and measured per fix a standard receiver at 100 Hz looked survey-grade (docs/findings.md);
+//! weighs them as a steady-state Kalman filter weighs a measurement of that noise against the
+//! dead reckoning's drift over a window:
+//! - the window is the lowpass's (its taps and span: 30 fixes at 100 Hz; three fixes, 0.6 s,
+//!   at 5 Hz; one fix at 1 Hz), counted in ticks, one per fix at most (a 100 Hz receiver's
+//!   30 fixes: 30 ticks, 0.6 s): within it the filtered fixes share their noise, so from one
+//!   fix to the next a fast receiver's estimate moves by millimetres whatever its noise, and
+//!   measured per fix a standard receiver at 100 Hz looked survey-grade (docs/findings.md);
+//! - the dead reckoning drifts as it moves: over a window of `d` metres a heading error of
+//!   `sigma` radians puts it `sigma d` across the track and a wheel-speed scale error
+//!   [`SPEED_SCALE_ERROR`] puts it that share of `d` along it, so the process noise per window
+//!   is `q = (heading variance + SPEED_SCALE_ERROR^2) d^2 + DRIFT_FLOOR_M2_PER_S x window`,
+//!   with the heading's variance as the estimator's heading filter reckons it and a floor
+//!   that does not move with the car (a survey-grade receiver at a stop is followed as it is);
 //! - a window's jump is the difference of two estimates' errors and the drift between them,
-//!   mean square `2 r + q`: measurement noise `r = (jump_ms - q) / 2`, process noise per window
-//!   `q = DRIFT_DIFFUSION_M2_PER_S x window`;
+//!   mean square `2 r + q`: measurement noise `r = (jump_ms - q_ms) / 2`, with `q_ms` the
+//!   drift allowed for over the same windows (each from the distance its dead reckoning moved
+//!   and the heading's variance then), averaged as the jumps are;
 //! - the correction per window `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
-//!   scalar Riccati equation's fixed point): 1 for a receiver whose jumps are no larger than
-//!   the drift (RTK: the estimate as it is), about `sqrt(q / r)` for a noisy one;
+//!   scalar Riccati equation's fixed point, `q` at this tick's speed): 1 for a receiver whose
+//!   jumps are no larger than the drift (RTK: the estimate as it is), about `sqrt(q / r)` for
+//!   a noisy one, so a noisy receiver is smoothed most where the car moves least;
 //! - spread over the window's ticks as a complementary filter: the smoothed antenna moves
 //!   with the dead reckoning and is pulled towards the estimate by `g` per tick, with
 //!   `(1 - g)^ticks = 1 - K` (`g = -ln(1 - K) / ticks`, at most 1). The lowpass acts only on
@@ -37,11 +46,22 @@ use crate::model::kinematic::Pose;
 
 use super::estimator::{EstimatorConfig, Xy};
 
-/// How fast the dead reckoning's error against the truth wanders, as a random walk, m^2/s: the
-/// process noise per window is this times the lowpass's window (0.03 m^2 over a 5 Hz
-/// receiver's 0.6 s). The one setting of the control pose: docs/controller.md, "Slow
-/// receivers", for what more and less of it do.
+/// The most the dead reckoning is allowed to drift, as a random walk, m^2/s: the process
+/// noise per window is at most this times the lowpass's window (0.03 m^2 over a 5 Hz
+/// receiver's 0.6 s), whatever the distance driven. Tuned on slow receivers at speed
+/// (docs/controller.md, "Slow receivers"); the distance's bound below is the lesser where the
+/// car moves slowly.
 pub const DRIFT_DIFFUSION_M2_PER_S: f32 = 0.05;
+
+/// The dead reckoning's drift that does not come with the distance it moves, as a random
+/// walk, m^2/s: the process noise per window when the car stands (0.003 m^2 over a 100 Hz
+/// receiver's 0.6 s window, a 0.055 m jump: a survey-grade receiver's are millimetres to
+/// centimetres and pass as they are). docs/controller.md, "Slow receivers", for the settings.
+pub const DRIFT_FLOOR_M2_PER_S: f32 = 0.005;
+
+/// The wheel speed's scale error the dead reckoning is allowed: its drift along the track per
+/// metre driven (a tyre's rolling radius varies by about 2 % with its wear, pressure and load).
+pub const SPEED_SCALE_ERROR: f32 = 0.02;
 
 /// The jumps' mean square is averaged over about this long, s (a running mean until then).
 pub const JUMP_WINDOW_S: f32 = 5.0;
@@ -55,17 +75,20 @@ pub const SNAP_M: f32 = 3.0;
 pub struct Smoothing {
     /// The smoothed antenna and the dead reckoning it was last moved with.
     last: Option<(Xy, Xy)>,
-    /// The estimate's antenna less the dead reckoning at the start of this window.
-    window_start: Option<Xy>,
+    /// The estimate's antenna less the dead reckoning, and the dead reckoning, at the start of
+    /// this window.
+    window_start: Option<(Xy, Xy)>,
     /// Ticks since the window started.
     window_ticks: u32,
     /// Mean square of the estimate's jumps against the dead reckoning per window, m^2.
     jump_ms: f32,
+    /// The drift allowed for over the same windows, averaged as the jumps are, m^2.
+    drift_ms: f32,
     /// Windows in the mean square (saturating at [`JUMP_WINDOW_S`]'s).
     windows: u32,
     /// Ticks per window: the lowpass's window, at least one tick.
     window_len_ticks: u32,
-    /// Process noise per window, m^2.
+    /// Process noise per window at this tick's speed, m^2.
     drift_var: f32,
 }
 
@@ -78,6 +101,7 @@ impl Smoothing {
             window_start: None,
             window_ticks: 0,
             jump_ms: 0.0,
+            drift_ms: 0.0,
             windows: 0,
             window_len_ticks: 1,
             drift_var: 0.0,
@@ -102,9 +126,10 @@ impl Smoothing {
         };
         // At most a minute of ticks: any real receiver's window is seconds.
         let ticks = math::clamp(libm::roundf(window_fixes * period_s / tick_s), 1.0, 3000.0);
+        let window_len_ticks = ticks as u32;
         Self {
-            window_len_ticks: ticks as u32,
-            drift_var: DRIFT_DIFFUSION_M2_PER_S * ticks * tick_s,
+            window_len_ticks,
+            drift_var: drift_var_m2(window_len_ticks, 0.0, 0.0),
             ..Self::new()
         }
     }
@@ -121,11 +146,12 @@ impl Smoothing {
     ///
     /// Over a window the jump is the difference of two estimates' errors, uncorrelated a
     /// window apart, and of the dead reckoning's drift in between: its mean square is
-    /// `2 r + q`, so the measurement noise is `r = (jump_ms - q) / 2` (none when the jumps are
-    /// no larger than the drift allowed for: a survey-grade receiver is followed as it is).
+    /// `2 r + q`, so the measurement noise is `r = (jump_ms - q_ms) / 2` (none when the jumps
+    /// are no larger than the drift allowed for: a survey-grade receiver is followed as it
+    /// is).
     pub fn gain(&self) -> f32 {
         let q = self.drift_var;
-        let r = 0.5 * (self.jump_ms - q);
+        let r = 0.5 * (self.jump_ms - self.drift_ms);
         if !(r > 0.0 && q > 0.0) {
             return 1.0;
         }
@@ -138,8 +164,16 @@ impl Smoothing {
         math::clamp(-libm::logf(keep) / self.window_len_ticks as f32, 0.0, 1.0)
     }
 
-    /// This tick's control pose for the estimate `pose` (rear axle) and the dead reckoning.
-    pub fn control_pose(&mut self, cfg: &EstimatorConfig, pose: Pose, dead_reckoned: Xy) -> Pose {
+    /// This tick's control pose for the estimate `pose` (rear axle), the dead reckoning, the
+    /// speed and the heading's variance as the estimator reckons it (rad^2).
+    pub fn control_pose(
+        &mut self,
+        cfg: &EstimatorConfig,
+        pose: Pose,
+        dead_reckoned: Xy,
+        speed_mps: f32,
+        heading_var_rad2: f32,
+    ) -> Pose {
         let (s, c) = (pose.sin_heading, pose.cos_heading);
         // The estimate's antenna (`EstimatorState::position` inverted).
         let lever = Xy {
@@ -150,10 +184,17 @@ impl Smoothing {
             x_m: pose.x_m + lever.x_m,
             y_m: pose.y_m + lever.y_m,
         };
-        self.measure(Xy {
-            x_m: estimate.x_m - dead_reckoned.x_m,
-            y_m: estimate.y_m - dead_reckoned.y_m,
-        });
+        let speed = math::clamp_finite(speed_mps, 0.0, f32::MAX);
+        let window_m = speed * self.window_len_ticks as f32 * crate::SAMPLE_PERIOD_S;
+        self.drift_var = drift_var_m2(self.window_len_ticks, heading_var_rad2, window_m);
+        self.measure(
+            Xy {
+                x_m: estimate.x_m - dead_reckoned.x_m,
+                y_m: estimate.y_m - dead_reckoned.y_m,
+            },
+            dead_reckoned,
+            heading_var_rad2,
+        );
         let gain = self.gain();
         let smoothed = match self.last {
             Some((last, odo)) if gain < 1.0 => {
@@ -183,10 +224,11 @@ impl Smoothing {
 
     /// Counts this tick into the window; at its end adds the window's jump of the estimate
     /// against the dead reckoning (`offset`: the estimate's antenna less the dead reckoning)
-    /// to the mean square.
-    fn measure(&mut self, offset: Xy) {
-        let Some(start) = self.window_start else {
-            self.window_start = Some(offset);
+    /// to the mean square, and the drift allowed for over the distance the dead reckoning
+    /// moved in it to its own.
+    fn measure(&mut self, offset: Xy, dead_reckoned: Xy, heading_var_rad2: f32) {
+        let Some((start, start_odo)) = self.window_start else {
+            self.window_start = Some((offset, dead_reckoned));
             self.window_ticks = 0;
             return;
         };
@@ -202,10 +244,31 @@ impl Smoothing {
             self.windows = self.windows.saturating_add(1);
             let n = math::min(self.windows as f32, windows);
             self.jump_ms += (j2 - self.jump_ms) / n;
+            let moved_m = math::sqrt(
+                (dead_reckoned.x_m - start_odo.x_m) * (dead_reckoned.x_m - start_odo.x_m)
+                    + (dead_reckoned.y_m - start_odo.y_m) * (dead_reckoned.y_m - start_odo.y_m),
+            );
+            let q = drift_var_m2(self.window_len_ticks, heading_var_rad2, moved_m);
+            self.drift_ms += (q - self.drift_ms) / n;
         }
-        self.window_start = Some(offset);
+        self.window_start = Some((offset, dead_reckoned));
         self.window_ticks = 0;
     }
+}
+
+/// The process noise over a window of `window_ticks` in which the dead reckoning moves
+/// `moved_m` with the heading's variance `heading_var_rad2`, m^2: the heading's error and the
+/// wheel speed's scale error times the distance, and the floor over the window's time. A
+/// variance or a distance that is not finite and positive counts as none; the result is
+/// finite (the heading's variance is at most 1 rad^2 and a window at most a minute).
+fn drift_var_m2(window_ticks: u32, heading_var_rad2: f32, moved_m: f32) -> f32 {
+    let var = math::clamp_finite(heading_var_rad2, 0.0, 1.0);
+    let d = math::clamp_finite(moved_m, 0.0, 1.0e4);
+    let window_s = window_ticks as f32 * crate::SAMPLE_PERIOD_S;
+    math::min(
+        (var + SPEED_SCALE_ERROR * SPEED_SCALE_ERROR) * d * d + DRIFT_FLOOR_M2_PER_S * window_s,
+        DRIFT_DIFFUSION_M2_PER_S * window_s,
+    )
 }
 
 impl Default for Smoothing {
