@@ -513,27 +513,33 @@ fn a_fast_noisy_receiver_does_not_make_the_car_weave() {
     }
 }
 
-/// A noisy receiver is smoothed most where the car moves least: the dead reckoning's drift over
-/// the lowpass's window is the heading's error times the distance driven
-/// (`catmodel::node::smoothing`), so at a crawl the receiver's noise is weighed against
-/// centimetres. With the drift allowed for at every speed as at speed (0.05 m^2/s), the
-/// steering command moved, on the loop, seeds 0-2: the standard receiver at 2 m/s 16-22 %/s,
-/// a receiver with white noise alone (0.3 m per axis, the bias 0.01 m) at 3 m/s 27-35 %/s;
-/// with the drift from the distance 10-13 and 7-10 %/s (docs/controller.md, "Slow receivers").
+/// A noisy receiver is smoothed by as much as the dead reckoning's drift allows: the drift over
+/// the lowpass's window is the heading's error times the distance driven, and where the dead
+/// reckoning drifts less than the heading filter's variance says, the drift measured over a
+/// longer lag (`catmodel::node::smoothing`). With the drift allowed for at every speed as at
+/// speed (0.05 m^2/s), the steering command moved, on the loop, seeds 0-2: the standard
+/// receiver at 2 m/s 16-22 %/s, a receiver with white noise alone (0.3 m per axis, the bias
+/// 0.01 m) at 3 m/s 27-35 %/s and at 8 m/s 24-31 %/s; with the drift from the distance 10-13,
+/// 7-10 and 20-29 %/s; with the measured drift as well 10-13, 7-8 and 12-14 %/s
+/// (docs/controller.md, "Slow receivers").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn a_noisy_receiver_is_smoothed_most_where_the_car_moves_least() {
     let (vehicle, node) = load_setup(None, None).unwrap();
     let mut white = vehicle.clone();
     white.sensors.gnss.bias_sigma_m = 0.01;
-    for (name, vehicle, speed) in [("standard", &vehicle, 2.0), ("white noise", &white, 3.0)] {
+    for (name, vehicle, speed) in [
+        ("standard", &vehicle, 2.0),
+        ("white noise", &white, 3.0),
+        ("white noise", &white, 8.0),
+    ] {
         for seed in 0..3 {
             let out = drive_setup(vehicle, &node, Kind::Loop, speed, seed);
             assert!(out.metrics.clean, "{name}, seed {seed}");
             let rate = steering_activity(&out);
             println!("{name} receiver, loop at {speed} m/s, seed {seed}: {rate:.1} %/s");
             assert!(
-                rate < 15.0,
+                rate < 16.0,
                 "{name} receiver, loop at {speed} m/s, seed {seed}: steering moves {rate:.0} %/s"
             );
         }

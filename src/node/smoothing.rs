@@ -22,14 +22,23 @@
 //!   is `q = (heading variance + SPEED_SCALE_ERROR^2) d^2 + DRIFT_FLOOR_M2_PER_S x window`,
 //!   with the heading's variance as the estimator's heading filter reckons it and a floor
 //!   that does not move with the car (a survey-grade receiver at a stop is followed as it is);
+//! - the heading's variance is a design figure of the heading filter, set for a standard
+//!   receiver's chords; where the dead reckoning drifts less the drift is measured as well:
+//!   over [`DRIFT_LAG_WINDOWS`] windows the noise's part of the jump is the same `2 r` as over
+//!   one, the drift's grows (`n` times over `n` windows for a random walk, `n^2` times for a
+//!   steady drift), so `(long_ms - short_ms) / (n - 1)` bounds the drift per window from
+//!   above; averaged over [`DRIFT_AVERAGE_S`] and taken with two standard errors of that
+//!   average added (a slow receiver's few windows say little, and its bound stays the
+//!   distance's). The lesser of the two bounds is the process noise, never below the floor;
 //! - a window's jump is the difference of two estimates' errors and the drift between them,
 //!   mean square `2 r + q`: measurement noise `r = (jump_ms - q_ms) / 2`, with `q_ms` the
 //!   drift allowed for over the same windows (each from the distance its dead reckoning moved
-//!   and the heading's variance then), averaged as the jumps are;
+//!   and the heading's variance then, at most the measured bound), averaged as the jumps are;
 //! - the correction per window `K = P / (P + r)` with `P = (q + sqrt(q^2 + 4 q r)) / 2` (the
-//!   scalar Riccati equation's fixed point, `q` at this tick's speed): 1 for a receiver whose
-//!   jumps are no larger than the drift (RTK: the estimate as it is), about `sqrt(q / r)` for
-//!   a noisy one, so a noisy receiver is smoothed most where the car moves least;
+//!   scalar Riccati equation's fixed point, `q` the lesser bound, the distance's at this
+//!   tick's speed): 1 for a receiver whose jumps are no larger than the drift (RTK: the
+//!   estimate as it is), about `sqrt(q / r)` for a noisy one, so a noisy receiver is smoothed
+//!   most where the car moves least and the dead reckoning drifts least;
 //! - spread over the window's ticks as a complementary filter: the smoothed antenna moves
 //!   with the dead reckoning and is pulled towards the estimate by `g` per tick, with
 //!   `(1 - g)^ticks = 1 - K` (`g = -ln(1 - K) / ticks`, at most 1). The lowpass acts only on
@@ -66,6 +75,14 @@ pub const SPEED_SCALE_ERROR: f32 = 0.02;
 /// The jumps' mean square is averaged over about this long, s (a running mean until then).
 pub const JUMP_WINDOW_S: f32 = 5.0;
 
+/// The longer lag the drift is measured over, windows (2.4 s at 100 Hz, 4 s at 1 Hz).
+pub const DRIFT_LAG_WINDOWS: usize = 4;
+
+/// The jumps over one window and over [`DRIFT_LAG_WINDOWS`] are averaged over about this long
+/// for the drift's measurement, s: longer than the noise's, as a difference of two means
+/// scatters more than either.
+pub const DRIFT_AVERAGE_S: f32 = 20.0;
+
 /// A difference between the estimate and the smoothed position beyond this is taken at once,
 /// m; a jump beyond it is not noise and stays out of the mean square.
 pub const SNAP_M: f32 = 3.0;
@@ -88,8 +105,18 @@ pub struct Smoothing {
     windows: u32,
     /// Ticks per window: the lowpass's window, at least one tick.
     window_len_ticks: u32,
-    /// Process noise per window at this tick's speed, m^2.
+    /// Process noise per window at this tick's speed, from the distance, m^2.
     drift_var: f32,
+    /// The estimate's antenna less the dead reckoning at the last [`DRIFT_LAG_WINDOWS`]
+    /// windows' ends (ring, newest at `ends_head`).
+    ends: [Xy; DRIFT_LAG_WINDOWS],
+    ends_head: usize,
+    /// Windows' ends in `ends` in a row (since the last [`Self::forget`]).
+    ends_len: u32,
+    /// Mean square of the jumps over [`DRIFT_LAG_WINDOWS`] windows, m^2.
+    long_ms: f32,
+    /// Mean square of the jumps over one window, averaged as `long_ms`, m^2.
+    short_ms: f32,
 }
 
 impl Smoothing {
@@ -105,6 +132,11 @@ impl Smoothing {
             windows: 0,
             window_len_ticks: 1,
             drift_var: 0.0,
+            ends: [Xy { x_m: 0.0, y_m: 0.0 }; DRIFT_LAG_WINDOWS],
+            ends_head: 0,
+            ends_len: 0,
+            long_ms: 0.0,
+            short_ms: 0.0,
         }
     }
 
@@ -135,11 +167,35 @@ impl Smoothing {
     }
 
     /// Forgets the smoothed position (no pose, no path: nobody follows it): the next pose is
-    /// taken as it is. The jumps' statistics (the receiver's) are kept.
+    /// taken as it is. The jumps' statistics (the receiver's) are kept; the windows' ends are
+    /// not (a lag across the gap would not be one).
     pub fn forget(&mut self) {
         self.last = None;
         self.window_start = None;
         self.window_ticks = 0;
+        self.ends_len = 0;
+    }
+
+    /// The drift per window measured from the jumps over one window and over
+    /// [`DRIFT_LAG_WINDOWS`], an upper bound, m^2: the growth of the jumps' mean square with
+    /// the lag, as a random walk's (a steady drift grows faster and is overestimated), plus
+    /// two standard errors of the average; `None` until a long lag has been seen.
+    fn measured_drift(&self) -> Option<f32> {
+        if (self.ends_len as usize) < DRIFT_LAG_WINDOWS {
+            return None;
+        }
+        let lags = (DRIFT_LAG_WINDOWS - 1) as f32;
+        let n = math::max(math::min(self.windows as f32, self.drift_windows()), 1.0);
+        let growth = math::max(self.long_ms - self.short_ms, 0.0) / lags;
+        Some(growth + 2.0 * math::sqrt(2.0 / n) * self.long_ms / lags)
+    }
+
+    /// Windows in [`DRIFT_AVERAGE_S`], at least one.
+    fn drift_windows(&self) -> f32 {
+        math::max(
+            DRIFT_AVERAGE_S / (self.window_len_ticks as f32 * crate::SAMPLE_PERIOD_S),
+            1.0,
+        )
     }
 
     /// The pull towards the estimate per tick for the jumps measured so far (1: none).
@@ -150,8 +206,20 @@ impl Smoothing {
     /// are no larger than the drift allowed for: a survey-grade receiver is followed as it
     /// is).
     pub fn gain(&self) -> f32 {
-        let q = self.drift_var;
-        let r = 0.5 * (self.jump_ms - self.drift_ms);
+        let (q, q_ms) = match self.measured_drift() {
+            Some(measured) => {
+                // Both bounds are at least the floor; the measured one may be below it.
+                let floor =
+                    DRIFT_FLOOR_M2_PER_S * self.window_len_ticks as f32 * crate::SAMPLE_PERIOD_S;
+                let measured = math::max(measured, floor);
+                (
+                    math::min(self.drift_var, measured),
+                    math::min(self.drift_ms, measured),
+                )
+            }
+            None => (self.drift_var, self.drift_ms),
+        };
+        let r = 0.5 * (self.jump_ms - q_ms);
         if !(r > 0.0 && q > 0.0) {
             return 1.0;
         }
@@ -250,7 +318,26 @@ impl Smoothing {
             );
             let q = drift_var_m2(self.window_len_ticks, heading_var_rad2, moved_m);
             self.drift_ms += (q - self.drift_ms) / n;
+            // The ring's oldest end is DRIFT_LAG_WINDOWS windows before this one's.
+            let oldest = (self.ends_head + 1) % DRIFT_LAG_WINDOWS;
+            if let (true, Some(old)) = (
+                self.ends_len as usize >= DRIFT_LAG_WINDOWS,
+                self.ends.get(oldest),
+            ) {
+                let (lx, ly) = (offset.x_m - old.x_m, offset.y_m - old.y_m);
+                let l2 = lx * lx + ly * ly;
+                if l2 <= SNAP_M * SNAP_M {
+                    let m = math::min(self.windows as f32, self.drift_windows());
+                    self.long_ms += (l2 - self.long_ms) / m;
+                    self.short_ms += (j2 - self.short_ms) / m;
+                }
+            }
         }
+        self.ends_head = (self.ends_head + 1) % DRIFT_LAG_WINDOWS;
+        if let Some(end) = self.ends.get_mut(self.ends_head) {
+            *end = offset;
+        }
+        self.ends_len = self.ends_len.saturating_add(1);
         self.window_start = Some((offset, dead_reckoned));
         self.window_ticks = 0;
     }
