@@ -778,3 +778,38 @@ fn the_stage_clock_by_hand() {
         }
     }
 }
+
+/// `MpcConfig::blind_steer_pct`, by hand: a plan at 10 m/s for its first second and 5 m/s for
+/// its second (0.1 s steps, so 1 m and 0.5 m a step; the step across the change 0.75 m), its
+/// steering 0.01 rad per step. The steering is the plan's where it had covered the distance
+/// travelled plus the lead's (0.07 s at the car's speed), linear between points, the last
+/// point's past the end, and in percent of the lock.
+#[test]
+fn a_car_driven_blind_steers_along_its_plan_by_distance() {
+    use catmodel::control::mpc::PlanPoint;
+    let cfg = VehicleConfig::default();
+    let lock = (cfg.chassis.max_steer_deg as f32).to_radians();
+    let mpc = mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING);
+    let mut plan = [PlanPoint::default(); PLAN_STEPS + 1];
+    for (k, p) in plan.iter_mut().enumerate() {
+        p.t_s = k as f32 * 0.1;
+        p.speed_mps = if k <= 10 { 10.0 } else { 5.0 };
+        p.steer_rad = 0.01 * k as f32;
+    }
+    let pct = |rad: f32| rad / lock * 100.0;
+    let near = |a: f32, b: f32| (a - b).abs() < 1e-4;
+    // Standing at the start: the first point.
+    assert!(near(mpc.blind_steer_pct(&plan, 0.0, 0.0), 0.0));
+    // 2.5 m covered, standing: halfway between points 2 and 3.
+    assert!(near(mpc.blind_steer_pct(&plan, 2.5, 0.0), pct(0.025)));
+    // 2.5 m and 10 m/s: 0.7 m more, 3.2 m: 0.2 of the way from point 3 to 4.
+    assert!(near(mpc.blind_steer_pct(&plan, 2.5, 10.0), pct(0.032)));
+    // 10.375 m: halfway across the 0.75 m step from point 10 to 11.
+    assert!(near(mpc.blind_steer_pct(&plan, 10.375, 0.0), pct(0.105)));
+    // 11.75 m: point 13 (10.75 m to point 11, 0.5 m a step after it).
+    assert!(near(mpc.blind_steer_pct(&plan, 11.75, 0.0), pct(0.13)));
+    // Past the plan's 15.25 m: its last steering.
+    assert!(near(mpc.blind_steer_pct(&plan, 40.0, 8.0), pct(0.2)));
+    // Not finite: from the start.
+    assert!(near(mpc.blind_steer_pct(&plan, f32::NAN, f32::NAN), 0.0));
+}

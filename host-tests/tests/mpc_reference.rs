@@ -347,7 +347,7 @@ fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
 
     let mut inside = fresh();
     assert_eq!(
-        relax_corridor(&mut inside, &x(0.5), 1.0, &StageClock::UNIFORM),
+        relax_corridor(&mut inside, &x(0.5), (1.0, 10.0, 0.2), &StageClock::UNIFORM),
         0.0
     );
     for (a, b) in inside.stages.iter().zip(fresh().stages.iter()) {
@@ -356,7 +356,7 @@ fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
 
     let mut q = fresh();
     assert_eq!(
-        relax_corridor(&mut q, &x(3.0), 1.0, &StageClock::UNIFORM),
+        relax_corridor(&mut q, &x(3.0), (1.0, 10.0, 0.2), &StageClock::UNIFORM),
         2.0
     );
     let duration = 2.0 * 2.0f64.sqrt();
@@ -380,6 +380,23 @@ fn a_start_outside_the_corridor_relaxes_its_rows_by_a_tapering_give() {
     // s(0.49497) = 0.49058).
     assert!((f64::from(q.stages[0].rows[1].upper) - 2.99916).abs() < 2e-5);
     assert!((f64::from(q.stages[13].rows[1].upper) - (1.0 + 2.0 * (1.0 - 0.49058))).abs() < 2e-4);
+
+    // At 1 m/s the return is no faster than 0.2 rad of heading allows: its fastest lateral
+    // speed, 1.875 x 2 m / duration, at most 1 m/s x sin 0.2, so the duration is
+    // 1.875 x 2 / 0.19867 = 18.876 s, not 2.828 s. Stage 13 (1.4 s, u = 0.074170):
+    // s(u) = 10 u^3 - 15 u^4 + 6 u^5 = 0.0036397, the give 2 (1 - s) = 1.99272.
+    let mut slow = fresh();
+    relax_corridor(&mut slow, &x(3.0), (1.0, 1.0, 0.2), &StageClock::UNIFORM);
+    assert!((f64::from(slow.stages[13].rows[1].upper) - (1.0 + 1.99272)).abs() < 2e-4);
+    // Standing counts as 1 m/s.
+    let mut standing = fresh();
+    relax_corridor(
+        &mut standing,
+        &x(3.0),
+        (1.0, 0.0, 0.2),
+        &StageClock::UNIFORM,
+    );
+    assert_eq!(standing.stages[13].rows[1], slow.stages[13].rows[1]);
 }
 
 /// The tracking targets' taper for a car far off its path (`lateral::taper_reference`), by

@@ -209,6 +209,10 @@ enum Command {
             allow_negative_numbers = true
         )]
         start_offset: f64,
+        /// Inject the vehicle file's sensor faults (its [faults]: GNSS outages and outliers,
+        /// lost bus reports), as simulate-drive does; off by default.
+        #[arg(long)]
+        faults: bool,
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
@@ -598,6 +602,7 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             replan_every,
             start_offset,
+            faults,
             out,
         } => {
             let progress = Progress::spinner(&format!("closed loop: {scenario}"));
@@ -612,6 +617,7 @@ fn run(cli: Cli) -> Result<()> {
                     seed,
                     replan_s: replan_every,
                     start_offset_m: start_offset,
+                    faults,
                     out,
                 })?;
             progress.finish();

@@ -174,6 +174,9 @@ pub struct Drive {
     last_plan: Option<MpcOutput>,
     /// ... and it is the previous tick's.
     planned_last_tick: bool,
+    /// How far the car has been driven blind along `last_plan` since the position was lost,
+    /// m ([`Drive::blind`]); `None` while it is known.
+    blind_m: Option<f32>,
     /// A long path completed this tick: no solve until the next ([`Stage::DriveCoast`]).
     path_loaded: bool,
     /// Commands sent last tick.
@@ -214,6 +217,7 @@ impl Drive {
             reference: [ReferencePoint::ZERO; STEPS + 1],
             last_plan: None,
             planned_last_tick: false,
+            blind_m: None,
             path_loaded: false,
             last_speed_cmd_mps: 0.0,
             last_steer_cmd_pct: 0.0,
@@ -246,6 +250,7 @@ impl Drive {
             fill(addr_of_mut!((*p).reference), ReferencePoint::ZERO);
             addr_of_mut!((*p).last_plan).write(None);
             addr_of_mut!((*p).planned_last_tick).write(false);
+            addr_of_mut!((*p).blind_m).write(None);
             addr_of_mut!((*p).path_loaded).write(false);
             addr_of_mut!((*p).last_speed_cmd_mps).write(0.0);
             addr_of_mut!((*p).last_steer_cmd_pct).write(0.0);
@@ -270,6 +275,7 @@ impl Drive {
         self.planned_speeds = None;
         self.last_plan = None;
         self.planned_last_tick = false;
+        self.blind_m = None;
         self.path_loaded = false;
         self.last_speed_cmd_mps = 0.0;
         self.last_steer_cmd_pct = 0.0;
@@ -372,6 +378,7 @@ impl Drive {
     }
 
     fn new_path(&mut self) {
+        self.blind_m = None;
         self.mpc.reset();
         self.pursuit.integral_mps = 0.0;
         self.pursuit.projection = None;
@@ -422,8 +429,15 @@ impl Drive {
             } else {
                 FallbackCause::NotReady
             };
+            if inputs.pose.is_none() {
+                if let Some(out) = self.blind(config, inputs.speed_mps, planned_last_tick) {
+                    return out;
+                }
+            }
+            self.blind_m = None;
             return self.hold(ControlStatus::Fallback, cause);
         };
+        self.blind_m = None;
         let pose = self.smoothing.control_pose(
             &config.estimator,
             pose,
@@ -548,6 +562,49 @@ impl Drive {
         self.lost_path = true;
         self.last_steer_cmd_pct = 0.0;
         self.hold(ControlStatus::Fallback, FallbackCause::LostPath)
+    }
+
+    /// The position was lost (no GNSS for longer than the estimator bridges) while the
+    /// model-predictive controller drove: the car brakes, steering along the last accepted
+    /// plan by the distance it has covered since ([`mpc::MpcConfig::blind_steer_pct`]), and
+    /// holds the plan's last steering past its end. That plan was made for the path from the
+    /// last position known, and is the best guess of the steering the path asks for; the
+    /// steering held at the loss (`hold`) was the middle of a manoeuvre: measured, the CAT
+    /// Vehicle swerving past the obstacle at 8 m/s lost its position with -10 % held and
+    /// turned 0.28 rad further off while it braked, 5.6 m beside its path when the position
+    /// came back (docs/controller.md, "A lost position"). `None` when there is no such plan
+    /// (pure pursuit, no plan in the previous tick and not already blind).
+    fn blind(
+        &mut self,
+        config: &NodeConfig,
+        speed_mps: f32,
+        planned_last_tick: bool,
+    ) -> Option<DriveOutput> {
+        if config.controller != Controller::Mpc {
+            return None;
+        }
+        let travelled = match self.blind_m {
+            Some(m) => m,
+            None if planned_last_tick => 0.0,
+            None => return None,
+        };
+        let (Some(mpc), Some(out)) = (self.mpc_config.as_ref(), self.last_plan.as_ref()) else {
+            return None;
+        };
+        let speed = crate::math::clamp_finite(speed_mps, 0.0, f32::MAX);
+        let steer = mpc.blind_steer_pct(&out.plan, travelled, speed);
+        self.blind_m = Some(travelled + speed * crate::SAMPLE_PERIOD_S);
+        self.last_steer_cmd_pct = steer;
+        self.last_speed_cmd_mps = 0.0;
+        Some(DriveOutput {
+            command: ControlCommand {
+                status: ControlStatus::Fallback,
+                fallback: FallbackCause::NotReady,
+                steer_cmd_pct: Some(steer),
+                speed_cmd_mps: Some(0.0),
+            },
+            plan: None,
+        })
     }
 
     /// Speed 0, steering held where it was last commanded.

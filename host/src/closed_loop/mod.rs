@@ -113,6 +113,9 @@ pub struct RunOptions {
     pub replan_s: Option<f64>,
     /// The car starts this far to the right of the path's first point (negative: left), m.
     pub start_offset_m: f64,
+    /// Inject the vehicle file's sensor faults (`[faults]`: GNSS outages and outliers, lost
+    /// bus reports), as `simulate-drive` does.
+    pub faults: bool,
 }
 
 impl RunOptions {
@@ -124,6 +127,7 @@ impl RunOptions {
             max_time_s: 120.0,
             replan_s: None,
             start_offset_m: 0.0,
+            faults: false,
         }
     }
 }
@@ -358,7 +362,7 @@ pub fn run(
     };
     let sim_options = SimOptions {
         seed: options.seed,
-        faults: false,
+        faults: options.faults,
         vary_commands: false,
         ..SimOptions::default()
     };
@@ -577,6 +581,8 @@ pub struct ClosedLoopArgs {
     pub replan_s: Option<f64>,
     /// The car starts this far to the right of the path's first point, m.
     pub start_offset_m: f64,
+    /// Inject the vehicle file's sensor faults.
+    pub faults: bool,
     /// Output directory.
     pub out: std::path::PathBuf,
 }
@@ -664,6 +670,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         max_time_s: 300.0,
         replan_s: args.replan_s,
         start_offset_m: args.start_offset_m,
+        faults: args.faults,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
     if let Some(note) = driver::Driver::gnss_rate_note(&driver) {

@@ -382,15 +382,20 @@ fn corner_row(
 /// row): each row's bound gives way by the start's violation, tapering to none along a quintic
 /// smoothstep over the time a return at `return_mps2` of lateral acceleration takes,
 /// `2 sqrt(violation / return_mps2)` (a bang-bang return's duration; the smoothstep's peak is
-/// 1.44 times that acceleration). Without it the exact penalty, far above the tracking cost,
-/// asks for the return within the first steps whatever it costs: from 2 m outside the
-/// hatchback's corridor the plan steered to the lock and the car overshot the path by 4.5 m
-/// (docs/controller.md, "Starting outside the corridor"). A car inside its corridor is not
-/// affected. Returns the largest violation at the start, m.
+/// 1.44 times that acceleration), or longer where that return's fastest lateral speed would
+/// ask more heading than `heading_rad` at the speed the car has, `speed_mps` (at least 1 m/s),
+/// as [`taper_reference`]'s. Without it the exact penalty, far above the tracking cost, asks
+/// for the return within the first steps whatever it costs: from 2 m outside the hatchback's
+/// corridor the plan steered to the lock and the car overshot the path by 4.5 m
+/// (docs/controller.md, "Starting outside the corridor"). Without the heading's bound a car
+/// that had braked to 1.4 m/s 2.6 m outside its corridor was asked for the whole return within
+/// 3.2 s: it steered to the lock, sped up with 0.84 rad of heading and swung 3.8 m through the
+/// path (docs/controller.md, "A lost position"). A car inside its corridor is not affected.
+/// Returns the largest violation at the start, m.
 pub fn relax_corridor(
     problem: &mut Problem<NX, STEPS, ROWS>,
     x0: &SVector<f32, NX>,
-    return_mps2: f32,
+    (return_mps2, speed_mps, heading_rad): (f32, f32, f32),
     stage: &StageClock,
 ) -> f32 {
     let Some(first) = problem.stages.first() else {
@@ -407,10 +412,16 @@ pub fn relax_corridor(
         return 0.0;
     }
     // Per row: the start's violation and the inverse of the return's duration.
+    let v0 = max(speed_mps, 1.0);
+    let (sin_heading, _) = math::sin_cos(heading_rad);
     let mut taper = [(0.0f32, 0.0f32); ROW_OBSTACLE];
     for (t, v) in taper.iter_mut().zip(start) {
         if v > 0.0 {
-            *t = (v, return_rate(v, return_mps2));
+            let rate = math::min(
+                return_rate(v, return_mps2),
+                v0 * sin_heading / (RETURN_PEAK_SPEED * v),
+            );
+            *t = (v, rate);
         }
     }
     for (k, st) in problem.stages.iter_mut().enumerate() {

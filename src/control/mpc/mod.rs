@@ -936,7 +936,11 @@ impl MpcConfig {
         lateral::relax_corridor(
             &mut state.problem,
             &x0,
-            self.tuning.corridor_return_mps2,
+            (
+                self.tuning.corridor_return_mps2,
+                speeds.first().copied().unwrap_or(0.0),
+                self.tuning.return_heading_rad,
+            ),
             &self.stage,
         );
         lateral::taper_reference(
@@ -1097,6 +1101,38 @@ impl MpcConfig {
         }
         out.iterations = 0;
         out.factorisations = 0;
+    }
+
+    /// The steering, %, of a car driven blind along `plan` (an accepted plan, as it was made)
+    /// `travelled_m` after the plan's start at `speed_mps`: the plan's steering where the
+    /// plan had covered that distance plus what the car covers in the steering lead, its
+    /// last steering past its end. Indexed by distance, not time, so that a car braking along
+    /// it turns where the plan turned (its curvature along its arc, to the kinematic model's
+    /// first order) instead of sooner. Its cost is fixed: one pass over the plan's points.
+    pub fn blind_steer_pct(
+        &self,
+        plan: &[PlanPoint; PLAN_STEPS + 1],
+        travelled_m: f32,
+        speed_mps: f32,
+    ) -> f32 {
+        let at_m = finite_or(travelled_m, 0.0)
+            + max(finite_or(speed_mps, 0.0), 0.0) * self.tuning.steer_lead_s;
+        let mut covered = 0.0f32;
+        let mut steer = plan.first().map_or(0.0, |p| p.steer_rad);
+        for pair in plan.windows(2) {
+            let [a, b] = pair else {
+                continue;
+            };
+            let step_m = max(0.5 * (a.speed_mps + b.speed_mps) * (b.t_s - a.t_s), 0.0);
+            if covered + step_m >= at_m && step_m > 0.0 {
+                let f = clamp((at_m - covered) / step_m, 0.0, 1.0);
+                steer = a.steer_rad + f * (b.steer_rad - a.steer_rad);
+                return self.steer_pct(steer);
+            }
+            covered += step_m;
+            steer = b.steer_rad;
+        }
+        self.steer_pct(steer)
     }
 
     /// The lateral model of this solve: the hybrid switch's choice, kinematic if the car has no
