@@ -73,6 +73,19 @@ fn drive_at(
         .collect()
 }
 
+/// The RMS of the tick-to-tick steps of the pose `pick` takes from each of `run`'s rows, less
+/// the car's own motion of `east_m` a tick east, m.
+fn step_rms(run: &[(Pose, Pose, Pose)], east_m: f32, pick: fn(&(Pose, Pose, Pose)) -> Pose) -> f32 {
+    let sum: f32 = run
+        .windows(2)
+        .map(|w| {
+            let (a, b) = (pick(&w[0]), pick(&w[1]));
+            (b.x_m - a.x_m - east_m).powi(2) + (b.y_m - a.y_m).powi(2)
+        })
+        .sum();
+    (sum / (run.len() - 1) as f32).sqrt()
+}
+
 /// The steady-state Kalman gain of a random walk with process noise `q` per step measured with
 /// noise `r`, by iterating the Riccati recursion (independent of the closed form the node uses).
 fn kalman_gain(q: f64, r: f64) -> f64 {
@@ -214,19 +227,11 @@ fn a_fast_noisy_receivers_lowpassed_noise_is_measured_over_the_window() {
     );
     let g = smoothing.gain();
     assert!(g < 0.3, "100 Hz standard receiver: pull {g} per tick");
-    let settled = &run[1_000..];
-    let step_rms = |pick: fn(&(Pose, Pose, Pose)) -> Pose| {
-        let sum: f32 = settled
-            .windows(2)
-            .map(|w| {
-                let (a, b) = (pick(&w[0]), pick(&w[1]));
-                // The car's own motion is 0.1 m east per tick.
-                (b.x_m - a.x_m - 0.1).powi(2) + (b.y_m - a.y_m).powi(2)
-            })
-            .sum();
-        (sum / (settled.len() - 1) as f32).sqrt()
-    };
-    let (est, ctl) = (step_rms(|s| s.1), step_rms(|s| s.2));
+    // The car's own motion is 0.1 m east per tick.
+    let (est, ctl) = (
+        step_rms(&run[1_000..], 0.1, |s| s.1),
+        step_rms(&run[1_000..], 0.1, |s| s.2),
+    );
     assert!(
         ctl < 0.8 * est,
         "step RMS {ctl} m vs the estimate's {est} m"
@@ -313,23 +318,14 @@ fn a_fast_receivers_white_noise_is_smoothed_at_speed_once_the_drift_is_measured(
         "a drifting dead reckoning: pull {drifting} per tick"
     );
     // The smoothed pose moves less from tick to tick than the estimate...
-    let steps = |run: &[(Pose, Pose, Pose)], pick: fn(&(Pose, Pose, Pose)) -> Pose| {
-        let settled = &run[3_000..];
-        let sum: f32 = settled
-            .windows(2)
-            .map(|w| {
-                let (a, b) = (pick(&w[0]), pick(&w[1]));
-                (b.x_m - a.x_m - 0.3).powi(2) + (b.y_m - a.y_m).powi(2)
-            })
-            .sum();
-        (sum / (settled.len() - 1) as f32).sqrt()
-    };
-    let (est, ctl) = (steps(&run, |s| s.1), steps(&run, |s| s.2));
+    let (est, ctl) = (
+        step_rms(&run[3_000..], 0.3, |s| s.1),
+        step_rms(&run[3_000..], 0.3, |s| s.2),
+    );
     assert!(
         ctl < 0.5 * est,
         "step RMS {ctl} m vs the estimate's {est} m"
     );
-    // ... and the drifting one is the estimate.
     // ... and the drifting one stays with the estimate: what smoothing is left there is the
     // distance's bound's (the jumps scatter about it), a lag of at most 0.16 m here.
     let lag = drift_run[3_000..]
