@@ -961,7 +961,7 @@ fn a_steering_weaker_than_the_model_file_says_is_found_and_used() {
 /// within 3.2 s by the corridor, swung it 3.8 m through the path: lost (status 3 for the rest
 /// of the run, 3 m outside the corridor). Now it brakes steering along its last plan by the
 /// distance it covers, and a slow car's return to its corridor is bounded by the heading it
-/// needs: within 0.14 m of where it was beside the path while blind (3.34 m, 3.20 m at the loss), and the run completes
+/// needs: within 0.12 m of where it was beside the path while blind (3.32 m, 3.20 m at the loss), and the run completes
 /// clean (docs/controller.md, "A lost position").
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]

@@ -583,7 +583,9 @@ impl Drive {
         if config.controller != Controller::Mpc {
             return None;
         }
-        let travelled = match self.blind_m {
+        // The plan starts at the car of the tick it was made in, one tick before the first
+        // blind one.
+        let before = match self.blind_m {
             Some(m) => m,
             None if planned_last_tick => 0.0,
             None => return None,
@@ -592,8 +594,9 @@ impl Drive {
             return None;
         };
         let speed = crate::math::clamp_finite(speed_mps, 0.0, f32::MAX);
+        let travelled = before + speed * crate::SAMPLE_PERIOD_S;
         let steer = mpc.blind_steer_pct(&out.plan, travelled, speed);
-        self.blind_m = Some(travelled + speed * crate::SAMPLE_PERIOD_S);
+        self.blind_m = Some(travelled);
         self.last_steer_cmd_pct = steer;
         self.last_speed_cmd_mps = 0.0;
         Some(DriveOutput {
