@@ -336,7 +336,9 @@ pub struct InputsSection {
     pub pedal_timeout_s: f64,
     /// NMEA 2000 source address of the GNSS receiver (0..251).
     pub gnss_source_address: u8,
-    /// A fix farther than this from where the node expects the antenna is rejected, m.
+    /// A fix farther than this from where the node expects the antenna is rejected, m: the
+    /// most the node's gate allows; it learns a tighter one from the receiver's own fixes
+    /// (5.1 times their median distance from there, at least 1 m: `node::gnss::GATE_MEDIANS`).
     pub gnss_gate_m: f64,
     /// GNSS silent this long: the position is no longer trusted, s.
     pub gnss_lost_s: f64,

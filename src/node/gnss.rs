@@ -20,6 +20,31 @@ use super::{bump, NodeConfig};
 /// rate `p` (`p` = 0.5: once in 10^6).
 pub const RATE_MISMATCH_FIXES: u16 = 20;
 
+/// The plausibility gate learns the receiver: it tracks the median distance of the fixes from
+/// where dead reckoning put the antenna at their time, and rejects a fix beyond this many
+/// times that median (the model file's `gnss_gate_m` stays the most the gate allows). For
+/// fixes scattered as a 2-D Gaussian of sigma per axis the median distance is 1.1774 sigma,
+/// so 5.1 medians are 6 sigma. A median, not a mean square: outliers as frequent as one fix
+/// in seven move a mean square enough to let themselves through, and barely move a median. A
+/// survey-grade receiver's fixes are centimetres from there, and a multipath fix metres off
+/// passed the 10 m gate into the lowpass: on the closed-loop rig with RTK and 2 % of fixes off
+/// by up to 6 m per axis, the loop at 10 m/s was 0.08-0.13 m RMS off the path instead of
+/// 0.03, and the lane change at 12 m/s hit cones on three seeds of four (docs/findings.md).
+pub const GATE_MEDIANS: f32 = 5.1;
+
+/// The learnt gate is never tighter than this, m: the dead reckoning's drift over a fix
+/// period at the grip limit, and a survey-grade receiver's own jumps (RTK float), pass.
+pub const GATE_FLOOR_M: f32 = 1.0;
+
+/// The learnt gate widens by about this much per second since the last accepted fix, m/s:
+/// the dead reckoning bridging a gap drifts.
+pub const GATE_GAP_MPS: f32 = 1.0;
+
+/// The median's step per fix, as a share of it: up when a fix is farther, down when nearer
+/// (a stochastic approximation of the median, in its logarithm). From the configured gate
+/// it comes down to a survey-grade receiver's in about 200 fixes (2 s at 100 Hz).
+pub const GATE_MEDIAN_STEP: f32 = 0.03;
+
 /// Whether the receiver's fixes come at the rate the estimator was designed for
 /// ([`EstimatorConfig::design`] from the model file's `gnss_rate_hz`, never on the MCU). The
 /// lowpass, the course chord and the gap filling all count in fixes of that period: a 10 Hz
@@ -110,6 +135,63 @@ pub struct Gnss {
     last_reject_us: Option<u64>,
     /// The receiver's rate against the model file's.
     rate: RateCheck,
+    /// The learnt gate ([`GATE_MEDIANS`]).
+    gate: GateStats,
+}
+
+/// The learnt gate's state ([`GATE_MEDIANS`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct GateStats {
+    /// The median distance of the fixes from where the antenna should have been, m; `None`
+    /// until a fix was compared (then it starts at the configured gate's).
+    median_m: Option<f32>,
+    /// When the last fix was accepted, us.
+    last_accept_us: Option<u64>,
+}
+
+impl GateStats {
+    /// The gate's square for a fix received at `t_us`, m^2: [`GATE_MEDIANS`] times the median,
+    /// at least [`GATE_FLOOR_M`], widened by `g` = [`GATE_GAP_MPS`] per second since the last
+    /// accepted fix as `base^2 + 2 floor g + g^2` (at most `(base + g)^2`, at least
+    /// `base^2 + g^2`: no square root per fix on the MCU), at most the configured gate's.
+    fn gate_m2(&self, configured_m: f32, t_us: u64) -> f32 {
+        let configured_m2 = configured_m * configured_m;
+        let Some(median) = self.median_m else {
+            return configured_m2;
+        };
+        let gap_s = self
+            .last_accept_us
+            .map_or(0.0, |a| math::u64_to_f32(t_us.saturating_sub(a)) * 1e-6);
+        let g = GATE_GAP_MPS * gap_s;
+        let base = math::max(GATE_MEDIANS * median, GATE_FLOOR_M);
+        let learnt_m2 = base * base + 2.0 * GATE_FLOOR_M * g + g * g;
+        if learnt_m2.is_finite() {
+            math::min(learnt_m2, configured_m2)
+        } else {
+            configured_m2
+        }
+    }
+
+    /// A fix `d2_m2` (squared) from where the antenna should have been: the median steps
+    /// towards it, whether the fix is accepted or not (rejected fixes are above the median).
+    fn observe(&mut self, d2_m2: f32, configured_m: f32) {
+        let median = self.median_m.unwrap_or(configured_m / GATE_MEDIANS);
+        let next = if d2_m2 > median * median {
+            median * (1.0 + GATE_MEDIAN_STEP)
+        } else {
+            median * (1.0 - GATE_MEDIAN_STEP)
+        };
+        // Within the gate's range: never above the configured gate's, never below the floor's
+        // (below it the gate does not tighten, and a lasting step would have further to
+        // climb: from the floor's median a 2.5 m step opens the gate in about 30 fixes).
+        if next.is_finite() {
+            self.median_m = Some(math::clamp(
+                next,
+                GATE_FLOOR_M / GATE_MEDIANS,
+                math::max(configured_m, GATE_FLOOR_M) / GATE_MEDIANS,
+            ));
+        }
+    }
 }
 
 impl Gnss {
@@ -253,12 +335,18 @@ impl Gnss {
             x_m: enu.east_m,
             y_m: enu.north_m,
         };
-        // Plausibility gate against where the car should be; repeated rejections mean the car
+        // Plausibility gate against where the car should have been at the fix's time, learnt
+        // from the receiver's fixes ([`GATE_MEDIANS`]); repeated rejections mean the car
         // really is there (e.g. after a long gap): restart the filters on the fixes.
+        let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
         let mut antenna = self.estimator.antenna_position(cfg);
         if let Some(p) = antenna {
-            let (dx, dy) = (fix.x_m - p.x_m, fix.y_m - p.y_m);
-            if dx * dx + dy * dy > config.gnss_gate_m * config.gnss_gate_m {
+            let then = self.estimator.dead_reckoned_back(p, age_s, speed_mps);
+            let (dx, dy) = (fix.x_m - then.x_m, fix.y_m - then.y_m);
+            let d2 = dx * dx + dy * dy;
+            let gate_m2 = self.gate.gate_m2(config.gnss_gate_m, t_us);
+            self.gate.observe(d2, config.gnss_gate_m);
+            if d2.is_nan() || d2 > gate_m2 {
                 self.rejects_in_row = self.rejects_in_row.saturating_add(1);
                 bump(&mut counters.gnss_gate_rejects);
                 self.last_reject_us = Some(t_us);
@@ -267,12 +355,14 @@ impl Gnss {
                     return;
                 }
                 self.estimator.reset();
+                // The fixes won: the receiver's statistics are learnt again from them.
+                self.gate = GateStats::default();
                 antenna = None;
             }
         }
         self.rejects_in_row = 0;
+        self.gate.last_accept_us = Some(t_us);
         probe.lap(Stage::GnssFixCheck);
-        let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
         // The lowpass assumes one fix per period. Fixes missing since the last accepted one
         // (a dropout, or fixes the gate rejected) are filled with where dead reckoning puts
         // the antenna at those instants, oldest first, up to the tick's budget; a longer gap

@@ -141,7 +141,8 @@ pub struct NodeConfig {
     pub freshness: FreshnessConfig,
     /// GNSS silent this long: the position is no longer trusted (invalid, filters restart), us.
     pub gnss_lost_us: u64,
-    /// A fix farther than this from the predicted position is rejected, m.
+    /// A fix farther than this from the predicted position is rejected, m: the most the gate
+    /// allows; it learns a tighter one from the receiver ([`gnss::GATE_MEDIANS`]).
     pub gnss_gate_m: f32,
     /// After this many consecutive gate rejections the fixes win: the filters restart there.
     pub gnss_reacquire_fixes: u16,
