@@ -412,16 +412,11 @@ pub fn relax_corridor(
         return 0.0;
     }
     // Per row: the start's violation and the inverse of the return's duration.
-    let v0 = max(speed_mps, 1.0);
-    let (sin_heading, _) = math::sin_cos(heading_rad);
+    let lateral_mps = return_lateral_mps(speed_mps, heading_rad);
     let mut taper = [(0.0f32, 0.0f32); ROW_OBSTACLE];
     for (t, v) in taper.iter_mut().zip(start) {
         if v > 0.0 {
-            let rate = math::min(
-                return_rate(v, return_mps2),
-                v0 * sin_heading / (RETURN_PEAK_SPEED * v),
-            );
-            *t = (v, rate);
+            *t = (v, return_rate(v, return_mps2, lateral_mps));
         }
     }
     for (k, st) in problem.stages.iter_mut().enumerate() {
@@ -444,9 +439,20 @@ const RETURN_PEAK_SPEED: f32 = 1.875;
 
 /// The inverse of the duration of a return over `distance_m` at `accel_mps2`: a bang-bang
 /// return's `2 sqrt(distance / accel)` (the smoothstep of [`return_ahead`] peaks at 1.44 times
-/// that acceleration).
-fn return_rate(distance_m: f32, accel_mps2: f32) -> f32 {
-    0.5 * math::sqrt(accel_mps2 / distance_m)
+/// that acceleration), or longer where the smoothstep's fastest lateral speed would exceed
+/// `lateral_mps` ([`return_lateral_mps`]).
+fn return_rate(distance_m: f32, accel_mps2: f32, lateral_mps: f32) -> f32 {
+    math::min(
+        0.5 * math::sqrt(accel_mps2 / distance_m),
+        lateral_mps / (RETURN_PEAK_SPEED * distance_m),
+    )
+}
+
+/// The fastest lateral speed a return may ask of a car at `speed_mps` (at least 1 m/s) with
+/// `heading_rad` of heading: `v sin h`.
+fn return_lateral_mps(speed_mps: f32, heading_rad: f32) -> f32 {
+    let (sin_heading, _) = math::sin_cos(heading_rad);
+    max(speed_mps, 1.0) * sin_heading
 }
 
 /// The share of a return still ahead at time `t_s` along the quintic smoothstep `10 u^3 -
@@ -490,11 +496,10 @@ pub fn taper_reference(
     if !part.is_finite() || part <= 0.0 {
         return 0.0;
     }
-    let v0 = max(speeds_mps.first().copied().unwrap_or(0.0), 1.0);
-    let (sin_heading, _) = math::sin_cos(heading_rad);
-    let rate = math::min(
-        return_rate(part, return_mps2),
-        v0 * sin_heading / (RETURN_PEAK_SPEED * part),
+    let rate = return_rate(
+        part,
+        return_mps2,
+        return_lateral_mps(speeds_mps.first().copied().unwrap_or(0.0), heading_rad),
     );
     let part = if e0 < 0.0 { -part } else { part };
     for (k, st) in problem.stages.iter_mut().enumerate() {
