@@ -1041,3 +1041,57 @@ fn a_survey_grade_receivers_multipath_does_not_reach_the_loop() {
         );
     }
 }
+
+/// `closed-loop --model FILE` without `--vehicle`: the CAT Vehicle's plant carries the receiver
+/// the model file declares, at its rate and where it declares it. Before, a 5 Hz car's file ran
+/// over the plant's 100 Hz receiver: every fix refused as off-rate, no position, no plan (the
+/// worst-case bound's closed-loop sessions for such a car never planned).
+#[test]
+fn a_model_file_alone_puts_its_receiver_on_the_plant() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("models/paper.toml")).unwrap();
+    let slow = text
+        .replace("\ngnss_rate_hz = 100.0 ", "\ngnss_rate_hz = 5.0 ")
+        .replace("\nantenna_ahead_m = 1.478 ", "\nantenna_ahead_m = 2.0 ");
+    assert_ne!(slow, text);
+    let dir = tmp_dir("model_alone");
+    let model = dir.join("five-hertz.toml");
+    std::fs::write(&model, slow).unwrap();
+    let (vehicle, node) = load_setup(None, Some(&model)).unwrap();
+    let gnss = &vehicle.sensors.gnss;
+    assert_eq!(
+        (gnss.period_s, gnss.antenna_ahead_of_rear_axle_m),
+        (0.2, 2.0)
+    );
+    // The published file leaves the plant as it is, bit for bit.
+    let (published, _) = load_setup(None, Some(&root.join("models/paper.toml"))).unwrap();
+    let (default, _) = load_setup(None, None).unwrap();
+    assert_eq!(
+        (
+            published.sensors.gnss.period_s,
+            published.sensors.gnss.antenna_ahead_of_rear_axle_m
+        ),
+        (
+            default.sensors.gnss.period_s,
+            default.sensors.gnss.antenna_ahead_of_rear_axle_m
+        )
+    );
+    let course = scenario::course(Kind::Loop, &vehicle.body, Kind::Loop.default_speed_mps());
+    let mut driver = NodeDriver::new(node, Controller::Mpc);
+    let out = run(
+        &vehicle,
+        &course,
+        &mut driver,
+        "mpc",
+        &RunOptions::new(0, Receiver::Rtk),
+    );
+    assert!(
+        catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver).is_none(),
+        "the receiver's rate is refused"
+    );
+    assert!(
+        out.metrics.completed && out.metrics.clean,
+        "{:?}",
+        out.metrics
+    );
+}

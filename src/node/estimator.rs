@@ -40,8 +40,10 @@ use crate::signal::moving_average::{MovingAverage, MovingAverageState};
 pub const GNSS_FIR_TAPS: usize = 21;
 /// Moving-average span (the paper's "span of 10 elements").
 pub const GNSS_MA_SPAN: usize = 10;
-/// Fixes of filtered track kept for the course estimate: 0.64 s at 100 Hz.
-const TRACK_LEN: usize = 64;
+/// Fixes of filtered track kept for the course estimate: 0.64 s at 100 Hz. (A restart on the
+/// dead-reckoned track writes one entry per missing fix up to this many: the stage drives'
+/// long gaps reach it, `xtask/src/drives.rs`.)
+pub const TRACK_LEN: usize = 64;
 /// Time spanned by the chord of the course estimate, s: the paper rate's 63 fixes.
 const TRACK_SPAN_S: f64 = 0.63;
 /// The paper's receiver rate (NovAtel, "every 0.01 seconds", paper II-B), Hz: the rate the

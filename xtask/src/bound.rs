@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{anyhow, bail, Context, Result};
+use catmodel::node::drive::Controller;
 use catmodel::node::NodeConfig;
 use catmodel_app::budget::{
     CONTROL_TICK_BUDGET_INSTRUCTIONS, CYCLES_PER_TICK, TICK_BUDGET_INSTRUCTIONS,
@@ -238,6 +239,19 @@ impl Bound {
         failures
     }
 
+    /// The rows no drive ran: a row measured at 0 would count nothing, and the bound would not
+    /// be one. Only the model-predictive controller's rows may stay unmeasured, on a car whose
+    /// model file chooses the pure pursuit (its ticks never run them).
+    pub fn unmeasured(&self, controller: Controller) -> Vec<&str> {
+        let mpc_only = ["drive_reference", SOLVE_ROW, "drive_coast"];
+        self.rows
+            .iter()
+            .filter(|r| r.runs == 0)
+            .filter(|r| controller == Controller::Mpc || !mpc_only.contains(&r.key.as_str()))
+            .map(|r| r.key.as_str())
+            .collect()
+    }
+
     /// The table printed by `cargo qemu` and `cargo xtask bench-target`.
     pub fn table(&self) -> String {
         let total = self.total();
@@ -400,7 +414,8 @@ impl Bound {
 /// firmware's build script reads the same file through the same reader).
 pub fn baked_car() -> Result<NodeConfig> {
     let path = match std::env::var_os("CATMODEL_MODEL") {
-        Some(p) => PathBuf::from(p),
+        // Absolute, or relative to the repository root, as `firmware/build.rs` reads it.
+        Some(p) => root().join(p),
         None => root().join("models").join("paper.toml"),
     };
     let file = catmodel_model_file::load(&path).map_err(|e| anyhow!("{e}"))?;
@@ -502,12 +517,16 @@ pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
     let mut paths = Vec::new();
     for scenario in CLOSED_LOOP_SCENARIOS {
         let out = dir.join(format!("closed-loop-{scenario}"));
-        let output = Command::new(&host)
+        let mut command = Command::new(&host);
+        command
             .current_dir(root())
             .args(["closed-loop", "--scenario", scenario, "--out"])
-            .arg(&out)
-            .output()
-            .context("running catmodel closed-loop")?;
+            .arg(&out);
+        // The node as the firmware bakes it (the plant's receiver then at the file's rate).
+        if let Some(model) = std::env::var_os("CATMODEL_MODEL") {
+            command.arg("--model").arg(root().join(model));
+        }
+        let output = command.output().context("running catmodel closed-loop")?;
         if !output.status.success() {
             bail!(
                 "catmodel closed-loop --scenario {scenario} failed:\n{}",
@@ -573,7 +592,17 @@ pub fn measure_stages() -> Result<Bound> {
             named.map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
         })
         .collect();
-    parse(&stderr, names)
+    let bound = parse(&stderr, names)?;
+    let unmeasured = bound.unmeasured(car.controller);
+    if !unmeasured.is_empty() {
+        bail!(
+            "the dedicated drives never ran {} with this model file: the bound would count \
+             nothing for {}; the drives (xtask/src/drives.rs, stage_corpus) must reach every stage",
+            unmeasured.join(", "),
+            if unmeasured.len() == 1 { "it" } else { "them" }
+        );
+    }
+    Ok(bound)
 }
 
 /// The model-predictive controller's solve on its most expensive path: every row of every
@@ -627,6 +656,20 @@ mod tests {
             vec!["a".into()]
         )
         .is_err());
+    }
+
+    #[test]
+    fn a_row_no_drive_ran_is_refused_but_the_mpcs_on_a_pure_pursuit_car() {
+        let text = "stage\tgnss_fill\t2\t0\t0\t0\t0\t0\tcommon\tgnss_gap\tcap\n\
+                    stage\tpredict\t1\t9\t5000\t1\t5000\t0\tcommon\t-\tonce\n\
+                    stage\tdrive_reference\t1\t0\t0\t0\t0\t1\tplan\t-\tonce\n\
+                    stage-ticks\t9\t7000\t1\t80000\t0\nstage-done\n";
+        let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
+        assert_eq!(
+            b.unmeasured(Controller::Mpc),
+            vec!["gnss_fill", "drive_reference"]
+        );
+        assert_eq!(b.unmeasured(Controller::PurePursuit), vec!["gnss_fill"]);
     }
 
     #[test]

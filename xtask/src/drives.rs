@@ -20,6 +20,8 @@ use catmodel::can::codec::{
 use catmodel::can::spec::MAX_PATH_POINTS;
 use catmodel::can::{candump, CanFrame, CanId, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
+use catmodel::node::estimator::TRACK_LEN;
+use catmodel::node::stage::GAP_FILL_PER_TICK;
 use catmodel::node::NodeConfig;
 use catmodel::node::{PLANNER_FRAMES_PER_TICK, SHORT_PATH_POINTS};
 
@@ -574,6 +576,30 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
     let enter = f64::from(car.hybrid.enter_dynamic_speed_mps);
     let exit = f64::from(car.hybrid.exit_dynamic_speed_mps);
     let dwell_s = f64::from(car.hybrid.min_dwell_ticks) * TICK_S;
+    // The car's receiver as its model file declares it: the node does not use fixes at another
+    // rate (`gnss_rate_mismatch`), so every drive but the bursts' sends them at this one, and
+    // the gaps are counted in its fixes. The published car's 100 Hz gives the figures in
+    // docs/firmware.md; a 5 Hz car's gaps are longer in seconds, not in fixes.
+    // The declared rate (the f32 period's rounding undone: 100 Hz is 100, not 100.0000002).
+    let gnss_hz = (1e3 / f64::from(car.estimator.gnss_period_s)).round() / 1e3;
+    let period_s = 1.0 / gnss_hz;
+    let lost_s = car.gnss_lost_us as f64 * 1e-6;
+    let reacquire_s = f64::from(car.gnss_reacquire_fixes) * period_s;
+    let plain = |name: &str| Spec {
+        gnss_hz,
+        cog_hz: gnss_hz,
+        ..Spec::plain(name)
+    };
+    // Long enough for a dozen gaps of each kind at the slowest receiver (1 Hz).
+    let gaps_s = (16.0_f64).max(40.0 * period_s);
+    // A restart's dearest run writes a track entry per missing fix up to the track's length:
+    // the long gaps miss more fixes than that where the receiver is fast enough for it before
+    // the position is lost, else as many as it can, and always more than a tick fills.
+    let track_s = (TRACK_LEN as f64 + 1.5) * period_s;
+    let long_gap_s = track_s
+        .min(lost_s - 1.5 * period_s)
+        .max((GAP_FILL_PER_TICK as f64 + 1.5) * period_s);
+    let lost_gap_s = (2.6_f64).max(lost_s + 6.0 * period_s);
     vec![
         // Running, both modes: frames bunched into single ticks (every tick at the cap for a
         // while), GNSS and COG at twice the fastest receiver's rate.
@@ -601,7 +627,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
                 hi: 100.0,
                 period_s: 1.3,
             },
-            ..Spec::plain("stages-top-speed-full-lock")
+            ..plain("stages-top-speed-full-lock")
         },
         // The hybrid switch flipping as often as its dwell allows, both ways.
         Spec {
@@ -615,51 +641,51 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
                 hi: 100.0,
                 period_s: 0.7,
             },
-            ..Spec::plain("stages-hybrid-flips")
+            ..plain("stages-hybrid-flips")
         },
         // GNSS gaps of every length: filled fix by fix, restarts on the track, outages past
         // "lost"; and jumps beyond the gate long enough to be followed.
         Spec {
-            seconds: 16.0,
+            seconds: gaps_s,
             speed: Profile::Const(12.0),
             gnss_dropout: Some(Periodic {
                 first_s: 2.0,
-                every_s: 0.37,
-                len_s: 0.013,
+                every_s: (0.37_f64).max(5.3 * period_s),
+                len_s: 1.3 * period_s,
             }),
             gnss_jump: Some(Periodic {
                 first_s: 6.0,
-                every_s: 5.0,
-                len_s: 1.3,
+                every_s: (5.0_f64).max(2.0 * reacquire_s + 10.0 * period_s),
+                len_s: (1.3_f64).max(reacquire_s + 4.0 * period_s),
             }),
             gnss_jump_m: 40.0,
-            ..Spec::plain("stages-gnss-gaps-short")
+            ..plain("stages-gnss-gaps-short")
         },
         Spec {
-            seconds: 16.0,
+            seconds: gaps_s,
             speed: Profile::Const(12.0),
             gnss_dropout: Some(Periodic {
                 first_s: 2.0,
-                every_s: 1.1,
-                len_s: 0.45,
+                every_s: (1.1_f64).max(long_gap_s + 5.0 * period_s),
+                len_s: long_gap_s,
             }),
-            ..Spec::plain("stages-gnss-gaps-long")
+            ..plain("stages-gnss-gaps-long")
         },
         Spec {
-            seconds: 14.0,
+            seconds: (14.0_f64).max(3.0 + 1.8 * (lost_gap_s + 3.4)),
             gnss_dropout: Some(Periodic {
                 first_s: 3.0,
-                every_s: 6.0,
-                len_s: 2.6,
+                every_s: lost_gap_s + 3.4,
+                len_s: lost_gap_s,
             }),
-            ..Spec::plain("stages-gnss-lost")
+            ..plain("stages-gnss-lost")
         },
         // Floods: every tick at the cap with frames the node must decode and reject, and
         // frames the acceptance filter refuses.
         Spec {
             corrupt_per_tick: 14,
             unknown_per_tick: 40,
-            ..Spec::plain("stages-floods")
+            ..plain("stages-floods")
         },
         // Standstill, then off: the slow branches of the models and the roll-out.
         Spec {
@@ -669,35 +695,37 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
                 period_s: 3.0,
             },
             steer: Profile::Const(100.0),
-            ..Spec::plain("stages-standstill")
+            ..plain("stages-standstill")
         },
         // The local frame at other latitudes (its f64 set-up takes other paths).
         Spec {
             seconds: 2.0,
             origin_deg: (0.0001, 0.0001),
-            ..Spec::plain("stages-origin-equator")
+            ..plain("stages-origin-equator")
         },
         Spec {
             seconds: 2.0,
             origin_deg: (79.9, 179.9),
-            ..Spec::plain("stages-origin-north")
+            ..plain("stages-origin-north")
         },
         Spec {
             seconds: 2.0,
             origin_deg: (-45.0, -179.99),
-            ..Spec::plain("stages-origin-south")
+            ..plain("stages-origin-south")
         },
         // The planner's paths completing: the longest path the bus carries (validation and
         // load over 256 points), and short ones completing every few ticks.
+        // (Longer for a slow receiver: the controller plans, and a long path's tick coasts on
+        // the previous plan, only once the lowpass has a position.)
         Spec {
-            seconds: 9.0,
+            seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
             path_points: MAX_PATH_POINTS,
-            ..Spec::plain("stages-path-long")
+            ..plain("stages-path-long")
         },
         Spec {
-            seconds: 4.0,
+            seconds: (4.0_f64).max(1.0 + 40.0 * period_s),
             path_points: SHORT_PATH_POINTS,
-            ..Spec::plain("stages-path-short")
+            ..plain("stages-path-short")
         },
     ]
 }

@@ -620,6 +620,20 @@ pub fn load_setup(
     } else {
         crate::node_config(model)?
     };
+    let mut cfg = cfg;
+    if vehicle.is_none() && model.is_some() {
+        // The CAT Vehicle's plant with the receiver the model file declares, where it declares
+        // it: the node uses no fix at another rate (`gnss_rate_mismatch`), and a 5 Hz car's
+        // file over the plant's 100 Hz receiver would leave it without a position.
+        // (The f32 figures' rounding undone: the published file leaves the plant as it is.)
+        let gnss = &mut cfg.sensors.gnss;
+        let hz = (1e3 / f64::from(node.estimator.gnss_period_s)).round() / 1e3;
+        gnss.period_s = 1.0 / hz;
+        let ahead = f64::from(node.estimator.antenna_ahead_m);
+        if (ahead - gnss.antenna_ahead_of_rear_axle_m).abs() > 1e-5 {
+            gnss.antenna_ahead_of_rear_axle_m = ahead;
+        }
+    }
     // The node takes its first fix as its origin, as the firmware does (see `driver`).
     Ok((cfg, node))
 }
