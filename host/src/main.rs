@@ -184,7 +184,8 @@ enum Command {
         /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
         #[arg(long)]
         vehicle: Option<PathBuf>,
-        /// Model file for the node (default: the published models).
+        /// Model file for the node (default: the published models). Without --vehicle the
+        /// plant's GNSS receiver is the one the file declares (its rate and antenna).
         #[arg(long)]
         model: Option<PathBuf>,
         /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
