@@ -637,7 +637,7 @@ impl EstimatorState {
         // Only those few entries: the chord comparison waits for a history of its own.
         self.odo_valid = 0;
         let odo_entries = (missing as usize).min(ODO_LEN);
-        let odo_read = (cfg.group_delay_fixes.max(0.0) as usize + 2).min(odo_entries);
+        let odo_read = (math::max(cfg.group_delay_fixes, 0.0) as usize + 2).min(odo_entries);
         self.odo_head = (self.odo_head + odo_entries - odo_read) % ODO_LEN;
         for k in (1..=odo_read).rev() {
             let back = back_m(k, 0.0);
@@ -700,7 +700,7 @@ impl EstimatorState {
         if (self.fixes as f32) < cfg.group_delay_fixes * 2.0 {
             return None;
         }
-        let d = cfg.group_delay_fixes.max(0.0);
+        let d = math::max(cfg.group_delay_fixes, 0.0);
         let k0 = d as usize; // floor: d >= 0
         let w = d - k0 as f32;
         let a = self.odo_fixes_ago(k0)?;
@@ -809,7 +809,7 @@ impl EstimatorState {
             return TrackCorrection::NoHistory;
         };
         let span = (cfg.track_span_fixes as usize).clamp(1, TRACK_LEN - 1);
-        let delay = cfg.group_delay_fixes.max(0.0);
+        let delay = math::max(cfg.group_delay_fixes, 0.0);
         let k0 = delay as usize; // floor: delay >= 0
         let w = delay - k0 as f32;
         if (self.odo_valid as usize) < k0 + span + 2 || (self.fixes as usize) < span + 2 * k0 {
