@@ -338,6 +338,13 @@ impl Default for EstimatorState {
 }
 
 impl EstimatorConfig {
+    /// The receiver's rate the model file declares, Hz: `1 / gnss_period_s` with the f32
+    /// period's rounding undone to a thousandth of a hertz (100 Hz is 100, not 100.0000002), for
+    /// host tools that must reproduce that receiver exactly (the stage drives, the rig's plant).
+    pub fn declared_gnss_rate_hz(&self) -> f64 {
+        libm::round(1e3 / f64::from(self.gnss_period_s)) / 1e3
+    }
+
     /// The lowpass and heading filter for a receiver at `gnss_rate_hz` (1..100 Hz; designed in
     /// f64, on the host or in the firmware build, never on the MCU), the antenna
     /// `antenna_ahead_m` ahead of the rear axle and `antenna_left_m` left of the centre line.

@@ -580,8 +580,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
     // rate (`gnss_rate_mismatch`), so every drive but the bursts' sends them at this one, and
     // the gaps are counted in its fixes. The published car's 100 Hz gives the figures in
     // docs/firmware.md; a 5 Hz car's gaps are longer in seconds, not in fixes.
-    // The declared rate (the f32 period's rounding undone: 100 Hz is 100, not 100.0000002).
-    let gnss_hz = (1e3 / f64::from(car.estimator.gnss_period_s)).round() / 1e3;
+    let gnss_hz = car.estimator.declared_gnss_rate_hz();
     let period_s = 1.0 / gnss_hz;
     let lost_s = car.gnss_lost_us as f64 * 1e-6;
     let reacquire_s = f64::from(car.gnss_reacquire_fixes) * period_s;

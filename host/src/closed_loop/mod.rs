@@ -627,8 +627,7 @@ pub fn load_setup(
         // file over the plant's 100 Hz receiver would leave it without a position.
         // (The f32 figures' rounding undone: the published file leaves the plant as it is.)
         let gnss = &mut cfg.sensors.gnss;
-        let hz = (1e3 / f64::from(node.estimator.gnss_period_s)).round() / 1e3;
-        gnss.period_s = 1.0 / hz;
+        gnss.period_s = 1.0 / node.estimator.declared_gnss_rate_hz();
         let ahead = f64::from(node.estimator.antenna_ahead_m);
         if (ahead - gnss.antenna_ahead_of_rear_axle_m).abs() > 1e-5 {
             gnss.antenna_ahead_of_rear_axle_m = ahead;
