@@ -687,68 +687,66 @@ pub fn parse_truth(text: &str, path: &Path) -> Result<Vec<TruthRow>, LogError> {
 /// Writes a driving log (header + rows). Rejects non-finite values and non-increasing time, so
 /// that what is written can always be read back.
 pub fn write_log(path: &Path, rows: &[LogRow]) -> Result<(), LogError> {
-    let mut buf = Vec::new();
-    write_log_to(&mut buf, rows).map_err(|(line, column, kind)| LogError {
-        path: path.to_path_buf(),
-        line,
-        char_column: 0,
-        column: column.map(str::to_string),
-        kind,
-    })?;
-    std::fs::write(path, buf).map_err(|e| file_error(path, LogErrorKind::Io(e)))
+    write_file(path, |buf| write_log_to(buf, rows))
 }
 
 /// Writes a driving log to any writer. Errors carry (line, column, reason).
-pub fn write_log_to<W: Write>(
-    w: &mut W,
-    rows: &[LogRow],
-) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
-    let io = |e| (0, None, LogErrorKind::Io(e));
-    writeln!(w, "{}", LOG_COLUMNS.join(",")).map_err(io)?;
-    let mut previous: Option<f64> = None;
-    let mut line_text = String::new();
-    for (i, r) in rows.iter().enumerate() {
-        let line = i + 2;
-        let cells = r.cells();
-        check_write(line, &cells, &LOG_COLUMNS, &mut previous)?;
-        format_cells(&mut line_text, &cells);
-        w.write_all(line_text.as_bytes()).map_err(io)?;
-    }
-    Ok(())
+pub fn write_log_to<W: Write>(w: &mut W, rows: &[LogRow]) -> Result<(), WriteError> {
+    write_table(w, &LOG_COLUMNS, rows.iter().map(LogRow::cells))
 }
 
 /// Writes a truth CSV.
 pub fn write_truth(path: &Path, rows: &[TruthRow]) -> Result<(), LogError> {
-    let mut buf = Vec::new();
-    write_truth_to(&mut buf, rows).map_err(|(line, column, kind)| LogError {
-        path: path.to_path_buf(),
-        line,
-        char_column: 0,
-        column: column.map(str::to_string),
-        kind,
-    })?;
-    std::fs::write(path, buf).map_err(|e| file_error(path, LogErrorKind::Io(e)))
+    write_file(path, |buf| write_truth_to(buf, rows))
 }
 
 /// Writes a truth CSV to any writer. Errors carry (line, column, reason).
-pub fn write_truth_to<W: Write>(
-    w: &mut W,
-    rows: &[TruthRow],
-) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
-    let io = |e| (0, None, LogErrorKind::Io(e));
-    writeln!(w, "{}", TRUTH_COLUMNS.join(",")).map_err(io)?;
-    let mut previous: Option<f64> = None;
-    let mut line_text = String::new();
-    for (i, r) in rows.iter().enumerate() {
-        let cells = [
+pub fn write_truth_to<W: Write>(w: &mut W, rows: &[TruthRow]) -> Result<(), WriteError> {
+    let cells = rows.iter().map(|r| {
+        [
             Some(r.t),
             Some(r.x),
             Some(r.y),
             Some(r.heading),
             Some(r.yaw_rate),
             Some(r.speed),
-        ];
-        check_write(i + 2, &cells, &TRUTH_COLUMNS, &mut previous)?;
+        ]
+    });
+    write_table(w, &TRUTH_COLUMNS, cells)
+}
+
+/// What a writer refused: (line, column, reason).
+pub type WriteError = (usize, Option<&'static str>, LogErrorKind);
+
+/// Formats a whole table in memory, then writes the file: nothing is written for a table with a
+/// bad cell.
+fn write_file(
+    path: &Path,
+    format: impl FnOnce(&mut Vec<u8>) -> Result<(), WriteError>,
+) -> Result<(), LogError> {
+    let mut buf = Vec::new();
+    format(&mut buf).map_err(|(line, column, kind)| LogError {
+        path: path.to_path_buf(),
+        line,
+        char_column: 0,
+        column: column.map(str::to_string),
+        kind,
+    })?;
+    std::fs::write(path, buf).map_err(|e| file_error(path, LogErrorKind::Io(e)))
+}
+
+/// The header, then one line per row of cells, each checked (finite, time increasing) first.
+fn write_table<W: Write, const N: usize>(
+    w: &mut W,
+    names: &[&'static str; N],
+    rows: impl Iterator<Item = [Option<f64>; N]>,
+) -> Result<(), WriteError> {
+    let io = |e| (0, None, LogErrorKind::Io(e));
+    writeln!(w, "{}", names.join(",")).map_err(io)?;
+    let mut previous: Option<f64> = None;
+    let mut line_text = String::new();
+    for (i, cells) in rows.enumerate() {
+        check_write(i + 2, &cells, names, &mut previous)?;
         format_cells(&mut line_text, &cells);
         w.write_all(line_text.as_bytes()).map_err(io)?;
     }
@@ -760,7 +758,7 @@ fn check_write(
     cells: &[Option<f64>],
     names: &[&'static str],
     previous: &mut Option<f64>,
-) -> Result<(), (usize, Option<&'static str>, LogErrorKind)> {
+) -> Result<(), WriteError> {
     for (cell, name) in cells.iter().zip(names) {
         if let Some(v) = cell {
             if !v.is_finite() {
