@@ -193,6 +193,19 @@ pub fn run_with(
     platform: impl Fn(usize) -> PlatformStats,
 ) -> Vec<TickOut> {
     let mut node = catmodel_host::new_node(config);
+    run_node(&mut node, frames, platform)
+}
+
+/// [`run`] on a node of the caller's, to look at its state afterwards.
+pub fn run_on(node: &mut catmodel_host::HostNode, frames: &[TimedFrame]) -> Vec<TickOut> {
+    run_node(node, frames, |_| PlatformStats::default())
+}
+
+fn run_node(
+    node: &mut catmodel_host::HostNode,
+    frames: &[TimedFrame],
+    platform: impl Fn(usize) -> PlatformStats,
+) -> Vec<TickOut> {
     let mut out = Vec::new();
     let (Some(first), Some(last)) = (frames.first(), frames.last()) else {
         return out;

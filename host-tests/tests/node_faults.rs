@@ -306,6 +306,53 @@ fn gnss_jump_beyond_the_gate_is_rejected_and_a_persistent_one_is_followed() {
 }
 
 #[test]
+fn a_car_that_leaves_the_nodes_own_frame_takes_the_frame_along() {
+    // The fixes jump 25 km north at 5 s and stay there (the car far from where the node's
+    // frame was built, beyond its 20 km validity radius). A frame the node chose at its first
+    // fix moves there after the fixes the gate would take to accept a jump (2 s at 100 Hz),
+    // and the position is back within a second, on the car's track in the new frame; before,
+    // every fix from there on was refused and the position stayed lost.
+    let mut d = drive(10.0, 0.0, 14.0);
+    shift_fixes(&mut d, 5.0, 14.0, 25_000.0);
+    let own = catmodel::node::NodeConfig {
+        origin_e7: None,
+        ..config()
+    };
+    let mut node = catmodel_host::new_node(own);
+    let ticks = bus::run_on(&mut node, &frames(&d));
+    assert_eq!(node.gnss_fixes_beyond_frame(), 200);
+    assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 200);
+    let (lat_e7, _) = node.origin_e7().expect("a frame");
+    let north_of_start_m = f64::from(lat_e7 - bus::ORIGIN.0) * 0.0111;
+    assert!(
+        (north_of_start_m - 25_000.0).abs() < 5.0,
+        "{north_of_start_m}"
+    );
+    // In the new frame (its origin the fix that moved it, the antenna at 7 s) the car runs
+    // east at 10 m/s from one second after the move.
+    let lever = f64::from(config().estimator.antenna_ahead_m);
+    let after = window(&ticks, 8.0, 14.0);
+    assert!(after.iter().all(|t| t.position().position_valid));
+    for t in after {
+        let p = t.position();
+        let east = f64::from(p.east_m.unwrap());
+        let expected = 10.0 * (t.t_s() - 7.0) - lever;
+        assert!(
+            (east - expected).abs() < 0.5,
+            "t={}: {east} vs {expected}",
+            t.t_s()
+        );
+        assert!(f64::from(p.north_m.unwrap()).abs() < 0.5, "{p:?}");
+    }
+    // A frame given to the node (here the configured origin; a LOCAL_ORIGIN alike) is not the
+    // node's to move: the fixes stay refused, and the position lost.
+    let ticks = run(&frames(&d));
+    assert!(window(&ticks, 8.0, 14.0)
+        .iter()
+        .all(|t| !t.position().position_valid));
+}
+
+#[test]
 fn a_lasting_step_beyond_the_learnt_gate_opens_it_within_a_few_fixes() {
     // An exact receiver's fixes step 2.5 m north for good at 5 s (a standalone receiver
     // changing satellites): past the learnt gate (its 1 m floor) and inside the configured

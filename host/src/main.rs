@@ -424,6 +424,9 @@ fn run(cli: Cli) -> Result<()> {
             {
                 eprintln!("catmodel: warning: {note}");
             }
+            if let Some(note) = replay::frame_note(&result) {
+                eprintln!("catmodel: warning: {note}");
+            }
             let still = config_course_min_speed_mps;
             if result.ticks > 0
                 && result.valid_ticks == 0
@@ -435,7 +438,11 @@ fn run(cli: Cli) -> Result<()> {
                      A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
                     result.ticks, result.max_speed_mps
                 );
-            } else if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {
+            } else if result.ticks > 0
+                && result.valid_ticks == 0
+                && c.gnss_rate_mismatch == 0
+                && result.fixes_beyond_frame == 0
+            {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
                      Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",

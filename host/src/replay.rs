@@ -435,11 +435,47 @@ pub struct ReplayStats {
     pub steering: SteeringCheck,
     /// Ticks at which the node used a steering gain other than the model file's.
     pub steering_mismatch_ticks: u64,
-    /// Origin used, 1e-7 deg.
+    /// Origin used at the end, 1e-7 deg.
     pub origin_e7: Option<(i32, i32)>,
+    /// Times the local frame moved (a LOCAL_ORIGIN, or the car leaving the node's own frame:
+    /// STATE_POSITION jumps there).
+    pub origin_moves: u32,
+    /// GNSS fixes beyond the local frame's validity radius ([`Node::gnss_fixes_beyond_frame`]).
+    pub fixes_beyond_frame: u32,
     /// The latest interval between GNSS fixes off the model file's period, us, as the node
     /// measured it.
     pub gnss_interval_us: Option<u32>,
+}
+
+/// What a replay should say about the local frame: fixes beyond its validity radius
+/// ([`catmodel::geodesy::VALIDITY_RADIUS_M`]) from the origin, and the frame's moves, at
+/// which STATE_POSITION jumps. `None` when neither happened.
+pub fn frame_note(stats: &ReplayStats) -> Option<String> {
+    if stats.fixes_beyond_frame == 0 {
+        return None;
+    }
+    let radius_km = catmodel::geodesy::VALIDITY_RADIUS_M / 1000.0;
+    let origin = stats.origin_e7.map_or(String::new(), |(lat, lon)| {
+        format!(
+            " (now {:.7},{:.7})",
+            f64::from(lat) * 1e-7,
+            f64::from(lon) * 1e-7
+        )
+    });
+    Some(if stats.origin_moves > 0 {
+        format!(
+            "{} GNSS fixes lay more than {radius_km} km from the local frame's origin{origin}, among the gate's rejections; \
+             the frame moved {} time(s), and STATE_POSITION and the predictions jump where it did (the node moves a frame it chose at its first fix; \
+             a LOCAL_ORIGIN from the planner or --origin fixes the frame instead)",
+            stats.fixes_beyond_frame, stats.origin_moves
+        )
+    } else {
+        format!(
+            "{} GNSS fixes lay more than {radius_km} km from the local frame's origin{origin} and were refused (counted among the gate's rejections): \
+             the origin given (--origin, or the planner's LOCAL_ORIGIN) is too far from the drive; give one within {radius_km} km of it",
+            stats.fixes_beyond_frame
+        )
+    })
 }
 
 /// Number of ticks [`replay`] runs over `frames` (sorted by time).
@@ -492,6 +528,8 @@ pub fn replay_with_progress(
         steering: SteeringCheck::new(),
         steering_mismatch_ticks: 0,
         origin_e7: None,
+        origin_moves: 0,
+        fixes_beyond_frame: 0,
         gnss_interval_us: None,
     });
     ReplayOutput {
@@ -922,6 +960,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let mut valid_ticks = 0u64;
     let mut max_speed_mps = 0.0f32;
     let mut steering_mismatch_ticks = 0u64;
+    let mut origin_moves = 0u32;
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
@@ -953,6 +992,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
             }
         };
         let mut step = 0u64;
+        let mut last_origin = None;
         if let Some(first_t_us) = source.first_t_us() {
             let mut now = first_tick_us(first_t_us);
             let mut batch = Vec::with_capacity(BATCH_TICKS);
@@ -987,6 +1027,11 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 if node.steering().mismatch() {
                     steering_mismatch_ticks += 1;
                 }
+                let origin = node.origin_e7();
+                if origin != last_origin && last_origin.is_some() {
+                    origin_moves += 1;
+                }
+                last_origin = origin;
                 batch.push((now, tx));
                 step += 1;
                 if step.is_multiple_of(500) {
@@ -1034,6 +1079,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         steering: *node.steering(),
         steering_mismatch_ticks,
         origin_e7: node.origin_e7(),
+        origin_moves,
+        fixes_beyond_frame: node.gnss_fixes_beyond_frame(),
         gnss_interval_us: node.gnss_off_rate_interval_us(),
     };
     let error = if input_ok == Some(true) {

@@ -377,6 +377,14 @@ impl Drive {
         self.new_path();
     }
 
+    /// The node moved its own local frame: the active path, in the old one, is dropped (the
+    /// car stops following it: no path). Only that, to keep the estimating tick that moves
+    /// the frame within its budget; the controllers start afresh when the next path activates
+    /// ([`Self::new_path`]).
+    pub fn drop_path(&mut self) {
+        self.planner.drop_path();
+    }
+
     fn new_path(&mut self) {
         self.blind_m = None;
         self.mpc.reset();

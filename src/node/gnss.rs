@@ -4,7 +4,7 @@
 //! Bounded per tick ([`super::stage`]): the fixes, the filled fixes and the restarts after a
 //! long gap each have a per-tick cap.
 use crate::can::freshness::Input;
-use crate::geodesy::{GeodesyError, LocalFrame};
+use crate::geodesy::{Enu, GeodesyError, LocalFrame};
 use crate::math;
 use crate::model::kinematic::Pose;
 
@@ -111,10 +111,12 @@ impl RateCheck {
 /// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
 pub type TickFixes = heapless::Vec<GnssFix, GNSS_FIXES_PER_TICK>;
 
-/// What one tick may still spend on gaps: filling missing fixes one by one, or one restart on
-/// the dead-reckoned track, not both ([`super::stage::Exclusive::GnssGap`]: the tick's bound
+/// What one tick may still spend: one local frame built (at the first fix, or moved), and on
+/// gaps filling missing fixes one by one, or one restart on the dead-reckoned track, not both ([`super::stage::Exclusive::GnssGap`]: the tick's bound
 /// counts the dearer of the two, not their sum).
 struct GapBudget {
+    /// Whether it may still build a local frame ([`Stage::GnssOrigin`]: once per tick).
+    frame_left: bool,
     /// Missing fixes it may still fill one by one.
     fills_left: u32,
     /// Whether it may still restart the filters on the dead-reckoned track.
@@ -126,6 +128,13 @@ struct GapBudget {
 pub struct Gnss {
     /// The local frame, from the configured origin or the first fix.
     frame: Option<LocalFrame>,
+    /// Whether the frame is the node's own (built at its first fix, no origin configured or
+    /// received): the node may move it ([`LocalFrame`]'s validity radius).
+    frame_own: bool,
+    /// The node moved its own frame since [`Self::take_frame_moved`] last looked.
+    frame_moved: bool,
+    /// Fixes that lay beyond the local frame's validity radius (among the gate's rejections).
+    beyond_frame: u32,
     estimator: EstimatorState,
     /// The receiver's course (rad) and its receive time, while the car moves.
     cog: Option<(f32, u64)>,
@@ -212,11 +221,24 @@ impl Gnss {
         let frame = LocalFrame::new(lat_e7, lon_e7)?;
         let changed = self.frame.is_some();
         self.frame = Some(frame);
+        self.frame_own = false;
         if changed {
             self.estimator.reset();
             self.rejects_in_row = 0;
         }
         Ok(changed)
+    }
+
+    /// Whether the node moved its own frame to a fix beyond the old one's validity radius
+    /// since the last call (the planner's path in the old frame no longer holds); clears it.
+    pub fn take_frame_moved(&mut self) -> bool {
+        core::mem::take(&mut self.frame_moved)
+    }
+
+    /// Fixes that lay beyond the local frame's validity radius so far (counted among the
+    /// gate's rejections on the bus): the origin is too far from the drive.
+    pub fn fixes_beyond_frame(&self) -> u32 {
+        self.beyond_frame
     }
 
     /// The antenna's dead-reckoned position ([`EstimatorState::dead_reckoned`]).
@@ -278,6 +300,7 @@ impl Gnss {
         probe: &mut P,
     ) {
         let mut gaps = GapBudget {
+            frame_left: self.frame.is_some(),
             fills_left: GAP_FILL_PER_TICK,
             restart_left: true,
         };
@@ -317,19 +340,51 @@ impl Gnss {
         }
         if self.frame.is_none() {
             let origin = config.origin_e7.unwrap_or((lat_e7, lon_e7));
-            // Once in the node's life: a frame, once built, is never rebuilt. A refused origin
-            // is refused by cheap range checks before any of the f64 set-up.
+            // Built once, at the configured origin or the first fix; after that only a
+            // LOCAL_ORIGIN or the car leaving the node's own frame (below) moves it. A refused
+            // origin is refused by cheap range checks before any of the set-up.
             if let Ok(frame) = LocalFrame::new(origin.0, origin.1) {
                 self.frame = Some(frame);
+                self.frame_own = config.origin_e7.is_none();
                 probe.lap(Stage::GnssOrigin);
             }
         }
-        let enu = self.frame.and_then(|fr| fr.to_local(lat_e7, lon_e7).ok());
-        let Some(enu) = enu else {
-            bump(&mut counters.gnss_gate_rejects);
-            self.last_reject_us = Some(t_us);
-            probe.lap(Stage::GnssFixCheck);
-            return;
+        let (enu, moved) = match self.frame.map(|fr| fr.to_local(lat_e7, lon_e7)) {
+            Some(Ok(enu)) => (enu, false),
+            Some(Err(GeodesyError::BeyondValidityRadius)) if self.frame_own => {
+                self.beyond_frame = self.beyond_frame.saturating_add(1);
+                // The car has left the frame the node chose at its first fix (its expansion
+                // holds within `VALIDITY_RADIUS_M`): fixes beyond it are rejected as the gate
+                // rejects them, and once enough of them in a row say the car is there (not one
+                // wild fix), the frame moves to this fix and the filters restart in it, as for
+                // a LOCAL_ORIGIN. A planner's frame is the planner's to move.
+                self.rejects_in_row = self.rejects_in_row.saturating_add(1);
+                bump(&mut counters.gnss_gate_rejects);
+                self.last_reject_us = Some(t_us);
+                let frame = (self.rejects_in_row >= config.gnss_reacquire_fixes && gaps.frame_left)
+                    .then(|| LocalFrame::new(lat_e7, lon_e7).ok())
+                    .flatten();
+                let Some(frame) = frame else {
+                    probe.lap(Stage::GnssFixCheck);
+                    return;
+                };
+                gaps.frame_left = false;
+                self.frame = Some(frame);
+                self.frame_moved = true;
+                self.estimator.reset();
+                self.gate = GateStats::default();
+                probe.lap(Stage::GnssOrigin);
+                (Enu::default(), true)
+            }
+            other => {
+                if let Some(Err(GeodesyError::BeyondValidityRadius)) = other {
+                    self.beyond_frame = self.beyond_frame.saturating_add(1);
+                }
+                bump(&mut counters.gnss_gate_rejects);
+                self.last_reject_us = Some(t_us);
+                probe.lap(Stage::GnssFixCheck);
+                return;
+            }
         };
         let fix = Xy {
             x_m: enu.east_m,
@@ -337,9 +392,14 @@ impl Gnss {
         };
         // Plausibility gate against where the car should have been at the fix's time, learnt
         // from the receiver's fixes ([`GATE_MEDIANS`]); repeated rejections mean the car
-        // really is there (e.g. after a long gap): restart the filters on the fixes.
+        // really is there (e.g. after a long gap): restart the filters on the fixes. A moved
+        // frame has restarted them already.
         let age_s = math::u64_to_f32(now_us.saturating_sub(t_us)) * 1e-6;
-        let mut antenna = self.estimator.antenna_position(cfg);
+        let mut antenna = if moved {
+            None
+        } else {
+            self.estimator.antenna_position(cfg)
+        };
         if let Some(p) = antenna {
             let then = self.estimator.dead_reckoned_back(p, age_s, speed_mps);
             let (dx, dy) = (fix.x_m - then.x_m, fix.y_m - then.y_m);

@@ -446,6 +446,14 @@ impl<D: BorrowMut<Drive>> Node<D> {
         self.gnss.off_rate_interval_us()
     }
 
+    /// GNSS fixes that lay beyond the local frame's validity radius
+    /// ([`crate::geodesy::VALIDITY_RADIUS_M`]) so far: counted among the gate's rejections on
+    /// the bus; the node moves its own frame after enough of them, not a configured or
+    /// planner's one.
+    pub fn gnss_fixes_beyond_frame(&self) -> u32 {
+        self.gnss.fixes_beyond_frame()
+    }
+
     /// The on-line check of the steering's effect on the yaw rate ([`steering`]): its fitted
     /// gain against the model file's and whether the node uses it.
     pub fn steering(&self) -> &SteeringCheck {
@@ -596,6 +604,13 @@ impl<D: BorrowMut<Drive>> Node<D> {
             &mut self.inputs,
             probe,
         );
+        if self.gnss.take_frame_moved() {
+            // The car left the node's own frame and the frame moved with it: a path given in
+            // the old one no longer holds (never in a tick with a LOCAL_ORIGIN: a planner's
+            // frame is not moved).
+            self.drive.borrow_mut().drop_path();
+            probe.lap(Stage::Origin);
+        }
         planner_frames
     }
 

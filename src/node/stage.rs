@@ -72,9 +72,11 @@ pub enum Stage {
     /// A planner frame that completed a path of at most [`SHORT_PATH_POINTS`] points.
     PathCompleteShort,
     /// The planner's map origin (LOCAL_ORIGIN) made the local frame: the frame built, the
-    /// filters and the controller's path reset when it moved.
+    /// filters and the controller's path reset when it moved; or the controller's path reset
+    /// when the node moved its own frame.
     Origin,
-    /// The local frame built at the first fix (once in the node's life).
+    /// The local frame built at the first fix, or moved to a fix beyond the node's own frame
+    /// (the fix's check, the frame and the filters' restart).
     GnssOrigin,
     /// One fix into the local frame and through the plausibility gate (with the filters'
     /// restart after repeated rejections).
@@ -271,7 +273,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         stage: Stage::Origin,
         key: "origin",
         max_per_tick: 1,
-        because: "the tick's last LOCAL_ORIGIN only, after the frames",
+        because: "the tick's last LOCAL_ORIGIN only, after the frames, or the node's own frame moved (never both)",
         branch: Branch::Common,
         exclusive: None,
     },
@@ -279,7 +281,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         stage: Stage::GnssOrigin,
         key: "gnss_origin",
         max_per_tick: 1,
-        because: "once in the node's life (the local frame is never rebuilt)",
+        because: "a frame built at most once per tick (the first fix, or the car leaving the node's own frame)",
         branch: Branch::Common,
         exclusive: None,
     },

@@ -599,6 +599,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
         .min(lost_s - 1.5 * period_s)
         .max((GAP_FILL_PER_TICK as f64 + 1.5) * period_s);
     let lost_gap_s = (2.6_f64).max(lost_s + 6.0 * period_s);
+    let far_every_s = (5.0_f64).max(2.0 * reacquire_s + 30.0 * period_s);
     vec![
         // Running, both modes: frames bunched into single ticks (every tick at the cap for a
         // while), GNSS and COG at twice the fastest receiver's rate.
@@ -711,6 +712,20 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             seconds: 2.0,
             origin_deg: (-45.0, -179.99),
             ..plain("stages-origin-south")
+        },
+        // The car leaving the node's own frame: fixes 25 km away (beyond the frame's validity
+        // radius) long enough for the frame to move to them, and back, at the dearest of the
+        // latitudes above (the frame built again at each move).
+        Spec {
+            seconds: 2.0 + 2.0 * far_every_s,
+            origin_deg: (79.9, 179.9),
+            gnss_jump: Some(Periodic {
+                first_s: 2.0,
+                every_s: far_every_s,
+                len_s: reacquire_s + 10.0 * period_s,
+            }),
+            gnss_jump_m: 25_000.0,
+            ..plain("stages-frame-moves")
         },
         // The planner's paths completing: the longest path the bus carries (validation and
         // load over 256 points), and short ones completing every few ticks.
