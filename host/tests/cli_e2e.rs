@@ -504,3 +504,35 @@ fn receiver_error_from_a_parked_car() {
     let e = fails(&["receiver-error", s(&same_path)]);
     assert!(e.contains("fixes span 0.000 s"), "{e}");
 }
+
+#[test]
+fn replay_says_when_fixes_lie_beyond_the_local_frame() {
+    // An origin 20.5 km north of the bundled drive: every fix lies beyond the frame's 20 km
+    // reach, and a configured origin is not the node's to move. Before, replay blamed the
+    // receiver's rate.
+    let dir = tmp_dir("beyond-frame");
+    let stderr = ok(&[
+        "replay",
+        s(&data("bundled.can.log")),
+        "--origin",
+        "32.4169,-110.9501",
+        "--out",
+        s(&dir.join("pred.csv")),
+    ]);
+    assert!(
+        stderr.contains("more than 20 km from the local frame's origin")
+            && stderr.contains("too far from the drive")
+            && !stderr.contains("gnss_rate_hz"),
+        "{stderr}"
+    );
+    // The drive's own origin: not a word about the frame.
+    let stderr = ok(&[
+        "replay",
+        s(&data("bundled.can.log")),
+        "--origin",
+        "32.2319,-110.9501",
+        "--out",
+        s(&dir.join("pred.csv")),
+    ]);
+    assert!(!stderr.contains("local frame"), "{stderr}");
+}
