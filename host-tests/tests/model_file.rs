@@ -85,16 +85,60 @@ pub fn expected_message(path: &Path) -> String {
         .to_owned()
 }
 
-/// Every car's model file of the repository (the published one and those `catmodel identify`
-/// wrote for the van and the hatchback) loads: the reader's stability and gain bounds refuse
-/// none of them, though identified poles sit on the 0.1 1/s bound `identify` fits under.
+/// Every car's model file of the repository (the published one, those `catmodel identify`
+/// wrote for the van and the hatchback, and the truck of docs/findings-data) loads: the
+/// reader's stability, gain and physical bounds refuse none of them, though identified poles
+/// sit on the 0.1 1/s bound `identify` fits under.
 #[test]
 fn every_car_model_of_the_repository_loads() {
-    let files = corpus(".");
+    let mut files = corpus(".");
     assert!(files.len() >= 3, "{files:?}");
+    files.push(repo("docs/findings-data/truck-4hz.model.toml"));
     for path in files {
         if let Err(e) = model_file::load(&path) {
             panic!("{e}");
+        }
+    }
+}
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+}
+
+/// Every car the repository describes reaches the node through the reader and is accepted by
+/// its physical ranges: the owners' car files (`identify --vehicle`: the published file with
+/// the car's `[vehicle]`, `[dynamics]`, `[inputs]`, `[control]`) and the simulator's plants
+/// (`closed_loop::model_file_for`, as `closed-loop` and `sil` describe a plant to the node),
+/// from the city car to the van, the pickup and the 4 Hz truck.
+#[test]
+fn every_car_file_and_plant_of_the_repository_is_accepted() {
+    use catmodel_host::sim::config::VehicleConfig;
+    let base = model_file::paper();
+    let car_files = [
+        "host/vehicles/vw-polo.car.toml",
+        "host/vehicles/van.car.toml",
+        "docs/findings-data/truck-4hz.car.toml",
+    ];
+    for path in car_files {
+        if let Err(e) = catmodel_host::identify::car::apply(&base, &repo(path)) {
+            panic!("{path}: {e}");
+        }
+    }
+    let plants = [
+        "host/vehicles/cat-vehicle.toml",
+        "host/vehicles/city-car.toml",
+        "host/vehicles/hatchback.toml",
+        "host/vehicles/pickup.toml",
+        "host/vehicles/van.toml",
+        "host/vehicles/vw-polo.toml",
+        "host/tests/data/long-heavy-5hz.toml",
+        "host/tests/data/long-slow-steering-20hz.toml",
+        "docs/findings-data/truck-4hz.toml",
+    ];
+    for path in plants {
+        let plant = VehicleConfig::load(&repo(path)).unwrap_or_else(|e| panic!("{path}: {e}"));
+        if let Err(e) = catmodel_host::closed_loop::model_file_for(&plant) {
+            panic!("{path}: {e}");
         }
     }
 }
@@ -233,7 +277,7 @@ fn errors_name_the_file_and_the_key() {
     );
     expect_error(
         &t.replace("antenna_left_m = 0.0", "antenna_left_m = inf"),
-        "vehicle.antenna_left_m = inf: must be finite",
+        "vehicle.antenna_left_m = inf: must be within -1.403..1.403 m (on the car",
     );
     expect_error(
         &t.replace("gnss_lost_s = 2.0", "gnss_lost_s = 0.1"),

@@ -45,8 +45,17 @@
 //! imaginary axis or decaying slower than [`MIN_POLE_DECAY_RATE_PER_S`] (the bound `catmodel
 //! identify` fits under); a steady-state gain outside what the block's units allow
 //! ([`SPEED_DC_GAIN_RANGE`], [`LATERAL_DC_GAIN_RANGE`], [`DX_DT_POSITION_DC_GAIN_MAX_PER_S`], and
-//! for dx/dt from `v_m` +-2, from `phi` +-2 `max_speed_mps` per radian of lock); a `steer_gain`
-//! outside [`STEER_GAIN_RANGE`] or giving a lock of [`MAX_LOCK_DEG`] or more.
+//! for dx/dt from `v_m` +-2, from `phi` +-2 `max_speed_mps` per radian of lock); a
+//! high-frequency gain (what passes at once) or, for the speed and lateral models, a step
+//! response beyond [`SPEED_RESPONSE_MAX`] and [`LATERAL_RESPONSE_MAX`], and for dx/dt beyond what
+//! one tick's largest change of its input may do ([`block_problem`]); a block whose
+//! discretization loses its steady-state gain to rounding; a `steer_gain` outside
+//! [`STEER_GAIN_RANGE`] or giving a lock of [`MAX_LOCK_DEG`] or more. So is a car no one drives:
+//! every number has a physical range ([`KEY_RANGES`] and the checks beside it: the antenna on the
+//! car, the centre of gravity on the wheelbase, the yaw inertia and the cornering stiffnesses
+//! from the mass and size, a `[dynamics]` model stable up to `max_speed_mps`,
+//! [`critical_speed_mps`]); the units and outputs are the node's ([`Signals`]: it converts
+//! nothing); fit figures are finite, a fit at most 100 %.
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -509,63 +518,522 @@ fn err(path: &Path, message: String) -> ModelFileError {
     }
 }
 
-/// Checks of single values, each naming its key.
-struct Checker<'a> {
-    path: &'a Path,
-}
-
-impl Checker<'_> {
-    fn positive(&self, key: &str, v: f64) -> Result<(), ModelFileError> {
-        if v.is_finite() && v > 0.0 {
-            Ok(())
-        } else {
-            Err(err(
-                self.path,
-                format!("{key} = {v}: must be a finite number > 0"),
-            ))
-        }
-    }
-
-    fn non_negative(&self, key: &str, v: f64) -> Result<(), ModelFileError> {
-        if v.is_finite() && v >= 0.0 {
-            Ok(())
-        } else {
-            Err(err(
-                self.path,
-                format!("{key} = {v}: must be a finite number >= 0"),
-            ))
-        }
-    }
-
-    fn finite(&self, key: &str, v: f64) -> Result<(), ModelFileError> {
-        if v.is_finite() {
-            Ok(())
-        } else {
-            Err(err(self.path, format!("{key} = {v}: must be finite")))
-        }
-    }
-
-    fn within(&self, key: &str, v: f64, lo: f64, hi: f64, why: &str) -> Result<(), ModelFileError> {
-        if v.is_finite() && (lo..=hi).contains(&v) {
-            Ok(())
-        } else {
-            Err(err(
-                self.path,
-                format!("{key} = {v}: must be within {lo}..{hi} ({why})"),
-            ))
-        }
+/// A value for a message: as written when that is short (`2.62`, `0`, `NaN`, `inf`), else in
+/// exponent form (`1e30`, not thirty-one digits).
+fn shown(v: f64) -> String {
+    let plain = format!("{v}");
+    if plain.len() <= 8 {
+        plain
+    } else {
+        format!("{v:e}")
     }
 }
 
-/// The blocks of a model, matched to the node's inputs by name.
+/// `v` within `lo..=hi` (a finite number), or why not, naming the key, the range and the reason.
+fn within(key: &str, v: f64, lo: f64, hi: f64, unit: &str, why: &str) -> Result<(), String> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        let unit = if unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {unit}")
+        };
+        Err(format!(
+            "{key} = {}: must be within {}..{}{unit} ({why})",
+            shown(v),
+            sig(lo),
+            sig(hi)
+        ))
+    }
+}
+
+/// The physical range of a key ([`KEY_RANGES`]): a value outside it is one no car has, or a
+/// unit mistake.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KeyRange {
+    /// The key, `table.key`.
+    pub key: &'static str,
+    /// Its unit, as messages print it.
+    pub unit: &'static str,
+    /// Smallest value accepted.
+    pub min: f64,
+    /// Largest value accepted.
+    pub max: f64,
+    /// Why the range ends there (printed with the error).
+    pub why: &'static str,
+}
+
+const UNDERSTEER_WHY: &str =
+    "the cars here 0.0015..0.0022; at 0.01 a car at 30 m/s would need ten times the kinematic \
+     steering angle; an oversteering car (below 0) is not one the node models";
+const TIMEOUT_WHY: &str =
+    "one tick, the reports' 20 ms period, to 2 s: 100 missed reports, 60 m driven blind at 30 m/s";
+const HYBRID_SPEED_WHY: &str =
+    "from the single-track model's 1 m/s floor to the logs' reader's top speed, 80 m/s";
+const HYBRID_ACCEL_WHY: &str =
+    "0.1 m/s^2 is the estimate's noise; 15 m/s^2 = 1.5 g is beyond any road tyre's grip, \
+     a threshold there never switches";
+
+/// The fixed physical range of every numeric key that has one (README, "Model file"),
+/// deliberately wide, from a microcar to a bus or a 40 t truck, as the logs' reader's ranges
+/// are for samples (docs/logs.md): they catch unit mistakes and values no car has, not unusual
+/// cars. Bounds are inclusive. Ranges that depend on other keys are checked beside these: the
+/// GNSS antenna on the car ([`ANTENNA_MOUNT_M`]), `track_m` at most `width_m`, the overhang and
+/// wheelbase within `length_m`, the yaw inertia from the mass and length
+/// ([`RADIUS_OF_GYRATION_SHARE_OF_LENGTH`]), the centre of gravity on the wheelbase
+/// ([`CG_SHARE_OF_WHEELBASE`]), the cornering stiffnesses from the axle loads
+/// ([`CORNERING_STIFFNESS_PER_LOAD_PER_RAD`]) and below the critical speed
+/// ([`critical_speed_mps`]), `gnss_lost_s` beyond the GNSS timeout, the lock with
+/// `lateral.steer_gain` ([`MAX_LOCK_DEG`]).
+pub const KEY_RANGES: [KeyRange; 24] = [
+    KeyRange {
+        key: "vehicle.wheelbase_m",
+        unit: "m",
+        min: 1.0,
+        max: 10.0,
+        why: "a microcar's 1.7 m (Renault Twizy) to a long coach's 7 to 8 m; a wheelbase in cm, mm \
+              or inches is far outside",
+    },
+    KeyRange {
+        key: "vehicle.track_m",
+        unit: "m",
+        min: 0.5,
+        max: 3.0,
+        why: "a microcar's 1.1 m to a truck's 2.1 m",
+    },
+    KeyRange {
+        key: "vehicle.max_steer_deg",
+        unit: "deg",
+        min: 10.0,
+        max: 65.0,
+        why: "the centre tyre at full lock: cars 30..45 deg, buses and trucks up to about 55; \
+              below 10 a car turns no tighter than a 30 m circle",
+    },
+    KeyRange {
+        key: "vehicle.understeer_s2_per_m2",
+        unit: "s^2/m^2",
+        min: 0.0,
+        max: 0.01,
+        why: UNDERSTEER_WHY,
+    },
+    KeyRange {
+        key: "vehicle.gnss_rate_hz",
+        unit: "Hz",
+        min: GNSS_RATE_RANGE_HZ.0,
+        max: GNSS_RATE_RANGE_HZ.1,
+        why: "the receiver rates the node's lowpass and gap logic are designed for",
+    },
+    KeyRange {
+        key: "vehicle.width_m",
+        unit: "m",
+        min: 0.8,
+        max: 3.0,
+        why: "a microcar's 1.2 m to the 2.55-2.6 m road limit of buses and trucks",
+    },
+    KeyRange {
+        key: "vehicle.length_m",
+        unit: "m",
+        min: 1.0,
+        max: 25.0,
+        why: "a microcar's 2.3 m to the longest truck combinations' 25 m",
+    },
+    KeyRange {
+        key: "vehicle.rear_overhang_m",
+        unit: "m",
+        min: 0.0,
+        max: 6.0,
+        why: "a coach's is about 4 m",
+    },
+    KeyRange {
+        key: "vehicle.max_speed_mps",
+        unit: "m/s",
+        min: 5.0,
+        max: 80.0,
+        why: "80 m/s = 288 km/h, the logs' reader's top speed; no road vehicle is limited below \
+              5 m/s = 18 km/h; a speed in km/h or mph?",
+    },
+    KeyRange {
+        key: "vehicle.max_steer_rate_pct_per_s",
+        unit: "%/s",
+        min: 5.0,
+        max: 500.0,
+        why: "lock to lock (200 %) in 40 s is slower than any steering, in 0.4 s faster than any \
+              actuator; the CAT Vehicle's 60, the Polo's 100",
+    },
+    KeyRange {
+        key: "vehicle.steer_lag_s",
+        unit: "s",
+        min: STEER_LAG_RANGE_S.0,
+        max: STEER_LAG_RANGE_S.1,
+        why: "how far the steering trails a ramp command: the MPC's lead stays within its limit",
+    },
+    KeyRange {
+        key: "dynamics.mass_kg",
+        unit: "kg",
+        min: 200.0,
+        max: 50_000.0,
+        why: "a 450 kg microcar to a 40-44 t truck, with margin; a mass in tonnes or pounds?",
+    },
+    KeyRange {
+        key: "inputs.steer_timeout_s",
+        unit: "s",
+        min: 0.02,
+        max: 2.0,
+        why: TIMEOUT_WHY,
+    },
+    KeyRange {
+        key: "inputs.speed_timeout_s",
+        unit: "s",
+        min: 0.02,
+        max: 2.0,
+        why: TIMEOUT_WHY,
+    },
+    KeyRange {
+        key: "inputs.pedal_timeout_s",
+        unit: "s",
+        min: 0.02,
+        max: 2.0,
+        why: TIMEOUT_WHY,
+    },
+    KeyRange {
+        key: "inputs.gnss_gate_m",
+        unit: "m",
+        min: 1.0,
+        max: 100.0,
+        why: "1 m is the tightest gate the node learns; a gate past 100 m rejects nothing a receiver sends",
+    },
+    KeyRange {
+        key: "inputs.gnss_lost_s",
+        unit: "s",
+        min: 0.2,
+        max: 30.0,
+        why: "dead reckoning drifts by a few % of the distance: after 30 s at 30 m/s it is tens of \
+              metres off, beyond any gate",
+    },
+    KeyRange {
+        key: "control.position_uncertainty_m",
+        unit: "m",
+        min: 0.0,
+        max: 20.0,
+        why: "RTK's centimetres to a single-point receiver's few metres; no receiver a car drives by is worse",
+    },
+    KeyRange {
+        key: "control.mpc_lateral_weight_per_m2",
+        unit: "per m^2",
+        min: MPC_LATERAL_WEIGHT_RANGE.0,
+        max: MPC_LATERAL_WEIGHT_RANGE.1,
+        why: "the heading weight is 10, the steering's 1",
+    },
+    KeyRange {
+        key: "hybrid.enter_dynamic_speed_mps",
+        unit: "m/s",
+        min: 1.0,
+        max: 80.0,
+        why: HYBRID_SPEED_WHY,
+    },
+    KeyRange {
+        key: "hybrid.exit_dynamic_speed_mps",
+        unit: "m/s",
+        min: 1.0,
+        max: 80.0,
+        why: HYBRID_SPEED_WHY,
+    },
+    KeyRange {
+        key: "hybrid.enter_dynamic_lat_accel_mps2",
+        unit: "m/s^2",
+        min: 0.1,
+        max: 15.0,
+        why: HYBRID_ACCEL_WHY,
+    },
+    KeyRange {
+        key: "hybrid.exit_dynamic_lat_accel_mps2",
+        unit: "m/s^2",
+        min: 0.1,
+        max: 15.0,
+        why: HYBRID_ACCEL_WHY,
+    },
+    KeyRange {
+        key: "hybrid.min_dwell_ticks",
+        unit: "ticks",
+        min: 0.0,
+        max: 500.0,
+        why: "500 ticks = 10 s: a mode held longer outlasts the manoeuvre it was chosen for",
+    },
+];
+
+/// `lateral.understeer_s2_per_m2` has `vehicle.understeer_s2_per_m2`'s range.
+const LATERAL_UNDERSTEER: KeyRange = KeyRange {
+    key: "lateral.understeer_s2_per_m2",
+    unit: "s^2/m^2",
+    min: 0.0,
+    max: 0.01,
+    why: UNDERSTEER_WHY,
+};
+
+/// Why `value` of `key` is refused by its range in [`KEY_RANGES`], if it is (`None` for a key
+/// without a fixed range). `catmodel identify` applies it to what it estimates.
+pub fn range_problem(key: &str, value: f64) -> Option<String> {
+    let r = KEY_RANGES
+        .iter()
+        .chain(std::iter::once(&LATERAL_UNDERSTEER))
+        .find(|r| r.key == key)?;
+    within(r.key, value, r.min, r.max, r.unit, r.why).err()
+}
+
+/// `value` of `key` within its range in [`KEY_RANGES`]. A key the table does not hold is a bug
+/// of this reader, refused as such (every file would be, and every test would say so).
+fn range(key: &str, value: f64) -> Result<(), String> {
+    if !KEY_RANGES
+        .iter()
+        .chain(std::iter::once(&LATERAL_UNDERSTEER))
+        .any(|r| r.key == key)
+    {
+        return Err(format!(
+            "{key}: no range for this key (a bug of the model file's reader)"
+        ));
+    }
+    range_problem(key, value).map_or(Ok(()), Err)
+}
+
+/// How far off the body a GNSS antenna's mount may put it, m (a bracket or a mast): the
+/// antenna is on the car, within its length and width and this much more.
+pub const ANTENNA_MOUNT_M: f64 = 0.5;
+
+/// Where the centre of gravity may be on the wheelbase: `cg_to_front_m` and `cg_to_rear_m` each
+/// within this share of the wheelbase (no road vehicle carries more than 85 % of its weight on
+/// one axle: a rear-engined car 60 %, an empty tractor unit about 70 % on the front).
+pub const CG_SHARE_OF_WHEELBASE: (f64, f64) = (0.15, 0.85);
+
+/// The radius of gyration `sqrt(yaw_inertia_kg_m2 / mass_kg)` over `length_m`: a car's is about
+/// 0.3 (the CAT Vehicle 0.27, the Polo, the van 0.31); below 0.1 the mass would sit in a point,
+/// and none of it is farther from the centre of gravity than the car's length.
+pub const RADIUS_OF_GYRATION_SHARE_OF_LENGTH: (f64, f64) = (0.1, 1.0);
+
+/// An axle's cornering stiffness over its static load (`mass_kg` g times the other axle's share
+/// of the wheelbase), per rad: a tyre gives 0.1 to 0.35 of its load per degree of slip, 6 to 20
+/// per radian (the CAT Vehicle's 8.3 and 12.2, a truck's 5 and 11); a stiffness in N/deg or
+/// kN/rad is far outside.
+pub const CORNERING_STIFFNESS_PER_LOAD_PER_RAD: (f64, f64) = (2.0, 40.0);
+
+/// Standard gravity, m/s^2 (axle loads).
+const GRAVITY_MPS2: f64 = 9.80665;
+
+/// The speed above which the linear single-track model `d` is unstable, m/s: an oversteering
+/// model (`C_f l_f > C_r l_r`) diverges above `v_crit = sqrt(C_f C_r L^2 / (m (C_f l_f - C_r
+/// l_r)))`; `None` for a neutral or understeering one, stable at every speed.
+pub fn critical_speed_mps(d: &DynamicsSection) -> Option<f64> {
+    let front = d.cornering_front_n_per_rad * d.cg_to_front_m;
+    let rear = d.cornering_rear_n_per_rad * d.cg_to_rear_m;
+    let excess = front - rear;
+    // A NaN stiffness gives no critical speed: the ranges refuse it.
+    if excess.is_nan() || excess <= 0.0 {
+        return None;
+    }
+    let l = d.cg_to_front_m + d.cg_to_rear_m;
+    Some(
+        (d.cornering_front_n_per_rad * d.cornering_rear_n_per_rad * l * l / (d.mass_kg * excess))
+            .sqrt(),
+    )
+}
+
+/// Why a `[dynamics]` table is refused for the car `v`, if it is: a key outside its range, a
+/// centre of gravity off the wheelbase, or a model that is unstable below `max_speed_mps`.
+/// `catmodel identify` applies it to the stiffnesses it fits.
+pub fn dynamics_problem(v: &VehicleSection, d: &DynamicsSection) -> Option<String> {
+    dynamics_check(v, d).err()
+}
+
+fn dynamics_check(v: &VehicleSection, d: &DynamicsSection) -> Result<(), String> {
+    range("dynamics.mass_kg", d.mass_kg)?;
+    let (k_lo, k_hi) = RADIUS_OF_GYRATION_SHARE_OF_LENGTH;
+    within(
+        "dynamics.yaw_inertia_kg_m2",
+        d.yaw_inertia_kg_m2,
+        d.mass_kg * (k_lo * v.length_m).powi(2),
+        d.mass_kg * (k_hi * v.length_m).powi(2),
+        "kg m^2",
+        "mass_kg x (0.1 length_m)^2 .. mass_kg x length_m^2: a car's radius of gyration is about 0.3 \
+         of its length, and none of its mass is farther from the centre of gravity than its length",
+    )?;
+    let (share_lo, share_hi) = CG_SHARE_OF_WHEELBASE;
+    for (key, value) in [
+        ("dynamics.cg_to_front_m", d.cg_to_front_m),
+        ("dynamics.cg_to_rear_m", d.cg_to_rear_m),
+    ] {
+        within(
+            key,
+            value,
+            share_lo * v.wheelbase_m,
+            share_hi * v.wheelbase_m,
+            "m",
+            "15 to 85 % of vehicle.wheelbase_m: no road vehicle carries more than 85 % of its weight on one axle",
+        )?;
+    }
+    let l = d.cg_to_front_m + d.cg_to_rear_m;
+    if (l - v.wheelbase_m).abs() > 0.01 {
+        return Err(format!(
+            "dynamics: cg_to_front_m + cg_to_rear_m = {l} m differs from vehicle.wheelbase_m = {} m by more than 1 cm",
+            v.wheelbase_m
+        ));
+    }
+    // Stability first: it is what an oversteering pair of stiffnesses does to the node (a NaN or
+    // negative stiffness gives no critical speed, and its range refuses it below).
+    if let Some(v_crit) = critical_speed_mps(d) {
+        if v_crit <= v.max_speed_mps {
+            return Err(format!(
+                "dynamics: the single-track model oversteers (cornering_front_n_per_rad x cg_to_front_m = {} N m/rad \
+                 above cornering_rear_n_per_rad x cg_to_rear_m = {} N m/rad) and is unstable above its critical \
+                 speed sqrt(C_f C_r L^2 / (m (C_f l_f - C_r l_r))) = {} m/s, within vehicle.max_speed_mps = {}: \
+                 no car is driven beyond its critical speed (check the stiffnesses and the centre of gravity)",
+                sig(d.cornering_front_n_per_rad * d.cg_to_front_m),
+                sig(d.cornering_rear_n_per_rad * d.cg_to_rear_m),
+                sig(v_crit),
+                shown(v.max_speed_mps)
+            ));
+        }
+    }
+    let (c_lo, c_hi) = CORNERING_STIFFNESS_PER_LOAD_PER_RAD;
+    for (key, value, axle, other_share) in [
+        (
+            "dynamics.cornering_front_n_per_rad",
+            d.cornering_front_n_per_rad,
+            "front",
+            d.cg_to_rear_m / l,
+        ),
+        (
+            "dynamics.cornering_rear_n_per_rad",
+            d.cornering_rear_n_per_rad,
+            "rear",
+            d.cg_to_front_m / l,
+        ),
+    ] {
+        let load_n = d.mass_kg * GRAVITY_MPS2 * other_share;
+        within(
+            key,
+            value,
+            c_lo * load_n,
+            c_hi * load_n,
+            "N/rad",
+            &format!(
+                "{c_lo} to {c_hi} per rad of the {axle} axle's static load, {} N: a tyre gives 6 to 20; N/deg or kN/rad?",
+                sig(load_n)
+            ),
+        )?;
+    }
+    Ok(())
+}
+
+/// A model's fixed labels: what the node feeds it and reads from it. The node converts nothing:
+/// a model identified in other units, or for another output, would run with its coefficients
+/// applied to the wrong numbers, so a file must name exactly these.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Signals {
+    /// The output's name.
+    pub output: &'static str,
+    /// The output's unit.
+    pub output_unit: &'static str,
+    /// The inputs' names, in the node's order.
+    pub inputs: &'static [&'static str],
+    /// The inputs' units, in the same order.
+    pub input_units: &'static [&'static str],
+}
+
+/// The speed model (eq 5): commanded speed -> speed, both in m/s.
+pub const SPEED_SIGNALS: Signals = Signals {
+    output: "vel",
+    output_unit: "m/s",
+    inputs: &SPEED_INPUTS,
+    input_units: &["m/s"],
+};
+
+/// The dx/dt model (eq 7): speed (m/s), position east and north (m), the centre tyre's angle
+/// (rad) -> the east velocity (m/s).
+pub const DX_DT_SIGNALS: Signals = Signals {
+    output: "dx_dt",
+    output_unit: "m/s",
+    inputs: &DX_DT_INPUTS,
+    input_units: &["m/s", "m", "m", "rad"],
+};
+
+/// The lateral model: kinematic yaw rate -> yaw rate, both in rad/s.
+pub const LATERAL_SIGNALS: Signals = Signals {
+    output: "yaw_rate",
+    output_unit: "rad/s",
+    inputs: &LATERAL_INPUTS,
+    input_units: &["rad/s"],
+};
+
+/// A label the node fixes, or why it is refused: `expected X, found Y`.
+fn label(key: &str, want: &str, found: &str) -> Result<(), String> {
+    if found == want {
+        Ok(())
+    } else {
+        Err(format!(
+            "{key}: expected {want:?}, found {found:?} (the node feeds and reads this model in fixed signals \
+             and units and converts nothing: identify or convert the model for them)"
+        ))
+    }
+}
+
+/// Fit figures as `catmodel compare` defines them: a fit % is `100 (1 - |y - yhat| / |y -
+/// mean(y)|)`, at most 100 (a perfect fit; any value below is possible), an MSE at least 0.
+fn fit_check(key: &str, fit: &Fit) -> Result<(), String> {
+    for (name, value) in [
+        ("training_fit_percent", fit.training_fit_percent),
+        ("validation_fit_percent", fit.validation_fit_percent),
+        (
+            "kinematic_training_fit_percent",
+            fit.kinematic_training_fit_percent,
+        ),
+        (
+            "kinematic_validation_fit_percent",
+            fit.kinematic_validation_fit_percent,
+        ),
+    ] {
+        if let Some(p) = value.filter(|p| !(p.is_finite() && *p <= 100.0)) {
+            return Err(format!(
+                "{key}.fit.{name} = {}: must be a finite number <= 100 (a fit percentage: 100 is a perfect fit, \
+                 0 no better than the output's mean, below 0 worse)",
+                shown(p)
+            ));
+        }
+    }
+    for (name, value) in [
+        ("training_mse", fit.training_mse),
+        ("validation_mse", fit.validation_mse),
+        ("kinematic_training_mse", fit.kinematic_training_mse),
+        ("kinematic_validation_mse", fit.kinematic_validation_mse),
+    ] {
+        if let Some(m) = value.filter(|m| !(m.is_finite() && *m >= 0.0)) {
+            return Err(format!(
+                "{key}.fit.{name} = {}: must be a finite number >= 0 (a mean square error)",
+                shown(m)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The blocks of a model, matched to the node's inputs by name, with the labels the node
+/// fixes ([`Signals`]) and the fit figures checked.
 fn convert_model(
     path: &Path,
     key: &str,
     raw: RawModel,
-    inputs: &[&str],
+    signals: &Signals,
     ts: f64,
     vehicle: &VehicleSection,
 ) -> Result<Model, ModelFileError> {
+    let at = |message: String| err(path, message);
+    let inputs = signals.inputs;
+    label(&format!("{key}.output"), signals.output, &raw.output).map_err(at)?;
+    label(
+        &format!("{key}.output_unit"),
+        signals.output_unit,
+        &raw.output_unit,
+    )
+    .map_err(at)?;
     let mut slots: Vec<Option<Block>> = vec![None; inputs.len()];
     for (i, b) in raw.blocks.into_iter().enumerate() {
         let bkey = format!("{key}.blocks[{i}]");
@@ -608,25 +1076,13 @@ fn convert_model(
                 ),
             ));
         }
-        // Stability, then the steady-state gain its units allow (both named by input).
-        let nkey = format!("{key}.blocks[{}]", b.input);
-        if let Some(why) = pole_problem(tf.denominator()) {
-            return Err(err(path, format!("{nkey}: {why}")));
+        // Its unit, its stability, then the gains its units allow (named by input).
+        if let Some(unit) = signals.input_units.get(slot) {
+            let nkey = format!("{key}.blocks[{}]", b.input);
+            label(&format!("{nkey}.input_unit"), unit, &b.input_unit).map_err(at)?;
         }
-        if let (Some((lo, hi, what)), Ok(gain)) =
-            (dc_gain_bounds(key, &b.input, vehicle), tf.dc_gain())
-        {
-            if !(lo..=hi).contains(&gain) {
-                return Err(err(
-                    path,
-                    format!(
-                        "{nkey}: DC gain {} is outside {}..{} ({what})",
-                        sig(gain),
-                        sig(lo),
-                        sig(hi)
-                    ),
-                ));
-            }
+        if let Some(why) = block_problem(key, &b.input, &tf, vehicle, ts) {
+            return Err(err(path, why));
         }
         *target = Some(Block {
             input: b.input,
@@ -649,6 +1105,7 @@ fn convert_model(
             }
         }
     }
+    fit_check(key, &raw.fit).map_err(at)?;
     Ok(Model {
         equation: raw.equation,
         output: raw.output,
@@ -658,6 +1115,62 @@ fn convert_model(
     })
 }
 
+/// Why block `input` of model `key` (`speed`, `dx_dt`, `lateral`) is refused for the car
+/// `vehicle` at the sample time `ts`, if it is, naming the block: a pole in the right
+/// half-plane, on the imaginary axis or too slow ([`pole_problem`]); a steady-state gain, a
+/// high-frequency gain (what passes at once, `num[0] / den[0]`) or, for the speed and lateral
+/// models, a step response outside what the block's units allow. `catmodel identify` applies
+/// it to the blocks it fits.
+pub fn block_problem(
+    key: &str,
+    input: &str,
+    tf: &TransferFunction,
+    vehicle: &VehicleSection,
+    ts: f64,
+) -> Option<String> {
+    let nkey = format!("{key}.blocks[{input}]");
+    if let Some(why) = pole_problem(tf.denominator()) {
+        return Some(format!("{nkey}: {why}"));
+    }
+    if let (Some((lo, hi, what)), Ok(gain)) = (dc_gain_bounds(key, input, vehicle), tf.dc_gain()) {
+        if !(lo..=hi).contains(&gain) {
+            return Some(format!(
+                "{nkey}: DC gain {} is outside {}..{} ({what})",
+                sig(gain),
+                sig(lo),
+                sig(hi)
+            ));
+        }
+    }
+    if let Some((lo, hi, what)) = hf_gain_bounds(key, input, vehicle, ts) {
+        let hf = high_frequency_gain(tf);
+        if !(lo..=hi).contains(&hf) {
+            return Some(format!(
+                "{nkey}: high-frequency gain {} (num[0] / den[0], what passes at once) is outside {}..{} ({what})",
+                sig(hf),
+                sig(lo),
+                sig(hi)
+            ));
+        }
+    }
+    if let Some((max, what)) = step_peak_bound(key) {
+        match step_peak(tf, ts) {
+            Ok((peak, _)) if peak.abs() <= max => {}
+            Ok((peak, at_s)) => {
+                return Some(format!(
+                    "{nkey}: the step response reaches {} times the step {} s after it (delay excluded), \
+                     outside -{}..{} ({what})",
+                    sig(peak),
+                    sig(at_s),
+                    sig(max),
+                    sig(max)
+                ));
+            }
+            Err(e) => return Some(format!("{nkey}: {}", describe_model_error(&e))),
+        }
+    }
+    None
+}
 /// Parses and validates a model file's text; `path` only names it in errors. A file that parses
 /// is one the node runs ([`ModelFile::node_config`] succeeds).
 pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
@@ -691,7 +1204,7 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
         None => return Err(err(path, format!("missing key `format` (expected {FORMAT:?})"))),
     }
     let raw: RawFile = toml::from_str(text).map_err(|e| err(path, toml_message(text, &e)))?;
-    let check = Checker { path };
+    let at = |message: String| err(path, message);
     let ts = raw.sample_time_s;
     let node_ts = catmodel::SAMPLE_PERIOD_S_F64;
     if !(ts.is_finite() && (ts - node_ts).abs() <= 1e-12) {
@@ -703,31 +1216,36 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
         ));
     }
     let v = &raw.vehicle;
-    check.positive("vehicle.wheelbase_m", v.wheelbase_m)?;
-    check.positive("vehicle.track_m", v.track_m)?;
-    check.positive("vehicle.max_steer_deg", v.max_steer_deg)?;
-    if v.max_steer_deg >= 90.0 {
+    for (key, value) in [
+        ("vehicle.wheelbase_m", v.wheelbase_m),
+        ("vehicle.track_m", v.track_m),
+        ("vehicle.max_steer_deg", v.max_steer_deg),
+        ("vehicle.understeer_s2_per_m2", v.understeer_s2_per_m2),
+        ("vehicle.gnss_rate_hz", v.gnss_rate_hz),
+        ("vehicle.width_m", v.width_m),
+        ("vehicle.length_m", v.length_m),
+        ("vehicle.rear_overhang_m", v.rear_overhang_m),
+        ("vehicle.max_speed_mps", v.max_speed_mps),
+        (
+            "vehicle.max_steer_rate_pct_per_s",
+            v.max_steer_rate_pct_per_s,
+        ),
+    ] {
+        range(key, value).map_err(at)?;
+    }
+    if let Some(lag) = v.steer_lag_s {
+        range("vehicle.steer_lag_s", lag).map_err(at)?;
+    }
+    if v.track_m > v.width_m {
         return Err(err(
             path,
             format!(
-                "vehicle.max_steer_deg = {}: must be below 90",
-                v.max_steer_deg
+                "vehicle.track_m = {}: wider than width_m = {} (the tyres are under the body)",
+                shown(v.track_m),
+                shown(v.width_m)
             ),
         ));
     }
-    check.non_negative("vehicle.understeer_s2_per_m2", v.understeer_s2_per_m2)?;
-    check.finite("vehicle.antenna_ahead_m", v.antenna_ahead_m)?;
-    check.finite("vehicle.antenna_left_m", v.antenna_left_m)?;
-    check.within(
-        "vehicle.gnss_rate_hz",
-        v.gnss_rate_hz,
-        GNSS_RATE_RANGE_HZ.0,
-        GNSS_RATE_RANGE_HZ.1,
-        "the receiver rates the node's lowpass and gap logic are designed for",
-    )?;
-    check.positive("vehicle.width_m", v.width_m)?;
-    check.positive("vehicle.length_m", v.length_m)?;
-    check.non_negative("vehicle.rear_overhang_m", v.rear_overhang_m)?;
     if v.rear_overhang_m + v.wheelbase_m > v.length_m {
         return Err(err(
             path,
@@ -738,50 +1256,39 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             ),
         ));
     }
-    check.positive("vehicle.max_speed_mps", v.max_speed_mps)?;
-    check.positive(
-        "vehicle.max_steer_rate_pct_per_s",
-        v.max_steer_rate_pct_per_s,
-    )?;
-    if let Some(lag) = v.steer_lag_s {
-        if !(lag.is_finite() && (STEER_LAG_RANGE_S.0..=STEER_LAG_RANGE_S.1).contains(&lag)) {
-            return Err(err(
-                path,
-                format!(
-                    "vehicle.steer_lag_s = {lag}: must be within {}..{} s (how far the steering trails a ramp command)",
-                    STEER_LAG_RANGE_S.0, STEER_LAG_RANGE_S.1
-                ),
-            ));
-        }
-    }
+    // The antenna is on the car: from the rear bumper to the front one, within its width, and
+    // a mount's reach more.
+    within(
+        "vehicle.antenna_ahead_m",
+        v.antenna_ahead_m,
+        -v.rear_overhang_m - ANTENNA_MOUNT_M,
+        v.length_m - v.rear_overhang_m + ANTENNA_MOUNT_M,
+        "m",
+        "on the car: from the rear bumper, rear_overhang_m behind the rear axle, to the front one, \
+         length_m - rear_overhang_m ahead of it, and 0.5 m more for a mount",
+    )
+    .map_err(at)?;
+    let half_width_m = v.width_m / 2.0 + ANTENNA_MOUNT_M;
+    within(
+        "vehicle.antenna_left_m",
+        v.antenna_left_m,
+        -half_width_m,
+        half_width_m,
+        "m",
+        "on the car: within width_m / 2 of the centre line, and 0.5 m more for a mount",
+    )
+    .map_err(at)?;
     if let Some(d) = &raw.dynamics {
-        check.positive("dynamics.mass_kg", d.mass_kg)?;
-        check.positive("dynamics.yaw_inertia_kg_m2", d.yaw_inertia_kg_m2)?;
-        check.positive("dynamics.cg_to_front_m", d.cg_to_front_m)?;
-        check.positive("dynamics.cg_to_rear_m", d.cg_to_rear_m)?;
-        check.positive(
-            "dynamics.cornering_front_n_per_rad",
-            d.cornering_front_n_per_rad,
-        )?;
-        check.positive(
-            "dynamics.cornering_rear_n_per_rad",
-            d.cornering_rear_n_per_rad,
-        )?;
-        let l = d.cg_to_front_m + d.cg_to_rear_m;
-        if (l - v.wheelbase_m).abs() > 0.01 {
-            return Err(err(
-                path,
-                format!(
-                    "dynamics: cg_to_front_m + cg_to_rear_m = {l} m differs from vehicle.wheelbase_m = {} m by more than 1 cm",
-                    v.wheelbase_m
-                ),
-            ));
-        }
+        dynamics_check(v, d).map_err(at)?;
     }
     let i = &raw.inputs;
-    check.positive("inputs.steer_timeout_s", i.steer_timeout_s)?;
-    check.positive("inputs.speed_timeout_s", i.speed_timeout_s)?;
-    check.positive("inputs.pedal_timeout_s", i.pedal_timeout_s)?;
+    for (key, value) in [
+        ("inputs.steer_timeout_s", i.steer_timeout_s),
+        ("inputs.speed_timeout_s", i.speed_timeout_s),
+        ("inputs.pedal_timeout_s", i.pedal_timeout_s),
+    ] {
+        range(key, value).map_err(at)?;
+    }
     if i.gnss_source_address > 251 {
         return Err(err(
             path,
@@ -791,7 +1298,7 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             ),
         ));
     }
-    check.positive("inputs.gnss_gate_m", i.gnss_gate_m)?;
+    range("inputs.gnss_gate_m", i.gnss_gate_m).map_err(at)?;
     let gnss_timeout_s = InputsSection::gnss_timeout_s(v.gnss_rate_hz);
     if !(i.gnss_lost_s.is_finite() && i.gnss_lost_s > gnss_timeout_s) {
         return Err(err(
@@ -802,44 +1309,14 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             ),
         ));
     }
-    for (key, val) in [
-        ("inputs.steer_timeout_s", i.steer_timeout_s),
-        ("inputs.speed_timeout_s", i.speed_timeout_s),
-        ("inputs.pedal_timeout_s", i.pedal_timeout_s),
-        ("inputs.gnss_lost_s", i.gnss_lost_s),
-    ] {
-        if val > 60.0 {
-            return Err(err(
-                path,
-                format!("{key} = {val}: above 60 s, an input that old is not a measurement"),
-            ));
-        }
-    }
+    range("inputs.gnss_lost_s", i.gnss_lost_s).map_err(at)?;
     let c = &raw.control;
-    if !(c.position_uncertainty_m.is_finite() && (0.0..=20.0).contains(&c.position_uncertainty_m)) {
-        return Err(err(
-            path,
-            format!(
-                "control.position_uncertainty_m = {}: must be within 0..20 m",
-                c.position_uncertainty_m
-            ),
-        ));
-    }
+    range("control.position_uncertainty_m", c.position_uncertainty_m).map_err(at)?;
     if let Some(w) = c.mpc_lateral_weight_per_m2 {
-        if !(w.is_finite()
-            && (MPC_LATERAL_WEIGHT_RANGE.0..=MPC_LATERAL_WEIGHT_RANGE.1).contains(&w))
-        {
-            return Err(err(
-                path,
-                format!(
-                    "control.mpc_lateral_weight_per_m2 = {w}: must be within {}..{} (the heading weight is 10, the steering's 1)",
-                    MPC_LATERAL_WEIGHT_RANGE.0, MPC_LATERAL_WEIGHT_RANGE.1
-                ),
-            ));
-        }
+        range("control.mpc_lateral_weight_per_m2", w).map_err(at)?;
     }
     let h = &raw.hybrid;
-    for (key, val) in [
+    for (key, value) in [
         ("hybrid.enter_dynamic_speed_mps", h.enter_dynamic_speed_mps),
         (
             "hybrid.enter_dynamic_lat_accel_mps2",
@@ -850,8 +1327,9 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             "hybrid.exit_dynamic_lat_accel_mps2",
             h.exit_dynamic_lat_accel_mps2,
         ),
+        ("hybrid.min_dwell_ticks", f64::from(h.min_dwell_ticks)),
     ] {
-        check.positive(key, val)?;
+        range(key, value).map_err(at)?;
     }
     if h.exit_dynamic_speed_mps > h.enter_dynamic_speed_mps
         || h.exit_dynamic_lat_accel_mps2 > h.enter_dynamic_lat_accel_mps2
@@ -861,15 +1339,15 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             "hybrid: exit thresholds must not exceed enter thresholds (hysteresis)".into(),
         ));
     }
-    let speed = convert_model(path, "speed", raw.speed, &SPEED_INPUTS, ts, &raw.vehicle)?;
-    let dx_dt = convert_model(path, "dx_dt", raw.dx_dt, &DX_DT_INPUTS, ts, &raw.vehicle)?;
+    let speed = convert_model(path, "speed", raw.speed, &SPEED_SIGNALS, ts, &raw.vehicle)?;
+    let dx_dt = convert_model(path, "dx_dt", raw.dx_dt, &DX_DT_SIGNALS, ts, &raw.vehicle)?;
     let lateral = match raw.lateral {
         None => None,
         Some(l) => {
             if let Some(why) = steer_gain_problem(raw.vehicle.max_steer_deg, l.steer_gain) {
                 return Err(err(path, why));
             }
-            check.non_negative("lateral.understeer_s2_per_m2", l.understeer_s2_per_m2)?;
+            range("lateral.understeer_s2_per_m2", l.understeer_s2_per_m2).map_err(at)?;
             let model = convert_model(
                 path,
                 "lateral",
@@ -880,10 +1358,24 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
                     blocks: l.blocks,
                     fit: l.fit,
                 },
-                &LATERAL_INPUTS,
+                &LATERAL_SIGNALS,
                 ts,
                 &raw.vehicle,
             )?;
+            // The node does not run this block (its delay line is not involved): the bound is
+            // the car's, not the node's.
+            for b in &model.blocks {
+                within(
+                    &format!("lateral.blocks[{}].delay_s", b.input),
+                    b.tf.delay_s(),
+                    LATERAL_DELAY_RANGE_S.0,
+                    LATERAL_DELAY_RANGE_S.1,
+                    "s",
+                    "the yaw rate follows the steering within a fraction of a second; its lag is the block's pole, \
+                     and `catmodel identify` scans delays of 0..0.2 s",
+                )
+                .map_err(at)?;
+            }
             Some(Lateral {
                 steer_gain: l.steer_gain,
                 understeer_s2_per_m2: l.understeer_s2_per_m2,
@@ -958,15 +1450,16 @@ impl ModelFile {
         let velocity: SsBlock<2, VELOCITY_DELAY_CAP> = zoh::discretize(&velocity_tf, ts)
             .and_then(|d| embed(&d))
             .map_err(|e| block_err("speed.blocks[input_vel]", e))?;
-        velocity
-            .dc_gain()
-            .filter(|g| *g != 0.0)
-            .ok_or_else(|| block_err("speed.blocks[input_vel]", ModelError::NoEquilibrium))?;
+        same_steady_state(velocity.dc_gain(), &velocity_tf)
+            .map_err(|why| err(path, format!("speed.blocks[input_vel]: {why}")))?;
         let mut dxdt_blocks = [SsBlock::<2, DXDT_DELAY_CAP>::zeroed(); 4];
         for (slot, b) in dxdt_blocks.iter_mut().zip(&self.dx_dt.blocks) {
+            let key = format!("dx_dt.blocks[{}]", b.input);
             *slot = zoh::discretize(&b.tf, ts)
                 .and_then(|d| embed(&d))
-                .map_err(|e| block_err(&format!("dx_dt.blocks[{}]", b.input), e))?;
+                .map_err(|e| block_err(&key, e))?;
+            same_steady_state(slot.dc_gain(), &b.tf)
+                .map_err(|why| err(path, format!("{key}: {why}")))?;
         }
         let dxdt = MisoBlock::from_blocks(dxdt_blocks);
         let v = &self.vehicle;
@@ -1043,6 +1536,168 @@ impl ModelFile {
             Ok(config)
         })
     }
+}
+
+/// Whether the node's block (discretized in f64, `dc_gain` its steady-state gain rounded to f32)
+/// keeps the steady-state gain of its transfer function: the node starts a block at equilibrium
+/// with it (the speed model at the measured speed). The reader has refused poles at or near
+/// s = 0 before; what fails here is rounding: coefficients so large that `D + C (I - A)^-1 B`
+/// cancels to nothing (or to noise) in f64. Tolerance: far above the f32 rounding (6e-8
+/// relative), far below any gain that matters.
+fn same_steady_state(block_gain: Option<f32>, tf: &TransferFunction) -> Result<(), String> {
+    let Ok(want) = tf.dc_gain() else {
+        return Err(describe_model_error(&ModelError::NoEquilibrium));
+    };
+    match block_gain.map(f64::from) {
+        Some(got) if (got - want).abs() <= 1e-5 * want.abs().max(1.0) => Ok(()),
+        got => Err(format!(
+            "its discretization's steady-state gain is {}, the transfer function's {}: the coefficients \
+             (num {:?}, den {:?}) are too large for the node's arithmetic, which loses the gain to rounding",
+            got.map_or_else(|| "undefined".into(), sig),
+            sig(want),
+            tf.numerator(),
+            tf.denominator()
+        )),
+    }
+}
+
+/// The high-frequency gain of `tf`, `num[0] / den[0]` (the numerator is padded to the
+/// denominator's length: 0 for a strictly proper block): what passes from the input to the
+/// output at once, the discrete block's `D`.
+pub fn high_frequency_gain(tf: &TransferFunction) -> f64 {
+    match (tf.numerator().first(), tf.denominator().first()) {
+        (Some(b0), Some(a0)) if *a0 != 0.0 => b0 / a0,
+        _ => 0.0,
+    }
+}
+
+/// Largest |response| of the speed model to a step of the commanded speed, per m/s of the step,
+/// at once (its high-frequency gain) or at any time after (overshoot): a car's speed cannot jump
+/// (the published model's high-frequency gain is 0.0368, identified ones below 0.01), and a speed
+/// loop that overshot a step by more than 100 % would be none a car has; the steady state's own
+/// bound, [`SPEED_DC_GAIN_RANGE`], ends at 2 too.
+pub const SPEED_RESPONSE_MAX: f64 = 2.0;
+
+/// Largest |response| of the lateral model to a step of the kinematic yaw rate, per rad/s of the
+/// step, at once or at any time after: the yaw rate lags the steering (`catmodel identify`
+/// writes a first-order lag, high-frequency gain 0, no overshoot), and the steady state's own
+/// bound, [`LATERAL_DC_GAIN_RANGE`], ends at 2.
+pub const LATERAL_RESPONSE_MAX: f64 = 2.0;
+
+/// Acceleration no road car exceeds, m/s^2 (1 g: harder than any car's tyres accelerate or brake
+/// it): the measured speed changes by at most this times the sample time in a tick, the bound
+/// of the dx/dt model's high-frequency gain from `v_m`.
+pub const MAX_ACCEL_MPS2: f64 = 10.0;
+
+/// Accepted range of a lateral block's `delay_s`, s: the node does not run the block, so no
+/// delay line bounds it; the yaw rate follows the steering within a fraction of a second (its
+/// lag is the block's pole) and `catmodel identify` scans delays of 0 to 10 samples (0.2 s).
+pub const LATERAL_DELAY_RANGE_S: (f64, f64) = (0.0, 0.5);
+
+/// How long a step response is followed for its peak, s: six time constants of the slowest
+/// pole accepted ([`MIN_POLE_DECAY_RATE_PER_S`]); overshoot peaks long before.
+const STEP_PEAK_HORIZON_S: f64 = 60.0;
+
+/// The high-frequency gain a block may have, from its units: `(low, high, what)`.
+fn hf_gain_bounds(
+    key: &str,
+    input: &str,
+    v: &VehicleSection,
+    ts: f64,
+) -> Option<(f64, f64, String)> {
+    match (key, input) {
+        ("speed", _) => Some((
+            -SPEED_RESPONSE_MAX,
+            SPEED_RESPONSE_MAX,
+            "m/s per commanded m/s: a car's speed cannot jump (the published model's is 0.0368); a speed loop \
+             that jumped by more than twice the commanded change is none a car has"
+                .into(),
+        )),
+        ("lateral", _) => Some((
+            -LATERAL_RESPONSE_MAX,
+            LATERAL_RESPONSE_MAX,
+            "yaw rate per kinematic yaw rate: the yaw rate lags the steering (identify writes 0)".into(),
+        )),
+        ("dx_dt", _) => {
+            // One tick's largest change of the input, and what makes it.
+            let (step, unit, how) = match input {
+                "v_m" => (
+                    MAX_ACCEL_MPS2 * ts,
+                    "m/s",
+                    format!("at {MAX_ACCEL_MPS2} m/s^2, 1 g"),
+                ),
+                "x" | "y" => (v.max_speed_mps * ts, "m", "at max_speed_mps".to_string()),
+                "phi" => (
+                    v.max_steer_rate_pct_per_s / 100.0 * v.max_steer_deg.to_radians() * ts,
+                    "rad",
+                    "at max_steer_rate_pct_per_s".to_string(),
+                ),
+                _ => return None,
+            };
+            let m = v.max_speed_mps / step;
+            Some((
+                -m,
+                m,
+                format!(
+                    "m/s per {unit}: one tick's largest change of {input}, {} {unit} ({how}), must not move dx/dt \
+                     at once by more than max_speed_mps, its whole range's half (the published blocks' are \
+                     -4.122, 20.55, -0.069 and -22.3)",
+                    sig(step)
+                ),
+            ))
+        }
+        _ => None,
+    }
+}
+
+/// The bound of a model's step response, `(max, what)`: for the speed and lateral models, whose
+/// input and output are the same quantity.
+fn step_peak_bound(key: &str) -> Option<(f64, &'static str)> {
+    match key {
+        "speed" => Some((
+            SPEED_RESPONSE_MAX,
+            "m/s per commanded m/s: no car's speed loop overshoots a commanded step by more than 100 %",
+        )),
+        "lateral" => Some((
+            LATERAL_RESPONSE_MAX,
+            "yaw rate per kinematic yaw rate: no car's yaw rate overshoots a steering step by more than 100 %",
+        )),
+        _ => None,
+    }
+}
+
+/// The largest |value| of `tf`'s unit step response (ZOH-exact at the samples, the delay left
+/// out) over [`STEP_PEAK_HORIZON_S`], signed, with its time after the step, s.
+fn step_peak(tf: &TransferFunction, ts: f64) -> Result<(f64, f64), ModelError> {
+    let d = zoh::discretize(tf, ts)?;
+    let n = d.n;
+    let mut x = [0.0f64; 2];
+    let mut peak = (0.0f64, 0.0f64);
+    let steps = (STEP_PEAK_HORIZON_S / ts).round() as usize;
+    for k in 0..steps {
+        let y = d.dd
+            + d.cd
+                .iter()
+                .zip(&x)
+                .take(n)
+                .map(|(c, xi)| c * xi)
+                .sum::<f64>();
+        if !y.is_finite() {
+            return Err(ModelError::NumericalFailure);
+        }
+        if y.abs() > peak.0.abs() {
+            peak = (y, k as f64 * ts);
+        }
+        let mut next = [0.0f64; 2];
+        for (i, slot) in next.iter_mut().enumerate().take(n) {
+            let row = d.ad.get(i).map_or(0.0, |r| {
+                r.iter().zip(&x).take(n).map(|(a, xj)| a * xj).sum::<f64>()
+            });
+            *slot = row + d.bd.get(i).copied().unwrap_or(0.0);
+        }
+        x = next;
+    }
+    Ok(peak)
 }
 
 /// Accepted range of `[vehicle] steer_lag_s`, s: the MPC's lead (the lag plus a tick) stays
@@ -1622,5 +2277,381 @@ mod tests {
         assert_eq!(sig(1.3294e30), "1.329e30");
         assert_eq!(sig(20.0), "20");
         assert_eq!(sig(-96.84), "-96.84");
+    }
+
+    fn paper_text() -> String {
+        std::fs::read_to_string(paper_path()).unwrap_or_default()
+    }
+
+    /// `text` with the line of `key` (its first, as `key = ...`) set to `value`.
+    fn set(text: &str, key: &str, value: &str) -> String {
+        let head = format!("{key} = ");
+        let mut done = false;
+        let lines: Vec<String> = text
+            .lines()
+            .map(|l| {
+                if !done && l.starts_with(&head) {
+                    done = true;
+                    format!("{head}{value}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect();
+        assert!(done, "no line `{key} = `");
+        lines.join("\n") + "\n"
+    }
+
+    fn refused(text: &str) -> String {
+        match parse(text, Path::new("t.toml")) {
+            Ok(_) => panic!("accepted"),
+            Err(e) => e.message,
+        }
+    }
+
+    fn expect(text: &str, needle: &str) {
+        let message = refused(text);
+        assert!(message.contains(needle), "{message:?} lacks {needle:?}");
+    }
+
+    fn accepted(text: &str) {
+        if let Err(e) = parse(text, Path::new("t.toml")) {
+            panic!("{e}");
+        }
+    }
+
+    /// The published file with a lateral section as `catmodel identify` writes one.
+    fn with_lateral(text: &str, delay_s: &str) -> String {
+        format!(
+            "{text}\n[lateral]\nsteer_gain = 1.0\nundersteer_s2_per_m2 = 0.0015\n\
+             output = \"yaw_rate\"\noutput_unit = \"rad/s\"\n\n[[lateral.blocks]]\n\
+             input = \"yaw_rate_kinematic\"\ninput_unit = \"rad/s\"\nnum = [0.0, 25.0]\n\
+             den = [1.0, 25.0]\ndelay_s = {delay_s}\n"
+        )
+    }
+
+    #[test]
+    fn values_in_messages() {
+        assert_eq!(shown(2.62), "2.62");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(1e30), "1e30");
+        assert_eq!(shown(1e-30), "1e-30");
+        assert_eq!(shown(f64::NAN), "NaN");
+        assert_eq!(shown(f64::INFINITY), "inf");
+    }
+
+    /// The CAT Vehicle understeers (no critical speed); with the rear stiffness at 10 kN/rad it
+    /// oversteers, unstable above 6.4 m/s (by hand: 80e3 x 10e3 x 2.62^2 / (1741 x (80e3 x
+    /// 1.142 - 10e3 x 1.478)) = 41.19, v = 6.418 m/s), which the file's 60 m/s speed range
+    /// holds: refused, naming the keys and the speed. A slightly oversteering pair whose
+    /// critical speed (126 m/s) is above the file's range is accepted.
+    #[test]
+    fn an_oversteering_single_track_model_is_refused_with_its_critical_speed() {
+        let text = paper_text();
+        let d = parse(&text, Path::new("paper.toml"))
+            .ok()
+            .and_then(|f| f.dynamics);
+        assert!(d.is_some());
+        assert_eq!(d.and_then(|d| critical_speed_mps(&d)), None);
+        let over = text.replace(
+            "cornering_rear_n_per_rad = 91000.0",
+            "cornering_rear_n_per_rad = 10000.0",
+        );
+        let message = refused(&over);
+        assert!(
+            message.starts_with("dynamics: the single-track model oversteers (cornering_front_n_per_rad x cg_to_front_m = 91360 N m/rad above cornering_rear_n_per_rad x cg_to_rear_m = 14780 N m/rad)"),
+            "{message}"
+        );
+        assert!(
+            message.contains("critical speed sqrt(C_f C_r L^2 / (m (C_f l_f - C_r l_r))) = 6.418 m/s, within vehicle.max_speed_mps = 60"),
+            "{message}"
+        );
+        // A rear stiffness of 40 kN/rad: critical speed 19.78 m/s. Refused on a car declared up
+        // to 20 m/s, accepted on one declared up to 19 m/s (stable over its whole range).
+        let over = text.replace(
+            "cornering_rear_n_per_rad = 91000.0",
+            "cornering_rear_n_per_rad = 40000.0",
+        );
+        expect(
+            &set(&over, "max_speed_mps", "20.0"),
+            "= 19.78 m/s, within vehicle.max_speed_mps = 20",
+        );
+        accepted(&set(&over, "max_speed_mps", "19.0"));
+        let mild = text.replace(
+            "cornering_rear_n_per_rad = 91000.0",
+            "cornering_rear_n_per_rad = 61000.0",
+        );
+        let f = parse(&mild, Path::new("mild.toml")).unwrap_or_else(|e| panic!("{e}"));
+        let v_crit = f
+            .dynamics
+            .and_then(|d| critical_speed_mps(&d))
+            .unwrap_or(0.0);
+        assert!((v_crit - 126.5).abs() < 0.1, "{v_crit}");
+    }
+
+    /// The probe's speed models: a high-frequency gain of 1e6 with the published DC gain, and
+    /// 1e27 / 1e28 over a stable denominator (poles -0.45 +/- 0.19j), which was refused with a
+    /// pole at s = 0 that is not there (1e27) or accepted (1e28); refused now for what they
+    /// are. A block whose steady state the node's arithmetic cannot hold (a huge middle
+    /// coefficient, no feedthrough) says so, and a speed model that overshoots a step a
+    /// million times is refused by its step response.
+    #[test]
+    fn huge_instantaneous_gains_are_refused_for_what_they_are() {
+        let text = paper_text();
+        let speed_num = "num = [0.03679, -0.1981, 0.7647]";
+        expect(
+            &text.replace(speed_num, "num = [1e6, 1e6, 0.7647]"),
+            "speed.blocks[input_vel]: high-frequency gain 1e6 (num[0] / den[0], what passes at once) is outside -2..2",
+        );
+        for (huge, shown) in [("1e27", "1e27"), ("1e28", "1e28")] {
+            let t = text
+                .replace(speed_num, &format!("num = [{huge}, 0.0, 0.19]"))
+                .replace("den = [1.0, 1.629, 0.7522]", "den = [1.0, 0.9, 0.19]");
+            let message = refused(&t);
+            assert!(!message.contains("s = 0"), "{message}");
+            assert!(
+                message.contains(&format!("high-frequency gain {shown} ")),
+                "{message}"
+            );
+        }
+        // Within the bounds: a gain of 2 at once is the most a speed loop may have.
+        accepted(&text.replace(speed_num, "num = [2.0, 1.629, 0.7647]"));
+        // Overshoot: DC gain 1.017 and no feedthrough, but a step response of ~1e6.
+        expect(
+            &text.replace(speed_num, "num = [0.0, 1e6, 0.7647]"),
+            "speed.blocks[input_vel]: the step response reaches",
+        );
+        // dx/dt from x: 1 m/s per m DC (the paper's 0.108), 1e4 at once: a 1.2 m change of
+        // position in one tick at 60 m/s would move dx/dt by 12 km/s.
+        expect(
+            &text.replace(
+                "num = [20.55, -110.4, 12.08]",
+                "num = [1e4, -110.4, 12.08]",
+            ),
+            "dx_dt.blocks[x]: high-frequency gain 10000 (num[0] / den[0], what passes at once) is outside -50..50",
+        );
+        // dx/dt from phi: no feedthrough, the published DC gain, a middle coefficient so large
+        // that the discretized block's steady state is rounding noise.
+        expect(
+            &text.replace("num = [-22.3, 371.5, -26.08]", "num = [0.0, 1e27, -26.08]"),
+            "dx_dt.blocks[phi]: its discretization's steady-state gain is",
+        );
+    }
+
+    #[test]
+    fn high_frequency_gain_by_hand() {
+        let tf = |num: &[f64], den: &[f64]| {
+            TransferFunction::new(num, den, 0.0).unwrap_or_else(|e| panic!("{e:?}"))
+        };
+        assert_eq!(high_frequency_gain(&tf(&[2.0, 1.0], &[4.0, 1.0])), 0.5);
+        assert_eq!(high_frequency_gain(&tf(&[1.0], &[1.0, 1.0])), 0.0);
+        // The published speed model's: 0.03679.
+        assert_eq!(
+            high_frequency_gain(&tf(&[0.03679, -0.1981, 0.7647], &[1.0, 1.629, 0.7522])),
+            0.03679
+        );
+        // A first-order lag's step response peaks at its DC gain at the end.
+        let (peak, at_s) = step_peak(&tf(&[2.0], &[1.0, 1.0]), 0.02).unwrap_or((0.0, 0.0));
+        assert!((peak - 2.0).abs() < 1e-9 && at_s > 30.0, "{peak} at {at_s}");
+        // A lightly damped pair (zeta 0.1) overshoots by e^(-pi 0.1 / sqrt(0.99)) = 73 %.
+        let (peak, _) = step_peak(&tf(&[1.0], &[1.0, 0.2, 1.0]), 0.02).unwrap_or((0.0, 0.0));
+        assert!((peak - 1.729).abs() < 1e-3, "{peak}");
+    }
+
+    /// The probe's cars (an antenna 1e30 m ahead, a car 1e30 m wide, a lock of 1e-30 degrees,
+    /// a top speed of 1e30 m/s) and the unit mistakes a range catches, each refused naming the
+    /// key and the range.
+    #[test]
+    fn values_no_car_has_are_refused_naming_the_range() {
+        let text = paper_text();
+        let cases = [
+            ("antenna_ahead_m", "1e30", "vehicle.antenna_ahead_m = 1e30: must be within -1.409..4.028 m (on the car"),
+            ("antenna_ahead_m", "-1.478", "vehicle.antenna_ahead_m = -1.478: must be within -1.409..4.028 m"),
+            ("antenna_left_m", "2.0", "vehicle.antenna_left_m = 2: must be within -1.403..1.403 m"),
+            ("width_m", "1e30", "vehicle.width_m = 1e30: must be within 0.8..3 m"),
+            ("max_steer_deg", "1e-30", "vehicle.max_steer_deg = 1e-30: must be within 10..65 deg"),
+            ("max_speed_mps", "1e30", "vehicle.max_speed_mps = 1e30: must be within 5..80 m/s"),
+            ("max_speed_mps", "100.0", "vehicle.max_speed_mps = 100: must be within 5..80 m/s"),
+            ("wheelbase_m", "2620.0", "vehicle.wheelbase_m = 2620: must be within 1..10 m"),
+            ("track_m", "1.9", "vehicle.track_m = 1.9: wider than width_m = 1.806"),
+            ("length_m", "1e30", "vehicle.length_m = 1e30: must be within 1..25 m"),
+            ("rear_overhang_m", "-0.1", "vehicle.rear_overhang_m = -0.1: must be within 0..6 m"),
+            ("understeer_s2_per_m2", "0.1", "vehicle.understeer_s2_per_m2 = 0.1: must be within 0..0.01 s^2/m^2"),
+            ("max_steer_rate_pct_per_s", "1e6", "vehicle.max_steer_rate_pct_per_s = 1000000: must be within 5..500 %/s"),
+            ("mass_kg", "1.741", "dynamics.mass_kg = 1.741: must be within 200..50000 kg"),
+            ("yaw_inertia_kg_m2", "1e9", "dynamics.yaw_inertia_kg_m2 = 1e9: must be within 342.8..34275 kg m^2"),
+            ("cg_to_front_m", "0.1", "dynamics.cg_to_front_m = 0.1: must be within 0.393..2.227 m"),
+            ("cornering_front_n_per_rad", "1396.0", "dynamics.cornering_front_n_per_rad = 1396: must be within 19263..3.853e5 N/rad (2 to 40 per rad of the front axle's static load, 9631 N"),
+            ("cornering_rear_n_per_rad", "9.1e7", "dynamics.cornering_rear_n_per_rad = 91000000: must be within 14884..2.977e5 N/rad"),
+            ("steer_timeout_s", "10.0", "inputs.steer_timeout_s = 10: must be within 0.02..2 s"),
+            ("gnss_gate_m", "1e6", "inputs.gnss_gate_m = 1000000: must be within 1..100 m"),
+            ("gnss_lost_s", "3600.0", "inputs.gnss_lost_s = 3600: must be within 0.2..30 s"),
+            ("position_uncertainty_m", "-1.0", "control.position_uncertainty_m = -1: must be within 0..20 m"),
+            ("enter_dynamic_lat_accel_mps2", "100.0", "hybrid.enter_dynamic_lat_accel_mps2 = 100: must be within 0.1..15 m/s^2"),
+            ("min_dwell_ticks", "5000", "hybrid.min_dwell_ticks = 5000: must be within 0..500 ticks"),
+        ];
+        for (key, value, needle) in cases {
+            expect(&set(&text, key, value), needle);
+        }
+        // `cg_to_front_m` moved with `cg_to_rear_m` keeps the wheelbase: only the share refuses.
+        let t = set(&set(&text, "cg_to_front_m", "0.2"), "cg_to_rear_m", "2.42");
+        expect(
+            &t,
+            "dynamics.cg_to_front_m = 0.2: must be within 0.393..2.227 m (15 to 85 %",
+        );
+    }
+
+    /// The ranges are wide enough for a microcar, a city bus and a 40 t truck.
+    #[test]
+    fn a_microcar_a_bus_and_a_truck_are_accepted() {
+        let text = paper_text();
+        let cars: [&[(&str, &str)]; 3] = [
+            // Renault Twizy class.
+            &[
+                ("wheelbase_m", "1.686"),
+                ("track_m", "1.09"),
+                ("max_steer_deg", "40.0"),
+                ("antenna_ahead_m", "1.0"),
+                ("width_m", "1.24"),
+                ("length_m", "2.34"),
+                ("rear_overhang_m", "0.3"),
+                ("max_speed_mps", "25.0"),
+                ("mass_kg", "560.0"),
+                ("yaw_inertia_kg_m2", "390.0"),
+                ("cg_to_front_m", "0.9"),
+                ("cg_to_rear_m", "0.786"),
+                ("cornering_front_n_per_rad", "25000.0"),
+                ("cornering_rear_n_per_rad", "40000.0"),
+            ],
+            // A 12 m city bus, rear-engined (60 % of its weight on the rear axle).
+            &[
+                ("wheelbase_m", "6.0"),
+                ("track_m", "2.1"),
+                ("max_steer_deg", "50.0"),
+                ("antenna_ahead_m", "5.0"),
+                ("width_m", "2.55"),
+                ("length_m", "12.0"),
+                ("rear_overhang_m", "3.3"),
+                ("max_speed_mps", "30.0"),
+                ("max_steer_rate_pct_per_s", "40.0"),
+                ("mass_kg", "18000.0"),
+                ("yaw_inertia_kg_m2", "155520.0"),
+                ("cg_to_front_m", "3.6"),
+                ("cg_to_rear_m", "2.4"),
+                ("cornering_front_n_per_rad", "424000.0"),
+                ("cornering_rear_n_per_rad", "1060000.0"),
+                ("understeer_s2_per_m2", "0.003"),
+            ],
+            // A 40 t truck, as one body.
+            &[
+                ("wheelbase_m", "7.5"),
+                ("track_m", "2.05"),
+                ("max_steer_deg", "45.0"),
+                ("antenna_ahead_m", "8.0"),
+                ("width_m", "2.6"),
+                ("length_m", "16.5"),
+                ("rear_overhang_m", "4.0"),
+                ("max_speed_mps", "25.0"),
+                ("max_steer_rate_pct_per_s", "30.0"),
+                ("mass_kg", "40000.0"),
+                ("yaw_inertia_kg_m2", "600000.0"),
+                ("cg_to_front_m", "4.5"),
+                ("cg_to_rear_m", "3.0"),
+                ("cornering_front_n_per_rad", "600000.0"),
+                ("cornering_rear_n_per_rad", "2400000.0"),
+                ("understeer_s2_per_m2", "0.004"),
+            ],
+        ];
+        for car in cars {
+            let mut t = text.clone();
+            for (key, value) in car {
+                t = set(&t, key, value);
+            }
+            accepted(&t);
+        }
+    }
+
+    /// The node feeds and reads every model in fixed signals and units: another unit or output
+    /// is refused naming what the node expects (the probe's files: phi in degrees, the speed
+    /// model in km/h, a dx/dt model labelled dy/dt).
+    #[test]
+    fn units_and_outputs_are_the_nodes() {
+        let text = paper_text();
+        expect(
+            &text.replace("input_unit = \"rad\"", "input_unit = \"deg\""),
+            "dx_dt.blocks[phi].input_unit: expected \"rad\", found \"deg\"",
+        );
+        expect(
+            &text.replacen("input_unit = \"m/s\"", "input_unit = \"km/h\"", 1),
+            "speed.blocks[input_vel].input_unit: expected \"m/s\", found \"km/h\"",
+        );
+        expect(
+            &text.replacen("output_unit = \"m/s\"", "output_unit = \"km/h\"", 1),
+            "speed.output_unit: expected \"m/s\", found \"km/h\"",
+        );
+        expect(
+            &text.replace("output = \"dx_dt\"", "output = \"dy_dt\""),
+            "dx_dt.output: expected \"dx_dt\", found \"dy_dt\"",
+        );
+        expect(
+            &text.replace(
+                "input_unit = \"m\"\nnum = [-0.06946",
+                "input_unit = \"ft\"\nnum = [-0.06946",
+            ),
+            "dx_dt.blocks[y].input_unit: expected \"m\", found \"ft\"",
+        );
+        let lateral = with_lateral(&text, "0.0");
+        accepted(&lateral);
+        expect(
+            &lateral.replace("output = \"yaw_rate\"", "output = \"yaw_rate_deg\""),
+            "lateral.output: expected \"yaw_rate\", found \"yaw_rate_deg\"",
+        );
+        expect(
+            &lateral.replace("input_unit = \"rad/s\"", "input_unit = \"deg/s\""),
+            "lateral.blocks[yaw_rate_kinematic].input_unit: expected \"rad/s\", found \"deg/s\"",
+        );
+    }
+
+    #[test]
+    fn fit_figures_are_finite_and_a_fit_at_most_100_percent() {
+        let text = paper_text();
+        expect(
+            &text.replace("training_fit_percent = 74.53", "training_fit_percent = nan"),
+            "speed.fit.training_fit_percent = NaN: must be a finite number <= 100",
+        );
+        expect(
+            &text.replace(
+                "training_fit_percent = 85.67",
+                "training_fit_percent = 185.67",
+            ),
+            "dx_dt.fit.training_fit_percent = 185.67: must be a finite number <= 100",
+        );
+        expect(
+            &text.replace("validation_mse = 0.743", "validation_mse = -0.743"),
+            "speed.fit.validation_mse = -0.743: must be a finite number >= 0",
+        );
+        expect(
+            &text.replace("validation_mse = 13.1558", "validation_mse = inf"),
+            "dx_dt.fit.validation_mse = inf: must be a finite number >= 0",
+        );
+        // A fit worse than the mean is a fit (identified files have -108 %), and 100 a perfect one.
+        accepted(&text.replace(
+            "training_fit_percent = 74.53",
+            "training_fit_percent = -108.7",
+        ));
+        accepted(&text.replace(
+            "training_fit_percent = 74.53",
+            "training_fit_percent = 100.0",
+        ));
+    }
+
+    #[test]
+    fn a_lateral_delay_is_bounded() {
+        let text = paper_text();
+        accepted(&with_lateral(&text, "0.2"));
+        expect(
+            &with_lateral(&text, "100.0"),
+            "lateral.blocks[yaw_rate_kinematic].delay_s = 100: must be within 0..0.5 s",
+        );
     }
 }

@@ -48,7 +48,7 @@ def reorder(text):
     return text[:first] + "".join(reversed(parts)) + text[last:]
 
 
-def with_lateral(text, steer_gain="1.0", den="[1.0, 25.0]"):
+def with_lateral(text, steer_gain="1.0", den="[1.0, 25.0]", delay_s="0.0"):
     """The published file with a lateral section as `catmodel identify` writes one."""
     return text + f"""
 [lateral]
@@ -63,7 +63,7 @@ input = "yaw_rate_kinematic"
 input_unit = "rad/s"
 num = [0.0, 25.0]
 den = {den}
-delay_s = 0.0
+delay_s = {delay_s}
 """
 
 
@@ -142,19 +142,19 @@ BAD = {
     ),
     "negative-wheelbase": (
         lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_m = -2.62"),
-        "vehicle.wheelbase_m = -2.62: must be a finite number > 0",
+        "vehicle.wheelbase_m = -2.62: must be within 1..10 m",
     ),
     "zero-timeout": (
         lambda t: replace(t, "steer_timeout_s = 0.1", "steer_timeout_s = 0.0"),
-        "inputs.steer_timeout_s = 0: must be a finite number > 0",
+        "inputs.steer_timeout_s = 0: must be within 0.02..2 s",
     ),
     "nan-understeer": (
         lambda t: replace(t, "understeer_s2_per_m2 = 0.0015 ", "understeer_s2_per_m2 = nan"),
-        "vehicle.understeer_s2_per_m2 = NaN: must be a finite number >= 0",
+        "vehicle.understeer_s2_per_m2 = NaN: must be within 0..0.01 s^2/m^2",
     ),
     "infinite-gate": (
         lambda t: replace(t, "gnss_gate_m = 10.0", "gnss_gate_m = inf"),
-        "inputs.gnss_gate_m = inf: must be a finite number > 0",
+        "inputs.gnss_gate_m = inf: must be within 1..100 m",
     ),
     "nan-coefficient": (
         lambda t: replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [0.03679, nan, 0.7647]"),
@@ -162,11 +162,11 @@ BAD = {
     ),
     "gnss-rate-zero": (
         lambda t: replace(t, "gnss_rate_hz = 100.0", "gnss_rate_hz = 0.0"),
-        "vehicle.gnss_rate_hz = 0: must be within 1..100",
+        "vehicle.gnss_rate_hz = 0: must be within 1..100 Hz",
     ),
     "gnss-rate-too-high": (
         lambda t: replace(t, "gnss_rate_hz = 100.0", "gnss_rate_hz = 200.0"),
-        "vehicle.gnss_rate_hz = 200: must be within 1..100",
+        "vehicle.gnss_rate_hz = 200: must be within 1..100 Hz",
     ),
     "cg-not-on-wheelbase": (
         lambda t: replace(t, "cg_to_rear_m = 1.478", "cg_to_rear_m = 1.6"),
@@ -191,6 +191,102 @@ BAD = {
     "steer-lag-too-long": (
         lambda t: replace(t, "\n\n[dynamics]", "\nsteer_lag_s = 0.5\n\n[dynamics]"),
         "vehicle.steer_lag_s = 0.5: must be within 0..0.25 s",
+    ),
+    # What no car has (the reader's physical ranges, README "Model file"), units and outputs
+    # the node does not use, and gains that pass at once: each the published file with one
+    # change.
+    "oversteer-dynamics": (
+        lambda t: replace(t, "cornering_rear_n_per_rad = 91000.0", "cornering_rear_n_per_rad = 10000.0"),
+        "dynamics: the single-track model oversteers (cornering_front_n_per_rad x cg_to_front_m = 91360 N m/rad "
+        "above cornering_rear_n_per_rad x cg_to_rear_m = 14780 N m/rad) and is unstable above its critical speed "
+        "sqrt(C_f C_r L^2 / (m (C_f l_f - C_r l_r))) = 6.418 m/s, within vehicle.max_speed_mps = 60",
+    ),
+    "speed-feedthrough": (
+        lambda t: replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [1e6, 1e6, 0.7647]"),
+        "speed.blocks[input_vel]: high-frequency gain 1e6 (num[0] / den[0], what passes at once) is outside -2..2",
+    ),
+    # Was refused with a pole at s = 0 that is not there (the poles are -0.45 +/- 0.19j).
+    "speed-huge-feedthrough": (
+        lambda t: replace(
+            replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [1e27, 0.0, 0.19]"),
+            "den = [1.0, 1.629, 0.7522]", "den = [1.0, 0.9, 0.19]"),
+        "speed.blocks[input_vel]: high-frequency gain 1e27 (num[0] / den[0], what passes at once) is outside -2..2",
+    ),
+    "speed-overshoot": (
+        lambda t: replace(t, "num = [0.03679, -0.1981, 0.7647]", "num = [0.0, 1e6, 0.7647]"),
+        "speed.blocks[input_vel]: the step response reaches",
+    ),
+    "dxdt-position-feedthrough": (
+        lambda t: replace(t, "num = [20.55, -110.4, 12.08]", "num = [10000.0, -110.4, 12.08]"),
+        "dx_dt.blocks[x]: high-frequency gain 10000 (num[0] / den[0], what passes at once) is outside -50..50",
+    ),
+    "dxdt-steady-state-lost": (
+        lambda t: replace(t, "num = [-22.3, 371.5, -26.08]", "num = [0.0, 1e27, -26.08]"),
+        "dx_dt.blocks[phi]: its discretization's steady-state gain is",
+    ),
+    "antenna-far-ahead": (
+        lambda t: replace(t, "antenna_ahead_m = 1.478 ", "antenna_ahead_m = 1e30 "),
+        "vehicle.antenna_ahead_m = 1e30: must be within -1.409..4.028 m",
+    ),
+    "car-too-wide": (
+        lambda t: replace(t, "width_m = 1.806 ", "width_m = 1e30 "),
+        "vehicle.width_m = 1e30: must be within 0.8..3 m",
+    ),
+    "lock-too-small": (
+        lambda t: replace(t, "max_steer_deg = 35.5 ", "max_steer_deg = 1e-30 "),
+        "vehicle.max_steer_deg = 1e-30: must be within 10..65 deg",
+    ),
+    "max-speed-absurd": (
+        lambda t: replace(t, "max_speed_mps = 60.0 ", "max_speed_mps = 1e30 "),
+        "vehicle.max_speed_mps = 1e30: must be within 5..80 m/s",
+    ),
+    "wheelbase-in-mm": (
+        lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_m = 2620.0"),
+        "vehicle.wheelbase_m = 2620: must be within 1..10 m",
+    ),
+    "track-wider-than-car": (
+        lambda t: replace(t, "track_m = 1.55 ", "track_m = 1.9 "),
+        "vehicle.track_m = 1.9: wider than width_m = 1.806",
+    ),
+    "mass-in-tonnes": (
+        lambda t: replace(t, "mass_kg = 1741.0", "mass_kg = 1.741"),
+        "dynamics.mass_kg = 1.741: must be within 200..50000 kg",
+    ),
+    "yaw-inertia-absurd": (
+        lambda t: replace(t, "yaw_inertia_kg_m2 = 2500.0", "yaw_inertia_kg_m2 = 1e9"),
+        "dynamics.yaw_inertia_kg_m2 = 1e9: must be within 342.8..34275 kg m^2",
+    ),
+    "cornering-in-n-per-deg": (
+        lambda t: replace(t, "cornering_front_n_per_rad = 80000.0", "cornering_front_n_per_rad = 1396.0"),
+        "dynamics.cornering_front_n_per_rad = 1396: must be within 19263..3.853e5 N/rad",
+    ),
+    "gnss-lost-an-hour": (
+        lambda t: replace(t, "gnss_lost_s = 2.0 ", "gnss_lost_s = 3600.0 "),
+        "inputs.gnss_lost_s = 3600: must be within 0.2..30 s",
+    ),
+    "phi-in-degrees": (
+        lambda t: replace(t, 'input_unit = "rad"', 'input_unit = "deg"'),
+        'dx_dt.blocks[phi].input_unit: expected "rad", found "deg"',
+    ),
+    "speed-in-kmh": (
+        lambda t: replace(t, 'input = "input_vel"\ninput_unit = "m/s"', 'input = "input_vel"\ninput_unit = "km/h"'),
+        'speed.blocks[input_vel].input_unit: expected "m/s", found "km/h"',
+    ),
+    "dxdt-output-dy-dt": (
+        lambda t: replace(t, 'output = "dx_dt"', 'output = "dy_dt"'),
+        'dx_dt.output: expected "dx_dt", found "dy_dt"',
+    ),
+    "fit-nan": (
+        lambda t: replace(t, "training_fit_percent = 74.53", "training_fit_percent = nan"),
+        "speed.fit.training_fit_percent = NaN: must be a finite number <= 100",
+    ),
+    "fit-above-100": (
+        lambda t: replace(t, "training_fit_percent = 85.67", "training_fit_percent = 185.67"),
+        "dx_dt.fit.training_fit_percent = 185.67: must be a finite number <= 100",
+    ),
+    "lateral-delay-too-long": (
+        lambda t: with_lateral(t, delay_s="100.0"),
+        "lateral.blocks[yaw_rate_kinematic].delay_s = 100: must be within 0..0.5 s",
     ),
     "unknown-key": (
         lambda t: replace(t, "wheelbase_m = 2.62 ", "wheelbase_mm = 2620"),

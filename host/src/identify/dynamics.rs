@@ -22,7 +22,7 @@ use catmodel::metrics;
 use catmodel::model::dynamic::LateralState;
 
 use super::preprocess::Experiment;
-use crate::model_file::{DynamicsSection, VehicleSection};
+use crate::model_file::{self, DynamicsSection, VehicleSection};
 
 /// Samples count in the fit only where the car was faster than this, m/s (over the whole
 /// window of the yaw rate's central difference).
@@ -250,6 +250,14 @@ pub fn identify_dynamics(
             &measured,
         ),
     };
+    // Stiffnesses the model file's reader refuses (an oversteering pair unstable below the car's
+    // top speed, a stiffness no tyre has for its load) are not written.
+    if let Some(why) = model_file::dynamics_problem(vehicle, &section) {
+        return Err(format!(
+            "the fit, C_f {:.0} N/rad and C_r {:.0} N/rad, is refused by the model file's reader: {why}",
+            section.cornering_front_n_per_rad, section.cornering_rear_n_per_rad
+        ));
+    }
     if rel.0 > MAX_RELATIVE_STD_ERROR || rel.1 > MAX_RELATIVE_STD_ERROR {
         // The standard error falls as one over the square root of the data.
         let more = (rel.0.max(rel.1) / MAX_RELATIVE_STD_ERROR).powi(2).ceil();

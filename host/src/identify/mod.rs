@@ -464,6 +464,11 @@ pub fn identify_lateral(
             "steering gain estimate {g} is implausible ({why})"
         )));
     }
+    if let Some(why) = model_file::range_problem("lateral.understeer_s2_per_m2", k) {
+        return Ok(Err(format!(
+            "understeer estimate {k} is implausible ({why})"
+        )));
+    }
     // Dynamic part over whole experiments.
     let r_kin: Vec<Vec<f64>> = training
         .iter()
@@ -748,11 +753,11 @@ pub fn identify(
     );
     model.speed = Model {
         equation: "eq 5 form (2nd order, input delay), simulation-error fit".into(),
-        output: "vel".into(),
-        output_unit: "m/s".into(),
+        output: model_file::SPEED_SIGNALS.output.into(),
+        output_unit: model_file::SPEED_SIGNALS.output_unit.into(),
         blocks: vec![Block {
-            input: "input_vel".into(),
-            input_unit: "m/s".into(),
+            input: model_file::SPEED_INPUTS[0].into(),
+            input_unit: model_file::SPEED_SIGNALS.input_units[0].into(),
             tf: speed.tf,
         }],
         fit: Fit::default(),
@@ -760,15 +765,15 @@ pub fn identify(
     if let Some(tfs) = &dx_dt_tfs {
         model.dx_dt = Model {
             equation: "eq 7 form (MISO, proper 2nd-order blocks), simulation-error fit".into(),
-            output: "dx_dt".into(),
-            output_unit: "m/s".into(),
+            output: model_file::DX_DT_SIGNALS.output.into(),
+            output_unit: model_file::DX_DT_SIGNALS.output_unit.into(),
             blocks: tfs
                 .iter()
                 .zip(model_file::DX_DT_INPUTS)
-                .zip(["m/s", "m", "m", "rad"])
+                .zip(model_file::DX_DT_SIGNALS.input_units)
                 .map(|((tf, i), u)| Block {
                     input: i.into(),
-                    input_unit: u.into(),
+                    input_unit: (*u).into(),
                     tf: *tf,
                 })
                 .collect(),
@@ -798,11 +803,11 @@ pub fn identify(
         understeer_s2_per_m2: l.understeer_s2_per_m2,
         model: Model {
             equation: "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order".into(),
-            output: "yaw_rate".into(),
-            output_unit: "rad/s".into(),
+            output: model_file::LATERAL_SIGNALS.output.into(),
+            output_unit: model_file::LATERAL_SIGNALS.output_unit.into(),
             blocks: vec![Block {
                 input: model_file::LATERAL_INPUTS[0].into(),
-                input_unit: "rad/s".into(),
+                input_unit: model_file::LATERAL_SIGNALS.input_units[0].into(),
                 tf: l.tf,
             }],
             fit: Fit::default(),

@@ -24,8 +24,10 @@ pub struct Score {
 /// Scores `yhat` against `y`.
 pub fn score(y: &[f64], yhat: &[f64]) -> Score {
     Score {
-        fit_percent: metrics::fit_percent(y, yhat).ok(),
-        mse: metrics::mse(y, yhat).ok(),
+        // Finite figures only (a sum of squares can overflow): the model file's reader refuses
+        // a non-finite fit, and an undefined one is written as none.
+        fit_percent: metrics::fit_percent(y, yhat).ok().filter(|f| f.is_finite()),
+        mse: metrics::mse(y, yhat).ok().filter(|m| m.is_finite()),
     }
 }
 
