@@ -391,6 +391,53 @@ fn a_foreign_encoding_is_refused_only_where_it_is_read() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// The truth reader has physical ranges like the log reader's (review finding 08: a truth
+/// `x = 1e300` made `evaluate` print `inf` and `NaN`), with `file:line:column`.
+#[test]
+fn truth_values_no_car_can_have_are_refused() {
+    let head = "t,x,y,heading,yaw_rate,speed\n0,1,2,0.5,0.1,5\n";
+    let cases = [
+        (
+            "0.01,1e300,2,0.5,0.1,5",
+            "t.csv:3:6: column `x`: 1e300 m is outside -1e7..1e7 m",
+        ),
+        (
+            "0.01,1,-2e7,0.5,0.1,5",
+            "t.csv:3:8: column `y`: -2e7 m is outside -1e7..1e7 m",
+        ),
+        (
+            "0.01,1,2,90,0.1,5",
+            "t.csv:3:10: column `heading`: 90 rad is outside -6.3..6.3 rad",
+        ),
+        (
+            "0.01,1,2,0.5,57,5",
+            "t.csv:3:14: column `yaw_rate`: 57 rad/s is outside -10..10 rad/s",
+        ),
+        ("0.01,1,2,0.5,0.1,36", ""),
+        (
+            "0.01,1,2,0.5,0.1,130",
+            "t.csv:3:18: column `speed`: 130 m/s is outside -10..80 m/s",
+        ),
+        (
+            "1e12,1,2,0.5,0.1,5",
+            "t.csv:3:1: column `t`: 1e12 s is outside -1e10..1e10 s",
+        ),
+    ];
+    for (row, want) in cases {
+        let text = format!("{head}{row}\n");
+        match logcsv::parse_truth(&text, Path::new("t.csv")) {
+            Ok(rows) => assert!(want.is_empty(), "{row}: accepted {rows:?}"),
+            Err(e) => assert!(
+                !want.is_empty() && e.to_string().starts_with(want),
+                "{row}: {e}"
+            ),
+        }
+    }
+    for (range, column) in logcsv::TRUTH_RANGES.iter().zip(logcsv::TRUTH_COLUMNS) {
+        assert_eq!(range.column, column);
+    }
+}
+
 /// Every range bound is accepted and the next double beyond it is refused, for every column.
 #[test]
 fn ranges_are_inclusive_and_end_exactly_at_their_bounds() {
@@ -598,7 +645,7 @@ proptest! {
     }
 
     #[test]
-    fn truth_round_trip_is_exact(values in proptest::collection::vec((finite(), finite(), -3.2..3.2f64, finite(), 0.0..30.0f64), 0..30)) {
+    fn truth_round_trip_is_exact(values in proptest::collection::vec((finite(), finite(), -3.2..3.2f64, -10.0..10.0f64, 0.0..30.0f64), 0..30)) {
         let rows: Vec<TruthRow> = values.iter().enumerate().map(|(i, (x, y, h, r, v))| TruthRow {
             t: i as f64 * 0.01, x: *x, y: *y, heading: *h, yaw_rate: *r, speed: *v }).collect();
         let mut bytes = Vec::new();

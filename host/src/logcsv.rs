@@ -307,12 +307,12 @@ impl fmt::Display for LogErrorKind {
 
 /// A number as a person reads it: plain (`101`, `-0.5`), or in exponent form when plain
 /// would be a long run of digits (`1e30`, `1.5e-9`).
-struct Readable(f64);
+pub struct Readable(pub f64);
 
 impl fmt::Display for Readable {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let a = self.0.abs();
-        if a != 0.0 && !(1e-4..1e9).contains(&a) {
+        if a != 0.0 && !(1e-4..1e7).contains(&a) {
             write!(f, "{:e}", self.0)
         } else {
             write!(f, "{}", self.0)
@@ -436,6 +436,53 @@ pub const LOG_RANGES: [ColumnRange; 8] = [
         min: -180.0,
         max: 180.0,
         why: "WGS-84 longitude",
+    },
+];
+
+/// The largest distance from the truth frame's origin, m: 10 000 km, a quarter of the way
+/// round the Earth; a flat east/north frame means nothing further out. A larger value is a
+/// corrupt cell or another unit, not a car's position.
+pub const MAX_TRUTH_POSITION_M: f64 = 1e7;
+
+/// Ranges of the truth columns, in the order of [`TRUTH_COLUMNS`] (docs/logs.md). As wide as
+/// the log's: they catch corrupt cells and unit mistakes (a truth `x = 1e300` made `evaluate`
+/// print `inf` and `NaN`), not unusual driving.
+pub const TRUTH_RANGES: [ColumnRange; 6] = [
+    LOG_RANGES[0],
+    ColumnRange {
+        column: "x",
+        unit: "m",
+        min: -MAX_TRUTH_POSITION_M,
+        max: MAX_TRUTH_POSITION_M,
+        why: "10 000 km from the origin, a quarter of the way round the Earth: a corrupt cell, or not metres?",
+    },
+    ColumnRange {
+        column: "y",
+        unit: "m",
+        min: -MAX_TRUTH_POSITION_M,
+        max: MAX_TRUTH_POSITION_M,
+        why: "10 000 km from the origin, a quarter of the way round the Earth: a corrupt cell, or not metres?",
+    },
+    ColumnRange {
+        column: "heading",
+        unit: "rad",
+        min: -6.3,
+        max: 6.3,
+        why: "a heading in radians, -pi..pi or 0..2 pi; in degrees?",
+    },
+    ColumnRange {
+        column: "yaw_rate",
+        unit: "rad/s",
+        min: -10.0,
+        max: 10.0,
+        why: "573 deg/s; a car spinning out turns at about 3 rad/s: in deg/s?",
+    },
+    ColumnRange {
+        column: "speed",
+        unit: "m/s",
+        min: -10.0,
+        max: 80.0,
+        why: SPEED_WHY,
     },
 ];
 
@@ -688,7 +735,7 @@ fn check_sample_interval(rows: &[LogRow], path: &Path) -> Result<(), LogError> {
     Ok(())
 }
 
-/// Reads a truth CSV (every cell required).
+/// Reads a truth CSV (every cell required, each within its column's range: [`TRUTH_RANGES`]).
 pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, LogError> {
     let text = read_text(path)?;
     parse_truth_text(&text.text, path, text.lossy)
@@ -707,7 +754,7 @@ fn parse_truth_text(text: &str, path: &Path, lossy: bool) -> Result<Vec<TruthRow
         let line = line?;
         let mut v = [0.0; 6];
         for (i, out) in v.iter_mut().enumerate() {
-            *out = match line.value(i, None)? {
+            *out = match line.value(i, TRUTH_RANGES.get(i))? {
                 Some(x) => x,
                 None => return Err(line.error(i, LogErrorKind::MissingValue)),
             };

@@ -465,15 +465,13 @@ fn run(cli: Cli) -> Result<()> {
                 catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
             progress.set_message("evaluating");
             let e = data.evaluate();
-            if e.ticks == 0 {
-                progress.finish();
-                bail!(
-                    "{}: no prediction to score: the node had no valid position at any tick \
-                     (replay warns why: a receiver slower than the model file's gnss_rate_hz \
-                     times out between its fixes; GNSS missing or refused)",
-                    predictions.display()
-                );
-            }
+            let e = match e {
+                Ok(e) => e,
+                Err(err) => {
+                    progress.finish();
+                    return Err(err);
+                }
+            };
             let written = match &plots {
                 Some(dir) => {
                     progress.set_message("plotting");

@@ -438,6 +438,118 @@ fn bad_input_is_reported_with_file_and_line() {
     assert!(err.contains("nope.log"), "{err}");
 }
 
+/// `evaluate` refuses, with what to do, what would score nonsense (review findings 07, 08 and
+/// the lead's frame mismatch): predictions on another clock than the truth (both ranges
+/// named, not "no valid position"); a truth value no car can have (FILE:LINE:COL, not `inf`
+/// and `NaN` in the report); predictions in the node's own frame (replay without `--origin`,
+/// origin at the first fix) scored against the truth's frame. The same run with `--origin`
+/// scores.
+#[test]
+fn evaluate_refuses_what_would_mislead() {
+    let dir = tmp_dir("evaluate-refuses");
+    let truth = data("smoke.truth.csv");
+    let can = data("smoke.can.log");
+
+    // Predictions stamped at an epoch (the log's `t` + 1.7e9 s), truth from 0.
+    let csv = String::from_utf8(read(&data("smoke.csv"))).unwrap();
+    let mut epoch = String::new();
+    for (i, l) in csv.lines().enumerate() {
+        if i == 0 {
+            epoch += l;
+        } else {
+            let (t, rest) = l.split_once(',').unwrap();
+            epoch += &format!("{:.6},{rest}", t.parse::<f64>().unwrap() + 1.7e9);
+        }
+        epoch += "\n";
+    }
+    let epoch_csv = dir.join("epoch.csv");
+    std::fs::write(&epoch_csv, epoch).unwrap();
+    let epoch_can = dir.join("epoch.can.log");
+    ok(&["csv2can", s(&epoch_csv), "--out", s(&epoch_can)]);
+    let epoch_pred = dir.join("epoch_pred.csv");
+    ok(&[
+        "replay",
+        s(&epoch_can),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&epoch_pred),
+    ]);
+    let err = fails(&[
+        "evaluate",
+        s(&epoch_pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&epoch_can),
+    ]);
+    assert!(err.contains("do not overlap in time"), "{err}");
+    assert!(
+        err.contains("(t = 1700000003.86 .. 1700000014.96 s)"),
+        "{err}"
+    );
+    assert!(err.contains("(t = 0 .. 14.95 s)"), "{err}");
+    assert!(!err.contains("no valid position"), "{err}");
+
+    // A truth cell no car can have: its file, line and column.
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let truth_text = String::from_utf8(read(&truth)).unwrap();
+    let mut lines: Vec<String> = truth_text.lines().map(str::to_string).collect();
+    let cells: Vec<String> = lines[1000].split(',').map(str::to_string).collect();
+    lines[1000] = format!("{},1e300,{}", cells[0], cells[2..].join(","));
+    let bad_truth = dir.join("bad.truth.csv");
+    std::fs::write(&bad_truth, lines.join("\n") + "\n").unwrap();
+    let json = dir.join("eval.json");
+    let err = fails(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&bad_truth),
+        "--inputs",
+        s(&can),
+        "--json",
+        s(&json),
+    ]);
+    let col = cells[0].chars().count() + 2;
+    assert!(
+        err.contains(&format!(
+            "{}:1001:{col}: column `x`: 1e300 m is outside -1e7..1e7 m",
+            bad_truth.display()
+        )),
+        "{err}"
+    );
+    assert!(!json.exists(), "no report on error");
+
+    // Replay without --origin: the node's frame at its first fix, 1.5 m from the truth's.
+    let first_fix = dir.join("first_fix.csv");
+    ok(&["replay", s(&can), "--out", s(&first_fix)]);
+    let err = fails(&[
+        "evaluate",
+        s(&first_fix),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&can),
+    ]);
+    assert!(
+        err.contains("the predictions are not in the truth's frame"),
+        "{err}"
+    );
+    assert!(err.contains("the first GNSS fix"), "{err}");
+    assert!(err.contains(&format!("--origin {ORIGIN}")), "{err}");
+    // The same drive replayed in the truth's frame is scored.
+    let out = ok(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&can),
+    ]);
+    assert!(!out.contains("error"), "{out}");
+}
+
 /// `receiver-error` on the simulator's receiver parked for an hour gives the bound the built-in
 /// files declare (the simulator's bias, 0.8 m per axis: 2.0 m, 2.5 standard deviations; seeds
 /// 1 and 2 give 2.1 and 2.0 m); a 20 s standstill is too short and says how long is enough; a
