@@ -365,6 +365,15 @@ fn run(cli: Cli) -> Result<()> {
         Command::Csv2can { log, out } => {
             let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
             print_notes(&read.notes.messages());
+            if read.rows.is_empty() {
+                // An empty candump would replay to nothing, with success: not a drive.
+                bail!(
+                    "{}: no data rows (a header alone): a log with no rows is not a drive; \
+                     nothing written to {}",
+                    log.display(),
+                    out.display()
+                );
+            }
             let encoded = csv2can::encode_log(&read.rows)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
             if let Some(note) = encoded.note() {

@@ -611,9 +611,9 @@ fn replay_text<C: Write + Send, T: Write + Send>(
 /// `catmodel replay`: the candump file at `log` through the node (its frames on `interface`
 /// only, if given), the predictions CSV to `csv_path` and the TX log to `tx_path` if given
 /// (files, with their directories, written as `.partial` files while the node runs and renamed
-/// once the whole log has parsed: an error leaves none behind; [`PartialFile`]). `progress` as
-/// in [`replay_into`]; [`estimate_ticks`] gives the total. Returns what the reader noticed
-/// too ([`LogReport`]).
+/// once the whole log has parsed: an error leaves none behind; [`PartialFile`]). A log with no
+/// frame to replay is an error naming it. `progress` as in [`replay_into`]; [`estimate_ticks`]
+/// gives the total. Returns what the reader noticed too ([`LogReport`]).
 pub fn replay_file(
     log: &Path,
     text: &[u8],
@@ -648,6 +648,18 @@ pub fn replay_file(
             (stats, read.report)
         }
     };
+    if stats.ticks == 0 {
+        // No frame, no tick: a replay of nothing would "succeed" with an empty predictions
+        // file. The output files are dropped uncommitted (none is left behind).
+        let skipped = match stats.unsupported {
+            0 => String::new(),
+            n => format!(" ({n} remote/FD/error frames skipped, which the node cannot use)"),
+        };
+        bail!(
+            "{}: no CAN frame to replay{skipped}: a log with no frames is not a drive",
+            log.display()
+        );
+    }
     csv.commit()?;
     if let Some(tx) = tx {
         tx.commit()?;

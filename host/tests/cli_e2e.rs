@@ -438,6 +438,39 @@ fn bad_input_is_reported_with_file_and_line() {
     assert!(err.contains("nope.log"), "{err}");
 }
 
+/// A log with no rows is not a drive: `csv2can` of a header alone and `replay` of an empty
+/// candump (or one of blank lines only) are errors naming the file, and write nothing (they
+/// used to write an empty candump, and replay 0 ticks, with exit status 0).
+#[test]
+fn a_log_with_no_rows_is_not_a_drive() {
+    let dir = tmp_dir("no-rows");
+    let header_only = dir.join("header.csv");
+    std::fs::write(
+        &header_only,
+        "t,vel,input_vel,accel,steer,brake,lat,lon\r\n",
+    )
+    .unwrap();
+    let can = dir.join("header.can.log");
+    let err = fails(&["csv2can", s(&header_only), "--out", s(&can)]);
+    assert!(
+        err.contains(&format!("{}: no data rows", header_only.display())),
+        "{err}"
+    );
+    assert!(!can.exists(), "nothing written");
+
+    let pred = dir.join("p.csv");
+    for (name, text) in [("empty.can.log", ""), ("blank.can.log", "\n  \n\n")] {
+        let log = dir.join(name);
+        std::fs::write(&log, text).unwrap();
+        let err = fails(&["replay", s(&log), "--out", s(&pred)]);
+        assert!(
+            err.contains(&format!("{}: no CAN frame to replay", log.display())),
+            "{err}"
+        );
+        assert!(!pred.exists(), "{name}: no output");
+    }
+}
+
 /// `evaluate` refuses, with what to do, what would score nonsense (review findings 07, 08 and
 /// the lead's frame mismatch): predictions on another clock than the truth (both ranges
 /// named, not "no valid position"); a truth value no car can have (FILE:LINE:COL, not `inf`
