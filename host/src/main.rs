@@ -444,6 +444,16 @@ fn run(cli: Cli) -> Result<()> {
                      A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
                     result.ticks, result.max_speed_mps
                 );
+            } else if result.ticks > 0
+                && result.valid_ticks == 0
+                && c.gnss_rate_mismatch == 0
+                && report.timestamps.batched()
+            {
+                eprintln!(
+                    "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate): \
+                     the log's timestamps come in batches (the warning above), which bunch the fixes in time",
+                    result.ticks, c.gnss_gate_rejects
+                );
             } else if result.ticks > 0 && result.valid_ticks == 0 && c.gnss_rate_mismatch == 0 {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
@@ -681,6 +691,9 @@ fn run(cli: Cli) -> Result<()> {
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             eprintln!("sil: {summary}");
+            if let Some(w) = summary.timestamps.warning("stdin") {
+                eprintln!("sil: warning: {w}");
+            }
             if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver)
             {
                 eprintln!("sil: warning: {note}");
