@@ -120,7 +120,8 @@ enum Command {
         /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
         #[arg(long)]
         vehicle: Option<PathBuf>,
-        /// Write the model even if a fit is below the floor (the warning goes into the file).
+        /// Write the model even if a fit is below the floor (the warning goes into the file),
+        /// or a log's wheel speed is not in m/s by its GNSS track (km/h, mph).
         #[arg(long)]
         force: bool,
     },
@@ -545,6 +546,26 @@ fn run(cli: Cli) -> Result<()> {
             for e in training.iter().chain(&validation) {
                 print_notes(&e.log_notes);
             }
+            // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
+            // word and a wrong model (review finding 04): refused before the minutes of fitting.
+            let units = speed_unit_problems(
+                logs.iter().chain(&validate),
+                training.iter().chain(&validation),
+            );
+            if !units.is_empty() {
+                if !force {
+                    bail!(
+                        "{}\n{} not written: the wheel speed of {} log(s) is not in m/s by \
+                         their GNSS track (--force identifies anyway)",
+                        units.join("\n"),
+                        out.display(),
+                        units.len()
+                    );
+                }
+                for u in &units {
+                    eprintln!("catmodel: warning: {u} (identified anyway: --force)");
+                }
+            }
             let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
             spinner.enable_steady_tick(std::time::Duration::from_millis(120));
             let mut id = identify::identify(training, validation, &base, &opts)?;
@@ -595,6 +616,9 @@ fn run(cli: Cli) -> Result<()> {
             let opts = identify::preprocess::PreprocessOptions::default();
             let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
             print_notes(&e.log_notes);
+            for u in speed_unit_problems([&log], [&e]) {
+                eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
+            }
             let sim = identify::validate::simulate_all(&file, &e)?;
             let scores =
                 identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
@@ -855,6 +879,22 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `FILE: why` for each log whose wheel speed its GNSS track says is not in m/s
+/// ([`identify::units::SpeedScale::problem`]).
+fn speed_unit_problems<'a>(
+    paths: impl IntoIterator<Item = &'a PathBuf>,
+    experiments: impl IntoIterator<Item = &'a identify::preprocess::Experiment>,
+) -> Vec<String> {
+    paths
+        .into_iter()
+        .zip(experiments)
+        .filter_map(|(p, e)| {
+            let problem = e.speed_scale.and_then(|s| s.problem())?;
+            Some(format!("{}: {problem}", p.display()))
+        })
+        .collect()
 }
 
 /// The training log and line behind a suspect sample of the fit floor, with its value.

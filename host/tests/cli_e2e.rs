@@ -471,6 +471,65 @@ fn a_log_with_no_rows_is_not_a_drive() {
     }
 }
 
+/// `identify` refuses logs whose wheel speed their GNSS track says is not in m/s (review
+/// finding 04: a training set in km/h was identified with exit 0 and a steering gain of 0.34),
+/// naming each file, the ratio and the likely unit; `--force` identifies anyway, with the
+/// warning; `compare` warns.
+#[test]
+fn identify_refuses_a_wheel_speed_in_another_unit() {
+    let dir = tmp_dir("speed-unit");
+    let mut logs = Vec::new();
+    for scenario in ["straight-5", "turn-left"] {
+        ok(&[
+            "simulate-drive",
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--out",
+            s(&dir),
+        ]);
+        // `vel` and `input_vel` (columns 2 and 3 of the simulator's log) in km/h.
+        let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
+        let mut kmh = String::new();
+        for (i, l) in text.lines().enumerate() {
+            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+            if i > 0 {
+                for c in &mut cells[1..3] {
+                    if !c.is_empty() {
+                        *c = format!("{}", c.parse::<f64>().unwrap() * 3.6);
+                    }
+                }
+            }
+            kmh += &(cells.join(",") + "\n");
+        }
+        let path = dir.join(format!("{scenario}-kmh.csv"));
+        std::fs::write(&path, kmh).unwrap();
+        logs.push(path);
+    }
+    let model = dir.join("model.toml");
+    let mut args = vec!["identify", s(&logs[0]), s(&logs[1]), "--out", s(&model)];
+    let err = fails(&args);
+    for log in &logs {
+        assert!(
+            err.contains(&format!("{}: the wheel speed `vel` is 3.", log.display())),
+            "{err}"
+        );
+    }
+    assert!(err.contains("`vel` looks like km/h"), "{err}");
+    assert!(err.contains("--force"), "{err}");
+    assert!(!model.exists(), "not written");
+    args.push("--force");
+    let warnings = ok(&args);
+    assert!(
+        warnings.contains("looks like km/h") && warnings.contains("identified anyway"),
+        "{warnings}"
+    );
+    assert!(model.exists());
+    let warning = ok(&["compare", s(&logs[0]), "--model", s(&model)]);
+    assert!(warning.contains("looks like km/h"), "{warning}");
+}
+
 /// `evaluate` refuses, with what to do, what would score nonsense (review findings 07, 08 and
 /// the lead's frame mismatch): predictions on another clock than the truth (both ranges
 /// named, not "no valid position"); a truth value no car can have (FILE:LINE:COL, not `inf`
