@@ -36,6 +36,7 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         yaw_half_width: 48,
         log_notes: Vec::new(),
         gnss_rate_hz: 100.0,
+        speed_scale: None,
     }
 }
 
@@ -491,4 +492,86 @@ fn an_understeer_the_drives_do_not_determine_is_the_car_files() {
         lateral.understeer_s2_per_m2,
         base.vehicle.understeer_s2_per_m2
     );
+}
+
+/// The wheel speed's unit against the GNSS track (review finding 04: a training set in km/h,
+/// inside the schema's range in town, was identified with exit 0 and a steering gain of 0.34
+/// instead of 0.99). The simulator's drives in m/s pass at every receiver rate (1 to 100 Hz,
+/// the CAT Vehicle's standard receiver and RTK, the Polo's 10 Hz and the van's 5 Hz, with
+/// faults too); the same drives in km/h and mph are named as such.
+#[test]
+fn the_wheel_speed_unit_is_checked_against_the_gnss_track() {
+    use catmodel_host::identify::units::SpeedScale;
+    use catmodel_host::sim::{self, SimOptions};
+    let vehicle = model_file::load(&model_file::paper_path()).unwrap().vehicle;
+    let at_rate = |hz: f64| {
+        let mut p = VehicleConfig::default();
+        p.sensors.gnss.period_s = 1.0 / hz;
+        (format!("CAT Vehicle at {hz} Hz"), p)
+    };
+    let mut plants = vec![
+        ("CAT Vehicle".to_string(), VehicleConfig::default()),
+        (
+            "CAT Vehicle RTK".to_string(),
+            with_rtk(VehicleConfig::default()),
+        ),
+        (
+            "Polo (10 Hz)".to_string(),
+            VehicleConfig::load(&vehicles_dir().join("vw-polo.toml")).unwrap(),
+        ),
+        (
+            "van (5 Hz)".to_string(),
+            VehicleConfig::load(&vehicles_dir().join("van.toml")).unwrap(),
+        ),
+    ];
+    plants.extend([1.0, 2.0, 20.0, 50.0].map(at_rate));
+    let scale_of = |plant: &VehicleConfig, scenario: &str, faults: bool, unit: f64| {
+        let base = sim::scenario::Scenario::builtin(scenario).unwrap();
+        let options = SimOptions {
+            seed: 4,
+            faults,
+            ..SimOptions::default()
+        };
+        let mut rows = sim::simulate(&base, plant, &options).log;
+        for r in &mut rows {
+            r.vel = r.vel.map(|v| v * unit);
+            r.input_vel = r.input_vel.map(|v| v * unit);
+        }
+        let e = preprocess_rows(scenario, &rows, &vehicle, &PreprocessOptions::default())
+            .unwrap_or_else(|e| panic!("{scenario}: {e:#}"));
+        e.speed_scale
+    };
+    let mut worst: f64 = 1.0;
+    for (name, plant) in &plants {
+        for scenario in [
+            "straight-2.5",
+            "straight-10",
+            "turn-left",
+            "circle-right",
+            "suburb",
+        ] {
+            for faults in [false, true] {
+                let what = format!("{name}, {scenario}, faults {faults}");
+                let s: SpeedScale = scale_of(plant, scenario, faults, 1.0)
+                    .unwrap_or_else(|| panic!("{what}: not judged"));
+                assert_eq!(s.problem(), None, "{what}: {s:?}");
+                println!("{what}: {:.3} over {} stretches", s.ratio, s.stretches);
+                if (s.ratio - 1.0).abs() > (worst - 1.0).abs() {
+                    worst = s.ratio;
+                }
+                if faults {
+                    continue;
+                }
+                for (unit, label) in [(3.6, "km/h"), (2.236_936, "mph")] {
+                    let s = scale_of(plant, scenario, faults, unit).unwrap();
+                    let problem = s.problem().unwrap_or_else(|| panic!("{what}: {s:?}"));
+                    assert!(
+                        problem.contains(&format!("looks like {label}")),
+                        "{what}, {label}: {problem}"
+                    );
+                }
+            }
+        }
+    }
+    println!("wheel over track distance, m/s drives: farthest from 1 {worst:.3}");
 }

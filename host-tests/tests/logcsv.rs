@@ -73,7 +73,11 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
     let cases: &[(&str, &str)] = &[
         ("", "drive.csv:1: missing header row"),
         ("1,2,3,4,5,6,7,8\n", "drive.csv:1:1: missing header row"),
-        ("t,vel,,accel\n", "drive.csv:1:7: empty column name in the header"),
+        (
+            "t,vel,\"input_vel,accel\n",
+            "drive.csv:1:7: the quote that opens this cell is never closed (RFC 4180: a quoted \
+             cell ends at the next lone `\"`; `\"\"` is a quote inside it)",
+        ),
         ("t,vel,t\n", "drive.csv:1:7: column `t`: column `t` appears twice in the header"),
         ("t,vel,input_vel,accel,steer,brake,lat\n", "drive.csv:1: column `lon`: missing required column `lon` (the header found: `t,vel,input_vel,accel,steer,brake,lat`)"),
         (
@@ -264,6 +268,176 @@ fn extra_columns_are_named_once() {
     );
 }
 
+/// Three recorder habits the schema's "extra columns are ignored" covers (review finding 09):
+/// a trailing comma on every line (an unnamed, empty column), a quoted comment holding a line
+/// break (RFC 4180), and a comment in another encoding than UTF-8 (a cp1252 `ß`). Each reads
+/// as the same log without it; a named column twice, a foreign byte in the header or in a
+/// column that is read stay errors with their line and column.
+#[test]
+fn recorder_habits_in_extra_columns_are_read_past() {
+    let plain = format!("{HEADER}\n0.5,2.5,3,,,,,\n0.52,2.6,3,,,,,\n");
+    let want = parse(&plain).expect("valid");
+
+    // (a) A trailing comma on every line, header included; with CRLF too.
+    let trailing: String = plain.lines().map(|l| format!("{l},\r\n")).collect();
+    assert_eq!(parse(&trailing).expect("trailing comma"), want);
+    assert_eq!(
+        notes(&trailing),
+        vec![
+            "drive.csv: 1 unnamed column (an empty header cell, as a trailing comma on every \
+              line makes) is not in the log schema: ignored"
+                .to_string()
+        ]
+    );
+    let two = "t,gear,vel,input_vel,accel,steer,brake,lat,lon,,\n0.5,3,2.5,3,,,,,,,\n";
+    assert_eq!(
+        notes(two),
+        vec![
+            "drive.csv: column `gear` and 2 unnamed columns (empty header cells, as trailing \
+              commas on every line make) are not in the log schema: ignored"
+                .to_string()
+        ]
+    );
+    // A known column twice is still ambiguous, unnamed ones beside it or not.
+    assert_eq!(
+        error_message("t,vel,input_vel,accel,steer,brake,lat,lon,vel,\n"),
+        "drive.csv:1:43: column `vel`: column `vel` appears twice in the header"
+    );
+    // A header-less file with a trailing comma is still a file without a header.
+    assert_eq!(
+        error_message("1,2,3,4,5,6,7,8,\n"),
+        "drive.csv:1:1: missing header row"
+    );
+
+    // (b) A quoted cell holding a line break (LF or CRLF): one record over two lines; the
+    // lines after it keep their physical numbers in errors.
+    for eol in ["\n", "\r\n"] {
+        let text = format!(
+            "{HEADER},comment{eol}0.5,2.5,3,,,,,,\"stop,{eol}then go\"{eol}0.52,2.6,3,,,,,,{eol}"
+        );
+        let log = logcsv::parse_log(&text, Path::new(FILE)).expect("quoted line break");
+        assert_eq!(log.rows, want, "{eol:?}");
+        assert_eq!(log.lines, vec![2, 4], "{eol:?}");
+        let bad = format!(
+            "{HEADER},comment{eol}0.5,2.5,3,,,,,,\"stop,{eol}then go\"{eol}0.52,x,3,,,,,,{eol}"
+        );
+        assert_eq!(
+            error_message(&bad),
+            "drive.csv:4:6: column `vel`: not a number: `x`",
+            "{eol:?}"
+        );
+    }
+    // A cell of a read column that starts on a later physical line is named by that line.
+    let text = "t,comment,vel,input_vel,accel,steer,brake,lat,lon\n0.5,\"a\nb\",abc,,,,,,\n";
+    assert_eq!(
+        error_message(text),
+        "drive.csv:3:4: column `vel`: not a number: `abc`"
+    );
+    // A quote inside a cell is text: it opens nothing (`5" screen`).
+    let text = format!("{HEADER},comment\n0.5,2.5,3,,,,,,5\" screen\n0.52,2.6,3,,,,,,ok\n");
+    assert_eq!(parse(&text).expect("inch mark"), want);
+    // A quote that opens a cell and never closes is named where it opens.
+    let text =
+        format!("{HEADER},comment\n0.5,2.5,3,,,,,,ok\n0.52,2.6,3,,,,,,\"stop\n0.54,,,,,,,,\n");
+    let message = error_message(&text);
+    assert!(
+        message.starts_with("drive.csv:3:17: the quote that opens this cell is never closed"),
+        "{message}"
+    );
+}
+
+/// (c) A byte that is not UTF-8 in an ignored column is never read; in the header or in a read
+/// column it is an error with its line and column.
+#[test]
+fn a_foreign_encoding_is_refused_only_where_it_is_read() {
+    let dir = std::env::temp_dir().join(format!("catmodel-logcsv-cp1252-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let write = |name: &str, bytes: &[u8]| {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).expect("write");
+        p
+    };
+    // cp1252 `Straße`: 0xDF is not UTF-8.
+    let ok = write(
+        "comment.csv",
+        b"t,vel,input_vel,accel,steer,brake,lat,lon,comment\n0.5,2.5,3,,,,,,Stra\xdfe\n0.52,2.6,3,,,,,,\n",
+    );
+    let log = logcsv::read_log(&ok).expect("a foreign byte in an ignored column");
+    assert_eq!(log.rows.len(), 2);
+    assert_eq!(log.rows[1].vel, Some(2.6));
+    assert_eq!(log.notes.extra_columns, vec!["comment"]);
+    let header = write(
+        "header.csv",
+        b"t,vel,input_vel,accel,steer,brake,lat,lon,Stra\xdfe\n0.5,2.5,3,,,,,,\n",
+    );
+    let e = logcsv::read_log(&header).expect_err("a foreign byte in the header");
+    assert!(
+        e.to_string()
+            .starts_with(&format!("{}:1:43: not UTF-8 text", header.display())),
+        "{e}"
+    );
+    let truth = write(
+        "t.truth.csv",
+        b"t,x,y,heading,yaw_rate,speed,note\n0,1,2,0.5,0,5,\xe9t\xe9\n0.01,1\xb2,2,0.5,0,5,\n",
+    );
+    let e = logcsv::read_truth(&truth).expect_err("a foreign byte in a truth column");
+    assert!(
+        e.to_string().starts_with(&format!(
+            "{}:3:6: column `x`: not UTF-8 text",
+            truth.display()
+        )),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The truth reader has physical ranges like the log reader's (review finding 08: a truth
+/// `x = 1e300` made `evaluate` print `inf` and `NaN`), with `file:line:column`.
+#[test]
+fn truth_values_no_car_can_have_are_refused() {
+    let head = "t,x,y,heading,yaw_rate,speed\n0,1,2,0.5,0.1,5\n";
+    let cases = [
+        (
+            "0.01,1e300,2,0.5,0.1,5",
+            "t.csv:3:6: column `x`: 1e300 m is outside -1e7..1e7 m",
+        ),
+        (
+            "0.01,1,-2e7,0.5,0.1,5",
+            "t.csv:3:8: column `y`: -2e7 m is outside -1e7..1e7 m",
+        ),
+        (
+            "0.01,1,2,90,0.1,5",
+            "t.csv:3:10: column `heading`: 90 rad is outside -6.3..6.3 rad",
+        ),
+        (
+            "0.01,1,2,0.5,57,5",
+            "t.csv:3:14: column `yaw_rate`: 57 rad/s is outside -10..10 rad/s",
+        ),
+        ("0.01,1,2,0.5,0.1,36", ""),
+        (
+            "0.01,1,2,0.5,0.1,130",
+            "t.csv:3:18: column `speed`: 130 m/s is outside -10..80 m/s",
+        ),
+        (
+            "1e12,1,2,0.5,0.1,5",
+            "t.csv:3:1: column `t`: 1e12 s is outside -1e10..1e10 s",
+        ),
+    ];
+    for (row, want) in cases {
+        let text = format!("{head}{row}\n");
+        match logcsv::parse_truth(&text, Path::new("t.csv")) {
+            Ok(rows) => assert!(want.is_empty(), "{row}: accepted {rows:?}"),
+            Err(e) => assert!(
+                !want.is_empty() && e.to_string().starts_with(want),
+                "{row}: {e}"
+            ),
+        }
+    }
+    for (range, column) in logcsv::TRUTH_RANGES.iter().zip(logcsv::TRUTH_COLUMNS) {
+        assert_eq!(range.column, column);
+    }
+}
+
 /// Every range bound is accepted and the next double beyond it is refused, for every column.
 #[test]
 fn ranges_are_inclusive_and_end_exactly_at_their_bounds() {
@@ -321,7 +495,11 @@ fn file_errors_name_the_file() {
     let e = logcsv::read_log(&latin1).expect_err("not UTF-8");
     assert_eq!(
         e.to_string(),
-        format!("{}:3: not UTF-8 text", latin1.display())
+        format!(
+            "{}:3:5: column `vel`: not UTF-8 text (the header and the schema's columns must be \
+             UTF-8; bytes of another encoding are accepted only in columns that are ignored)",
+            latin1.display()
+        )
     );
 
     let truth = dir.join("bad.truth.csv");
@@ -467,7 +645,7 @@ proptest! {
     }
 
     #[test]
-    fn truth_round_trip_is_exact(values in proptest::collection::vec((finite(), finite(), -3.2..3.2f64, finite(), 0.0..30.0f64), 0..30)) {
+    fn truth_round_trip_is_exact(values in proptest::collection::vec((finite(), finite(), -3.2..3.2f64, -10.0..10.0f64, 0.0..30.0f64), 0..30)) {
         let rows: Vec<TruthRow> = values.iter().enumerate().map(|(i, (x, y, h, r, v))| TruthRow {
             t: i as f64 * 0.01, x: *x, y: *y, heading: *h, yaw_rate: *r, speed: *v }).collect();
         let mut bytes = Vec::new();

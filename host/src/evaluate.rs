@@ -42,6 +42,9 @@ pub struct BaselineInputs {
     pub speed: Vec<(f64, f64)>,
     /// Measured steering `(t, %)`.
     pub steer: Vec<(f64, f64)>,
+    /// The planner's map origins (LOCAL_ORIGIN, both pages) `(t, east, north)`: the node's
+    /// frame from then on.
+    pub local_origins: Vec<(f64, f64, f64)>,
 }
 
 /// Truth interpolated in time, heading unwrapped before interpolation.
@@ -144,6 +147,21 @@ impl ErrorStats {
     }
 }
 
+impl ErrorStats {
+    /// The first figure that is not a finite number, by name.
+    fn non_finite(&self) -> Option<(&'static str, f64)> {
+        [
+            ("pos_mean_m", self.pos_mean_m),
+            ("pos_rms_m", self.pos_rms_m),
+            ("pos_p95_m", self.pos_p95_m),
+            ("heading_rms_rad", self.heading_rms_rad),
+            ("speed_rms_mps", self.speed_rms_mps),
+        ]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite())
+    }
+}
+
 /// One line of the report: a horizon, catmodel's errors and the baseline's.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct HorizonRow {
@@ -170,6 +188,40 @@ pub struct Evaluation {
     pub bias_floor: BiasFloor,
     /// Ticks whose horizon-0 position was compared.
     pub ticks: usize,
+}
+
+impl Evaluation {
+    /// The first figure of the report that is not a finite number (`horizons[2].node.pos_rms_m`,
+    /// ...), with its value: the report must never print `NaN` or `inf` (nor JSON `null`).
+    pub fn non_finite(&self) -> Option<(String, f64)> {
+        for (i, r) in self.horizons.iter().enumerate() {
+            if !r.horizon_s.is_finite() {
+                return Some((format!("horizons[{i}].horizon_s"), r.horizon_s));
+            }
+            for (who, stats) in [("node", &r.node), ("baseline", &r.baseline)] {
+                if let Some((name, v)) = stats.non_finite() {
+                    return Some((format!("horizon {} s: {who} {name}", r.horizon_s), v));
+                }
+            }
+        }
+        for (who, stats) in [
+            ("raw_gnss", &self.raw_gnss),
+            ("raw_gnss_at_axle", &self.raw_gnss_at_axle),
+        ] {
+            if let Some((name, v)) = stats.non_finite() {
+                return Some((format!("{who} {name}"), v));
+            }
+        }
+        let b = &self.bias_floor;
+        [
+            ("bias_floor pos_rms_m", Some(b.pos_rms_m)),
+            ("bias_floor filtered_pos_rms_m", Some(b.filtered_pos_rms_m)),
+            ("bias_floor filtered_ratio", b.filtered_ratio),
+            ("bias_floor raw_at_axle_ratio", b.raw_at_axle_ratio),
+        ]
+        .into_iter()
+        .find_map(|(name, v)| v.filter(|v| !v.is_finite()).map(|v| (name.to_string(), v)))
+    }
 }
 
 /// Width of the centred window that separates the slow part of the GNSS error, s: about the
@@ -302,6 +354,97 @@ fn bias_floor(
         filtered_ratio: ratio(filtered_pos_rms_m),
         raw_at_axle_ratio: ratio(raw_at_axle_rms_m),
     }
+}
+
+/// The longest interval between two fixes across which [`filtered_offset_from_fixes`]
+/// interpolates, s: a 1 Hz receiver's period with room to spare; longer is an outage.
+const MAX_FIX_GAP_S: f64 = 2.5;
+
+/// The mean offset `(east, north)` of the node's filtered position (horizon 0) from the raw
+/// fixes (interpolated to the tick's time) moved back to the rear axle along the true heading,
+/// m, and the ticks it is the mean over; `None` without a tick between two fixes. Whatever the
+/// receiver's bias, the filtered position follows the fixes (it has nothing else to follow), so
+/// this mean is small when the predictions and the fixes share a frame, and the offset between
+/// the two frames when they do not ([`frame_offset_check`]).
+pub fn filtered_offset_from_fixes(
+    predictions: &[Prediction],
+    truth: &Truth,
+    gnss: &[(f64, f64, f64)],
+    antenna_ahead_m: f64,
+) -> Option<((f64, f64), usize)> {
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for p in predictions.iter().filter(|p| p.horizon_s == 0.0) {
+        let i = gnss.partition_point(|g| g.0 <= p.t);
+        let (Some(a), Some(b)) = (i.checked_sub(1).and_then(|i| gnss.get(i)), gnss.get(i)) else {
+            continue;
+        };
+        let span = b.0 - a.0;
+        if !(span > 0.0 && span <= MAX_FIX_GAP_S) {
+            continue;
+        }
+        let Some((_, _, th, _)) = truth.at(p.t) else {
+            continue;
+        };
+        let w = (p.t - a.0) / span;
+        let fx = a.1 + (b.1 - a.1) * w - antenna_ahead_m * th.sin();
+        let fy = a.2 + (b.2 - a.2) * w - antenna_ahead_m * th.cos();
+        sx += p.x - fx;
+        sy += p.y - fy;
+        n += 1;
+    }
+    (n > 0).then(|| ((sx / n as f64, sy / n as f64), n))
+}
+
+/// Below this, a frame offset is not told apart from the filter's own offset from the fixes,
+/// and changes no figure that matters, m.
+pub const NEGLIGIBLE_FRAME_OFFSET_M: f64 = 0.2;
+
+/// Which frame the predictions are in, judged by [`filtered_offset_from_fixes`]: the truth's
+/// (expected offset 0) or a frame whose origin sits at `candidate` in the truth's frame (the
+/// predictions then sit at `-candidate` from the fixes: a point's coordinates in a frame are
+/// its coordinates in the truth's minus the frame's origin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameCheck {
+    /// The mean offset of the filtered position from the fixes, m.
+    pub offset_m: (f64, f64),
+    /// Ticks it is the mean over.
+    pub ticks: usize,
+    /// The candidate frame's origin in the truth frame, m.
+    pub candidate_m: (f64, f64),
+    /// How far the offset is from the truth frame's expectation (0), m.
+    pub residual_truth_m: f64,
+    /// How far it is from the candidate's expectation (`-candidate`), m.
+    pub residual_candidate_m: f64,
+}
+
+impl FrameCheck {
+    /// The candidate frame fits clearly better than the truth's, and differs from it by more
+    /// than [`NEGLIGIBLE_FRAME_OFFSET_M`]: the predictions are in the candidate frame.
+    pub fn in_candidate_frame(&self) -> bool {
+        let (cx, cy) = self.candidate_m;
+        cx.hypot(cy) > NEGLIGIBLE_FRAME_OFFSET_M
+            && self.residual_candidate_m < 0.5 * self.residual_truth_m
+            && self.residual_truth_m > NEGLIGIBLE_FRAME_OFFSET_M
+    }
+}
+
+/// [`FrameCheck`] of the predictions against a candidate frame origin `candidate_m` (in the
+/// truth frame, m); `None` without ticks to judge by.
+pub fn frame_offset_check(
+    predictions: &[Prediction],
+    truth: &Truth,
+    gnss: &[(f64, f64, f64)],
+    antenna_ahead_m: f64,
+    candidate_m: (f64, f64),
+) -> Option<FrameCheck> {
+    let (offset_m, ticks) = filtered_offset_from_fixes(predictions, truth, gnss, antenna_ahead_m)?;
+    Some(FrameCheck {
+        offset_m,
+        ticks,
+        candidate_m,
+        residual_truth_m: offset_m.0.hypot(offset_m.1),
+        residual_candidate_m: (offset_m.0 + candidate_m.0).hypot(offset_m.1 + candidate_m.1),
+    })
 }
 
 /// Per-horizon error lists: (horizon, position, heading, speed errors).
@@ -1028,6 +1171,86 @@ mod tests {
             assert!(ey.abs() < 1e-9);
         }
         assert_eq!(floor.at(20.0), None);
+    }
+
+    /// A prediction the readers would refuse, 1e200 m east, squares to `inf`: the report
+    /// names the figure instead of printing it (the CLI refuses it: review finding 08).
+    #[test]
+    fn a_figure_that_is_not_finite_is_named() {
+        let truth = truth_line();
+        let preds: Vec<Prediction> = (0..10)
+            .map(|k| Prediction {
+                t: 1.0 + k as f64 * 0.02,
+                step: k,
+                horizon_s: 0.0,
+                x: if k == 3 { 1e200 } else { 0.0 },
+                y: 10.0 * (1.0 + k as f64 * 0.02),
+                heading: 0.0,
+                speed: 10.0,
+                mode: "kinematic".into(),
+            })
+            .collect();
+        let e = evaluate(
+            &preds,
+            &truth,
+            &BaselineInputs::default(),
+            &CAT_VEHICLE,
+            1.5,
+        );
+        let (what, v) = e.non_finite().expect("inf");
+        assert_eq!(what, "horizon 0 s: node pos_mean_m");
+        assert!(v.is_infinite());
+        let fine = evaluate(
+            &preds[4..],
+            &truth,
+            &BaselineInputs::default(),
+            &CAT_VEHICLE,
+            1.5,
+        );
+        assert_eq!(fine.non_finite(), None);
+    }
+
+    /// The filtered position's mean offset from the fixes tells the frame: fixes with a 1 m
+    /// bias, the node following them in the truth's frame (offset 0) or in a frame whose
+    /// origin is the first fix (offset minus that fix).
+    #[test]
+    fn the_offset_from_the_fixes_tells_the_frame() {
+        let truth = truth_line();
+        let lever_m = 1.5;
+        let gnss: Vec<(f64, f64, f64)> = (0..100)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                (t, 0.6, 10.0 * t + lever_m - 0.8)
+            })
+            .collect();
+        let first = (gnss[0].1, gnss[0].2);
+        let preds = |shift: (f64, f64)| -> Vec<Prediction> {
+            (0..400)
+                .map(|k| {
+                    let t = 1.0 + k as f64 * 0.02;
+                    Prediction {
+                        t,
+                        step: k,
+                        horizon_s: 0.0,
+                        x: 0.6 - shift.0,
+                        y: 10.0 * t - 0.8 - shift.1,
+                        heading: 0.0,
+                        speed: 10.0,
+                        mode: "kinematic".into(),
+                    }
+                })
+                .collect()
+        };
+        let same = frame_offset_check(&preds((0.0, 0.0)), &truth, &gnss, lever_m, first).unwrap();
+        assert!(same.residual_truth_m < 1e-9, "{same:?}");
+        assert!(!same.in_candidate_frame(), "{same:?}");
+        let node = frame_offset_check(&preds(first), &truth, &gnss, lever_m, first).unwrap();
+        assert!(node.residual_candidate_m < 1e-9, "{node:?}");
+        assert!(node.in_candidate_frame(), "{node:?}");
+        // A first fix within 0.2 m of the truth's origin changes nothing worth refusing.
+        let near = (0.1, -0.1);
+        let c = frame_offset_check(&preds(near), &truth, &gnss, lever_m, near).unwrap();
+        assert!(!c.in_candidate_frame(), "{c:?}");
     }
 
     #[test]

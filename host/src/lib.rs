@@ -27,7 +27,9 @@ pub fn new_node(config: catmodel::node::NodeConfig) -> HostNode {
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use catmodel::can::codec::{decode_input, InputMessage};
+use catmodel::can::codec::{
+    decode_input, decode_planner, InputMessage, LocalOrigin, PlannerMessage,
+};
 use catmodel::geodesy::LocalFrame;
 use evaluate::{BaselineInputs, Evaluation, Prediction, Truth};
 
@@ -87,6 +89,11 @@ fn cell_f64(
     Ok(v)
 }
 
+/// The largest heading a predictions or truth file may hold, rad (either way round, radians).
+const MAX_HEADING_RAD: f64 = 6.3;
+/// The longest horizon a predictions file may hold, s (the node predicts 2 s ahead).
+const MAX_HORIZON_S: f64 = 60.0;
+
 /// Reads a predictions CSV (`t,step,horizon_s,x,y,heading,speed,mode`).
 pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     let (header, rows) = csv_table(path)?;
@@ -131,6 +138,25 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
             speed: f(6)?,
             mode,
         };
+        // What no node's output can be (a corrupt cell, another file): refused here, where
+        // the line is known, rather than squared into an `inf` in the report.
+        for (name, v, bound) in [
+            ("t", p.t, logcsv::LOG_RANGES[0].max),
+            ("x", p.x, logcsv::MAX_TRUTH_POSITION_M),
+            ("y", p.y, logcsv::MAX_TRUTH_POSITION_M),
+            ("heading", p.heading, MAX_HEADING_RAD),
+            ("horizon_s", p.horizon_s, MAX_HORIZON_S),
+        ] {
+            if v.abs() > bound {
+                bail!(
+                    "{}:{line}: column `{name}`: {} is outside -{bound}..{bound} (no node \
+                     predicts this: a corrupt cell?)",
+                    path.display(),
+                    logcsv::Readable(v),
+                    bound = logcsv::Readable(bound),
+                );
+            }
+        }
         if p.horizon_s < 0.0 {
             bail!(
                 "{}:{line}: column `horizon_s`: {} is negative",
@@ -186,8 +212,29 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64), car: &Car) -> Result
     )
     .map_err(|e| anyhow::anyhow!("origin {origin_deg:?}: {e:?}"))?;
     let mut inputs = BaselineInputs::default();
+    // LOCAL_ORIGIN's latitude page (with its counter), waiting for the longitude page.
+    let mut origin_lat: Option<(i32, u8)> = None;
     for f in frames {
         let t = f.t_us as f64 * 1e-6;
+        if let Ok(PlannerMessage::LocalOrigin(page, counter)) = decode_planner(&f.frame) {
+            match page {
+                LocalOrigin::Latitude { lat_e7 } => origin_lat = Some((lat_e7, counter)),
+                LocalOrigin::Longitude { lon_e7 } => {
+                    if let Some((lat_e7, c)) = origin_lat.take() {
+                        if (c + 1) & 0x0F == counter {
+                            if let Ok(enu) = frame.to_local(lat_e7, lon_e7) {
+                                inputs.local_origins.push((
+                                    t,
+                                    f64::from(enu.east_m),
+                                    f64::from(enu.north_m),
+                                ));
+                            }
+                        }
+                    }
+                }
+            }
+            continue;
+        }
         match decode_input(&f.frame, car.gnss_source) {
             Ok(InputMessage::Steering(m, _)) => {
                 if let Some(p) = m.steer_pct {
@@ -222,6 +269,10 @@ pub struct EvaluationData {
     pub inputs: BaselineInputs,
     /// The car.
     pub car: Car,
+    /// The files read: predictions, truth, inputs (for the errors).
+    pub paths: [PathBuf; 3],
+    /// The truth frame's origin, degrees.
+    pub origin_deg: (f64, f64),
 }
 
 impl EvaluationData {
@@ -238,18 +289,150 @@ impl EvaluationData {
             truth: Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?),
             inputs: baseline_inputs(inputs, origin_deg, &car)?,
             car,
+            paths: [
+                predictions.to_path_buf(),
+                truth.to_path_buf(),
+                inputs.to_path_buf(),
+            ],
+            origin_deg,
         })
     }
 
-    /// Scores the predictions and the baseline (the car's geometry for the baseline).
-    pub fn evaluate(&self) -> Evaluation {
-        evaluate::evaluate(
+    /// Scores the predictions and the baseline (the car's geometry for the baseline). Refused,
+    /// with what to do, when the scores would mislead: the files do not overlap in time, the
+    /// node had no position, the inputs hold no fix in the truth's time, the predictions are
+    /// not in the truth's frame ([`Self::check_frame`]); and a report with a figure that is not
+    /// a finite number is never returned.
+    pub fn evaluate(&self) -> Result<Evaluation> {
+        let [pred_path, truth_path, inputs_path] = &self.paths;
+        let span = |t: &mut dyn Iterator<Item = f64>| {
+            t.fold(None, |r: Option<(f64, f64)>, t| {
+                Some(r.map_or((t, t), |(a, b)| (a.min(t), b.max(t))))
+            })
+        };
+        let truth_span = span(&mut self.truth.samples().iter().map(|s| s.t));
+        let Some((t0, t1)) = truth_span else {
+            bail!("{}: no truth row (a header alone)", truth_path.display());
+        };
+        if let Some((p0, p1)) = span(&mut self.predictions.iter().map(|p| p.t)) {
+            if p1 < t0 || p0 > t1 {
+                bail!(
+                    "{} (t = {p0} .. {p1} s) and the truth {} (t = {t0} .. {t1} s) do not \
+                     overlap in time: nothing to score. The two are on different clocks (an \
+                     epoch time against time from the start?): shift one onto the other's \
+                     clock (the log's `t` before csv2can, or the truth's `t`)",
+                    pred_path.display(),
+                    truth_path.display()
+                );
+            }
+        }
+        let e = evaluate::evaluate(
             &self.predictions,
             &self.truth,
             &self.inputs,
             &self.car.vehicle,
             self.car.antenna_ahead_m,
-        )
+        );
+        if e.ticks == 0 {
+            bail!(
+                "{}: no prediction to score: the node had no valid position at any tick \
+                 (replay warns why: a receiver slower than the model file's gnss_rate_hz \
+                 times out between its fixes; GNSS missing or refused)",
+                pred_path.display()
+            );
+        }
+        match span(&mut self.inputs.gnss.iter().map(|g| g.0)) {
+            None => bail!(
+                "{}: no GNSS fix from source address {} (the raw GNSS error and the baseline \
+                 are measured on them): is it the candump the predictions came from?",
+                inputs_path.display(),
+                self.car.gnss_source
+            ),
+            Some((g0, g1)) if g1 < t0 || g0 > t1 => bail!(
+                "the inputs {} (GNSS fixes at t = {g0} .. {g1} s) and the truth {} (t = {t0} .. \
+                 {t1} s) do not overlap in time: the raw GNSS error and the baseline cannot be \
+                 measured. Is it the candump the predictions came from, on the truth's clock?",
+                inputs_path.display(),
+                truth_path.display()
+            ),
+            Some(_) => {}
+        }
+        self.check_frame()?;
+        if let Some((what, v)) = e.non_finite() {
+            bail!(
+                "{} against {}: the evaluation's {what} is {v}, not a finite number: refused \
+                 rather than printed (an input value beyond what the readers check: please \
+                 report it with the files)",
+                pred_path.display(),
+                truth_path.display()
+            );
+        }
+        Ok(e)
+    }
+
+    /// Refuses predictions that are not in the truth's frame. `replay` without `--origin`
+    /// puts the node's origin at its first fix (the contract), and `evaluate` reads them in
+    /// the truth's (the simulator's test site by default): the two frames differ by the first
+    /// fix's error, 1-2 m, and the filtered position scored 1.2-1.8 x the bias floor where the
+    /// same run in the truth's frame scores 1.01-1.05 x, without a word. The filtered position
+    /// follows the fixes whatever their bias, so its mean offset from them tells the frame
+    /// ([`evaluate::frame_offset_check`]): near 0 in the truth's frame, near minus the node's
+    /// origin in the node's. The candidates: the first fix, and the planner's LOCAL_ORIGIN if
+    /// the inputs carry one.
+    pub fn check_frame(&self) -> Result<()> {
+        let [pred_path, _, inputs_path] = &self.paths;
+        let first_fix = self.inputs.gnss.first().map(|g| ("the first GNSS fix", g));
+        let planner = self
+            .inputs
+            .local_origins
+            .first()
+            .map(|o| ("the planner's LOCAL_ORIGIN", o));
+        for (what, &(_, east, north)) in first_fix.into_iter().chain(planner) {
+            let Some(c) = evaluate::frame_offset_check(
+                &self.predictions,
+                &self.truth,
+                &self.inputs.gnss,
+                self.car.antenna_ahead_m,
+                (east, north),
+            ) else {
+                continue;
+            };
+            if !c.in_candidate_frame() {
+                continue;
+            }
+            let (lat, lon) = self.origin_deg;
+            let advice = if what == "the first GNSS fix" {
+                format!(
+                    "`catmodel replay` without `--origin` puts the node's origin at its first \
+                     fix. Re-run it in the truth's frame: `catmodel replay {} --origin \
+                     {lat},{lon} --out {}` (the truth frame's origin; evaluate's `--origin` if \
+                     the truth has another)",
+                    inputs_path.display(),
+                    pred_path.display()
+                )
+            } else {
+                "the planner's map origin became the node's frame: evaluate against a truth in \
+                 that frame (`--origin` its LAT,LON)"
+                    .to_string()
+            };
+            bail!(
+                "{}: the predictions are not in the truth's frame (origin {lat},{lon}): the \
+                 node's filtered position sits ({:+.2}, {:+.2}) m east/north of the raw fixes on \
+                 average over {} ticks, where a frame with its origin at {what}, ({:+.2}, \
+                 {:+.2}) m from the truth's origin, puts it ({:.2} m off that, {:.2} m off the \
+                 truth's frame). Scored as they are, they would add that offset to every error. \
+                 {advice}",
+                pred_path.display(),
+                c.offset_m.0,
+                c.offset_m.1,
+                c.ticks,
+                c.candidate_m.0,
+                c.candidate_m.1,
+                c.residual_candidate_m,
+                c.residual_truth_m,
+            );
+        }
+        Ok(())
     }
 
     /// Writes the figures of [`evaluate::write_plots`] into `dir`.
@@ -274,7 +457,7 @@ pub fn evaluate_files(
     origin_deg: (f64, f64),
 ) -> Result<Evaluation> {
     let car = Car::from_model(&model_file::load(&model_file::paper_path())?);
-    Ok(EvaluationData::read(predictions, truth, inputs, origin_deg, car)?.evaluate())
+    EvaluationData::read(predictions, truth, inputs, origin_deg, car)?.evaluate()
 }
 
 /// Why the node did not use the GNSS fixes, when the receiver ran at another rate than the
@@ -392,6 +575,10 @@ mod tests {
             (
                 "0.02,0,0.00,1,2,inf,3,kinematic\n",
                 ":2: column `heading`: \"inf\" is not finite",
+            ),
+            (
+                "0.02,0,0.00,1e300,2,0.1,3,kinematic\n",
+                ":2: column `x`: 1e300 is outside -1e7..1e7",
             ),
         ];
         for (i, (rows, want)) in cases.iter().enumerate() {

@@ -2,8 +2,10 @@
 //! strict readers and writers.
 //!
 //! Reading takes logs as recorders write them (docs/logs.md): a header row is required; columns
-//! may come in any order; extra columns are ignored and named in a note; an empty cell means the
-//! sensor did not report at that time; a UTF-8 byte-order mark and CRLF line ends are accepted;
+//! may come in any order; extra columns (unnamed ones too: a trailing comma on every line) are
+//! ignored and named in a note, and never read (bytes that are not UTF-8 in them are accepted);
+//! quoted cells may hold commas and line breaks (RFC 4180); an empty cell means the sensor did
+//! not report at that time; a UTF-8 byte-order mark and CRLF line ends are accepted;
 //! rows with equal `t` are one instant (several sensors reported then) and are merged into one
 //! row. A value outside its column's physical range ([`LOG_RANGES`]) is an error. Every problem
 //! is an error that names the file, the line, the column (character position and name) and the
@@ -119,12 +121,12 @@ pub const TRUTH_COLUMNS: [&str; 6] = ["t", "x", "y", "heading", "yaw_rate", "spe
 pub enum LogErrorKind {
     /// The file could not be read or written.
     Io(std::io::Error),
-    /// The bytes are not UTF-8.
+    /// A byte that is not UTF-8 in the header or in a cell that is read.
     NotUtf8,
+    /// A quote opens a cell and is never closed (the rest of the file would be one cell).
+    UnclosedQuote,
     /// The file has no header row.
     MissingHeader,
-    /// A header cell is empty.
-    EmptyColumnName,
     /// The header names a column twice.
     DuplicateColumn(String),
     /// A column the schema requires is absent: the column, and the header found.
@@ -228,9 +230,17 @@ impl fmt::Display for LogErrorKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             LogErrorKind::Io(e) => write!(f, "{e}"),
-            LogErrorKind::NotUtf8 => write!(f, "not UTF-8 text"),
+            LogErrorKind::NotUtf8 => write!(
+                f,
+                "not UTF-8 text (the header and the schema's columns must be UTF-8; bytes \
+                 of another encoding are accepted only in columns that are ignored)"
+            ),
+            LogErrorKind::UnclosedQuote => write!(
+                f,
+                "the quote that opens this cell is never closed (RFC 4180: a quoted cell ends \
+                 at the next lone `\"`; `\"\"` is a quote inside it)"
+            ),
             LogErrorKind::MissingHeader => write!(f, "missing header row"),
-            LogErrorKind::EmptyColumnName => write!(f, "empty column name in the header"),
             LogErrorKind::DuplicateColumn(c) => {
                 write!(f, "column `{c}` appears twice in the header")
             }
@@ -297,12 +307,12 @@ impl fmt::Display for LogErrorKind {
 
 /// A number as a person reads it: plain (`101`, `-0.5`), or in exponent form when plain
 /// would be a long run of digits (`1e30`, `1.5e-9`).
-struct Readable(f64);
+pub struct Readable(pub f64);
 
 impl fmt::Display for Readable {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let a = self.0.abs();
-        if a != 0.0 && !(1e-4..1e9).contains(&a) {
+        if a != 0.0 && !(1e-4..1e7).contains(&a) {
             write!(f, "{:e}", self.0)
         } else {
             write!(f, "{}", self.0)
@@ -429,6 +439,53 @@ pub const LOG_RANGES: [ColumnRange; 8] = [
     },
 ];
 
+/// The largest distance from the truth frame's origin, m: 10 000 km, a quarter of the way
+/// round the Earth; a flat east/north frame means nothing further out. A larger value is a
+/// corrupt cell or another unit, not a car's position.
+pub const MAX_TRUTH_POSITION_M: f64 = 1e7;
+
+/// Ranges of the truth columns, in the order of [`TRUTH_COLUMNS`] (docs/logs.md). As wide as
+/// the log's: they catch corrupt cells and unit mistakes (a truth `x = 1e300` made `evaluate`
+/// print `inf` and `NaN`), not unusual driving.
+pub const TRUTH_RANGES: [ColumnRange; 6] = [
+    LOG_RANGES[0],
+    ColumnRange {
+        column: "x",
+        unit: "m",
+        min: -MAX_TRUTH_POSITION_M,
+        max: MAX_TRUTH_POSITION_M,
+        why: "10 000 km from the origin, a quarter of the way round the Earth: a corrupt cell, or not metres?",
+    },
+    ColumnRange {
+        column: "y",
+        unit: "m",
+        min: -MAX_TRUTH_POSITION_M,
+        max: MAX_TRUTH_POSITION_M,
+        why: "10 000 km from the origin, a quarter of the way round the Earth: a corrupt cell, or not metres?",
+    },
+    ColumnRange {
+        column: "heading",
+        unit: "rad",
+        min: -6.3,
+        max: 6.3,
+        why: "a heading in radians, -pi..pi or 0..2 pi; in degrees?",
+    },
+    ColumnRange {
+        column: "yaw_rate",
+        unit: "rad/s",
+        min: -10.0,
+        max: 10.0,
+        why: "573 deg/s; a car spinning out turns at about 3 rad/s: in deg/s?",
+    },
+    ColumnRange {
+        column: "speed",
+        unit: "m/s",
+        min: -10.0,
+        max: 80.0,
+        why: SPEED_WHY,
+    },
+];
+
 /// Index of `t`, `lat` and `lon` in [`LOG_COLUMNS`].
 const T: usize = 0;
 const LAT: usize = 6;
@@ -463,7 +520,8 @@ pub struct Conflict {
 pub struct LogNotes {
     /// The file.
     pub path: PathBuf,
-    /// Header cells that are not schema columns, in file order (ignored).
+    /// Header cells that are not schema columns, in file order (ignored); `""` for an unnamed
+    /// column (an empty header cell: a trailing comma on every line).
     pub extra_columns: Vec<String>,
     /// Lines merged into the row before them because they share its `t`.
     pub merged_lines: usize,
@@ -484,16 +542,36 @@ impl LogNotes {
             let names: Vec<String> = self
                 .extra_columns
                 .iter()
+                .filter(|c| !c.is_empty())
                 .map(|c| format!("`{c}`"))
                 .collect();
-            let (noun, verb) = if names.len() == 1 {
-                ("column", "is")
+            let unnamed = self.extra_columns.len() - names.len();
+            let mut parts = Vec::new();
+            match names.len() {
+                0 => {}
+                1 => parts.push(format!("column {}", names.join(""))),
+                _ => parts.push(format!("columns {}", names.join(", "))),
+            }
+            match unnamed {
+                0 => {}
+                1 => parts.push(
+                    "1 unnamed column (an empty header cell, as a trailing comma on every line \
+                     makes)"
+                        .to_string(),
+                ),
+                n => parts.push(format!(
+                    "{n} unnamed columns (empty header cells, as trailing commas on every line \
+                     make)"
+                )),
+            }
+            let verb = if self.extra_columns.len() == 1 {
+                "is"
             } else {
-                ("columns", "are")
+                "are"
             };
             out.push(format!(
-                "{file}: {noun} {} {verb} not in the log schema: ignored",
-                names.join(", ")
+                "{file}: {} {verb} not in the log schema: ignored",
+                parts.join(" and ")
             ));
         }
         if let Some(c) = &self.first_conflict {
@@ -511,7 +589,7 @@ impl LogNotes {
 /// a log whose median interval between instants is over [`MAX_MEDIAN_INTERVAL_S`] is refused.
 pub fn read_log(path: &Path) -> Result<Log, LogError> {
     let text = read_text(path)?;
-    parse_log(&text, path)
+    parse_log_text(&text.text, path, text.lossy)
 }
 
 /// The instant being assembled from lines that share one `t`.
@@ -550,7 +628,13 @@ impl PendingRow {
 
 /// Parses log text; `path` only names the source in errors.
 pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
-    let table = Table::new(text, path, &LOG_COLUMNS, &OPTIONAL_LOG_COLUMNS)?;
+    parse_log_text(text, path, false)
+}
+
+/// [`parse_log`]; `lossy`: bytes that were not UTF-8 were replaced by U+FFFD in `text`
+/// ([`read_text`]).
+fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError> {
+    let table = Table::new(text, path, &LOG_COLUMNS, &OPTIONAL_LOG_COLUMNS, lossy)?;
     let mut notes = LogNotes {
         path: path.to_path_buf(),
         extra_columns: table.extra_columns(),
@@ -619,7 +703,7 @@ pub fn parse_log(text: &str, path: &Path) -> Result<Log, LogError> {
                 }
             }
             *cell = Some(v);
-            instant.source[i] = (line.number, line.char_column(i));
+            instant.source[i] = line.position(i);
         }
         pending = Some(instant);
     }
@@ -651,22 +735,26 @@ fn check_sample_interval(rows: &[LogRow], path: &Path) -> Result<(), LogError> {
     Ok(())
 }
 
-/// Reads a truth CSV (every cell required).
+/// Reads a truth CSV (every cell required, each within its column's range: [`TRUTH_RANGES`]).
 pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, LogError> {
     let text = read_text(path)?;
-    parse_truth(&text, path)
+    parse_truth_text(&text.text, path, text.lossy)
 }
 
 /// Parses truth text; `path` only names the source in errors.
 pub fn parse_truth(text: &str, path: &Path) -> Result<Vec<TruthRow>, LogError> {
-    let table = Table::new(text, path, &TRUTH_COLUMNS, &[])?;
+    parse_truth_text(text, path, false)
+}
+
+fn parse_truth_text(text: &str, path: &Path, lossy: bool) -> Result<Vec<TruthRow>, LogError> {
+    let table = Table::new(text, path, &TRUTH_COLUMNS, &[], lossy)?;
     let mut rows = Vec::new();
     let mut previous: Option<f64> = None;
     for line in table.lines() {
         let line = line?;
         let mut v = [0.0; 6];
         for (i, out) in v.iter_mut().enumerate() {
-            *out = match line.value(i, None)? {
+            *out = match line.value(i, TRUTH_RANGES.get(i))? {
                 Some(x) => x,
                 None => return Err(line.error(i, LogErrorKind::MissingValue)),
             };
@@ -796,25 +884,26 @@ fn format_cells(out: &mut String, cells: &[Option<f64>]) {
     out.push('\n');
 }
 
-fn read_text(path: &Path) -> Result<String, LogError> {
+/// A file's text, and whether bytes that are not UTF-8 were replaced (U+FFFD) to get it.
+struct Text {
+    text: String,
+    lossy: bool,
+}
+
+/// Reads a file as text. Bytes that are not UTF-8 (a cp1252 `ß` in a recorder's comment) are
+/// replaced by U+FFFD and the text is marked lossy: such a byte is refused where it is read
+/// (the header, a schema column: [`LogErrorKind::NotUtf8`] with its line and column) and
+/// never looked at in an ignored column. A replacement never swallows a comma, a quote or a
+/// line end (they are ASCII), so the cells and lines stay where they were.
+fn read_text(path: &Path) -> Result<Text, LogError> {
     let bytes = std::fs::read(path).map_err(|e| file_error(path, LogErrorKind::Io(e)))?;
-    match String::from_utf8(bytes) {
-        Ok(s) => Ok(s),
-        Err(e) => {
-            let good = e
-                .as_bytes()
-                .get(..e.utf8_error().valid_up_to())
-                .unwrap_or(&[]);
-            let line = 1 + good.iter().filter(|&&b| b == b'\n').count();
-            Err(LogError {
-                path: path.to_path_buf(),
-                line,
-                char_column: 0,
-                column: None,
-                kind: LogErrorKind::NotUtf8,
-            })
-        }
-    }
+    Ok(match String::from_utf8(bytes) {
+        Ok(text) => Text { text, lossy: false },
+        Err(e) => Text {
+            text: String::from_utf8_lossy(e.as_bytes()).into_owned(),
+            lossy: true,
+        },
+    })
 }
 
 /// Strictly increasing time (the truth CSV: one row per sample, never two at one instant).
@@ -828,52 +917,129 @@ fn check_time(line: &Line<'_>, t: f64, previous: &mut Option<f64>) -> Result<(),
     Ok(())
 }
 
-/// A cell: its text (trimmed, outer quotes removed) and 1-based character position.
+/// A cell: its text (trimmed, outer quotes removed) and where it starts.
 struct Cell<'a> {
     text: &'a str,
+    /// 1-based physical line the cell starts on (a quoted cell may hold line breaks, so the
+    /// cells of one record can start on different lines).
+    line: usize,
+    /// 1-based character position on that line.
     char_column: usize,
 }
 
-/// Splits a line at the commas outside double quotes (RFC 4180: a quoted cell may hold commas,
-/// and `""` inside it is a quote), so that a recorder's free-text column does not shift the
-/// cells after it. A cell's text is trimmed and loses its outer quotes; escaped quotes are
-/// left as they are (no schema column holds text).
-fn split_cells(line: &str) -> Vec<Cell<'_>> {
-    let mut cells = Vec::new();
-    let mut start_byte = 0;
-    let mut start_char = 1;
-    let mut in_quotes = false;
-    for (char_index, (byte, ch)) in line
-        .char_indices()
-        .chain(std::iter::once((line.len(), ',')))
-        .enumerate()
-    {
-        let end_of_line = byte == line.len();
-        if ch == '"' && !end_of_line {
-            // A quote toggles; the second of a `""` pair toggles back.
-            in_quotes = !in_quotes;
-            continue;
-        }
-        if ch == ',' && (!in_quotes || end_of_line) {
-            let raw = line.get(start_byte..byte).unwrap_or("");
-            let trimmed = raw.trim();
-            let text = trimmed
-                .strip_prefix('"')
-                .and_then(|s| s.strip_suffix('"'))
-                .unwrap_or(trimmed)
-                .trim();
-            cells.push(Cell {
-                text,
-                char_column: start_char,
-            });
-            start_byte = byte + 1;
-            start_char = char_index + 2;
-        }
-    }
-    cells
+/// One record of the file (a header or a data row): usually one line; more when a quoted cell
+/// holds a line break (RFC 4180 allows it; a recorder's free-text comment does it).
+struct Record<'a> {
+    /// 1-based physical line the record starts on.
+    line: usize,
+    /// Physical lines it spans.
+    lines: usize,
+    /// Its text without the line end.
+    text: &'a str,
+    cells: Vec<Cell<'a>>,
 }
 
-/// A parsed header and the data lines after it.
+/// A quote that opens a cell and is never closed: (line, character column) of the quote.
+struct UnclosedQuote(usize, usize);
+
+/// Splits the record at the start of `text` (which starts on physical line `line`) into cells
+/// at the commas outside quoted cells; returns it and the text after its line end. RFC 4180
+/// quoting: a `"` that is the first non-blank character of a cell opens a quoted cell, in which
+/// commas and line breaks are text and `""` is a quote; the next lone `"` closes it. A `"`
+/// anywhere else is text (`5" screen`), so a stray quote cannot swallow the lines after it. A
+/// cell's text is trimmed and loses its outer quotes; escaped quotes are left as they are (no
+/// schema column holds text).
+fn next_record(text: &str, line: usize) -> Result<(Record<'_>, &str), UnclosedQuote> {
+    let bytes = text.as_bytes();
+    let mut cells = Vec::new();
+    let mut cell_start = 0;
+    let (mut cell_line, mut cell_column) = (line, 1);
+    let mut current_line = line;
+    // Character column of the next byte that starts a character. The delimiters are ASCII,
+    // so scanning bytes finds them; a multi-byte character counts once.
+    let mut next_column = 1;
+    let mut at_cell_start = true;
+    let mut open_quote: Option<(usize, usize)> = None;
+    let cell = |start: usize, end: usize, line: usize, char_column: usize| {
+        let trimmed = text.get(start..end).unwrap_or("").trim();
+        let text = trimmed
+            .strip_prefix('"')
+            .and_then(|s| s.strip_suffix('"'))
+            .unwrap_or(trimmed)
+            .trim();
+        Cell {
+            text,
+            line,
+            char_column,
+        }
+    };
+    let mut i = 0;
+    while let Some(&b) = bytes.get(i) {
+        let column = next_column;
+        if b & 0xC0 != 0x80 {
+            next_column += 1;
+        }
+        if open_quote.is_some() {
+            match b {
+                b'"' if bytes.get(i + 1) == Some(&b'"') => {
+                    i += 1;
+                    next_column += 1;
+                }
+                b'"' => open_quote = None,
+                b'\n' => {
+                    current_line += 1;
+                    next_column = 1;
+                }
+                _ => {}
+            }
+        } else {
+            match b {
+                b'"' if at_cell_start => {
+                    open_quote = Some((current_line, column));
+                    at_cell_start = false;
+                }
+                b',' => {
+                    cells.push(cell(cell_start, i, cell_line, cell_column));
+                    cell_start = i + 1;
+                    (cell_line, cell_column) = (current_line, next_column);
+                    at_cell_start = true;
+                }
+                b'\n' => {
+                    cells.push(cell(cell_start, i, cell_line, cell_column));
+                    let record = Record {
+                        line,
+                        lines: current_line - line + 1,
+                        text: record_text(text, i),
+                        cells,
+                    };
+                    return Ok((record, text.get(i + 1..).unwrap_or("")));
+                }
+                b' ' | b'\t' | b'\r' => {}
+                _ => at_cell_start = false,
+            }
+        }
+        i += 1;
+    }
+    if let Some((l, c)) = open_quote {
+        return Err(UnclosedQuote(l, c));
+    }
+    cells.push(cell(cell_start, text.len(), cell_line, cell_column));
+    let record = Record {
+        line,
+        lines: current_line - line + 1,
+        text: record_text(text, text.len()),
+        cells,
+    };
+    Ok((record, ""))
+}
+
+/// `text[..end]` without a CR before the line end.
+fn record_text(text: &str, end: usize) -> &str {
+    let t = text.get(..end).unwrap_or("");
+    t.strip_suffix('\r').unwrap_or(t)
+}
+
+/// A parsed header and the data records after it.
 struct Table<'a> {
     path: &'a Path,
     header_len: usize,
@@ -881,10 +1047,15 @@ struct Table<'a> {
     /// the header lacks, read as empty).
     index: Vec<Option<usize>>,
     names: &'static [&'static str],
-    /// Header cells that are not wanted columns, in file order.
+    /// Header cells that are not wanted columns, in file order (`""` for an unnamed one).
     extra: Vec<String>,
-    /// (1-based line number, text) of every line after the header.
-    data: Vec<(usize, &'a str)>,
+    /// The text after the header.
+    data: &'a str,
+    /// The physical line `data` starts on.
+    data_line: usize,
+    /// Bytes that were not UTF-8 were replaced by U+FFFD ([`read_text`]): a cell that is read
+    /// and holds one is refused.
+    lossy: bool,
 }
 
 impl<'a> Table<'a> {
@@ -893,12 +1064,9 @@ impl<'a> Table<'a> {
         path: &'a Path,
         wanted: &'static [&'static str],
         optional: &[&str],
+        lossy: bool,
     ) -> Result<Self, LogError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)));
         let err = |line, char_column, column: Option<String>, kind| LogError {
             path: path.to_path_buf(),
             line,
@@ -906,25 +1074,29 @@ impl<'a> Table<'a> {
             column,
             kind,
         };
-        let (_, header) = match lines.next() {
-            Some((n, h)) if !h.trim().is_empty() => (n, h),
-            _ => return Err(err(1, 0, None, LogErrorKind::MissingHeader)),
+        let (header, data) = match next_record(text, 1) {
+            Ok((h, rest)) if !h.text.trim().is_empty() => (h, rest),
+            Ok(_) => return Err(err(1, 0, None, LogErrorKind::MissingHeader)),
+            Err(UnclosedQuote(l, c)) => return Err(err(l, c, None, LogErrorKind::UnclosedQuote)),
         };
-        let cells = split_cells(header);
+        let cells = &header.cells;
         for (i, c) in cells.iter().enumerate() {
-            if c.text.is_empty() {
-                return Err(err(1, c.char_column, None, LogErrorKind::EmptyColumnName));
+            if lossy && c.text.contains(char::REPLACEMENT_CHARACTER) {
+                return Err(err(c.line, c.char_column, None, LogErrorKind::NotUtf8));
             }
-            if cells.iter().take(i).any(|p| p.text == c.text) {
+            // Unnamed columns (a trailing comma on every line) are extra columns: ignored,
+            // however many there are. A named column twice is ambiguous.
+            if !c.text.is_empty() && cells.iter().take(i).any(|p| p.text == c.text) {
                 return Err(err(
-                    1,
+                    c.line,
                     c.char_column,
                     Some(c.text.to_string()),
                     LogErrorKind::DuplicateColumn(c.text.to_string()),
                 ));
             }
         }
-        if cells.iter().all(|c| c.text.parse::<f64>().is_ok()) {
+        let named = || cells.iter().filter(|c| !c.text.is_empty());
+        if named().next().is_some() && named().all(|c| c.text.parse::<f64>().is_ok()) {
             return Err(err(1, 1, None, LogErrorKind::MissingHeader));
         }
         let mut index = Vec::with_capacity(wanted.len());
@@ -939,7 +1111,7 @@ impl<'a> Table<'a> {
                         Some((*name).to_string()),
                         LogErrorKind::MissingColumn {
                             column: name,
-                            header: header.to_string(),
+                            header: header.text.to_string(),
                         },
                     ))
                 }
@@ -950,11 +1122,6 @@ impl<'a> Table<'a> {
             .filter(|c| !wanted.contains(&c.text))
             .map(|c| c.text.to_string())
             .collect();
-        let mut data: Vec<(usize, &str)> = lines.collect();
-        // Trailing blank lines are the end of the file, not missing rows.
-        while data.last().is_some_and(|(_, l)| l.trim().is_empty()) {
-            data.pop();
-        }
         Ok(Table {
             path,
             header_len: cells.len(),
@@ -962,67 +1129,113 @@ impl<'a> Table<'a> {
             names: wanted,
             extra,
             data,
+            data_line: header.line + header.lines,
+            lossy,
         })
     }
 
-    /// The header's extra columns.
+    /// The header's extra columns (`""` for an unnamed one).
     fn extra_columns(&self) -> Vec<String> {
         self.extra.clone()
     }
 
-    fn lines(&self) -> impl Iterator<Item = Result<Line<'_>, LogError>> + '_ {
-        self.data.iter().map(move |&(number, text)| {
-            let fail = |kind| LogError {
-                path: self.path.to_path_buf(),
-                line: number,
-                char_column: 0,
-                column: None,
-                kind,
-            };
-            if text.trim().is_empty() {
-                return Err(fail(LogErrorKind::BlankLine));
-            }
-            let cells = split_cells(text);
-            if cells.len() != self.header_len {
-                return Err(fail(LogErrorKind::FieldCount {
-                    expected: self.header_len,
-                    found: cells.len(),
-                }));
-            }
-            Ok(Line {
-                table: self,
-                number,
-                cells,
-            })
-        })
+    /// The data records, one [`Line`] each; the first error ends them.
+    fn lines(&self) -> Lines<'_> {
+        Lines {
+            table: self,
+            rest: self.data,
+            line: self.data_line,
+        }
     }
 }
 
-/// One data line, split into cells.
+/// The data records of a [`Table`].
+struct Lines<'t> {
+    table: &'t Table<'t>,
+    rest: &'t str,
+    /// The physical line `rest` starts on.
+    line: usize,
+}
+
+impl<'t> Iterator for Lines<'t> {
+    type Item = Result<Line<'t>, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.rest.is_empty() {
+            return None;
+        }
+        let fail = |line, char_column, kind| LogError {
+            path: self.table.path.to_path_buf(),
+            line,
+            char_column,
+            column: None,
+            kind,
+        };
+        let (record, rest) = match next_record(self.rest, self.line) {
+            Ok(r) => r,
+            Err(UnclosedQuote(l, c)) => {
+                self.rest = "";
+                return Some(Err(fail(l, c, LogErrorKind::UnclosedQuote)));
+            }
+        };
+        if record.text.trim().is_empty() {
+            // Trailing blank lines are the end of the file, not missing rows.
+            if rest.trim().is_empty() {
+                self.rest = "";
+                return None;
+            }
+            self.rest = "";
+            return Some(Err(fail(record.line, 0, LogErrorKind::BlankLine)));
+        }
+        self.rest = rest;
+        self.line = record.line + record.lines;
+        if record.cells.len() != self.table.header_len {
+            self.rest = "";
+            return Some(Err(fail(
+                record.line,
+                0,
+                LogErrorKind::FieldCount {
+                    expected: self.table.header_len,
+                    found: record.cells.len(),
+                },
+            )));
+        }
+        Some(Ok(Line {
+            table: self.table,
+            number: record.line,
+            cells: record.cells,
+        }))
+    }
+}
+
+/// One data record, split into cells.
 struct Line<'a> {
     table: &'a Table<'a>,
+    /// The physical line it starts on.
     number: usize,
     cells: Vec<Cell<'a>>,
 }
 
 impl Line<'_> {
-    /// Character column of wanted column `i` (0 if absent).
-    fn char_column(&self, i: usize) -> usize {
+    /// (physical line, character column) of wanted column `i`'s cell; (the record's first
+    /// line, 0) if the column is absent.
+    fn position(&self, i: usize) -> (usize, usize) {
         self.table
             .index
             .get(i)
             .copied()
             .flatten()
             .and_then(|h| self.cells.get(h))
-            .map_or(0, |c| c.char_column)
+            .map_or((self.number, 0), |c| (c.line, c.char_column))
     }
 
     /// Error at wanted column `i`.
     fn error(&self, i: usize, kind: LogErrorKind) -> LogError {
+        let (line, char_column) = self.position(i);
         LogError {
             path: self.table.path.to_path_buf(),
-            line: self.number,
-            char_column: self.char_column(i),
+            line,
+            char_column,
             column: self.table.names.get(i).map(|s| s.to_string()),
             kind,
         }
@@ -1042,6 +1255,9 @@ impl Line<'_> {
         };
         if text.is_empty() {
             return Ok(None);
+        }
+        if self.table.lossy && text.contains(char::REPLACEMENT_CHARACTER) {
+            return Err(self.error(i, LogErrorKind::NotUtf8));
         }
         let v: f64 = text
             .parse()

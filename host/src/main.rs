@@ -120,7 +120,8 @@ enum Command {
         /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
         #[arg(long)]
         vehicle: Option<PathBuf>,
-        /// Write the model even if a fit is below the floor (the warning goes into the file).
+        /// Write the model even if a fit is below the floor (the warning goes into the file),
+        /// or a log's wheel speed is not in m/s by its GNSS track (km/h, mph).
         #[arg(long)]
         force: bool,
     },
@@ -365,6 +366,15 @@ fn run(cli: Cli) -> Result<()> {
         Command::Csv2can { log, out } => {
             let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
             print_notes(&read.notes.messages());
+            if read.rows.is_empty() {
+                // An empty candump would replay to nothing, with success: not a drive.
+                bail!(
+                    "{}: no data rows (a header alone): a log with no rows is not a drive; \
+                     nothing written to {}",
+                    log.display(),
+                    out.display()
+                );
+            }
             let encoded = csv2can::encode_log(&read.rows)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
             if let Some(note) = encoded.note() {
@@ -428,21 +438,25 @@ fn run(cli: Cli) -> Result<()> {
                 eprintln!("catmodel: warning: {note}");
             }
             let still = config_course_min_speed_mps;
-            if result.ticks > 0
+            // No position at any tick (the rate's mismatch and the frame's reach have their
+            // own warnings above): why, as far as the replay can tell.
+            let no_position = result.ticks > 0
                 && result.valid_ticks == 0
                 && c.gnss_rate_mismatch == 0
-                && result.max_speed_mps < still
-            {
+                && result.fixes_beyond_frame == 0;
+            if no_position && result.max_speed_mps < still {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \
                      A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
                     result.ticks, result.max_speed_mps
                 );
-            } else if result.ticks > 0
-                && result.valid_ticks == 0
-                && c.gnss_rate_mismatch == 0
-                && result.fixes_beyond_frame == 0
-            {
+            } else if no_position && report.timestamps.batched() {
+                eprintln!(
+                    "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate): \
+                     the log's timestamps come in batches (the warning above), which bunch the fixes in time",
+                    result.ticks, c.gnss_gate_rejects
+                );
+            } else if no_position {
                 eprintln!(
                     "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
                      Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",
@@ -472,15 +486,13 @@ fn run(cli: Cli) -> Result<()> {
                 catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
             progress.set_message("evaluating");
             let e = data.evaluate();
-            if e.ticks == 0 {
-                progress.finish();
-                bail!(
-                    "{}: no prediction to score: the node had no valid position at any tick \
-                     (replay warns why: a receiver slower than the model file's gnss_rate_hz \
-                     times out between its fixes; GNSS missing or refused)",
-                    predictions.display()
-                );
-            }
+            let e = match e {
+                Ok(e) => e,
+                Err(err) => {
+                    progress.finish();
+                    return Err(err);
+                }
+            };
             let written = match &plots {
                 Some(dir) => {
                     progress.set_message("plotting");
@@ -535,6 +547,26 @@ fn run(cli: Cli) -> Result<()> {
             for e in training.iter().chain(&validation) {
                 print_notes(&e.log_notes);
             }
+            // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
+            // word and a wrong model (review finding 04): refused before the minutes of fitting.
+            let units = speed_unit_problems(
+                logs.iter().chain(&validate),
+                training.iter().chain(&validation),
+            );
+            if !units.is_empty() {
+                if !force {
+                    bail!(
+                        "{}\n{} not written: the wheel speed of {} log(s) is not in m/s by \
+                         their GNSS track (--force identifies anyway)",
+                        units.join("\n"),
+                        out.display(),
+                        units.len()
+                    );
+                }
+                for u in &units {
+                    eprintln!("catmodel: warning: {u} (identified anyway: --force)");
+                }
+            }
             let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
             spinner.enable_steady_tick(std::time::Duration::from_millis(120));
             let mut id = identify::identify(training, validation, &base, &opts)?;
@@ -585,6 +617,9 @@ fn run(cli: Cli) -> Result<()> {
             let opts = identify::preprocess::PreprocessOptions::default();
             let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
             print_notes(&e.log_notes);
+            for u in speed_unit_problems([&log], [&e]) {
+                eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
+            }
             let sim = identify::validate::simulate_all(&file, &e)?;
             let scores =
                 identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
@@ -681,6 +716,9 @@ fn run(cli: Cli) -> Result<()> {
             let stdout = std::io::BufWriter::new(std::io::stdout().lock());
             let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
             eprintln!("sil: {summary}");
+            if let Some(w) = summary.timestamps.warning("stdin") {
+                eprintln!("sil: warning: {w}");
+            }
             if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver)
             {
                 eprintln!("sil: warning: {note}");
@@ -842,6 +880,22 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `FILE: why` for each log whose wheel speed its GNSS track says is not in m/s
+/// ([`identify::units::SpeedScale::problem`]).
+fn speed_unit_problems<'a>(
+    paths: impl IntoIterator<Item = &'a PathBuf>,
+    experiments: impl IntoIterator<Item = &'a identify::preprocess::Experiment>,
+) -> Vec<String> {
+    paths
+        .into_iter()
+        .zip(experiments)
+        .filter_map(|(p, e)| {
+            let problem = e.speed_scale.and_then(|s| s.problem())?;
+            Some(format!("{}: {problem}", p.display()))
+        })
+        .collect()
 }
 
 /// The training log and line behind a suspect sample of the fit floor, with its value.

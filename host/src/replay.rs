@@ -60,6 +60,117 @@ pub struct LogReport {
     /// The last line, cut short without a line end (the recorder lost power): its number;
     /// the line was left out.
     pub truncated_last_line: Option<usize>,
+    /// How the frames' timestamps were taken ([`TimestampStats`]): batched by the recorder?
+    pub timestamps: TimestampStats,
+}
+
+/// A step between two distinct timestamps this long or longer spans two of the node's 20 ms
+/// ticks or more, us.
+pub const BATCH_STEP_US: u64 = 2 * SAMPLE_PERIOD_US;
+
+/// Distinct timestamps needed before a log's timestamps are judged: a second of 20 ms batches.
+const MIN_INSTANTS_JUDGED: u64 = 50;
+
+/// How a log's timestamps were taken, counted frame by frame ([`TimestampTracker`]). A bus
+/// recorder stamps each frame as it arrives: distinct timestamps milliseconds apart, and never
+/// one message twice in one microsecond (a CAN frame takes over 100 us on the wire). A recorder
+/// that reads its queue in batches and stamps each batch (review finding 03) gives many frames
+/// one timestamp, several of one message among them, and steps of 40-60 ms between the
+/// timestamps. The node runs on the timestamps as given (the firmware would too), and the
+/// batching moved its filtered position 9 m RMS off on the 5-minute drive.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TimestampStats {
+    /// Frames counted.
+    pub frames: u64,
+    /// Distinct timestamps (a frame stamped later than the one before starts one).
+    pub instants: u64,
+    /// Steps between consecutive distinct timestamps of [`BATCH_STEP_US`] or more.
+    pub coarse_steps: u64,
+    /// Frames whose identifier already came at the same timestamp.
+    pub repeats: u64,
+    /// The first and last timestamps, us.
+    pub first_us: u64,
+    pub last_us: u64,
+}
+
+impl TimestampStats {
+    /// The timestamps come in batches coarser than the node's tick: enough of them to judge,
+    /// most steps between them two ticks or longer, and messages repeating within one
+    /// timestamp (at least one such frame every other timestamp): a slow bus alone (a 10 Hz
+    /// log) has the long steps but no repeats.
+    pub fn batched(&self) -> bool {
+        self.instants >= MIN_INSTANTS_JUDGED
+            && 2 * self.coarse_steps >= self.instants - 1
+            && 2 * self.repeats >= self.instants
+    }
+
+    /// The warning for batched timestamps, naming `source`; `None` if they are not.
+    pub fn warning(&self, source: &str) -> Option<String> {
+        if !self.batched() {
+            return None;
+        }
+        let mean_step_ms =
+            (self.last_us - self.first_us) as f64 * 1e-3 / (self.instants - 1).max(1) as f64;
+        Some(format!(
+            "{source}: the timestamps come in batches coarser than the node's 20 ms tick: {} \
+             frames on {} distinct timestamps ({:.1} a timestamp, {:.0} ms apart on average; \
+             {:.0} % of the steps {} ms or longer), and {} frames repeat a message already \
+             stamped in the same microsecond, which no bus carries: the recorder stamped the \
+             frames when it read them in batches, not when they arrived. The node runs on the \
+             timestamps as given (the firmware does the same), so it sees each sensor's reports \
+             bunched at one instant and none in the ticks between: its GNSS filter takes the \
+             fixes late and in jumps and its gate refuses many, and the filtered position can \
+             be metres off (9 m RMS on the simulator's 5-minute drive batched to 50 ms, raw \
+             GNSS 1.9 m). Record with a timestamp per frame as received (candump -l)",
+            self.frames,
+            self.instants,
+            self.frames as f64 / self.instants as f64,
+            mean_step_ms,
+            100.0 * self.coarse_steps as f64 / (self.instants - 1).max(1) as f64,
+            BATCH_STEP_US / 1000,
+            self.repeats,
+        ))
+    }
+}
+
+/// Counts [`TimestampStats`] over frames in log order: the identifiers seen at the current
+/// timestamp (a few dozen at most are kept: enough to see a batch's repeats).
+#[derive(Debug, Clone, Default)]
+pub struct TimestampTracker {
+    last_us: Option<u64>,
+    ids: Vec<CanId>,
+}
+
+/// Identifiers kept per timestamp by [`TimestampTracker`].
+const TRACKED_IDS: usize = 32;
+
+impl TimestampTracker {
+    /// A frame of identifier `id` stamped `t_us`, counted into `stats`.
+    #[inline]
+    pub fn observe(&mut self, stats: &mut TimestampStats, t_us: u64, id: CanId) {
+        stats.frames += 1;
+        match self.last_us {
+            Some(last) if last == t_us => {
+                if self.ids.contains(&id) {
+                    stats.repeats += 1;
+                } else if self.ids.len() < TRACKED_IDS {
+                    self.ids.push(id);
+                }
+                return;
+            }
+            Some(last) => {
+                if t_us > last && t_us - last >= BATCH_STEP_US {
+                    stats.coarse_steps += 1;
+                }
+            }
+            None => stats.first_us = t_us,
+        }
+        stats.instants += 1;
+        stats.last_us = stats.last_us.max(t_us);
+        self.last_us = Some(t_us);
+        self.ids.clear();
+        self.ids.push(id);
+    }
 }
 
 impl LogReport {
@@ -89,9 +200,13 @@ impl LogReport {
         }]
     }
 
-    /// Warnings: the recording lost frames, or its last line was cut short.
+    /// Warnings: the recording lost frames, its last line was cut short, or its timestamps
+    /// come in batches ([`TimestampStats::warning`]).
     pub fn warnings(&self, path: &Path) -> Vec<String> {
         let mut out = Vec::new();
+        if let Some(w) = self.timestamps.warning(&path.display().to_string()) {
+            out.push(w);
+        }
         if let Some(line) = self.first_drop_line {
             out.push(format!(
                 "{}:{line}: the recording lost {} frame(s): candump -d reported drops on {} line(s) (`DROPCOUNT: ...`, skipped); the node saw gaps there",
@@ -208,6 +323,7 @@ struct LineReader<'a> {
     path: &'a Path,
     interface: Option<&'a str>,
     last_t: Option<u64>,
+    timestamps: TimestampTracker,
     log: CandumpLog,
 }
 
@@ -219,6 +335,7 @@ impl<'a> LineReader<'a> {
             path,
             interface,
             last_t: None,
+            timestamps: TimestampTracker::default(),
             log,
         }
     }
@@ -299,6 +416,8 @@ impl<'a> LineReader<'a> {
             }
         }
         self.last_t = Some(frame.t_us);
+        self.timestamps
+            .observe(&mut self.log.report.timestamps, frame.t_us, frame.frame.id);
         self.log.frames.push(frame);
         Ok(())
     }
@@ -649,9 +768,9 @@ fn replay_text<C: Write + Send, T: Write + Send>(
 /// `catmodel replay`: the candump file at `log` through the node (its frames on `interface`
 /// only, if given), the predictions CSV to `csv_path` and the TX log to `tx_path` if given
 /// (files, with their directories, written as `.partial` files while the node runs and renamed
-/// once the whole log has parsed: an error leaves none behind; [`PartialFile`]). `progress` as
-/// in [`replay_into`]; [`estimate_ticks`] gives the total. Returns what the reader noticed
-/// too ([`LogReport`]).
+/// once the whole log has parsed: an error leaves none behind; [`PartialFile`]). A log with no
+/// frame to replay is an error naming it. `progress` as in [`replay_into`]; [`estimate_ticks`]
+/// gives the total. Returns what the reader noticed too ([`LogReport`]).
 pub fn replay_file(
     log: &Path,
     text: &[u8],
@@ -686,6 +805,18 @@ pub fn replay_file(
             (stats, read.report)
         }
     };
+    if stats.ticks == 0 {
+        // No frame, no tick: a replay of nothing would "succeed" with an empty predictions
+        // file. The output files are dropped uncommitted (none is left behind).
+        let skipped = match stats.unsupported {
+            0 => String::new(),
+            n => format!(" ({n} remote/FD/error frames skipped, which the node cannot use)"),
+        };
+        bail!(
+            "{}: no CAN frame to replay{skipped}: a log with no frames is not a drive",
+            log.display()
+        );
+    }
     csv.commit()?;
     if let Some(tx) = tx {
         tx.commit()?;
@@ -1797,6 +1928,58 @@ mod tests {
 
     /// A forward clock jump beyond a day (a clock step, logs joined) is refused with its line,
     /// instead of ticking through it for hours; a day's pause is replayed.
+    /// The tracker's counts: a batch is one timestamp; a message twice in it is a repeat; a
+    /// step of two ticks or more between timestamps is coarse.
+    #[test]
+    fn timestamps_in_batches_are_counted() {
+        let id = |n: u16| CanId::Standard(n);
+        let mut stats = TimestampStats::default();
+        let mut tracker = TimestampTracker::default();
+        for (t, n) in [
+            (0, 1),
+            (0, 2),
+            (0, 1),
+            (50_000, 1),
+            (50_000, 1),
+            (60_000, 3),
+        ] {
+            tracker.observe(&mut stats, t, id(n));
+        }
+        assert_eq!(
+            stats,
+            TimestampStats {
+                frames: 6,
+                instants: 3,
+                coarse_steps: 1,
+                repeats: 2,
+                first_us: 0,
+                last_us: 60_000,
+            }
+        );
+        assert!(!stats.batched(), "too few to judge");
+        // 100 batches of 50 ms, each with a message twice: batched.
+        let (mut stats, mut tracker) = (TimestampStats::default(), TimestampTracker::default());
+        for k in 0..100 {
+            for n in [1, 2, 1] {
+                tracker.observe(&mut stats, k * 50_000, id(n));
+            }
+        }
+        assert!(stats.batched(), "{stats:?}");
+        assert!(stats
+            .warning("x.log")
+            .unwrap()
+            .starts_with("x.log: the timestamps come in batches"));
+        // The same steps with no message twice at one timestamp: a slow bus, not batches.
+        let (mut stats, mut tracker) = (TimestampStats::default(), TimestampTracker::default());
+        for k in 0..100 {
+            for n in [1, 2] {
+                tracker.observe(&mut stats, k * 50_000, id(n));
+            }
+        }
+        assert!(!stats.batched(), "{stats:?}");
+        assert_eq!(stats.warning("x.log"), None);
+    }
+
     #[test]
     fn a_clock_jump_beyond_a_day_is_refused_with_its_line() {
         let path = Path::new("jump.log");

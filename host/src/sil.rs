@@ -24,7 +24,7 @@ use catmodel::can::{candump, CanFrame, TimedFrame};
 use catmodel::node::{Counters, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN};
 
 use crate::closed_loop::driver::Driver;
-use crate::replay::{candump_line, candump_reason};
+use crate::replay::{candump_line, candump_reason, TimestampStats, TimestampTracker};
 
 /// Why a session stopped early.
 #[derive(Debug)]
@@ -123,6 +123,9 @@ pub fn run(
     let mut ticks = 0;
     let mut tx: Vec<CanFrame> = Vec::new();
     let mut bytes = Vec::new();
+    // As replay: are the frames stamped in batches coarser than the tick?
+    let mut timestamps = TimestampStats::default();
+    let mut tracker = TimestampTracker::default();
     for line_no in 1.. {
         bytes.clear();
         if input.read_until(b'\n', &mut bytes).map_err(SilError::Io)? == 0 {
@@ -184,7 +187,10 @@ pub fn run(
             continue;
         }
         match candump::parse_line(text) {
-            Ok(frame) => queue.push(frame),
+            Ok(frame) => {
+                tracker.observe(&mut timestamps, frame.t_us, frame.frame.id);
+                queue.push(frame)
+            }
             // What the firmware's receive path does with them: skipped and counted.
             Err(e) if e.is_unsupported_frame() => queue.unsupported += 1,
             Err(e) => {
@@ -203,6 +209,7 @@ pub fn run(
         unsupported: queue.unsupported,
         rx_queue_drops: queue.drops,
         counters: driver.counters(),
+        timestamps,
     })
 }
 
@@ -235,6 +242,8 @@ pub struct SilSummary {
     /// The node's rejection counters at the end (`time_errors`, frames stamped after the TICK
     /// that delivered them, is on no status page).
     pub counters: Counters,
+    /// How the frames were stamped ([`TimestampStats::warning`]: in batches?).
+    pub timestamps: TimestampStats,
 }
 
 impl std::fmt::Display for SilSummary {
@@ -410,7 +419,8 @@ mod tests {
                 counters: Counters {
                     time_errors: 1,
                     ..summary.counters
-                }
+                },
+                timestamps: summary.timestamps,
             }
         );
         assert_eq!(summary.counters.time_errors, 1);

@@ -226,3 +226,67 @@ fn frames_of_two_interfaces_are_named_and_one_is_kept_on_request() {
         decode(&dir.join("plain.log"), &[])
     );
 }
+
+/// Stamps rounded up to the next multiple of `batch_us`, as a recorder that reads its queue in
+/// batches and stamps each batch writes them (review finding 03's `batch.py`).
+fn batched(text: &str, batch_us: u64) -> String {
+    each_line(text, |l| {
+        let (stamp, rest) = l.split_once(' ').unwrap();
+        let (s, us) = stamp
+            .trim_start_matches('(')
+            .trim_end_matches(')')
+            .split_once('.')
+            .unwrap();
+        let t = s.parse::<u64>().unwrap() * 1_000_000 + us.parse::<u64>().unwrap();
+        let t = t.div_ceil(batch_us) * batch_us;
+        format!("({:010}.{:06}) {rest}", t / 1_000_000, t % 1_000_000)
+    })
+}
+
+/// A candump stamped in batches coarser than the node's 20 ms tick replays as given (exit 0),
+/// with a warning saying what it is and what it does to the estimate (review finding 03: the
+/// filtered position 9 m RMS off without a word); batches of one tick, the plain log and a
+/// slow bus (one frame every 100 ms, no message twice at one timestamp) get no warning.
+#[test]
+fn timestamps_in_batches_coarser_than_a_tick_are_named() {
+    let dir = tmp_dir("batched");
+    let plain = smoke();
+    let warned = |stderr: &str| stderr.contains("the timestamps come in batches");
+    for batch_ms in [40, 50, 60] {
+        let (code, pred, stderr) = replay(&dir, "b.log", &batched(&plain, batch_ms * 1000), &[]);
+        assert_eq!(code, 0, "{stderr}");
+        assert!(pred.starts_with("t,step,"), "{batch_ms} ms: replayed");
+        assert!(warned(&stderr), "{batch_ms} ms: {stderr}");
+        // No position at all (the smoke drive batched to 40 ms): the batches are named as
+        // the cause, not the model file's receiver rate.
+        assert!(!stderr.contains("gnss_rate_hz"), "{stderr}");
+        assert!(stderr.contains("b.log: "), "{stderr}");
+        assert!(
+            stderr.contains(&format!("{batch_ms} ms apart on average")),
+            "{stderr}"
+        );
+        assert!(stderr.contains("filtered position"), "{stderr}");
+    }
+    for (name, text) in [
+        ("plain.log", plain.clone()),
+        ("tick.log", batched(&plain, 20_000)),
+        // A slow bus: every fifth line, stamped 100 ms apart.
+        (
+            "slow.log",
+            plain
+                .lines()
+                .step_by(5)
+                .enumerate()
+                .map(|(i, l)| {
+                    let t = i as u64 * 100_000;
+                    let rest = l.split_once(' ').unwrap().1;
+                    format!("({:010}.{:06}) {rest}\n", t / 1_000_000, t % 1_000_000)
+                })
+                .collect(),
+        ),
+    ] {
+        let (code, _, stderr) = replay(&dir, name, &text, &[]);
+        assert_eq!(code, 0, "{name}: {stderr}");
+        assert!(!warned(&stderr), "{name}: {stderr}");
+    }
+}

@@ -438,6 +438,210 @@ fn bad_input_is_reported_with_file_and_line() {
     assert!(err.contains("nope.log"), "{err}");
 }
 
+/// A log with no rows is not a drive: `csv2can` of a header alone and `replay` of an empty
+/// candump (or one of blank lines only) are errors naming the file, and write nothing (they
+/// used to write an empty candump, and replay 0 ticks, with exit status 0).
+#[test]
+fn a_log_with_no_rows_is_not_a_drive() {
+    let dir = tmp_dir("no-rows");
+    let header_only = dir.join("header.csv");
+    std::fs::write(
+        &header_only,
+        "t,vel,input_vel,accel,steer,brake,lat,lon\r\n",
+    )
+    .unwrap();
+    let can = dir.join("header.can.log");
+    let err = fails(&["csv2can", s(&header_only), "--out", s(&can)]);
+    assert!(
+        err.contains(&format!("{}: no data rows", header_only.display())),
+        "{err}"
+    );
+    assert!(!can.exists(), "nothing written");
+
+    let pred = dir.join("p.csv");
+    for (name, text) in [("empty.can.log", ""), ("blank.can.log", "\n  \n\n")] {
+        let log = dir.join(name);
+        std::fs::write(&log, text).unwrap();
+        let err = fails(&["replay", s(&log), "--out", s(&pred)]);
+        assert!(
+            err.contains(&format!("{}: no CAN frame to replay", log.display())),
+            "{err}"
+        );
+        assert!(!pred.exists(), "{name}: no output");
+    }
+}
+
+/// `identify` refuses logs whose wheel speed their GNSS track says is not in m/s (review
+/// finding 04: a training set in km/h was identified with exit 0 and a steering gain of 0.34),
+/// naming each file, the ratio and the likely unit; `--force` identifies anyway, with the
+/// warning; `compare` warns.
+#[test]
+fn identify_refuses_a_wheel_speed_in_another_unit() {
+    let dir = tmp_dir("speed-unit");
+    let mut logs = Vec::new();
+    for scenario in ["straight-5", "turn-left"] {
+        ok(&[
+            "simulate-drive",
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--out",
+            s(&dir),
+        ]);
+        // `vel` and `input_vel` (columns 2 and 3 of the simulator's log) in km/h.
+        let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
+        let mut kmh = String::new();
+        for (i, l) in text.lines().enumerate() {
+            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+            if i > 0 {
+                for c in &mut cells[1..3] {
+                    if !c.is_empty() {
+                        *c = format!("{}", c.parse::<f64>().unwrap() * 3.6);
+                    }
+                }
+            }
+            kmh += &(cells.join(",") + "\n");
+        }
+        let path = dir.join(format!("{scenario}-kmh.csv"));
+        std::fs::write(&path, kmh).unwrap();
+        logs.push(path);
+    }
+    let model = dir.join("model.toml");
+    let mut args = vec!["identify", s(&logs[0]), s(&logs[1]), "--out", s(&model)];
+    let err = fails(&args);
+    for log in &logs {
+        assert!(
+            err.contains(&format!("{}: the wheel speed `vel` is 3.", log.display())),
+            "{err}"
+        );
+    }
+    assert!(err.contains("`vel` looks like km/h"), "{err}");
+    assert!(err.contains("--force"), "{err}");
+    assert!(!model.exists(), "not written");
+    args.push("--force");
+    let warnings = ok(&args);
+    assert!(
+        warnings.contains("looks like km/h") && warnings.contains("identified anyway"),
+        "{warnings}"
+    );
+    assert!(model.exists());
+    let warning = ok(&["compare", s(&logs[0]), "--model", s(&model)]);
+    assert!(warning.contains("looks like km/h"), "{warning}");
+}
+
+/// `evaluate` refuses, with what to do, what would score nonsense (review findings 07, 08 and
+/// the lead's frame mismatch): predictions on another clock than the truth (both ranges
+/// named, not "no valid position"); a truth value no car can have (FILE:LINE:COL, not `inf`
+/// and `NaN` in the report); predictions in the node's own frame (replay without `--origin`,
+/// origin at the first fix) scored against the truth's frame. The same run with `--origin`
+/// scores.
+#[test]
+fn evaluate_refuses_what_would_mislead() {
+    let dir = tmp_dir("evaluate-refuses");
+    let truth = data("smoke.truth.csv");
+    let can = data("smoke.can.log");
+
+    // Predictions stamped at an epoch (the log's `t` + 1.7e9 s), truth from 0.
+    let csv = String::from_utf8(read(&data("smoke.csv"))).unwrap();
+    let mut epoch = String::new();
+    for (i, l) in csv.lines().enumerate() {
+        if i == 0 {
+            epoch += l;
+        } else {
+            let (t, rest) = l.split_once(',').unwrap();
+            epoch += &format!("{:.6},{rest}", t.parse::<f64>().unwrap() + 1.7e9);
+        }
+        epoch += "\n";
+    }
+    let epoch_csv = dir.join("epoch.csv");
+    std::fs::write(&epoch_csv, epoch).unwrap();
+    let epoch_can = dir.join("epoch.can.log");
+    ok(&["csv2can", s(&epoch_csv), "--out", s(&epoch_can)]);
+    let epoch_pred = dir.join("epoch_pred.csv");
+    ok(&[
+        "replay",
+        s(&epoch_can),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&epoch_pred),
+    ]);
+    let err = fails(&[
+        "evaluate",
+        s(&epoch_pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&epoch_can),
+    ]);
+    assert!(err.contains("do not overlap in time"), "{err}");
+    assert!(
+        err.contains("(t = 1700000003.86 .. 1700000014.96 s)"),
+        "{err}"
+    );
+    assert!(err.contains("(t = 0 .. 14.95 s)"), "{err}");
+    assert!(!err.contains("no valid position"), "{err}");
+
+    // A truth cell no car can have: its file, line and column.
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let truth_text = String::from_utf8(read(&truth)).unwrap();
+    let mut lines: Vec<String> = truth_text.lines().map(str::to_string).collect();
+    let cells: Vec<String> = lines[1000].split(',').map(str::to_string).collect();
+    lines[1000] = format!("{},1e300,{}", cells[0], cells[2..].join(","));
+    let bad_truth = dir.join("bad.truth.csv");
+    std::fs::write(&bad_truth, lines.join("\n") + "\n").unwrap();
+    let json = dir.join("eval.json");
+    let err = fails(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&bad_truth),
+        "--inputs",
+        s(&can),
+        "--json",
+        s(&json),
+    ]);
+    let col = cells[0].chars().count() + 2;
+    assert!(
+        err.contains(&format!(
+            "{}:1001:{col}: column `x`: 1e300 m is outside -1e7..1e7 m",
+            bad_truth.display()
+        )),
+        "{err}"
+    );
+    assert!(!json.exists(), "no report on error");
+
+    // Replay without --origin: the node's frame at its first fix, 1.5 m from the truth's.
+    let first_fix = dir.join("first_fix.csv");
+    ok(&["replay", s(&can), "--out", s(&first_fix)]);
+    let err = fails(&[
+        "evaluate",
+        s(&first_fix),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&can),
+    ]);
+    assert!(
+        err.contains("the predictions are not in the truth's frame"),
+        "{err}"
+    );
+    assert!(err.contains("the first GNSS fix"), "{err}");
+    assert!(err.contains(&format!("--origin {ORIGIN}")), "{err}");
+    // The same drive replayed in the truth's frame is scored.
+    let out = ok(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&truth),
+        "--inputs",
+        s(&can),
+    ]);
+    assert!(!out.contains("error"), "{out}");
+}
+
 /// `receiver-error` on the simulator's receiver parked for an hour gives the bound the built-in
 /// files declare (the simulator's bias, 0.8 m per axis: 2.0 m, 2.5 standard deviations; seeds
 /// 1 and 2 give 2.1 and 2.0 m); a 20 s standstill is too short and says how long is enough; a

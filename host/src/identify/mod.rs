@@ -24,6 +24,7 @@ pub mod receiver;
 pub mod report;
 pub mod simulate;
 pub mod steering;
+pub mod units;
 pub mod validate;
 
 use std::path::PathBuf;

@@ -90,6 +90,9 @@ pub struct Experiment {
     /// The receiver's fix rate in this log: the reciprocal of the median interval between
     /// fixes, Hz.
     pub gnss_rate_hz: f64,
+    /// The wheel speed against the GNSS track ([`super::units`]): about 1 when `vel` is in
+    /// m/s; `None` when the log has too few moving stretches to judge by.
+    pub speed_scale: Option<super::units::SpeedScale>,
 }
 
 impl Experiment {
@@ -483,6 +486,10 @@ pub fn preprocess_rows(
         })
         .unzip();
 
+    // On the raw samples: the wheel's distance against the track's (a `vel` in km/h passes
+    // the schema's range in town).
+    let speed_scale = super::units::speed_scale(&tv, &vel, &tg, &xe, &yn);
+
     let taps = taps(opts)?;
     let f = |name: &str, t: &[f64], v: &[f64]| -> Result<Vec<f64>> {
         let g = onto_grid(name, t, v, &grid)?;
@@ -548,6 +555,7 @@ pub fn preprocess_rows(
         origin_deg: origin,
         yaw_half_width,
         gnss_rate_hz: 1.0 / median_interval(&tg),
+        speed_scale,
         log_notes: notes,
     })
 }

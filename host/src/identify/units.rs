@@ -1,0 +1,307 @@
+//! The wheel speed's unit, checked against the GNSS track (review finding 04).
+//!
+//! The log schema's speeds are m/s, and its range (-10..80 m/s) cannot tell km/h or mph in town
+//! from m/s on a motorway: a training set in km/h (37 at most) was identified with exit 0 and
+//! a steering gain of 0.34 instead of 0.99 (mph: 0.50). The GNSS fixes measure the distance
+//! the car went independently of `vel`, so the ratio of the two tells the unit: about 1 in
+//! m/s, 3.6 in km/h, 2.237 in mph, 57.3 when `lat`/`lon` are radians.
+//!
+//! It is measured robustly, for slow and noisy receivers alike: over *stretches* of the drive
+//! where the car moves (every wheel speed sample above [`MOVING`]), the fixes are regular (no
+//! gap over [`MAX_GAP_PERIODS`] of the receiver's periods) and the stretch is long (at least
+//! [`MIN_STRETCH_S`] and [`MIN_STRETCH_M`] along the track): a standard receiver's 1-2 m error
+//! is mostly a bias that moves slowly and cancels between the stretch's ends, and its white
+//! noise is small beside 10 m. The track's length is the sum of chords between fixes at least
+//! [`MIN_CHORD_M`] apart (on a turn a single chord is shorter than the arc; short chords would
+//! add the noise's length). The ratio is the median over the stretches, so a few bad ones (an
+//! outlier fix, a stop inside a stretch) do not move it.
+
+/// Wheel speed above which a sample counts as moving, in the log's unit (m/s, or whatever the
+/// log holds: the test is only that the car is not standing).
+pub const MOVING: f64 = 0.5;
+/// Shortest stretch, s: at least two of a 1 Hz receiver's fixes, and a baseline over which
+/// the receiver's slow error changes little.
+pub const MIN_STRETCH_S: f64 = 2.0;
+/// Shortest stretch along the track, m: beside a standard receiver's 0.3-0.4 m of white noise
+/// per fix, a few per cent.
+pub const MIN_STRETCH_M: f64 = 10.0;
+/// Longest stretch, s: a stretch that takes longer to cover its length is a crawl.
+pub const MAX_STRETCH_S: f64 = 30.0;
+/// Shortest chord summed into the track's length, m.
+pub const MIN_CHORD_M: f64 = 3.0;
+/// A gap between fixes over this many of the receiver's periods (the median interval) breaks
+/// a stretch: an outage, not a stretch measured.
+pub const MAX_GAP_PERIODS: f64 = 2.5;
+/// A chord's ratio of wheel to chord distance must be within this factor of the log's own
+/// (the median over all its chords): a chord to an outlier fix (tens of metres in a fraction
+/// of a second) is not, and the fix is skipped; the noise of a standard receiver moves a
+/// chord's ratio by some 20 %, a steady turn little.
+pub const MAX_CHORD_SPREAD: f64 = 1.6;
+/// Stretches needed to judge a log.
+pub const MIN_STRETCHES: usize = 5;
+/// The accepted ratio of wheel distance to track distance: m/s with every error the check
+/// allows for (a wheel speed a few per cent off, the antenna's wider arc on a turn) inside,
+/// km/h (3.6) and mph (2.237) far outside.
+pub const ACCEPTED_RATIO: std::ops::RangeInclusive<f64> = 0.8..=1.25;
+
+/// The wheel speed against the GNSS track over one log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedScale {
+    /// Median over the stretches of (distance by the wheel speed) / (distance along the
+    /// track): 1 when `vel` is in m/s.
+    pub ratio: f64,
+    /// Stretches it is the median of.
+    pub stretches: usize,
+}
+
+/// A ratio within this fraction of a unit's factor names the unit: wide enough for the tight
+/// turns of a circle (the antenna ahead of the rear axle runs a wider circle than the wheel
+/// speed measures: 0.88-0.9 times m/s with the simulator's circles), narrow enough that km/h
+/// (3.06..4.14) and mph (1.90..2.57) do not meet.
+const NAMED_UNIT_TOLERANCE: f64 = 0.15;
+
+/// What a ratio of wheel to track distance most likely means, if it is not m/s.
+fn likely_cause(ratio: f64) -> String {
+    let near = |x: f64| (ratio / x - 1.0).abs() < NAMED_UNIT_TOLERANCE;
+    if near(3.6) {
+        "`vel` looks like km/h (3.6 times m/s): the log schema's speeds are m/s; divide `vel` \
+         and `input_vel` by 3.6"
+            .into()
+    } else if near(2.236_936) {
+        "`vel` looks like mph (2.237 times m/s): the log schema's speeds are m/s; divide `vel` \
+         and `input_vel` by 2.237"
+            .into()
+    } else if near(180.0 / std::f64::consts::PI) {
+        "`lat` and `lon` look like radians (the track is 57.3 times too short): the schema's \
+         are degrees"
+            .into()
+    } else if ratio < 1.0 {
+        "the GNSS track is longer than the wheel speed says: check the unit of `vel` (m/s) and \
+         of `lat`/`lon` (degrees), and that they come from one car"
+            .into()
+    } else {
+        "the wheel speed is faster than the GNSS track: check the unit of `vel` (m/s) and of \
+         `lat`/`lon` (degrees), and that they come from one car"
+            .into()
+    }
+}
+
+impl SpeedScale {
+    /// Why the log's wheel speed cannot be m/s, or `None` when the ratio is within
+    /// [`ACCEPTED_RATIO`].
+    pub fn problem(&self) -> Option<String> {
+        if ACCEPTED_RATIO.contains(&self.ratio) {
+            return None;
+        }
+        Some(format!(
+            "the wheel speed `vel` is {:.2} times the speed along the GNSS track (the median \
+             over {} stretches where the car moves, each at least {MIN_STRETCH_S} s and \
+             {MIN_STRETCH_M} m along the track; m/s gives {}..{}): {}",
+            self.ratio,
+            self.stretches,
+            ACCEPTED_RATIO.start(),
+            ACCEPTED_RATIO.end(),
+            likely_cause(self.ratio)
+        ))
+    }
+}
+
+/// Cumulative distance by the wheel speed at each sample (trapezoids; reversing counts as
+/// distance too).
+fn wheel_distance(t: &[f64], v: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(t.len());
+    let mut d = 0.0;
+    for k in 0..t.len() {
+        if k > 0 {
+            d += 0.5 * (v[k].abs() + v[k - 1].abs()) * (t[k] - t[k - 1]);
+        }
+        out.push(d);
+    }
+    out
+}
+
+/// Linear interpolation of the series `(t, y)` (sorted by `t`) at `at`; `None` outside it.
+fn interpolate(t: &[f64], y: &[f64], at: f64) -> Option<f64> {
+    let i = t.partition_point(|x| *x <= at);
+    if i == 0 {
+        return None;
+    }
+    if i == t.len() {
+        return (t[i - 1] == at).then(|| y[i - 1]);
+    }
+    let (t0, t1) = (t[i - 1], t[i]);
+    let w = if t1 > t0 { (at - t0) / (t1 - t0) } else { 0.0 };
+    Some(y[i - 1] + (y[i] - y[i - 1]) * w)
+}
+
+/// [`SpeedScale`] of a log: the wheel speed samples `(tv, vel)` and the fixes `(tg, east,
+/// north)` in metres (each sorted by time). `None` when the log has fewer than
+/// [`MIN_STRETCHES`] stretches to judge by (a parked car, a log too short).
+pub fn speed_scale(
+    tv: &[f64],
+    vel: &[f64],
+    tg: &[f64],
+    east: &[f64],
+    north: &[f64],
+) -> Option<SpeedScale> {
+    if tv.len() < 2 || tg.len() < 2 {
+        return None;
+    }
+    let wheel = wheel_distance(tv, vel);
+    let max_gap = MAX_GAP_PERIODS * median_step(tg);
+    // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
+    let max_wheel_gap = MAX_GAP_PERIODS * median_step(tv);
+    let moving_between = |a: f64, b: f64| -> bool {
+        let lo = tv.partition_point(|t| *t < a);
+        let hi = tv.partition_point(|t| *t <= b);
+        lo > 0
+            && hi < tv.len()
+            && tv[lo - 1..=hi]
+                .windows(2)
+                .all(|w| w[1] - w[0] <= max_wheel_gap)
+            && vel[lo - 1..=hi].iter().all(|v| v.abs() >= MOVING)
+    };
+    let wheel_between = |i: usize, j: usize| -> Option<f64> {
+        Some(interpolate(tv, &wheel, tg[j])? - interpolate(tv, &wheel, tg[i])?)
+    };
+    let chord = |i: usize, j: usize| (east[j] - east[i]).hypot(north[j] - north[i]);
+
+    // 1. The log's own ratio, roughly: the median over every chord of MIN_CHORD_M along the
+    // track while moving. The median ignores the few chords to an outlier fix; it is what the
+    // chords of a stretch must agree with.
+    let mut rough = Vec::new();
+    let mut last = 0;
+    for k in 1..tg.len() {
+        if tg[k] - tg[k - 1] > max_gap {
+            last = k;
+            continue;
+        }
+        let c = chord(last, k);
+        if c >= MIN_CHORD_M {
+            if moving_between(tg[last], tg[k]) {
+                if let Some(w) = wheel_between(last, k) {
+                    rough.push(w / c);
+                }
+            }
+            last = k;
+        }
+    }
+    if rough.len() < MIN_STRETCHES {
+        return None;
+    }
+    let rough = median(&mut rough);
+    let agrees = |r: f64| r >= rough / MAX_CHORD_SPREAD && r <= rough * MAX_CHORD_SPREAD;
+
+    // 2. Stretches: walk the track from `start`, summing chords of at least MIN_CHORD_M that
+    // agree with the log (a chord to an outlier fix does not: that fix is skipped), until the
+    // stretch is long enough; a gap in the fixes or a crawl ends it, and so does a start that
+    // no chord agrees with (the start is the outlier).
+    let mut ratios = Vec::new();
+    let mut start = 0;
+    while start + 1 < tg.len() {
+        let (mut length, mut last, mut end) = (0.0, start, None);
+        let mut refused = 0;
+        let mut k = start + 1;
+        while k < tg.len() {
+            if tg[k] - tg[k - 1] > max_gap
+                || tg[k] - tg[start] > MAX_STRETCH_S
+                || refused > MAX_REFUSED_CHORDS
+            {
+                break;
+            }
+            let c = chord(last, k);
+            if c >= MIN_CHORD_M {
+                match wheel_between(last, k) {
+                    Some(w) if agrees(w / c) => {
+                        length += c;
+                        last = k;
+                        refused = 0;
+                        if length >= MIN_STRETCH_M && tg[k] - tg[start] >= MIN_STRETCH_S {
+                            end = Some(k);
+                            break;
+                        }
+                    }
+                    _ => refused += 1,
+                }
+            }
+            k += 1;
+        }
+        let Some(end) = end else {
+            // Nothing measured from this start: the next fix starts the next stretch.
+            start = if last > start { last } else { start + 1 };
+            continue;
+        };
+        if moving_between(tg[start], tg[end]) {
+            if let Some(w) = wheel_between(start, end) {
+                ratios.push(w / length);
+            }
+        }
+        start = end;
+    }
+    if ratios.len() < MIN_STRETCHES {
+        return None;
+    }
+    Some(SpeedScale {
+        ratio: median(&mut ratios),
+        stretches: ratios.len(),
+    })
+}
+
+/// Chords refused in a row before a stretch's start counts as an outlier itself.
+const MAX_REFUSED_CHORDS: usize = 3;
+
+/// The median interval between consecutive times (at least 2).
+fn median_step(t: &[f64]) -> f64 {
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    median(&mut d)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => f64::NAN,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A drive at `v` m/s due east for 60 s, wheel speed at 50 Hz scaled by `unit`, fixes at
+    /// `rate_hz` with an alternating +-0.4 m error.
+    fn drive(v: f64, unit: f64, rate_hz: f64) -> Option<SpeedScale> {
+        let tv: Vec<f64> = (0..3000).map(|k| k as f64 * 0.02).collect();
+        let vel = vec![v * unit; tv.len()];
+        let n = (60.0 * rate_hz) as usize;
+        let tg: Vec<f64> = (0..n).map(|k| k as f64 / rate_hz).collect();
+        let east: Vec<f64> = tg
+            .iter()
+            .enumerate()
+            .map(|(k, t)| v * t + if k % 2 == 0 { 0.4 } else { -0.4 })
+            .collect();
+        let north = vec![0.0; n];
+        speed_scale(&tv, &vel, &tg, &east, &north)
+    }
+
+    #[test]
+    fn the_ratio_tells_the_unit() {
+        for rate in [1.0, 5.0, 10.0, 100.0] {
+            let s = drive(5.0, 1.0, rate).expect("judged");
+            assert!((s.ratio - 1.0).abs() < 0.02, "{rate} Hz: {s:?}");
+            assert_eq!(s.problem(), None);
+            let kmh = drive(5.0, 3.6, rate).expect("judged");
+            assert!((kmh.ratio - 3.6).abs() < 0.1, "{rate} Hz: {kmh:?}");
+            assert!(
+                kmh.problem().unwrap().contains("looks like km/h"),
+                "{kmh:?}"
+            );
+            let mph = drive(5.0, 2.236_936, rate).expect("judged");
+            assert!(mph.problem().unwrap().contains("looks like mph"), "{mph:?}");
+        }
+        // A parked car: nothing to judge by.
+        assert_eq!(drive(0.0, 1.0, 10.0), None);
+    }
+}
