@@ -742,3 +742,48 @@ fn a_time_in_milliseconds_is_refused_by_its_median_interval() {
     text += "100,3,,,,,,\n";
     assert!(parse(&text).is_ok());
 }
+
+/// A latitude and longitude in radians read as degrees put every fix in the open sea of the
+/// Gulf of Guinea: refused, naming radians, at the first fix's line. A single fix there among
+/// fixes elsewhere is not a unit (and the Tucson drive's are far outside the box); integers of
+/// 1e-7 deg are named in the range error.
+#[test]
+fn a_track_in_radians_or_in_1e7_degrees_is_named() {
+    let (lat, lon) = (32.2319_f64.to_radians(), (-110.9501_f64).to_radians());
+    let text = format!(
+        "{HEADER}\n0,1,,,,,,\n0.02,1,,,,,{lat},{lon}\n0.04,1,,,,,{},{lon}\n",
+        lat + 1e-7
+    );
+    let e = error_message(&text);
+    assert!(
+        e.starts_with("drive.csv:3: column `lat`: all 2 fixes lie within 1.5708 deg")
+            && e.contains("look like radians"),
+        "{e}"
+    );
+    assert!(e.contains("multiply both columns by 57.29578"), "{e}");
+    // The same drive in degrees, and one fix in the box among others.
+    let degrees = format!("{HEADER}\n0,1,,,,,32.2319,-110.9501\n0.02,1,,,,,32.2320,-110.9501\n");
+    parse(&degrees).expect("degrees");
+    let mixed = format!("{HEADER}\n0,1,,,,,0.5,0.5\n0.02,1,,,,,5.5,0.5\n");
+    parse(&mixed).expect("a fix outside the box");
+    // u-blox style integers.
+    let e = error_message(&format!("{HEADER}\n0,1,,,,,322319000,-1109501000\n"));
+    assert!(
+        e.ends_with("integers of 1e-7 deg (as u-blox writes them) need dividing by 1e7"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_fix_in_nmea_minutes_is_named() {
+    let e = error_message(&format!("{HEADER}\n0,1,,,,,3213.914,-11057.006\n"));
+    assert!(e.contains("NMEA's ddmm.mmmm"), "{e}");
+    let e = error_message(&format!("{HEADER}\n0,1,,,,,32.2,-11057.006\n"));
+    assert!(
+        e.contains("column `lon`") && e.contains("NMEA's ddmm.mmmm"),
+        "{e}"
+    );
+    // Past a latitude's range, but neither format.
+    let e = error_message(&format!("{HEADER}\n0,1,,,,,91,0\n"));
+    assert!(e.ends_with("(WGS-84 latitude)"), "{e}");
+}

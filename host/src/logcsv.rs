@@ -166,6 +166,13 @@ pub enum LogErrorKind {
     /// A GNSS fix at latitude 0, longitude 0: the placeholder many receivers write without a
     /// fix, not a position (it is in the Gulf of Guinea).
     NullIsland,
+    /// Every fix of the log lies within pi/2 deg of the equator and pi deg of Greenwich: open
+    /// sea in the Gulf of Guinea, and exactly the range of a latitude and longitude in
+    /// radians ([`radians_likely`]).
+    RadiansLikely {
+        /// Fixes in the log.
+        fixes: usize,
+    },
     /// `t` is smaller than the previous row's (log), or not greater (truth, written files).
     TimeNotIncreasing {
         /// This row's time, s.
@@ -287,10 +294,20 @@ impl fmt::Display for LogErrorKind {
                 min = Readable(range.min),
                 max = Readable(range.max),
                 why = range.why
-            ),
+            )
+            .and_then(|()| match range.unit {
+                "deg" => write!(f, "{}", angle_format_hint(*value, range)),
+                _ => Ok(()),
+            }),
             LogErrorKind::NullIsland => write!(
                 f,
                 "fix at latitude 0, longitude 0: the placeholder receivers write without a fix; leave `lat` and `lon` empty instead"
+            ),
+            LogErrorKind::RadiansLikely { fixes } => write!(
+                f,
+                "all {fixes} fixes lie within 1.5708 deg of the equator and 3.1416 deg of \
+                 Greenwich, in the open sea of the Gulf of Guinea: `lat` and `lon` look like \
+                 radians; the schema's are degrees (multiply both columns by 57.29578)"
             ),
             LogErrorKind::TimeNotIncreasing { t, previous } if t < previous => {
                 write!(f, "time goes backwards: {t} after {previous}")
@@ -302,6 +319,20 @@ impl fmt::Display for LogErrorKind {
                 write!(f, "`lat` and `lon` must be both present or both empty")
             }
         }
+    }
+}
+
+/// What an angle outside a latitude's or longitude's range most likely is: integers of 1e-7
+/// deg (u-blox's binary messages, and converters that keep them), or NMEA's `ddmm.mmmm`
+/// (degrees times 100 plus minutes). Empty when it is neither.
+fn angle_format_hint(value: f64, range: &ColumnRange) -> &'static str {
+    let a = value.abs();
+    if a >= 1e5 && a / 1e7 <= range.max {
+        "; integers of 1e-7 deg (as u-blox writes them) need dividing by 1e7"
+    } else if a < 100.0 * range.max && a % 100.0 < 60.0 {
+        "; NMEA's ddmm.mmmm (degrees times 100 plus minutes) needs converting to degrees"
+    } else {
+        ""
     }
 }
 
@@ -712,7 +743,37 @@ fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError>
         rows.push(p.finish(path)?);
     }
     check_sample_interval(&rows, path)?;
+    if let Some(fixes) = radians_likely(&rows) {
+        let first = rows.iter().position(|r| r.lat.is_some()).unwrap_or(0);
+        return Err(LogError {
+            path: path.to_path_buf(),
+            line: lines.get(first).copied().unwrap_or(0),
+            char_column: 0,
+            column: Some("lat".to_string()),
+            kind: LogErrorKind::RadiansLikely { fixes },
+        });
+    }
     Ok(Log { rows, lines, notes })
+}
+
+/// The number of fixes when every fix of `rows` lies in the box a latitude and longitude in
+/// radians fill when read as degrees (|lat| <= pi/2, |lon| <= pi). In degrees that box is the
+/// open sea south of Ghana, about 270 km from the nearest land (Annobon, 1.4 deg south, 5.6 deg
+/// east; Ghana's coast is at 4.7 deg north): no drive is logged there, so a log whose fixes all
+/// lie in it is in radians. The wheel speed's unit check cannot tell (`identify::units`): its
+/// chords need metres of track, and a track in radians read as degrees is 57 times too short.
+pub fn radians_likely(rows: &[LogRow]) -> Option<usize> {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let mut fixes = 0;
+    for r in rows {
+        if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
+            if lat.abs() > FRAC_PI_2 || lon.abs() > PI {
+                return None;
+            }
+            fixes += 1;
+        }
+    }
+    (fixes > 0).then_some(fixes)
 }
 
 /// Refuses a log whose median interval between instants is over [`MAX_MEDIAN_INTERVAL_S`].
