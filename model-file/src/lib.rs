@@ -837,6 +837,58 @@ pub fn critical_speed_mps(d: &DynamicsSection) -> Option<f64> {
     )
 }
 
+/// The understeer term of the single-track model `d`, s^2/m^2: its steady-state curvature
+/// for a wheel angle delta is delta / (L (1 + K v^2)) with K = m (C_r l_r - C_f l_f) / (C_f C_r
+/// L^2), eq 2's form (negative for an oversteering pair).
+pub fn dynamics_understeer_s2_per_m2(d: &DynamicsSection) -> f64 {
+    let l = d.cg_to_front_m + d.cg_to_rear_m;
+    d.mass_kg
+        * (d.cornering_rear_n_per_rad * d.cg_to_rear_m
+            - d.cornering_front_n_per_rad * d.cg_to_front_m)
+        / (d.cornering_front_n_per_rad * d.cornering_rear_n_per_rad * l * l)
+}
+
+/// `vehicle.understeer_s2_per_m2` and the understeer of `[dynamics]` may differ by this
+/// factor: both describe one car's steady turning, the first for the kinematic model (eq 2;
+/// pure pursuit uses it at every speed), the second for the dynamic one. Identified from drives
+/// each is good to some 20 % (`catmodel identify` writes K only with a standard error under
+/// 10 %, and the stiffnesses come out 2-6 % low, which moves their K by up to 10 %); twice or
+/// half the other is another car, or a unit slip.
+pub const UNDERSTEER_AGREEMENT_FACTOR: f64 = 2.0;
+/// Below this difference, s^2/m^2, two understeer terms agree whatever their ratio: a nearly
+/// neutral car's K is small and its ratio meaningless; 0.0005 moves the radius at 6 m/s, where
+/// the node switches models, by 2 %.
+pub const UNDERSTEER_AGREEMENT_FLOOR_S2_PER_M2: f64 = 0.0005;
+
+/// Why the kinematic model's understeer (`v`) and the dynamic model's (`d`) describe different
+/// cars, if they do ([`UNDERSTEER_AGREEMENT_FACTOR`]). The node switches between the two at
+/// `h`'s thresholds: the radius one steering gives jumps by their ratio at every switch.
+fn understeer_check(
+    v: &VehicleSection,
+    d: &DynamicsSection,
+    h: &HybridSection,
+) -> Result<(), String> {
+    let k = v.understeer_s2_per_m2;
+    let k_dyn = dynamics_understeer_s2_per_m2(d);
+    let (lo, hi) = (k.min(k_dyn), k.max(k_dyn));
+    if hi - lo <= UNDERSTEER_AGREEMENT_FLOOR_S2_PER_M2 || hi <= UNDERSTEER_AGREEMENT_FACTOR * lo {
+        return Ok(());
+    }
+    let at = h.enter_dynamic_speed_mps;
+    let jump = ((1.0 + hi * at * at) / (1.0 + lo * at * at) - 1.0) * 100.0;
+    Err(format!(
+        "vehicle.understeer_s2_per_m2 = {} and [dynamics] describe different cars: the stiffnesses' \
+         understeer m (C_r l_r - C_f l_f) / (C_f C_r L^2) is {} s^2/m^2, apart by more than a factor of \
+         {UNDERSTEER_AGREEMENT_FACTOR} and more than {UNDERSTEER_AGREEMENT_FLOOR_S2_PER_M2} s^2/m^2: one steering's radius jumps by {:.0} % \
+         when the node switches models at hybrid.enter_dynamic_speed_mps = {}, and more at speed \
+         (check K's unit, the stiffnesses and the centre of gravity)",
+        shown(k),
+        sig(k_dyn),
+        jump,
+        shown(at)
+    ))
+}
+
 /// Why a `[dynamics]` table is refused for the car `v`, if it is: a key outside its range, a
 /// centre of gravity off the wheelbase, or a model that is unstable below `max_speed_mps`.
 /// `catmodel identify` applies it to the stiffnesses it fits.
@@ -1338,6 +1390,9 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
             path,
             "hybrid: exit thresholds must not exceed enter thresholds (hysteresis)".into(),
         ));
+    }
+    if let Some(d) = &raw.dynamics {
+        understeer_check(v, d, h).map_err(at)?;
     }
     let speed = convert_model(path, "speed", raw.speed, &SPEED_SIGNALS, ts, &raw.vehicle)?;
     let dx_dt = convert_model(path, "dx_dt", raw.dx_dt, &DX_DT_SIGNALS, ts, &raw.vehicle)?;
