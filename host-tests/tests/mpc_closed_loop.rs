@@ -848,3 +848,35 @@ fn a_truck_with_slow_steering_anticipates_the_reversals() {
     assert!(max <= 2.0 / 3.0 * max2, "{max:.3} against {max2:.3} m");
     assert!(rms < rms2, "{rms:.3} against {rms2:.3} m");
 }
+
+/// A motorway path at 38 m/s (137 km/h; PATH_POINT's speed reaches 40.94 m/s): the plan's
+/// speed is the model file's limit (60 m/s for the CAT Vehicle), not a tuning's, and the
+/// lateral loop holds the lane at that speed. The built-in tuning capped every command at
+/// 30 m/s while reporting "tracking" (docs/findings.md).
+#[test]
+fn follows_a_motorway_path_at_its_speed() {
+    let path = straight(2000.0, 1.8, 38.0);
+    let mut l = cat_loop(&path, 30.0, 0.3);
+    l.run(&path, 1900.0, 40.0);
+    let last = l.log.last().expect("ran");
+    let (rms, max) = summary(&l, 10.0);
+    println!(
+        "{} ticks to {:.0} m: speed {:.2} m/s, command {:.2}; after 10 s rms {rms:.4} max {max:.4}; \
+         first e_y {:.3}",
+        l.log.len(),
+        last.station_m,
+        last.speed_mps,
+        last.out.speed_cmd_mps,
+        l.log[0].e_y_m
+    );
+    assert!(
+        (last.speed_mps - 38.0).abs() < 0.5,
+        "speed {} m/s for a 38 m/s path",
+        last.speed_mps
+    );
+    assert!(max < 0.05, "after 10 s: max |e_y| {max}");
+    assert!(l
+        .log
+        .iter()
+        .all(|t| t.out.status == ControlStatus::Tracking));
+}

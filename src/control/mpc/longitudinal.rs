@@ -97,7 +97,8 @@ pub struct SpeedTuning {
     pub speed_weight: f32,
     /// Weight of a change of the command from one step to the next, per (m/s)^2.
     pub command_change_weight: f32,
-    /// Fastest the plan may go (and command), m/s.
+    /// Fastest the plan may go (and command), m/s. [`super::MpcConfig::for_node`] lowers it
+    /// to the model file's `max_speed_mps`; the built-in tuning leaves that the limit.
     pub max_speed_mps: f32,
     /// Acceleration the reference assumes, m/s^2.
     pub accel_mps2: f32,

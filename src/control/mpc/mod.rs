@@ -372,7 +372,9 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     speed: SpeedTuning {
         speed_weight: 1.0,
         command_change_weight: 0.5,
-        max_speed_mps: 30.0,
+        // The car's limit is the model file's `max_speed_mps` (at most the reader's 80 m/s);
+        // a tuning of 30 m/s once capped every path silently (docs/findings.md).
+        max_speed_mps: 80.0,
         accel_mps2: 1.5,
         decel_mps2: 3.0,
         iterations: 10,
