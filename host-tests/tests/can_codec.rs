@@ -711,7 +711,8 @@ fn controller_messages_round_trip_at_limits() {
                 ControlStatus::Avoiding,
                 ControlStatus::Fallback,
             ] {
-                let fallback = FallbackCause::ALL[(i + 4 * counter as usize) % 11];
+                let fallback =
+                    FallbackCause::ALL[(i + 4 * counter as usize) % FallbackCause::ALL.len()];
                 let m = ControlCommand {
                     status,
                     fallback,

@@ -214,6 +214,7 @@ fn run_pp(
         replan_s: None,
         start_offset_m: 0.0,
         faults: false,
+        reversed_steering_report: false,
     };
     run(&vehicle, &course, &mut driver, "pure-pursuit", &options)
 }
@@ -417,6 +418,7 @@ fn the_mpc_drives_through_a_replanning_planners_paths() {
             replan_s,
             start_offset_m: 0.0,
             faults: false,
+            reversed_steering_report: false,
         };
         run(&vehicle, &course, &mut driver, "mpc", &options)
     };
@@ -527,6 +529,7 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
         replan_s: None,
         start_offset_m: 3.9,
         faults: false,
+        reversed_steering_report: false,
     };
     let out = run(&vehicle, &course, &mut driver, "mpc", &options);
     let path_heading = course.frame.heading_rad;
@@ -623,6 +626,7 @@ fn a_refused_tuning_is_named_on_the_bus() {
         replan_s: None,
         start_offset_m: 0.0,
         faults: false,
+        reversed_steering_report: false,
     };
     let out = run(&vehicle, &course, &mut driver, "mpc", &options);
     assert!(out.samples.iter().all(|s| !s.engaged));
@@ -684,6 +688,7 @@ fn a_car_started_outside_its_corridor_returns_without_swinging_through() {
                 replan_s: None,
                 start_offset_m: offset,
                 faults: false,
+                reversed_steering_report: false,
             };
             let out = run(&vehicle, &course, &mut driver, "mpc", &options);
             let first = out.samples.iter().find(|s| s.engaged).unwrap();
@@ -763,6 +768,7 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
         replan_s: None,
         start_offset_m: 0.0,
         faults: false,
+        reversed_steering_report: false,
     };
     let (vehicle, declared) =
         load_setup(Some(&plant), Some(&root.join("models/paper.toml"))).unwrap();
@@ -1095,4 +1101,78 @@ fn a_model_file_alone_puts_its_receiver_on_the_plant() {
         "{:?}",
         out.metrics
     );
+}
+
+/// A drive-by-wire that reports its steering with the other sign (positive to the left; the
+/// commands keep the interface's sign). The node finds the report running against its
+/// commands within a second of driving ([`catmodel::node::follow`]), says so
+/// (`steering_mismatch`), and the controllers stop the car with the wheels straight
+/// (`steering_reversed`): a command's sign may be as wrong as the report's. Before, the
+/// controller steered harder against the report it saw and the car left the loop's path by
+/// 3.6 m in 11 s (then `lost_path`, 20 m off when it stopped; docs/findings.md). With the
+/// report's right sign nothing of this happens.
+#[test]
+fn a_steering_reported_with_the_other_sign_stops_the_car() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    for (kind, speed) in [(Kind::Loop, 10.0), (Kind::DoubleLaneChange, 10.0)] {
+        let course = scenario::course(kind, &vehicle.body, speed);
+        for reversed_steering_report in [true, false] {
+            let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+            let options = RunOptions {
+                reversed_steering_report,
+                ..RunOptions::new(0, Receiver::Rtk)
+            };
+            let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+            let what = format!("{kind:?}, reversed {reversed_steering_report}");
+            let stopped: Vec<_> = out
+                .samples
+                .iter()
+                .filter(|s| s.command.fallback == FallbackCause::SteeringReversed)
+                .collect();
+            if !reversed_steering_report {
+                assert!(stopped.is_empty(), "{what}");
+                assert!(
+                    steering_mismatch_bits(&out).iter().all(|(_, on)| !on),
+                    "{what}"
+                );
+                continue;
+            }
+            let driving = out
+                .samples
+                .iter()
+                .find(|s| s.command.status == ControlStatus::Tracking)
+                .expect("drove")
+                .t_s;
+            let from = stopped.first().expect("stopped").t_s;
+            let flagged = steering_mismatch_bits(&out)
+                .into_iter()
+                .find(|(_, on)| *on)
+                .expect("flagged")
+                .0;
+            let worst = out
+                .samples
+                .iter()
+                .map(|s| s.lateral_m.abs())
+                .fold(0.0, f64::max);
+            let last = out.samples.last().unwrap();
+            println!(
+                "{what}: driving from {driving:.2} s, stopped from {from:.2} s, flagged at {flagged:.2} s, \
+                 worst lateral {worst:.2} m, last speed {:.2} m/s",
+                last.truth.speed
+            );
+            assert!(from - driving < 2.5, "{what}: {driving} -> {from}");
+            assert!(flagged - from < 0.1, "{what}: flagged at {flagged}");
+            assert!(worst < 0.5, "{what}: {worst} m off");
+            let after: Vec<_> = out.samples.iter().filter(|s| s.t_s >= from).collect();
+            assert!(
+                after
+                    .iter()
+                    .all(|s| s.command.fallback == FallbackCause::SteeringReversed
+                        && s.command.steer_cmd_pct == Some(0.0)
+                        && s.command.speed_cmd_mps == Some(0.0)),
+                "{what}: latched"
+            );
+            assert!(last.truth.speed < 0.1, "{what}: {}", last.truth.speed);
+        }
+    }
 }

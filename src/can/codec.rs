@@ -1107,11 +1107,15 @@ pub enum FallbackCause {
     ObstacleNotCleared = 9,
     /// The controller's command was not finite.
     NonFiniteCommand = 10,
+    /// The steering turns the car the other way than its report says (the node's steering
+    /// check, NODE_STATUS `steering_mismatch`): stopped with the wheels straight, since the
+    /// commands' sign may be as wrong as the report's.
+    SteeringReversed = 11,
 }
 
 impl FallbackCause {
     /// Every cause, by raw value.
-    pub const ALL: [FallbackCause; 11] = [
+    pub const ALL: [FallbackCause; 12] = [
         FallbackCause::None,
         FallbackCause::NotReady,
         FallbackCause::HeadingSettling,
@@ -1123,9 +1127,10 @@ impl FallbackCause {
         FallbackCause::Solver,
         FallbackCause::ObstacleNotCleared,
         FallbackCause::NonFiniteCommand,
+        FallbackCause::SteeringReversed,
     ];
 
-    /// `raw` within the signal's range (0..=10, checked by the reader).
+    /// `raw` within the signal's range (0..=11, checked by the reader).
     fn from_raw(raw: i64) -> Self {
         usize::try_from(raw)
             .ok()

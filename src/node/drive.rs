@@ -39,6 +39,7 @@
 use core::mem::MaybeUninit;
 use core::ptr::addr_of_mut;
 
+use super::follow::SteerFollow;
 use crate::can::codec::{
     ControlCommand, ControlStatus, FallbackCause, ObstacleCircle, PlannerMessage,
 };
@@ -109,6 +110,9 @@ pub struct DriveInputs<'a> {
     pub rear_side_mps: f32,
     /// Measured centre-tyre steering angle, rad, times `steer_scale`.
     pub steer_rad: f32,
+    /// STEERING_REPORT as received, % (`None`: invalid or stale): whether it follows the
+    /// node's commands ([`super::follow`]).
+    pub steer_report_pct: Option<f32>,
     /// The steering gain the node's steering check uses (1: the model file's,
     /// [`super::steering`]): the controllers' lock and rate limit are scaled by it.
     pub steer_scale: f32,
@@ -195,6 +199,8 @@ pub struct Drive {
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
+    /// Whether the steering report follows the commands ([`SteerFollow`]).
+    follow: SteerFollow,
 }
 
 impl Default for Drive {
@@ -227,6 +233,7 @@ impl Drive {
             heading: HeadingSettle::new(),
             lost_path: false,
             unconfigured: true,
+            follow: SteerFollow::new(),
         }
     }
 
@@ -260,6 +267,7 @@ impl Drive {
             addr_of_mut!((*p).heading).write(HeadingSettle::new());
             addr_of_mut!((*p).lost_path).write(false);
             addr_of_mut!((*p).unconfigured).write(true);
+            addr_of_mut!((*p).follow).write(SteerFollow::new());
             slot.assume_init_mut()
         }
     }
@@ -289,6 +297,13 @@ impl Drive {
             Controller::PurePursuit => None,
         };
         self.unconfigured = config.controller == Controller::Mpc && self.mpc_config.is_none();
+        self.follow = SteerFollow::new();
+    }
+
+    /// Whether the steering report has run against the controllers' commands (latched:
+    /// [`super::follow`]); the controllers then stop the car.
+    pub fn steering_reversed(&self) -> bool {
+        self.follow.reversed()
     }
 
     /// The paths' speed envelope brakes at the active controller's deceleration: the
@@ -407,6 +422,8 @@ impl Drive {
         self.last_tracking = None;
         let path_loaded = core::mem::take(&mut self.path_loaded);
         let planned_last_tick = core::mem::take(&mut self.planned_last_tick);
+        self.follow
+            .observe(&self.last_command, inputs.steer_report_pct);
         let out = self.decide(config, inputs, path_loaded, planned_last_tick, probe);
         self.last_command = out.command;
         out
@@ -455,6 +472,15 @@ impl Drive {
         );
         if self.unconfigured {
             return self.hold(ControlStatus::Fallback, FallbackCause::Unconfigured);
+        }
+        if inputs.steer_scale < 0.0 || self.follow.reversed() {
+            // The steering check found the car turning against its steering report
+            // ([`super::steering::SteeringCheck::reversed`]: the estimate is right again, the
+            // models take the sign), or the report ran against the commands
+            // ([`super::follow`]). A command's sign may be as wrong as the report's, so no
+            // controller steers: wheels straight, stopped.
+            self.last_steer_cmd_pct = 0.0;
+            return self.hold(ControlStatus::Fallback, FallbackCause::SteeringReversed);
         }
         if self.lost_path {
             // Latched: a noisy estimate that strays back into the corridor does not hand a

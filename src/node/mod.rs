@@ -27,6 +27,7 @@
 //! ([`NodeConfig::from_image`]); nothing about a particular car lives in this crate.
 pub mod drive;
 pub mod estimator;
+pub mod follow;
 pub mod gnss;
 pub mod inputs;
 pub mod publish;
@@ -496,7 +497,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         probe.lap(Stage::Models);
         let estimate = self.estimate(now, &motion);
         probe.lap(Stage::Estimate);
-        let drive = self.run_drive(&motion, &estimate, probe);
+        let drive = self.run_drive(&motion, &estimate, snapshot.steer_pct, probe);
         probe.lap(Stage::Drive);
         let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
         let predicted = match drive.plan {
@@ -733,6 +734,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         &mut self,
         motion: &Motion,
         estimate: &Estimate,
+        steer_report_pct: Option<f32>,
         probe: &mut P,
     ) -> DriveOutput {
         let inputs = DriveInputs {
@@ -743,6 +745,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,
             steer_rad: motion.center_steer_rad,
+            steer_report_pct,
             steer_scale: motion.steer_scale,
             mode: motion.mode,
             speed_model: self.models.velocity.as_ref(),
@@ -807,7 +810,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             gnss_fresh: estimate.gnss_fresh,
             gnss_rejected_us: self.gnss.last_reject_us(),
             gnss_rate_mismatch: self.gnss.rate_mismatch(),
-            steering_mismatch: self.steering.mismatch(),
+            steering_mismatch: self.steering.mismatch() || self.drive.borrow().steering_reversed(),
             mode: motion.mode,
             speed_mps: motion.speed_mps,
             yaw_rate_rps: self.models.yaw_rate_rps,

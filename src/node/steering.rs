@@ -25,7 +25,10 @@
 //! [`MIN_BLOCKS`] blocks, and the gain is more than [`ENGAGE`] and [`MIN_SIGMAS`] standard
 //! deviations off 1, the node uses it: every steering angle it reads is scaled by it before
 //! the models, and the controllers' lock and rate with it (their commands divided by it);
-//! NODE_STATUS says `steering_mismatch` while it does. Within [`RELEASE`] of 1 again the
+//! NODE_STATUS says `steering_mismatch` while it does. A negative gain is a steering reported
+//! with the other sign: the models take it as well (the estimate turns as the car does), and
+//! the controllers stop the car (CONTROL_COMMAND `fallback_reason` `steering_reversed`),
+//! since the commands' sign may be as wrong as the report's. Within [`RELEASE`] of 1 again the
 //! file's steering is used as it is. A car whose model file is right does not engage it
 //! (measured: 3.0 standard deviations at most over the accuracy bar's drives and the
 //! closed-loop rig's, docs/findings.md): its frames are those of a node without the check.
@@ -50,7 +53,10 @@ pub const MIN_SIGMAS: f32 = 5.0;
 pub const ENGAGE: f32 = 0.10;
 /// How close to 1 the gain must come back for the node to drop it.
 pub const RELEASE: f32 = 0.05;
-/// The gains the node uses at most and at least: past them the file is not this car's.
+/// The gains the node uses at most and at least: past them the file is not this car's. A
+/// negative gain is the steering reported with the other sign: the node uses the same
+/// magnitudes negated (the models then turn the car the way it turns), and its controllers
+/// do not drive ([`SteeringCheck::reversed`]).
 pub const SCALE_RANGE: (f32, f32) = (0.5, 2.0);
 /// Blocks are driven at this speed or faster, m/s: below it a standard receiver's course is
 /// too noisy for a block to say anything.
@@ -58,9 +64,17 @@ pub const MIN_SPEED_MPS: f32 = 4.0;
 /// Blocks driven at this mean speed or faster weigh fully; slower ones as the speed squared
 /// (a course's error goes as 1 / the chord's length), m/s.
 pub const FULL_WEIGHT_SPEED_MPS: f32 = 10.0;
-/// A block whose measured turn is further than this (plus half the modelled turn) from the
-/// fit's is not taken (a heading jump: a course after a multipath burst), rad.
+/// A block whose measured turn is further than this (plus [`OUTLIER_PER_MODELLED`] of the
+/// modelled turn) from the fit's is not taken (a heading jump: a course after a multipath
+/// burst), rad.
 pub const OUTLIER_RAD: f32 = 0.1;
+/// The share of the modelled turn a block's measured turn may be off the fit's and still be
+/// taken: a steering reported with the other sign (a report positive to the left, the
+/// schema's is to the right) turns the car by minus the modelled turn, 2 |modelled| off a fit
+/// at the file's gain; with a half (before) every such block was an outlier, the fit never
+/// saw one, and a node on such a car dead-reckoned its heading 1.7 rad off without a word
+/// (docs/findings.md).
+pub const OUTLIER_PER_MODELLED: f32 = 2.5;
 
 /// The check's state.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -152,8 +166,15 @@ impl SteeringCheck {
         self.scale != 1.0
     }
 
+    /// Whether the steering turns the car the other way than its report says: the gain in
+    /// use is negative. The estimate uses it (the models turn as the car does); the
+    /// controllers do not drive, since a command's sign may be as wrong as the report's.
+    pub fn reversed(&self) -> bool {
+        self.scale < 0.0
+    }
+
     /// The dead reckoning turned at `yaw_rps` (from the steering scaled by the gain applied
-    /// then) and drove at `speed_mps` for `dt_s`.
+    /// then, negative for a reversed steering) and drove at `speed_mps` for `dt_s`.
     pub fn turned(&mut self, yaw_rps: f32, speed_mps: f32, dt_s: f32) {
         self.block_modelled_rad += yaw_rps * dt_s / self.applied;
         self.block_distance_m += speed_mps * dt_s;
@@ -184,7 +205,7 @@ impl SteeringCheck {
             return;
         }
         let residual = y - self.gain * x - self.offset_per_m() * d;
-        if residual.abs() > OUTLIER_RAD + 0.5 * x.abs() {
+        if residual.abs() > OUTLIER_RAD + OUTLIER_PER_MODELLED * x.abs() {
             return;
         }
         let keep = 1.0 - BLOCK_S / FORGET_S;
@@ -218,10 +239,13 @@ impl SteeringCheck {
 
     /// The normal equations with the priors, the gain, its information and the gain in use.
     fn solve(&mut self) {
+        // The prior is the file's gain, 1, or for a steering found reversed its negation: the
+        // file's magnitude is still the best guess of the car's.
+        let prior_gain = if self.scale < 0.0 { -1.0 } else { 1.0 };
         let a11 = self.sxx + PRIOR_TURN_RAD2;
         let a12 = self.sxd;
         let a22 = self.sdd + PRIOR_DISTANCE_M2;
-        let b1 = self.sxy + PRIOR_TURN_RAD2;
+        let b1 = self.sxy + prior_gain * PRIOR_TURN_RAD2;
         let b2 = self.sdy;
         let det = a11 * a22 - a12 * a12;
         if det.is_nan() || det <= 0.0 {
@@ -245,7 +269,11 @@ impl SteeringCheck {
             && off * off * self.info_rad2 * dof > MIN_SIGMAS * MIN_SIGMAS * rss;
         let engaged = self.scale != 1.0;
         self.scale = if (!engaged && significant && off > ENGAGE) || (engaged && off >= RELEASE) {
-            math::clamp(gain, SCALE_RANGE.0, SCALE_RANGE.1)
+            if gain < 0.0 {
+                -math::clamp(-gain, SCALE_RANGE.0, SCALE_RANGE.1)
+            } else {
+                math::clamp(gain, SCALE_RANGE.0, SCALE_RANGE.1)
+            }
         } else {
             1.0
         };
@@ -293,6 +321,19 @@ mod tests {
         assert!((gain - 0.8).abs() < 0.02, "{gain} {check:?}");
         assert!(info > MIN_INFO_RAD2);
         assert!(check.mismatch());
+        assert!((check.scale() - gain).abs() < 1e-6);
+    }
+
+    /// A steering reported with the other sign: the car turns by minus what the file's
+    /// model says. Found within the blocks a weaker steering takes, used negated.
+    #[test]
+    fn a_reversed_steering_is_found_and_used() {
+        let mut check = SteeringCheck::new();
+        let turns = |i: usize| [0.5, -0.4, 0.0, 0.3, -0.5][i % 5];
+        drive(&mut check, 120, -1.0, 0.0, turns, |_| 0.0);
+        let (gain, _) = check.fit();
+        assert!((gain + 1.0).abs() < 0.05, "{gain} {check:?}");
+        assert!(check.mismatch() && check.reversed());
         assert!((check.scale() - gain).abs() < 1e-6);
     }
 

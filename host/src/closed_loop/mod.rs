@@ -116,6 +116,10 @@ pub struct RunOptions {
     /// Inject the vehicle file's sensor faults (`[faults]`: GNSS outages and outliers, lost
     /// bus reports), as `simulate-drive` does.
     pub faults: bool,
+    /// The drive-by-wire reports its steering with the other sign (positive to the left): a
+    /// wiring or convention fault the node's steering check must find (the commands keep
+    /// STEERING_REPORT's sign, as the DBW's interface documents it).
+    pub reversed_steering_report: bool,
 }
 
 impl RunOptions {
@@ -128,6 +132,7 @@ impl RunOptions {
             replan_s: None,
             start_offset_m: 0.0,
             faults: false,
+            reversed_steering_report: false,
         }
     }
 }
@@ -409,7 +414,10 @@ pub fn run(
         pending_rows.sort_by_key(|(t, _)| *t);
         let due = pending_rows.partition_point(|(t, _)| *t as u64 <= t_tick_us);
         let mut rx: Vec<TimedFrame> = Vec::new();
-        for (_, row) in pending_rows.drain(..due) {
+        for (_, mut row) in pending_rows.drain(..due) {
+            if options.reversed_steering_report {
+                row.steer = row.steer.map(|s| -s);
+            }
             // Note: the simulator's clock starts at 0 and only counts up, so a row's time is
             // never negative (the only error encode_row reports).
             let _ = encoder.encode_row(&row, &mut rx);
@@ -684,6 +692,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         replan_s: args.replan_s,
         start_offset_m: args.start_offset_m,
         faults: args.faults,
+        reversed_steering_report: false,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
     if let Some(note) = driver::Driver::gnss_rate_note(&driver) {
