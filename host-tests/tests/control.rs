@@ -5,7 +5,10 @@ use catmodel::can::codec::{
     ControlStatus, LocalOrigin, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint,
     PlannerMessage,
 };
-use catmodel::control::path::{Narrowest, Path, PathError, Projection, Waypoint, MAX_PATH_POINTS};
+use catmodel::control::path::{
+    Narrowest, Path, PathError, Projection, Waypoint, MAX_PATH_POINTS, MIN_PLANNED_SPACING_M,
+    MIN_SEGMENT_M,
+};
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
     CarState, PurePursuitConfig, PurePursuitState, PurePursuitTuning, DEFAULT_TUNING,
@@ -635,6 +638,78 @@ fn a_loop_is_followed_in_order_where_it_meets_itself() {
         assert!((q.station_m - s).abs() < 0.01, "{} vs {s}", q.station_m);
         prev = Some(q);
     }
+}
+
+/// `points` as the node decodes them from PATH_POINT (each coordinate rounded to 0.02 m).
+fn through_the_bus(points: &[Waypoint]) -> Vec<Waypoint> {
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, w)| {
+            let frame = PathPoint {
+                path_id: 0,
+                index: i as u8,
+                east_m: w.east_m,
+                north_m: w.north_m,
+            }
+            .encode(0);
+            let (p, _) = PathPoint::decode(&frame).unwrap();
+            Waypoint {
+                east_m: p.east_m,
+                north_m: p.north_m,
+                ..*w
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn the_documented_minimum_spacing_survives_path_points_rounding() {
+    // The documented minimum is on the decoded points: 0.06 m along an axis (three steps)
+    // passes, 0.04 m (two) is refused.
+    assert!(Path::validate(&through_the_bus(&straight(0.0, 0.0, 0.0, 20, 0.06))).is_ok());
+    assert_eq!(
+        Path::validate(&through_the_bus(&straight(0.0, 0.0, 0.0, 20, 0.04))),
+        Err(PathError::SegmentLength(0))
+    );
+    // A planner spacing its points MIN_SEGMENT_M apart before encoding them is refused (the
+    // probe's path: 0.05 m becomes 0.06 and 0.04 m) ...
+    assert_eq!(
+        Path::validate(&through_the_bus(&straight(0.0, 0.0, 0.0, 20, 0.05))),
+        Err(PathError::SegmentLength(1))
+    );
+    // ... and one spacing them MIN_PLANNED_SPACING_M apart is accepted at every heading and
+    // offset from the bus's grid, straight or on its tightest circle (the car's, 5.6 m).
+    let d = f64::from(MIN_PLANNED_SPACING_M);
+    let mut worst = f64::INFINITY;
+    for deg in 0..360 {
+        let h = f64::from(deg).to_radians();
+        for k in 0..10 {
+            let (e0, n0) = (0.0037 * f64::from(k), 100.0 - 0.0051 * f64::from(k));
+            let points = through_the_bus(&straight(e0, n0, h, 64, d));
+            assert_eq!(
+                Path::validate(&points),
+                Ok(()),
+                "heading {deg} deg, offset {k}"
+            );
+            for pair in points.windows(2) {
+                let (dx, dy) = (
+                    pair[1].east_m - pair[0].east_m,
+                    pair[1].north_m - pair[0].north_m,
+                );
+                worst = worst.min(f64::from(dx.hypot(dy)));
+            }
+        }
+    }
+    assert!(worst >= f64::from(MIN_SEGMENT_M), "{worst}");
+    let circle: Vec<Waypoint> = clockwise_circle(5.6, MAX_PATH_POINTS, d)
+        .into_iter()
+        .map(|w| Waypoint {
+            east_m: w.east_m + 37.011,
+            ..w
+        })
+        .collect();
+    assert_eq!(Path::validate(&through_the_bus(&circle)), Ok(()));
 }
 
 #[test]

@@ -243,8 +243,9 @@ enum Command {
         plots: Option<PathBuf>,
     },
     /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
-    /// Input lines: candump frames and `TICK SECONDS.UUUUUU`; on each TICK the node runs and
-    /// writes that tick's frames as candump lines, then `END SECONDS.UUUUUU`.
+    /// Input lines: candump frames and `TICK SECONDS.UUUUUU`, every 20 ms on multiples of
+    /// 0.020000 s; on each TICK the node runs and writes that tick's frames as candump lines,
+    /// then `END SECONDS.UUUUUU`.
     Sil {
         /// Talk over stdin/stdout (the only transport).
         #[arg(long, required = true)]
@@ -424,6 +425,11 @@ fn run(cli: Cli) -> Result<()> {
                 c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
                 result.unsupported
             );
+            // Logs with a planner on the bus: what it sent and the node refused (NODE_STATUS
+            // carries only a bit of it).
+            if result.planner.counters != Default::default() {
+                eprintln!("catmodel: {}", result.planner);
+            }
             if let Some(note) =
                 catmodel_host::gnss_rate_note(&c, result.gnss_interval_us, declared_hz)
             {

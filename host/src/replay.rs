@@ -25,6 +25,8 @@ use catmodel::node::{
 };
 use catmodel::SAMPLE_PERIOD_US;
 
+use crate::planner_refusals::PlannerRefusals;
+
 /// Interface name written into candump output.
 pub const IFACE: &str = "can0";
 
@@ -533,7 +535,7 @@ pub struct ReplayText {
 }
 
 /// What a replay did, its text aside.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ReplayStats {
     /// Frames handed to the node.
     pub frames: u64,
@@ -564,6 +566,9 @@ pub struct ReplayStats {
     /// The latest interval between GNSS fixes off the model file's period, us, as the node
     /// measured it.
     pub gnss_interval_us: Option<u32>,
+    /// The node's planner refusals (on no status page but as the bit
+    /// `planner_refused_recently`) and the first one's reason, as `sil` sums them up.
+    pub planner: PlannerRefusals,
 }
 
 /// What a replay should say about the local frame: fixes beyond its validity radius
@@ -650,6 +655,7 @@ pub fn replay_with_progress(
         origin_moves: 0,
         fixes_beyond_frame: 0,
         gnss_interval_us: None,
+        planner: PlannerRefusals::default(),
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -1092,6 +1098,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let mut max_speed_mps = 0.0f32;
     let mut steering_mismatch_ticks = 0u64;
     let mut origin_moves = 0u32;
+    let mut planner = PlannerRefusals::default();
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
@@ -1148,7 +1155,9 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     source.take();
                 }
                 frames += rx.len() as u64;
+                let before = *node.drive().planner().counters();
                 let estimate = node.step(&tick, &rx, &mut tx);
+                planner.observe(now, &rx, &before, node.drive().planner().counters());
                 if estimate.pose.is_some() {
                     valid_ticks += 1;
                 }
@@ -1213,6 +1222,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         origin_moves,
         fixes_beyond_frame: node.gnss_fixes_beyond_frame(),
         gnss_interval_us: node.gnss_off_rate_interval_us(),
+        planner,
     };
     let error = if input_ok == Some(true) {
         None
@@ -1874,6 +1884,45 @@ mod tests {
     /// Remote, CAN FD and error frames (`candump -e`) are skipped and counted by every reader,
     /// as the firmware's receive path skips them, instead of refusing the log; replay reports
     /// them; the node gets the same frames as without them.
+    /// Replay sums up the planner's refusals as `sil` does (the same [`PlannerRefusals`]): a
+    /// path whose points are 0.05 m apart, 0.04 m once PATH_POINT has rounded them.
+    #[test]
+    fn planner_refusals_are_summed_up_as_in_sil() {
+        use crate::closed_loop::planner::{PlannedPoint, Planner};
+        let mut planner = Planner::new();
+        let points: Vec<PlannedPoint> = (0..6)
+            .map(|i| PlannedPoint {
+                east_m: 0.0,
+                north_m: 0.05 * f64::from(i),
+                speed_mps: 3.0,
+                left_m: 2.0,
+                right_m: 2.0,
+            })
+            .collect();
+        planner.send_path(&points).unwrap();
+        let mut frames = Vec::new();
+        while planner.pending() > 0 {
+            frames.extend(
+                planner
+                    .take_tick_frames()
+                    .into_iter()
+                    .map(|frame| TimedFrame {
+                        t_us: 1_000_000,
+                        frame,
+                    }),
+            );
+        }
+        let config = crate::node_config(None).unwrap();
+        let stats = replay_into(&frames, config, Vec::new(), None::<Vec<u8>>, |_| {}).unwrap();
+        assert_eq!(stats.planner.counters.paths_invalid, 1);
+        let text = stats.planner.to_string();
+        assert!(
+            text.contains("1 refused (invalid paths 1")
+                && text.contains("path 0 refused: points 1 and 2 are 0.040 m apart"),
+            "{text}"
+        );
+    }
+
     #[test]
     fn unsupported_frames_are_skipped_and_counted() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");

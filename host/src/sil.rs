@@ -12,18 +12,24 @@
 //! then the line `END SECONDS.UUUUUU` (T in the candump timestamp format), and flushes.
 //! Remote, CAN FD and error frames are skipped and counted, as the firmware's receive path
 //! skips them; blank lines are skipped (as in `replay`). End of input: success, and a summary
-//! of the frames not given to the node ([`SilSummary`]). A malformed line (not UTF-8, neither a
-//! candump line nor a TICK), or a TICK not later than the previous one or beyond year 292 000:
-//! an error naming the line number (quoting at most 80 characters of it), and nothing more is
-//! read.
+//! of the frames not given to the node, of the node's rejections and of its planner's
+//! refusals with the first one's reason ([`SilSummary`]). A malformed line (not UTF-8, neither
+//! a candump line nor a TICK), or a TICK beyond year 292 000 or off the node's tick schedule
+//! (the first on a whole multiple of 20 ms, each next one 20 ms after the previous:
+//! [`check_tick_schedule`]): an error naming the line number (quoting at most 80 characters of
+//! it, or the TICK expected), and nothing more is read.
 use std::collections::VecDeque;
 use std::io::{BufRead, Write};
 
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, CanFrame, TimedFrame};
-use catmodel::node::{Counters, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN};
+use catmodel::node::{
+    first_tick_us, Counters, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK, RX_QUEUE_LEN,
+};
+use catmodel::SAMPLE_PERIOD_US;
 
 use crate::closed_loop::driver::Driver;
+use crate::planner_refusals::PlannerRefusals;
 use crate::replay::{candump_line, candump_reason, TimestampStats, TimestampTracker};
 
 /// Why a session stopped early.
@@ -126,6 +132,7 @@ pub fn run(
     // As replay: are the frames stamped in batches coarser than the tick?
     let mut timestamps = TimestampStats::default();
     let mut tracker = TimestampTracker::default();
+    let mut planner = PlannerRefusals::default();
     for line_no in 1.. {
         bytes.clear();
         if input.read_until(b'\n', &mut bytes).map_err(SilError::Io)? == 0 {
@@ -142,15 +149,24 @@ pub fn run(
             continue;
         }
         if let Some(rest) = text.strip_prefix("TICK") {
-            let t_us = rest
-                .strip_prefix(' ')
-                .and_then(|t| candump::parse_timestamp(t).ok())
-                .ok_or_else(|| {
-                    malformed(format!(
+            let stamp = rest.strip_prefix(' ');
+            let t_us = match stamp.map(candump::parse_timestamp) {
+                Some(Ok(t_us)) => t_us,
+                // The syntax is right, the value overflows the microseconds' u64.
+                Some(Err(_)) if stamp.is_some_and(is_timestamp_syntax) => {
+                    return Err(malformed(format!(
+                        "{} out of range (above {} s)",
+                        quoted(text),
+                        MAX_TIME_US / 1_000_000
+                    )))
+                }
+                _ => {
+                    return Err(malformed(format!(
                         "expected `TICK SECONDS.UUUUUU` (six decimals), got {}",
                         quoted(text)
-                    ))
-                })?;
+                    )))
+                }
+            };
             // As replay refuses a frame time beyond it (year 292 000): keeps the node's tick
             // arithmetic from overflowing.
             if t_us > MAX_TIME_US {
@@ -167,6 +183,7 @@ pub fn run(
                     timestamp(prev)
                 )));
             }
+            check_tick_schedule(t_us, last_tick).map_err(malformed)?;
             tx.clear();
             queue.take_tick(&mut rx);
             let tick = Tick {
@@ -176,7 +193,9 @@ pub fn run(
                     ..PlatformStats::default()
                 },
             };
+            let before = driver.planner_counters();
             driver.tick(&tick, &rx, &mut tx);
+            planner.observe(t_us, &rx, &before, &driver.planner_counters());
             for frame in &tx {
                 writeln!(output, "{}", candump_line(t_us, frame)).map_err(SilError::Io)?;
             }
@@ -210,6 +229,52 @@ pub fn run(
         rx_queue_drops: queue.drops,
         counters: driver.counters(),
         timestamps,
+        planner,
+    })
+}
+
+/// Whether `text` has the candump timestamp's syntax (1-20 digits, a dot, six digits), so that
+/// a TICK [`candump::parse_timestamp`] refuses is out of range, not malformed.
+fn is_timestamp_syntax(text: &str) -> bool {
+    let digits = |s: &str| s.bytes().all(|b| b.is_ascii_digit());
+    text.split_once('.').is_some_and(|(secs, frac)| {
+        (1..=20).contains(&secs.len()) && digits(secs) && frac.len() == 6 && digits(frac)
+    })
+}
+
+/// The node's tick schedule, which a TICK at `t_us` after the TICK at `previous_us` must
+/// follow (docs/architecture.md, "Tick schedule", as replay, QEMU and the board tick): the
+/// first on a whole multiple of [`SAMPLE_PERIOD_US`] (20 ms), each next one 20 ms after the
+/// previous. An error, not a warning: the node steps its filters, dead reckoning and models
+/// by 20 ms a tick whatever the TICK says, and its receive cap
+/// ([`MAX_RX_FRAMES_PER_TICK`]) and GNSS fixes per tick are sized for 20 ms of bus traffic, so
+/// a simulator ticking every 40 ms drove a car the node saw move at half its speed and
+/// overflowed the receive queue (the session never drove, and the summary blamed the queue and
+/// the GNSS gate: docs/findings.md). The error names the TICK expected.
+fn check_tick_schedule(t_us: u64, previous_us: Option<u64>) -> Result<(), String> {
+    let expected = match previous_us {
+        Some(prev) => prev.saturating_add(SAMPLE_PERIOD_US),
+        None => first_tick_us(t_us),
+    };
+    if t_us == expected {
+        return Ok(());
+    }
+    let period_s = SAMPLE_PERIOD_US as f64 / 1e6;
+    Err(match previous_us {
+        Some(prev) => format!(
+            "TICK {} is {} ms after the previous TICK {}: the node ticks every {period_s} s \
+             (its models, filters and receive cap are per 20 ms tick); expected TICK {}",
+            timestamp(t_us),
+            (t_us - prev) as f64 / 1000.0,
+            timestamp(prev),
+            timestamp(expected)
+        ),
+        None => format!(
+            "TICK {} is off the node's tick schedule: ticks fall on whole multiples of \
+             {period_s} s (docs/architecture.md, \"Tick schedule\"); expected TICK {}",
+            timestamp(t_us),
+            timestamp(expected)
+        ),
     })
 }
 
@@ -229,7 +294,7 @@ fn quoted(text: &str) -> String {
 }
 
 /// What a session did, for its closing line on stderr.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SilSummary {
     /// Ticks run.
     pub ticks: u64,
@@ -244,6 +309,9 @@ pub struct SilSummary {
     pub counters: Counters,
     /// How the frames were stamped ([`TimestampStats::warning`]: in batches?).
     pub timestamps: TimestampStats,
+    /// The node's planner refusals (on no status page but as the bit
+    /// `planner_refused_recently`) and the first one's reason.
+    pub planner: PlannerRefusals,
 }
 
 impl std::fmt::Display for SilSummary {
@@ -254,7 +322,7 @@ impl std::fmt::Display for SilSummary {
             "{} ticks; frames not given to the node: {} not node inputs (acceptance filter), \
              {} remote/FD/error frames, {} dropped by the full receive queue; rejected by the \
              node: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, \
-             stamped after their TICK {}",
+             stamped after their TICK {}; {}",
             self.ticks,
             self.filtered,
             self.unsupported,
@@ -266,7 +334,8 @@ impl std::fmt::Display for SilSummary {
             c.gnss_gate_rejects,
             c.gnss_rate_mismatch,
             c.unknown_ids,
-            c.time_errors
+            c.time_errors,
+            self.planner
         )
     }
 }
@@ -393,6 +462,127 @@ mod tests {
     }
 
     #[test]
+    fn a_tick_too_large_for_microseconds_is_out_of_range_not_malformed() {
+        // Six decimals, but 1e20 us overflows a u64: the reason is the range (it said "six
+        // decimals" before).
+        let (line, reason) = malformed(b"TICK 0.020000\nTICK 99999999999999.000000\n");
+        assert_eq!(line, 2);
+        assert!(
+            reason.contains("out of range (above 9223372036854 s)")
+                && !reason.contains("six decimals"),
+            "{reason}"
+        );
+        // A wrong syntax still says what the syntax is.
+        let (_, reason) = malformed(b"TICK 0.02\n");
+        assert!(reason.contains("six decimals"), "{reason}");
+    }
+
+    #[test]
+    fn a_tick_off_the_20_ms_schedule_is_refused_with_the_tick_expected() {
+        for (input, line, needle) in [
+            // A 25 Hz simulator: the node would step 20 ms for every 40.
+            (
+                &b"TICK 0.020000\nTICK 0.060000\n"[..],
+                2,
+                "40 ms after the previous TICK 0000000000.020000: the node ticks every 0.02 s \
+                 (its models, filters and receive cap are per 20 ms tick); expected TICK \
+                 0000000000.040000",
+            ),
+            (
+                b"TICK 0.020000\nTICK 0.027000\n",
+                2,
+                "expected TICK 0000000000.040000",
+            ),
+            // The first tick off the grid every platform ticks on.
+            (
+                b"TICK 0.013000\n",
+                1,
+                "off the node's tick schedule: ticks fall on whole multiples of 0.02 s \
+                 (docs/architecture.md, \"Tick schedule\"); expected TICK 0000000000.020000",
+            ),
+        ] {
+            let (got_line, reason) = malformed(input);
+            assert_eq!(got_line, line, "{reason}");
+            assert!(reason.contains(needle), "{reason}");
+        }
+        // On the schedule, at an epoch time too.
+        let (result, _) = session(b"TICK 1700000000.020000\nTICK 1700000000.040000\n");
+        assert_eq!(result.unwrap().ticks, 2);
+    }
+
+    /// The frames of `points` (north, `spacing` m apart) as our planner sends them.
+    fn path_frames(n: usize, spacing: f64) -> Vec<CanFrame> {
+        let mut planner = Planner::new();
+        let points: Vec<PlannedPoint> = (0..n)
+            .map(|i| PlannedPoint {
+                east_m: 0.0,
+                north_m: spacing * i as f64,
+                speed_mps: 3.0,
+                left_m: 2.0,
+                right_m: 2.0,
+            })
+            .collect();
+        planner.send_path(&points).unwrap();
+        let mut frames = Vec::new();
+        while planner.pending() > 0 {
+            frames.extend(planner.take_tick_frames());
+        }
+        frames
+    }
+
+    /// A session giving `frames` at 1 s, then ticking 1.02..1.10.
+    fn session_of(frames: &[CanFrame]) -> SilSummary {
+        let mut input: String = frames
+            .iter()
+            .map(|f| format!("{}\n", candump_line(1_000_000, f)))
+            .collect();
+        for k in 1..=5 {
+            input.push_str(&format!("TICK 1.{:02}0000\n", 2 * k));
+        }
+        session(input.as_bytes()).0.unwrap()
+    }
+
+    #[test]
+    fn planner_refusals_are_summed_up_with_the_first_reason() {
+        // The probe's path: points 0.05 m apart, which PATH_POINT turns into 0.06 and 0.04 m.
+        // The node refuses it; the summary said nothing was rejected.
+        let summary = session_of(&path_frames(6, 0.05));
+        assert_eq!(summary.planner.counters.paths_invalid, 1);
+        let text = summary.to_string();
+        assert!(
+            text.contains(
+                "planner: 0 paths loaded, 1 refused (invalid paths 1, abandoned 0, duplicate \
+                 indices 0, stray frames 0, stuck counters 0, unpaired origin pages 0); the \
+                 first at 1.040000 s: path 0 refused: points 1 and 2 are 0.040 m apart as decoded \
+                 (at least 0.05, at most 50; PATH_POINT rounds each coordinate to 0.02 m: space \
+                 the points at least 0.08 m apart before encoding them)"
+            ),
+            "{text}"
+        );
+        // Spaced as docs/bus.md says: loaded, nothing refused.
+        let summary = session_of(&path_frames(6, 0.08));
+        assert_eq!(
+            (
+                summary.planner.counters.paths_activated,
+                summary.planner.first
+            ),
+            (1, None)
+        );
+        // A frame given twice (its counter repeated): the node refuses the copy; the path
+        // still loads.
+        let mut frames = path_frames(6, 1.0);
+        frames.insert(2, frames[1]);
+        let summary = session_of(&frames);
+        let text = summary.to_string();
+        assert!(
+            text.contains("1 paths loaded, 1 refused")
+                && text.contains("stuck counters 1")
+                && text.contains("repeated its message's rolling counter"),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn unsupported_and_foreign_frames_are_skipped_and_summed_up() {
         // And a steering report stamped after the TICK that delivers it: the node's to
         // reject, counted in the summary (no status page carries `time_errors`).
@@ -421,11 +611,14 @@ mod tests {
                     ..summary.counters
                 },
                 timestamps: summary.timestamps,
+                planner: summary.planner.clone(),
             }
         );
         assert_eq!(summary.counters.time_errors, 1);
         assert!(
-            summary.to_string().ends_with("stamped after their TICK 1"),
+            summary
+                .to_string()
+                .contains("stamped after their TICK 1; planner: 0 paths loaded, 0 refused"),
             "{summary}"
         );
         assert!(out.ends_with("END 0000000000.020000\n"));

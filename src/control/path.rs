@@ -48,9 +48,19 @@ use crate::model::kinematic::Pose;
 pub const MAX_PATH_POINTS: usize = crate::can::spec::MAX_PATH_POINTS;
 /// Half the chord the reference heading at a point is measured over, m (see the module doc).
 pub const REFERENCE_BASELINE_M: f32 = 1.0;
-/// Consecutive points at least this far apart, m: the heading of a shorter segment is
-/// dominated by the 0.02 m quantisation of the bus (0.02 m over 0.05 m is 0.4 rad).
+/// Consecutive points at least this far apart, m, as the node decodes them (PATH_POINT's
+/// coordinates are multiples of 0.02 m): the heading of a shorter segment is dominated by the
+/// 0.02 m quantisation of the bus (0.02 m over 0.05 m is 0.4 rad). A limit on the decoded
+/// points, not relaxed by the rounding: the reference chord's bound (2 m / this = 40 points)
+/// and the projection's windows rest on it. A planner spaces its points
+/// [`MIN_PLANNED_SPACING_M`] apart before encoding them.
 pub const MIN_SEGMENT_M: f32 = 0.05;
+/// Least spacing of a planner's points before PATH_POINT rounds them, m, that keeps them
+/// [`MIN_SEGMENT_M`] apart once decoded at any heading: each coordinate moves by up to half
+/// the 0.02 m step, so a segment by up to 0.02 m per axis, 0.0283 m in length (along a
+/// diagonal); 0.05 + 0.0283, rounded up to the bus's step. At exactly 0.05 m a straight path
+/// decodes to segments of 0.04 and 0.06 m and is refused (docs/findings.md).
+pub const MIN_PLANNED_SPACING_M: f32 = 0.08;
 /// Consecutive points at most this far apart, m: a longer gap is a lost or corrupt point, not a
 /// plan (a planner samples curves far more densely).
 pub const MAX_SEGMENT_M: f32 = 50.0;

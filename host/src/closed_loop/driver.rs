@@ -10,6 +10,7 @@ use catmodel::can::codec::{ControlCommand, ControlStatus, FallbackCause};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::mpc::MpcTuning;
 use catmodel::control::path::Tracking;
+use catmodel::control::planner::PlannerCounters;
 use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
 use catmodel::node::drive::Controller as NodeController;
@@ -36,6 +37,12 @@ pub trait Driver {
     /// ([`crate::steering_note`]).
     fn steering_note(&self) -> Option<String> {
         None
+    }
+
+    /// The node's planner counters so far (paths loaded and refused; on no status page:
+    /// `sil` sums them up).
+    fn planner_counters(&self) -> PlannerCounters {
+        PlannerCounters::default()
     }
 }
 
@@ -111,6 +118,10 @@ impl Driver for NodeDriver {
 
     fn steering_note(&self) -> Option<String> {
         crate::steering_note(self.node.steering(), None)
+    }
+
+    fn planner_counters(&self) -> PlannerCounters {
+        *self.node.drive().planner().counters()
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {

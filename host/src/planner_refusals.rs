@@ -1,0 +1,224 @@
+//! What the node's planner input refused, and why, for `sil`'s and `replay`'s closing lines.
+//!
+//! The counts are the node's own ([`PlannerCounters`], read from the node before and after
+//! each tick): NODE_STATUS carries only the bit `planner_refused_recently` (docs/bus.md), so
+//! without this a simulator whose every path was refused read a summary that said nothing was
+//! rejected. The first refusal's reason is the kind of counter that rose first; for a complete
+//! path refused by its geometry, the node keeps no copy of the points it refused, so
+//! [`PlannerRefusals`] keeps the points of the path being sent as the node decoded them (same
+//! decoder, same counter check) and asks the node's own rule ([`Path::validate`]) what is
+//! wrong, to name the points and their spacing or turn.
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use catmodel::can::counter::CounterChecker;
+use catmodel::can::{decode_planner, PlannerMessage, TimedFrame};
+use catmodel::control::path::{
+    Path, PathError, Waypoint, MAX_SEGMENT_M, MAX_TURN_RAD, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M,
+};
+use catmodel::control::planner::PlannerCounters;
+use catmodel::node::MAX_RX_FRAMES_PER_TICK;
+
+/// Rolling-counter slots, one per planner message (as the node's `PlannerInputs`).
+const MESSAGES: usize = 5;
+
+/// A path being sent: its id, and its points (east, north, m) by index.
+type Receiving = (u8, BTreeMap<u8, (f32, f32)>);
+
+/// The node's planner refusals over a session and the first one's reason.
+#[derive(Debug, Clone, Default)]
+pub struct PlannerRefusals {
+    /// The node's planner counters at the end.
+    pub counters: PlannerCounters,
+    /// The first refusal: the tick's time, us, and why.
+    pub first: Option<(u64, String)>,
+    /// The points received of the path being sent: its id and its points by index (the
+    /// first of each index, as the node keeps it).
+    receiving: Option<Receiving>,
+    counter_checks: [CounterChecker; MESSAGES],
+}
+
+impl PartialEq for PlannerRefusals {
+    /// Equal when the node's counts and the first reason are (the points kept to describe a
+    /// refusal are a means, not a result).
+    fn eq(&self, other: &Self) -> bool {
+        self.counters == other.counters && self.first == other.first
+    }
+}
+
+impl PlannerRefusals {
+    /// One tick: `rx` the frames given to the node at `now_us`, `before` and `after` its
+    /// planner counters around the tick.
+    pub fn observe(
+        &mut self,
+        now_us: u64,
+        rx: &[TimedFrame],
+        before: &PlannerCounters,
+        after: &PlannerCounters,
+    ) {
+        self.counters = *after;
+        // The frames the node reads: its per-tick cap, none stamped after the tick.
+        for f in rx.iter().take(MAX_RX_FRAMES_PER_TICK) {
+            if f.t_us > now_us {
+                continue;
+            }
+            if let Ok(message) = decode_planner(&f.frame) {
+                self.keep(&message);
+            }
+        }
+        if self.first.is_none() && after.rejects() != before.rejects() {
+            self.first = Some((now_us, self.reason(before, after)));
+        }
+    }
+
+    /// Keeps the points of the path being sent, skipping frames whose counter is stuck (the
+    /// node refuses those).
+    fn keep(&mut self, message: &PlannerMessage) {
+        let (slot, counter) = match *message {
+            PlannerMessage::PathHeader(_, c) => (0, c),
+            PlannerMessage::PathPoint(_, c) => (1, c),
+            PlannerMessage::PathLimits(_, c) => (2, c),
+            PlannerMessage::Obstacle(_, c) => (3, c),
+            PlannerMessage::LocalOrigin(_, c) => (4, c),
+        };
+        if let Some(checker) = self.counter_checks.get_mut(slot) {
+            if !checker.check(counter).accepted() {
+                return;
+            }
+        }
+        match *message {
+            PlannerMessage::PathHeader(h, _) => self.receiving = Some((h.path_id, BTreeMap::new())),
+            PlannerMessage::PathPoint(p, _) => {
+                if let Some((id, points)) = self.receiving.as_mut() {
+                    if *id == p.path_id {
+                        points.entry(p.index).or_insert((p.east_m, p.north_m));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Why the counters moved from `before` to `after` (the first kind that rose).
+    fn reason(&self, before: &PlannerCounters, after: &PlannerCounters) -> String {
+        if after.paths_invalid != before.paths_invalid {
+            return self.invalid_path();
+        }
+        if after.paths_abandoned != before.paths_abandoned {
+            return "a path's assembly was abandoned: a PATH_POINT or PATH_LIMITS index was \
+                    skipped (a frame lost), or a new PATH_HEADER came before the path was \
+                    complete; send the path again with a new header"
+                .into();
+        }
+        if after.duplicates != before.duplicates {
+            return "a PATH_POINT or PATH_LIMITS index was received twice (each goes once, in \
+                    index order)"
+                .into();
+        }
+        if after.stray_frames != before.stray_frames {
+            return "a PATH_POINT or PATH_LIMITS of a path id not being assembled (no \
+                    PATH_HEADER for it, or its assembly was abandoned)"
+                .into();
+        }
+        if after.stuck_counters != before.stuck_counters {
+            return "a planner frame repeated its message's rolling counter (each planner \
+                    message counts +1 per frame)"
+                .into();
+        }
+        "a LOCAL_ORIGIN longitude page did not follow its latitude page with the next counter"
+            .into()
+    }
+
+    /// The geometry a refused path broke, by the node's rule on the points it decoded.
+    fn invalid_path(&self) -> String {
+        let Some((id, points)) = &self.receiving else {
+            return "a path was refused by the node's geometry checks (docs/bus.md)".into();
+        };
+        let xy: Vec<(f32, f32)> = points.values().copied().collect();
+        let waypoints: Vec<Waypoint> = xy
+            .iter()
+            .map(|&(east_m, north_m)| Waypoint {
+                east_m,
+                north_m,
+                ..Waypoint::ZERO
+            })
+            .collect();
+        let at = |i: usize| xy.get(i).copied().unwrap_or((0.0, 0.0));
+        let dist = |a: (f32, f32), b: (f32, f32)| f64::from(b.0 - a.0).hypot(f64::from(b.1 - a.1));
+        let mut text = format!("path {id} refused: ");
+        let _ = match Path::validate(&waypoints) {
+            Err(PathError::SegmentLength(i)) => {
+                let i = usize::from(i);
+                let d = dist(at(i), at(i + 1));
+                let _ = write!(
+                    text,
+                    "points {i} and {} are {d:.3} m apart as decoded (at least {MIN_SEGMENT_M}, \
+                     at most {MAX_SEGMENT_M}",
+                    i + 1
+                );
+                if d < f64::from(MIN_SEGMENT_M) {
+                    write!(
+                        text,
+                        "; PATH_POINT rounds each coordinate to 0.02 m: space the points at \
+                         least {MIN_PLANNED_SPACING_M} m apart before encoding them)"
+                    )
+                } else {
+                    write!(text, ")")
+                }
+            }
+            Err(PathError::Turn(i)) => {
+                let i = usize::from(i);
+                let (a, b, c) = (at(i.saturating_sub(1)), at(i), at(i + 1));
+                let h1 = f64::from(b.0 - a.0).atan2(f64::from(b.1 - a.1));
+                let h2 = f64::from(c.0 - b.0).atan2(f64::from(c.1 - b.1));
+                let mut turn = (h2 - h1).abs() % std::f64::consts::TAU;
+                if turn > std::f64::consts::PI {
+                    turn = std::f64::consts::TAU - turn;
+                }
+                write!(
+                    text,
+                    "it turns {:.0} degrees at point {i} (at most {:.0})",
+                    turn.to_degrees(),
+                    f64::from(MAX_TURN_RAD).to_degrees()
+                )
+            }
+            Err(PathError::BadValue(i)) => write!(text, "point {i} has a value out of range"),
+            Err(PathError::PointCount) => write!(
+                text,
+                "{} points (2..{})",
+                xy.len(),
+                catmodel::control::path::MAX_PATH_POINTS
+            ),
+            Ok(()) => write!(text, "by the node's geometry checks (docs/bus.md)"),
+        };
+        text
+    }
+}
+
+impl std::fmt::Display for PlannerRefusals {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.counters;
+        write!(
+            f,
+            "planner: {} paths loaded, {} refused (invalid paths {}, abandoned {}, duplicate \
+             indices {}, stray frames {}, stuck counters {}, unpaired origin pages {})",
+            c.paths_activated,
+            c.rejects(),
+            c.paths_invalid,
+            c.paths_abandoned,
+            c.duplicates,
+            c.stray_frames,
+            c.stuck_counters,
+            c.origin_mismatches
+        )?;
+        if let Some((t_us, reason)) = &self.first {
+            write!(
+                f,
+                "; the first at {}.{:06} s: {reason}",
+                t_us / 1_000_000,
+                t_us % 1_000_000
+            )?;
+        }
+        Ok(())
+    }
+}
