@@ -424,9 +424,7 @@ fn run(cli: Cli) -> Result<()> {
                 c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
                 result.unsupported
             );
-            if let Some(note) =
-                catmodel_host::gnss_rate_note(&c, result.gnss_interval_us, declared_hz)
-            {
+            if let Some(note) = catmodel_host::gnss_rate_note(&c, result.gnss_rate, declared_hz) {
                 eprintln!("catmodel: warning: {note}");
             }
             if let Some(note) =
