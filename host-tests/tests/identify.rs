@@ -396,6 +396,50 @@ fn a_gnss_step_no_car_can_make_is_refused_as_a_discontinuity() {
     assert!(preprocess_rows("20m", &drive(20.0 / 94_253.0, 1), &v, &o).is_ok());
 }
 
+/// What a steering gain no car has is named (review finding 01), against the gains worked out
+/// by hand for the CAT Vehicle's 35.5 deg lock: the road wheels' degrees read as percent give
+/// 100 / 35.5 = 2.817, the steering wheel's degrees at a 16:1 ratio 100 / (35.5 x 16) = 0.176
+/// (a lock of 6.25 deg), a `steer` of the other sign minus the car's gain. Gains a car has
+/// (1, 0.8 and 1.25 off its file) are none of these.
+#[test]
+fn a_steering_gain_no_car_has_names_its_likely_cause() {
+    let cause = |g: f64, se: f64| identify::steer_gain_cause(g, se, 35.5);
+    for g in [0.987, 0.8, 1.25, 2.0] {
+        assert_eq!(cause(g, 0.01), None, "{g}");
+    }
+    let sign = cause(-0.987, 0.012).unwrap();
+    assert!(
+        sign.starts_with("`steer` turns the car the other way than the schema's sign convention (positive = right)")
+            && sign.ends_with("negate the column"),
+        "{sign}"
+    );
+    let wheel = cause(2.78, 0.03).unwrap();
+    assert!(
+        wheel.contains("road wheels' angle in degrees")
+            && wheel.contains("100 / 35.5 = 2.82")
+            && wheel.contains("multiply it by 100 / 35.5"),
+        "{wheel}"
+    );
+    // The other sign and degrees at once: both named.
+    let both = cause(-2.78, 0.03).unwrap();
+    assert!(
+        both.contains("negate the column") && both.contains("road wheels' angle in degrees"),
+        "{both}"
+    );
+    let steering_wheel = cause(100.0 / (35.5 * 16.0), 0.002).unwrap();
+    assert!(
+        steering_wheel.contains("steering wheel's angle in degrees (with a steering ratio of 16:1")
+            && steering_wheel.contains("6.2 deg"),
+        "{steering_wheel}"
+    );
+    // Near zero, within its error of 0: not the sign; no car steers so.
+    let none = cause(-0.02, 0.05).unwrap();
+    assert!(
+        none.starts_with("no car steers so") && !none.contains("negate"),
+        "{none}"
+    );
+}
+
 /// A plant with a survey-grade (RTK) receiver: 1 cm white noise and bias per axis (NovAtel OEM7
 /// data sheet, RTK: 1 cm + 1 ppm RMS horizontal), as the closed-loop rig's `--receiver rtk`.
 fn with_rtk(mut plant: VehicleConfig) -> VehicleConfig {

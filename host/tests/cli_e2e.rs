@@ -819,3 +819,80 @@ fn replay_names_the_receivers_rate_from_the_whole_log() {
         "{stderr}"
     );
 }
+
+/// Review finding 01: drives whose `steer` has the other sign (positive = left) gave a steering
+/// gain of -0.987 that `identify` only noted, leaving `[lateral]` out, writing the file and
+/// exiting 0. It is now refused with the cause and the fix, as a wheel speed in km/h is;
+/// `--force` writes the file without `[lateral]`, with the warning; `compare` warns.
+#[test]
+fn identify_refuses_a_steering_of_the_other_sign() {
+    let dir = tmp_dir("steer-sign");
+    let mut logs = Vec::new();
+    for scenario in ["turn-left", "circle-right"] {
+        ok(&[
+            "simulate-drive",
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--out",
+            s(&dir),
+        ]);
+        let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
+        let steer = text
+            .lines()
+            .next()
+            .unwrap()
+            .split(',')
+            .position(|c| c == "steer")
+            .unwrap();
+        let mut flipped = String::new();
+        for (i, l) in text.lines().enumerate() {
+            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+            if i > 0 && !cells[steer].is_empty() {
+                cells[steer] = format!("{}", -cells[steer].parse::<f64>().unwrap());
+            }
+            flipped += &(cells.join(",") + "\n");
+        }
+        let path = dir.join(format!("{scenario}-flipped.csv"));
+        std::fs::write(&path, flipped).unwrap();
+        logs.push(path);
+    }
+    let model = dir.join("model.toml");
+    let mut args = vec!["identify", s(&logs[0]), s(&logs[1]), "--out", s(&model)];
+    let err = fails(&args);
+    let gain: f64 = err
+        .split("from `steer`) is ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|g| g.parse().ok())
+        .unwrap_or_else(|| panic!("{err}"));
+    // The car's gain, 0.987 unflipped (README), with the other sign.
+    assert!((gain + 0.987).abs() < 0.02, "{gain}\n{err}");
+    assert!(
+        err.contains("turn-left-flipped ") && err.contains("circle-right-flipped "),
+        "each log's gain: {err}"
+    );
+    assert!(
+        err.contains("`steer` turns the car the other way") && err.contains("negate the column"),
+        "{err}"
+    );
+    assert!(
+        err.contains("not written") && err.contains("--force"),
+        "{err}"
+    );
+    assert!(!model.exists(), "not written");
+    args.push("--force");
+    let warnings = ok(&args);
+    assert!(
+        warnings.contains("negate the column") && warnings.contains("without [lateral]: --force"),
+        "{warnings}"
+    );
+    let written = String::from_utf8(read(&model)).unwrap();
+    assert!(!written.contains("[lateral]"), "{written}");
+    let warning = ok(&["compare", s(&logs[1]), "--model", s(&model)]);
+    assert!(
+        warning.contains("catmodel: warning: ") && warning.contains("negate the column"),
+        "{warning}"
+    );
+}
