@@ -315,6 +315,131 @@ fn a_pause_in_a_sensor_is_refused_and_a_short_outage_is_not() {
     );
 }
 
+/// Two drives joined in one log (review finding 02: time continuous, the second drive 2 km
+/// east, a fix 2 km from the one 20 ms before): refused as the pause rule refuses a pause, with
+/// the file, the line of the first fix after the step, the times and the advice to split the
+/// log there. Before, identify trained across it (dx/dt MSE 519 (m/s)^2 instead of 0.05) with
+/// exit 0. A burst of three bad fixes (which the outlier check keeps: the median of three
+/// neighbours is bad too) is no discontinuity, and neither is a slow receiver's period.
+#[test]
+fn a_gnss_step_no_car_can_make_is_refused_as_a_discontinuity() {
+    let v = model_file::load(&model_file::paper_path()).unwrap().vehicle;
+    let o = PreprocessOptions::default();
+    // 60 s at 50 Hz, a fix every `gnss_every` rows; from t = 30 s the fixes `shift` deg east.
+    let drive = |shift: f64, gnss_every: usize| -> Vec<LogRow> {
+        (0..3000)
+            .map(|k| {
+                let t = k as f64 * 0.02;
+                let mut r = row(t, Some(5.0), Some(5.0), Some(0.0), k % gnss_every == 0);
+                if t >= 30.0 {
+                    r.lon = r.lon.map(|lon| lon + shift);
+                }
+                r
+            })
+            .collect()
+    };
+    // 0.0213 deg of longitude at 32.2319 deg north: pi/180 a cos(lat) / sqrt(1 - e^2 sin^2(lat))
+    // = 94 253 m/deg (WGS-84), 2008 m.
+    let e = preprocess_rows("joined", &drive(0.0213, 1), &v, &o).unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("the GNSS fix jumps 2008 m in 0.02 s (t = 29.98 to 30), and stays there")
+            && msg.contains("split the log at this line"),
+        "{msg}"
+    );
+    // A 1 Hz receiver: its side medians span 3 fixes each (5 s, 500 m at most): still refused.
+    let msg = format!(
+        "{:#}",
+        preprocess_rows("joined-1hz", &drive(0.0213, 50), &v, &o).unwrap_err()
+    );
+    assert!(msg.contains("(t = 29 to 30)"), "{msg}");
+    // The joined drive as a file: the line of the first fix after the step (the header is
+    // line 1, t = 0 line 2, t = 30 s, row 1500, line 1502).
+    let dir = std::env::temp_dir().join(format!("catmodel-gnss-step-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("joined.csv");
+    let cell = |x: Option<f64>| x.map_or(String::new(), |x| format!("{x}"));
+    let mut text = String::from("t,vel,input_vel,accel,steer,brake,lat,lon\n");
+    for r in drive(0.0213, 1) {
+        text += &format!(
+            "{},{},{},,{},,{},{}\n",
+            r.t,
+            cell(r.vel),
+            cell(r.input_vel),
+            cell(r.steer),
+            cell(r.lat),
+            cell(r.lon)
+        );
+    }
+    std::fs::write(&path, text).unwrap();
+    let msg = format!(
+        "{:#}",
+        identify::preprocess::load_experiment(&path, &v, &o).unwrap_err()
+    );
+    assert!(
+        msg.starts_with(&format!(
+            "{}:1502: the GNSS fix jumps 2008 m",
+            path.display()
+        )),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    // Not a discontinuity: the same drive unshifted; three fixes 1 km north in a row (kept by
+    // the outlier check, they move neither side's median over 1 s); a 20 m step that stays
+    // (two drives joined at one site: within the receiver's error at worst).
+    assert!(preprocess_rows("one", &drive(0.0, 1), &v, &o).is_ok());
+    let mut burst = drive(0.0, 1);
+    for r in &mut burst[1000..1003] {
+        r.lat = r.lat.map(|lat| lat + 0.009);
+    }
+    assert!(preprocess_rows("burst", &burst, &v, &o).is_ok());
+    assert!(preprocess_rows("20m", &drive(20.0 / 94_253.0, 1), &v, &o).is_ok());
+}
+
+/// What a steering gain no car has is named (review finding 01), against the gains worked out
+/// by hand for the CAT Vehicle's 35.5 deg lock: the road wheels' degrees read as percent give
+/// 100 / 35.5 = 2.817, the steering wheel's degrees at a 16:1 ratio 100 / (35.5 x 16) = 0.176
+/// (a lock of 6.25 deg), a `steer` of the other sign minus the car's gain. Gains a car has
+/// (1, 0.8 and 1.25 off its file) are none of these.
+#[test]
+fn a_steering_gain_no_car_has_names_its_likely_cause() {
+    let cause = |g: f64, se: f64| identify::steer_gain_cause(g, se, 35.5);
+    for g in [0.987, 0.8, 1.25, 2.0] {
+        assert_eq!(cause(g, 0.01), None, "{g}");
+    }
+    let sign = cause(-0.987, 0.012).unwrap();
+    assert!(
+        sign.starts_with("`steer` turns the car the other way than the schema's sign convention (positive = right)")
+            && sign.ends_with("negate the column"),
+        "{sign}"
+    );
+    let wheel = cause(2.78, 0.03).unwrap();
+    assert!(
+        wheel.contains("road wheels' angle in degrees")
+            && wheel.contains("100 / 35.5 = 2.82")
+            && wheel.contains("multiply it by 100 / 35.5"),
+        "{wheel}"
+    );
+    // The other sign and degrees at once: both named.
+    let both = cause(-2.78, 0.03).unwrap();
+    assert!(
+        both.contains("negate the column") && both.contains("road wheels' angle in degrees"),
+        "{both}"
+    );
+    let steering_wheel = cause(100.0 / (35.5 * 16.0), 0.002).unwrap();
+    assert!(
+        steering_wheel.contains("steering wheel's angle in degrees (with a steering ratio of 16:1")
+            && steering_wheel.contains("6.2 deg"),
+        "{steering_wheel}"
+    );
+    // Near zero, within its error of 0: not the sign; no car steers so.
+    let none = cause(-0.02, 0.05).unwrap();
+    assert!(
+        none.starts_with("no car steers so") && !none.contains("negate"),
+        "{none}"
+    );
+}
+
 /// A plant with a survey-grade (RTK) receiver: 1 cm white noise and bias per axis (NovAtel OEM7
 /// data sheet, RTK: 1 cm + 1 ppm RMS horizontal), as the closed-loop rig's `--receiver rtk`.
 fn with_rtk(mut plant: VehicleConfig) -> VehicleConfig {

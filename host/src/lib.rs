@@ -461,32 +461,98 @@ pub fn evaluate_files(
     EvaluationData::read(predictions, truth, inputs, origin_deg, car)?.evaluate()
 }
 
+/// The rate of a receiver's fixes over a whole log or session: the median interval between
+/// consecutive fixes. The node names none: it keeps the latest interval off the declared period
+/// ([`catmodel::node::Node::gnss_off_rate_interval_us`]), one interval with the receive
+/// times' jitter in it (8 ms, "132.7 Hz", for a 100 Hz receiver whose median interval is
+/// 10.0 ms; 95.5 Hz on a longer drive of the same receiver: review finding 04). The median
+/// over every fix is the receiver's period whatever the jitter and a few gaps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReceiverRate {
+    /// The median interval between consecutive fixes, s (the mean when the median is 0:
+    /// fixes stamped in batches share their timestamps).
+    pub interval_s: f64,
+    /// The fixes it was measured over.
+    pub fixes: usize,
+}
+
+impl ReceiverRate {
+    /// The rate of fixes received at `t_us` (ascending), `None` with fewer than two fixes or
+    /// none apart in time.
+    pub fn measure(t_us: &[u64]) -> Option<Self> {
+        let mut intervals: Vec<u64> = t_us.windows(2).map(|w| w[1].saturating_sub(w[0])).collect();
+        intervals.sort_unstable();
+        let median = *intervals.get(intervals.len() / 2)?;
+        let interval_us = if median > 0 {
+            median as f64
+        } else {
+            (t_us[t_us.len() - 1] - t_us[0]) as f64 / intervals.len() as f64
+        };
+        (interval_us > 0.0).then_some(Self {
+            interval_s: interval_us * 1e-6,
+            fixes: t_us.len(),
+        })
+    }
+
+    /// Fixes per second.
+    pub fn hz(&self) -> f64 {
+        1.0 / self.interval_s
+    }
+}
+
 /// Why the node did not use the GNSS fixes, when the receiver ran at another rate than the
-/// model file declares (`counters.gnss_rate_mismatch` fixes not used; `interval_us`: the
-/// interval the node measured between them, off the declared period): the message names the
-/// rate to declare.
+/// model file declares (`counters.gnss_rate_mismatch` fixes not used): the message names the
+/// receiver's rate as `measured` over the whole log ([`ReceiverRate`]) and the `gnss_rate_hz`
+/// to declare, rounded to 0.1 Hz as `catmodel identify` writes it. A rate outside the model
+/// file's range ([`model_file::GNSS_RATE_RANGE_HZ`]) is never advised: the reader refuses it
+/// (132.7 Hz was, review finding 04); the message says to set the receiver's rate instead.
 pub fn gnss_rate_note(
     counters: &catmodel::node::Counters,
-    interval_us: Option<u32>,
+    measured: Option<ReceiverRate>,
     declared_hz: f64,
 ) -> Option<String> {
     if counters.gnss_rate_mismatch == 0 {
         return None;
     }
-    let measured = interval_us
-        .filter(|us| *us > 0)
-        .map_or("another rate".to_string(), |us| {
-            let s = f64::from(us) * 1e-6;
-            format!("{:.1} Hz (every {:.0} ms)", 1.0 / s, s * 1e3)
-        });
-    Some(format!(
-        "{} GNSS fixes not used: the receiver's fixes came at {measured}, the model file declares \
-         gnss_rate_hz = {} (the GNSS lowpass and heading filter are designed for that \
-         rate); set [vehicle] gnss_rate_hz to the receiver's rate (`catmodel identify` writes it \
-         from the logs)",
-        counters.gnss_rate_mismatch,
-        (declared_hz * 10.0).round() / 10.0
-    ))
+    let declared = (declared_hz * 10.0).round() / 10.0;
+    let lead = format!(
+        "{} GNSS fixes not used: the model file declares gnss_rate_hz = {declared} (the GNSS \
+         lowpass and heading filter are designed for that rate)",
+        counters.gnss_rate_mismatch
+    );
+    let Some(rate) = measured else {
+        return Some(format!(
+            "{lead}, and the receiver's fixes came at another rate; set [vehicle] gnss_rate_hz \
+             to the receiver's rate (`catmodel identify` writes it from the logs)"
+        ));
+    };
+    let hz = rate.hz();
+    let came = format!(
+        "the receiver's fixes came at {hz:.1} Hz (the median interval between its {} fixes: \
+         {:.2} ms)",
+        rate.fixes,
+        rate.interval_s * 1e3
+    );
+    let (lo, hi) = model_file::GNSS_RATE_RANGE_HZ;
+    let advice = if hz > hi {
+        format!(
+            "that is above the {hi} Hz a model file may declare (the rates the node's lowpass \
+             and gap logic are designed for: {lo}..{hi} Hz): set the receiver to send at {hi} Hz \
+             or less, and declare that rate"
+        )
+    } else if hz < lo {
+        format!(
+            "that is below the {lo} Hz a model file may declare (the rates the node's lowpass \
+             and gap logic are designed for: {lo}..{hi} Hz): set the receiver to send at {lo} Hz \
+             or more, and declare that rate"
+        )
+    } else {
+        format!(
+            "set [vehicle] gnss_rate_hz = {} (`catmodel identify` writes it from the logs)",
+            ((hz * 10.0).round() / 10.0).clamp(lo, hi)
+        )
+    };
+    Some(format!("{came}, and {lead}: {advice}"))
 }
 
 /// What the node's steering check ([`catmodel::node::steering`]) found, when it used a steering
@@ -591,5 +657,50 @@ mod tests {
         let no_col = write("nocol.csv", "t,step\n0,0\n");
         let err = format!("{:#}", read_predictions(&no_col).unwrap_err());
         assert!(err.contains(":1: missing column `horizon_s`"), "{err}");
+    }
+
+    /// The rate a replay names (review finding 04): the median interval over every fix, whatever
+    /// one interval's jitter, and never a `gnss_rate_hz` the model-file reader refuses.
+    #[test]
+    fn the_receiver_rate_is_the_median_and_only_a_readable_rate_is_advised() {
+        // A 100 Hz receiver with one fix received 2 ms late (intervals of 12 and 8 ms beside
+        // it, the node's latest off-period interval 8 ms: "125 Hz"): the median is 10 ms.
+        let t: Vec<u64> = (0..100u64)
+            .map(|k| k * 10_000 + if k == 40 { 2_000 } else { 0 })
+            .collect();
+        let rate = ReceiverRate::measure(&t).unwrap();
+        assert_eq!(rate.interval_s, 0.010);
+        assert_eq!(rate.hz(), 100.0);
+        // Stamped in batches (every fix of a batch on one timestamp): the mean interval.
+        let batched = [0, 0, 0, 50_000, 50_000, 50_000, 100_000];
+        assert!((ReceiverRate::measure(&batched).unwrap().interval_s - 0.1 / 6.0).abs() < 1e-12);
+        assert_eq!(ReceiverRate::measure(&[5]), None);
+        assert_eq!(ReceiverRate::measure(&[5, 5]), None);
+
+        let counters = catmodel::node::Counters {
+            gnss_rate_mismatch: 7,
+            ..Default::default()
+        };
+        let note = gnss_rate_note(&counters, Some(rate), 10.0).unwrap();
+        assert!(
+            note.contains("came at 100.0 Hz (the median interval between its 100 fixes: 10.00 ms)")
+                && note.contains("declares gnss_rate_hz = 10 ")
+                && note.ends_with("set [vehicle] gnss_rate_hz = 100 (`catmodel identify` writes it from the logs)"),
+            "{note}"
+        );
+        // 200 Hz and 0.5 Hz: outside the reader's 1..100 Hz, so not advised.
+        for (interval_s, bound) in [(0.005, "above the 100 Hz"), (2.0, "below the 1 Hz")] {
+            let rate = ReceiverRate {
+                interval_s,
+                fixes: 50,
+            };
+            let note = gnss_rate_note(&counters, Some(rate), 10.0).unwrap();
+            assert!(
+                note.contains(bound) && !note.contains("set [vehicle] gnss_rate_hz ="),
+                "{note}"
+            );
+        }
+        let quiet = catmodel::node::Counters::default();
+        assert_eq!(gnss_rate_note(&quiet, Some(rate), 10.0), None);
     }
 }

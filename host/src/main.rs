@@ -430,9 +430,7 @@ fn run(cli: Cli) -> Result<()> {
             if result.planner.counters != Default::default() {
                 eprintln!("catmodel: {}", result.planner);
             }
-            if let Some(note) =
-                catmodel_host::gnss_rate_note(&c, result.gnss_interval_us, declared_hz)
-            {
+            if let Some(note) = catmodel_host::gnss_rate_note(&c, result.gnss_rate, declared_hz) {
                 eprintln!("catmodel: warning: {note}");
             }
             if let Some(note) =
@@ -583,6 +581,20 @@ fn run(cli: Cli) -> Result<()> {
                 let index = identify::report::write_report(&dir, &id)?;
                 eprintln!("wrote {}", index.display());
             }
+            // A steering of the other sign or in degrees (review finding 01) is the log's:
+            // refused as the wheel speed's unit is; --force writes the file without [lateral].
+            if let Some(why) = &id.steering_problem {
+                if !force {
+                    bail!(
+                        "{why}\n{} not written: the training logs' `steer` is not the log \
+                         schema's (--force writes the file without [lateral])",
+                        out.display()
+                    );
+                }
+                eprintln!(
+                    "catmodel: warning: {why} (identified anyway, without [lateral]: --force)"
+                );
+            }
             let violations = identify::floor::check(&id);
             for v in &violations {
                 eprintln!("catmodel: warning: {v}");
@@ -625,6 +637,15 @@ fn run(cli: Cli) -> Result<()> {
             print_notes(&e.log_notes);
             for u in speed_unit_problems([&log], [&e]) {
                 eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
+            }
+            if let Some(why) =
+                identify::steering_gain_problem(std::slice::from_ref(&e), &file.vehicle)
+            {
+                eprintln!(
+                    "catmodel: warning: {}: {why}: the yaw-rate scores below compare the model's \
+                     steering with it",
+                    log.display()
+                );
             }
             let sim = identify::validate::simulate_all(&file, &e)?;
             let scores =

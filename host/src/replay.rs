@@ -16,7 +16,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
-use catmodel::can::codec::{ModelMode, Prediction, StateMotion, StatePosition};
+use catmodel::can::codec::{GnssPosition, ModelMode, Prediction, StateMotion, StatePosition};
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::steering::SteeringCheck;
@@ -563,9 +563,9 @@ pub struct ReplayStats {
     pub origin_moves: u32,
     /// GNSS fixes beyond the local frame's validity radius ([`Node::gnss_fixes_beyond_frame`]).
     pub fixes_beyond_frame: u32,
-    /// The latest interval between GNSS fixes off the model file's period, us, as the node
-    /// measured it.
-    pub gnss_interval_us: Option<u32>,
+    /// The receiver's rate over the whole log ([`ReceiverRate::measure`]), `None` with fewer
+    /// than two fixes.
+    pub gnss_rate: Option<crate::ReceiverRate>,
     /// The node's planner refusals (on no status page but as the bit
     /// `planner_refused_recently`) and the first one's reason, as `sil` sums them up.
     pub planner: PlannerRefusals,
@@ -654,7 +654,7 @@ pub fn replay_with_progress(
         origin_e7: None,
         origin_moves: 0,
         fixes_beyond_frame: 0,
-        gnss_interval_us: None,
+        gnss_rate: None,
         planner: PlannerRefusals::default(),
     });
     ReplayOutput {
@@ -1089,7 +1089,10 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     stream: bool,
     mut progress: impl FnMut(u64),
 ) -> (ReplayStats, std::io::Result<()>, Option<anyhow::Error>) {
+    let gnss_source = config.gnss_source;
     let mut node = crate::new_node(config);
+    // The times of the receiver's position frames, for the rate the whole log shows.
+    let mut fix_times_us: Vec<u64> = Vec::new();
     let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
@@ -1155,6 +1158,11 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     source.take();
                 }
                 frames += rx.len() as u64;
+                fix_times_us.extend(
+                    rx.iter()
+                        .filter(|f| GnssPosition::decode(&f.frame, gnss_source).is_ok())
+                        .map(|f| f.t_us),
+                );
                 let before = *node.drive().planner().counters();
                 let estimate = node.step(&tick, &rx, &mut tx);
                 planner.observe(now, &rx, &before, node.drive().planner().counters());
@@ -1221,7 +1229,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         origin_e7: node.origin_e7(),
         origin_moves,
         fixes_beyond_frame: node.gnss_fixes_beyond_frame(),
-        gnss_interval_us: node.gnss_off_rate_interval_us(),
+        gnss_rate: crate::ReceiverRate::measure(&fix_times_us),
         planner,
     };
     let error = if input_ok == Some(true) {

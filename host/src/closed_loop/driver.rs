@@ -6,7 +6,7 @@
 //! names (`[control]` of the model file) and sends CONTROL_COMMAND itself. The closed-loop
 //! tools may drive with another controller than the model file's ([`Controller`]), and tune
 //! the reference controller; a SIL session runs the node exactly as configured.
-use catmodel::can::codec::{ControlCommand, ControlStatus, FallbackCause};
+use catmodel::can::codec::{ControlCommand, ControlStatus, FallbackCause, GnssPosition};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::mpc::MpcTuning;
 use catmodel::control::path::Tracking;
@@ -75,6 +75,9 @@ pub enum Controller {
 /// The node, controller included.
 pub struct NodeDriver {
     node: HostNode,
+    /// The times of the receiver's position frames the node was given, for the rate the
+    /// session shows ([`crate::ReceiverRate`]).
+    fix_times_us: Vec<u64>,
 }
 
 impl NodeDriver {
@@ -94,7 +97,10 @@ impl NodeDriver {
             }
             Controller::FromModel | Controller::Mpc => {}
         }
-        Self { node }
+        Self {
+            node,
+            fix_times_us: Vec::new(),
+        }
     }
 
     /// The node.
@@ -111,7 +117,7 @@ impl Driver for NodeDriver {
     fn gnss_rate_note(&self) -> Option<String> {
         crate::gnss_rate_note(
             self.node.counters(),
-            self.node.gnss_off_rate_interval_us(),
+            crate::ReceiverRate::measure(&self.fix_times_us),
             1.0 / f64::from(self.node.config().estimator.gnss_period_s),
         )
     }
@@ -126,6 +132,12 @@ impl Driver for NodeDriver {
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {
         let mut node_tx = TxFrames::new();
+        let source = self.node.config().gnss_source;
+        self.fix_times_us.extend(
+            rx.iter()
+                .filter(|f| GnssPosition::decode(&f.frame, source).is_ok())
+                .map(|f| f.t_us),
+        );
         let estimate = self.node.step(tick, rx, &mut node_tx);
         tx.extend_from_slice(&node_tx);
         let drive = self.node.drive();

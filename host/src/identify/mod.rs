@@ -108,6 +108,10 @@ pub struct Identification {
     /// The cornering stiffnesses, when the drives determine them (else the file keeps the car
     /// file's `[dynamics]`, and a note says why).
     pub dynamics: Option<dynamics::DynamicsFit>,
+    /// Why the training logs' steering cannot be the schema's ([`steering_gain_problem`]):
+    /// `catmodel identify` refuses to write the file unless `--force`, which writes it without
+    /// `[lateral]`.
+    pub steering_problem: Option<String>,
     /// Things the user should know (skipped models, weak excitation, transfer caveats).
     pub notes: Vec<String>,
     /// Wall time of the identification (without reading files), s.
@@ -346,6 +350,183 @@ pub fn identify_dx_dt(
         .ok_or_else(|| "no stable fit found".to_string()))
 }
 
+/// One steady-turn sample: speed, m/s; nominal centre angle, rad; yaw rate from the course,
+/// rad/s.
+type SteadyTurn = (f64, f64, f64);
+
+/// Steady-turn samples `(speed, nominal centre angle, yaw rate)` of one experiment: speed above
+/// 2 m/s, |angle| above 0.01 rad, steering and speed steady for [`LATERAL_STEADY_S`] and over
+/// the yaw rate's window ahead. A step steer at speed yaws up over a second; fitted as if
+/// steady, its transient reads as understeer (0.0038 s^2/m^2 instead of the plant's 0.0015
+/// with `steps-at-speed` in the set).
+fn steady_turns(e: &Experiment) -> Vec<SteadyTurn> {
+    let mut pts = Vec::new();
+    let behind = (LATERAL_STEADY_S / e.ts_s).round() as usize;
+    for k in behind..e.len().saturating_sub(e.yaw_half_width) {
+        let (v, d) = (e.vel[k], e.delta_rad[k]);
+        if v <= 2.0 || d.abs() <= 0.01 {
+            continue;
+        }
+        let window = k - behind..=k + e.yaw_half_width;
+        let steady = e.delta_rad[window.clone()]
+            .iter()
+            .all(|x| (x - d).abs() <= 0.05 * d.abs() + 0.002)
+            && e.vel[window].iter().all(|x| (x - v).abs() <= 0.3);
+        if steady {
+            pts.push((v, d, e.yaw_rate[k]));
+        }
+    }
+    pts
+}
+
+/// Steady-turn samples needed to estimate the steering gain (5 s of turning at 50 Hz).
+pub const MIN_STEADY_TURN_SAMPLES: usize = 250;
+
+/// The steering gain `g` of `r = v tan(g delta / (1 + K v^2)) / L` with the car file's K, by
+/// Gauss-Newton from 1, and its standard error (the yaw rate's central difference over
+/// `2 hw + 1` samples counted as one independent error, as the understeer's).
+fn steer_gain_alone(pts: &[SteadyTurn], vehicle: &VehicleSection, hw: usize) -> (f64, f64) {
+    let (l, k) = (vehicle.wheelbase_m, vehicle.understeer_s2_per_m2);
+    let mut g = 1.0;
+    let (mut jtj, mut cost) = (0.0, 0.0);
+    for _ in 0..50 {
+        let mut jtr = 0.0;
+        (jtj, cost) = (0.0, 0.0);
+        for &(v, d, r) in pts {
+            let arg = g * d / (1.0 + k * v * v);
+            let res = r - v * arg.tan() / l;
+            let j = v / l / arg.cos().powi(2) * d / (1.0 + k * v * v);
+            jtj += j * j;
+            jtr += j * res;
+            cost += res * res;
+        }
+        if jtj.is_nan() || jtj <= 0.0 {
+            break;
+        }
+        let dg = jtr / jtj;
+        g += dg;
+        if dg.abs() < 1e-10 {
+            break;
+        }
+    }
+    let s2 = cost / (pts.len() as f64 - 1.0).max(1.0) * (2 * hw + 1) as f64;
+    (g, (s2 / jtj).sqrt())
+}
+
+/// A steering gain this many standard errors below 0 turns the car the other way.
+pub const STEER_SIGN_SIGMAS: f64 = 3.0;
+
+/// The smallest lock a car has, deg: the model file's floor on `max_steer_deg` ("below 10 no
+/// turn tighter than a 30 m circle"). A gain that leaves the car file's lock below it describes
+/// no car.
+pub const MIN_LOCK_DEG: f64 = 10.0;
+
+/// A gain within this fraction of what a unit gives names that unit (the antenna's wider arc
+/// on a circle reads 1-10 % low, as in [`units`]).
+const STEER_UNIT_TOLERANCE: f64 = 0.15;
+
+/// Overall steering ratios (steering wheel to road wheels) of road vehicles: about 12:1 on a
+/// sports car, 14-18:1 on most cars, to 20-25:1 on vans, trucks and buses.
+pub const STEERING_RATIO_RANGE: std::ops::RangeInclusive<f64> = 10.0..=25.0;
+
+/// What a steering gain that no car has most likely means, or `None` for one a car can have.
+/// `steer` is percent of the lock (`max_steer_deg`), so
+/// - the road wheels' angle in degrees read as percent gives `100 / max_steer_deg` (2.82 on
+///   the CAT Vehicle's 35.5 deg): the lock it implies is 100 deg, more than any wheel turns;
+/// - the steering wheel's angle in degrees gives `100 / (max_steer_deg R)` for a steering
+///   ratio R ([`STEERING_RATIO_RANGE`]): a lock of `100 / R` deg, 4-10 deg;
+/// - a `steer` of the other sign (positive = left) gives minus the car's gain.
+pub fn steer_gain_cause(g: f64, std_error: f64, max_steer_deg: f64) -> Option<String> {
+    let near = |x: f64| (g.abs() / x - 1.0).abs() < STEER_UNIT_TOLERANCE;
+    let wheel_deg = 100.0 / max_steer_deg;
+    let lock = g.abs() * max_steer_deg;
+    let ratio = 100.0 / lock;
+    let unit = if near(wheel_deg) {
+        Some(format!(
+            "`steer` looks like the road wheels' angle in degrees (degrees read as percent of \
+             the car file's {max_steer_deg} deg lock give a gain of 100 / {max_steer_deg} = {}): \
+             the schema's `steer` is percent of full lock: multiply it by 100 / {max_steer_deg}",
+            sig3(wheel_deg)
+        ))
+    } else if lock < MIN_LOCK_DEG && STEERING_RATIO_RANGE.contains(&ratio) {
+        Some(format!(
+            "`steer` looks like the steering wheel's angle in degrees (with a steering ratio of \
+             {ratio:.0}:1, degrees at the steering wheel read as percent of the car file's \
+             {max_steer_deg} deg lock give this gain; the lock it implies, {lock:.1} deg, no car \
+             has): the schema's `steer` is percent of full lock at the road wheels: divide it by \
+             the steering ratio and multiply by 100 / {max_steer_deg}"
+        ))
+    } else {
+        None
+    };
+    if g < 0.0 && -g > STEER_SIGN_SIGMAS * std_error {
+        let sign = "`steer` turns the car the other way than the schema's sign convention \
+                    (positive = right): the yaw rate from the GNSS course has the opposite sign \
+                    to the steering; negate the column";
+        return Some(match unit {
+            Some(u) => format!("{sign}; and {u}"),
+            None => sign.into(),
+        });
+    }
+    if unit.is_some() {
+        return unit;
+    }
+    let problem = model_file::steer_gain_problem(max_steer_deg, g);
+    if problem.is_none() && lock >= MIN_LOCK_DEG {
+        return None;
+    }
+    Some(format!(
+        "no car steers so ({}): check `steer`'s unit (percent of full lock), its sign (positive \
+         = right), that it is this car's, and the car file's max_steer_deg ({max_steer_deg})",
+        problem.unwrap_or_else(|| format!(
+            "the lock would be max_steer_deg {max_steer_deg} x {} = {lock:.1} deg, below the \
+             {MIN_LOCK_DEG} deg of any car",
+            sig3(g)
+        ))
+    ))
+}
+
+/// Three significant figures.
+fn sig3(x: f64) -> String {
+    format!("{}", format!("{x:.2e}").parse::<f64>().unwrap_or(x))
+}
+
+/// Why the steering of `logs` cannot be the schema's (review finding 01: a `steer` of the other
+/// sign gave a gain of -0.987, a `steer` in wheel degrees 2.78; `identify` said so in a note,
+/// left `[lateral]` out, wrote the file and exited 0): the gain over their steady turns with
+/// the car file's understeer, its standard error, each log's own gain where it has
+/// [`MIN_STEADY_TURN_SAMPLES`] / 5, and the likely cause ([`steer_gain_cause`]). `None` when
+/// the gain is one a car has, or too few steady turns to tell.
+pub fn steering_gain_problem(logs: &[Experiment], vehicle: &VehicleSection) -> Option<String> {
+    let per_log: Vec<(&str, Vec<SteadyTurn>, usize)> = logs
+        .iter()
+        .map(|e| (e.name.as_str(), steady_turns(e), e.yaw_half_width))
+        .collect();
+    let all: Vec<SteadyTurn> = per_log.iter().flat_map(|p| p.1.clone()).collect();
+    if all.len() < MIN_STEADY_TURN_SAMPLES {
+        return None;
+    }
+    let hw = logs.first().map_or(1, |e| e.yaw_half_width);
+    let (g, se) = steer_gain_alone(&all, vehicle, hw);
+    let cause = steer_gain_cause(g, se, vehicle.max_steer_deg)?;
+    let each: Vec<String> = per_log
+        .iter()
+        .filter(|p| p.1.len() >= MIN_STEADY_TURN_SAMPLES / 5)
+        .map(|(name, pts, hw)| format!("{name} {:.3}", steer_gain_alone(pts, vehicle, *hw).0))
+        .collect();
+    Some(format!(
+        "the steering gain (the centre-tyre angle the GNSS course shows over the nominal one \
+         from `steer`) is {g:.3} +- {se:.3} over {} samples of steady turning (per log: {}): \
+         {cause}",
+        all.len(),
+        if each.is_empty() {
+            "none has enough alone".into()
+        } else {
+            each.join(", ")
+        }
+    ))
+}
+
 /// Steering gain and understeer term from `r = v tan(g delta / (1 + K v^2)) / L` by
 /// Gauss-Newton on the samples faster than 2 m/s with |delta| > 0.01 rad; then the dynamic
 /// part, a first-order lag with delay, by output error. `Err(reason)` when the data do not
@@ -355,32 +536,12 @@ pub fn identify_lateral(
     vehicle: &VehicleSection,
     opts: &IdentifyOptions,
 ) -> Result<std::result::Result<LateralFit, String>> {
-    // The steering gain and understeer are a steady-state relation: only samples where the
-    // steering and speed have been steady for LATERAL_STEADY_S (and over the yaw rate's window
-    // ahead) count. A step steer at speed yaws up over a second; fitted as if steady, its
-    // transient reads as understeer (0.0038 s^2/m^2 instead of the plant's 0.0015 with
-    // `steps-at-speed` in the set).
-    let mut pts = Vec::new();
-    for e in training {
-        let behind = (LATERAL_STEADY_S / e.ts_s).round() as usize;
-        for k in behind..e.len().saturating_sub(e.yaw_half_width) {
-            let (v, d) = (e.vel[k], e.delta_rad[k]);
-            if v <= 2.0 || d.abs() <= 0.01 {
-                continue;
-            }
-            let window = k - behind..=k + e.yaw_half_width;
-            let steady = e.delta_rad[window.clone()]
-                .iter()
-                .all(|x| (x - d).abs() <= 0.05 * d.abs() + 0.002)
-                && e.vel[window].iter().all(|x| (x - v).abs() <= 0.3);
-            if steady {
-                pts.push((v, d, e.yaw_rate[k]));
-            }
-        }
-    }
-    if pts.len() < 250 {
+    // The steering gain and understeer are a steady-state relation: only steady turns count
+    // ([`steady_turns`]).
+    let pts: Vec<SteadyTurn> = training.iter().flat_map(steady_turns).collect();
+    if pts.len() < MIN_STEADY_TURN_SAMPLES {
         return Ok(Err(format!(
-            "only {} samples of steady steering above 0.01 rad at more than 2 m/s (at least 250 needed: drive turns or circles)",
+            "only {} samples of steady steering above 0.01 rad at more than 2 m/s (at least {MIN_STEADY_TURN_SAMPLES} needed: drive turns or circles)",
             pts.len()
         )));
     }
@@ -697,12 +858,21 @@ pub fn identify(
             None
         }
     };
-    let lateral = match identify_lateral(&training, &vehicle, opts)? {
-        Ok(l) => Some(l),
-        Err(why) => {
+    // A steering no car has (the other sign, degrees) is the log's, not the car's: named as a
+    // refusal, and the lateral model is not fitted to it.
+    let steering_problem = steering_gain_problem(&training, &vehicle);
+    let lateral = match &steering_problem {
+        Some(why) => {
             notes.push(format!("lateral model not identified: {why}"));
             None
         }
+        None => match identify_lateral(&training, &vehicle, opts)? {
+            Ok(l) => Some(l),
+            Err(why) => {
+                notes.push(format!("lateral model not identified: {why}"));
+                None
+            }
+        },
     };
 
     let identified_dynamics = match (&base.dynamics, &lateral) {
@@ -872,6 +1042,7 @@ pub fn identify(
         validation_scores,
         dx_dt_identified: dx_dt_tfs.is_some(),
         dynamics: identified_dynamics,
+        steering_problem,
         notes,
         seconds: started.elapsed().as_secs_f64(),
     })
