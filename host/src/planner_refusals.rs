@@ -20,7 +20,7 @@ use catmodel::control::planner::PlannerCounters;
 use catmodel::node::MAX_RX_FRAMES_PER_TICK;
 
 /// Rolling-counter slots, one per planner message (as the node's `PlannerInputs`).
-const MESSAGES: usize = 5;
+const MESSAGES: usize = PlannerMessage::KINDS;
 
 /// A path being sent: its id, and its points (east, north, m) by index.
 type Receiving = (u8, BTreeMap<u8, (f32, f32)>);
@@ -74,13 +74,7 @@ impl PlannerRefusals {
     /// Keeps the points of the path being sent, skipping frames whose counter is stuck (the
     /// node refuses those).
     fn keep(&mut self, message: &PlannerMessage) {
-        let (slot, counter) = match *message {
-            PlannerMessage::PathHeader(_, c) => (0, c),
-            PlannerMessage::PathPoint(_, c) => (1, c),
-            PlannerMessage::PathLimits(_, c) => (2, c),
-            PlannerMessage::Obstacle(_, c) => (3, c),
-            PlannerMessage::LocalOrigin(_, c) => (4, c),
-        };
+        let (slot, counter) = message.counter();
         if let Some(checker) = self.counter_checks.get_mut(slot) {
             if !checker.check(counter).accepted() {
                 return;

@@ -1896,30 +1896,13 @@ mod tests {
     /// path whose points are 0.05 m apart, 0.04 m once PATH_POINT has rounded them.
     #[test]
     fn planner_refusals_are_summed_up_as_in_sil() {
-        use crate::closed_loop::planner::{PlannedPoint, Planner};
-        let mut planner = Planner::new();
-        let points: Vec<PlannedPoint> = (0..6)
-            .map(|i| PlannedPoint {
-                east_m: 0.0,
-                north_m: 0.05 * f64::from(i),
-                speed_mps: 3.0,
-                left_m: 2.0,
-                right_m: 2.0,
+        let frames: Vec<TimedFrame> = crate::closed_loop::planner::straight_path_frames(6, 0.05)
+            .into_iter()
+            .map(|frame| TimedFrame {
+                t_us: 1_000_000,
+                frame,
             })
             .collect();
-        planner.send_path(&points).unwrap();
-        let mut frames = Vec::new();
-        while planner.pending() > 0 {
-            frames.extend(
-                planner
-                    .take_tick_frames()
-                    .into_iter()
-                    .map(|frame| TimedFrame {
-                        t_us: 1_000_000,
-                        frame,
-                    }),
-            );
-        }
         let config = crate::node_config(None).unwrap();
         let stats = replay_into(&frames, config, Vec::new(), None::<Vec<u8>>, |_| {}).unwrap();
         assert_eq!(stats.planner.counters.paths_invalid, 1);

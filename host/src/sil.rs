@@ -344,7 +344,7 @@ impl std::fmt::Display for SilSummary {
 mod tests {
     use super::*;
     use crate::closed_loop::driver::{Controller, NodeDriver};
-    use crate::closed_loop::planner::{PlannedPoint, Planner};
+    use crate::closed_loop::planner::straight_path_frames;
     use crate::replay::candump_line;
     use catmodel::can::{CanFrame, CanId};
 
@@ -383,21 +383,7 @@ mod tests {
         // A 6-point path is 13 frames: the node takes 12 in the first tick and the 13th in
         // the next (before the receive queue, the 13th was counted over the cap and lost, so
         // the path never loaded in SIL while it did in replay).
-        let mut planner = Planner::new();
-        let points: Vec<PlannedPoint> = (0..6)
-            .map(|i| PlannedPoint {
-                east_m: 0.0,
-                north_m: 5.0 * f64::from(i),
-                speed_mps: 3.0,
-                left_m: 2.0,
-                right_m: 2.0,
-            })
-            .collect();
-        planner.send_path(&points).unwrap();
-        let mut frames = Vec::new();
-        while planner.pending() > 0 {
-            frames.extend(planner.take_tick_frames());
-        }
+        let frames = straight_path_frames(6, 5.0);
         assert_eq!(frames.len(), 13);
         let t0 = 1_000_000;
         let mut input: String = frames
@@ -510,26 +496,6 @@ mod tests {
         assert_eq!(result.unwrap().ticks, 2);
     }
 
-    /// The frames of `points` (north, `spacing` m apart) as our planner sends them.
-    fn path_frames(n: usize, spacing: f64) -> Vec<CanFrame> {
-        let mut planner = Planner::new();
-        let points: Vec<PlannedPoint> = (0..n)
-            .map(|i| PlannedPoint {
-                east_m: 0.0,
-                north_m: spacing * i as f64,
-                speed_mps: 3.0,
-                left_m: 2.0,
-                right_m: 2.0,
-            })
-            .collect();
-        planner.send_path(&points).unwrap();
-        let mut frames = Vec::new();
-        while planner.pending() > 0 {
-            frames.extend(planner.take_tick_frames());
-        }
-        frames
-    }
-
     /// A session giving `frames` at 1 s, then ticking 1.02..1.10.
     fn session_of(frames: &[CanFrame]) -> SilSummary {
         let mut input: String = frames
@@ -546,7 +512,7 @@ mod tests {
     fn planner_refusals_are_summed_up_with_the_first_reason() {
         // The probe's path: points 0.05 m apart, which PATH_POINT turns into 0.06 and 0.04 m.
         // The node refuses it; the summary said nothing was rejected.
-        let summary = session_of(&path_frames(6, 0.05));
+        let summary = session_of(&straight_path_frames(6, 0.05));
         assert_eq!(summary.planner.counters.paths_invalid, 1);
         let text = summary.to_string();
         assert!(
@@ -560,7 +526,7 @@ mod tests {
             "{text}"
         );
         // Spaced as docs/bus.md says: loaded, nothing refused.
-        let summary = session_of(&path_frames(6, 0.08));
+        let summary = session_of(&straight_path_frames(6, 0.08));
         assert_eq!(
             (
                 summary.planner.counters.paths_activated,
@@ -570,7 +536,7 @@ mod tests {
         );
         // A frame given twice (its counter repeated): the node refuses the copy; the path
         // still loads.
-        let mut frames = path_frames(6, 1.0);
+        let mut frames = straight_path_frames(6, 1.0);
         frames.insert(2, frames[1]);
         let summary = session_of(&frames);
         let text = summary.to_string();

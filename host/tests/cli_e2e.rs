@@ -471,6 +471,46 @@ fn a_log_with_no_rows_is_not_a_drive() {
     }
 }
 
+/// Simulates `scenario` (seed 1) into `dir` and writes a copy of its log as `{scenario}-{tag}.csv`
+/// with every non-empty cell of `columns` mapped by `f`: a log as another recorder's habit
+/// writes it. Returns the copy's path.
+fn simulated_log_with(
+    dir: &Path,
+    scenario: &str,
+    tag: &str,
+    columns: &[&str],
+    f: impl Fn(f64) -> f64,
+) -> PathBuf {
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        scenario,
+        "--seed",
+        "1",
+        "--out",
+        s(dir),
+    ]);
+    let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let picked: Vec<usize> = columns
+        .iter()
+        .map(|c| header.iter().position(|h| h == c).unwrap())
+        .collect();
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+        for &k in picked.iter().filter(|_| i > 0) {
+            if !cells[k].is_empty() {
+                cells[k] = format!("{}", f(cells[k].parse::<f64>().unwrap()));
+            }
+        }
+        out += &(cells.join(",") + "\n");
+    }
+    let path = dir.join(format!("{scenario}-{tag}.csv"));
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
 /// `identify` refuses logs whose wheel speed their GNSS track says is not in m/s (review
 /// finding 04: a training set in km/h was identified with exit 0 and a steering gain of 0.34),
 /// naming each file, the ratio and the likely unit; `--force` identifies anyway, with the
@@ -478,35 +518,12 @@ fn a_log_with_no_rows_is_not_a_drive() {
 #[test]
 fn identify_refuses_a_wheel_speed_in_another_unit() {
     let dir = tmp_dir("speed-unit");
-    let mut logs = Vec::new();
-    for scenario in ["straight-5", "turn-left"] {
-        ok(&[
-            "simulate-drive",
-            "--scenario",
-            scenario,
-            "--seed",
-            "1",
-            "--out",
-            s(&dir),
-        ]);
-        // `vel` and `input_vel` (columns 2 and 3 of the simulator's log) in km/h.
-        let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
-        let mut kmh = String::new();
-        for (i, l) in text.lines().enumerate() {
-            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
-            if i > 0 {
-                for c in &mut cells[1..3] {
-                    if !c.is_empty() {
-                        *c = format!("{}", c.parse::<f64>().unwrap() * 3.6);
-                    }
-                }
-            }
-            kmh += &(cells.join(",") + "\n");
-        }
-        let path = dir.join(format!("{scenario}-kmh.csv"));
-        std::fs::write(&path, kmh).unwrap();
-        logs.push(path);
-    }
+    let logs: Vec<PathBuf> = ["straight-5", "turn-left"]
+        .iter()
+        .map(|scenario| {
+            simulated_log_with(&dir, scenario, "kmh", &["vel", "input_vel"], |v| v * 3.6)
+        })
+        .collect();
     let model = dir.join("model.toml");
     let mut args = vec!["identify", s(&logs[0]), s(&logs[1]), "--out", s(&model)];
     let err = fails(&args);
@@ -827,37 +844,10 @@ fn replay_names_the_receivers_rate_from_the_whole_log() {
 #[test]
 fn identify_refuses_a_steering_of_the_other_sign() {
     let dir = tmp_dir("steer-sign");
-    let mut logs = Vec::new();
-    for scenario in ["turn-left", "circle-right"] {
-        ok(&[
-            "simulate-drive",
-            "--scenario",
-            scenario,
-            "--seed",
-            "1",
-            "--out",
-            s(&dir),
-        ]);
-        let text = String::from_utf8(read(&dir.join(format!("{scenario}.csv")))).unwrap();
-        let steer = text
-            .lines()
-            .next()
-            .unwrap()
-            .split(',')
-            .position(|c| c == "steer")
-            .unwrap();
-        let mut flipped = String::new();
-        for (i, l) in text.lines().enumerate() {
-            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
-            if i > 0 && !cells[steer].is_empty() {
-                cells[steer] = format!("{}", -cells[steer].parse::<f64>().unwrap());
-            }
-            flipped += &(cells.join(",") + "\n");
-        }
-        let path = dir.join(format!("{scenario}-flipped.csv"));
-        std::fs::write(&path, flipped).unwrap();
-        logs.push(path);
-    }
+    let logs: Vec<PathBuf> = ["turn-left", "circle-right"]
+        .iter()
+        .map(|scenario| simulated_log_with(&dir, scenario, "flipped", &["steer"], |v| -v))
+        .collect();
     let model = dir.join("model.toml");
     let mut args = vec!["identify", s(&logs[0]), s(&logs[1]), "--out", s(&model)];
     let err = fails(&args);

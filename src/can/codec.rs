@@ -771,6 +771,23 @@ pub enum PlannerMessage {
     LocalOrigin(LocalOrigin, u8),
 }
 
+impl PlannerMessage {
+    /// The kinds of planner message, each with its own rolling counter.
+    pub const KINDS: usize = 5;
+
+    /// The message's kind (0..[`Self::KINDS`], in the order of the variants: the index of its
+    /// counter's checker) and its rolling counter.
+    pub fn counter(&self) -> (usize, u8) {
+        match *self {
+            PlannerMessage::PathHeader(_, c) => (0, c),
+            PlannerMessage::PathPoint(_, c) => (1, c),
+            PlannerMessage::PathLimits(_, c) => (2, c),
+            PlannerMessage::Obstacle(_, c) => (3, c),
+            PlannerMessage::LocalOrigin(_, c) => (4, c),
+        }
+    }
+}
+
 /// Decodes any frame from the planner; [`DecodeError::UnknownId`] for other identifiers.
 /// Kept apart from [`decode_input`] (the vehicle's reports), which is unchanged.
 pub fn decode_planner(frame: &CanFrame) -> Result<PlannerMessage, DecodeError> {

@@ -93,7 +93,7 @@ struct Assembly {
 }
 
 /// Rolling-counter slots, one per planner message.
-const MESSAGES: usize = 5;
+const MESSAGES: usize = PlannerMessage::KINDS;
 
 /// The two halves of a waypoint, each arriving in index order.
 #[derive(Clone, Copy)]
@@ -231,13 +231,7 @@ impl PlannerInputs {
 
     /// Applies one decoded planner message (see the module doc for the rules).
     pub fn receive(&mut self, message: &PlannerMessage) -> PlannerEvent {
-        let (slot, counter) = match *message {
-            PlannerMessage::PathHeader(_, c) => (0, c),
-            PlannerMessage::PathPoint(_, c) => (1, c),
-            PlannerMessage::PathLimits(_, c) => (2, c),
-            PlannerMessage::Obstacle(_, c) => (3, c),
-            PlannerMessage::LocalOrigin(_, c) => (4, c),
-        };
+        let (slot, counter) = message.counter();
         if let Some(checker) = self.counters.get_mut(slot) {
             let verdict = checker.check(counter);
             if !verdict.accepted() {

@@ -181,3 +181,25 @@ impl Planner {
         self.queue.len()
     }
 }
+
+/// The frames of a straight path of `n` points due north, `spacing_m` apart (3 m/s, 2 m of
+/// corridor each side), in the order this planner sends them: the tests' path.
+#[cfg(test)]
+pub(crate) fn straight_path_frames(n: usize, spacing_m: f64) -> Vec<CanFrame> {
+    let mut planner = Planner::new();
+    let points: Vec<PlannedPoint> = (0..n)
+        .map(|i| PlannedPoint {
+            east_m: 0.0,
+            north_m: spacing_m * i as f64,
+            speed_mps: 3.0,
+            left_m: 2.0,
+            right_m: 2.0,
+        })
+        .collect();
+    planner.send_path(&points).expect("a valid path");
+    let mut frames = Vec::new();
+    while planner.pending() > 0 {
+        frames.extend(planner.take_tick_frames());
+    }
+    frames
+}
