@@ -455,8 +455,7 @@ fn the_rigs_node_knows_its_car_from_its_model_file() {
     let text = text
         .replace(
             "cornering_front_n_per_rad = 80000.0",
-            // (halved, its understeer would be another car's: the reader refuses that)
-            "cornering_front_n_per_rad = 70000.0",
+            "cornering_front_n_per_rad = 40000.0",
         )
         .replace("antenna_ahead_m = 1.478", "antenna_ahead_m = 1.2");
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rig_model_file");
@@ -466,7 +465,7 @@ fn the_rigs_node_knows_its_car_from_its_model_file() {
     let plant = root.join("host/vehicles/cat-vehicle.toml");
     let (_, node) = load_setup(Some(&plant), Some(&model)).unwrap();
     let dynamics = node.dynamics.unwrap();
-    assert_eq!(dynamics.cornering_front_n_per_rad, 70000.0);
+    assert_eq!(dynamics.cornering_front_n_per_rad, 40000.0);
     assert_eq!(node.estimator.antenna_ahead_m, 1.2);
     // Without a model file the plant lends its own.
     let (_, lent) = load_setup(Some(&plant), None).unwrap();
