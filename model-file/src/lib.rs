@@ -837,17 +837,6 @@ pub fn critical_speed_mps(d: &DynamicsSection) -> Option<f64> {
     )
 }
 
-/// The understeer term of the single-track model `d`, s^2/m^2: its steady-state curvature
-/// for a wheel angle delta is delta / (L (1 + K v^2)) with K = m (C_r l_r - C_f l_f) / (C_f C_r
-/// L^2), eq 2's form (negative for an oversteering pair).
-pub fn dynamics_understeer_s2_per_m2(d: &DynamicsSection) -> f64 {
-    let l = d.cg_to_front_m + d.cg_to_rear_m;
-    d.mass_kg
-        * (d.cornering_rear_n_per_rad * d.cg_to_rear_m
-            - d.cornering_front_n_per_rad * d.cg_to_front_m)
-        / (d.cornering_front_n_per_rad * d.cornering_rear_n_per_rad * l * l)
-}
-
 /// How far the kinematic model's turn and the dynamic model's may differ where the node
 /// switches from one to the other (`hybrid.enter_dynamic_speed_mps`): the steady-state
 /// curvature of one steering, `delta / (L (1 + K v^2))`, with `vehicle.understeer_s2_per_m2`
@@ -868,7 +857,8 @@ fn understeer_check(
     h: &HybridSection,
 ) -> Result<(), String> {
     let k = v.understeer_s2_per_m2;
-    let k_dyn = dynamics_understeer_s2_per_m2(d);
+    // The node's own K of its dynamic model (eq 2's form, negative for an oversteering pair).
+    let k_dyn = f64::from(d.params().understeer_s2_per_m2());
     let at = h.enter_dynamic_speed_mps;
     // Stability below max_speed_mps (checked before) keeps 1 + K_dyn v^2 positive here.
     let ratio = (1.0 + k * at * at) / (1.0 + k_dyn * at * at);
