@@ -6,8 +6,8 @@ use catmodel::can::codec::{
     PlannerMessage,
 };
 use catmodel::control::path::{
-    Narrowest, Path, PathError, Projection, Waypoint, MAX_PATH_POINTS, MIN_PLANNED_SPACING_M,
-    MIN_SEGMENT_M,
+    Narrowest, Path, PathCar, PathError, Projection, Waypoint, CORRIDOR_TOLERANCE_M,
+    MAX_PATH_POINTS, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M,
 };
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
@@ -885,6 +885,58 @@ fn an_invalid_path_is_refused_and_the_active_one_stays() {
     assert_eq!(inputs.path_id(), Some(1));
     assert_eq!(inputs.path().unwrap().points(), &good[..]);
     assert_eq!(inputs.counters().paths_invalid, 1);
+}
+
+/// A car 1.9 m wide.
+const CAR: PathCar = PathCar { body_width_m: 1.9 };
+
+#[test]
+fn a_corridor_the_body_does_not_fit_in_is_refused() {
+    let mut points = straight(0.0, 0.0, 0.0, 20, 1.0);
+    for w in &mut points {
+        (w.left_m, w.right_m) = (0.95, 0.95);
+    }
+    // Exactly the car's width, and the bus's rounding of it: taken.
+    assert_eq!(Path::validate_for(&points, &CAR), Ok(()));
+    points[7].right_m = 0.95 - CORRIDOR_TOLERANCE_M + 0.001;
+    assert_eq!(Path::validate_for(&points, &CAR), Ok(()));
+    // One point 2 cm too narrow, or a corridor of nothing (the probe's left = right = 0).
+    points[7].right_m = 0.93;
+    assert_eq!(
+        Path::validate_for(&points, &CAR),
+        Err(PathError::Corridor(7))
+    );
+    for w in &mut points {
+        (w.left_m, w.right_m) = (0.0, 0.0);
+    }
+    assert_eq!(
+        Path::validate_for(&points, &CAR),
+        Err(PathError::Corridor(0))
+    );
+    // Without a car (zero width) only the geometry is checked.
+    assert_eq!(Path::validate_for(&points, &PathCar::default()), Ok(()));
+}
+
+#[test]
+fn a_path_the_body_does_not_fit_is_refused_and_the_active_one_stays() {
+    let mut inputs = PlannerInputs::new();
+    inputs.set_car(CAR);
+    let good = straight(0.0, 0.0, 0.0, 10, 1.0);
+    assert_eq!(
+        feed(&mut inputs, &path_messages(1, &good, 0)),
+        [PlannerEvent::PathActivated(1)]
+    );
+    let mut narrow = good.clone();
+    narrow[3].left_m = 0.9;
+    narrow[3].right_m = 0.9;
+    assert_eq!(
+        feed(&mut inputs, &path_messages(2, &narrow, 3)),
+        [PlannerEvent::PathInvalid(2, PathError::Corridor(3))]
+    );
+    assert_eq!(inputs.path_id(), Some(1));
+    assert_eq!(inputs.path().unwrap().points(), &good[..]);
+    assert_eq!(inputs.counters().paths_invalid, 1);
+    assert_eq!(*inputs.car(), CAR);
 }
 
 #[test]

@@ -5,16 +5,18 @@
 //! without this a simulator whose every path was refused read a summary that said nothing was
 //! rejected. The first refusal's reason is the kind of counter that rose first; for a complete
 //! path refused by its geometry, the node keeps no copy of the points it refused, so
-//! [`PlannerRefusals`] keeps the points of the path being sent as the node decoded them (same
-//! decoder, same counter check) and asks the node's own rule ([`Path::validate`]) what is
-//! wrong, to name the points and their spacing or turn.
+//! [`PlannerRefusals`] keeps the points and limits of the path being sent as the node decoded
+//! them (same decoder, same counter check) and asks the node's own rule
+//! ([`Path::validate_for`] the node's car) what is wrong, to name the points and their
+//! spacing, turn or corridor.
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{decode_planner, PlannerMessage, TimedFrame};
 use catmodel::control::path::{
-    Path, PathError, Waypoint, MAX_SEGMENT_M, MAX_TURN_RAD, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M,
+    Path, PathCar, PathError, Waypoint, MAX_SEGMENT_M, MAX_TURN_RAD, MIN_PLANNED_SPACING_M,
+    MIN_SEGMENT_M,
 };
 use catmodel::control::planner::PlannerCounters;
 use catmodel::node::MAX_RX_FRAMES_PER_TICK;
@@ -22,8 +24,16 @@ use catmodel::node::MAX_RX_FRAMES_PER_TICK;
 /// Rolling-counter slots, one per planner message (as the node's `PlannerInputs`).
 const MESSAGES: usize = PlannerMessage::KINDS;
 
-/// A path being sent: its id, and its points (east, north, m) by index.
-type Receiving = (u8, BTreeMap<u8, (f32, f32)>);
+/// A path being sent: its id, and its waypoints by index (position from PATH_POINT, speed and
+/// corridor from PATH_LIMITS, each the first received for its index).
+type Receiving = (u8, BTreeMap<u8, Kept>);
+
+/// One index of the path being sent, as far as its frames have come.
+#[derive(Debug, Clone, Copy, Default)]
+struct Kept {
+    point: Option<(f32, f32)>,
+    limits: Option<(f32, f32, f32)>,
+}
 
 /// The node's planner refusals over a session and the first one's reason.
 #[derive(Debug, Clone, Default)]
@@ -32,7 +42,7 @@ pub struct PlannerRefusals {
     pub counters: PlannerCounters,
     /// The first refusal: the tick's time, us, and why.
     pub first: Option<(u64, String)>,
-    /// The points received of the path being sent: its id and its points by index (the
+    /// The waypoints received of the path being sent: its id and its waypoints by index (the
     /// first of each index, as the node keeps it).
     receiving: Option<Receiving>,
     counter_checks: [CounterChecker; MESSAGES],
@@ -47,15 +57,16 @@ impl PartialEq for PlannerRefusals {
 }
 
 impl PlannerRefusals {
-    /// One tick: `rx` the frames given to the node at `now_us`, `before` and `after` its
-    /// planner counters around the tick.
+    /// One tick: `rx` the frames given to the node at `now_us`, `counters` its planner
+    /// counters before and after the tick, `car` what it checks paths against.
     pub fn observe(
         &mut self,
         now_us: u64,
         rx: &[TimedFrame],
-        before: &PlannerCounters,
-        after: &PlannerCounters,
+        counters: (&PlannerCounters, &PlannerCounters),
+        car: &PathCar,
     ) {
+        let (before, after) = counters;
         self.counters = *after;
         // The frames the node reads: its per-tick cap, none stamped after the tick.
         for f in rx.iter().take(MAX_RX_FRAMES_PER_TICK) {
@@ -67,7 +78,7 @@ impl PlannerRefusals {
             }
         }
         if self.first.is_none() && after.rejects() != before.rejects() {
-            self.first = Some((now_us, self.reason(before, after)));
+            self.first = Some((now_us, self.reason(before, after, car)));
         }
     }
 
@@ -85,7 +96,17 @@ impl PlannerRefusals {
             PlannerMessage::PathPoint(p, _) => {
                 if let Some((id, points)) = self.receiving.as_mut() {
                     if *id == p.path_id {
-                        points.entry(p.index).or_insert((p.east_m, p.north_m));
+                        let kept = points.entry(p.index).or_default();
+                        kept.point.get_or_insert((p.east_m, p.north_m));
+                    }
+                }
+            }
+            PlannerMessage::PathLimits(l, _) => {
+                if let Some((id, points)) = self.receiving.as_mut() {
+                    if *id == l.path_id {
+                        let kept = points.entry(l.index).or_default();
+                        kept.limits
+                            .get_or_insert((l.speed_mps, l.left_m, l.right_m));
                     }
                 }
             }
@@ -94,9 +115,9 @@ impl PlannerRefusals {
     }
 
     /// Why the counters moved from `before` to `after` (the first kind that rose).
-    fn reason(&self, before: &PlannerCounters, after: &PlannerCounters) -> String {
+    fn reason(&self, before: &PlannerCounters, after: &PlannerCounters, car: &PathCar) -> String {
         if after.paths_invalid != before.paths_invalid {
-            return self.invalid_path();
+            return self.invalid_path(car);
         }
         if after.paths_abandoned != before.paths_abandoned {
             return "a path's assembly was abandoned: a PATH_POINT or PATH_LIMITS index was \
@@ -123,24 +144,30 @@ impl PlannerRefusals {
             .into()
     }
 
-    /// The geometry a refused path broke, by the node's rule on the points it decoded.
-    fn invalid_path(&self) -> String {
+    /// The rule a refused path broke, by the node's rule on the points it decoded.
+    fn invalid_path(&self, car: &PathCar) -> String {
         let Some((id, points)) = &self.receiving else {
             return "a path was refused by the node's geometry checks (docs/bus.md)".into();
         };
-        let xy: Vec<(f32, f32)> = points.values().copied().collect();
-        let waypoints: Vec<Waypoint> = xy
-            .iter()
-            .map(|&(east_m, north_m)| Waypoint {
-                east_m,
-                north_m,
-                ..Waypoint::ZERO
+        let waypoints: Vec<Waypoint> = points
+            .values()
+            .map(|kept| {
+                let (east_m, north_m) = kept.point.unwrap_or_default();
+                let (speed_mps, left_m, right_m) = kept.limits.unwrap_or_default();
+                Waypoint {
+                    east_m,
+                    north_m,
+                    speed_mps,
+                    left_m,
+                    right_m,
+                }
             })
             .collect();
+        let xy: Vec<(f32, f32)> = waypoints.iter().map(|w| (w.east_m, w.north_m)).collect();
         let at = |i: usize| xy.get(i).copied().unwrap_or((0.0, 0.0));
         let dist = |a: (f32, f32), b: (f32, f32)| f64::from(b.0 - a.0).hypot(f64::from(b.1 - a.1));
         let mut text = format!("path {id} refused: ");
-        let _ = match Path::validate(&waypoints) {
+        let _ = match Path::validate_for(&waypoints, car) {
             Err(PathError::SegmentLength(i)) => {
                 let i = usize::from(i);
                 let d = dist(at(i), at(i + 1));
@@ -174,6 +201,18 @@ impl PlannerRefusals {
                     "it turns {:.0} degrees at point {i} (at most {:.0})",
                     turn.to_degrees(),
                     f64::from(MAX_TURN_RAD).to_degrees()
+                )
+            }
+            Err(PathError::Corridor(i)) => {
+                let w = waypoints.get(usize::from(i)).copied().unwrap_or_default();
+                write!(
+                    text,
+                    "the corridor at point {i} is {:.2} m wide (left {:.2} + right {:.2}), \
+                     narrower than the car's body ({:.2} m, the model file's vehicle width)",
+                    w.left_m + w.right_m,
+                    w.left_m,
+                    w.right_m,
+                    car.body_width_m
                 )
             }
             Err(PathError::BadValue(i)) => write!(text, "point {i} has a value out of range"),

@@ -1165,7 +1165,12 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 );
                 let before = *node.drive().planner().counters();
                 let estimate = node.step(&tick, &rx, &mut tx);
-                planner.observe(now, &rx, &before, node.drive().planner().counters());
+                planner.observe(
+                    now,
+                    &rx,
+                    (&before, node.drive().planner().counters()),
+                    node.drive().planner().car(),
+                );
                 if estimate.pose.is_some() {
                     valid_ticks += 1;
                 }

@@ -195,7 +195,12 @@ pub fn run(
             };
             let before = driver.planner_counters();
             driver.tick(&tick, &rx, &mut tx);
-            planner.observe(t_us, &rx, &before, &driver.planner_counters());
+            planner.observe(
+                t_us,
+                &rx,
+                (&before, &driver.planner_counters()),
+                &driver.path_car(),
+            );
             for frame in &tx {
                 writeln!(output, "{}", candump_line(t_us, frame)).map_err(SilError::Io)?;
             }
@@ -344,7 +349,7 @@ impl std::fmt::Display for SilSummary {
 mod tests {
     use super::*;
     use crate::closed_loop::driver::{Controller, NodeDriver};
-    use crate::closed_loop::planner::straight_path_frames;
+    use crate::closed_loop::planner::{path_frames, straight_path_frames, PlannedPoint};
     use crate::replay::candump_line;
     use catmodel::can::{CanFrame, CanId};
 
@@ -545,6 +550,47 @@ mod tests {
                 && text.contains("stuck counters 1")
                 && text.contains("repeated its message's rolling counter"),
             "{text}"
+        );
+    }
+
+    #[test]
+    fn a_corridor_the_body_does_not_fit_in_is_refused_with_both_widths() {
+        // The probe's corridor of nothing, and one 2.6 cm under the CAT Vehicle's 1.806 m (the
+        // model file's width; PATH_LIMITS carries 0.01 m, the node allows that much).
+        let path = |side: f64| -> Vec<PlannedPoint> {
+            (0..20)
+                .map(|i| PlannedPoint {
+                    east_m: 0.0,
+                    north_m: f64::from(i),
+                    speed_mps: 3.0,
+                    left_m: side,
+                    right_m: side,
+                })
+                .collect()
+        };
+        let text = session_of(&path_frames(&path(0.0))).to_string();
+        assert!(
+            text.contains(
+                "1 refused (invalid paths 1, abandoned 0, duplicate indices 0, stray frames 0, \
+                 stuck counters 0, unpaired origin pages 0); the first at 1.080000 s: path 0 \
+                 refused: the corridor at point 0 is 0.00 m wide (left 0.00 + right 0.00), \
+                 narrower than the car's body (1.81 m, the model file's vehicle width)"
+            ),
+            "{text}"
+        );
+        let text = session_of(&path_frames(&path(0.89))).to_string();
+        assert!(
+            text.contains("the corridor at point 0 is 1.78 m wide (left 0.89 + right 0.89)"),
+            "{text}"
+        );
+        // The body's width as the bus carries it (0.90 m a side): loaded.
+        let summary = session_of(&path_frames(&path(0.903)));
+        assert_eq!(
+            (
+                summary.planner.counters.paths_activated,
+                summary.planner.first
+            ),
+            (1, None)
         );
     }
 

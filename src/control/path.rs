@@ -127,7 +127,22 @@ pub enum PathError {
     SegmentLength(u16),
     /// The heading changes by more than [`MAX_TURN_RAD`] at point `index`.
     Turn(u16),
+    /// The corridor at point `index` (`left_m + right_m`) is narrower than the car's body
+    /// ([`PathCar::body_width_m`], less [`CORRIDOR_TOLERANCE_M`]): no body fits in it.
+    Corridor(u16),
 }
+
+/// What [`Path::validate_for`] checks a path against: the car that is to drive it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PathCar {
+    /// The body's overall width, m (0: no corridor check).
+    pub body_width_m: f32,
+}
+
+/// A corridor this much narrower than the body is still taken, m: PATH_LIMITS carries each
+/// side to 0.01 m, so a corridor planned exactly the body's width decodes up to 0.01 m under it.
+pub const CORRIDOR_TOLERANCE_M: f32 = 0.01;
 
 /// The reference at one station.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -365,10 +380,41 @@ impl Path {
         Ok(())
     }
 
+    /// [`Path::validate`], then what the car that is to drive the path needs of it: a corridor
+    /// its body fits in at every point.
+    ///
+    /// A turn tighter than the car's lock is not refused here: whether a car at its lock can
+    /// drive it depends on how far the corridor lets it swing wide before and after, which
+    /// no per-point rule bounds without refusing turns it can drive. Such a path is driven
+    /// until the car leaves its corridor, and the car then stops (`lost_path`, docs/bus.md).
+    pub fn validate_for(waypoints: &[Waypoint], car: &PathCar) -> Result<(), PathError> {
+        Self::validate(waypoints)?;
+        for (i, w) in waypoints.iter().enumerate() {
+            if w.left_m + w.right_m + CORRIDOR_TOLERANCE_M < car.body_width_m {
+                return Err(PathError::Corridor(i as u16));
+            }
+        }
+        Ok(())
+    }
+
     /// Replaces this path by `waypoints` if they pass [`Path::validate`]; on an error the path
     /// is left as it was.
     pub fn load(&mut self, waypoints: &[Waypoint]) -> Result<(), PathError> {
         Self::validate(waypoints)?;
+        self.load_valid(waypoints);
+        Ok(())
+    }
+
+    /// Replaces this path by `waypoints` if they pass [`Path::validate_for`] `car`; on an
+    /// error the path is left as it was.
+    pub fn load_for(&mut self, waypoints: &[Waypoint], car: &PathCar) -> Result<(), PathError> {
+        Self::validate_for(waypoints, car)?;
+        self.load_valid(waypoints);
+        Ok(())
+    }
+
+    /// Loads waypoints that passed [`Path::validate`].
+    fn load_valid(&mut self, waypoints: &[Waypoint]) {
         let n = waypoints.len();
         let mut station = 0.0;
         for i in 0..n {
@@ -396,7 +442,6 @@ impl Path {
         self.len = n;
         self.reference_geometry();
         self.speed_envelope();
-        Ok(())
     }
 
     /// The speed envelope of every point, from the end back (see the module doc).

@@ -3,7 +3,7 @@
 //!
 //! Rules: a PATH_HEADER starts assembling a path; its PATH_POINT and PATH_LIMITS frames arrive
 //! each in index order; the path replaces the active one only when every point and limit is in
-//! and the whole passes [`Path::validate`]. Everything else is a counted rejection, never a
+//! and the whole passes [`Path::validate_for`] the car ([`PlannerInputs::set_car`]). Everything else is a counted rejection, never a
 //! panic: duplicates, gaps (a lost frame abandons the assembly), frames of a path not being
 //! assembled, a header change mid-way (abandons the old assembly), stuck rolling counters, a
 //! longitude page of LOCAL_ORIGIN that does not follow its latitude page.
@@ -18,7 +18,7 @@ use crate::can::counter::CounterChecker;
 use crate::can::spec::OBSTACLE_SLOTS;
 use crate::in_place::fill;
 
-use super::path::{Path, PathError, Waypoint, MAX_PATH_POINTS};
+use super::path::{Path, PathCar, PathError, Waypoint, MAX_PATH_POINTS};
 
 /// Rejection and event counters since start (saturating).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -28,7 +28,7 @@ pub struct PlannerCounters {
     pub paths_activated: u32,
     /// Assemblies abandoned: a lost frame, or a new header before completion.
     pub paths_abandoned: u32,
-    /// Complete paths refused by [`Path::validate`] (the active path stays).
+    /// Complete paths refused by [`Path::validate_for`] (the active path stays).
     pub paths_invalid: u32,
     /// PATH_POINT / PATH_LIMITS with an index already received (duplicates).
     pub duplicates: u32,
@@ -115,6 +115,8 @@ pub struct PlannerInputs {
     origin_latitude: Option<(i32, u8)>,
     counters: [CounterChecker; MESSAGES],
     stats: PlannerCounters,
+    /// The car the paths are checked against ([`Path::validate_for`]); zero: geometry only.
+    car: PathCar,
 }
 
 impl Default for PlannerInputs {
@@ -150,6 +152,7 @@ impl PlannerInputs {
                 counter_jumps: 0,
                 origin_mismatches: 0,
             },
+            car: PathCar { body_width_m: 0.0 },
         }
     }
 
@@ -176,6 +179,7 @@ impl PlannerInputs {
             addr_of_mut!((*slot).origin_latitude).write(None);
             addr_of_mut!((*slot).counters).write([CounterChecker::new(); MESSAGES]);
             addr_of_mut!((*slot).stats).write(PlannerCounters::default());
+            addr_of_mut!((*slot).car).write(PathCar::default());
         }
     }
 
@@ -221,6 +225,17 @@ impl PlannerInputs {
     /// and positive).
     pub fn set_braking(&mut self, decel_mps2: f32) -> bool {
         self.path.set_braking(decel_mps2)
+    }
+
+    /// Sets the car that every path completed from now on must fit ([`Path::validate_for`]:
+    /// its body in the corridor).
+    pub fn set_car(&mut self, car: PathCar) {
+        self.car = car;
+    }
+
+    /// The car every completed path is checked against ([`PlannerInputs::set_car`]).
+    pub const fn car(&self) -> &PathCar {
+        &self.car
     }
 
     /// Forgets the active path (e.g. the local frame changed under it); the counters stay.
@@ -327,7 +342,7 @@ impl PlannerInputs {
         }
         a.active = false;
         let waypoints = a.waypoints.get(..a.count).unwrap_or(&[]);
-        match self.path.load(waypoints) {
+        match self.path.load_for(waypoints, &self.car) {
             Ok(()) => {
                 self.path_id = Some(a.path_id);
                 bump(&mut self.stats.paths_activated);

@@ -47,7 +47,7 @@ use crate::control::mpc::{
     self, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint,
     Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
-use crate::control::path::{Path, PathSample, Projection, Tracking};
+use crate::control::path::{Path, PathCar, PathSample, Projection, Tracking};
 use crate::control::planner::{PlannerEvent, PlannerInputs};
 use crate::control::pure_pursuit::{
     self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
@@ -64,6 +64,14 @@ use super::estimator::Xy;
 use super::smoothing::{HeadingSettle, Smoothing};
 use super::stage::{Stage, StageProbe, SHORT_PATH_POINTS};
 use super::{NodeConfig, PREDICTION_POINTS, VELOCITY_DELAY_CAP};
+
+/// What a path must leave the car of `config` ([`crate::control::path::Path::validate_for`]):
+/// room for its body.
+pub fn path_car(config: &NodeConfig) -> PathCar {
+    PathCar {
+        body_width_m: config.body.width_m,
+    }
+}
 
 /// Which controller drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -290,6 +298,7 @@ impl Drive {
         self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.heading = HeadingSettle::new();
         self.lost_path = false;
+        self.planner.set_car(path_car(config));
         let tuning = mpc_tuning(config);
         self.set_braking(config, &tuning);
         self.mpc_config = match config.controller {

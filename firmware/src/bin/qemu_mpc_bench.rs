@@ -528,6 +528,8 @@ fn run_scenarios(b: &Bench, st: &mut Statics) {
 fn run_worst(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
     // A corridor narrower than the car: the body starts outside it on both sides, so the
     // corridor's give (`lateral::relax_corridor`) runs on every corridor row of every stage.
+    // The node refuses such a path from the planner (`PathError::Corridor`); the solver is
+    // given it here directly, a case beyond the worst the node can meet.
     let road = Straight { half_width: 0.25 };
     for (v, key, name) in [
         (15.0, "mpc_worst_dynamic", "MPC solve, worst case (dynamic)"),

@@ -9,7 +9,7 @@
 use catmodel::can::codec::{ControlCommand, ControlStatus, FallbackCause, GnssPosition};
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::control::mpc::MpcTuning;
-use catmodel::control::path::Tracking;
+use catmodel::control::path::{PathCar, Tracking};
 use catmodel::control::planner::PlannerCounters;
 use catmodel::control::pure_pursuit::PurePursuitTuning;
 use catmodel::model::kinematic::Pose;
@@ -43,6 +43,11 @@ pub trait Driver {
     /// `sil` sums them up).
     fn planner_counters(&self) -> PlannerCounters {
         PlannerCounters::default()
+    }
+
+    /// The car the node checks paths against (`sil` names what a refused path asks of it).
+    fn path_car(&self) -> PathCar {
+        PathCar::default()
     }
 }
 
@@ -128,6 +133,10 @@ impl Driver for NodeDriver {
 
     fn planner_counters(&self) -> PlannerCounters {
         *self.node.drive().planner().counters()
+    }
+
+    fn path_car(&self) -> PathCar {
+        *self.node.drive().planner().car()
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {

@@ -186,7 +186,6 @@ impl Planner {
 /// corridor each side), in the order this planner sends them: the tests' path.
 #[cfg(test)]
 pub(crate) fn straight_path_frames(n: usize, spacing_m: f64) -> Vec<CanFrame> {
-    let mut planner = Planner::new();
     let points: Vec<PlannedPoint> = (0..n)
         .map(|i| PlannedPoint {
             east_m: 0.0,
@@ -196,7 +195,14 @@ pub(crate) fn straight_path_frames(n: usize, spacing_m: f64) -> Vec<CanFrame> {
             right_m: 2.0,
         })
         .collect();
-    planner.send_path(&points).expect("a valid path");
+    path_frames(&points)
+}
+
+/// The frames of a path of `points`, in the order this planner sends them (tests).
+#[cfg(test)]
+pub(crate) fn path_frames(points: &[PlannedPoint]) -> Vec<CanFrame> {
+    let mut planner = Planner::new();
+    planner.send_path(points).expect("a valid path");
     let mut frames = Vec::new();
     while planner.pending() > 0 {
         frames.extend(planner.take_tick_frames());
