@@ -411,7 +411,7 @@ impl Drive {
 
     fn new_path(&mut self) {
         self.blind_m = None;
-        self.mpc.reset();
+        self.mpc.new_path();
         self.pursuit.integral_mps = 0.0;
         self.pursuit.projection = None;
         self.projection = None;

@@ -651,6 +651,13 @@ impl SpeedState {
         }
     }
 
+    /// A new path: the stop at the old one's end is over (the speed plan's warm start, bias and
+    /// fit are the car's, and stay).
+    pub fn new_path(&mut self) {
+        self.stopping = false;
+        self.to_end_m = f32::INFINITY;
+    }
+
     /// The speed bias to plan with: `raw_mps` (measured minus modelled speed this tick) through
     /// the first-order lowpass of time constant `time_constant_s` (0: `raw_mps`), once per tick;
     /// the first tick (or after a non-finite bias) starts the filter at `raw_mps`.
