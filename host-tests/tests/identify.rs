@@ -700,3 +700,125 @@ fn the_wheel_speed_unit_is_checked_against_the_gnss_track() {
     }
     println!("wheel over track distance, m/s drives: farthest from 1 {worst:.3}");
 }
+
+/// The wheel speed is moved to the antenna before its unit is judged (third probe, finding
+/// 01): a 12 m bus with its antenna 6.5 m ahead of the rear axle ran its full-lock circles in
+/// m/s at 0.68 times the speed along the GNSS track, and `identify` refused them as a unit
+/// mistake. With the car file's antenna (ahead of the axle, or behind it and far to one side,
+/// at the ends of the documented ranges), every drive in m/s is within a few per cent of 1,
+/// and the same drives in km/h and mph are still named as such. With the antenna declared on
+/// the axle (the check as it was), the bus's circles are refused.
+#[test]
+fn the_wheel_speed_is_moved_to_the_antenna_before_its_unit_is_judged() {
+    use catmodel_host::closed_loop::model_file_for;
+    use catmodel_host::sim::{self, SimOptions};
+    let bus = VehicleConfig::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../host/tests/data/bus-12m-20hz.toml"),
+    )
+    .unwrap();
+    let with_antenna = |ahead: f64, left: f64| {
+        let mut p = bus.clone();
+        p.sensors.gnss.antenna_ahead_of_rear_axle_m = ahead;
+        p.sensors.gnss.antenna_left_of_centre_line_m = left;
+        p
+    };
+    // The documented ranges: -rear_overhang_m - 0.5 .. length_m - rear_overhang_m + 0.5 =
+    // -3.5 .. 9.5 m ahead, width_m / 2 + 0.5 = 1.775 m to either side.
+    let plants = [
+        ("bus, antenna 6.5 m ahead", bus.clone(), true),
+        (
+            "bus, antenna 3.45 m behind, 1.75 m left",
+            with_antenna(-3.45, 1.75),
+            true,
+        ),
+        (
+            "bus, antenna 9.45 m ahead, 1.75 m right",
+            with_antenna(9.45, -1.75),
+            true,
+        ),
+        (
+            "bus, antenna on the rear axle",
+            with_antenna(0.0, 0.0),
+            false,
+        ),
+    ];
+    let mut worst: f64 = 1.0;
+    for (name, plant, lever) in &plants {
+        let car = model_file_for(plant).unwrap().vehicle;
+        assert_eq!(
+            (car.antenna_ahead_m, car.antenna_left_m),
+            (
+                plant.sensors.gnss.antenna_ahead_of_rear_axle_m,
+                plant.sensors.gnss.antenna_left_of_centre_line_m
+            )
+        );
+        let mut on_axle = car;
+        on_axle.antenna_ahead_m = 0.0;
+        on_axle.antenna_left_m = 0.0;
+        let mut refused_before = 0;
+        for scenario in ["circle-left", "circle-right", "turn-left", "straight-10"] {
+            let base = sim::scenario::Scenario::builtin(scenario).unwrap();
+            let options = SimOptions {
+                seed: 1,
+                ..SimOptions::default()
+            };
+            let log = sim::simulate(&base, plant, &options).log;
+            let scale = |vehicle: &model_file::VehicleSection, unit: f64| {
+                let mut rows = log.clone();
+                for r in &mut rows {
+                    r.vel = r.vel.map(|v| v * unit);
+                    r.input_vel = r.input_vel.map(|v| v * unit);
+                }
+                preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default())
+                    .unwrap_or_else(|e| panic!("{name}, {scenario}: {e:#}"))
+                    .speed_scale
+                    .unwrap_or_else(|| panic!("{name}, {scenario}: not judged"))
+            };
+            let what = format!("{name}, {scenario}");
+            let before = scale(&on_axle, 1.0);
+            let after = scale(&car, 1.0);
+            println!(
+                "{what}: wheel over track {:.3} (the rear axle's speed), {:.3} (moved to the \
+                 antenna), over {} stretches",
+                before.ratio, after.ratio, after.stretches
+            );
+            assert_eq!(after.problem(), None, "{what}: {after:?}");
+            assert!((after.ratio - 1.0).abs() < 0.05, "{what}: {after:?}");
+            if (after.ratio - 1.0).abs() > (worst - 1.0).abs() {
+                worst = after.ratio;
+            }
+            if *lever {
+                assert_eq!(
+                    after.antenna_m,
+                    Some((car.antenna_ahead_m, car.antenna_left_m))
+                );
+            } else {
+                // No lever arm: the check as it was, to the last bit.
+                assert_eq!(after, before, "{what}");
+            }
+            refused_before += usize::from(before.problem().is_some());
+            for (unit, label) in [(3.6, "km/h"), (2.236_936, "mph")] {
+                let s = scale(&car, unit);
+                println!("{what}, {label}: {:.3}", s.ratio);
+                let problem = s
+                    .problem()
+                    .unwrap_or_else(|| panic!("{what}, {label}: {s:?}"));
+                assert!(
+                    problem.contains(&format!("looks like {label}")),
+                    "{what}, {label}: {problem}"
+                );
+                assert!(
+                    (s.ratio / after.ratio / unit - 1.0).abs() < 0.02,
+                    "{what}, {label}: {s:?} against {after:?}"
+                );
+            }
+        }
+        if name.contains("6.5 m ahead") {
+            assert!(
+                refused_before >= 2,
+                "{name}: the circles were refused before"
+            );
+        }
+    }
+    println!("moved to the antenna, m/s drives: farthest from 1 {worst:.3}");
+}

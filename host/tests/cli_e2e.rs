@@ -547,6 +547,142 @@ fn identify_refuses_a_wheel_speed_in_another_unit() {
     assert!(warning.contains("looks like km/h"), "{warning}");
 }
 
+/// A copy of the log `src` with `vel` and `input_vel` times `unit`, at `dst`.
+fn with_speed_times(src: &Path, dst: &Path, unit: f64) {
+    let text = String::from_utf8(read(src)).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let picked: Vec<usize> = ["vel", "input_vel"]
+        .iter()
+        .map(|c| header.iter().position(|h| h == c).unwrap())
+        .collect();
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+        for &k in picked.iter().filter(|_| i > 0) {
+            if !cells[k].is_empty() {
+                cells[k] = format!("{}", unit * cells[k].parse::<f64>().unwrap());
+            }
+        }
+        out += &(cells.join(",") + "\n");
+    }
+    std::fs::write(dst, out).unwrap();
+}
+
+/// `identify --vehicle` and `compare` move the wheel speed (the rear axle's) to the antenna
+/// the car file declares before judging its unit against the GNSS track (third probe, finding
+/// 01): a 12 m bus with its antenna 6.5 m ahead of the rear axle ran its full-lock circle in
+/// m/s at 0.68 times the speed along the track, and `identify` refused it ("check the unit of
+/// `vel`"), `compare` warned. Now both accept it, and the same log in km/h is still refused.
+/// The same for the antenna 3.45 m behind the rear axle and 1.75 m left of the centre line
+/// (the ends of the documented ranges) on a right-hand circle (0.70 before).
+#[test]
+fn identify_judges_the_wheel_speed_at_the_antenna_the_car_file_declares() {
+    let dir = tmp_dir("speed-unit-antenna");
+    let plant = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bus-12m-20hz.toml");
+    let car = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bus-12m.car.toml");
+    let plant_text = String::from_utf8(read(&plant)).unwrap();
+    let car_text = String::from_utf8(read(&car)).unwrap();
+    let behind_left = (
+        plant_text.replace(
+            "antenna_ahead_of_rear_axle_m = 6.5",
+            "antenna_ahead_of_rear_axle_m = -3.45\nantenna_left_of_centre_line_m = 1.75",
+        ),
+        car_text
+            .replace("antenna_ahead_m = 6.5", "antenna_ahead_m = -3.45")
+            .replace("antenna_left_m = 0.0", "antenna_left_m = 1.75"),
+    );
+    assert_ne!(behind_left.0, plant_text);
+    assert_ne!(behind_left.1, car_text);
+    for (tag, (plant_text, car_text), circle, antenna) in [
+        (
+            "ahead",
+            (plant_text.clone(), car_text.clone()),
+            "circle-left",
+            "6.5 m ahead of and 0 m left",
+        ),
+        (
+            "behind-left",
+            behind_left,
+            "circle-right",
+            "-3.45 m ahead of and 1.75 m left",
+        ),
+    ] {
+        let dir = dir.join(tag);
+        std::fs::create_dir_all(&dir).unwrap();
+        let plant = dir.join("bus.toml");
+        let car = dir.join("bus.car.toml");
+        std::fs::write(&plant, plant_text).unwrap();
+        std::fs::write(&car, car_text).unwrap();
+        for scenario in [circle, "straight-5"] {
+            ok(&[
+                "simulate-drive",
+                "--scenario",
+                scenario,
+                "--seed",
+                "1",
+                "--vehicle",
+                s(&plant),
+                "--out",
+                s(&dir),
+            ]);
+        }
+        let logs = [
+            dir.join(format!("{circle}.csv")),
+            dir.join("straight-5.csv"),
+        ];
+        let model = dir.join("model.toml");
+        let said = ok(&[
+            "identify",
+            s(&logs[0]),
+            s(&logs[1]),
+            "--vehicle",
+            s(&car),
+            "--out",
+            s(&model),
+        ]);
+        assert!(!said.contains("wheel speed `vel`"), "{tag}: {said}");
+        assert!(model.exists(), "{tag}");
+        let said = ok(&["compare", s(&logs[0]), "--model", s(&model)]);
+        assert!(!said.contains("wheel speed `vel`"), "{tag}: {said}");
+
+        // The same drive in km/h: refused, by the speed moved to the antenna.
+        let kmh: Vec<PathBuf> = logs
+            .iter()
+            .map(|l| {
+                let k = l.with_extension("kmh.csv");
+                with_speed_times(l, &k, 3.6);
+                k
+            })
+            .collect();
+        let kmh_model = dir.join("kmh-model.toml");
+        let err = fails(&[
+            "identify",
+            s(&kmh[0]),
+            s(&kmh[1]),
+            "--vehicle",
+            s(&car),
+            "--out",
+            s(&kmh_model),
+        ]);
+        for log in &kmh {
+            assert!(
+                err.contains(&format!("{}: the wheel speed `vel` is 3.", log.display())),
+                "{tag}: {err}"
+            );
+        }
+        assert!(err.contains("`vel` looks like km/h"), "{tag}: {err}");
+        assert!(
+            err.contains(&format!(
+                "the wheel speed moved to the antenna, {antenna} of the rear axle"
+            )),
+            "{tag}: {err}"
+        );
+        assert!(!kmh_model.exists(), "{tag}");
+        let warning = ok(&["compare", s(&kmh[0]), "--model", s(&model)]);
+        assert!(warning.contains("looks like km/h"), "{tag}: {warning}");
+    }
+}
+
 /// `evaluate` refuses, with what to do, what would score nonsense (review findings 07, 08 and
 /// the lead's frame mismatch): predictions on another clock than the truth (both ranges
 /// named, not "no valid position"); a truth value no car can have (FILE:LINE:COL, not `inf`

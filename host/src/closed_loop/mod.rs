@@ -188,6 +188,7 @@ pub fn model_file_for(vehicle: &VehicleConfig) -> anyhow::Result<crate::model_fi
     v.max_steer_deg = c.max_steer_deg;
     v.understeer_s2_per_m2 = vehicle.understeer_s2_per_m2();
     v.antenna_ahead_m = vehicle.sensors.gnss.antenna_ahead_of_rear_axle_m;
+    v.antenna_left_m = vehicle.sensors.gnss.antenna_left_of_centre_line_m;
     v.width_m = vehicle.body.width_m;
     v.length_m = vehicle.body.length_m;
     v.rear_overhang_m = vehicle.body.rear_overhang_m;

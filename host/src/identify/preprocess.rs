@@ -608,9 +608,16 @@ pub fn preprocess_rows(
         })
         .unzip();
 
-    // On the raw samples: the wheel's distance against the track's (a `vel` in km/h passes
-    // the schema's range in town).
-    let speed_scale = super::units::speed_scale(&tv, &vel, &tg, &xe, &yn);
+    // On the raw samples: the wheel's distance, moved to the antenna by the steering, against
+    // the track's (a `vel` in km/h passes the schema's range in town).
+    let speed_scale = super::units::speed_scale(
+        (&tv, &vel),
+        (&ts_, &steer),
+        &super::units::LeverArm::of(vehicle),
+        &tg,
+        &xe,
+        &yn,
+    );
 
     let taps = taps(opts)?;
     let f = |name: &str, t: &[f64], v: &[f64]| -> Result<Vec<f64>> {

@@ -15,6 +15,36 @@
 //! [`MIN_CHORD_M`] apart (on a turn a single chord is shorter than the arc; short chords would
 //! add the noise's length). The ratio is the median over the stretches, so a few bad ones (an
 //! outlier fix, a stop inside a stretch) do not move it.
+//!
+//! Like is compared with like (review finding 01 of the third probe): the wheel speed is the
+//! rear axle's, the track the antenna's, and on a turn an antenna `a` ahead of and `l` left
+//! of the rear axle runs another circle than the axle: of radius `hypot(R - l, a)` where the
+//! axle runs `R`. A 12 m bus with its antenna 6.5 m ahead gave 0.68 on its full-lock circles
+//! in m/s, and its correct logs were refused. So the distance compared with the track is the
+//! *antenna's*, predicted from the wheel speed and the car file's geometry
+//! ([`LeverArm`]): the antenna's velocity is `v_rear + omega x r_antenna`, and with the rear
+//! axle's path curvature `kappa = omega / v` its speed is
+//! `|v| hypot(1 - kappa l, kappa a)`. The curvature comes from the steering through the
+//! kinematic model (eq 8, `kappa = tan(delta) / L`), not from the GNSS course, because:
+//!
+//! - it is a ratio of lengths, free of the speed's unit: the correction is the same whatever
+//!   unit `vel` is in, so km/h still reads 3.6 times what m/s reads, and mph 2.237 (an
+//!   `omega` from the course rate, against a `vel` in km/h, would not be);
+//! - the steering sensor has none of the receiver's noise, where the course's is multiplied by
+//!   the lever arm: 0.1 rad of course noise on a 3 m chord is 0.65 m at 6.5 m ahead, and it
+//!   enters squared (`hypot`), a bias, not noise that averages out;
+//! - the slip at speed, which the kinematic model leaves out (an understeering car turns less
+//!   than its wheels say), matters little: the correction is second order in `kappa a` and
+//!   first in `kappa l`, and `kappa` is small at speed (4 m/s^2 at 20 m/s: 0.01 /m; 1.5 m
+//!   left moves the ratio 1.5 %, 6.5 m ahead 0.2 %); where the correction is large, on the
+//!   full-lock circles, the car is slow and follows its wheels (the simulated bus: its rear
+//!   axle ran 6.14 m where eq 8 says 5.9 m, the corrected ratio 1.01 instead of 1).
+//!   The understeer term of eq 2 would need the speed, in the unit being checked.
+//!
+//! With the antenna on the rear axle (or driving straight) the correction is exactly 1: the
+//! check is what it was. The steering is taken as the log schema's (percent of the lock,
+//! positive = right); one of the other sign matters only through `l` and is the steering
+//! check's to refuse (`identify::steering_gain_problem`).
 
 /// Wheel speed above which a sample counts as moving, in the log's unit (m/s, or whatever the
 /// log holds: the test is only that the car is not standing).
@@ -39,25 +69,77 @@ pub const MAX_GAP_PERIODS: f64 = 2.5;
 pub const MAX_CHORD_SPREAD: f64 = 1.6;
 /// Stretches needed to judge a log.
 pub const MIN_STRETCHES: usize = 5;
-/// The accepted ratio of wheel distance to track distance: m/s with every error the check
-/// allows for (a wheel speed a few per cent off, the antenna's wider arc on a turn) inside,
-/// km/h (3.6) and mph (2.237) far outside.
+/// The accepted ratio of wheel distance (moved to the antenna, [`LeverArm`]) to track
+/// distance: m/s with every error the check allows for (a wheel speed a few per cent off, the
+/// kinematic model's error on a turn, a car file's antenna a little off) inside, km/h (3.6)
+/// and mph (2.237) far outside.
 pub const ACCEPTED_RATIO: std::ops::RangeInclusive<f64> = 0.8..=1.25;
+
+/// Where the GNSS antenna sits on the car and how the steering bends the rear axle's path:
+/// what moves the wheel speed (the rear axle's) to the antenna (see the module doc).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LeverArm {
+    /// Antenna ahead of the rear axle, m.
+    pub ahead_m: f64,
+    /// Antenna left of the centre line, m.
+    pub left_m: f64,
+    /// Wheelbase, m.
+    pub wheelbase_m: f64,
+    /// Centre-tyre angle at 100 % steering, degrees.
+    pub max_steer_deg: f64,
+}
+
+impl LeverArm {
+    /// The car file's antenna and steering geometry.
+    pub fn of(vehicle: &crate::model_file::VehicleSection) -> Self {
+        Self {
+            ahead_m: vehicle.antenna_ahead_m,
+            left_m: vehicle.antenna_left_m,
+            wheelbase_m: vehicle.wheelbase_m,
+            max_steer_deg: vehicle.max_steer_deg,
+        }
+    }
+
+    /// An antenna on the rear axle: the wheel speed is the antenna's.
+    pub const NONE: Self = Self {
+        ahead_m: 0.0,
+        left_m: 0.0,
+        wheelbase_m: 1.0,
+        max_steer_deg: 0.0,
+    };
+
+    /// Whether the antenna is off the rear axle's centre.
+    pub fn is_off_the_axle(&self) -> bool {
+        self.ahead_m != 0.0 || self.left_m != 0.0
+    }
+
+    /// The antenna's speed over the rear axle's at a steering of `steer_pct` (percent of the
+    /// lock, positive = right), by the kinematic model: `hypot(1 - kappa l, kappa a)` with
+    /// the rear axle's curvature `kappa = tan(delta) / L`, positive to the left. Exactly 1
+    /// straight ahead or with the antenna on the axle.
+    pub fn antenna_speed_factor(&self, steer_pct: f64) -> f64 {
+        let delta_right = steer_pct.clamp(-100.0, 100.0) / 100.0 * self.max_steer_deg.to_radians();
+        let kappa_left = -delta_right.tan() / self.wheelbase_m;
+        (1.0 - kappa_left * self.left_m).hypot(kappa_left * self.ahead_m)
+    }
+}
 
 /// The wheel speed against the GNSS track over one log.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpeedScale {
-    /// Median over the stretches of (distance by the wheel speed) / (distance along the
-    /// track): 1 when `vel` is in m/s.
+    /// Median over the stretches of (distance by the wheel speed, moved to the antenna) /
+    /// (distance along the track): 1 when `vel` is in m/s.
     pub ratio: f64,
     /// Stretches it is the median of.
     pub stretches: usize,
+    /// The antenna the wheel speed was moved to, ahead of and left of the rear axle, m
+    /// (`None`: on the axle, the wheel speed as it is).
+    pub antenna_m: Option<(f64, f64)>,
 }
 
 /// A ratio within this fraction of a unit's factor names the unit: wide enough for the tight
-/// turns of a circle (the antenna ahead of the rear axle runs a wider circle than the wheel
-/// speed measures: 0.88-0.9 times m/s with the simulator's circles), narrow enough that km/h
-/// (3.06..4.14) and mph (1.90..2.57) do not meet.
+/// turns of a circle (the kinematic model's error at full lock, a car file's antenna a little
+/// off), narrow enough that km/h (3.06..4.14) and mph (1.90..2.57) do not meet.
 const NAMED_UNIT_TOLERANCE: f64 = 0.15;
 
 /// What a ratio of wheel to track distance most likely means, if it is not m/s.
@@ -93,31 +175,63 @@ impl SpeedScale {
         if ACCEPTED_RATIO.contains(&self.ratio) {
             return None;
         }
+        let moved = match self.antenna_m {
+            Some((ahead, left)) => format!(
+                "; the wheel speed moved to the antenna, {ahead} m ahead of and {left} m left \
+                 of the rear axle, by the steering"
+            ),
+            None => String::new(),
+        };
+        let cause = likely_cause(self.ratio);
+        let check_car = if self.antenna_m.is_some() && !cause.contains("looks like") {
+            ", and the car file's antenna and steering"
+        } else {
+            ""
+        };
         Some(format!(
             "the wheel speed `vel` is {:.2} times the speed along the GNSS track (the median \
              over {} stretches where the car moves, each at least {MIN_STRETCH_S} s and \
-             {MIN_STRETCH_M} m along the track; m/s gives {}..{}): {}",
+             {MIN_STRETCH_M} m along the track{moved}; m/s gives {}..{}): {cause}{check_car}",
             self.ratio,
             self.stretches,
             ACCEPTED_RATIO.start(),
             ACCEPTED_RATIO.end(),
-            likely_cause(self.ratio)
         ))
     }
 }
 
-/// Cumulative distance by the wheel speed at each sample (trapezoids; reversing counts as
-/// distance too).
-fn wheel_distance(t: &[f64], v: &[f64]) -> Vec<f64> {
+/// Cumulative distance by the wheel speed at each sample, moved to the antenna by
+/// `factor` (trapezoids; reversing counts as distance too).
+fn wheel_distance(t: &[f64], v: &[f64], factor: &[f64]) -> Vec<f64> {
     let mut out = Vec::with_capacity(t.len());
     let mut d = 0.0;
     for k in 0..t.len() {
         if k > 0 {
-            d += 0.5 * (v[k].abs() + v[k - 1].abs()) * (t[k] - t[k - 1]);
+            d +=
+                0.5 * (v[k].abs() * factor[k] + v[k - 1].abs() * factor[k - 1]) * (t[k] - t[k - 1]);
         }
         out.push(d);
     }
     out
+}
+
+/// [`LeverArm::antenna_speed_factor`] at each time of `at`, by the steering samples
+/// `(ts, steer_pct)` (sorted by time; the first and last held outside them; 1 without any).
+fn antenna_factors(at: &[f64], ts: &[f64], steer_pct: &[f64], lever: &LeverArm) -> Vec<f64> {
+    if !lever.is_off_the_axle() || ts.is_empty() {
+        return vec![1.0; at.len()];
+    }
+    let (first, last) = (steer_pct[0], steer_pct[steer_pct.len() - 1]);
+    at.iter()
+        .map(|&t| {
+            let s = if t <= ts[0] {
+                first
+            } else {
+                interpolate(ts, steer_pct, t).unwrap_or(last)
+            };
+            lever.antenna_speed_factor(s)
+        })
+        .collect()
 }
 
 /// Linear interpolation of the series `(t, y)` (sorted by `t`) at `at`; `None` outside it.
@@ -134,12 +248,17 @@ fn interpolate(t: &[f64], y: &[f64], at: f64) -> Option<f64> {
     Some(y[i - 1] + (y[i] - y[i - 1]) * w)
 }
 
-/// [`SpeedScale`] of a log: the wheel speed samples `(tv, vel)` and the fixes `(tg, east,
-/// north)` in metres (each sorted by time). `None` when the log has fewer than
-/// [`MIN_STRETCHES`] stretches to judge by (a parked car, a log too short).
+/// The steering samples of a log, `(t, steer_pct)`, sorted by time.
+pub type Steering<'a> = (&'a [f64], &'a [f64]);
+
+/// [`SpeedScale`] of a log: the wheel speed samples `(tv, vel)`, the steering `(ts,
+/// steer_pct)` and the fixes `(tg, east, north)` in metres (each sorted by time), the antenna
+/// where `lever` puts it. `None` when the log has fewer than [`MIN_STRETCHES`] stretches to
+/// judge by (a parked car, a log too short).
 pub fn speed_scale(
-    tv: &[f64],
-    vel: &[f64],
+    (tv, vel): (&[f64], &[f64]),
+    (ts, steer_pct): Steering,
+    lever: &LeverArm,
     tg: &[f64],
     east: &[f64],
     north: &[f64],
@@ -147,7 +266,8 @@ pub fn speed_scale(
     if tv.len() < 2 || tg.len() < 2 {
         return None;
     }
-    let wheel = wheel_distance(tv, vel);
+    let factor = antenna_factors(tv, ts, steer_pct, lever);
+    let wheel = wheel_distance(tv, vel, &factor);
     let max_gap = MAX_GAP_PERIODS * median_step(tg);
     // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
     let max_wheel_gap = MAX_GAP_PERIODS * median_step(tv);
@@ -244,6 +364,9 @@ pub fn speed_scale(
     Some(SpeedScale {
         ratio: median(&mut ratios),
         stretches: ratios.len(),
+        antenna_m: lever
+            .is_off_the_axle()
+            .then_some((lever.ahead_m, lever.left_m)),
     })
 }
 
@@ -283,7 +406,36 @@ mod tests {
             .map(|(k, t)| v * t + if k % 2 == 0 { 0.4 } else { -0.4 })
             .collect();
         let north = vec![0.0; n];
-        speed_scale(&tv, &vel, &tg, &east, &north)
+        speed_scale((&tv, &vel), (&[], &[]), &LeverArm::NONE, &tg, &east, &north)
+    }
+
+    /// The antenna's speed over the rear axle's is the ratio of their kinematic circles.
+    #[test]
+    fn the_antenna_speed_factor_is_the_ratio_of_the_kinematic_circles() {
+        let bus = LeverArm {
+            ahead_m: 6.5,
+            left_m: 0.0,
+            wheelbase_m: 5.9,
+            max_steer_deg: 45.0,
+        };
+        // Full lock either way: the rear axle runs L / tan(45 deg) = 5.9 m, the antenna
+        // hypot(5.9, 6.5) = 8.78 m.
+        for steer in [100.0, -100.0] {
+            let f = bus.antenna_speed_factor(steer);
+            assert!((f - 5.9_f64.hypot(6.5) / 5.9).abs() < 1e-12, "{f}");
+        }
+        assert_eq!(bus.antenna_speed_factor(0.0), 1.0);
+        assert_eq!(LeverArm::NONE.antenna_speed_factor(100.0), 1.0);
+        // 1.75 m left: inside a left-hand circle (steering negative), outside a right-hand one.
+        let left = LeverArm {
+            ahead_m: 0.0,
+            left_m: 1.75,
+            ..bus
+        };
+        let f = left.antenna_speed_factor(-100.0);
+        assert!((f - (5.9 - 1.75) / 5.9).abs() < 1e-12, "{f}");
+        let f = left.antenna_speed_factor(100.0);
+        assert!((f - (5.9 + 1.75) / 5.9).abs() < 1e-12, "{f}");
     }
 
     #[test]

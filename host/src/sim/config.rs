@@ -186,6 +186,10 @@ pub struct Gnss {
     pub bias_correlation_s: f64,
     /// Antenna position ahead of the rear axle, m (the truth reference point is the rear axle).
     pub antenna_ahead_of_rear_axle_m: f64,
+    /// Antenna position left of the car's centre line, m (negative: right; absent: 0, on the
+    /// centre line).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub antenna_left_of_centre_line_m: f64,
     /// Resolution of latitude and longitude in the log, degrees.
     pub resolution_deg: f64,
 }
@@ -279,6 +283,7 @@ impl Default for VehicleConfig {
                     bias_sigma_m: 0.8,
                     bias_correlation_s: 60.0,
                     antenna_ahead_of_rear_axle_m: 1.478,
+                    antenna_left_of_centre_line_m: 0.0,
                     resolution_deg: 1e-9,
                 },
             },
@@ -584,4 +589,9 @@ impl VehicleConfig {
         }
         Ok(())
     }
+}
+
+/// For `skip_serializing_if`: an optional key at its default is not written.
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }

@@ -173,6 +173,7 @@ pub struct Rig {
     sensors: Option<SensorSuite>,
     cg_to_rear_m: f64,
     antenna_ahead_m: f64,
+    antenna_left_m: f64,
     max_steer_rad: f64,
     ax_mps2: f64,
     steer_pct: f64,
@@ -206,6 +207,7 @@ impl Rig {
             )),
             cg_to_rear_m,
             antenna_ahead_m: cfg.sensors.gnss.antenna_ahead_of_rear_axle_m,
+            antenna_left_m: cfg.sensors.gnss.antenna_left_of_centre_line_m,
             max_steer_rad: cfg.chassis.max_steer_deg.to_radians(),
             ax_mps2: 0.0,
             steer_pct,
@@ -220,11 +222,13 @@ impl Rig {
         let s = &self.state;
         let (sin_h, cos_h) = (libm::sin(s.heading_rad), libm::cos(s.heading_rad));
         let ahead = self.antenna_ahead_m - self.cg_to_rear_m;
+        // The heading is clockwise from north: ahead is (sin, cos), left (-cos, sin).
+        let left = self.antenna_left_m;
         Snapshot {
             speed_mps: s.vx_mps,
             steer_pct: self.steer_pct,
-            antenna_east_m: s.x_m + ahead * sin_h,
-            antenna_north_m: s.y_m + ahead * cos_h,
+            antenna_east_m: s.x_m + ahead * sin_h - left * cos_h,
+            antenna_north_m: s.y_m + ahead * cos_h + left * sin_h,
         }
     }
 
