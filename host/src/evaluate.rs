@@ -809,6 +809,7 @@ pub fn write_plots(
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
     use crate::plot::{decimate, Figure, PALETTE};
     let [truth_c, node_c, base_c, gnss_c, axle_c, window_c] = PALETTE;
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
     let paths: Vec<_> = PLOT_FILES.iter().map(|f| dir.join(f)).collect();
     let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
     let t0 = predictions.first().map_or(0.0, |p| p.t);

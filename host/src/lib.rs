@@ -7,6 +7,7 @@ pub mod decode;
 pub mod evaluate;
 pub mod identify;
 pub mod logcsv;
+pub mod outputs;
 pub mod planner_refusals;
 pub mod plot;
 pub mod progress;
