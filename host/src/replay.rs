@@ -2043,6 +2043,8 @@ mod tests {
     fn output_files_appear_only_for_a_valid_log() {
         let dir = std::env::temp_dir().join(format!("catmodel-partial-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
+        // The output directory exists: the CLI refuses a missing one ([`crate::outputs`]).
+        std::fs::create_dir_all(dir.join("out")).unwrap();
         let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
         let text = std::fs::read(&log).unwrap();
         let config = crate::model_file::paper().node_config();
