@@ -1412,12 +1412,14 @@ mod tests {
         };
         for k in 0..5 {
             let t = f64::from(k) * 0.02;
-            for h in [0.0, 0.6, 1.2, 0.8, 0.8 + 1e-7, 2.0] {
+            // 0.9 is the nearest; 0.9 - 1e-7 is farther but within 1e-6 s of it: its rows
+            // are the path horizon's too.
+            for h in [0.0, 0.6, 1.3, 0.9, 0.9 - 1e-7, 2.0] {
                 kept.keep(&row(t, h));
             }
         }
         let (h1, rows) = kept.path_horizon().unwrap();
-        assert_eq!(h1, 0.8);
+        assert_eq!(h1, 0.9);
         assert_eq!(rows.len(), 10, "{rows:?}");
         assert_eq!(kept.current.len(), 5);
         assert_eq!(kept.first_last, Some((0.0, 0.08)));
