@@ -766,6 +766,11 @@ fn run(cli: Cli) -> Result<()> {
             progress.finish();
             let text = serde_json::to_string_pretty(&limits)?;
             println!("{text}");
+            // The figures' directory first: `--json` may name a file in it.
+            if let Some(dir) = &plots {
+                std::fs::create_dir_all(dir)
+                    .map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            }
             if let Some(path) = json {
                 replay::write_file(&path, &text)?;
             }
@@ -773,8 +778,6 @@ fn run(cli: Cli) -> Result<()> {
                 use catmodel_host::closed_loop::{optimal, plots};
                 let track = optimal::TrackAtSpeed::new(&cfg, v);
                 let rows = track.record(&limits.optimal_profile_pct);
-                std::fs::create_dir_all(&dir)
-                    .map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
                 for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
                     eprintln!("wrote {}", p.display());
                 }
