@@ -7,6 +7,7 @@ pub mod decode;
 pub mod evaluate;
 pub mod identify;
 pub mod logcsv;
+pub mod outputs;
 pub mod planner_refusals;
 pub mod plot;
 pub mod progress;
@@ -37,25 +38,6 @@ use evaluate::{BaselineInputs, Evaluation, Prediction, Truth};
 /// The simulator's test site and the default origin of its truth files: the University of
 /// Arizona area in Tucson, where the CAT Vehicle drove, degrees.
 pub const SIM_ORIGIN_DEG: (f64, f64) = (32.2319, -110.9501);
-
-/// Rows of a CSV file with their line numbers.
-type Rows = Vec<(usize, Vec<String>)>;
-
-/// Splits a CSV file into its header and its non-empty rows.
-fn csv_table(path: &Path) -> Result<(Vec<String>, Rows)> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text.lines().enumerate();
-    let Some((_, header)) = lines.next() else {
-        bail!("{}:1: empty file, a header row is required", path.display());
-    };
-    let header: Vec<String> = header.split(',').map(|s| s.trim().to_string()).collect();
-    let rows = lines
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, l)| (i + 1, l.split(',').map(|s| s.trim().to_string()).collect()))
-        .collect();
-    Ok((header, rows))
-}
 
 fn column(path: &Path, header: &[String], name: &str) -> Result<usize> {
     header
@@ -97,7 +79,36 @@ const MAX_HORIZON_S: f64 = 60.0;
 
 /// Reads a predictions CSV (`t,step,horizon_s,x,y,heading,speed,mode`).
 pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
-    let (header, rows) = csv_table(path)?;
+    let mut out = Vec::new();
+    for_each_prediction(path, |p| out.push(p))?;
+    Ok(out)
+}
+
+/// Reads a predictions CSV one line at a time, giving each row to `emit` as it is read (a drive's
+/// rows are never held together: [`evaluate::Scorer`]); refused, naming the file and line, as
+/// [`read_predictions`] refuses it, at the first bad row (the rows before it have been given).
+pub fn for_each_prediction(path: &Path, mut emit: impl FnMut(Prediction)) -> Result<()> {
+    use std::io::BufRead;
+    let reading = || format!("reading {}", path.display());
+    let file = std::fs::File::open(path).with_context(reading)?;
+    let mut reader = std::io::BufReader::with_capacity(1 << 16, file);
+    let mut text = String::new();
+    let split = |l: &str| -> Vec<String> { l.split(',').map(|s| s.trim().to_string()).collect() };
+    let next_line = |reader: &mut std::io::BufReader<std::fs::File>, text: &mut String| {
+        text.clear();
+        let n = reader.read_line(text).with_context(reading)?;
+        if text.ends_with('\n') {
+            text.pop();
+            if text.ends_with('\r') {
+                text.pop();
+            }
+        }
+        anyhow::Ok(n > 0)
+    };
+    if !next_line(&mut reader, &mut text)? {
+        bail!("{}:1: empty file, a header row is required", path.display());
+    }
+    let header = split(&text);
     let cols: Vec<usize> = [
         "t",
         "step",
@@ -111,8 +122,14 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
     .iter()
     .map(|n| column(path, &header, n))
     .collect::<Result<_>>()?;
-    let mut out: Vec<Prediction> = Vec::with_capacity(rows.len());
-    for (line, row) in rows {
+    let mut prev_t: Option<f64> = None;
+    let mut line = 1;
+    while next_line(&mut reader, &mut text)? {
+        line += 1;
+        if text.trim().is_empty() {
+            continue;
+        }
+        let row = split(&text);
         if row.len() != header.len() {
             bail!(
                 "{}:{line}: {} fields, the header has {}",
@@ -165,19 +182,20 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Prediction>> {
                 p.horizon_s
             );
         }
-        if let Some(prev) = out.last() {
-            if p.t < prev.t {
+        if let Some(prev_t) = prev_t {
+            if p.t < prev_t {
                 bail!(
                     "{}:{line}: column `t`: time goes backwards ({} s after {} s)",
                     path.display(),
                     p.t,
-                    prev.t
+                    prev_t
                 );
             }
         }
-        out.push(p);
+        prev_t = Some(p.t);
+        emit(p);
     }
-    Ok(out)
+    Ok(())
 }
 
 /// What the evaluation needs to know about the car (from its model file): the kinematic
@@ -260,10 +278,14 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64), car: &Car) -> Result
     Ok(inputs)
 }
 
-/// Everything `catmodel evaluate` reads: predictions, truth and the baseline's bus inputs.
+/// Everything `catmodel evaluate` reads: truth and the baseline's bus inputs, and the
+/// predictions, scored as they are read ([`evaluate::Scorer`]) and kept only as far as the
+/// checks and the figures need them.
 pub struct EvaluationData {
-    /// The node's predictions.
-    pub predictions: Vec<Prediction>,
+    /// What is kept of the node's predictions.
+    pub predictions: evaluate::KeptPredictions,
+    /// The scores, before [`Self::evaluate`]'s checks.
+    scores: Evaluation,
     /// Ground truth.
     pub truth: Truth,
     /// Raw GNSS, speed and steering from the candump.
@@ -277,7 +299,8 @@ pub struct EvaluationData {
 }
 
 impl EvaluationData {
-    /// Reads the three files; `origin_deg` is the origin of the truth frame.
+    /// Reads the truth and the inputs, then the predictions, scoring them row by row;
+    /// `origin_deg` is the origin of the truth frame.
     pub fn read(
         predictions: &Path,
         truth: &Path,
@@ -285,10 +308,17 @@ impl EvaluationData {
         origin_deg: (f64, f64),
         car: Car,
     ) -> Result<Self> {
+        let truth_rows = Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?);
+        let bus = baseline_inputs(inputs, origin_deg, &car)?;
+        let mut scorer =
+            evaluate::Scorer::new(&truth_rows, &bus, &car.vehicle, car.antenna_ahead_m);
+        for_each_prediction(predictions, |p| scorer.add(&p))?;
+        let (scores, kept) = scorer.finish();
         Ok(Self {
-            predictions: read_predictions(predictions)?,
-            truth: Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?),
-            inputs: baseline_inputs(inputs, origin_deg, &car)?,
+            predictions: kept,
+            scores,
+            truth: truth_rows,
+            inputs: bus,
             car,
             paths: [
                 predictions.to_path_buf(),
@@ -315,7 +345,7 @@ impl EvaluationData {
         let Some((t0, t1)) = truth_span else {
             bail!("{}: no truth row (a header alone)", truth_path.display());
         };
-        if let Some((p0, p1)) = span(&mut self.predictions.iter().map(|p| p.t)) {
+        if let Some((p0, p1)) = self.predictions.span {
             if p1 < t0 || p0 > t1 {
                 bail!(
                     "{} (t = {p0} .. {p1} s) and the truth {} (t = {t0} .. {t1} s) do not \
@@ -327,13 +357,7 @@ impl EvaluationData {
                 );
             }
         }
-        let e = evaluate::evaluate(
-            &self.predictions,
-            &self.truth,
-            &self.inputs,
-            &self.car.vehicle,
-            self.car.antenna_ahead_m,
-        );
+        let e = self.scores.clone();
         if e.ticks == 0 {
             bail!(
                 "{}: no prediction to score: the node had no valid position at any tick \
@@ -390,7 +414,7 @@ impl EvaluationData {
             .map(|o| ("the planner's LOCAL_ORIGIN", o));
         for (what, &(_, east, north)) in first_fix.into_iter().chain(planner) {
             let Some(c) = evaluate::frame_offset_check(
-                &self.predictions,
+                &self.predictions.current,
                 &self.truth,
                 &self.inputs.gnss,
                 self.car.antenna_ahead_m,
@@ -657,6 +681,48 @@ mod tests {
         let no_col = write("nocol.csv", "t,step\n0,0\n");
         let err = format!("{:#}", read_predictions(&no_col).unwrap_err());
         assert!(err.contains(":1: missing column `horizon_s`"), "{err}");
+    }
+
+    /// `evaluate` scores the predictions as it reads them, keeping only what the checks and
+    /// the figures need (outside review, finding 08): the same evaluation as the whole list's
+    /// on the bundled smoke drive.
+    #[test]
+    fn streamed_evaluation_equals_the_whole_lists() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+        let can = data.join("smoke.can.log");
+        let mut config = node_config(None).unwrap();
+        config.origin_e7 = Some((
+            (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
+            (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
+        ));
+        let frames = replay::read_candump_reporting(&can, None).unwrap().frames;
+        let pred = write(
+            "smoke.pred.csv",
+            &replay::replay(&frames, config).predictions_csv,
+        );
+        let car = Car::from_model(&model_file::load(&model_file::paper_path()).unwrap());
+        let truth = data.join("smoke.truth.csv");
+        let streamed = EvaluationData::read(&pred, &truth, &can, SIM_ORIGIN_DEG, car).unwrap();
+        let list = read_predictions(&pred).unwrap();
+        let whole = evaluate::evaluate(
+            &list,
+            &streamed.truth,
+            &streamed.inputs,
+            &car.vehicle,
+            car.antenna_ahead_m,
+        );
+        assert_eq!(streamed.evaluate().unwrap(), whole);
+        assert!(whole.ticks > 500, "{}", whole.ticks);
+        assert_eq!(
+            streamed.predictions.current,
+            evaluate::current_positions(&list)
+        );
+        let (h1, rows) = streamed.predictions.path_horizon().unwrap();
+        assert_eq!(h1, 1.0);
+        assert_eq!(
+            rows.len(),
+            list.iter().filter(|p| p.horizon_s == 1.0).count()
+        );
     }
 
     /// The rate a replay names (review finding 04): the median interval over every fix, whatever

@@ -3,6 +3,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Result};
+use catmodel_host::outputs::{Kind, Paths};
 use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, decode, evaluate, identify, logcsv, model_file, replay, sim};
 use clap::{Parser, Subcommand};
@@ -334,6 +335,13 @@ fn run(cli: Cli) -> Result<()> {
             receiver,
             faults,
         } => {
+            let mut paths = Paths::new()
+                .input_opt(vehicle.as_deref(), "--vehicle")
+                .output(&out, "--out", Kind::Dir);
+            for ext in ["csv", "can.log", "truth.csv"] {
+                paths = paths.output(&out.join(format!("{scenario}.{ext}")), "--out", Kind::File);
+            }
+            paths.check()?;
             let options = sim::SimOptions {
                 seed,
                 faults,
@@ -365,6 +373,10 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Csv2can { log, out } => {
+            Paths::new()
+                .input(&log, "LOG")
+                .output(&out, "--out", Kind::File)
+                .check()?;
             let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
             print_notes(&read.notes.messages());
             if read.rows.is_empty() {
@@ -393,6 +405,12 @@ fn run(cli: Cli) -> Result<()> {
             model,
             interface,
         } => {
+            Paths::new()
+                .input(&log, "LOG")
+                .input_opt(model.as_deref(), "--model")
+                .output(&out, "--out", Kind::File)
+                .output_opt(tx_out.as_deref(), "--tx-out", Kind::File)
+                .check()?;
             let reading = Progress::spinner(&format!("reading {}", log.display()));
             let text = replay::read_bytes(&log)?;
             reading.finish();
@@ -478,12 +496,20 @@ fn run(cli: Cli) -> Result<()> {
             json,
             plots,
         } => {
+            let (inputs, inputs_arg) = match inputs {
+                Some(p) => (p, "--inputs"),
+                None => (sibling_candump(&truth)?, "--inputs (its default)"),
+            };
+            Paths::new()
+                .input(&predictions, "PREDICTIONS")
+                .input(&truth, "--truth")
+                .input(&inputs, inputs_arg)
+                .input_opt(model.as_deref(), "--model")
+                .output_opt(json.as_deref(), "--json", Kind::File)
+                .output_opt(plots.as_deref(), "--plots", Kind::Dir)
+                .check()?;
             let model = model_file::load(&model.unwrap_or_else(model_file::paper_path))?;
             let car = catmodel_host::Car::from_model(&model);
-            let inputs = match inputs {
-                Some(p) => p,
-                None => sibling_candump(&truth)?,
-            };
             let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
             let progress = Progress::spinner("reading");
             let data =
@@ -523,6 +549,14 @@ fn run(cli: Cli) -> Result<()> {
             vehicle,
             force,
         } => {
+            Paths::new()
+                .inputs(&logs, "LOGS")
+                .inputs(&validate, "--validate")
+                .input_opt(base.as_deref(), "--base")
+                .input_opt(vehicle.as_deref(), "--vehicle")
+                .output(&out, "--out", Kind::File)
+                .output_opt(report.as_deref(), "--report", Kind::Dir)
+                .check()?;
             let base = load_base(base.as_deref())?;
             let base = match vehicle {
                 Some(car) => identify::car::apply(&base, &car)?,
@@ -631,6 +665,11 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Compare { log, model, out } => {
+            Paths::new()
+                .input(&log, "LOG")
+                .input(&model, "--model")
+                .output_opt(out.as_deref(), "--out", Kind::File)
+                .check()?;
             let file = model_file::load(&model)?;
             let opts = identify::preprocess::PreprocessOptions::default();
             let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
@@ -675,6 +714,14 @@ fn run(cli: Cli) -> Result<()> {
             faults,
             out,
         } => {
+            let mut paths = Paths::new()
+                .input_opt(vehicle.as_deref(), "--vehicle")
+                .input_opt(model.as_deref(), "--model")
+                .output(&out, "--out", Kind::Dir);
+            for name in catmodel_host::closed_loop::SESSION_FILES {
+                paths = paths.output(&out.join(name), "--out", Kind::File);
+            }
+            paths.check()?;
             let progress = Progress::spinner(&format!("closed loop: {scenario}"));
             let (metrics, written) =
                 catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
@@ -705,6 +752,12 @@ fn run(cli: Cli) -> Result<()> {
             json,
             plots,
         } => {
+            Paths::new()
+                .input_opt(vehicle.as_deref(), "--vehicle")
+                .input_opt(model.as_deref(), "--model")
+                .output_opt(json.as_deref(), "--json", Kind::File)
+                .output_opt(plots.as_deref(), "--plots", Kind::Dir)
+                .check()?;
             let progress = Progress::spinner("searching the double lane change's limits");
             let (cfg, node) =
                 catmodel_host::closed_loop::load_setup(vehicle.as_deref(), model.as_deref())?;
@@ -713,6 +766,11 @@ fn run(cli: Cli) -> Result<()> {
             progress.finish();
             let text = serde_json::to_string_pretty(&limits)?;
             println!("{text}");
+            // The figures' directory first: `--json` may name a file in it.
+            if let Some(dir) = &plots {
+                std::fs::create_dir_all(dir)
+                    .map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+            }
             if let Some(path) = json {
                 replay::write_file(&path, &text)?;
             }
@@ -720,7 +778,6 @@ fn run(cli: Cli) -> Result<()> {
                 use catmodel_host::closed_loop::{optimal, plots};
                 let track = optimal::TrackAtSpeed::new(&cfg, v);
                 let rows = track.record(&limits.optimal_profile_pct);
-                std::fs::create_dir_all(&dir)?;
                 for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
                     eprintln!("wrote {}", p.display());
                 }

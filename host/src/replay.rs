@@ -862,9 +862,8 @@ pub fn estimate_ticks(text: &[u8]) -> u64 {
     }
 }
 
-/// A file created (with its directories) on the first write or flush.
-/// An output file written as `PATH.partial` beside `PATH` (created, with its directories, on
-/// the first write or flush) and renamed to `PATH` by [`PartialFile::commit`]; dropped without
+/// An output file written as `PATH.partial` beside `PATH` (created on the first write or
+/// flush) and renamed to `PATH` by [`PartialFile::commit`]; dropped without
 /// a commit (the input failed), it is removed. So the text streams to disk as the node runs
 /// (before, it was held in memory until the whole input had parsed: 3.6 times the input's
 /// size) and a failed replay still leaves no output behind. A `PATH` that exists and is not a
@@ -1395,19 +1394,14 @@ fn append_prediction_rows(csv: &mut Vec<u8>, now_us: u64, step: u64, tx: &TxFram
     }
 }
 
-/// Creates `path` for writing, creating parent directories.
+/// Creates `path` for writing (its directory must exist: the CLI refuses a missing one before
+/// it starts, [`crate::outputs`]).
 pub fn create_file(path: &Path) -> Result<std::fs::File> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))
 }
 
-/// Writes `text` to `path`, creating parent directories.
+/// Writes `text` to `path` (its directory must exist, as for [`create_file`]).
 pub fn write_file(path: &Path, text: &str) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     let mut f =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     f.write_all(text.as_bytes())
@@ -2049,6 +2043,8 @@ mod tests {
     fn output_files_appear_only_for_a_valid_log() {
         let dir = std::env::temp_dir().join(format!("catmodel-partial-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
+        // The output directory exists: the CLI refuses a missing one ([`crate::outputs`]).
+        std::fs::create_dir_all(dir.join("out")).unwrap();
         let log = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
         let text = std::fs::read(&log).unwrap();
         let config = crate::model_file::paper().node_config();

@@ -1022,3 +1022,150 @@ fn identify_refuses_a_steering_of_the_other_sign() {
         "{warning}"
     );
 }
+
+/// No command writes over its own input (outside review, finding 07: `replay in.can.log --out
+/// in.can.log` replaced the drive with its predictions, exit 0; so did `--tx-out`, `csv2can`,
+/// `evaluate --json`, `identify --out` and `compare --out` given an input's path). Each is
+/// refused before anything is read, naming the path and both arguments, and the input keeps
+/// its bytes, however the path is spelled; so are two outputs given one path, an output in a
+/// directory that does not exist (it was created, with its parents), and an existing file as
+/// `identify --report DIR` (it failed after the whole identification with `File exists (os
+/// error 17)`, naming no path).
+#[test]
+fn outputs_never_overwrite_inputs() {
+    let dir = tmp_dir("aliases");
+    let copy = |name: &str, as_name: &str| {
+        let p = dir.join(as_name);
+        std::fs::copy(data(name), &p).unwrap();
+        p
+    };
+    let can = copy("smoke.can.log", "in.can.log");
+    let log = copy("smoke.csv", "in.csv");
+    let turn = copy("turn-left-30s.csv", "turn.csv");
+    let truth = copy("smoke.truth.csv", "truth.csv");
+    let pred = dir.join("p.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let paper = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/paper.toml");
+    let fresh = dir.join("fresh.csv");
+    let respelled = dir.join(".").join("in.can.log");
+    let cases: Vec<(Vec<&str>, &Path, &str)> = vec![
+        (
+            vec!["replay", s(&can), "--out", s(&can)],
+            &can,
+            "--out and LOG",
+        ),
+        (
+            vec!["replay", s(&can), "--out", s(&fresh), "--tx-out", s(&can)],
+            &can,
+            "--tx-out and LOG",
+        ),
+        (
+            vec!["replay", s(&can), "--out", s(&respelled)],
+            &respelled,
+            "--out and LOG",
+        ),
+        (
+            vec!["csv2can", s(&log), "--out", s(&log)],
+            &log,
+            "--out and LOG",
+        ),
+        (
+            vec![
+                "evaluate",
+                s(&pred),
+                "--truth",
+                s(&truth),
+                "--inputs",
+                s(&can),
+                "--json",
+                s(&truth),
+            ],
+            &truth,
+            "--json and --truth",
+        ),
+        (
+            vec![
+                "evaluate",
+                s(&pred),
+                "--truth",
+                s(&truth),
+                "--inputs",
+                s(&can),
+                "--json",
+                s(&pred),
+            ],
+            &pred,
+            "--json and PREDICTIONS",
+        ),
+        (
+            vec!["identify", s(&log), s(&turn), "--out", s(&turn)],
+            &turn,
+            "--out and LOGS",
+        ),
+        (
+            vec!["compare", s(&log), "--model", s(&paper), "--out", s(&log)],
+            &log,
+            "--out and LOG",
+        ),
+    ];
+    for (args, input, what) in cases {
+        let before = read(input);
+        let err = fails(&args);
+        assert!(
+            err.contains(&format!("{}: is also an input ({what})", input.display())),
+            "{args:?}: {err}"
+        );
+        assert_eq!(read(input), before, "{args:?} changed {}", input.display());
+        assert!(!fresh.exists(), "{args:?} wrote {}", fresh.display());
+    }
+    // Two outputs, one path.
+    let err = fails(&["replay", s(&can), "--out", s(&fresh), "--tx-out", s(&fresh)]);
+    assert!(
+        err.contains(&format!(
+            "{}: given as two outputs (--out and --tx-out)",
+            fresh.display()
+        )),
+        "{err}"
+    );
+    assert!(!fresh.exists());
+    // A directory that does not exist is named, not created.
+    let typo = dir.join("no/such/p.csv");
+    let err = fails(&["replay", s(&can), "--out", s(&typo)]);
+    assert!(
+        err.contains(&format!(
+            "the directory {} does not exist",
+            dir.join("no/such").display()
+        )),
+        "{err}"
+    );
+    assert!(!dir.join("no").exists(), "created the missing directories");
+    // An existing file as the report directory: refused before the identification (nothing on
+    // stdout, where its summary goes), naming the file.
+    let afile = dir.join("afile");
+    std::fs::write(&afile, "").unwrap();
+    let model = dir.join("m.toml");
+    let out = run(&[
+        "identify",
+        s(&log),
+        s(&turn),
+        "--out",
+        s(&model),
+        "--report",
+        s(&afile),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{}: exists and is not a directory (--report",
+            afile.display()
+        )),
+        "{err}"
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "identified first: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(!model.exists());
+}

@@ -707,23 +707,31 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     Ok((output.metrics, files))
 }
 
-/// Writes a run's files into `dir` (created).
+/// The files [`write_session`] writes into its directory, in order.
+pub const SESSION_FILES: [&str; 4] = [
+    "session.can.log",
+    "session.tx.log",
+    "samples.csv",
+    "metrics.json",
+];
+
+/// Writes a run's files ([`SESSION_FILES`]) into `dir` (created).
 pub fn write_session(
     dir: &std::path::Path,
     output: &RunOutput,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
     let mut written = Vec::new();
-    let inputs = dir.join("session.can.log");
+    let inputs = dir.join(SESSION_FILES[0]);
     crate::replay::write_file(&inputs, &crate::csv2can::to_candump(&output.inputs))?;
     written.push(inputs);
-    let tx = dir.join("session.tx.log");
+    let tx = dir.join(SESSION_FILES[1]);
     crate::replay::write_file(&tx, &crate::csv2can::to_candump(&output.outputs))?;
     written.push(tx);
-    let samples = dir.join("samples.csv");
+    let samples = dir.join(SESSION_FILES[2]);
     crate::replay::write_file(&samples, &samples_csv(&output.samples))?;
     written.push(samples);
-    let metrics = dir.join("metrics.json");
+    let metrics = dir.join(SESSION_FILES[3]);
     crate::replay::write_file(&metrics, &serde_json::to_string_pretty(&output.metrics)?)?;
     written.push(metrics);
     Ok(written)

@@ -9,7 +9,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use super::{delay, validate, Identification};
 use crate::plot::{Figure, Style, PALETTE};
@@ -86,7 +86,7 @@ fn opt(v: Option<f64>, d: usize) -> String {
 
 /// Writes the report into `dir`; returns the summary's path.
 pub fn write_report(dir: &Path, id: &Identification) -> Result<PathBuf> {
-    std::fs::create_dir_all(dir)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let (sets, sims, label) = if id.validation.is_empty() {
         (&id.training, &id.training_sims, "Training")
     } else {
