@@ -5,7 +5,7 @@
 //! Every build also bakes the car into the crate (`OUT_DIR/baked.rs`, included by `baked`): the
 //! model file `models/paper.toml` by default, or the file named by the environment variable
 //! `CATMODEL_MODEL` (e.g. one `catmodel identify` wrote; absolute, or relative to the
-//! repository root). It is read with the host's reader, discretized
+//! repository root; `cargo qemu` makes a path relative to its own directory absolute first). It is read with the host's reader, discretized
 //! and designed in f64 on the host, and written as the node's configuration image (f32 words):
 //! `catmodel replay --model` builds the same configuration from the same file, so the firmware
 //! and the replay run identical numbers.

@@ -347,6 +347,12 @@ fn qemu(args: &[String]) -> Result<()> {
         || "data/bundled.can.log".to_string(),
         |p| p.display().to_string(),
     );
+    // A failed run leaves no other run's figures behind to be read as its own.
+    let timing = root().join("target").join("qemu").join("timing.json");
+    if timing.exists() {
+        std::fs::remove_file(&timing).with_context(|| format!("removing {}", timing.display()))?;
+    }
+    resolve_model_env()?;
     match qemu_run(input.as_deref()) {
         Ok(verdict) => {
             println!("{}", summary_line(&drive, &verdict));
@@ -362,6 +368,35 @@ fn qemu(args: &[String]) -> Result<()> {
             Err(Reported.into())
         }
     }
+}
+
+/// Makes `CATMODEL_MODEL` absolute for the firmware's build script and the bound, which run in
+/// the repository: a relative path is taken from the directory `cargo qemu` runs in, as its LOG
+/// is, and else from the repository root (as documented before; the same from the root). Neither
+/// there: an error naming both places.
+fn resolve_model_env() -> Result<()> {
+    let Some(model) = std::env::var_os("CATMODEL_MODEL") else {
+        return Ok(());
+    };
+    let given = PathBuf::from(&model);
+    if given.is_absolute() {
+        return Ok(());
+    }
+    let here = std::env::current_dir().context("the current directory")?;
+    let resolved = [here.join(&given), root().join(&given)]
+        .into_iter()
+        .find(|p| p.is_file())
+        .ok_or_else(|| {
+            anyhow!(
+                "CATMODEL_MODEL={}: no such file in the current directory {} nor in the \
+                 repository root {}",
+                given.display(),
+                here.display(),
+                root().display()
+            )
+        })?;
+    std::env::set_var("CATMODEL_MODEL", resolved);
+    Ok(())
 }
 
 /// Builds and runs the QEMU firmware over `input` (default: the bundled drive), writes

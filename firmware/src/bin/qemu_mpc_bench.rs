@@ -506,7 +506,7 @@ fn run_scenarios(b: &Bench, st: &mut Statics) {
         "MPC solve, obstacle passed",
         "straight road, obstacle 0.3 m right of the centre, 10 m/s",
     );
-    // No room: the fallback.
+    // No room: the stop short of it, then the fallback at rest.
     let road = Straight { half_width: 1.5 };
     let v = 8.0;
     let mut car = b.car(road.pose(0.0), v);
@@ -518,8 +518,8 @@ fn run_scenarios(b: &Bench, st: &mut Statics) {
     }
     st.stats.report(
         "mpc_blocked",
-        "MPC solve, no room (fallback)",
-        "obstacle across a 3 m corridor, 8 m/s: status 3 and braking",
+        "MPC solve, no room (stop)",
+        "obstacle across a 3 m corridor, 8 m/s: stopped short of it by the speed plan, status 3 at rest",
     );
 }
 
