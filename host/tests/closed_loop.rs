@@ -400,6 +400,27 @@ fn closed_loop_command_errors_name_the_problem() {
     }
 }
 
+/// The MPC over `course` with an RTK receiver, seed 0, the planner replanning every `replan_s`
+/// (`None`: one path).
+fn mpc_run(
+    vehicle: &VehicleConfig,
+    node: &catmodel::node::NodeConfig,
+    course: &catmodel_host::closed_loop::scenario::Course,
+    replan_s: Option<f64>,
+) -> catmodel_host::closed_loop::RunOutput {
+    let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+    let options = RunOptions {
+        seed: 0,
+        receiver: Receiver::Rtk,
+        max_time_s: 120.0,
+        replan_s,
+        start_offset_m: 0.0,
+        faults: false,
+        reversed_steering_report: false,
+    };
+    run(vehicle, course, &mut driver, "mpc", &options)
+}
+
 /// A planner that replans (the path sent again, with a new path id, as soon as the previous
 /// transfer has gone out): every replacement resets the controller and is loaded in a tick
 /// that does not solve (the previous plan is moved on by one tick instead, docs/firmware.md
@@ -409,19 +430,7 @@ fn closed_loop_command_errors_name_the_problem() {
 fn the_mpc_drives_through_a_replanning_planners_paths() {
     let (vehicle, node) = load_setup(None, None).unwrap();
     let course = scenario::course(Kind::DoubleLaneChange, &vehicle.body, 10.0);
-    let drive = |replan_s| {
-        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
-        let options = RunOptions {
-            seed: 0,
-            receiver: Receiver::Rtk,
-            max_time_s: 120.0,
-            replan_s,
-            start_offset_m: 0.0,
-            faults: false,
-            reversed_steering_report: false,
-        };
-        run(&vehicle, &course, &mut driver, "mpc", &options)
-    };
+    let drive = |replan_s| mpc_run(&vehicle, &node, &course, replan_s);
     let once = drive(None);
     let replanned = drive(Some(0.5));
     let headers = |out: &catmodel_host::closed_loop::RunOutput| {
@@ -459,17 +468,7 @@ fn a_replanning_planner_does_not_move_the_speed_of_a_car_unlike_its_model() {
     vehicle.speed_controller.actuator_lag_s = 1.2;
     let course = scenario::course(Kind::Loop, &vehicle.body, 8.0);
     let drive = |replan_s| {
-        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
-        let options = RunOptions {
-            seed: 0,
-            receiver: Receiver::Rtk,
-            max_time_s: 120.0,
-            replan_s,
-            start_offset_m: 0.0,
-            faults: false,
-            reversed_steering_report: false,
-        };
-        let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+        let out = mpc_run(&vehicle, &node, &course, replan_s);
         // Past the start's acceleration from rest (the same with one path).
         let engaged = || out.samples.iter().filter(|s| s.engaged && s.t_s > 8.0);
         let speed = engaged().map(|s| s.truth.speed).fold(0.0, f64::max);
