@@ -240,14 +240,14 @@ impl Bound {
     }
 
     /// The rows no drive ran: a row measured at 0 would count nothing, and the bound would not
-    /// be one. Only the model-predictive controller's rows may stay unmeasured, on a car whose
-    /// model file chooses the pure pursuit (its ticks never run them).
-    pub fn unmeasured(&self, controller: Controller) -> Vec<&str> {
-        let mpc_only = ["drive_reference", SOLVE_ROW, "drive_coast"];
+    /// be one. Only the rows no tick of this car can run may stay unmeasured ([`unreachable`]):
+    /// the model-predictive controller's on a car whose model file chooses the pure pursuit,
+    /// the restart on the track on a car whose position is lost before a gap can need one.
+    pub fn unmeasured(&self, unreachable: &[&str]) -> Vec<&str> {
         self.rows
             .iter()
             .filter(|r| r.runs == 0)
-            .filter(|r| controller == Controller::Mpc || !mpc_only.contains(&r.key.as_str()))
+            .filter(|r| !unreachable.contains(&r.key.as_str()))
             .map(|r| r.key.as_str())
             .collect()
     }
@@ -592,8 +592,14 @@ pub fn measure_stages() -> Result<Bound> {
             named.map_or_else(|| p.clone(), |s| s.to_string_lossy().into_owned())
         })
         .collect();
-    let bound = parse(&stderr, names)?;
-    let unmeasured = bound.unmeasured(car.controller);
+    let mut bound = parse(&stderr, names)?;
+    let unreachable = unreachable(&car);
+    for r in bound.rows.iter_mut().filter(|r| r.runs == 0) {
+        if unreachable.contains(&r.key.as_str()) {
+            r.because = format!("unreachable for this model file ({})", r.because);
+        }
+    }
+    let unmeasured = bound.unmeasured(&unreachable);
     if !unmeasured.is_empty() {
         bail!(
             "the dedicated drives never ran {} with this model file: the bound would count \
@@ -603,6 +609,30 @@ pub fn measure_stages() -> Result<Bound> {
         );
     }
     Ok(bound)
+}
+
+/// The stages no tick of `car` can run, by the code's rules, so that no drive has to reach them
+/// (their rows count 0):
+/// - the model-predictive controller's (`drive_reference`, the solve, `drive_coast`) on a car
+///   whose model file chooses the pure pursuit;
+/// - `gnss_restart` where the position is lost before a gap can need a restart: a restart
+///   takes `GAP_FILL_PER_TICK + 1` missing fixes (`src/node/gnss.rs`: a gap of
+///   `GAP_FILL_PER_TICK + 1.5` receiver periods at least), and a receiver silent for longer than
+///   `gnss_lost_us` has its position reset at the next tick, before the fix after the gap is
+///   taken when the gap is longer by more than a tick (two ticks allowed here). A 1 Hz car with
+///   `gnss_lost_s = 3`: a restart needs 3.5 s of silence, the position is gone after 3.
+pub fn unreachable(car: &NodeConfig) -> Vec<&'static str> {
+    let mut out = Vec::new();
+    if car.controller == Controller::PurePursuit {
+        out.extend(["drive_reference", SOLVE_ROW, "drive_coast"]);
+    }
+    let period_s = 1.0 / car.estimator.declared_gnss_rate_hz();
+    let restart_gap_s = (f64::from(catmodel::node::GAP_FILL_PER_TICK) + 1.5) * period_s;
+    let lost_s = car.gnss_lost_us as f64 * 1e-6;
+    if restart_gap_s > lost_s + 2.0 * catmodel::SAMPLE_PERIOD_S_F64 {
+        out.push("gnss_restart");
+    }
+    out
 }
 
 /// The model-predictive controller's solve on its most expensive path: every row of every
@@ -665,11 +695,9 @@ mod tests {
                     stage\tdrive_reference\t1\t0\t0\t0\t0\t1\tplan\t-\tonce\n\
                     stage-ticks\t9\t7000\t1\t80000\t0\nstage-done\n";
         let b = parse(text, vec!["a".into(), "b".into()]).unwrap();
-        assert_eq!(
-            b.unmeasured(Controller::Mpc),
-            vec!["gnss_fill", "drive_reference"]
-        );
-        assert_eq!(b.unmeasured(Controller::PurePursuit), vec!["gnss_fill"]);
+        assert_eq!(b.unmeasured(&[]), vec!["gnss_fill", "drive_reference"]);
+        let pursuit = ["drive_reference", SOLVE_ROW, "drive_coast"];
+        assert_eq!(b.unmeasured(&pursuit), vec!["gnss_fill"]);
     }
 
     #[test]
