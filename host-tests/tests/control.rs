@@ -7,7 +7,7 @@ use catmodel::can::codec::{
 };
 use catmodel::control::path::{
     Narrowest, Path, PathCar, PathError, Projection, Waypoint, CORRIDOR_TOLERANCE_M,
-    MAX_PATH_POINTS, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M,
+    MAX_PATH_POINTS, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M, NARROWEST_TIE_M,
 };
 use catmodel::control::planner::{PlannerEvent, PlannerInputs};
 use catmodel::control::pure_pursuit::{
@@ -620,6 +620,97 @@ fn narrowest_corridor_binds_where_a_lane_ends() {
     assert_eq!((n.left_m, n.left_station_m), (0.5, 5.0));
     let n = p.narrowest_corridor(3.0, 8.0, 0).expect("path");
     assert_eq!((n.left_m, n.left_station_m), (0.5, 8.0));
+}
+
+/// The rule `Path::narrowest_corridor` documents, by brute force over every candidate (the
+/// two ends as sampled, every point strictly between): per side the narrowest width, and the
+/// candidate farthest from `from` among those within `NARROWEST_TIE_M` of it.
+fn narrowest_by_brute_force(p: &Path, from: f32, to: f32) -> Narrowest {
+    let (lo, hi) = (from.min(to), from.max(to));
+    let (start, end) = (p.sample(lo, 0).unwrap(), p.sample(hi, 0).unwrap());
+    let (a, b) = (lo.clamp(0.0, p.length_m()), hi.clamp(0.0, p.length_m()));
+    let mut candidates = vec![(lo, start.left_m, start.right_m)];
+    for (i, w) in p.points().iter().enumerate() {
+        let s = p.station_of(i).unwrap();
+        if s > a && s < b {
+            candidates.push((s, w.left_m, w.right_m));
+        }
+    }
+    candidates.push((hi, end.left_m, end.right_m));
+    let farthest = |width: &dyn Fn(&(f32, f32, f32)) -> f32| {
+        let min = candidates.iter().map(width).fold(f32::INFINITY, f32::min);
+        let within = candidates
+            .iter()
+            .filter(|c| width(c) <= min + NARROWEST_TIE_M);
+        let station = if from <= to {
+            within.map(|c| c.0).fold(f32::NEG_INFINITY, f32::max)
+        } else {
+            within.map(|c| c.0).fold(f32::INFINITY, f32::min)
+        };
+        (min, station)
+    };
+    let (left_m, left_station_m) = farthest(&|c| c.1);
+    let (right_m, right_station_m) = farthest(&|c| c.2);
+    narrowest(left_m, left_station_m, right_m, right_station_m)
+}
+
+/// A lane that narrows by less than the tie from point to point is bound at its narrow end
+/// from either half of the body: the farthest station within the tie of the narrowest width,
+/// not the first point of the taper.
+#[test]
+fn a_slow_taper_binds_at_its_narrow_end() {
+    // Left corridor 2.0 m at point 0 narrowing by 5 mm per point, 1 m apart.
+    let mut pts = straight(0.0, 0.0, 0.0, 41, 1.0);
+    for (i, w) in pts.iter_mut().enumerate() {
+        w.left_m = 2.0 - 0.005 * i as f32;
+    }
+    let p = path_of(&pts);
+    // Rear half, axle at 30, rear end at 10: the narrowest is at the axle's end (1.85 m); the
+    // stations within 0.01 m of it are 28-30, of which 28 is the farthest from the axle.
+    let n = p.narrowest_corridor(30.0, 10.0, 0).unwrap();
+    assert!((n.left_m - 1.85).abs() < 1e-5, "{n:?}");
+    assert_eq!(n.left_station_m, 28.0);
+    assert_eq!(n, narrowest_by_brute_force(&p, 30.0, 10.0));
+}
+
+/// A path of `n` points `d` apart northwards whose corridors are drawn, per point and side,
+/// either anywhere from 0.3 to 3 m or within a few millimetres of 1 m (so that ties within
+/// `NARROWEST_TIE_M` are frequent).
+fn arb_corridor_path() -> impl Strategy<Value = Vec<Waypoint>> {
+    let width = prop_oneof![
+        0.3f32..3.0,
+        (0u8..5).prop_map(|k| 1.0 + 0.004 * f32::from(k))
+    ];
+    (2usize..=MAX_PATH_POINTS, 0.05f64..2.0).prop_flat_map(move |(n, d)| {
+        prop::collection::vec((width.clone(), width.clone()), n).prop_map(move |widths| {
+            let mut pts = straight(0.0, 0.0, 0.0, widths.len(), d);
+            for (w, (l, r)) in pts.iter_mut().zip(widths) {
+                (w.left_m, w.right_m) = (l, r);
+            }
+            pts
+        })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2048))]
+    /// The node's search (block minima, bounded whatever the body's length and the points'
+    /// density) finds what the brute force does, in both directions, from any hint, with the
+    /// ends anywhere (before, on or beyond the path).
+    #[test]
+    fn the_narrowest_corridor_is_the_brute_forces(
+        pts in arb_corridor_path(),
+        f in -0.2f32..1.2,
+        g in -0.2f32..1.2,
+        hint in 0usize..MAX_PATH_POINTS,
+    ) {
+        let p = path_of(&pts);
+        let (from, to) = (f * p.length_m(), g * p.length_m());
+        prop_assert_eq!(
+            p.narrowest_corridor(from, to, hint).unwrap(),
+            narrowest_by_brute_force(&p, from, to)
+        );
+    }
 }
 
 #[test]

@@ -169,6 +169,37 @@ pub struct PathSample {
 /// Corridor widths this close are one width in [`Path::narrowest_corridor`], m.
 pub const NARROWEST_TIE_M: f32 = 0.01;
 
+/// Points per block of the corridor's block minima ([`Path::narrowest_corridor`]): a search
+/// over any stretch of the path reads at most two partial blocks point by point and the
+/// blocks between whole, so its cost does not grow with the body's length or the points'
+/// density beyond `2 * CORRIDOR_BLOCK + MAX_PATH_POINTS / CORRIDOR_BLOCK` reads.
+const CORRIDOR_BLOCK: usize = 16;
+/// Blocks of [`CORRIDOR_BLOCK`] points a path of [`MAX_PATH_POINTS`] has.
+const CORRIDOR_BLOCKS: usize = MAX_PATH_POINTS.div_ceil(CORRIDOR_BLOCK);
+
+/// One side of the corridor: which of a waypoint's widths.
+#[derive(Clone, Copy)]
+enum Side {
+    Left,
+    Right,
+}
+
+impl Side {
+    const fn of(self, w: &Waypoint) -> f32 {
+        match self {
+            Self::Left => w.left_m,
+            Self::Right => w.right_m,
+        }
+    }
+
+    const fn of_pair(self, b: (f32, f32)) -> f32 {
+        match self {
+            Self::Left => b.0,
+            Self::Right => b.1,
+        }
+    }
+}
+
 /// Where the corridor binds a body's side ([`Path::narrowest_corridor`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Narrowest {
@@ -182,27 +213,49 @@ pub struct Narrowest {
     pub right_station_m: f32,
 }
 
-/// The running minimum of one side's corridor over ascending stations.
-struct Binding {
-    station_m: f32,
-    width_m: f32,
+/// [`Path::narrowest_corridor_located`]'s answer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NarrowestLocated {
+    /// Where the corridor binds.
+    pub narrowest: Narrowest,
+    /// The segment `narrowest.left_station_m` is on (the first or last for a station beyond
+    /// the path's ends).
+    pub left_segment: usize,
+    /// The segment `narrowest.right_station_m` is on.
+    pub right_segment: usize,
 }
 
-impl Binding {
-    const fn new(station_m: f32, width_m: f32) -> Self {
-        Self { station_m, width_m }
-    }
+/// A nearest point found by `Path::nearest_split`: its projection, its squared distance and
+/// whether it is a segment's end point rather than a foot on it.
+type Nearest = (Projection, f32, bool);
 
-    /// A narrower width moves the binding point here; an equal one (within the tie) only when
-    /// later stations win.
-    fn offer(&mut self, station_m: f32, width_m: f32, later_wins: bool) {
-        if width_m < self.width_m - NARROWEST_TIE_M
-            || (later_wins && width_m <= self.width_m + NARROWEST_TIE_M)
-        {
-            self.station_m = station_m;
-        }
-        self.width_m = math::min(self.width_m, width_m);
-    }
+/// The nearest segment so far of a search (`Path::scan_segments`).
+#[derive(Clone, Copy)]
+struct Best {
+    /// The segment (`usize::MAX`: none yet).
+    segment: usize,
+    /// Squared distance to it, m^2 (`+inf`: none yet).
+    d2: f32,
+    /// Whether the foot is clamped to one of its end points.
+    clamped: bool,
+    /// Along the segment from its start, m.
+    along: f32,
+    /// To the right of its line, m.
+    lateral: f32,
+    /// The least squared distance that cannot beat this one (see the tie), m^2.
+    reject: f32,
+}
+
+impl Best {
+    /// None yet: any finite distance beats it.
+    const NONE: Self = Self {
+        segment: usize::MAX,
+        d2: f32::INFINITY,
+        clamped: true,
+        along: 0.0,
+        lateral: 0.0,
+        reject: f32::INFINITY,
+    };
 }
 
 /// Where a point is relative to the path.
@@ -280,6 +333,9 @@ pub struct Path {
     /// The speed envelope at point `i`: the most speed squared that still meets every later
     /// point's target and stops at the end at `braking_mps2`, m^2/s^2 (see the module doc).
     reach_m2ps2: [f32; MAX_PATH_POINTS],
+    /// The narrowest corridor `(left, right)` over each block of [`CORRIDOR_BLOCK`] points,
+    /// m, taken at load.
+    corridor_block_min_m: [(f32, f32); CORRIDOR_BLOCKS],
 }
 
 impl Default for Path {
@@ -301,6 +357,7 @@ impl Path {
             max_curvature_per_m: 0.0,
             braking_mps2: DEFAULT_BRAKING_MPS2,
             reach_m2ps2: [0.0; MAX_PATH_POINTS],
+            corridor_block_min_m: [(0.0, 0.0); CORRIDOR_BLOCKS],
         }
     }
 
@@ -321,6 +378,7 @@ impl Path {
             addr_of_mut!((*slot).max_curvature_per_m).write(0.0);
             addr_of_mut!((*slot).braking_mps2).write(DEFAULT_BRAKING_MPS2);
             fill(addr_of_mut!((*slot).reach_m2ps2), 0.0);
+            fill(addr_of_mut!((*slot).corridor_block_min_m), (0.0, 0.0));
         }
     }
 
@@ -442,6 +500,27 @@ impl Path {
         self.len = n;
         self.reference_geometry();
         self.speed_envelope();
+        self.corridor_blocks();
+    }
+
+    /// The corridor's block minima (see [`Path::narrowest_corridor`]).
+    fn corridor_blocks(&mut self) {
+        let blocks = self.len.div_ceil(CORRIDOR_BLOCK);
+        for (b, min) in self
+            .corridor_block_min_m
+            .iter_mut()
+            .enumerate()
+            .take(blocks)
+        {
+            let from = b * CORRIDOR_BLOCK;
+            let block = self
+                .points
+                .get(from..(from + CORRIDOR_BLOCK).min(self.len))
+                .unwrap_or(&[]);
+            *min = block.iter().fold((f32::INFINITY, f32::INFINITY), |m, w| {
+                (math::min(m.0, w.left_m), math::min(m.1, w.right_m))
+            });
+        }
     }
 
     /// The speed envelope of every point, from the end back (see the module doc).
@@ -611,32 +690,6 @@ impl Path {
         Some((a, d, length))
     }
 
-    /// Projects `(east, north)` onto segment `i` (the end segments extend beyond the path's
-    /// ends): `(station, lateral, squared distance to the segment itself, whether the foot was
-    /// clamped to an end point)`. `lateral` is the offset from the segment's line.
-    ///
-    /// The station and offset of a point beyond the path's ends are on the extended end
-    /// segment, but its distance is to the segment itself, the end point: the extension is a
-    /// ray without end, and a path whose end points back at its start (a loop) must not take a
-    /// car at the start for one far beyond the end.
-    fn project_on(&self, i: usize, east_m: f32, north_m: f32) -> Option<(f32, f32, f32, bool)> {
-        let (a, (sin_h, cos_h), length) = self.segment(i)?;
-        let (px, py) = (east_m - a.east_m, north_m - a.north_m);
-        // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
-        let along = px * sin_h + py * cos_h;
-        let lateral = px * cos_h - py * sin_h;
-        let first = i == 0;
-        let last = i + 2 == self.len;
-        let t = match (along < 0.0 && !first, along > length && !last) {
-            (true, _) => 0.0,
-            (_, true) => length,
-            _ => along,
-        };
-        let (ex, ey) = (along - math::clamp(along, 0.0, length), lateral);
-        let station = self.station_m.get(i)? + t;
-        Some((station, lateral, ex * ex + ey * ey, t != along))
-    }
-
     /// The nearest point of the path to `(east, north)` among segments `range`, its squared
     /// distance and whether it is a segment's end point rather than a foot on it.
     fn nearest_in(
@@ -645,42 +698,136 @@ impl Path {
         east_m: f32,
         north_m: f32,
     ) -> Option<(Projection, f32, bool)> {
-        let mut best: Option<(Projection, f32, bool)> = None;
-        for i in range {
-            let Some((station_m, lateral, d2, clamped)) = self.project_on(i, east_m, north_m)
-            else {
-                break;
-            };
+        let end = range.end;
+        self.nearest_split(range, end, east_m, north_m).1
+    }
+
+    /// [`Path::nearest_in`] over segments `range` in one pass, and the same over the part of
+    /// it before segment `split`: `(before split, whole range)`.
+    fn nearest_split(
+        &self,
+        range: core::ops::Range<usize>,
+        split: usize,
+        east_m: f32,
+        north_m: f32,
+    ) -> (Option<Nearest>, Option<Nearest>) {
+        let segments = self.len.saturating_sub(1);
+        let (first, end) = (range.start, range.end.min(segments));
+        if first >= end {
+            return (None, None);
+        }
+        let mut best = Best::NONE;
+        let split = split.clamp(first, end);
+        self.scan_segments(first..split, east_m, north_m, &mut best);
+        let before_split = best;
+        self.scan_segments(split..end, east_m, north_m, &mut best);
+        (self.nearest_of(&before_split), self.nearest_of(&best))
+    }
+
+    /// [`Path::nearest_split`]'s search over segments `range` (within the path), from `best`
+    /// on. Every segment's distance is computed (the cost is the same wherever the point is);
+    /// the rest only for a segment that may beat `best`.
+    fn scan_segments(
+        &self,
+        range: core::ops::Range<usize>,
+        east_m: f32,
+        north_m: f32,
+        best: &mut Best,
+    ) {
+        let first = range.start;
+        // The segments' start points, directions, and the stations at both ends.
+        let (Some(points), Some(directions), Some(starts), Some(ends)) = (
+            self.points.get(range.clone()),
+            self.direction.get(range.clone()),
+            self.station_m.get(range.clone()),
+            self.station_m.get(first + 1..range.end + 1),
+        ) else {
+            return;
+        };
+        let last = self.len.saturating_sub(2);
+        let segments = points.iter().zip(directions).zip(starts.iter().zip(ends));
+        for (k, ((a, &(sin_h, cos_h)), (&s_a, &s_b))) in segments.enumerate() {
+            let length = s_b - s_a;
+            let (px, py) = (east_m - a.east_m, north_m - a.north_m);
+            // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
+            let along = px * sin_h + py * cos_h;
+            let lateral = px * cos_h - py * sin_h;
+            let ex = along - math::clamp(along, 0.0, length);
+            let d2 = ex * ex + lateral * lateral;
+            // No tie below lets a point this far win (most segments of a search end here).
+            if d2 >= best.reject {
+                continue;
+            }
+            let i = first + k;
+            // The end segments extend beyond the path's ends for the station and offset, but
+            // the distance is to the segment itself, the end point: the extension is a ray
+            // without end, and a path whose end points back at its start (a loop) must not
+            // take a car at the start for one far beyond the end. The foot is clamped to an
+            // end point, then, everywhere but there.
+            let clamped = (along < 0.0 && i != 0) || (along > length && i != last);
             // Near a point of a nearly straight stretch, the foot on the next segment and the
             // corner of the previous one are equally near but for the rounding of the two
             // segments' headings (1 km from the origin f32 points are 6e-5 m apart: 2e-4 rad
             // for a 0.3 m segment, which moves a squared distance by up to 4e-4 of itself).
             // The foot, the true nearest point there, wins such a tie.
-            let better = |b: f32, best_clamped: bool| match (clamped, best_clamped) {
-                (false, true) => d2 < b * (1.0 + VERTEX_TIE),
-                (true, false) => d2 < b * (1.0 - VERTEX_TIE),
-                _ => d2 < b,
+            let better = match (clamped, best.clamped) {
+                (false, true) => true,
+                (true, false) => d2 < best.d2 * (1.0 - VERTEX_TIE),
+                _ => d2 < best.d2,
             };
-            if best.is_none_or(|(_, b, best_clamped)| better(b, best_clamped)) {
-                // At a corner the nearest point is the corner itself: the offset is the
-                // distance to it, with the side of the segment's line.
-                let lateral_m = if clamped {
-                    math::sqrt(d2).copysign(lateral)
-                } else {
-                    lateral
-                };
-                best = Some((
-                    Projection {
-                        segment: i,
-                        station_m,
-                        lateral_m,
-                    },
+            if better {
+                *best = Best {
+                    segment: i,
                     d2,
                     clamped,
-                ));
+                    along,
+                    lateral,
+                    reject: d2 * (1.0 + VERTEX_TIE),
+                };
             }
         }
-        best
+    }
+
+    /// The projection `best` found (`None` if it found none).
+    fn nearest_of(&self, best: &Best) -> Option<Nearest> {
+        let Best {
+            segment: i,
+            d2,
+            clamped,
+            along,
+            lateral,
+            ..
+        } = *best;
+        let (Some(&s_a), Some(&s_b)) = (
+            self.station_m.get(i),
+            i.checked_add(1).and_then(|j| self.station_m.get(j)),
+        ) else {
+            return None;
+        };
+        let length = s_b - s_a;
+        let t = if !clamped {
+            along
+        } else if along < 0.0 {
+            0.0
+        } else {
+            length
+        };
+        // At a corner the nearest point is the corner itself: the offset is the distance to
+        // it, with the side of the segment's line.
+        let lateral_m = if clamped {
+            math::sqrt(d2).copysign(lateral)
+        } else {
+            lateral
+        };
+        Some((
+            Projection {
+                segment: i,
+                station_m: s_a + t,
+                lateral_m,
+            },
+            d2,
+            clamped,
+        ))
     }
 
     /// The projection of `(east, north)` onto the path. With `previous` (last tick's
@@ -713,22 +860,20 @@ impl Path {
     /// `prev`.
     fn window(&self, prev: &Projection) -> core::ops::Range<usize> {
         let segments = self.len.saturating_sub(1);
-        let mut lo = prev.segment.min(segments);
-        while lo > 0
-            && self
-                .station_of(lo)
-                .is_some_and(|s| s > prev.station_m - PROJECTION_BEHIND_M)
-        {
-            lo -= 1;
-        }
-        let mut hi = (prev.segment + 1).min(segments);
-        while hi < segments
-            && self
-                .station_of(hi)
-                .is_some_and(|s| s < prev.station_m + PROJECTION_AHEAD_M)
-        {
-            hi += 1;
-        }
+        let (behind, ahead) = (
+            prev.station_m - PROJECTION_BEHIND_M,
+            prev.station_m + PROJECTION_AHEAD_M,
+        );
+        // The last segment that starts at or before `behind` (or the first), no later than
+        // `prev`'s; the first point at or beyond `ahead` (or the last), after `prev`'s segment.
+        let lo = prev.segment.min(self.segment_at(behind, prev.segment));
+        let j = self.segment_at(ahead, prev.segment);
+        let first_at_or_beyond = if self.station_of(j).is_some_and(|s| s < ahead) {
+            j + 1
+        } else {
+            j
+        };
+        let hi = first_at_or_beyond.max(prev.segment + 1).min(segments);
         lo..hi
     }
 
@@ -749,9 +894,12 @@ impl Path {
             station_m: 0.0,
             lateral_m: 0.0,
         };
-        let (near_start, d2_start, corner) =
-            self.nearest_in(self.window(&start), east_m, north_m)?;
-        let (nearest, d2, _) = self.nearest_in(0..self.len.saturating_sub(1), east_m, north_m)?;
+        // The first stretch's window starts at segment 0: one pass over the whole path finds
+        // both.
+        let window = self.window(&start);
+        let (near_start, nearest) =
+            self.nearest_split(0..self.len.saturating_sub(1), window.end, east_m, north_m);
+        let ((near_start, d2_start, corner), (nearest, d2, _)) = (near_start?, nearest?);
         if !corner && math::sqrt(d2_start) <= math::sqrt(d2) + ACQUIRE_TIE_M {
             Some(near_start)
         } else {
@@ -759,18 +907,51 @@ impl Path {
         }
     }
 
-    /// Index of the segment whose span holds `station_m`, searching forward from `hint` (then
-    /// backward): stations that grow from call to call cost one step each.
+    /// Index of the segment whose span holds `station_m`: the last segment that starts at or
+    /// before it (the first one before the path). Searched from `hint` in steps that double
+    /// (forward or backward), then halved: a station near the hint costs a step or two, and
+    /// any station at most `2 log2(MAX_PATH_POINTS)` whatever the points' density.
     fn segment_at(&self, station_m: f32, hint: usize) -> usize {
         let last_segment = self.len.saturating_sub(2);
-        let mut i = hint.min(last_segment);
-        while i < last_segment && self.station_of(i + 1).is_some_and(|s| s <= station_m) {
-            i += 1;
+        let at_or_before = |i: usize| self.station_of(i).is_some_and(|s| s <= station_m);
+        let i = hint.min(last_segment);
+        // `lo` starts at or before the station (or is segment 0); `hi` is past it (or past
+        // the last segment).
+        let (mut lo, mut hi) = if at_or_before(i) {
+            let (mut lo, mut step) = (i, 1);
+            loop {
+                let next = lo + step;
+                if next > last_segment {
+                    break (lo, last_segment + 1);
+                }
+                if !at_or_before(next) {
+                    break (lo, next);
+                }
+                lo = next;
+                step *= 2;
+            }
+        } else {
+            let (mut hi, mut step) = (i, 1);
+            loop {
+                let Some(next) = hi.checked_sub(step) else {
+                    break (0, hi);
+                };
+                if at_or_before(next) {
+                    break (next, hi);
+                }
+                hi = next;
+                step *= 2;
+            }
+        };
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if at_or_before(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
         }
-        while i > 0 && self.station_of(i).is_some_and(|s| s > station_m) {
-            i -= 1;
-        }
-        i
+        lo
     }
 
     /// The segment that holds `station_m` (clamped to the path), searched from segment `hint`:
@@ -878,11 +1059,23 @@ impl Path {
     /// `None` without a path. What a controller needs to keep a body's side, between the axle
     /// and a corner, inside.
     pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<Narrowest> {
-        if !(from_m.is_finite() && to_m.is_finite()) {
+        self.narrowest_corridor_located(from_m, to_m, hint)
+            .map(|located| located.narrowest)
+    }
+
+    /// [`Path::narrowest_corridor`], with the segments its two stations are on: hints that
+    /// make sampling the path there one step.
+    pub fn narrowest_corridor_located(
+        &self,
+        from_m: f32,
+        to_m: f32,
+        hint: usize,
+    ) -> Option<NarrowestLocated> {
+        if self.len < 2 || !(from_m.is_finite() && to_m.is_finite()) {
             return None;
         }
         // The ends' stations as asked (the path extends beyond its ends, `sample`), the
-        // points between them on the path.
+        // points strictly between them on the path.
         let (lo, hi) = if from_m <= to_m {
             (from_m, to_m)
         } else {
@@ -890,34 +1083,145 @@ impl Path {
         };
         let length = self.length_m();
         let (a, b) = (math::clamp(lo, 0.0, length), math::clamp(hi, 0.0, length));
-        let start = self.sample(lo, hint)?;
-        let end = self.sample(hi, hint)?;
-        // Ascending stations; a tie goes to the later one when `to` is ahead of `from`.
-        let later_wins = from_m <= to_m;
-        let mut left = Binding::new(lo, start.left_m);
-        let mut right = Binding::new(lo, start.right_m);
-        let first = self.segment_at(a, hint) + 1;
-        for i in first..self.len {
-            let (Some(s), Some(w)) = (self.station_of(i), self.points.get(i)) else {
-                break;
+        let (seg_a, seg_b) = (self.segment_at(a, hint), self.segment_at(b, hint));
+        let start = self.widths_in(seg_a, a)?;
+        let end = self.widths_in(seg_b, b)?;
+        let first = seg_a + 1;
+        let last = if self.station_of(seg_b).is_some_and(|s| s < b) {
+            seg_b
+        } else {
+            seg_b.saturating_sub(1)
+        };
+        let inner = (first <= last && a < b).then_some((first, last));
+        let inner_min = inner.map_or((f32::INFINITY, f32::INFINITY), |(i, j)| {
+            self.corridor_min(i, j)
+        });
+        // The farthest station from `from_m` goes first, so that the first within the tie of
+        // the minimum is the one taken.
+        let ahead = from_m <= to_m;
+        let (far, near) = if ahead {
+            ((hi, seg_b), (lo, seg_a))
+        } else {
+            ((lo, seg_a), (hi, seg_b))
+        };
+        let side = |side: Side| {
+            let ends = (side.of_pair(start), side.of_pair(end));
+            let inner_min = side.of_pair(inner_min);
+            let width = math::min(math::min(ends.0, ends.1), inner_min);
+            let within = width + NARROWEST_TIE_M;
+            let far_width = if ahead { ends.1 } else { ends.0 };
+            let at = if far_width <= within {
+                far
+            } else if let Some(k) = inner
+                .filter(|_| inner_min <= within)
+                .and_then(|(i, j)| self.farthest_within(side, i, j, within, ahead))
+            {
+                // A point between the ends starts its own segment.
+                self.station_of(k).map_or(near, |s| (s, k))
+            } else {
+                near
             };
-            if s >= b {
-                break;
-            }
-            if s <= a {
-                continue;
-            }
-            left.offer(s, w.left_m, later_wins);
-            right.offer(s, w.right_m, later_wins);
-        }
-        left.offer(hi, end.left_m, later_wins);
-        right.offer(hi, end.right_m, later_wins);
-        Some(Narrowest {
-            left_m: left.width_m,
-            left_station_m: left.station_m,
-            right_m: right.width_m,
-            right_station_m: right.station_m,
+            (width, at)
+        };
+        let (left_m, (left_station_m, left_segment)) = side(Side::Left);
+        let (right_m, (right_station_m, right_segment)) = side(Side::Right);
+        Some(NarrowestLocated {
+            narrowest: Narrowest {
+                left_m,
+                left_station_m,
+                right_m,
+                right_station_m,
+            },
+            left_segment,
+            right_segment,
         })
+    }
+
+    /// The corridor `(left, right)` at station `station_m` (on the path) of segment `i`, m:
+    /// linear between its points, as [`Path::sample`] has it.
+    fn widths_in(&self, i: usize, station_m: f32) -> Option<(f32, f32)> {
+        let (Some(a), Some(b), Some(&s_a), Some(&s_b)) = (
+            self.points.get(i),
+            self.points.get(i + 1),
+            self.station_m.get(i),
+            self.station_m.get(i + 1),
+        ) else {
+            return None;
+        };
+        let seg_len = s_b - s_a;
+        let f = if seg_len > 0.0 {
+            (station_m - s_a) / seg_len
+        } else {
+            0.0
+        };
+        let lerp = |x: f32, y: f32| x + (y - x) * f;
+        Some((lerp(a.left_m, b.left_m), lerp(a.right_m, b.right_m)))
+    }
+
+    /// The narrowest corridor `(left, right)` over points `i..=j` (`i <= j < len`), m: the
+    /// blocks wholly inside from their minima, the rest point by point.
+    fn corridor_min(&self, i: usize, j: usize) -> (f32, f32) {
+        let both = |m: (f32, f32), w: (f32, f32)| (math::min(m.0, w.0), math::min(m.1, w.1));
+        let none = (f32::INFINITY, f32::INFINITY);
+        let points = |from: usize, to: usize| {
+            self.points
+                .get(from..to)
+                .unwrap_or(&[])
+                .iter()
+                .fold(none, |m, w| both(m, (w.left_m, w.right_m)))
+        };
+        let (first_block, last_block) = (i.div_ceil(CORRIDOR_BLOCK), (j + 1) / CORRIDOR_BLOCK);
+        if first_block >= last_block {
+            return points(i, j + 1);
+        }
+        let blocks = self
+            .corridor_block_min_m
+            .get(first_block..last_block)
+            .unwrap_or(&[])
+            .iter()
+            .fold(none, |m, &b| both(m, b));
+        let head = points(i, first_block * CORRIDOR_BLOCK);
+        let tail = points(last_block * CORRIDOR_BLOCK, j + 1);
+        both(both(head, blocks), tail)
+    }
+
+    /// The point of `i..=j` (`i <= j < len`) farthest along (`ahead`) or farthest back whose
+    /// corridor on `side` is at most `within_m`: blocks whose minimum is wider are skipped.
+    fn farthest_within(
+        &self,
+        side: Side,
+        i: usize,
+        j: usize,
+        within_m: f32,
+        ahead: bool,
+    ) -> Option<usize> {
+        let fits = |k: usize| self.points.get(k).is_some_and(|w| side.of(w) <= within_m);
+        let block_fits = |b: usize| {
+            self.corridor_block_min_m
+                .get(b)
+                .is_some_and(|&m| side.of_pair(m) <= within_m)
+        };
+        // Blocks are visited from the far end; a block is searched point by point only if its
+        // minimum (a partial block's too: its points are among the block's) fits, and the
+        // first that holds one holds the answer.
+        let (first_block, last_block) = (i / CORRIDOR_BLOCK, j / CORRIDOR_BLOCK);
+        let search = |b: usize| {
+            if !block_fits(b) {
+                return None;
+            }
+            let from = (b * CORRIDOR_BLOCK).max(i);
+            let to = ((b + 1) * CORRIDOR_BLOCK - 1).min(j);
+            if ahead {
+                (from..=to).rev().find(|&k| fits(k))
+            } else {
+                (from..=to).find(|&k| fits(k))
+            }
+        };
+        if ahead {
+            (first_block..=last_block).rev().find_map(search)
+        } else {
+            (first_block..=last_block).find_map(search)
+        }
     }
 
     /// The car's pose relative to the path (projection of the rear axle, heading error, the

@@ -771,17 +771,24 @@ fn side_points(
     end_m: f32,
     hint: usize,
 ) -> Option<(SidePoint, SidePoint)> {
-    let n = path.narrowest_corridor(axle_m, end_m, hint)?;
+    let located = path.narrowest_corridor_located(axle_m, end_m, hint)?;
+    let n = located.narrowest;
     let widths = (n.left_m, n.right_m);
     let left = SidePoint {
-        sample: sample(&path.sample_geometry(n.left_station_m, hint)?, widths),
+        sample: sample(
+            &path.sample_geometry(n.left_station_m, located.left_segment)?,
+            widths,
+        ),
         ahead_m: n.left_station_m - axle_m,
     };
     let right = if n.right_station_m == n.left_station_m {
         left
     } else {
         SidePoint {
-            sample: sample(&path.sample_geometry(n.right_station_m, hint)?, widths),
+            sample: sample(
+                &path.sample_geometry(n.right_station_m, located.right_segment)?,
+                widths,
+            ),
             ahead_m: n.right_station_m - axle_m,
         }
     };

@@ -164,6 +164,8 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         corrupt_per_tick: rng.below(16) as u32,
         unknown_per_tick: rng.below(60) as u32,
         path_points: [0, 0, 2, 5, 40, 256][rng.below(6) as usize],
+        path_spacing_m: [1.0, 0.5, 0.08][rng.below(3) as usize],
+        obstacles: rng.below(5) as usize,
     }
 }
 
@@ -188,7 +190,11 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
             }
             6 => out.burst = fresh.burst,
             7 => out.corrupt_per_tick = fresh.corrupt_per_tick,
-            8 => out.path_points = fresh.path_points,
+            8 => {
+                out.path_points = fresh.path_points;
+                out.path_spacing_m = fresh.path_spacing_m;
+                out.obstacles = fresh.obstacles;
+            }
             _ => out.unknown_per_tick = fresh.unknown_per_tick,
         }
     }

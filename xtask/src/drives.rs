@@ -14,11 +14,12 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use catmodel::can::codec::{
-    GnssCogSog, GnssPosition, LocalOrigin, PathHeader, PathLimits, PathPoint, PedalReport,
-    SpeedReport, SteeringReport,
+    GnssCogSog, GnssPosition, LocalOrigin, Obstacle, ObstacleCircle, PathHeader, PathLimits,
+    PathPoint, PedalReport, SpeedReport, SteeringReport,
 };
 use catmodel::can::spec::MAX_PATH_POINTS;
 use catmodel::can::{candump, CanFrame, CanId, TimedFrame};
+use catmodel::control::mpc::MAX_OBSTACLES;
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::estimator::TRACK_LEN;
 use catmodel::node::stage::GAP_FILL_PER_TICK;
@@ -126,6 +127,12 @@ pub struct Spec {
     /// car is on it, so the controller plans) paced at the node's rule for a conforming
     /// planner (`PLANNER_FRAMES_PER_TICK`).
     pub path_points: usize,
+    /// How far apart the planner's points are, m.
+    pub path_spacing_m: f64,
+    /// Obstacles the planner sends after each path (at most the node's slots): circles of
+    /// 0.3 m evenly along the path, 2 m to the right of it, inside its corridor; each path's
+    /// are somewhere else.
+    pub obstacles: usize,
 }
 
 impl Spec {
@@ -152,6 +159,8 @@ impl Spec {
             corrupt_per_tick: 0,
             unknown_per_tick: 0,
             path_points: 0,
+            path_spacing_m: 1.0,
+            obstacles: 0,
         }
     }
 }
@@ -179,12 +188,17 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
         }
         .encode(next(4)),
     ];
-    let per_path = 2 * points + 1;
+    let obstacles = spec.obstacles.min(MAX_OBSTACLES);
+    let per_path = 2 * points + 1 + obstacles;
     let ticks = (spec.seconds / 0.02) as usize;
     let paths = ticks * PLANNER_FRAMES_PER_TICK / per_path + 1;
     for k in 0..paths {
         let path_id = (k % 16) as u8;
-        let track = truth.track_ahead(frame_time_s(frames.len()) - 0.2, points, 1.0);
+        let track = truth.track_ahead(
+            frame_time_s(frames.len()) - 0.2,
+            points,
+            spec.path_spacing_m,
+        );
         frames.push(
             PathHeader {
                 path_id,
@@ -212,6 +226,24 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
                     right_m: 3.0,
                 }
                 .encode(next(2)),
+            );
+        }
+        for slot in 0..obstacles {
+            let i = (slot + 1) * points / (obstacles + 1);
+            let (Some(&(e0, n0)), Some(&(e1, n1))) = (track.get(i), track.get(i + 1)) else {
+                continue;
+            };
+            let heading = (e1 - e0).atan2(n1 - n0);
+            frames.push(
+                Obstacle {
+                    obstacle_id: slot as u8,
+                    circle: Some(ObstacleCircle {
+                        east_m: (e0 + 2.0 * heading.cos()) as f32,
+                        north_m: (n0 - 2.0 * heading.sin()) as f32,
+                        radius_m: 0.3,
+                    }),
+                }
+                .encode(next(3)),
             );
         }
     }
@@ -735,6 +767,13 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
             path_points: MAX_PATH_POINTS,
             ..plain("stages-path-long")
+        },
+        Spec {
+            seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
+            path_points: MAX_PATH_POINTS,
+            path_spacing_m: 0.08,
+            obstacles: MAX_OBSTACLES,
+            ..plain("stages-path-dense")
         },
         Spec {
             seconds: (4.0_f64).max(1.0 + 40.0 * period_s),
