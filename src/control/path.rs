@@ -173,7 +173,7 @@ pub const NARROWEST_TIE_M: f32 = 0.01;
 /// over any stretch of the path reads at most two partial blocks point by point and the
 /// blocks between whole, so its cost does not grow with the body's length or the points'
 /// density beyond `2 * CORRIDOR_BLOCK + MAX_PATH_POINTS / CORRIDOR_BLOCK` reads.
-const CORRIDOR_BLOCK: usize = 16;
+const CORRIDOR_BLOCK: usize = 8;
 /// Blocks of [`CORRIDOR_BLOCK`] points a path of [`MAX_PATH_POINTS`] has.
 const CORRIDOR_BLOCKS: usize = MAX_PATH_POINTS.div_ceil(CORRIDOR_BLOCK);
 
@@ -229,6 +229,9 @@ pub struct NarrowestLocated {
 /// whether it is a segment's end point rather than a foot on it.
 type Nearest = (Projection, f32, bool);
 
+/// Every how many points a search samples the path's points first (`Path::scan_segments`).
+const SCAN_STRIDE: usize = 8;
+
 /// The nearest segment so far of a search (`Path::scan_segments`).
 #[derive(Clone, Copy)]
 struct Best {
@@ -236,14 +239,14 @@ struct Best {
     segment: usize,
     /// Squared distance to it, m^2 (`+inf`: none yet).
     d2: f32,
+    /// What the search minimises ([`Best::key`]).
+    key: f32,
     /// Whether the foot is clamped to one of its end points.
     clamped: bool,
     /// Along the segment from its start, m.
     along: f32,
     /// To the right of its line, m.
     lateral: f32,
-    /// The least squared distance that cannot beat this one (see the tie), m^2.
-    reject: f32,
 }
 
 impl Best {
@@ -251,11 +254,25 @@ impl Best {
     const NONE: Self = Self {
         segment: usize::MAX,
         d2: f32::INFINITY,
+        key: f32::INFINITY,
         clamped: true,
         along: 0.0,
         lateral: 0.0,
-        reject: f32::INFINITY,
     };
+
+    /// The squared distance, a corner's [`VERTEX_TIE`] farther. Near a point of a nearly
+    /// straight stretch, the foot on the next segment and the corner of the previous one are
+    /// equally near but for the rounding of the two segments' headings (1 km from the origin
+    /// f32 points are 6e-5 m apart: 2e-4 rad for a 0.3 m segment, which moves a squared
+    /// distance by up to 4e-4 of itself): the foot, the true nearest point there, wins such a
+    /// tie.
+    fn key(d2: f32, clamped: bool) -> f32 {
+        if clamped {
+            d2 * (1.0 + VERTEX_TIE)
+        } else {
+            d2
+        }
+    }
 }
 
 /// Where a point is relative to the path.
@@ -716,24 +733,26 @@ impl Path {
         if first >= end {
             return (None, None);
         }
-        let mut best = Best::NONE;
         let split = split.clamp(first, end);
-        self.scan_segments(first..split, east_m, north_m, &mut best);
-        let before_split = best;
-        self.scan_segments(split..end, east_m, north_m, &mut best);
+        let before_split = self.scan_segments(first..split, east_m, north_m, Best::NONE);
+        let best = self.scan_segments(split..end, east_m, north_m, before_split);
         (self.nearest_of(&before_split), self.nearest_of(&best))
     }
 
     /// [`Path::nearest_split`]'s search over segments `range` (within the path), from `best`
-    /// on. Every segment's distance is computed (the cost is the same wherever the point is);
-    /// the rest only for a segment that may beat `best`.
+    /// on; the best after them: the least key ([`Best::key`]), the first segment of equal
+    /// ones. Every segment's distance is computed (the cost is the same wherever the point
+    /// is), the rest only for a segment that may beat the best: no more than the nearest of
+    /// every [`SCAN_STRIDE`]th point (a point is no nearer than the segments it ends), so that
+    /// a point the path approaches from afar does not make every segment a new best.
     fn scan_segments(
         &self,
         range: core::ops::Range<usize>,
         east_m: f32,
         north_m: f32,
-        best: &mut Best,
-    ) {
+        best: Best,
+    ) -> Best {
+        let mut best = best;
         let first = range.start;
         // The segments' start points, directions, and the stations at both ends.
         let (Some(points), Some(directions), Some(starts), Some(ends)) = (
@@ -742,8 +761,21 @@ impl Path {
             self.station_m.get(range.clone()),
             self.station_m.get(first + 1..range.end + 1),
         ) else {
-            return;
+            return best;
         };
+        let d2_to = |w: &Waypoint| {
+            let (dx, dy) = (east_m - w.east_m, north_m - w.north_m);
+            dx * dx + dy * dy
+        };
+        let sampled = points
+            .iter()
+            .step_by(SCAN_STRIDE)
+            .chain(self.points.get(range.end))
+            .fold(f32::INFINITY, |m, w| math::min(m, d2_to(w)));
+        // The key of the segment that starts (or ends) at the nearest sampled point is at most
+        // this (the margins cover the rounding of the two ways of computing a distance, and a
+        // point on the path).
+        let mut reject = math::min(best.key, sampled * ((1.0 + VERTEX_TIE) * 1.001) + 1e-4);
         let last = self.len.saturating_sub(2);
         let segments = points.iter().zip(directions).zip(starts.iter().zip(ends));
         for (k, ((a, &(sin_h, cos_h)), (&s_a, &s_b))) in segments.enumerate() {
@@ -754,8 +786,9 @@ impl Path {
             let lateral = px * cos_h - py * sin_h;
             let ex = along - math::clamp(along, 0.0, length);
             let d2 = ex * ex + lateral * lateral;
-            // No tie below lets a point this far win (most segments of a search end here).
-            if d2 >= best.reject {
+            // A key is at least the distance: no key this far beats the best (nor a NaN's,
+            // below).
+            if d2 >= reject {
                 continue;
             }
             let i = first + k;
@@ -765,27 +798,20 @@ impl Path {
             // take a car at the start for one far beyond the end. The foot is clamped to an
             // end point, then, everywhere but there.
             let clamped = (along < 0.0 && i != 0) || (along > length && i != last);
-            // Near a point of a nearly straight stretch, the foot on the next segment and the
-            // corner of the previous one are equally near but for the rounding of the two
-            // segments' headings (1 km from the origin f32 points are 6e-5 m apart: 2e-4 rad
-            // for a 0.3 m segment, which moves a squared distance by up to 4e-4 of itself).
-            // The foot, the true nearest point there, wins such a tie.
-            let better = match (clamped, best.clamped) {
-                (false, true) => true,
-                (true, false) => d2 < best.d2 * (1.0 - VERTEX_TIE),
-                _ => d2 < best.d2,
-            };
-            if better {
-                *best = Best {
+            let key = Best::key(d2, clamped);
+            if key < best.key {
+                best = Best {
                     segment: i,
                     d2,
+                    key,
                     clamped,
                     along,
                     lateral,
-                    reject: d2 * (1.0 + VERTEX_TIE),
                 };
+                reject = key;
             }
         }
+        best
     }
 
     /// The projection `best` found (`None` if it found none).

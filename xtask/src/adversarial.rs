@@ -166,6 +166,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         path_points: [0, 0, 2, 5, 40, 256][rng.below(6) as usize],
         path_spacing_m: [1.0, 0.5, 0.08][rng.below(3) as usize],
         obstacles: rng.below(5) as usize,
+        obstacles_at_centre: rng.below(2) == 0,
     }
 }
 
@@ -194,6 +195,7 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
                 out.path_points = fresh.path_points;
                 out.path_spacing_m = fresh.path_spacing_m;
                 out.obstacles = fresh.obstacles;
+                out.obstacles_at_centre = fresh.obstacles_at_centre;
             }
             _ => out.unknown_per_tick = fresh.unknown_per_tick,
         }

@@ -130,9 +130,13 @@ pub struct Spec {
     /// How far apart the planner's points are, m.
     pub path_spacing_m: f64,
     /// Obstacles the planner sends after each path (at most the node's slots): circles of
-    /// 0.3 m evenly along the path, 2 m to the right of it, inside its corridor; each path's
-    /// are somewhere else.
+    /// 0.3 m 2 m to the right of the path's last points, inside its corridor (a search of the
+    /// path from its start comes nearer at every segment), or, with `obstacles_at_centre`, all
+    /// at the centre of the circle through the path's first, middle and last points (on a
+    /// path that runs round them, every segment is as near).
     pub obstacles: usize,
+    /// See [`Spec::obstacles`].
+    pub obstacles_at_centre: bool,
 }
 
 impl Spec {
@@ -161,6 +165,7 @@ impl Spec {
             path_points: 0,
             path_spacing_m: 1.0,
             obstacles: 0,
+            obstacles_at_centre: false,
         }
     }
 }
@@ -228,18 +233,23 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
                 .encode(next(2)),
             );
         }
+        let centre = circumcentre(&track);
         for slot in 0..obstacles {
-            let i = (slot + 1) * points / (obstacles + 1);
+            let i = points.saturating_sub(2 + slot);
             let (Some(&(e0, n0)), Some(&(e1, n1))) = (track.get(i), track.get(i + 1)) else {
                 continue;
             };
             let heading = (e1 - e0).atan2(n1 - n0);
+            let (east, north) = match centre {
+                Some(c) if spec.obstacles_at_centre => c,
+                _ => (e0 + 2.0 * heading.cos(), n0 - 2.0 * heading.sin()),
+            };
             frames.push(
                 Obstacle {
                     obstacle_id: slot as u8,
                     circle: Some(ObstacleCircle {
-                        east_m: (e0 + 2.0 * heading.cos()) as f32,
-                        north_m: (n0 - 2.0 * heading.sin()) as f32,
+                        east_m: east as f32,
+                        north_m: north as f32,
                         radius_m: 0.3,
                     }),
                 }
@@ -258,6 +268,24 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
         });
     }
     out
+}
+
+/// The centre of the circle through the first, middle and last of `points` (`None` if they
+/// are in a line).
+fn circumcentre(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let (&a, &b, &c) = (
+        points.first()?,
+        points.get(points.len() / 2)?,
+        points.last()?,
+    );
+    let d = 2.0 * (a.0 * (b.1 - c.1) + b.0 * (c.1 - a.1) + c.0 * (a.1 - b.1));
+    if d.abs() < 1e-9 {
+        return None;
+    }
+    let sq = |p: (f64, f64)| p.0 * p.0 + p.1 * p.1;
+    let x = (sq(a) * (b.1 - c.1) + sq(b) * (c.1 - a.1) + sq(c) * (a.1 - b.1)) / d;
+    let y = (sq(a) * (c.0 - b.0) + sq(b) * (a.0 - c.0) + sq(c) * (b.0 - a.0)) / d;
+    Some((x, y))
 }
 
 /// When the planner's `i`-th frame goes out, s into the drive: PLANNER_FRAMES_PER_TICK per
@@ -774,6 +802,17 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             path_spacing_m: 0.08,
             obstacles: MAX_OBSTACLES,
             ..plain("stages-path-dense")
+        },
+        // The same on a path that runs round its obstacles: the car at full lock.
+        Spec {
+            seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
+            speed: Profile::Const(4.0),
+            steer: Profile::Const(100.0),
+            path_points: MAX_PATH_POINTS,
+            path_spacing_m: 0.08,
+            obstacles: MAX_OBSTACLES,
+            obstacles_at_centre: true,
+            ..plain("stages-path-round")
         },
         Spec {
             seconds: (4.0_f64).max(1.0 + 40.0 * period_s),
