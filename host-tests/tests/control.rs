@@ -698,6 +698,27 @@ proptest! {
     }
 }
 
+proptest! {
+    /// Four points projected in one pass are where each is projected alone.
+    #[test]
+    fn projections_in_one_pass_are_each_ones(
+        pts in arb_path(),
+        offsets in prop::collection::vec((-0.1f32..1.1, -20.0f32..20.0), 4),
+    ) {
+        let p = path_of(&pts);
+        let mut points = [(0.0, 0.0); 4];
+        for (q, &(f, offset)) in points.iter_mut().zip(&offsets) {
+            let on = p.sample(f * p.length_m(), 0).unwrap();
+            let (s, c) = (on.heading_rad.sin(), on.heading_rad.cos());
+            *q = (on.east_m + offset * c, on.north_m - offset * s);
+        }
+        let each = p.project_each(points);
+        for (q, one) in points.iter().zip(each) {
+            prop_assert_eq!(one, p.project(q.0, q.1, None));
+        }
+    }
+}
+
 /// The rule `Path::narrowest_corridor` documents, by brute force over every candidate (the
 /// two ends as sampled, every point strictly between): per side the narrowest width, and the
 /// candidate farthest from `from` among those within `NARROWEST_TIE_M` of it.

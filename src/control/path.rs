@@ -177,29 +177,6 @@ const CORRIDOR_BLOCK: usize = 8;
 /// Blocks of [`CORRIDOR_BLOCK`] points a path of [`MAX_PATH_POINTS`] has.
 const CORRIDOR_BLOCKS: usize = MAX_PATH_POINTS.div_ceil(CORRIDOR_BLOCK);
 
-/// One side of the corridor: which of a waypoint's widths.
-#[derive(Clone, Copy)]
-enum Side {
-    Left,
-    Right,
-}
-
-impl Side {
-    const fn of(self, w: &Waypoint) -> f32 {
-        match self {
-            Self::Left => w.left_m,
-            Self::Right => w.right_m,
-        }
-    }
-
-    const fn of_pair(self, b: (f32, f32)) -> f32 {
-        match self {
-            Self::Left => b.0,
-            Self::Right => b.1,
-        }
-    }
-}
-
 /// Where the corridor binds a body's side ([`Path::narrowest_corridor`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Narrowest {
@@ -740,11 +717,7 @@ impl Path {
     }
 
     /// [`Path::nearest_split`]'s search over segments `range` (within the path), from `best`
-    /// on; the best after them: the least key ([`Best::key`]), the first segment of equal
-    /// ones. Every segment's distance is computed (the cost is the same wherever the point
-    /// is), the rest only for a segment that may beat the best: no more than the nearest of
-    /// every [`SCAN_STRIDE`]th point (a point is no nearer than the segments it ends), so that
-    /// a point the path approaches from afar does not make every segment a new best.
+    /// on; the best after them ([`Path::scan_segments_each`] for one point).
     fn scan_segments(
         &self,
         range: core::ops::Range<usize>,
@@ -752,6 +725,32 @@ impl Path {
         north_m: f32,
         best: Best,
     ) -> Best {
+        let [best] = self.scan_segments_each(range, [(east_m, north_m)], [best]);
+        best
+    }
+
+    /// The projections onto the path of `points` (east, north; each finite), each as
+    /// [`Path::project`] finds it without a previous projection (`None` without a path), in one
+    /// pass over the segments: each segment's data read once for all of them.
+    pub fn project_each<const N: usize>(&self, points: [(f32, f32); N]) -> [Option<Projection>; N] {
+        let segments = self.len.saturating_sub(1);
+        let best = self.scan_segments_each(0..segments, points, [Best::NONE; N]);
+        best.map(|b| self.nearest_of(&b).map(|(p, _, _)| p))
+    }
+
+    /// The search over segments `range` (within the path) for each of `points`, from its
+    /// `best` on; the best of each after them: the least key ([`Best::key`]), the first segment
+    /// of equal ones. Every segment's distance is computed (the cost is the same wherever the
+    /// points are), the rest only for a segment that may beat the best: no more than the nearest
+    /// of every [`SCAN_STRIDE`]th point (a point is no nearer than the segments it ends), so
+    /// that a point the path approaches from afar does not make every segment a new best.
+    #[inline(never)]
+    fn scan_segments_each<const N: usize>(
+        &self,
+        range: core::ops::Range<usize>,
+        points_m: [(f32, f32); N],
+        best: [Best; N],
+    ) -> [Best; N] {
         let mut best = best;
         let first = range.start;
         // The segments' start points, directions, and the stations at both ends.
@@ -763,52 +762,62 @@ impl Path {
         ) else {
             return best;
         };
-        let d2_to = |w: &Waypoint| {
-            let (dx, dy) = (east_m - w.east_m, north_m - w.north_m);
-            dx * dx + dy * dy
-        };
-        let sampled = points
+        let mut sampled = [f32::INFINITY; N];
+        for w in points
             .iter()
             .step_by(SCAN_STRIDE)
             .chain(self.points.get(range.end))
-            .fold(f32::INFINITY, |m, w| math::min(m, d2_to(w)));
+        {
+            for (m, &(east_m, north_m)) in sampled.iter_mut().zip(&points_m) {
+                let (dx, dy) = (east_m - w.east_m, north_m - w.north_m);
+                *m = math::min(*m, dx * dx + dy * dy);
+            }
+        }
         // The key of the segment that starts (or ends) at the nearest sampled point is at most
         // this (the margins cover the rounding of the two ways of computing a distance, and a
         // point on the path).
-        let mut reject = math::min(best.key, sampled * ((1.0 + VERTEX_TIE) * 1.001) + 1e-4);
+        let mut reject = [0.0; N];
+        for ((r, b), m) in reject.iter_mut().zip(&best).zip(&sampled) {
+            *r = math::min(b.key, m * ((1.0 + VERTEX_TIE) * 1.001) + 1e-4);
+        }
         let last = self.len.saturating_sub(2);
         let segments = points.iter().zip(directions).zip(starts.iter().zip(ends));
         for (k, ((a, &(sin_h, cos_h)), (&s_a, &s_b))) in segments.enumerate() {
             let length = s_b - s_a;
-            let (px, py) = (east_m - a.east_m, north_m - a.north_m);
-            // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
-            let along = px * sin_h + py * cos_h;
-            let lateral = px * cos_h - py * sin_h;
-            let ex = along - math::clamp(along, 0.0, length);
-            let d2 = ex * ex + lateral * lateral;
-            // A key is at least the distance: no key this far beats the best (nor a NaN's,
-            // below).
-            if d2 >= reject {
-                continue;
-            }
-            let i = first + k;
-            // The end segments extend beyond the path's ends for the station and offset, but
-            // the distance is to the segment itself, the end point: the extension is a ray
-            // without end, and a path whose end points back at its start (a loop) must not
-            // take a car at the start for one far beyond the end. The foot is clamped to an
-            // end point, then, everywhere but there.
-            let clamped = (along < 0.0 && i != 0) || (along > length && i != last);
-            let key = Best::key(d2, clamped);
-            if key < best.key {
-                best = Best {
-                    segment: i,
-                    d2,
-                    key,
-                    clamped,
-                    along,
-                    lateral,
-                };
-                reject = key;
+            for ((b, r), &(east_m, north_m)) in
+                best.iter_mut().zip(reject.iter_mut()).zip(&points_m)
+            {
+                let (px, py) = (east_m - a.east_m, north_m - a.north_m);
+                // Along the segment (unit vector (sin h, cos h)) and to its right
+                // ((cos h, -sin h)).
+                let along = px * sin_h + py * cos_h;
+                let lateral = px * cos_h - py * sin_h;
+                let ex = along - math::clamp(along, 0.0, length);
+                let d2 = ex * ex + lateral * lateral;
+                // A key is at least the distance: no key this far beats the best (nor a
+                // NaN's, below).
+                if d2 >= *r {
+                    continue;
+                }
+                let i = first + k;
+                // The end segments extend beyond the path's ends for the station and offset,
+                // but the distance is to the segment itself, the end point: the extension is
+                // a ray without end, and a path whose end points back at its start (a loop)
+                // must not take a car at the start for one far beyond the end. The foot is
+                // clamped to an end point, then, everywhere but there.
+                let clamped = (along < 0.0 && i != 0) || (along > length && i != last);
+                let key = Best::key(d2, clamped);
+                if key < b.key {
+                    *b = Best {
+                        segment: i,
+                        d2,
+                        key,
+                        clamped,
+                        along,
+                        lateral,
+                    };
+                    *r = key;
+                }
             }
         }
         best
@@ -1130,27 +1139,48 @@ impl Path {
         } else {
             ((lo, seg_a), (hi, seg_b))
         };
-        let side = |side: Side| {
-            let ends = (side.of_pair(start), side.of_pair(end));
-            let inner_min = side.of_pair(inner_min);
-            let width = math::min(math::min(ends.0, ends.1), inner_min);
-            let within = width + NARROWEST_TIE_M;
-            let far_width = if ahead { ends.1 } else { ends.0 };
-            let at = if far_width <= within {
-                far
-            } else if let Some(k) = inner
-                .filter(|_| inner_min <= within)
-                .and_then(|(i, j)| self.farthest_within(side, i, j, within, ahead))
-            {
-                // A point between the ends starts its own segment.
-                self.station_of(k).map_or(near, |s| (s, k))
+        // Per side: the narrowest width, the tie around it, and whether the far end is within
+        // it (then it binds there); else the farthest point between the ends within it, else
+        // the near end.
+        let widths = (
+            math::min(math::min(start.0, end.0), inner_min.0),
+            math::min(math::min(start.1, end.1), inner_min.1),
+        );
+        let within = (widths.0 + NARROWEST_TIE_M, widths.1 + NARROWEST_TIE_M);
+        let far_widths = if ahead { end } else { start };
+        let far_fits = (far_widths.0 <= within.0, far_widths.1 <= within.1);
+        // A side searched between the ends only if the far end does not bind it and a point
+        // there may (`-inf`: not searched).
+        let search = |far_fits: bool, inner_min: f32, within: f32| {
+            if far_fits || inner_min > within {
+                f32::NEG_INFINITY
             } else {
-                near
-            };
-            (width, at)
+                within
+            }
         };
-        let (left_m, (left_station_m, left_segment)) = side(Side::Left);
-        let (right_m, (right_station_m, right_segment)) = side(Side::Right);
+        let found = inner.map_or((None, None), |(i, j)| {
+            self.farthest_within(
+                i,
+                j,
+                (
+                    search(far_fits.0, inner_min.0, within.0),
+                    search(far_fits.1, inner_min.1, within.1),
+                ),
+                ahead,
+            )
+        });
+        let at = |far_fits: bool, found: Option<usize>| {
+            if far_fits {
+                far
+            } else {
+                // A point between the ends starts its own segment.
+                found
+                    .and_then(|k| self.station_of(k).map(|s| (s, k)))
+                    .unwrap_or(near)
+            }
+        };
+        let (left_m, (left_station_m, left_segment)) = (widths.0, at(far_fits.0, found.0));
+        let (right_m, (right_station_m, right_segment)) = (widths.1, at(far_fits.1, found.1));
         Some(NarrowestLocated {
             narrowest: Narrowest {
                 left_m,
@@ -1211,43 +1241,69 @@ impl Path {
         both(both(head, blocks), tail)
     }
 
-    /// The point of `i..=j` (`i <= j < len`) farthest along (`ahead`) or farthest back whose
-    /// corridor on `side` is at most `within_m`: blocks whose minimum is wider are skipped.
+    /// The points of `i..=j` (`i <= j < len`) farthest along (`ahead`) or farthest back whose
+    /// corridor is at most `within_m` `(left, right)`, both sides in one pass (a side whose
+    /// bound is `-inf` is not searched): blocks whose minimum is wider are skipped, and a block
+    /// is read point by point from its far end only while a side it may hold is unfound.
     fn farthest_within(
         &self,
-        side: Side,
         i: usize,
         j: usize,
-        within_m: f32,
+        within_m: (f32, f32),
         ahead: bool,
-    ) -> Option<usize> {
-        let fits = |k: usize| self.points.get(k).is_some_and(|w| side.of(w) <= within_m);
-        let block_fits = |b: usize| {
-            self.corridor_block_min_m
-                .get(b)
-                .is_some_and(|&m| side.of_pair(m) <= within_m)
-        };
-        // Blocks are visited from the far end; a block is searched point by point only if its
-        // minimum (a partial block's too: its points are among the block's) fits, and the
-        // first that holds one holds the answer.
+    ) -> (Option<usize>, Option<usize>) {
+        let (mut left, mut right) = (None, None);
+        let (mut want_left, mut want_right) = (
+            within_m.0 > f32::NEG_INFINITY,
+            within_m.1 > f32::NEG_INFINITY,
+        );
         let (first_block, last_block) = (i / CORRIDOR_BLOCK, j / CORRIDOR_BLOCK);
-        let search = |b: usize| {
-            if !block_fits(b) {
-                return None;
+        let blocks = last_block - first_block + 1;
+        for n in 0..blocks {
+            if !(want_left || want_right) {
+                break;
+            }
+            let b = if ahead {
+                last_block - n
+            } else {
+                first_block + n
+            };
+            let Some(&(min_l, min_r)) = self.corridor_block_min_m.get(b) else {
+                break;
+            };
+            // A partial block's minimum may be outside the stretch: its points decide.
+            let (may_l, may_r) = (
+                want_left && min_l <= within_m.0,
+                want_right && min_r <= within_m.1,
+            );
+            if !(may_l || may_r) {
+                continue;
             }
             let from = (b * CORRIDOR_BLOCK).max(i);
             let to = ((b + 1) * CORRIDOR_BLOCK - 1).min(j);
-            if ahead {
-                (from..=to).rev().find(|&k| fits(k))
-            } else {
-                (from..=to).find(|&k| fits(k))
+            let Some(points) = self.points.get(from..=to) else {
+                break;
+            };
+            let (mut look_l, mut look_r) = (may_l, may_r);
+            for m in 0..points.len() {
+                let k = if ahead { points.len() - 1 - m } else { m };
+                let Some(w) = points.get(k) else {
+                    break;
+                };
+                if look_l && w.left_m <= within_m.0 {
+                    left = Some(from + k);
+                    (look_l, want_left) = (false, false);
+                }
+                if look_r && w.right_m <= within_m.1 {
+                    right = Some(from + k);
+                    (look_r, want_right) = (false, false);
+                }
+                if !(look_l || look_r) {
+                    break;
+                }
             }
-        };
-        if ahead {
-            (first_block..=last_block).rev().find_map(search)
-        } else {
-            (first_block..=last_block).find_map(search)
         }
+        (left, right)
     }
 
     /// The car's pose relative to the path (projection of the rear axle, heading error, the

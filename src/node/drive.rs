@@ -856,12 +856,23 @@ fn mpc_tick<P: StageProbe>(
             rear_right,
         };
     }
+    // Every obstacle projected in one pass over the path (an absent slot takes a present
+    // one's place, unused; no pass without one).
     let mut placed = [None; MAX_OBSTACLES];
-    for (slot, obstacle) in placed.iter_mut().zip(obstacles) {
-        let Some(o) = obstacle else {
-            continue;
-        };
-        let Some(p) = path.project(o.east_m, o.north_m, None) else {
+    let finite = |o: &&ObstacleCircle| o.east_m.is_finite() && o.north_m.is_finite();
+    let mut centres = [(0.0, 0.0); MAX_OBSTACLES];
+    let first = obstacles.iter().flatten().find(finite);
+    for (c, o) in centres.iter_mut().zip(obstacles) {
+        if let Some(o) = o.as_ref().filter(finite).or(first) {
+            *c = (o.east_m, o.north_m);
+        }
+    }
+    let projected = match first {
+        Some(_) => path.project_each(centres),
+        None => [None; MAX_OBSTACLES],
+    };
+    for ((slot, obstacle), p) in placed.iter_mut().zip(obstacles).zip(projected) {
+        let (Some(o), Some(p)) = (obstacle.as_ref().filter(finite), p) else {
             continue;
         };
         let at = path.sample_geometry(p.station_m, p.segment)?;

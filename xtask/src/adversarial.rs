@@ -167,6 +167,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         path_spacing_m: [1.0, 0.5, 0.08][rng.below(3) as usize],
         obstacles: rng.below(5) as usize,
         obstacles_at_centre: rng.below(2) == 0,
+        corridor_widening_m: [0.0, 0.002, -0.002][rng.below(3) as usize],
     }
 }
 
@@ -196,6 +197,7 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
                 out.path_spacing_m = fresh.path_spacing_m;
                 out.obstacles = fresh.obstacles;
                 out.obstacles_at_centre = fresh.obstacles_at_centre;
+                out.corridor_widening_m = fresh.corridor_widening_m;
             }
             _ => out.unknown_per_tick = fresh.unknown_per_tick,
         }

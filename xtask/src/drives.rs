@@ -137,6 +137,10 @@ pub struct Spec {
     pub obstacles: usize,
     /// See [`Spec::obstacles`].
     pub obstacles_at_centre: bool,
+    /// The corridors widen by this much from point to point, m: wider than the tie
+    /// (`control::path::NARROWEST_TIE_M`) over the front half of a body, the search for the
+    /// corridor's binding point reads its way back from the front to near the axle.
+    pub corridor_widening_m: f64,
 }
 
 impl Spec {
@@ -166,6 +170,7 @@ impl Spec {
             path_spacing_m: 1.0,
             obstacles: 0,
             obstacles_at_centre: false,
+            corridor_widening_m: 0.0,
         }
     }
 }
@@ -227,8 +232,8 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
                     path_id,
                     index,
                     speed_mps: 5.0,
-                    left_m: 3.0,
-                    right_m: 3.0,
+                    left_m: (3.0 + spec.corridor_widening_m * f64::from(index)) as f32,
+                    right_m: (3.0 + spec.corridor_widening_m * f64::from(index)) as f32,
                 }
                 .encode(next(2)),
             );
@@ -801,6 +806,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             path_points: MAX_PATH_POINTS,
             path_spacing_m: 0.08,
             obstacles: MAX_OBSTACLES,
+            corridor_widening_m: 0.002,
             ..plain("stages-path-dense")
         },
         // The same on a path that runs round its obstacles: the car at full lock.
@@ -812,6 +818,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             path_spacing_m: 0.08,
             obstacles: MAX_OBSTACLES,
             obstacles_at_centre: true,
+            corridor_widening_m: 0.002,
             ..plain("stages-path-round")
         },
         Spec {
