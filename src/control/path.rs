@@ -744,7 +744,6 @@ impl Path {
     /// points are), the rest only for a segment that may beat the best: no more than the nearest
     /// of every [`SCAN_STRIDE`]th point (a point is no nearer than the segments it ends), so
     /// that a point the path approaches from afar does not make every segment a new best.
-    #[inline(never)]
     fn scan_segments_each<const N: usize>(
         &self,
         range: core::ops::Range<usize>,

@@ -795,6 +795,47 @@ fn side_points(
     Some((left, right))
 }
 
+/// The obstacles as the solve takes them: each projected onto the path (all in one pass over
+/// it, an absent slot taking a present one's place, unused; no pass without one), `ahead_m` from
+/// the car's station `s0`. `None` if the path cannot be sampled where one projects. Out of
+/// line: its locals are not on the stack through the solve.
+#[inline(never)]
+fn place_obstacles(
+    path: &Path,
+    obstacles: &[Option<ObstacleCircle>],
+    s0: f32,
+) -> Option<[Option<mpc::Obstacle>; MAX_OBSTACLES]> {
+    let mut placed = [None; MAX_OBSTACLES];
+    let finite = |o: &&ObstacleCircle| o.east_m.is_finite() && o.north_m.is_finite();
+    let mut centres = [(0.0, 0.0); MAX_OBSTACLES];
+    let first = obstacles.iter().flatten().find(finite);
+    for (c, o) in centres.iter_mut().zip(obstacles) {
+        if let Some(o) = o.as_ref().filter(finite).or(first) {
+            *c = (o.east_m, o.north_m);
+        }
+    }
+    let projected = match first {
+        Some(_) => path.project_each(centres),
+        None => [None; MAX_OBSTACLES],
+    };
+    for ((slot, obstacle), p) in placed.iter_mut().zip(obstacles).zip(projected) {
+        let (Some(o), Some(p)) = (obstacle.as_ref().filter(finite), p) else {
+            continue;
+        };
+        let at = path.sample_geometry(p.station_m, p.segment)?;
+        *slot = Some(mpc::Obstacle {
+            east_m: o.east_m,
+            north_m: o.north_m,
+            radius_m: o.radius_m,
+            ahead_m: p.station_m - s0,
+            path_offset_m: p.lateral_m,
+            left_m: at.left_m,
+            right_m: at.right_m,
+        });
+    }
+    Some(placed)
+}
+
 /// One model-predictive solve; `None` when the path cannot be sampled, `Err` with the car's
 /// tracking when it has lost the path ([`Tracking::has_lost_path`]).
 #[allow(clippy::too_many_arguments)]
@@ -856,36 +897,7 @@ fn mpc_tick<P: StageProbe>(
             rear_right,
         };
     }
-    // Every obstacle projected in one pass over the path (an absent slot takes a present
-    // one's place, unused; no pass without one).
-    let mut placed = [None; MAX_OBSTACLES];
-    let finite = |o: &&ObstacleCircle| o.east_m.is_finite() && o.north_m.is_finite();
-    let mut centres = [(0.0, 0.0); MAX_OBSTACLES];
-    let first = obstacles.iter().flatten().find(finite);
-    for (c, o) in centres.iter_mut().zip(obstacles) {
-        if let Some(o) = o.as_ref().filter(finite).or(first) {
-            *c = (o.east_m, o.north_m);
-        }
-    }
-    let projected = match first {
-        Some(_) => path.project_each(centres),
-        None => [None; MAX_OBSTACLES],
-    };
-    for ((slot, obstacle), p) in placed.iter_mut().zip(obstacles).zip(projected) {
-        let (Some(o), Some(p)) = (obstacle.as_ref().filter(finite), p) else {
-            continue;
-        };
-        let at = path.sample_geometry(p.station_m, p.segment)?;
-        *slot = Some(mpc::Obstacle {
-            east_m: o.east_m,
-            north_m: o.north_m,
-            radius_m: o.radius_m,
-            ahead_m: p.station_m - s0,
-            path_offset_m: p.lateral_m,
-            left_m: at.left_m,
-            right_m: at.right_m,
-        });
-    }
+    let placed = place_obstacles(path, obstacles, s0)?;
     // Eq 5's output now: what its next step returns before the command sent now takes effect.
     let mut peek = *speed_model;
     let modelled_mps = config.velocity.step(&mut peek, 0.0);
