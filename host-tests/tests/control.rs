@@ -828,6 +828,46 @@ fn a_loop_is_followed_in_order_where_it_meets_itself() {
     }
 }
 
+/// A car moved onto another part of the path, beyond its window's reach, has left its window
+/// (the node's controller moves its last plan on rather than solving in that tick) and is
+/// found there; one past the path's end, or beside it, whose nearest point is still in the
+/// window, has not; nor has one placed on the path afresh.
+#[test]
+fn a_car_moved_to_another_part_of_the_path_has_left_its_window() {
+    // 51 m north, 0.2 m apart (256 points: the most a path has).
+    let p = path_of(&straight(0.0, 0.0, 0.0, 256, 0.2));
+    let pose = |north: f32, east: f32| Pose::new(east, north, 0.0);
+    let at_30 = p.track(&pose(30.0, 0.0), None).unwrap();
+    assert!(!at_30.left_window);
+    let prev = Some(at_30.projection);
+    // Within the window (3 m behind to 10 m ahead), or beyond it by less than 5 m: windowed,
+    // at the window's end for the latter (the next tick's window reaches it).
+    for north in [27.5, 35.0, 40.0, 44.9, 22.1] {
+        let t = p.track(&pose(north, 0.3), prev.as_ref()).unwrap();
+        assert!(!t.left_window, "{north}");
+        let within = north.clamp(27.0, 40.0);
+        assert!((t.projection.station_m - within).abs() < 1e-3, "{north}");
+    }
+    // 8.5 m behind the window's start, 6 m past its end, and at the path's start: found on
+    // the rest of the path.
+    for north in [18.5, 46.0, 1.0] {
+        let t = p.track(&pose(north, 0.3), prev.as_ref()).unwrap();
+        assert!(t.left_window, "{north}");
+        assert!((t.projection.station_m - north).abs() < 1e-3, "{north}");
+        assert!((t.projection.lateral_m - 0.3).abs() < 1e-3);
+    }
+    // 6 m beside its projection: farther than 5 m from the window, but nothing is nearer.
+    let beside = p.track(&pose(30.0, 6.0), prev.as_ref()).unwrap();
+    assert!(!beside.left_window);
+    assert!((beside.projection.station_m - 30.0).abs() < 1e-3);
+    // 8 m past the path's end with the projection at its end.
+    let end = p.track(&pose(50.9, 0.0), None).unwrap();
+    let past = p.track(&pose(59.0, 0.0), Some(&end.projection)).unwrap();
+    assert!(!past.left_window);
+    // The projection runs on along the last segment: 8 m past the end, beside nothing.
+    assert!((past.projection.station_m - (p.length_m() + 8.0)).abs() < 1e-3);
+}
+
 /// `points` as the node decodes them from PATH_POINT (each coordinate rounded to 0.02 m).
 fn through_the_bus(points: &[Waypoint]) -> Vec<Waypoint> {
     points

@@ -1128,11 +1128,16 @@ pub enum FallbackCause {
     /// check, NODE_STATUS `steering_mismatch`): stopped with the wheels straight, since the
     /// commands' sign may be as wrong as the report's.
     SteeringReversed = 11,
+    /// The car's position left the window of the path it was being followed on (more than
+    /// 5 m from it: a position that jumped, or was reset elsewhere) and there is no plan of
+    /// the last tick to move on: the whole path was searched for it this tick, and the
+    /// controller plans from there next tick.
+    PositionJumped = 12,
 }
 
 impl FallbackCause {
     /// Every cause, by raw value.
-    pub const ALL: [FallbackCause; 12] = [
+    pub const ALL: [FallbackCause; 13] = [
         FallbackCause::None,
         FallbackCause::NotReady,
         FallbackCause::HeadingSettling,
@@ -1145,9 +1150,10 @@ impl FallbackCause {
         FallbackCause::ObstacleNotCleared,
         FallbackCause::NonFiniteCommand,
         FallbackCause::SteeringReversed,
+        FallbackCause::PositionJumped,
     ];
 
-    /// `raw` within the signal's range (0..=11, checked by the reader).
+    /// `raw` within the signal's range (0..=12, checked by the reader).
     fn from_raw(raw: i64) -> Self {
         usize::try_from(raw)
             .ok()

@@ -273,6 +273,12 @@ pub struct Tracking {
     pub heading_error_rad: f32,
     /// The reference at the projection's station.
     pub reference: PathSample,
+    /// The car had a projection, was farther than [`PROJECTION_RESEARCH_M`] from every point
+    /// of its window, and the rest of the path, searched after the window, has a nearer point:
+    /// the car is on another part of the path (its position jumped, or was reset elsewhere
+    /// after a long gap). False for a car placed on the path afresh (`Path::acquire`) and for
+    /// one whose nearest point is still in its window (past the path's end, or beside it).
+    pub left_window: bool,
 }
 
 /// A car turned further than this from the path's direction is driving against it, rad.
@@ -717,7 +723,9 @@ impl Path {
     }
 
     /// [`Path::nearest_split`]'s search over segments `range` (within the path), from `best`
-    /// on; the best after them ([`Path::scan_segments_each`] for one point).
+    /// on; the best after them ([`Path::scan_segments_each`] for one point). Not inlined: one
+    /// copy for its five calls (the image's flash).
+    #[inline(never)]
     fn scan_segments(
         &self,
         range: core::ops::Range<usize>,
@@ -868,26 +876,48 @@ impl Path {
     /// projection) only segments from [`PROJECTION_BEHIND_M`] behind to [`PROJECTION_AHEAD_M`]
     /// ahead of it are searched, so that a path that passes near itself (a loop) is followed in
     /// order; the whole path is searched without it, or when the windowed result is farther
-    /// than [`PROJECTION_RESEARCH_M`]. `None` without a path or for non-finite input.
+    /// than [`PROJECTION_RESEARCH_M`] (the rest of the path, after the window). `None` without
+    /// a path or for non-finite input.
     pub fn project(
         &self,
         east_m: f32,
         north_m: f32,
         previous: Option<&Projection>,
     ) -> Option<Projection> {
+        self.project_windowed(east_m, north_m, previous)
+            .map(|(p, _)| p)
+    }
+
+    /// [`Path::project`], and whether the point left `previous`'s window
+    /// ([`Tracking::left_window`]; true for a `previous` of another path).
+    fn project_windowed(
+        &self,
+        east_m: f32,
+        north_m: f32,
+        previous: Option<&Projection>,
+    ) -> Option<(Projection, bool)> {
         if self.len < 2 || !east_m.is_finite() || !north_m.is_finite() {
             return None;
         }
         let segments = self.len - 1;
-        if let Some(prev) = previous.filter(|p| p.segment < segments) {
-            if let Some((p, d2, _)) = self.nearest_in(self.window(prev), east_m, north_m) {
-                if d2 <= PROJECTION_RESEARCH_M * PROJECTION_RESEARCH_M {
-                    return Some(p);
-                }
+        let Some(prev) = previous.filter(|p| p.segment < segments) else {
+            return self
+                .nearest_in(0..segments, east_m, north_m)
+                .map(|(p, _, _)| (p, previous.is_some()));
+        };
+        let window = self.window(prev);
+        let in_window = self.scan_segments(window.clone(), east_m, north_m, Best::NONE);
+        if let Some((p, d2, _)) = self.nearest_of(&in_window) {
+            if d2 <= PROJECTION_RESEARCH_M * PROJECTION_RESEARCH_M {
+                return Some((p, false));
             }
         }
-        self.nearest_in(0..segments, east_m, north_m)
-            .map(|(p, _, _)| p)
+        // The rest of the path, from the window's best on: with the window, one pass over the
+        // path, no dearer than placing a car on it afresh.
+        let before = self.scan_segments(0..window.start, east_m, north_m, in_window);
+        let best = self.scan_segments(window.end..segments, east_m, north_m, before);
+        let left = best.segment != in_window.segment;
+        self.nearest_of(&best).map(|(p, _, _)| (p, left))
     }
 
     /// The segments from [`PROJECTION_BEHIND_M`] behind to [`PROJECTION_AHEAD_M`] ahead of
@@ -1310,15 +1340,16 @@ impl Path {
     /// taken to be starting the path (see `Path::acquire`); `None` without a path or for a
     /// non-finite pose.
     pub fn track(&self, pose: &Pose, previous: Option<&Projection>) -> Option<Tracking> {
-        let projection = match previous {
-            Some(_) => self.project(pose.x_m, pose.y_m, previous)?,
-            None => self.acquire(pose.x_m, pose.y_m)?,
+        let (projection, left_window) = match previous {
+            Some(_) => self.project_windowed(pose.x_m, pose.y_m, previous)?,
+            None => (self.acquire(pose.x_m, pose.y_m)?, false),
         };
         let reference = self.sample(projection.station_m, projection.segment)?;
         Some(Tracking {
             projection,
             heading_error_rad: math::wrap_pi(pose.heading_rad - reference.heading_rad),
             reference,
+            left_window,
         })
     }
 

@@ -502,8 +502,8 @@ impl Drive {
             mpc.set_steer_scale(inputs.steer_scale);
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
-            (Controller::Mpc, Some(mpc)) if path_loaded => {
-                let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
+            (Controller::Mpc, Some(_)) if path_loaded => {
+                let Some(out) = self.coast(planned_last_tick) else {
                     // Nothing to move on: the path takes effect next tick.
                     return match self.last_command.status {
                         ControlStatus::NoPath => {
@@ -512,12 +512,10 @@ impl Drive {
                         _ => self.hold(ControlStatus::Fallback, FallbackCause::PathLoading),
                     };
                 };
-                mpc.coast(&mut self.mpc, out);
                 probe.lap(Stage::DriveCoast);
-                self.planned_last_tick = true;
-                mpc_command(out)
+                out
             }
-            (Controller::Mpc, Some(mpc)) => {
+            (Controller::Mpc, Some(mpc)) => 'solve: {
                 let Some(solved) = mpc_tick(
                     mpc,
                     &mut self.mpc,
@@ -537,9 +535,25 @@ impl Drive {
                 };
                 let (out, tracking) = match solved {
                     Ok(solved) => solved,
-                    Err(lost) => {
+                    Err(Unplanned::Lost(lost)) => {
                         self.last_tracking = Some(lost);
                         return self.stop_lost();
+                    }
+                    Err(Unplanned::LeftWindow(tracking)) => {
+                        // The whole path was searched for the car this tick: no solve in the
+                        // same tick (the bound's plan branch has no room for both); the last
+                        // plan moves on as in a tick that loads a path, and the next tick
+                        // solves from the new projection's window.
+                        self.last_tracking = Some(tracking);
+                        let out = self.coast(planned_last_tick);
+                        probe.lap(Stage::DriveCoast);
+                        match out {
+                            Some(out) => break 'solve out,
+                            None => {
+                                return self
+                                    .hold(ControlStatus::Fallback, FallbackCause::PositionJumped)
+                            }
+                        }
                     }
                 };
                 self.last_tracking = Some(tracking);
@@ -651,6 +665,20 @@ impl Drive {
             },
             plan: None,
         })
+    }
+
+    /// In a tick that does not solve, the last tick's plan moved on by one tick
+    /// (`MpcConfig::coast`) and its commands; `None` without a plan of the last tick.
+    fn coast(&mut self, planned_last_tick: bool) -> Option<DriveOutput> {
+        let (Some(mpc), Some(out)) = (
+            self.mpc_config.as_ref(),
+            self.last_plan.as_mut().filter(|_| planned_last_tick),
+        ) else {
+            return None;
+        };
+        mpc.coast(&mut self.mpc, out);
+        self.planned_last_tick = true;
+        Some(mpc_command(out))
     }
 
     /// Speed 0, steering held where it was last commanded.
@@ -836,9 +864,19 @@ fn place_obstacles(
     Some(placed)
 }
 
-/// One model-predictive solve; `None` when the path cannot be sampled, `Err` with the car's
-/// tracking when it has lost the path ([`Tracking::has_lost_path`]).
+/// Why a tick of the model-predictive controller did not solve, with the car's tracking.
+enum Unplanned {
+    /// The car has lost the path ([`Tracking::has_lost_path`]).
+    Lost(Tracking),
+    /// The car left its projection's window ([`Tracking::left_window`]): the whole path was
+    /// searched for it, and a tick that does so does not also solve.
+    LeftWindow(Tracking),
+}
+
+/// One model-predictive solve; `None` when the path cannot be sampled, `Err` when the tick
+/// does not solve ([`Unplanned`]).
 #[allow(clippy::too_many_arguments)]
+#[inline(never)]
 fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
     state: &mut MpcState,
@@ -853,7 +891,7 @@ fn mpc_tick<P: StageProbe>(
     last_speed_cmd_mps: f32,
     config: &NodeConfig,
     probe: &mut P,
-) -> Option<Result<(MpcOutput, Tracking), Tracking>> {
+) -> Option<Result<(MpcOutput, Tracking), Unplanned>> {
     let tracking = path.track(&pose, projection.as_ref())?;
     *projection = Some(tracking.projection);
     if tracking.has_lost_path(mpc.body().width_m) {
@@ -861,7 +899,12 @@ fn mpc_tick<P: StageProbe>(
         // for the planner to replan; nothing is solved. The tracking was this tick's reference
         // work (the plan branch's, as when it goes on to a solve: not the common rows').
         probe.lap(Stage::DriveReference);
-        return Some(Err(tracking));
+        return Some(Err(Unplanned::Lost(tracking)));
+    }
+    if tracking.left_window {
+        // The caller moves the last plan on (its lap, [`Stage::DriveCoast`], counts this
+        // search: the path-loading branch's, not the plan's).
+        return Some(Err(Unplanned::LeftWindow(tracking)));
     }
     let s0 = tracking.projection.station_m;
     let hint = tracking.projection.segment;

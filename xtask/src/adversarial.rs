@@ -160,11 +160,13 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         gnss_dropout: window(rng, 1.5),
         gnss_jump: window(rng, 2.0),
         gnss_jump_m: rng.range(2.0, 80.0),
+        gnss_jump_back_s: [0.0, 0.0, 2.0, 6.0][rng.below(4) as usize],
         burst: window(rng, 0.25),
         corrupt_per_tick: rng.below(16) as u32,
         unknown_per_tick: rng.below(60) as u32,
         path_points: [0, 0, 2, 5, 40, 256][rng.below(6) as usize],
         path_spacing_m: [1.0, 0.5, 0.08][rng.below(3) as usize],
+        path_once: rng.below(2) == 0,
         obstacles: rng.below(5) as usize,
         obstacles_at_centre: rng.below(2) == 0,
         corridor_widening_m: [0.0, 0.002, -0.002][rng.below(3) as usize],
@@ -189,12 +191,14 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
             5 => {
                 out.gnss_jump = fresh.gnss_jump;
                 out.gnss_jump_m = fresh.gnss_jump_m;
+                out.gnss_jump_back_s = fresh.gnss_jump_back_s;
             }
             6 => out.burst = fresh.burst,
             7 => out.corrupt_per_tick = fresh.corrupt_per_tick,
             8 => {
                 out.path_points = fresh.path_points;
                 out.path_spacing_m = fresh.path_spacing_m;
+                out.path_once = fresh.path_once;
                 out.obstacles = fresh.obstacles;
                 out.obstacles_at_centre = fresh.obstacles_at_centre;
                 out.corridor_widening_m = fresh.corridor_widening_m;

@@ -112,6 +112,10 @@ pub struct Spec {
     pub gnss_jump: Option<Periodic>,
     /// The jump, m.
     pub gnss_jump_m: f64,
+    /// With this above 0, the fixes in the jump windows are where the antenna was this long
+    /// before, s, in place of `gnss_jump_m` east: a jump back along the car's own track, onto
+    /// the path the planner sent.
+    pub gnss_jump_back_s: f64,
     /// Every frame inside a window is stamped at the window's end: all of them are due in one
     /// tick.
     pub burst: Option<Periodic>,
@@ -129,6 +133,9 @@ pub struct Spec {
     pub path_points: usize,
     /// How far apart the planner's points are, m.
     pub path_spacing_m: f64,
+    /// The planner sends one path (and its obstacles), not one after another: the car keeps
+    /// its projection on it for the whole drive (a new path places it afresh).
+    pub path_once: bool,
     /// Obstacles the planner sends after each path (at most the node's slots): circles of
     /// 0.3 m 2 m to the right of the path's last points, inside its corridor (a search of the
     /// path from its start comes nearer at every segment), or, with `obstacles_at_centre`, all
@@ -163,11 +170,13 @@ impl Spec {
             gnss_dropout: None,
             gnss_jump: None,
             gnss_jump_m: 0.0,
+            gnss_jump_back_s: 0.0,
             burst: None,
             corrupt_per_tick: 0,
             unknown_per_tick: 0,
             path_points: 0,
             path_spacing_m: 1.0,
+            path_once: false,
             obstacles: 0,
             obstacles_at_centre: false,
             corridor_widening_m: 0.0,
@@ -201,7 +210,10 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
     let obstacles = spec.obstacles.min(MAX_OBSTACLES);
     let per_path = 2 * points + 1 + obstacles;
     let ticks = (spec.seconds / 0.02) as usize;
-    let paths = ticks * PLANNER_FRAMES_PER_TICK / per_path + 1;
+    let paths = match spec.path_once {
+        true => 1,
+        false => ticks * PLANNER_FRAMES_PER_TICK / per_path + 1,
+    };
     for k in 0..paths {
         let path_id = (k % 16) as u8;
         let track = truth.track_ahead(
@@ -473,10 +485,14 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
             if spec.gnss_dropout.and_then(|w| w.window(t)).is_some() {
                 continue;
             }
-            let (x, y, h, _) = truth.at(t);
-            let jump = match spec.gnss_jump.and_then(|w| w.window(t)) {
-                Some(_) => spec.gnss_jump_m,
-                None => 0.0,
+            let jumped = spec.gnss_jump.and_then(|w| w.window(t)).is_some();
+            let (x, y, h, _) = match jumped && spec.gnss_jump_back_s > 0.0 {
+                true => truth.at(t - spec.gnss_jump_back_s),
+                false => truth.at(t),
+            };
+            let jump = match jumped && spec.gnss_jump_back_s <= 0.0 {
+                true => spec.gnss_jump_m,
+                false => 0.0,
             };
             let east = x + lever * h.sin() + spec.gnss_noise_m * rng.normal() + jump;
             let north = y + lever * h.cos() + spec.gnss_noise_m * rng.normal();
@@ -826,5 +842,149 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             path_points: SHORT_PATH_POINTS,
             ..plain("stages-path-short")
         },
+        path_jump(car, plain("stages-path-jump")),
     ]
+}
+
+/// A position that jumps back along a dense path, onto a part of it farther than
+/// `PROJECTION_RESEARCH_M` from the window its projection searches, and stays there long enough
+/// for the fixes to win: the tick that finds the car there searches the whole path after its
+/// window and moves the last plan on instead of solving (`drive_coast`). One path of 256 points,
+/// sent once (a new path places the car afresh), as dense as the car's timeline lets it be
+/// (0.08 m for a 100 Hz receiver; longer for a slow one, whose heading settles, gate yields and
+/// lowpass fills more slowly): the path is sent and completes, the heading settles while the
+/// controller has the path, a few plans, the jump, the gate's `gnss_reacquire_fixes`, the
+/// filters' restart, then the tick; the car still on the path then, and the jump long enough
+/// that the new position is well clear of the old window (`xtask::drives::tests`).
+fn path_jump(car: &NodeConfig, plain: Spec) -> Spec {
+    use catmodel::control::path::{PROJECTION_BEHIND_M, PROJECTION_RESEARCH_M};
+    let period_s = 1.0 / plain.gnss_hz;
+    let speed = (2.0_f64).max(f64::from(car.estimator.course_min_speed_mps) + 0.5);
+    let obstacles = MAX_OBSTACLES;
+    let sent_s = frame_time_s(2 + 2 * MAX_PATH_POINTS + 1 + obstacles);
+    let gain = f64::from(car.estimator.course_gain);
+    let settle_s = match gain > 0.0 {
+        true => f64::from(catmodel::node::smoothing::HEADING_SETTLE_TIME_CONSTANTS) / gain * TICK_S,
+        false => 0.0,
+    };
+    // The filters' memory in fixes, with two to spare: a position after a restart within it.
+    let fill_s = (car.estimator.fir.len() + car.estimator.ma.len() + 2) as f64 * period_s;
+    let planning_s = sent_s.max(fill_s) + settle_s + 1.0;
+    let yield_s = f64::from(car.gnss_reacquire_fixes) * period_s;
+    // The new position this far behind the old one at least: past the window's back by the
+    // research distance, and past the configured gate (the widest it opens), 1.5 m to spare
+    // either way, however long the filters took to fill.
+    let behind_m = f64::from(PROJECTION_BEHIND_M + PROJECTION_RESEARCH_M)
+        .max(f64::from(car.gnss_gate_m))
+        + 1.5;
+    let back_s = behind_m / speed + fill_s + 0.5;
+    // After a few plans, and late enough that the new position is on the path (past its
+    // first metre).
+    let jump_s = (planning_s + 0.5).max(back_s + 1.0 / speed - yield_s - fill_s - 0.5);
+    let found_s = jump_s + yield_s + fill_s + 0.5;
+    let length_m = speed * (found_s + 1.0);
+    Spec {
+        seconds: found_s + 1.5,
+        speed: Profile::Const(speed),
+        steer: Profile::Const(0.0),
+        gnss_jump: Some(Periodic {
+            first_s: jump_s,
+            every_s: 1e6,
+            len_s: 1e6,
+        }),
+        gnss_jump_back_s: back_s,
+        path_points: MAX_PATH_POINTS,
+        path_spacing_m: (0.08_f64).max(length_m / (MAX_PATH_POINTS - 1) as f64),
+        path_once: true,
+        obstacles,
+        ..plain
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use catmodel::node::drive::Drive;
+    use catmodel::node::{first_tick_us, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames};
+
+    /// The stages each tick ran.
+    #[derive(Default)]
+    struct Laps {
+        ticks: Vec<Vec<Stage>>,
+        this_tick: Vec<Stage>,
+    }
+
+    impl StageProbe for Laps {
+        fn lap(&mut self, stage: Stage) {
+            self.this_tick.push(stage);
+        }
+    }
+
+    /// The stages of every tick of `spec`'s drive through a node of `car`.
+    fn laps(spec: &Spec, car: &NodeConfig) -> Vec<Vec<Stage>> {
+        let frames = generate(spec, car);
+        let mut node = Node::new(car.clone(), Box::new(Drive::new()));
+        let mut laps = Laps::default();
+        let mut now = first_tick_us(frames[0].t_us);
+        let mut next = 0;
+        while next < frames.len() {
+            let start = next;
+            while next < frames.len() && frames[next].t_us <= now {
+                next += 1;
+            }
+            let tick = Tick {
+                now_us: now,
+                platform: PlatformStats::default(),
+            };
+            let mut tx = TxFrames::new();
+            let _ = node.step_probed(&tick, &frames[start..next], &mut tx, &mut laps);
+            laps.ticks.push(core::mem::take(&mut laps.this_tick));
+            now += 20_000;
+        }
+        laps.ticks
+    }
+
+    fn car(file: &str) -> NodeConfig {
+        let path = crate::root().join(file);
+        catmodel_model_file::load(&path).unwrap().node_config()
+    }
+
+    /// The jump drive reaches what it is made for, for the published car, a 5 Hz receiver that
+    /// bridges 30 s (`models/stress/dearest-found.toml`) and the van: a tick that searched the
+    /// whole path after its window (`drive_coast` without a path completing) follows ticks
+    /// that planned, does not solve itself, and the controller plans again after it.
+    #[test]
+    fn the_jump_drive_leaves_the_window_on_the_path_for_every_car() {
+        for file in [
+            "models/paper.toml",
+            "models/stress/dearest-found.toml",
+            "models/van.toml",
+        ] {
+            let car = car(file);
+            let spec = stage_corpus(&car)
+                .into_iter()
+                .find(|s| s.name == "stages-path-jump")
+                .unwrap();
+            let ticks = laps(&spec, &car);
+            let has = |t: &Vec<Stage>, s: Stage| t.contains(&s);
+            let jumps: Vec<usize> = (0..ticks.len())
+                .filter(|&k| {
+                    has(&ticks[k], Stage::DriveCoast) && !has(&ticks[k], Stage::PathComplete)
+                })
+                .collect();
+            assert!(!jumps.is_empty(), "{file}: no tick left the window");
+            for &k in &jumps {
+                assert!(!has(&ticks[k], Stage::MpcSolve), "{file}: tick {k} solved");
+            }
+            let k = jumps[0];
+            assert!(
+                ticks[..k].iter().any(|t| has(t, Stage::MpcSolve)),
+                "{file}: nothing planned before the jump"
+            );
+            assert!(
+                ticks[k + 1..].iter().any(|t| has(t, Stage::MpcSolve)),
+                "{file}: nothing planned after the jump"
+            );
+        }
+    }
 }

@@ -15,7 +15,6 @@ use embassy_stm32::can::{self, Can};
 use embassy_stm32::peripherals::CAN1;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::Instant;
-use panic_probe as _;
 
 bind_interrupts!(struct Irqs {
     CAN1_TX => can::TxInterruptHandler<CAN1>;
@@ -23,6 +22,25 @@ bind_interrupts!(struct Irqs {
     CAN1_RX1 => can::Rx1InterruptHandler<CAN1>;
     CAN1_SCE => can::SceInterruptHandler<CAN1>;
 });
+
+/// A panic outside the core (the core has no panic path, `cargo xtask no-panic`; embassy-stm32's
+/// init and the board's set-up have): its location over defmt, then a permanently undefined
+/// instruction, whose fault halts the core until the watchdog resets it, as panic-probe does.
+/// Without the message: formatting it links `core::fmt`'s formatter, 3 KiB of flash.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo<'_>) -> ! {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    // A panic while logging the first one goes straight to the fault.
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        match info.location() {
+            Some(at) => defmt::error!("panicked at {=str}:{=u32}", at.file(), at.line()),
+            None => defmt::error!("panicked"),
+        }
+    }
+    cortex_m::asm::udf()
+}
 
 static RX_QUEUE: RxQueue = RxQueue::new();
 static TX_QUEUE: TxQueue = TxQueue::new();
