@@ -9,8 +9,8 @@ use catmodel::can::codec::{LocalOrigin, PathHeader, PathLimits, PathPoint, Steer
 use catmodel::can::{CanFrame, TimedFrame};
 use catmodel::geodesy::{Enu, LocalFrame};
 use catmodel::node::{
-    first_tick_us, Branch, BranchTaken, PlatformStats, Stage, StageProbe, Tick, TxFrames,
-    TICK_STAGES,
+    due_ticks, first_tick_us, Branch, BranchTaken, PlatformStats, Stage, StageProbe, Tick,
+    TxFrames, TICK_STAGES,
 };
 use catmodel_host_tests::bus::{
     config, curvature, drive, rear_axle, Kind, Labelled, ORIGIN, START_US,
@@ -246,23 +246,16 @@ fn run(frames: &[TimedFrame]) -> (Counting, bool) {
     let mut plain = catmodel_host::new_node(config());
     let mut counting = Counting::default();
     let mut same = true;
-    let mut now = first_tick_us(frames[0].t_us);
-    let mut next = 0;
-    while next < frames.len() {
-        let start = next;
-        while next < frames.len() && frames[next].t_us <= now {
-            next += 1;
-        }
+    for (now_us, due) in due_ticks(frames) {
         let tick = Tick {
-            now_us: now,
+            now_us,
             platform: PlatformStats::default(),
         };
         let (mut a, mut b) = (TxFrames::new(), TxFrames::new());
-        let ea = probed.step_probed(&tick, &frames[start..next], &mut a, &mut counting);
-        let eb = plain.step(&tick, &frames[start..next], &mut b);
+        let ea = probed.step_probed(&tick, &frames[due.clone()], &mut a, &mut counting);
+        let eb = plain.step(&tick, &frames[due], &mut b);
         same &= a == b && ea == eb;
         counting.end_tick();
-        now += 20_000;
     }
     (counting, same)
 }

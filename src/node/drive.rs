@@ -502,8 +502,8 @@ impl Drive {
             mpc.set_steer_scale(inputs.steer_scale);
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
-            (Controller::Mpc, Some(_)) if path_loaded => {
-                let Some(out) = self.coast(planned_last_tick) else {
+            (Controller::Mpc, Some(mpc)) if path_loaded => {
+                let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
                     // Nothing to move on: the path takes effect next tick.
                     return match self.last_command.status {
                         ControlStatus::NoPath => {
@@ -512,8 +512,10 @@ impl Drive {
                         _ => self.hold(ControlStatus::Fallback, FallbackCause::PathLoading),
                     };
                 };
+                mpc.coast(&mut self.mpc, out);
                 probe.lap(Stage::DriveCoast);
-                out
+                self.planned_last_tick = true;
+                mpc_command(out)
             }
             (Controller::Mpc, Some(mpc)) => 'solve: {
                 let Some(solved) = mpc_tick(
@@ -876,7 +878,6 @@ enum Unplanned {
 /// One model-predictive solve; `None` when the path cannot be sampled, `Err` when the tick
 /// does not solve ([`Unplanned`]).
 #[allow(clippy::too_many_arguments)]
-#[inline(never)]
 fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
     state: &mut MpcState,

@@ -114,6 +114,29 @@ pub const fn first_tick_us(first_frame_us: u64) -> u64 {
     first_frame_us.div_ceil(SAMPLE_PERIOD_US) * SAMPLE_PERIOD_US
 }
 
+/// The ticks of a drive in which every frame goes to the first tick at or after its time,
+/// however many are due (no receive queue, no cap: the tests' and the stage checks' schedule):
+/// each tick's time and the range of `frames` (in time order) it gets, from [`first_tick_us`]
+/// of the first frame to the tick that gets the last.
+pub fn due_ticks(
+    frames: &[TimedFrame],
+) -> impl Iterator<Item = (u64, core::ops::Range<usize>)> + '_ {
+    let mut now = frames.first().map_or(0, |f| first_tick_us(f.t_us));
+    let mut next = 0;
+    core::iter::from_fn(move || {
+        if next >= frames.len() {
+            return None;
+        }
+        let start = next;
+        while frames.get(next).is_some_and(|f| f.t_us <= now) {
+            next += 1;
+        }
+        let tick = (now, start..next);
+        now += SAMPLE_PERIOD_US;
+        Some(tick)
+    })
+}
+
 /// Everything the node is configured with: everything about the car. Immutable.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeConfig {

@@ -905,7 +905,7 @@ fn path_jump(car: &NodeConfig, plain: Spec) -> Spec {
 mod tests {
     use super::*;
     use catmodel::node::drive::Drive;
-    use catmodel::node::{first_tick_us, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames};
+    use catmodel::node::{due_ticks, Node, PlatformStats, Stage, StageProbe, Tick, TxFrames};
 
     /// The stages each tick ran.
     #[derive(Default)]
@@ -925,21 +925,14 @@ mod tests {
         let frames = generate(spec, car);
         let mut node = Node::new(car.clone(), Box::new(Drive::new()));
         let mut laps = Laps::default();
-        let mut now = first_tick_us(frames[0].t_us);
-        let mut next = 0;
-        while next < frames.len() {
-            let start = next;
-            while next < frames.len() && frames[next].t_us <= now {
-                next += 1;
-            }
+        for (now_us, due) in due_ticks(&frames) {
             let tick = Tick {
-                now_us: now,
+                now_us,
                 platform: PlatformStats::default(),
             };
             let mut tx = TxFrames::new();
-            let _ = node.step_probed(&tick, &frames[start..next], &mut tx, &mut laps);
+            let _ = node.step_probed(&tick, &frames[due], &mut tx, &mut laps);
             laps.ticks.push(core::mem::take(&mut laps.this_tick));
-            now += 20_000;
         }
         laps.ticks
     }
