@@ -542,10 +542,11 @@ impl Drive {
                         return self.stop_lost();
                     }
                     Err(Unplanned::LeftWindow(tracking)) => {
-                        // The whole path was searched for the car this tick: no solve in the
-                        // same tick (the bound's plan branch has no room for both); the last
-                        // plan moves on as in a tick that loads a path, and the next tick
-                        // solves from the new projection's window.
+                        // The car was found on another part of its path, the rest of the
+                        // path searched after its window: no solve in the same tick (the
+                        // bound's plan branch has no room for both); the last plan moves on as
+                        // in a tick that loads a path, and the next tick solves from the new
+                        // projection's window.
                         self.last_tracking = Some(tracking);
                         let out = self.coast(planned_last_tick);
                         probe.lap(Stage::DriveCoast);
@@ -870,8 +871,8 @@ fn place_obstacles(
 enum Unplanned {
     /// The car has lost the path ([`Tracking::has_lost_path`]).
     Lost(Tracking),
-    /// The car left its projection's window ([`Tracking::left_window`]): the whole path was
-    /// searched for it, and a tick that does so does not also solve.
+    /// The car left its projection's window ([`Tracking::left_window`]): the rest of the path
+    /// was searched for it, and a tick that does so does not also solve.
     LeftWindow(Tracking),
 }
 

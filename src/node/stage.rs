@@ -101,7 +101,9 @@ pub enum Stage {
     MpcSolve,
     /// The model-predictive controller in a tick that completed a long path
     /// ([`Stage::PathComplete`]): no solve, the previous tick's plan moved on by one tick
-    /// (`MpcConfig::coast`); the next tick solves on the new path.
+    /// (`MpcConfig::coast`); the next tick solves on the new path. Also a tick that found the
+    /// car on another part of its path (`Tracking::left_window`, the search that found it
+    /// included): the plan moved on, or a hold without one; the next tick solves from there.
     DriveCoast,
     /// The controller's commands (CONTROL_COMMAND; after the model-predictive controller's
     /// solve its checks and plan, the pure pursuit's step, or holding without a path).
@@ -353,7 +355,7 @@ pub const TICK_STAGES: [StageBound; 18] = [
         stage: Stage::DriveCoast,
         key: "drive_coast",
         max_per_tick: 1,
-        because: "once per tick, in place of the solve",
+        because: "once per tick, in place of the solve (a path loaded, or the car found elsewhere on it)",
         branch: Branch::PathLoad,
         exclusive: None,
     },
