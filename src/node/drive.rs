@@ -503,6 +503,9 @@ impl Drive {
         }
         let output = match (config.controller, self.mpc_config.as_ref()) {
             (Controller::Mpc, Some(mpc)) if path_loaded => {
+                // The coast as [`Drive::coast`] does it, written out here: calling the helper
+                // from both places cost the estimating tick's bound 127 instructions as the
+                // code moved (docs/firmware.md, "Worst-case tick").
                 let Some(out) = self.last_plan.as_mut().filter(|_| planned_last_tick) else {
                     // Nothing to move on: the path takes effect next tick.
                     return match self.last_command.status {
