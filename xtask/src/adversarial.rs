@@ -158,6 +158,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         cog_hz: cog_rates[rng.below(cog_rates.len() as u64) as usize],
         gnss_noise_m: rng.range(0.0, 3.0),
         gnss_dropout: window(rng, 1.5),
+        gnss_gap_exact: rng.below(2) == 0,
         gnss_jump: window(rng, 2.0),
         gnss_jump_m: rng.range(2.0, 80.0),
         gnss_jump_back_s: [0.0, 0.0, 2.0, 6.0][rng.below(4) as usize],
@@ -187,7 +188,10 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
             1 => out.steer = fresh.steer,
             2 => out.gnss_hz = fresh.gnss_hz,
             3 => out.cog_hz = fresh.cog_hz,
-            4 => out.gnss_dropout = fresh.gnss_dropout,
+            4 => {
+                out.gnss_dropout = fresh.gnss_dropout;
+                out.gnss_gap_exact = fresh.gnss_gap_exact;
+            }
             5 => {
                 out.gnss_jump = fresh.gnss_jump;
                 out.gnss_jump_m = fresh.gnss_jump_m;

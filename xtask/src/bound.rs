@@ -617,19 +617,22 @@ pub fn measure_stages() -> Result<Bound> {
 ///   whose model file chooses the pure pursuit;
 /// - `gnss_restart` where the position is lost before a gap can need a restart: a restart
 ///   takes `GAP_FILL_PER_TICK + 1` missing fixes (`src/node/gnss.rs`: a gap of
-///   `GAP_FILL_PER_TICK + 1.5` receiver periods at least), and a receiver silent for longer than
-///   `gnss_lost_us` has its position reset at the next tick, before the fix after the gap is
-///   taken when the gap is longer by more than a tick (two ticks allowed here). A 1 Hz car with
-///   `gnss_lost_s = 3`: a restart needs 3.5 s of silence, the position is gone after 3.
+///   `GAP_FILL_PER_TICK + 1.5` receiver periods at least, [`crate::drives::restart_gap_s`]),
+///   and the first tick that finds the receiver silent for longer than `gnss_lost_us` resets
+///   the position. A tick takes its frames before it looks: the fix after a gap of `g` is
+///   taken in time if no tick falls between `lost` and `g` after the fix before it, which the
+///   ticks' phase allows while `g < lost + 20 ms` (the stage drive `stages-gnss-gaps-exact`
+///   places it so) and nothing allows past that. A 1 Hz car with `gnss_lost_s = 3`: a restart
+///   needs 3.5 s of silence, the position is gone after 3; a 10 Hz car with `gnss_lost_s =
+///   0.32`: 0.35 s against 0.34 (two ticks were allowed here before, and such a car's
+///   measurement stopped for want of a restart no drive could make).
 pub fn unreachable(car: &NodeConfig) -> Vec<&'static str> {
     let mut out = Vec::new();
     if car.controller == Controller::PurePursuit {
         out.extend(["drive_reference", SOLVE_ROW, "drive_coast"]);
     }
-    let period_s = 1.0 / car.estimator.declared_gnss_rate_hz();
-    let restart_gap_s = (f64::from(catmodel::node::GAP_FILL_PER_TICK) + 1.5) * period_s;
     let lost_s = car.gnss_lost_us as f64 * 1e-6;
-    if restart_gap_s > lost_s + 2.0 * catmodel::SAMPLE_PERIOD_S_F64 {
+    if crate::drives::restart_gap_s(car) > lost_s + catmodel::SAMPLE_PERIOD_S_F64 {
         out.push("gnss_restart");
     }
     out

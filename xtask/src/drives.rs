@@ -108,6 +108,12 @@ pub struct Spec {
     pub gnss_noise_m: f64,
     /// GNSS silent in these windows.
     pub gnss_dropout: Option<Periodic>,
+    /// Each dropout window a gap of exactly its length between two fixes, the second at a
+    /// tick's time (the first tick at or after the window's end) and the first that long
+    /// before it, off the receiver's slots: a fix as late as a receiver's clock and the bus
+    /// can make it, so that a gap as long as the car's `gnss_lost_s` allows, and a tick more,
+    /// is taken before the position is given up.
+    pub gnss_gap_exact: bool,
     /// Fixes moved by `gnss_jump_m` east in these windows.
     pub gnss_jump: Option<Periodic>,
     /// The jump, m.
@@ -168,6 +174,7 @@ impl Spec {
             cog_hz: 100.0,
             gnss_noise_m: 0.3,
             gnss_dropout: None,
+            gnss_gap_exact: false,
             gnss_jump: None,
             gnss_jump_m: 0.0,
             gnss_jump_back_s: 0.0,
@@ -429,6 +436,35 @@ fn us(t_s: f64) -> u64 {
     START_US + (t_s * 1e6).round() as u64
 }
 
+/// The GNSS fixes' times of `spec`: the receiver's slots outside the dropout windows, or with
+/// [`Spec::gnss_gap_exact`] each window's exact gap.
+fn fix_times(spec: &Spec) -> Vec<f64> {
+    let slots = ticks_of(spec.gnss_hz, 0.0033, spec.seconds);
+    let Some(w) = spec.gnss_dropout else {
+        return slots.collect();
+    };
+    if !spec.gnss_gap_exact {
+        return slots.filter(|&t| w.window(t).is_none()).collect();
+    }
+    // Each window [s, s + len] as the gap (t_b - len, t_b), t_b the first tick at or after its
+    // end (frame times are whole microseconds: the tick's own).
+    let mut gaps = Vec::new();
+    let mut start = w.first_s;
+    while start + w.len_s < spec.seconds {
+        let t_b = ((start + w.len_s) / TICK_S - 1e-9).ceil() * TICK_S;
+        gaps.push((t_b - w.len_s, t_b));
+        start += w.every_s.max(1e-3);
+    }
+    let mut times: Vec<f64> = slots
+        .filter(|&t| !gaps.iter().any(|&(a, b)| t >= a - 1e-6 && t <= b + 1e-6))
+        .collect();
+    for (a, b) in gaps {
+        times.extend([a, b]);
+    }
+    times.sort_by(f64::total_cmp);
+    times
+}
+
 /// The drive's frames, in time order.
 pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
     let truth = Truth::new(spec, car);
@@ -484,10 +520,7 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
     }
     // GNSS: the antenna where the car's file puts it, in the node's local frame.
     if let Some(local) = frame {
-        for t in ticks_of(spec.gnss_hz, 0.0033, spec.seconds) {
-            if spec.gnss_dropout.and_then(|w| w.window(t)).is_some() {
-                continue;
-            }
+        for t in fix_times(spec) {
             let jumped = spec.gnss_jump.and_then(|w| w.window(t)).is_some();
             let (x, y, h, _) = match jumped && spec.gnss_jump_back_s > 0.0 {
                 true => truth.at(t - spec.gnss_jump_back_s),
@@ -654,6 +687,13 @@ pub fn write_candump(path: &Path, frames: &[TimedFrame]) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
+/// The shortest gap in the fixes that the node restarts its filters after, s: one more missing
+/// fix than a tick fills (`src/node/gnss.rs`: a gap rounds to whole periods, so
+/// `GAP_FILL_PER_TICK + 1.5` of them).
+pub fn restart_gap_s(car: &NodeConfig) -> f64 {
+    (f64::from(GAP_FILL_PER_TICK) + 1.5) / car.estimator.declared_gnss_rate_hz()
+}
+
 /// The dedicated drives of the stage measurement: together they take every stage of the tick
 /// through its most expensive path (docs/firmware.md, "Worst-case tick"). Each runs on a
 /// fresh node.
@@ -685,6 +725,23 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
         .min(lost_s - 1.5 * period_s)
         .max((GAP_FILL_PER_TICK as f64 + 1.5) * period_s);
     let lost_gap_s = (2.6_f64).max(lost_s + 6.0 * period_s);
+    // The exact gaps: as long as the track holds or the position lasts (a tick after
+    // `gnss_lost_s` at most: the tick before the fix still finds it within), at least a
+    // restart's; a few of them, apart by the filters' memory and the heading's settling.
+    let exact_gap_s = (track_s.min(lost_s + TICK_S - 2e-6)).max(restart_gap_s(car) + 2e-6);
+    let slow = (2.0_f64).max(f64::from(car.estimator.course_min_speed_mps) + 0.5);
+    let gain = f64::from(car.estimator.course_gain);
+    let settle_s = match gain > 0.0 {
+        true => f64::from(catmodel::node::smoothing::HEADING_SETTLE_TIME_CONSTANTS) / gain * TICK_S,
+        false => 0.0,
+    };
+    let memory_s = (car.estimator.fir.len() + car.estimator.ma.len() + 2) as f64 * period_s;
+    let exact_first_s = 2.0 + memory_s + settle_s;
+    let exact_every_s = exact_gap_s + memory_s + 2.0;
+    // As many missing fixes as a tick fills, or as the position lasts (a 1 Hz receiver lost
+    // after 2.5 s: one; the GNSS timeout, 2.5 periods at least, leaves one always).
+    let fill_gap_s = (f64::from(GAP_FILL_PER_TICK + 1) * period_s).min(lost_s + TICK_S - 2e-6);
+    let fill_every_s = fill_gap_s + memory_s + 1.0;
     let far_every_s = (5.0_f64).max(2.0 * reacquire_s + 30.0 * period_s);
     vec![
         // Running, both modes: frames bunched into single ticks (every tick at the cap for a
@@ -756,6 +813,36 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
                 len_s: long_gap_s,
             }),
             ..plain("stages-gnss-gaps-long")
+        },
+        // The longest gap a restart can follow for this car, the fix after it taken in the
+        // tick before the position is given up (`gnss_lost_s` and a tick at most, for a
+        // receiver whose slots leave no such gap), driven slowly and straight so that dead
+        // reckoning lands within the tightest gate a file sets, after the filters are warm
+        // and the heading has settled.
+        Spec {
+            seconds: exact_first_s + 3.0 * exact_every_s,
+            speed: Profile::Const(slow),
+            steer: Profile::Const(0.0),
+            gnss_dropout: Some(Periodic {
+                first_s: exact_first_s,
+                every_s: exact_every_s,
+                len_s: exact_gap_s,
+            }),
+            gnss_gap_exact: true,
+            ..plain("stages-gnss-gaps-exact")
+        },
+        // The same with gaps a tick fills, as many fixes as it fills.
+        Spec {
+            seconds: exact_first_s + 3.0 * fill_every_s,
+            speed: Profile::Const(slow),
+            steer: Profile::Const(0.0),
+            gnss_dropout: Some(Periodic {
+                first_s: exact_first_s,
+                every_s: fill_every_s,
+                len_s: fill_gap_s,
+            }),
+            gnss_gap_exact: true,
+            ..plain("stages-gnss-gaps-exact-fill")
         },
         Spec {
             seconds: (14.0_f64).max(3.0 + 1.8 * (lost_gap_s + 3.4)),
@@ -1000,23 +1087,52 @@ mod tests {
             "models/stress/dearest-found.toml",
             "models/stress/truck-corner-antenna.toml",
         ] {
-            let car = car(file);
-            let unreachable = crate::bound::unreachable(&car);
-            let mut seen: Vec<Stage> = Vec::new();
-            for spec in stage_corpus(&car) {
-                for stage in laps(&spec, &car).into_iter().flatten() {
-                    if !seen.contains(&stage) {
-                        seen.push(stage);
-                    }
-                }
-            }
-            for row in catmodel::node::TICK_STAGES.iter() {
-                assert!(
-                    unreachable.contains(&row.key) || seen.contains(&row.stage),
-                    "{file}: no stage drive ran {}",
-                    row.key
-                );
+            if let Some(key) = a_stage_no_drive_reaches(&car(file)) {
+                panic!("{file}: no stage drive ran {key}");
             }
         }
+    }
+
+    /// The first stage the bound counts that no stage drive of `car` runs, if any.
+    fn a_stage_no_drive_reaches(car: &NodeConfig) -> Option<&'static str> {
+        let unreachable = crate::bound::unreachable(car);
+        let mut seen: Vec<Stage> = Vec::new();
+        for spec in stage_corpus(car) {
+            for stage in laps(&spec, car).into_iter().flatten() {
+                if !seen.contains(&stage) {
+                    seen.push(stage);
+                }
+            }
+        }
+        catmodel::node::TICK_STAGES
+            .iter()
+            .find(|row| !unreachable.contains(&row.key) && !seen.contains(&row.stage))
+            .map(|row| row.key)
+    }
+
+    /// The same for model files no one measured: drawn at random over the reader's ranges
+    /// ([`crate::cars`]; `CARS=N CARS_SEED=S` for another draw). A file whose drives miss a
+    /// stage is one `CATMODEL_MODEL=FILE cargo qemu` cannot bound.
+    #[test]
+    fn the_stage_drives_reach_every_stage_for_random_cars() {
+        let count: usize = std::env::var("CARS").map_or(40, |v| v.parse().unwrap());
+        let seed: u64 = std::env::var("CARS_SEED").map_or(1, |v| v.parse().unwrap());
+        let mut rng = Rng::new(seed);
+        let root = crate::root();
+        let mut missed = Vec::new();
+        for k in 0..count {
+            let (file, text, _) = crate::cars::draw(&mut rng, &root).unwrap();
+            if let Some(key) = a_stage_no_drive_reaches(&file.node_config()) {
+                missed.push(format!(
+                    "car {k} (seed {seed}): no stage drive ran {key}\n{text}"
+                ));
+            }
+        }
+        assert!(
+            missed.is_empty(),
+            "{} of {count}:\n{}",
+            missed.len(),
+            missed.join("\n")
+        );
     }
 }

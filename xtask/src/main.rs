@@ -22,6 +22,8 @@
 //!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
+//! - `cargo xtask random-cars --out DIR [--count N] [--seed S]`: model files drawn at random
+//!   over the reader's ranges, for `CATMODEL_MODEL=FILE cargo qemu` ([`cars`]).
 //! - `cargo xtask adversarial [--runs N] [--seed S]`: drives made to break the tick's
 //!   worst-case bound ([`bound`]), run in QEMU; fails if a tick exceeds it ([`adversarial`]).
 use std::fmt::Write as _;
@@ -34,6 +36,7 @@ use anyhow::{anyhow, bail, Context, Result};
 mod adversarial;
 mod bench;
 mod bound;
+mod cars;
 mod corpus;
 mod drives;
 mod nopanic;
@@ -68,11 +71,13 @@ fn main() -> ExitCode {
         Some("tx-compare") => txcompare::tx_compare(args.get(1..).unwrap_or(&[])),
         Some("bench-target") => bench::bench_target(args.get(1..).unwrap_or(&[])),
         Some("model-corpus") => corpus::model_corpus(),
+        Some("random-cars") => cars::random_cars(args.get(1..).unwrap_or(&[])),
         Some("tick-schedule") => schedule::tick_schedule(),
         Some("adversarial") => adversarial::adversarial(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus | tick-schedule | adversarial [--runs N] [--seed S]\n\
+             | bench-target [--check] | model-corpus | random-cars --out DIR [--count N] [--seed S]\n\
+             | tick-schedule | adversarial [--runs N] [--seed S]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
     };

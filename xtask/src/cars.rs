@@ -1,0 +1,357 @@
+//! Model files drawn at random over the reader's ranges: cars no one has measured, for the
+//! checks that must hold for any file the reader takes (the stage drives reach every stage the
+//! bound counts, `drives::tests`; `cargo xtask random-cars --out DIR` writes them for
+//! `CATMODEL_MODEL=FILE cargo qemu`).
+//!
+//! A draw starts from one of the repository's files (its identified models and comments) and
+//! sets every key [`catmodel_model_file::KEY_RANGES`] lists, and the `[dynamics]` section,
+//! somewhere in its range: the geometry consistent (overhangs from the body's length, the
+//! antenna on the body or its mount, the centre of gravity on the wheelbase, the yaw inertia
+//! and the cornering stiffnesses from the mass and size), the receiver's rate often a common
+//! one, the speed model's input delay anywhere the delay line holds. The reader decides: a draw
+//! it refuses (an oversteering model unstable below the top speed, say) is drawn again, and
+//! [`draw`] says how many were.
+use std::path::Path;
+
+use anyhow::{bail, Result};
+use catmodel_model_file::{ModelFile, GNSS_RATE_RANGE_HZ, STEER_LAG_RANGE_S};
+
+use crate::drives::Rng;
+
+/// The files a draw starts from: their models, sections and comments.
+const BASES: [&str; 3] = [
+    "models/paper.toml",
+    "models/hatchback.toml",
+    "models/stress/dearest-found.toml",
+];
+
+/// The speed model's longest input delay the node's delay line holds, s (64 ticks).
+const SPEED_DELAY_MAX_S: f64 = 1.28;
+
+/// Receivers' common fix rates, Hz: half of the draws take one of these.
+const COMMON_RATES_HZ: [f64; 7] = [1.0, 5.0, 10.0, 20.0, 25.0, 50.0, 100.0];
+
+/// Standard gravity, m/s^2.
+const G: f64 = 9.80665;
+
+/// Log-uniform in [lo, hi].
+fn log_range(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
+    (lo.ln() + (hi.ln() - lo.ln()) * rng.uniform()).exp()
+}
+
+/// `text` with `key` of `[section]` set to `value` (the line replaced, or added after the
+/// section's header). The first header named `[section]` is the section.
+fn set(text: &str, section: &str, key: &str, value: &str) -> String {
+    let header = format!("[{section}]");
+    let mut out = Vec::new();
+    let mut inside = false;
+    let mut done = false;
+    let mut header_at = None;
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            if inside && !done {
+                // The key is not in the section: it goes after the header.
+                if let Some(at) = header_at {
+                    out.insert(at + 1, format!("{key} = {value}"));
+                }
+                done = true;
+            }
+            inside = !done && trimmed.trim_end() == header;
+            if inside {
+                header_at = Some(out.len());
+            }
+        } else if inside && !done {
+            let name = trimmed.split('=').next().unwrap_or("").trim();
+            if name == key && trimmed.contains('=') {
+                out.push(format!("{key} = {value}"));
+                done = true;
+                continue;
+            }
+        }
+        out.push(line.to_string());
+    }
+    if inside && !done {
+        if let Some(at) = header_at {
+            out.insert(at + 1, format!("{key} = {value}"));
+        }
+    }
+    let mut s = out.join("\n");
+    s.push('\n');
+    s
+}
+
+/// `text` with the first `delay_s` line of the speed model's first block set to `delay_s`.
+fn set_speed_delay(text: &str, delay_s: f64) -> String {
+    let mut out = Vec::new();
+    let mut in_speed_block = false;
+    let mut done = false;
+    for line in text.lines() {
+        let trimmed = line.trim();
+        if trimmed.starts_with('[') {
+            in_speed_block = trimmed == "[[speed.blocks]]";
+        } else if in_speed_block && !done && trimmed.starts_with("delay_s") {
+            out.push(format!("delay_s = {delay_s:.2}"));
+            done = true;
+            continue;
+        }
+        out.push(line.to_string());
+    }
+    let mut s = out.join("\n");
+    s.push('\n');
+    s
+}
+
+/// One draw's text (not yet read).
+fn draw_text(rng: &mut Rng, root: &Path) -> Result<String> {
+    let base = BASES[rng.below(BASES.len() as u64) as usize];
+    let mut t = std::fs::read_to_string(root.join(base))?;
+    let put = |t: &mut String, section: &str, key: &str, value: f64| {
+        *t = set(t, section, key, &format!("{value}"));
+    };
+
+    // Geometry: a wheelbase, overhangs from it, a body no longer than 25 m.
+    let wheelbase = log_range(rng, 1.0, 10.0);
+    let rear_overhang = rng.range(0.0, (0.6 * wheelbase).min(6.0));
+    let front_overhang = rng.range(0.1, (0.6 * wheelbase).min(6.0));
+    let length = (wheelbase + rear_overhang + front_overhang).min(25.0);
+    let width = rng.range(0.8, 3.0);
+    let track = rng.range(0.5, width.min(3.0));
+    put(&mut t, "vehicle", "wheelbase_m", wheelbase);
+    put(&mut t, "vehicle", "rear_overhang_m", rear_overhang);
+    put(&mut t, "vehicle", "length_m", length);
+    put(&mut t, "vehicle", "width_m", width);
+    put(&mut t, "vehicle", "track_m", track);
+    put(&mut t, "vehicle", "max_steer_deg", rng.range(10.0, 65.0));
+    // The antenna anywhere on the body, its mount's reach past it included.
+    let mount = catmodel_model_file::ANTENNA_MOUNT_M;
+    let ahead = rng.range(-rear_overhang - mount, length - rear_overhang + mount);
+    let left = rng.range(-0.5 * width - mount, 0.5 * width + mount);
+    put(&mut t, "vehicle", "antenna_ahead_m", ahead);
+    put(&mut t, "vehicle", "antenna_left_m", left);
+    let rate = if rng.uniform() < 0.5 {
+        COMMON_RATES_HZ[rng.below(COMMON_RATES_HZ.len() as u64) as usize]
+    } else {
+        log_range(rng, GNSS_RATE_RANGE_HZ.0, GNSS_RATE_RANGE_HZ.1)
+    };
+    put(&mut t, "vehicle", "gnss_rate_hz", rate);
+    let max_speed = rng.range(5.0, 80.0);
+    put(&mut t, "vehicle", "max_speed_mps", max_speed);
+    put(
+        &mut t,
+        "vehicle",
+        "max_steer_rate_pct_per_s",
+        log_range(rng, 5.0, 500.0),
+    );
+    put(
+        &mut t,
+        "vehicle",
+        "steer_lag_s",
+        rng.range(STEER_LAG_RANGE_S.0, STEER_LAG_RANGE_S.1),
+    );
+
+    // The single-track model, from the mass and the size.
+    let mass = log_range(rng, 200.0, 50_000.0);
+    let gyration = rng.range(0.2, 0.45) * length;
+    let front_share = rng.range(0.3, 0.7);
+    let cg_front = front_share * wheelbase;
+    let cg_rear = wheelbase - cg_front;
+    let front_load = mass * G * cg_rear / wheelbase;
+    let rear_load = mass * G * cg_front / wheelbase;
+    put(&mut t, "dynamics", "mass_kg", mass);
+    put(
+        &mut t,
+        "dynamics",
+        "yaw_inertia_kg_m2",
+        mass * gyration * gyration,
+    );
+    put(&mut t, "dynamics", "cg_to_front_m", cg_front);
+    put(&mut t, "dynamics", "cg_to_rear_m", cg_rear);
+    // Per unit of load: the rear's above the front's makes an understeering car (most cars; the
+    // rest oversteer, which the reader takes if the model is stable to the top speed).
+    let rear_per_load = rng.range(6.0, 20.0);
+    let front_per_load = if rng.uniform() < 0.85 {
+        rng.range(6.0, rear_per_load)
+    } else {
+        rng.range(6.0, 20.0)
+    };
+    let c_front = front_load * front_per_load;
+    let c_rear = rear_load * rear_per_load;
+    put(&mut t, "dynamics", "cornering_front_n_per_rad", c_front);
+    put(&mut t, "dynamics", "cornering_rear_n_per_rad", c_rear);
+    // The kinematic model's understeer is the same car's (the reader compares the two): eq 2's
+    // K of the stiffnesses, within its range (an oversteering pair is stable to the top speed
+    // or refused).
+    let k =
+        mass * (c_rear * cg_rear - c_front * cg_front) / (c_front * c_rear * wheelbase * wheelbase);
+    put(
+        &mut t,
+        "vehicle",
+        "understeer_s2_per_m2",
+        k.clamp(0.0, 0.01),
+    );
+
+    // Inputs: timeouts, the gate, the outage bridged.
+    for key in ["steer_timeout_s", "speed_timeout_s", "pedal_timeout_s"] {
+        put(&mut t, "inputs", key, log_range(rng, 0.02, 2.0));
+    }
+    put(&mut t, "inputs", "gnss_gate_m", log_range(rng, 1.0, 100.0));
+    // Longer than the GNSS timeout: 2.5 fix periods, 0.2 s at least (the reader's rule).
+    let timeout_s = (2.5 / rate).max(0.2);
+    put(
+        &mut t,
+        "inputs",
+        "gnss_lost_s",
+        log_range(rng, 1.01 * timeout_s, 30.0),
+    );
+    put(
+        &mut t,
+        "control",
+        "position_uncertainty_m",
+        rng.range(0.0, 20.0),
+    );
+
+    // The hybrid switch: exit at or below enter.
+    let enter_speed = log_range(rng, 1.0, 80.0);
+    let enter_accel = log_range(rng, 0.1, 15.0);
+    put(&mut t, "hybrid", "enter_dynamic_speed_mps", enter_speed);
+    put(
+        &mut t,
+        "hybrid",
+        "exit_dynamic_speed_mps",
+        rng.range(1.0, enter_speed),
+    );
+    put(
+        &mut t,
+        "hybrid",
+        "enter_dynamic_lat_accel_mps2",
+        enter_accel,
+    );
+    put(
+        &mut t,
+        "hybrid",
+        "exit_dynamic_lat_accel_mps2",
+        rng.range(0.1, enter_accel),
+    );
+    t = set(
+        &t,
+        "hybrid",
+        "min_dwell_ticks",
+        &format!("{}", rng.below(501)),
+    );
+
+    // The speed model's input delay, whole ticks.
+    let ticks = rng.below((SPEED_DELAY_MAX_S / catmodel::SAMPLE_PERIOD_S_F64) as u64 + 1);
+    Ok(set_speed_delay(
+        &t,
+        ticks as f64 * catmodel::SAMPLE_PERIOD_S_F64,
+    ))
+}
+
+/// One model file the reader takes, drawn at random, its text, and how many draws the reader
+/// refused before it.
+pub fn draw(rng: &mut Rng, root: &Path) -> Result<(ModelFile, String, usize)> {
+    let mut refused = 0;
+    loop {
+        let text = draw_text(rng, root)?;
+        match catmodel_model_file::parse(&text, Path::new("random.toml")) {
+            Ok(file) => return Ok((file, text, refused)),
+            Err(_) => refused += 1,
+        }
+        if refused >= 200 {
+            bail!("200 draws in a row refused by the reader: the draw is wrong");
+        }
+    }
+}
+
+/// `cargo xtask random-cars --out DIR [--count N] [--seed S]`: writes `N` model files drawn at
+/// random (`DIR/car-K.toml`), each for `CATMODEL_MODEL=FILE cargo qemu`.
+pub fn random_cars(args: &[String]) -> Result<()> {
+    let mut out = None;
+    let mut count = 10usize;
+    let mut seed = 1u64;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = || {
+            it.next()
+                .ok_or_else(|| anyhow::anyhow!("{a} needs a value"))
+        };
+        match a.as_str() {
+            "--out" => out = Some(std::path::PathBuf::from(value()?)),
+            "--count" => count = value()?.parse()?,
+            "--seed" => seed = value()?.parse()?,
+            other => bail!("random-cars: unknown argument {other}"),
+        }
+    }
+    let Some(out) = out else {
+        bail!("usage: cargo xtask random-cars --out DIR [--count N] [--seed S]")
+    };
+    std::fs::create_dir_all(&out)?;
+    let mut rng = Rng::new(seed);
+    let root = crate::root();
+    let mut refused = 0;
+    for k in 0..count {
+        let (_, text, r) = draw(&mut rng, &root)?;
+        refused += r;
+        let path = out.join(format!("car-{k}.toml"));
+        let header = format!(
+            "# Drawn at random over the reader's ranges: cargo xtask random-cars --seed {seed} (car {k})\n"
+        );
+        std::fs::write(&path, header + &text)?;
+        println!("{}", path.display());
+    }
+    eprintln!("{count} model files written, {refused} draws refused by the reader on the way");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_key_is_set_in_its_section_or_added_to_it() {
+        let text = "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nk = 3\n";
+        assert_eq!(
+            set(text, "x", "k", "5"),
+            "a = 1\n[x]\nk = 5\nm = 2\n[y]\nk = 3\n"
+        );
+        assert_eq!(
+            set(text, "y", "k", "5"),
+            "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nk = 5\n"
+        );
+        assert_eq!(
+            set(text, "x", "n", "7"),
+            "a = 1\n[x]\nn = 7\nk = 1 # c\nm = 2\n[y]\nk = 3\n"
+        );
+        assert_eq!(
+            set(text, "y", "n", "7"),
+            "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nn = 7\nk = 3\n"
+        );
+    }
+
+    /// The draws are files the reader takes, most at the first try, and they differ where it
+    /// matters: the receiver's rate, the delay, the size.
+    #[test]
+    fn the_reader_takes_most_draws_and_they_spread_over_the_ranges() {
+        let mut rng = Rng::new(7);
+        let root = crate::root();
+        let mut refused = 0;
+        let mut rates = Vec::new();
+        let mut lengths = Vec::new();
+        for _ in 0..60 {
+            let (file, _, r) = draw(&mut rng, &root).unwrap();
+            refused += r;
+            let car = file.node_config();
+            rates.push(car.estimator.declared_gnss_rate_hz());
+            lengths.push(f64::from(car.body.length_m));
+        }
+        assert!(refused < 60, "{refused} of {} draws refused", 60 + refused);
+        let spread = |v: &[f64]| {
+            let lo = v.iter().cloned().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+            hi / lo
+        };
+        assert!(spread(&rates) > 20.0, "rates {rates:?}");
+        assert!(spread(&lengths) > 4.0, "lengths {lengths:?}");
+    }
+}
