@@ -246,6 +246,53 @@ fn warm_start_beats_cold_start_at_the_iteration_cap() {
     }
 }
 
+/// A workspace that forgot a solve (`Workspace::forget`, a new path) solves the next problem
+/// exactly as one reset to nothing does, bit for bit, whatever the solve before left in it:
+/// after a solve of another problem from another state, and of the same problem.
+#[test]
+fn a_forgotten_solve_is_a_reset_one() {
+    let r = load_reference("mpc.json");
+    let cases = r["ltv_qp"].as_array().unwrap();
+    for (n, case) in cases.iter().enumerate() {
+        let (p, x0) = problem(&case["problem"]);
+        for (m, before) in cases.iter().enumerate() {
+            let (q, y0) = problem(&before["problem"]);
+            let mut used = Workspace::default();
+            used.cold_start(&q);
+            used.factor(&q).unwrap();
+            used.iterate(&q, &y0, &settings(50)).unwrap();
+            let (mut forgot, mut reset) = (used.clone(), used);
+            forgot.forget();
+            reset.reset();
+            for ws in [&mut forgot, &mut reset] {
+                ws.cold_start(&p);
+                ws.factor(&p).unwrap();
+                ws.iterate(&p, &x0, &settings(12)).unwrap();
+            }
+            for (k, (a, b)) in forgot.stages.iter().zip(&reset.stages).enumerate() {
+                assert_eq!(a.u.to_bits(), b.u.to_bits(), "case {n} after {m}, stage {k}");
+                for i in 0..NX {
+                    assert_eq!(a.x[i].to_bits(), b.x[i].to_bits(), "case {n} after {m}");
+                }
+            }
+            // The solve before did move the workspace: a warm start would not be the same.
+            let mut warm = forgot.clone();
+            warm.shift(0.2);
+            warm.factor(&p).unwrap();
+            warm.iterate(&p, &x0, &settings(1)).unwrap();
+            let mut cold = reset.clone();
+            cold.reset();
+            cold.cold_start(&p);
+            cold.factor(&p).unwrap();
+            cold.iterate(&p, &x0, &settings(1)).unwrap();
+            assert!(
+                warm.stages.iter().zip(&cold.stages).any(|(a, b)| a.u != b.u),
+                "case {n} after {m}: the test cannot tell a warm start from a cold one"
+            );
+        }
+    }
+}
+
 fn eq5_block() -> SsBlock<2> {
     SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap()
 }

@@ -656,11 +656,18 @@ impl EstimatorState {
                 };
             }
         }
-        for k in (1..=(missing as usize).min(TRACK_LEN)).rev() {
+        // The track's entries, oldest first: each one step further along the heading than the
+        // one before (added, not recomputed: the tick's dearest loop when the gap is long).
+        let entries = (missing as usize).min(TRACK_LEN);
+        let mut p = at(back_m(entries, cfg.group_delay_fixes));
+        let (dx, dy) = (step_m * s, step_m * c);
+        for _ in 0..entries {
             self.track_head = (self.track_head + 1) % TRACK_LEN;
             if let Some(slot) = self.track.get_mut(self.track_head) {
-                *slot = at(back_m(k, cfg.group_delay_fixes));
+                *slot = p;
             }
+            p.x_m += dx;
+            p.y_m += dy;
         }
         self.filtered = Some(at(back_m(1, cfg.group_delay_fixes)));
         self.fixes = self.fixes.saturating_add(missing);

@@ -777,7 +777,9 @@ impl MpcState {
     /// 0.66 m/s over an 8 m/s limit (docs/findings.md).
     pub fn new_path(&mut self) {
         self.speed.new_path();
-        self.workspace.reset();
+        // With `lin` `None` the next solve cold-starts: what it reads of the old path's solve
+        // is forgotten, not the whole workspace rewritten (`Workspace::forget`).
+        self.workspace.forget();
         self.lin = None;
         self.sides = [None; MAX_OBSTACLES];
         self.blocked = [false; MAX_OBSTACLES];
