@@ -270,7 +270,11 @@ fn a_forgotten_solve_is_a_reset_one() {
                 ws.iterate(&p, &x0, &settings(12)).unwrap();
             }
             for (k, (a, b)) in forgot.stages.iter().zip(&reset.stages).enumerate() {
-                assert_eq!(a.u.to_bits(), b.u.to_bits(), "case {n} after {m}, stage {k}");
+                assert_eq!(
+                    a.u.to_bits(),
+                    b.u.to_bits(),
+                    "case {n} after {m}, stage {k}"
+                );
                 for i in 0..NX {
                     assert_eq!(a.x[i].to_bits(), b.x[i].to_bits(), "case {n} after {m}");
                 }
@@ -286,7 +290,10 @@ fn a_forgotten_solve_is_a_reset_one() {
             cold.factor(&p).unwrap();
             cold.iterate(&p, &x0, &settings(1)).unwrap();
             assert!(
-                warm.stages.iter().zip(&cold.stages).any(|(a, b)| a.u != b.u),
+                warm.stages
+                    .iter()
+                    .zip(&cold.stages)
+                    .any(|(a, b)| a.u != b.u),
                 "case {n} after {m}: the test cannot tell a warm start from a cold one"
             );
         }

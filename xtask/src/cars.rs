@@ -8,13 +8,16 @@
 //! somewhere in its range: the geometry consistent (overhangs from the body's length, the
 //! antenna on the body or its mount, the centre of gravity on the wheelbase, the yaw inertia
 //! and the cornering stiffnesses from the mass and size), the receiver's rate often a common
-//! one, the speed model's input delay anywhere the delay line holds. The reader decides: a draw
+//! one, the speed model's input delay anywhere the delay line holds, the pure pursuit on some
+//! cars and a lateral weight of their own on others. The reader decides: a draw
 //! it refuses (an oversteering model unstable below the top speed, say) is drawn again, and
 //! [`draw`] says how many were.
 use std::path::Path;
 
 use anyhow::{bail, Result};
-use catmodel_model_file::{ModelFile, GNSS_RATE_RANGE_HZ, STEER_LAG_RANGE_S};
+use catmodel_model_file::{
+    ModelFile, GNSS_RATE_RANGE_HZ, MPC_LATERAL_WEIGHT_RANGE, STEER_LAG_RANGE_S,
+};
 
 use crate::drives::Rng;
 
@@ -210,6 +213,22 @@ fn draw_text(rng: &mut Rng, root: &Path) -> Result<String> {
         "position_uncertainty_m",
         rng.range(0.0, 20.0),
     );
+    // The controller: the pure pursuit on a fifth of the cars (the MPC's stages are then
+    // unreachable, `bound::unreachable`), a lateral weight of the car's own on a third.
+    let controller = if rng.uniform() < 0.2 {
+        "pure-pursuit"
+    } else {
+        "mpc"
+    };
+    t = set(&t, "control", "controller", &format!("\"{controller}\""));
+    if rng.uniform() < 0.3 {
+        put(
+            &mut t,
+            "control",
+            "mpc_lateral_weight_per_m2",
+            log_range(rng, MPC_LATERAL_WEIGHT_RANGE.0, MPC_LATERAL_WEIGHT_RANGE.1),
+        );
+    }
 
     // The hybrid switch: exit at or below enter.
     let enter_speed = log_range(rng, 1.0, 80.0);
