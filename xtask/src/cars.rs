@@ -330,22 +330,24 @@ mod tests {
     #[test]
     fn a_key_is_set_in_its_section_or_added_to_it() {
         let text = "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nk = 3\n";
-        assert_eq!(
-            set(text, "x", "k", "5"),
-            "a = 1\n[x]\nk = 5\nm = 2\n[y]\nk = 3\n"
-        );
-        assert_eq!(
-            set(text, "y", "k", "5"),
-            "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nk = 5\n"
-        );
-        assert_eq!(
-            set(text, "x", "n", "7"),
-            "a = 1\n[x]\nn = 7\nk = 1 # c\nm = 2\n[y]\nk = 3\n"
-        );
-        assert_eq!(
-            set(text, "y", "n", "7"),
-            "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nn = 7\nk = 3\n"
-        );
+        for (section, key, value, want) in [
+            ("x", "k", "5", "a = 1\n[x]\nk = 5\nm = 2\n[y]\nk = 3\n"),
+            ("y", "k", "5", "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nk = 5\n"),
+            (
+                "x",
+                "n",
+                "7",
+                "a = 1\n[x]\nn = 7\nk = 1 # c\nm = 2\n[y]\nk = 3\n",
+            ),
+            (
+                "y",
+                "n",
+                "7",
+                "a = 1\n[x]\nk = 1 # c\nm = 2\n[y]\nn = 7\nk = 3\n",
+            ),
+        ] {
+            assert_eq!(set(text, section, key, value), want, "{section}.{key}");
+        }
     }
 
     /// The draws are files the reader takes, most at the first try, and they differ where it
