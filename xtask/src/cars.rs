@@ -283,12 +283,16 @@ pub fn draw(rng: &mut Rng, root: &Path) -> Result<(ModelFile, String, usize)> {
     }
 }
 
-/// `cargo xtask random-cars --out DIR [--count N] [--seed S]`: writes `N` model files drawn at
-/// random (`DIR/car-K.toml`), each for `CATMODEL_MODEL=FILE cargo qemu`.
+/// `cargo xtask random-cars --out DIR [--count N] [--seed S] [--qemu]`: writes `N` model files
+/// drawn at random (`DIR/car-K.toml`), each for `CATMODEL_MODEL=FILE cargo qemu`; with
+/// `--qemu` it runs that for each (about 4 minutes a file), prints each file's two bounds and
+/// their largest, and fails if one run fails (a tick or a bound over its budget, a stage no
+/// drive reached).
 pub fn random_cars(args: &[String]) -> Result<()> {
     let mut out = None;
     let mut count = 10usize;
     let mut seed = 1u64;
+    let mut qemu = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         let mut value = || {
@@ -299,6 +303,7 @@ pub fn random_cars(args: &[String]) -> Result<()> {
             "--out" => out = Some(std::path::PathBuf::from(value()?)),
             "--count" => count = value()?.parse()?,
             "--seed" => seed = value()?.parse()?,
+            "--qemu" => qemu = true,
             other => bail!("random-cars: unknown argument {other}"),
         }
     }
@@ -320,6 +325,53 @@ pub fn random_cars(args: &[String]) -> Result<()> {
         println!("{}", path.display());
     }
     eprintln!("{count} model files written, {refused} draws refused by the reader on the way");
+    if qemu {
+        measure_each(&out, count)?;
+    }
+    Ok(())
+}
+
+/// `CATMODEL_MODEL=DIR/car-K.toml cargo qemu` for each file written, and the bounds.
+fn measure_each(dir: &Path, count: usize) -> Result<()> {
+    let root = crate::root();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut failed = Vec::new();
+    let mut largest = (0u64, 0u64);
+    for k in 0..count {
+        let path = std::fs::canonicalize(dir.join(format!("car-{k}.toml")))?;
+        let status = std::process::Command::new(&cargo)
+            .args(["xtask", "qemu"])
+            .env("CATMODEL_MODEL", &path)
+            .current_dir(&root)
+            .stdout(std::process::Stdio::null())
+            .status()?;
+        if !status.success() {
+            println!("car-{k}: cargo qemu FAILED ({})", path.display());
+            failed.push(k);
+            continue;
+        }
+        let timing: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(
+            root.join("target/qemu/timing.json"),
+        )?)?;
+        let bound = |key: &str| timing.get(key).and_then(serde_json::Value::as_u64);
+        let (Some(b), Some(c)) = (
+            bound("worst_case_bound_instructions"),
+            bound("worst_case_bound_controller_instructions"),
+        ) else {
+            bail!("target/qemu/timing.json after car-{k}: no bounds");
+        };
+        println!("car-{k}: bound {b}, controller bound {c}");
+        largest = (largest.0.max(b), largest.1.max(c));
+    }
+    println!(
+        "{} of {count} measured: largest bound {}, largest controller bound {}",
+        count - failed.len(),
+        largest.0,
+        largest.1
+    );
+    if !failed.is_empty() {
+        bail!("cargo qemu failed for cars {failed:?}");
+    }
     Ok(())
 }
 

@@ -22,8 +22,9 @@
 //!   ([`schedule`]).
 //! - `cargo xtask model-corpus`: the firmware build and `catmodel replay --model` refuse every
 //!   bad model file of `models/bad/` with the same message ([`corpus`]).
-//! - `cargo xtask random-cars --out DIR [--count N] [--seed S]`: model files drawn at random
-//!   over the reader's ranges, for `CATMODEL_MODEL=FILE cargo qemu` ([`cars`]).
+//! - `cargo xtask random-cars --out DIR [--count N] [--seed S] [--qemu]`: model files drawn at
+//!   random over the reader's ranges, for `CATMODEL_MODEL=FILE cargo qemu`, which `--qemu` runs
+//!   for each ([`cars`]).
 //! - `cargo xtask adversarial [--runs N] [--seed S]`: drives made to break the tick's
 //!   worst-case bound ([`bound`]), run in QEMU; fails if a tick exceeds it ([`adversarial`]).
 use std::fmt::Write as _;
@@ -76,7 +77,7 @@ fn main() -> ExitCode {
         Some("adversarial") => adversarial::adversarial(args.get(1..).unwrap_or(&[])),
         _ => Err(anyhow!(
             "usage: cargo xtask qemu [-- FILE.log] | qemu-overrun-test | qemu-stack-guard-test | size | no-panic | tx-compare FW.log HOST.log\n\
-             | bench-target [--check] | model-corpus | random-cars --out DIR [--count N] [--seed S]\n\
+             | bench-target [--check] | model-corpus | random-cars --out DIR [--count N] [--seed S] [--qemu]\n\
              | tick-schedule | adversarial [--runs N] [--seed S]\n\
              (`cargo qemu` is `cargo xtask qemu`)"
         )),
