@@ -687,6 +687,16 @@ pub fn write_candump(path: &Path, frames: &[TimedFrame]) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
+/// How long the node's heading takes to settle on the receiver's course, s (its time
+/// constants at the file's course gain per tick; 0 without a gain).
+fn heading_settle_s(car: &NodeConfig) -> f64 {
+    let gain = f64::from(car.estimator.course_gain);
+    match gain > 0.0 {
+        true => f64::from(catmodel::node::smoothing::HEADING_SETTLE_TIME_CONSTANTS) / gain * TICK_S,
+        false => 0.0,
+    }
+}
+
 /// The shortest gap in the fixes that the node restarts its filters after, s: one more missing
 /// fix than a tick fills (`src/node/gnss.rs`: a gap rounds to whole periods, so
 /// `GAP_FILL_PER_TICK + 1.5` of them).
@@ -730,13 +740,8 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
     // restart's; a few of them, apart by the filters' memory and the heading's settling.
     let exact_gap_s = (track_s.min(lost_s + TICK_S - 2e-6)).max(restart_gap_s(car) + 2e-6);
     let slow = (2.0_f64).max(f64::from(car.estimator.course_min_speed_mps) + 0.5);
-    let gain = f64::from(car.estimator.course_gain);
-    let settle_s = match gain > 0.0 {
-        true => f64::from(catmodel::node::smoothing::HEADING_SETTLE_TIME_CONSTANTS) / gain * TICK_S,
-        false => 0.0,
-    };
     let memory_s = (car.estimator.fir.len() + car.estimator.ma.len() + 2) as f64 * period_s;
-    let exact_first_s = 2.0 + memory_s + settle_s;
+    let exact_first_s = 2.0 + memory_s + heading_settle_s(car);
     let exact_every_s = exact_gap_s + memory_s + 2.0;
     // As many missing fixes as a tick fills, or as the position lasts (a 1 Hz receiver lost
     // after 2.5 s: one; the GNSS timeout, 2.5 periods at least, leaves one always).
@@ -954,11 +959,7 @@ fn path_jump(car: &NodeConfig, plain: Spec) -> Spec {
     let speed = (2.0_f64).max(f64::from(car.estimator.course_min_speed_mps) + 0.5);
     let obstacles = MAX_OBSTACLES;
     let sent_s = frame_time_s(2 + 2 * MAX_PATH_POINTS + 1 + obstacles);
-    let gain = f64::from(car.estimator.course_gain);
-    let settle_s = match gain > 0.0 {
-        true => f64::from(catmodel::node::smoothing::HEADING_SETTLE_TIME_CONSTANTS) / gain * TICK_S,
-        false => 0.0,
-    };
+    let settle_s = heading_settle_s(car);
     // The filters' memory in fixes, with two to spare: a position after a restart within it.
     let fill_s = (car.estimator.fir.len() + car.estimator.ma.len() + 2) as f64 * period_s;
     let planning_s = sent_s.max(fill_s) + settle_s + 1.0;
