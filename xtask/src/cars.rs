@@ -45,7 +45,11 @@ fn log_range(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
 /// `text` with `key` of `[section]` set to `value` (the line replaced, or added after the
 /// section's header). The first header named `[section]` is the section.
 fn set(text: &str, section: &str, key: &str, value: &str) -> String {
-    let header = format!("[{section}]");
+    set_under(text, &format!("[{section}]"), key, value)
+}
+
+/// [`set`] under the first header line `header` (`[[speed.blocks]]`: the first block).
+fn set_under(text: &str, header: &str, key: &str, value: &str) -> String {
     let mut out = Vec::new();
     let mut inside = false;
     let mut done = false;
@@ -78,27 +82,6 @@ fn set(text: &str, section: &str, key: &str, value: &str) -> String {
         if let Some(at) = header_at {
             out.insert(at + 1, format!("{key} = {value}"));
         }
-    }
-    let mut s = out.join("\n");
-    s.push('\n');
-    s
-}
-
-/// `text` with the first `delay_s` line of the speed model's first block set to `delay_s`.
-fn set_speed_delay(text: &str, delay_s: f64) -> String {
-    let mut out = Vec::new();
-    let mut in_speed_block = false;
-    let mut done = false;
-    for line in text.lines() {
-        let trimmed = line.trim();
-        if trimmed.starts_with('[') {
-            in_speed_block = trimmed == "[[speed.blocks]]";
-        } else if in_speed_block && !done && trimmed.starts_with("delay_s") {
-            out.push(format!("delay_s = {delay_s:.2}"));
-            done = true;
-            continue;
-        }
-        out.push(line.to_string());
     }
     let mut s = out.join("\n");
     s.push('\n');
@@ -261,9 +244,12 @@ fn draw_text(rng: &mut Rng, root: &Path) -> Result<String> {
 
     // The speed model's input delay, whole ticks.
     let ticks = rng.below((SPEED_DELAY_MAX_S / catmodel::SAMPLE_PERIOD_S_F64) as u64 + 1);
-    Ok(set_speed_delay(
+    let delay_s = ticks as f64 * catmodel::SAMPLE_PERIOD_S_F64;
+    Ok(set_under(
         &t,
-        ticks as f64 * catmodel::SAMPLE_PERIOD_S_F64,
+        "[[speed.blocks]]",
+        "delay_s",
+        &format!("{delay_s:.2}"),
     ))
 }
 

@@ -731,9 +731,7 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
     // the long gaps miss more fixes than that where the receiver is fast enough for it before
     // the position is lost, else as many as it can, and always more than a tick fills.
     let track_s = (TRACK_LEN as f64 + 1.5) * period_s;
-    let long_gap_s = track_s
-        .min(lost_s - 1.5 * period_s)
-        .max((GAP_FILL_PER_TICK as f64 + 1.5) * period_s);
+    let long_gap_s = track_s.min(lost_s - 1.5 * period_s).max(restart_gap_s(car));
     let lost_gap_s = (2.6_f64).max(lost_s + 6.0 * period_s);
     // The exact gaps: as long as the track holds or the position lasts (a tick after
     // `gnss_lost_s` at most: the tick before the fix still finds it within), at least a
