@@ -38,7 +38,7 @@ use catmodel_app::budget::{
 };
 
 use super::bench::{self, MPC_BENCH};
-use super::{cargo_build, drives, qemu_command, root, INSTALL_QEMU};
+use super::{cargo_build, drives, qemu_append, qemu_command, qemu_path, root, INSTALL_QEMU};
 
 /// The stage row of the model-predictive controller's solve (`Stage::MpcSolve`).
 const SOLVE_ROW: &str = "mpc_solve";
@@ -561,11 +561,21 @@ pub fn measure_stages() -> Result<Bound> {
     let mut drives = write_stage_corpus(&car, &dir)?;
     drives.extend(write_closed_loop_sessions(&dir)?);
     let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
-    let mut append = vec!["catmodel-qemu-stages".to_string(), "--stages".to_string()];
-    append.extend(drives.iter().cloned());
-    let output = qemu_command(&elf)
-        .args(["-append", &append.join(" ")])
-        .output();
+    // The drives go in a list file: a command line of their paths outgrows the firmware's
+    // buffer as drives are added or the checkout's path grows.
+    let list = dir.join("drives.list");
+    let mut text = drives.join("\n");
+    text.push('\n');
+    std::fs::write(&list, text).with_context(|| format!("writing {}", list.display()))?;
+    let append = qemu_append(
+        &elf,
+        &[
+            "catmodel-qemu-stages".into(),
+            "--stages".into(),
+            qemu_path(&list)?,
+        ],
+    )?;
+    let output = qemu_command(&elf).args(["-append", &append]).output();
     let output = match output {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")

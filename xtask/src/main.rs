@@ -172,8 +172,14 @@ fn qemu_command(elf: &Path) -> Command {
         .args(["-semihosting-config", "enable=on,target=native"])
         .args(["-icount", "shift=0,align=off,sleep=off"])
         .arg("-kernel")
-        .arg(elf);
+        .arg(kernel_path(elf));
     command
+}
+
+/// The kernel's path as QEMU is given it: relative to the repository, QEMU's working
+/// directory, when inside (QEMU passes it on as the firmware's first argument, [`qemu_append`]).
+fn kernel_path(elf: &Path) -> &Path {
+    elf.strip_prefix(root()).unwrap_or(elf)
 }
 
 /// Runs the QEMU firmware with `args` appended; outputs go to `out_dir`.
@@ -187,19 +193,20 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
         let input = input
             .canonicalize()
             .with_context(|| format!("input {}", input.display()))?;
-        append.extend(["--in".into(), path_arg(&input)?]);
+        append.extend(["--in".into(), qemu_path(&input)?]);
     }
     append.extend([
         "--tx".into(),
-        path_arg(&tx)?,
+        qemu_path(&tx)?,
         "--ticks".into(),
-        path_arg(&ticks)?,
+        qemu_path(&ticks)?,
     ]);
     append.extend(extra.iter().map(|s| s.to_string()));
+    let append = qemu_append(elf, &append)?;
 
     let started = Instant::now();
     let output = qemu_command(elf)
-        .args(["-append", &append.join(" ")])
+        .args(["-append", &append])
         .output()
         .context("running qemu-system-arm")?;
     let wall_s = started.elapsed().as_secs_f64();
@@ -228,12 +235,47 @@ fn run_qemu(elf: &Path, out_dir: &Path, input: Option<&Path>, extra: &[&str]) ->
     })
 }
 
-fn path_arg(path: &Path) -> Result<String> {
+/// The QEMU firmwares' semihosting command line buffer, bytes (`CMDLINE_BYTES` in
+/// firmware/src/platform/qemu/run.rs and firmware/src/bin/qemu_stages.rs).
+const QEMU_CMDLINE_BYTES: usize = 512;
+
+/// `path` as a QEMU firmware opens it: relative to the repository (QEMU's working directory,
+/// [`qemu_command`]) when it lies inside, so that the command line does not grow with the
+/// checkout's path.
+fn qemu_path(path: &Path) -> Result<String> {
+    let inside = path
+        .strip_prefix(root())
+        .map(Path::to_path_buf)
+        .ok()
+        .or_else(|| {
+            let canonical = path.canonicalize().ok()?;
+            let canonical_root = root().canonicalize().ok()?;
+            canonical
+                .strip_prefix(canonical_root)
+                .ok()
+                .map(Path::to_path_buf)
+        });
+    let path = inside.as_deref().unwrap_or(path);
     let text = path.to_str().ok_or_else(|| anyhow!("non-UTF-8 path"))?;
     if text.contains(char::is_whitespace) || text.len() > 250 {
         bail!("QEMU's command line cannot carry the path {text:?} (spaces or too long)");
     }
     Ok(text.to_string())
+}
+
+/// `words` as QEMU's `-append`, checked to fit the firmware's command line: QEMU hands the
+/// firmware the kernel's path, a space and `-append` (`semihosting_arg_fallback`), NUL-terminated.
+fn qemu_append(elf: &Path, words: &[String]) -> Result<String> {
+    let append = words.join(" ");
+    let bytes = kernel_path(elf).as_os_str().len() + 1 + append.len() + 1;
+    if bytes > QEMU_CMDLINE_BYTES {
+        bail!(
+            "the QEMU command line would be {bytes} bytes, more than the firmware's \
+             {QEMU_CMDLINE_BYTES}: {} {append}",
+            kernel_path(elf).display()
+        );
+    }
+    Ok(append)
 }
 
 /// min, median, p99, max by nearest rank.
@@ -903,6 +945,40 @@ fn size() -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_command_line_check_is_the_firmwares_buffer() {
+        for file in [
+            "firmware/src/platform/qemu/run.rs",
+            "firmware/src/bin/qemu_stages.rs",
+        ] {
+            let text = std::fs::read_to_string(root().join(file)).unwrap();
+            let declared = format!("const CMDLINE_BYTES: usize = {QEMU_CMDLINE_BYTES};");
+            assert!(
+                text.contains(&declared),
+                "{file} does not declare {declared}"
+            );
+        }
+        let elf = root().join("target/thumbv7em-none-eabihf/firmware/catmodel-qemu");
+        let deep = "/a".repeat(100);
+        // Paths inside the repository go relative; one outside stays absolute and is counted.
+        let inside = qemu_path(&root().join("target/qemu/tx.log")).unwrap();
+        assert_eq!(inside, "target/qemu/tx.log");
+        let outside = qemu_path(Path::new(&format!("{deep}/drive.log"))).unwrap();
+        assert!(outside.starts_with("/a/a"));
+        assert!(qemu_append(&elf, &["catmodel-qemu".into(), "--in".into(), inside]).is_ok());
+        let words = [
+            "catmodel-qemu".into(),
+            "--in".into(),
+            outside.clone(),
+            "--tx".into(),
+            outside.clone(),
+            "--ticks".into(),
+            outside,
+        ];
+        let error = qemu_append(&elf, &words).unwrap_err().to_string();
+        assert!(error.contains("more than the firmware's 512"), "{error}");
+    }
 
     #[test]
     fn nearest_rank_statistics() {

@@ -27,6 +27,9 @@ pub static BUNDLED_DRIVE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/bund
 /// Most `--stall` options.
 pub const MAX_STALLS: usize = 4;
 const PATH_CAP: usize = 256;
+/// The semihosting command line's capacity, bytes: QEMU passes the kernel's path and `-append`
+/// (xtask/src/main.rs, `QEMU_CMDLINE_BYTES`, checks a command line fits before it runs QEMU).
+const CMDLINE_BYTES: usize = 512;
 
 /// A test stall: the tick of grid slot `slot` busy-waits `ms` milliseconds after its step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,7 +85,8 @@ fn parse_stall(text: &str) -> Option<Stall> {
 
 /// Reads the semihosting command line.
 pub fn options() -> Result<Options, &'static str> {
-    let args = semihosting::experimental::env::args::<512>().map_err(|_| "no command line")?;
+    let args = semihosting::experimental::env::args::<CMDLINE_BYTES>()
+        .map_err(|_| "no command line, or one longer than 512 bytes")?;
     let mut options = Options {
         input: None,
         tx_log: HostPath::new("target/qemu/tx.log").ok_or("path")?,
