@@ -2,11 +2,19 @@
 """A receding-horizon planner and a moving obstacle over `catmodel sil --stdio` (docs/bus.md,
 "Obstacles that move"). Reuses the DBC codec, car model and geodesy of scripts/sil-sim.py.
 
-usage: sil-moving.py --scenario {pedestrian,slowcar,none} [--road {straight,wave}] [--replan S]
-                     [--speed V] [--model FILE] [--gnss-noise-m 0.02] [--sweep S] [--out CSV]
+usage: sil-moving.py --scenario {pedestrian,slowcar,oncoming,standing,none} [--road {straight,wave}]
+                     [--replan S] [--speed V] [--model FILE] [--gnss-noise-m 0.02] [--sweep S]
+                     [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--out CSV]
+pedestrian: crosses the road 45 m ahead at --ped-speed from t = 2 s, from 6 m to the right
+(--ped-from right) or left;
+slowcar: a car 30 m ahead in the lane at --lead-speed; oncoming: a car in the left lane
+(3.5 m left) coming towards the car at --lead-speed from 150 m; standing: an object standing
+in the lane 45 m ahead. --obstacle-noise-m adds Gaussian noise to each circle sent (a detector's).
 --sweep S sends, every tick, the circle that covers the object from now to S seconds ahead (its
 radius grown by half the distance it moves) instead of its position.
-Prints a JSON summary: NaNs, command ranges, lateral error to the road, min clearance body<->obstacle,
+Prints a JSON summary: NaNs, command ranges, lateral error to the road, min clearance body<->obstacle
+(and the same over the ticks the car moves, above 0.5 m/s: an object that runs into a car that
+has stopped, e.g. the slower car once the path has ended, is not one the car can avoid),
 largest steering-command step per tick (all ticks, and ticks right after a new path is loaded), statuses.
 """
 import argparse, importlib.util, json, math, random, subprocess, sys
@@ -29,10 +37,12 @@ ap.add_argument("--spacing", type=float, default=1.0)
 ap.add_argument("--left", type=float, default=1.75)
 ap.add_argument("--right", type=float, default=1.75)
 ap.add_argument("--ped-speed", type=float, default=1.5)
+ap.add_argument("--ped-from", choices=["right", "left"], default="right")
 ap.add_argument("--lead-speed", type=float, default=4.0)
 ap.add_argument("--duration", type=float, default=40.0)
 ap.add_argument("--seed", type=int, default=0)
 ap.add_argument("--sweep", type=float, default=0.0)
+ap.add_argument("--obstacle-noise-m", type=float, default=0.0)
 ap.add_argument("--out")
 ap.add_argument("--dump-input")
 a = ap.parse_args()
@@ -81,14 +91,20 @@ def obstacle_at(t):
     if a.scenario == "pedestrian":
         # crosses the road 45 m ahead of the start from right to left, starting when t = 2 s at 6 m right
         t0 = 2.0
-        return (45.0, road(45.0)[1] - 6.0 + a.ped_speed*max(0.0, t-t0), 0.4)
+        side = 1.0 if a.ped_from == "right" else -1.0
+        return (45.0, road(45.0)[1] - side*(6.0 - a.ped_speed*max(0.0, t-t0)), 0.4)
     if a.scenario == "slowcar":
         s = 30.0 + a.lead_speed*t
         e, n = road(s); return (e, n, 1.5)
+    if a.scenario == "oncoming":
+        s = 150.0 - a.lead_speed*t
+        e, n = road(s); return (e, n + 3.5, 1.5)
+    if a.scenario == "standing":
+        e, n = road(45.0); return (e, n, 0.5)
     return None
 
 def clearance(ob):
-    # body rectangle at rear axle frame vs circle
+    # body rectangle at rear axle frame vs circle; and whether the circle is behind the body
     e, n, r = ob
     dx, dy = e - car.e, n - car.n
     h = car.heading
@@ -109,7 +125,7 @@ gp = 1.0/a.gnss_hz; next_fix = gp; sid = 0; t = 0.0; tick = 0; dbw = 0
 steer_cmd, speed_cmd = 0.0, 3.0
 prev = car.antenna(); engaged = None; valid_since = None
 rows = []; stats = dict(nan=0, steer_out_of_range=0, speed_out_of_range=0, na_while_engaged=0)
-statuses = {}; reasons = {}; min_clear = 1e9; min_clear_t = None; max_lat = 0.0; lat_sq = []; steps = []
+statuses = {}; reasons = {}; min_clear = 1e9; min_clear_t = None; min_ahead = 1e9; min_ahead_t = None; max_lat = 0.0; lat_sq = []; steps = []
 next_replan = a.replan; paths_sent = 1; prev_cmd = None
 while t < a.duration:
     tick += 1; tt = round(tick*S.TICK_S, 6); lines = []
@@ -133,6 +149,8 @@ while t < a.duration:
     if engaged is not None and tt >= next_replan and not outbox:
         pid = pid % 15 + 1; outbox += make_path(pid, car.e); paths_sent += 1; next_replan = tt + a.replan
     ob = obstacle_at(tt)
+    if ob is not None and a.obstacle_noise_m > 0:
+        ob = (ob[0] + rng.gauss(0, a.obstacle_noise_m), ob[1] + rng.gauss(0, a.obstacle_noise_m), ob[2])
     if ob is not None and a.sweep > 0:
         ob2 = obstacle_at(tt + a.sweep) or ob
         ob = ((ob[0]+ob2[0])/2, (ob[1]+ob2[1])/2, ob[2] + math.hypot(ob2[0]-ob[0], ob2[1]-ob[1])/2)
@@ -176,8 +194,9 @@ while t < a.duration:
             steer_cmd, speed_cmd = sc, vc
         d = road_dist(car.e, car.n); max_lat = max(max_lat, d); lat_sq.append(d*d)
         if ob is not None:
-            c = clearance(ob)
+            c = clearance(obstacle_at(tt))
             if c < min_clear: min_clear, min_clear_t = c, tt
+            if car.v > 0.5 and c < min_ahead: min_ahead, min_ahead_t = c, tt
     rows.append((tt, car.e, car.n, car.heading, car.v, car.steer, steer_cmd, speed_cmd, st, int(cmd["fallback_reason"] or 0), *(ob or (0, 0, 0))))
 node.stdin.close(); err = node.stderr.read(); node.wait()
 if a.out:
@@ -189,6 +208,7 @@ after_load = [s for s in steps if 0 <= s[2] <= 3]
 print(json.dumps(dict(engaged_at=engaged, paths_sent=paths_sent, statuses=statuses, fallback_reasons=reasons, **stats,
     lateral_rms_m=round(math.sqrt(sum(lat_sq)/max(len(lat_sq), 1)), 3), lateral_max_m=round(max_lat, 3),
     min_clearance_m=round(min_clear, 3) if min_clear < 1e9 else None, min_clearance_t=min_clear_t,
+    min_clearance_moving_m=round(min_ahead, 3) if min_ahead < 1e9 else None, min_clearance_moving_t=min_ahead_t,
     final_east=round(car.e, 1), final_speed=round(car.v, 2),
     steer_step_max=[(round(s[0], 2), s[1]) for s in steps[:5]],
     steer_step_max_near_load=[(round(s[0], 2), s[1], s[2]) for s in sorted(after_load, reverse=True)[:5]],

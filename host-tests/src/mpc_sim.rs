@@ -8,8 +8,8 @@
 //! This is the controller's test bench, not the product's closed-loop simulator (that one runs
 //! the whole node over the bus).
 use catmodel::control::mpc::{
-    CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ReferencePoint,
-    Sample, SidePoint, StageClock, MAX_OBSTACLES, PLAN_STEPS, STEPS,
+    CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ObstacleVelocity,
+    ReferencePoint, Sample, SidePoint, StageClock, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::{HybridConfig, HybridState};
@@ -239,6 +239,7 @@ impl TestPath {
             path_offset_m: self.offset(east, north, s) as f32,
             left_m: left as f32,
             right_m: right as f32,
+            velocity: ObstacleVelocity::ZERO,
         }
     }
 
@@ -285,6 +286,7 @@ pub fn circle(east_m: f32, north_m: f32, radius_m: f32) -> Obstacle {
         path_offset_m: 0.0,
         left_m: 0.0,
         right_m: 0.0,
+        velocity: ObstacleVelocity::ZERO,
     }
 }
 

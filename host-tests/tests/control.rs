@@ -9,7 +9,9 @@ use catmodel::control::path::{
     Narrowest, Path, PathCar, PathError, Projection, Waypoint, CORRIDOR_TOLERANCE_M,
     MAX_PATH_POINTS, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M, NARROWEST_TIE_M,
 };
-use catmodel::control::planner::{PlannerEvent, PlannerInputs};
+use catmodel::control::planner::{
+    ObstacleMotion, PlannerEvent, PlannerInputs, OBSTACLE_STILL_MPS, OBSTACLE_VELOCITY_SPAN_US,
+};
 use catmodel::control::pure_pursuit::{
     CarState, PurePursuitConfig, PurePursuitState, PurePursuitTuning, DEFAULT_TUNING,
 };
@@ -1010,7 +1012,7 @@ fn path_messages(path_id: u8, pts: &[Waypoint], c0: u8) -> Vec<PlannerMessage> {
 fn feed(inputs: &mut PlannerInputs, messages: &[PlannerMessage]) -> Vec<PlannerEvent> {
     messages
         .iter()
-        .map(|m| inputs.receive(m))
+        .map(|m| inputs.receive(m, 0))
         .filter(|e| *e != PlannerEvent::None)
         .collect()
 }
@@ -1072,7 +1074,7 @@ fn a_lost_frame_abandons_the_assembly_and_duplicates_are_counted() {
     assert!(inputs.receiving().is_some());
     // Skip point 3's PATH_POINT (index 4 arrives): a lost frame.
     if let PlannerMessage::PathPoint(p, _) = m[9] {
-        inputs.receive(&PlannerMessage::PathPoint(p, 5));
+        inputs.receive(&PlannerMessage::PathPoint(p, 5), 0);
     }
     assert_eq!(inputs.counters().paths_abandoned, 1);
     assert!(inputs.receiving().is_none() && inputs.path().is_none());
@@ -1167,6 +1169,102 @@ fn a_path_the_body_does_not_fit_is_refused_and_the_active_one_stays() {
     assert_eq!(*inputs.car(), CAR);
 }
 
+/// Slot `id`'s circles from `track(t_s)` once a tick (20 ms) for `seconds`, as the bus carries
+/// them (0.02 m resolution), starting at `t0_s`; the slot's motion after the last.
+fn obstacle_track(
+    inputs: &mut PlannerInputs,
+    id: u8,
+    (t0_s, seconds): (f64, f64),
+    track: impl Fn(f64) -> Option<(f64, f64)>,
+) -> ObstacleMotion {
+    let ticks = (seconds / 0.02).round() as u64;
+    let start = (t0_s / 0.02).round() as u64;
+    for tick in start..start + ticks {
+        let t = tick as f64 * 0.02;
+        let circle = track(t).map(|(e, n)| ObstacleCircle {
+            east_m: ((e / 0.02).round() * 0.02) as f32,
+            north_m: ((n / 0.02).round() * 0.02) as f32,
+            radius_m: 0.5,
+        });
+        let message = PlannerMessage::Obstacle(
+            Obstacle {
+                obstacle_id: id,
+                circle,
+            },
+            (tick % 16) as u8,
+        );
+        inputs.receive(&message, tick * 20_000);
+    }
+    inputs.obstacle_motion()[usize::from(id)]
+}
+
+#[test]
+fn an_obstacle_sent_as_it_moves_has_its_velocity() {
+    // A pedestrian crossing at 1.5 m/s north-west: its velocity once a span of frames is in,
+    // to the bus's resolution; none before.
+    let walk = |t: f64| Some((40.0 - 1.2 * t, -6.0 + 0.9 * t));
+    let mut inputs = PlannerInputs::new();
+    let early = obstacle_track(&mut inputs, 1, (0.0, 0.3), walk);
+    assert_eq!((early.east_mps, early.north_mps), (0.0, 0.0));
+    let m = obstacle_track(&mut inputs, 1, (0.3, 1.0), walk);
+    assert!(
+        (m.east_mps + 1.2).abs() < 0.03 && (m.north_mps - 0.9).abs() < 0.03,
+        "{m:?}"
+    );
+    // The other slots stand.
+    assert_eq!(inputs.obstacle_motion()[0], ObstacleMotion::STILL);
+    // Stopped: the next span measures it standing.
+    let stop = obstacle_track(&mut inputs, 1, (1.3, 1.2), |_| Some((38.44, -4.92)));
+    assert_eq!((stop.east_mps, stop.north_mps), (0.0, 0.0));
+}
+
+#[test]
+fn a_standing_obstacle_whose_circle_jitters_stands() {
+    // A detector's noise, 0.1 m either way and more at random, on a standing object: below
+    // the still speed on every span. (A deterministic scatter: a fixed LCG.)
+    let state = std::cell::Cell::new(7u64);
+    let noise = || {
+        let s = state
+            .get()
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1);
+        state.set(s);
+        ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.3
+    };
+    let mut inputs = PlannerInputs::new();
+    for span in 0..20 {
+        let m = obstacle_track(&mut inputs, 2, (span as f64 * 0.5, 0.5), |_| {
+            Some((12.0 + noise(), 30.0 + noise()))
+        });
+        assert_eq!((m.east_mps, m.north_mps), (0.0, 0.0), "span {span}: {m:?}");
+    }
+    // Just above the still speed, it moves.
+    let creep = 1.2 * f64::from(OBSTACLE_STILL_MPS);
+    let m = obstacle_track(&mut inputs, 3, (0.0, 1.2), |t| Some((creep * t, 0.0)));
+    assert!(m.east_mps > OBSTACLE_STILL_MPS, "{m:?}");
+}
+
+#[test]
+fn a_jump_a_silence_or_a_cleared_slot_starts_the_motion_afresh() {
+    let mut inputs = PlannerInputs::new();
+    let run = |t: f64| Some((3.0 * t, 50.0));
+    let m = obstacle_track(&mut inputs, 0, (0.0, 1.0), run);
+    assert!((m.east_mps - 3.0).abs() < 0.03, "{m:?}");
+    // Another object in the slot, 20 m away: no velocity from the jump, and none until a span
+    // of its own frames.
+    let span_s = OBSTACLE_VELOCITY_SPAN_US as f64 * 1e-6;
+    let jumped = obstacle_track(&mut inputs, 0, (1.0, span_s - 0.1), |_| Some((23.0, 50.0)));
+    assert_eq!((jumped.east_mps, jumped.north_mps), (0.0, 0.0));
+    // Silent for 3 s, then moving elsewhere at 1 m/s: measured from the frames after it.
+    let m = obstacle_track(&mut inputs, 0, (4.5, 1.0), |t| {
+        Some((23.0 + (t - 4.5), 50.0))
+    });
+    assert!((m.east_mps - 1.0).abs() < 0.05, "{m:?}");
+    // Cleared.
+    let cleared = obstacle_track(&mut inputs, 0, (5.5, 0.02), |_| None);
+    assert_eq!(cleared, ObstacleMotion::STILL);
+}
+
 #[test]
 fn stuck_counters_obstacles_and_origin_pairing() {
     let mut inputs = PlannerInputs::new();
@@ -1184,19 +1282,22 @@ fn stuck_counters_obstacles_and_origin_pairing() {
             c,
         )
     };
-    inputs.receive(&set(2, 0));
+    inputs.receive(&set(2, 0), 0);
     assert_eq!(inputs.obstacles()[2], Some(circle));
     // The same counter again: a stuck sender, rejected (slot 1 stays empty).
-    inputs.receive(&set(1, 0));
+    inputs.receive(&set(1, 0), 0);
     assert_eq!(inputs.obstacles()[1], None);
     assert_eq!(inputs.counters().stuck_counters, 1);
-    inputs.receive(&PlannerMessage::Obstacle(
-        Obstacle {
-            obstacle_id: 2,
-            circle: None,
-        },
-        1,
-    ));
+    inputs.receive(
+        &PlannerMessage::Obstacle(
+            Obstacle {
+                obstacle_id: 2,
+                circle: None,
+            },
+            1,
+        ),
+        0,
+    );
     assert_eq!(inputs.obstacles(), &[None; 4]);
     // Origin: latitude then longitude with the next counter.
     let lat = PlannerMessage::LocalOrigin(
@@ -1213,16 +1314,16 @@ fn stuck_counters_obstacles_and_origin_pairing() {
             c,
         )
     };
-    assert_eq!(inputs.receive(&lat), PlannerEvent::None);
+    assert_eq!(inputs.receive(&lat, 0), PlannerEvent::None);
     assert_eq!(
-        inputs.receive(&lon(15)),
+        inputs.receive(&lon(15), 0),
         PlannerEvent::Origin {
             lat_e7: 322_319_000,
             lon_e7: -1_109_501_000
         }
     );
     // A longitude page on its own (its latitude lost): a counted mismatch, no origin.
-    assert_eq!(inputs.receive(&lon(0)), PlannerEvent::None);
+    assert_eq!(inputs.receive(&lon(0), 0), PlannerEvent::None);
     assert_eq!(inputs.counters().origin_mismatches, 1);
 }
 
@@ -1240,7 +1341,7 @@ proptest! {
                 1 => PlannerMessage::PathPoint(PathPoint { path_id: id, index, east_m: v, north_m: f32::from(index) * 1.5 }, counter),
                 _ => PlannerMessage::PathLimits(PathLimits { path_id: id, index, speed_mps: v.abs(), left_m: 1.0, right_m: 1.0 }, counter),
             };
-            inputs.receive(&m);
+            inputs.receive(&m, 0);
             if let Some(p) = inputs.path() {
                 prop_assert!(Path::validate(p.points()).is_ok());
             }

@@ -5,8 +5,9 @@
 //! a NaN anywhere, and a tick without a solve (`MpcConfig::coast`) moves the plan on by one tick.
 use catmodel::control::mpc::longitudinal::SpeedTuning;
 use catmodel::control::mpc::{
-    CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning, StageClock,
-    DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS, STEP_S, TICKS_PER_STEP,
+    CarState, ControlStatus, FallbackReason, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle,
+    ObstacleSide, ObstacleVelocity, StageClock, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
+    STEP_S, TICKS_PER_STEP,
 };
 use catmodel::model::dynamic::LateralState;
 use catmodel::model::hybrid::Mode;
@@ -15,6 +16,9 @@ use catmodel::model::{paper, SsBlock};
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host_tests::mpc_sim::{mpc_for, TestPath, ESCAPE_BODY};
 use proptest::prelude::*;
+
+/// Lateral offset, distance ahead, radius; velocity east and north (zero for most).
+type CaseObstacle = ((f32, f32, f32), (f32, f32));
 
 #[derive(Clone, Debug)]
 struct Case {
@@ -27,7 +31,7 @@ struct Case {
     steer: f32,
     lateral: (f32, f32),
     dynamic: bool,
-    obstacles: Vec<(f32, f32, f32)>,
+    obstacles: Vec<CaseObstacle>,
     uncertainty: f32,
     /// Which input gets a NaN (0 = none).
     poison: u8,
@@ -39,10 +43,13 @@ fn case() -> impl Strategy<Value = Case> {
         (-2.5f32..2.5, -0.6f32..0.6, -0.6f32..0.6),
         ((-1.0f32..1.0, -0.6f32..0.6), any::<bool>()),
         prop::collection::vec(
-            (-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5),
+            (
+                (-4.0f32..4.0, -5.0f32..45.0, 0.0f32..2.5),
+                prop_oneof![2 => Just((0.0f32, 0.0f32)), 1 => (-3.0f32..3.0, -3.0f32..3.0)],
+            ),
             0..=MAX_OBSTACLES,
         ),
-        (0.0f32..1.2, prop_oneof![6 => Just(0u8), 1 => 1u8..6]),
+        (0.0f32..1.2, prop_oneof![6 => Just(0u8), 1 => 1u8..7]),
     )
         .prop_map(
             |(
@@ -103,11 +110,19 @@ proptest! {
         let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
         let model_state = eq5.steady_state_for_output(c.speed as f32).unwrap();
         let mut obstacles = [None; MAX_OBSTACLES];
-        for (slot, (lat, along, r)) in obstacles.iter_mut().zip(&c.obstacles) {
+        for (slot, ((lat, along, r), (ve, vn))) in obstacles.iter_mut().zip(&c.obstacles) {
             let (ox, oy, oh) = path.pose(5.0 + *along as f64);
             let east = ox + *lat as f64 * oh.cos();
             let north = oy - *lat as f64 * oh.sin();
-            *slot = Some(path.place(east, north, *r as f64, 5.0));
+            let mut o = path.place(east, north, *r as f64, 5.0);
+            let (sh, ch) = (oh.sin() as f32, oh.cos() as f32);
+            o.velocity = ObstacleVelocity {
+                east_mps: *ve,
+                north_mps: *vn,
+                along_mps: ve * sh + vn * ch,
+                right_mps: ve * ch - vn * sh,
+            };
+            *slot = Some(o);
         }
         let mut steer = c.steer;
         let mut uncertainty = c.uncertainty;
@@ -117,6 +132,11 @@ proptest! {
             3 => steer = f32::INFINITY,
             4 => uncertainty = f32::NAN,
             5 => reference[3].front_left.sample.left_m = f32::NAN,
+            // A velocity that is not a number, on an obstacle of its own if the case has none.
+            6 => {
+                let o = obstacles[0].get_or_insert_with(|| path.place(0.0, 30.0, 0.5, 5.0));
+                o.velocity.right_mps = f32::NAN;
+            }
             _ => {}
         }
         let mut state = MpcState::default();
@@ -213,6 +233,18 @@ fn solve_beside_a_straight(
     offset_m: f32,
     path_max_curvature_per_m: f32,
 ) -> MpcOutput {
+    solve_on_a_straight(cfg, tuning, offset_m, path_max_curvature_per_m, |_| None)
+}
+
+/// As [`solve_beside_a_straight`], with the obstacles `place` puts on the path (3 m corridors
+/// either side, north from the origin).
+fn solve_on_a_straight(
+    cfg: &VehicleConfig,
+    tuning: MpcTuning,
+    offset_m: f32,
+    path_max_curvature_per_m: f32,
+    place: impl Fn(&TestPath) -> Option<Obstacle>,
+) -> MpcOutput {
     let path = arc(0.0, 3.0, 3.0, 10.0);
     let speeds = [10.0f32; PLAN_STEPS + 1];
     let reference = path.reference(5.0, &speeds, &ESCAPE_BODY, &StageClock::UNIFORM);
@@ -220,7 +252,8 @@ fn solve_beside_a_straight(
     let pose = Pose::new(x as f32 + offset_m, y as f32, h as f32);
     let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
     let model_state = eq5.steady_state_for_output(10.0).unwrap();
-    let obstacles = [None; MAX_OBSTACLES];
+    let mut obstacles = [None; MAX_OBSTACLES];
+    obstacles[0] = place(&path);
     let mpc = mpc_for(cfg, ESCAPE_BODY, tuning);
     let mut state = MpcState::default();
     let input = MpcInput {
@@ -241,6 +274,45 @@ fn solve_beside_a_straight(
         to_end_m: f32::INFINITY,
     };
     mpc.solve(&mut state, &input)
+}
+
+/// An obstacle that crosses the path is passed behind: on the side it leaves, though the
+/// other has more room where it is now (the side with room for one that stands, or one that
+/// moves along the path). Here 1 m left of a straight path 30 m ahead.
+#[test]
+fn a_crossing_obstacle_is_passed_behind() {
+    let cfg = VehicleConfig::default();
+    let solve = |east_m: f64, east_mps: f32, north_mps: f32| {
+        solve_on_a_straight(&cfg, DEFAULT_TUNING, 0.0, 0.0, |path| {
+            let mut o = path.place(east_m, 35.0, 0.3, 5.0);
+            // The path runs north: along is north, right is east.
+            o.velocity = ObstacleVelocity {
+                east_mps,
+                north_mps,
+                along_mps: north_mps,
+                right_mps: east_mps,
+            };
+            Some(o)
+        })
+    };
+    let side = |east_mps: f32, north_mps: f32| {
+        let out = solve(-1.0, east_mps, north_mps);
+        assert_ne!(out.status, ControlStatus::Fallback, "{out:?}");
+        out.sides[0]
+    };
+    assert_eq!(side(0.0, 0.0), Some(ObstacleSide::Right));
+    assert_eq!(side(0.0, 5.0), Some(ObstacleSide::Right));
+    assert_eq!(side(1.5, 0.0), Some(ObstacleSide::Left));
+    assert_eq!(side(-1.5, 0.0), Some(ObstacleSide::Right));
+    // Below the crossing speed, as if it stood.
+    assert_eq!(side(0.25, 0.0), Some(ObstacleSide::Right));
+    // 2.5 m left and walking into the lane: the room is ahead of it, where it is going, and
+    // none behind it yet: no side; the car stops short of it (a stand-still obstacle there is
+    // passed on the right).
+    assert_eq!(solve(-2.5, 0.0, 0.0).sides[0], Some(ObstacleSide::Right));
+    let walking_in = solve(-2.5, 0.5, 0.0);
+    assert_eq!(walking_in.sides[0], None, "{walking_in:?}");
+    assert!(walking_in.speed_cmd_mps < 9.0, "{walking_in:?}");
 }
 
 /// `MpcTuning::line_rule`: a path that asks for the lock (here its largest curvature is the

@@ -1018,6 +1018,15 @@ impl Path {
         lo
     }
 
+    /// Segment `segment`'s direction as (sin, cos) of its heading (clockwise from north);
+    /// `None` past the path's last segment.
+    pub fn segment_direction(&self, segment: usize) -> Option<(f32, f32)> {
+        self.direction
+            .get(segment..self.len.saturating_sub(1))?
+            .first()
+            .copied()
+    }
+
     /// The segment that holds `station_m` (clamped to the path), searched from segment `hint`:
     /// the same whatever the hint, and cheaper from a nearby one. A caller sampling stations in
     /// ascending order passes each one's segment on as the next one's hint, so that its searches

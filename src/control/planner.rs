@@ -8,6 +8,10 @@
 //! assembled, a header change mid-way (abandons the old assembly), stuck rolling counters, a
 //! longitude page of LOCAL_ORIGIN that does not follow its latitude page.
 //!
+//! An obstacle slot that the planner keeps sending moves: its velocity is measured from its
+//! circles ([`ObstacleMotion`]), since OBSTACLE carries none (docs/bus.md, "Obstacles that
+//! move").
+//!
 //! No configuration; the state is [`PlannerInputs`]: the active [`Path`] (7 KiB) and the
 //! assembly buffer (5 KiB) at 256 points. Never allocates; every call is O(1) except the one
 //! that completes a path (one pass over its points to validate, one to load).
@@ -79,6 +83,116 @@ pub enum PlannerEvent {
     },
 }
 
+/// The span of frames of one obstacle slot that gives its velocity, us: a least-squares fit
+/// of the centre's track over at least this long (25 frames at one a tick: a detector's
+/// 0.1 m of noise on each circle is 0.14 m/s of it, the bus's 0.02 m resolution 0.03 m/s).
+pub const OBSTACLE_VELOCITY_SPAN_US: u64 = 500_000;
+/// A slot silent for longer starts its motion afresh, us.
+pub const OBSTACLE_SILENT_US: u64 = 2_000_000;
+/// Slower is taken as standing still, m/s: a standing object whose detection moves its circle
+/// by centimetres from frame to frame does not move.
+pub const OBSTACLE_STILL_MPS: f32 = 0.3;
+/// Faster than this between two frames (plus [`OBSTACLE_JUMP_M`]) is another object in the
+/// slot, not a motion, m/s.
+pub const OBSTACLE_MAX_MPS: f32 = 40.0;
+/// See [`OBSTACLE_MAX_MPS`], m.
+pub const OBSTACLE_JUMP_M: f32 = 0.5;
+
+/// An obstacle slot's motion, measured from its circles: the slope of a least-squares line
+/// through the centres of a span of frames at least [`OBSTACLE_VELOCITY_SPAN_US`] long, held
+/// until the next span ends. Zero (the obstacle stands) for a slot sent once, after a jump or
+/// [`OBSTACLE_SILENT_US`] of silence (until a span of frames after it), and below
+/// [`OBSTACLE_STILL_MPS`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObstacleMotion {
+    /// Velocity east, m/s.
+    pub east_mps: f32,
+    /// Velocity north, m/s.
+    pub north_mps: f32,
+    /// The span being measured: its first frame's centre and time (us), and the sums of the
+    /// fit over its frames, in s and m from that first frame: count, t, t^2, east, north,
+    /// t east, t north.
+    origin: (f32, f32),
+    origin_us: u64,
+    sums: [f32; 7],
+    /// The latest frame's time, us.
+    last_us: u64,
+}
+
+impl ObstacleMotion {
+    /// Standing still, nothing measured.
+    pub const STILL: Self = Self {
+        east_mps: 0.0,
+        north_mps: 0.0,
+        origin: (0.0, 0.0),
+        origin_us: 0,
+        sums: [0.0; 7],
+        last_us: 0,
+    };
+
+    /// Takes the slot's new circle `now` at `t_us`, `before` being what the slot held.
+    #[inline(never)]
+    fn observe(
+        &mut self,
+        before: Option<&ObstacleCircle>,
+        now: Option<&ObstacleCircle>,
+        t_us: u64,
+    ) {
+        // Microseconds since the last frame; a time that went back, or more than the silence,
+        // as the silence and one more.
+        let since_last = t_us
+            .checked_sub(self.last_us)
+            .filter(|d| *d <= OBSTACLE_SILENT_US)
+            .map_or(OBSTACLE_SILENT_US as u32 + 1, |d| d as u32);
+        let continues = match (before, now) {
+            (Some(b), Some(c)) => {
+                let (de, dn) = (c.east_m - b.east_m, c.north_m - b.north_m);
+                let reach = OBSTACLE_MAX_MPS * since_last as f32 * 1e-6 + OBSTACLE_JUMP_M;
+                since_last <= OBSTACLE_SILENT_US as u32 && de * de + dn * dn <= reach * reach
+            }
+            _ => false,
+        };
+        if !continues {
+            *self = Self::STILL;
+        }
+        let Some(c) = now else { return };
+        if self.sums[0] == 0.0 {
+            self.origin = (c.east_m, c.north_m);
+            self.origin_us = t_us;
+        }
+        self.last_us = t_us;
+        // Within a span: at most the silence per frame, and a span closes at its first frame
+        // past OBSTACLE_VELOCITY_SPAN_US.
+        let span_us = (t_us.saturating_sub(self.origin_us)).min(u64::from(u32::MAX)) as u32;
+        let t = span_us as f32 * 1e-6;
+        let (e, n) = (c.east_m - self.origin.0, c.north_m - self.origin.1);
+        for (sum, term) in self
+            .sums
+            .iter_mut()
+            .zip([1.0, t, t * t, e, n, t * e, t * n])
+        {
+            *sum += term;
+        }
+        if span_us < OBSTACLE_VELOCITY_SPAN_US as u32 {
+            return;
+        }
+        let [k, st, stt, se, sn, ste, stn] = self.sums;
+        let spread = k * stt - st * st;
+        let (ve, vn) = ((k * ste - st * se) / spread, (k * stn - st * sn) / spread);
+        let moving = ve * ve + vn * vn >= OBSTACLE_STILL_MPS * OBSTACLE_STILL_MPS;
+        (self.east_mps, self.north_mps) = if moving && spread > 0.0 {
+            (ve, vn)
+        } else {
+            (0.0, 0.0)
+        };
+        // The next span starts with this frame.
+        self.origin = (c.east_m, c.north_m);
+        self.origin_us = t_us;
+        self.sums = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    }
+}
+
 /// A path being received. Always allocated (in place, in the node's static drive state), so
 /// that starting or completing a path never moves its 5 KiB of waypoints through the stack.
 #[derive(Clone, Debug)]
@@ -111,6 +225,8 @@ pub struct PlannerInputs {
     path_id: Option<u8>,
     assembly: Assembly,
     obstacles: [Option<ObstacleCircle>; OBSTACLE_SLOTS],
+    /// Each slot's motion, measured from its circles.
+    motion: [ObstacleMotion; OBSTACLE_SLOTS],
     /// Latitude page waiting for its longitude page: (lat_e7, counter).
     origin_latitude: Option<(i32, u8)>,
     counters: [CounterChecker; MESSAGES],
@@ -140,6 +256,7 @@ impl PlannerInputs {
                 waypoints: [Waypoint::ZERO; MAX_PATH_POINTS],
             },
             obstacles: [None; OBSTACLE_SLOTS],
+            motion: [ObstacleMotion::STILL; OBSTACLE_SLOTS],
             origin_latitude: None,
             counters: [CounterChecker::new(); MESSAGES],
             stats: PlannerCounters {
@@ -176,6 +293,7 @@ impl PlannerInputs {
             addr_of_mut!((*assembly).next_limits).write(0);
             fill(addr_of_mut!((*assembly).waypoints), Waypoint::ZERO);
             addr_of_mut!((*slot).obstacles).write([None; OBSTACLE_SLOTS]);
+            addr_of_mut!((*slot).motion).write([ObstacleMotion::STILL; OBSTACLE_SLOTS]);
             addr_of_mut!((*slot).origin_latitude).write(None);
             addr_of_mut!((*slot).counters).write([CounterChecker::new(); MESSAGES]);
             addr_of_mut!((*slot).stats).write(PlannerCounters::default());
@@ -204,6 +322,11 @@ impl PlannerInputs {
         &self.obstacles
     }
 
+    /// Each obstacle slot's motion ([`ObstacleMotion`]; standing still for a cleared slot).
+    pub const fn obstacle_motion(&self) -> &[ObstacleMotion; OBSTACLE_SLOTS] {
+        &self.motion
+    }
+
     /// Counters since start.
     pub const fn counters(&self) -> &PlannerCounters {
         &self.stats
@@ -215,6 +338,7 @@ impl PlannerInputs {
         self.path_id = None;
         self.assembly.active = false;
         self.obstacles = [None; OBSTACLE_SLOTS];
+        self.motion = [ObstacleMotion::STILL; OBSTACLE_SLOTS];
         self.origin_latitude = None;
         self.counters = [CounterChecker::new(); MESSAGES];
         self.stats = PlannerCounters::default();
@@ -244,8 +368,9 @@ impl PlannerInputs {
         self.path_id = None;
     }
 
-    /// Applies one decoded planner message (see the module doc for the rules).
-    pub fn receive(&mut self, message: &PlannerMessage) -> PlannerEvent {
+    /// Applies one decoded planner message received at `t_us` (see the module doc for the
+    /// rules).
+    pub fn receive(&mut self, message: &PlannerMessage, t_us: u64) -> PlannerEvent {
         let (slot, counter) = message.counter();
         if let Some(checker) = self.counters.get_mut(slot) {
             let verdict = checker.check(counter);
@@ -279,7 +404,11 @@ impl PlannerInputs {
                 })
             }
             PlannerMessage::Obstacle(o, _) => {
-                if let Some(slot) = self.obstacles.get_mut(usize::from(o.obstacle_id)) {
+                let id = usize::from(o.obstacle_id);
+                if let (Some(slot), Some(motion)) =
+                    (self.obstacles.get_mut(id), self.motion.get_mut(id))
+                {
+                    motion.observe(slot.as_ref(), o.circle.as_ref(), t_us);
                     *slot = o.circle;
                 }
                 PlannerEvent::None

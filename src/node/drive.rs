@@ -48,7 +48,7 @@ use crate::control::mpc::{
     Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
 use crate::control::path::{Path, PathCar, PathSample, Projection, Tracking};
-use crate::control::planner::{PlannerEvent, PlannerInputs};
+use crate::control::planner::{ObstacleMotion, PlannerEvent, PlannerInputs};
 use crate::control::pure_pursuit::{
     self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
 };
@@ -362,8 +362,8 @@ impl Drive {
         self.set_braking(config, &mpc_tuning(config));
     }
 
-    /// Applies one planner message (stage 1).
-    pub fn receive(&mut self, message: &PlannerMessage) -> Received {
+    /// Applies one planner message received at `t_us` (stage 1).
+    pub fn receive(&mut self, message: &PlannerMessage, t_us: u64) -> Received {
         // The points of the path being assembled: a frame that completes it has its whole
         // stream in, so this is the path's length.
         let points = self.planner.receiving().map_or(0, |(_, p, l)| p.max(l));
@@ -375,7 +375,7 @@ impl Drive {
                 Stage::PathCompleteShort
             })
         };
-        match self.planner.receive(message) {
+        match self.planner.receive(message, t_us) {
             PlannerEvent::PathActivated(_) => {
                 self.new_path();
                 Received {
@@ -525,7 +525,7 @@ impl Drive {
                     mpc,
                     &mut self.mpc,
                     path,
-                    self.planner.obstacles(),
+                    (self.planner.obstacles(), self.planner.obstacle_motion()),
                     &mut self.projection,
                     &mut self.planned_speeds,
                     &mut self.reference,
@@ -837,6 +837,7 @@ fn side_points(
 fn place_obstacles(
     path: &Path,
     obstacles: &[Option<ObstacleCircle>],
+    motion: &[ObstacleMotion],
     s0: f32,
 ) -> Option<[Option<mpc::Obstacle>; MAX_OBSTACLES]> {
     let mut placed = [None; MAX_OBSTACLES];
@@ -852,22 +853,43 @@ fn place_obstacles(
         Some(_) => path.project_each(centres),
         None => [None; MAX_OBSTACLES],
     };
-    for ((slot, obstacle), p) in placed.iter_mut().zip(obstacles).zip(projected) {
+    for (((slot, obstacle), p), m) in placed.iter_mut().zip(obstacles).zip(projected).zip(motion) {
         let (Some(o), Some(p)) = (obstacle.as_ref().filter(finite), p) else {
             continue;
         };
-        let at = path.sample_geometry(p.station_m, p.segment)?;
-        *slot = Some(mpc::Obstacle {
-            east_m: o.east_m,
-            north_m: o.north_m,
-            radius_m: o.radius_m,
-            ahead_m: p.station_m - s0,
-            path_offset_m: p.lateral_m,
-            left_m: at.left_m,
-            right_m: at.right_m,
-        });
+        *slot = Some(place_one(path, o, &p, m, s0)?);
     }
     Some(placed)
+}
+
+/// One obstacle at its projection `p` on the path, `ahead_m` from the car's station `s0`, its
+/// motion in the path's frame there. Out of line: the loop over the slots would otherwise
+/// hold four copies of the sampling (flash).
+#[inline(never)]
+fn place_one(
+    path: &Path,
+    o: &ObstacleCircle,
+    p: &Projection,
+    m: &ObstacleMotion,
+    s0: f32,
+) -> Option<mpc::Obstacle> {
+    let at = path.sample_geometry(p.station_m, p.segment)?;
+    let (sh, ch) = path.segment_direction(p.segment).unwrap_or((0.0, 0.0));
+    Some(mpc::Obstacle {
+        east_m: o.east_m,
+        north_m: o.north_m,
+        radius_m: o.radius_m,
+        ahead_m: p.station_m - s0,
+        path_offset_m: p.lateral_m,
+        left_m: at.left_m,
+        right_m: at.right_m,
+        velocity: mpc::ObstacleVelocity {
+            east_mps: m.east_mps,
+            north_mps: m.north_mps,
+            along_mps: m.east_mps * sh + m.north_mps * ch,
+            right_mps: m.east_mps * ch - m.north_mps * sh,
+        },
+    })
 }
 
 /// Why a tick of the model-predictive controller did not solve, with the car's tracking.
@@ -886,7 +908,7 @@ fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
     state: &mut MpcState,
     path: &Path,
-    obstacles: &[Option<ObstacleCircle>],
+    (obstacles, motion): (&[Option<ObstacleCircle>], &[ObstacleMotion]),
     projection: &mut Option<Projection>,
     planned_speeds: &mut Option<[f32; PLAN_STEPS + 1]>,
     reference: &mut [ReferencePoint; STEPS + 1],
@@ -945,7 +967,7 @@ fn mpc_tick<P: StageProbe>(
             rear_right,
         };
     }
-    let placed = place_obstacles(path, obstacles, s0)?;
+    let placed = place_obstacles(path, obstacles, motion, s0)?;
     // Eq 5's output now: what its next step returns before the command sent now takes effect.
     let mut peek = *speed_model;
     let modelled_mps = config.velocity.step(&mut peek, 0.0);

@@ -599,7 +599,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     planner_frames = true;
                     let drive = self.drive.borrow_mut();
                     let refused = drive.planner().counters().rejects();
-                    let received = drive.receive(&message);
+                    let received = drive.receive(&message, now_us);
                     if drive.planner().counters().rejects() != refused {
                         self.health.planner_refused(now_us);
                     }

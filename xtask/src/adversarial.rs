@@ -170,6 +170,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         path_once: rng.below(2) == 0,
         obstacles: rng.below(5) as usize,
         obstacles_at_centre: rng.below(2) == 0,
+        obstacles_moving_mps: [0.0, 1.5, 30.0][rng.below(3) as usize],
         corridor_widening_m: [0.0, 0.002, -0.002][rng.below(3) as usize],
     }
 }
@@ -205,6 +206,7 @@ fn mutate(rng: &mut Rng, car: &NodeConfig, spec: &Spec, name: String) -> Spec {
                 out.path_once = fresh.path_once;
                 out.obstacles = fresh.obstacles;
                 out.obstacles_at_centre = fresh.obstacles_at_centre;
+                out.obstacles_moving_mps = fresh.obstacles_moving_mps;
                 out.corridor_widening_m = fresh.corridor_widening_m;
             }
             _ => out.unknown_per_tick = fresh.unknown_per_tick,

@@ -150,6 +150,11 @@ pub struct Spec {
     pub obstacles: usize,
     /// See [`Spec::obstacles`].
     pub obstacles_at_centre: bool,
+    /// Above 0, with `path_once`: after the path, the planner sends every obstacle slot again
+    /// each tick, its circle moving across the path, to the left, at this speed (the node
+    /// measures each slot's motion from its frames: the slots' fits close in the same ticks),
+    /// m/s.
+    pub obstacles_moving_mps: f64,
     /// The corridors widen by this much from point to point, m: wider than the tie
     /// (`control::path::NARROWEST_TIE_M`) over the front half of a body, the search for the
     /// corridor's binding point reads its way back from the front to near the axle.
@@ -186,6 +191,7 @@ impl Spec {
             path_once: false,
             obstacles: 0,
             obstacles_at_centre: false,
+            obstacles_moving_mps: 0.0,
             corridor_widening_m: 0.0,
         }
     }
@@ -216,6 +222,8 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
     ];
     let obstacles = spec.obstacles.min(MAX_OBSTACLES);
     let per_path = 2 * points + 1 + obstacles;
+    // The last path's obstacles: slot, centre, and the heading of the path where they are.
+    let mut circles: Vec<(usize, f64, f64, f64)> = Vec::new();
     let ticks = (spec.seconds / 0.02) as usize;
     let paths = match spec.path_once {
         true => 1,
@@ -258,6 +266,7 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
             );
         }
         let centre = circumcentre(&track);
+        circles.clear();
         for slot in 0..obstacles {
             let i = points.saturating_sub(2 + slot);
             let (Some(&(e0, n0)), Some(&(e1, n1))) = (track.get(i), track.get(i + 1)) else {
@@ -279,6 +288,26 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
                 }
                 .encode(next(3)),
             );
+            circles.push((slot, east, north, heading));
+        }
+    }
+    if spec.path_once && spec.obstacles_moving_mps > 0.0 && !circles.is_empty() {
+        let start_s = frame_time_s(frames.len());
+        while frame_time_s(frames.len()) < spec.seconds {
+            let moved_m = spec.obstacles_moving_mps * (frame_time_s(frames.len()) - start_s);
+            for &(slot, east, north, heading) in &circles {
+                frames.push(
+                    Obstacle {
+                        obstacle_id: slot as u8,
+                        circle: Some(ObstacleCircle {
+                            east_m: (east - moved_m * heading.cos()) as f32,
+                            north_m: (north + moved_m * heading.sin()) as f32,
+                            radius_m: 0.3,
+                        }),
+                    }
+                    .encode(next(3)),
+                );
+            }
         }
     }
     for (i, frame) in frames.into_iter().enumerate() {
@@ -931,6 +960,17 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             obstacles_at_centre: true,
             corridor_widening_m: 0.002,
             ..plain("stages-path-round")
+        },
+        // Obstacles sent every tick as they move: the planner frames whose handling fits a
+        // slot's motion (docs/bus.md, "Obstacles that move"), every slot's fit closing in the
+        // same tick.
+        Spec {
+            seconds: (6.0_f64).max(5.0 + 40.0 * period_s),
+            path_points: MAX_PATH_POINTS,
+            path_once: true,
+            obstacles: MAX_OBSTACLES,
+            obstacles_moving_mps: 1.5,
+            ..plain("stages-obstacles-moving")
         },
         Spec {
             seconds: (4.0_f64).max(1.0 + 40.0 * period_s),

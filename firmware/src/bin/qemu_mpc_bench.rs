@@ -36,8 +36,8 @@ use catmodel::control::mpc::lateral::{self, InflatedObstacle, LateralSetup, Line
 use catmodel::control::mpc::longitudinal::{SpeedStart, SpeedState};
 use catmodel::control::mpc::{
     CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ObstacleSide,
-    ReferencePoint, Sample, SidePoint, StageClock, DEFAULT_TUNING, MAX_OBSTACLES, NX, PLAN_STEPS,
-    ROWS, STEPS, STEP_S,
+    ObstacleVelocity, ReferencePoint, Sample, SidePoint, StageClock, DEFAULT_TUNING, MAX_OBSTACLES,
+    NX, PLAN_STEPS, ROWS, STEPS, STEP_S,
 };
 use catmodel::math;
 use catmodel::model::dynamic::{DynamicParams, LateralState};
@@ -454,6 +454,7 @@ fn on_straight(east: f32, north: f32, r: f32, car: &Car, half_width: f32) -> Obs
         path_offset_m: east,
         left_m: half_width,
         right_m: half_width,
+        velocity: ObstacleVelocity::ZERO,
     }
 }
 
@@ -573,6 +574,7 @@ fn run_parts(b: &Bench, st: &mut Statics) {
                         radius_m: o.radius_m + 0.7,
                         ahead_m: o.ahead_m,
                         path_offset_m: o.path_offset_m,
+                        velocity: o.velocity,
                     },
                     if o.east_m > 0.0 {
                         ObstacleSide::Left

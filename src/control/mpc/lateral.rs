@@ -30,7 +30,8 @@ use nalgebra::{SMatrix, SVector};
 use super::admm::{Problem, Row};
 use super::{clamp, max};
 use super::{
-    ObstacleSide, ReferencePoint, Sample, StageClock, Weights, MAX_OBSTACLES, NX, ROWS, STEPS,
+    ObstacleSide, ObstacleVelocity, ReferencePoint, Sample, StageClock, Weights, MAX_OBSTACLES, NX,
+    ROWS, STEPS,
 };
 use crate::math;
 use crate::model::dynamic::DynamicParams;
@@ -530,6 +531,22 @@ pub struct InflatedObstacle {
     pub ahead_m: f32,
     /// Its centre's offset from the path there, m ([`super::Obstacle::path_offset_m`]).
     pub path_offset_m: f32,
+    /// How it moves.
+    pub velocity: ObstacleVelocity,
+}
+
+impl InflatedObstacle {
+    /// Where it will be `t_s` from now (moved at its velocity; a standing one is itself).
+    pub fn at(&self, t_s: f32) -> Self {
+        let v = &self.velocity;
+        Self {
+            x_m: self.x_m + v.east_mps * t_s,
+            y_m: self.y_m + v.north_mps * t_s,
+            ahead_m: self.ahead_m + v.along_mps * t_s,
+            path_offset_m: self.path_offset_m + v.right_mps * t_s,
+            ..*self
+        }
+    }
 }
 
 /// An end-of-horizon stage's row for an obstacle still ahead of the rear axle there (and at
@@ -737,8 +754,11 @@ pub fn build(
         let station_m = origin.map_or(0.0, |o| {
             (r1.at.pose.x_m - o.x_m) * o.sin_heading + (r1.at.pose.y_m - o.y_m) * o.cos_heading
         });
+        // x_{k+1}'s time: each obstacle where it will be then.
+        let t_s = setup.stage.time_s(k + 1);
         for (i, ob) in obstacles.iter().enumerate() {
             let Some((ob, side)) = ob else { continue };
+            let ob = &ob.at(t_s);
             let terminal = end
                 .then(|| terminal_row(&r1.at, ob, *side, body, lin_b, w, (station_m, preview_m)))
                 .flatten();

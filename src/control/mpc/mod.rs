@@ -178,6 +178,34 @@ pub struct Obstacle {
     pub left_m: f32,
     /// The corridor at that station, m (as [`Sample::right_m`]).
     pub right_m: f32,
+    /// How it moves ([`ObstacleVelocity::ZERO`]: it stands).
+    pub velocity: ObstacleVelocity,
+}
+
+/// An obstacle's velocity, in the local frame and in the path's where it lies: the solve
+/// places it where it will be at each stage, and decides the side it is passed on by where it
+/// will be when the car reaches it. A component that is not finite is a bad input (status 3).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObstacleVelocity {
+    /// East, m/s.
+    pub east_mps: f32,
+    /// North, m/s.
+    pub north_mps: f32,
+    /// Along the path at its station, m/s.
+    pub along_mps: f32,
+    /// Across the path there, m/s, positive right.
+    pub right_mps: f32,
+}
+
+impl ObstacleVelocity {
+    /// Standing still.
+    pub const ZERO: Self = Self {
+        east_mps: 0.0,
+        north_mps: 0.0,
+        along_mps: 0.0,
+        right_mps: 0.0,
+    };
 }
 
 /// Which side of an obstacle the car passes on.
@@ -618,6 +646,12 @@ pub const NO_PASSAGE_AT_REST_MPS: f32 = 0.3;
 /// nothing), and at rest it has stopped for it, m: a speed loop that answers sooner than its
 /// model stops the car up to 0.75 m short of a planned stop (docs/findings.md).
 pub const NO_PASSAGE_NEAR_M: f32 = 2.0;
+
+/// An obstacle moving across the path faster than this is passed behind, m/s.
+pub const CROSSING_MPS: f32 = 0.3;
+/// The least speed at which the car is taken to close in on a moving obstacle when its side
+/// is decided, m/s.
+pub const MEET_CLOSING_MPS: f32 = 2.0;
 
 /// Where the speed plan stops for the nearest obstacle that leaves no passage.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1367,8 +1401,16 @@ impl MpcConfig {
             // Through less, no plan satisfies its own rows: the pickup of docs/findings.md
             // (2.05 m wide, 2.15 m of room, a 0.15 m margin) fought the corridor beside the
             // obstacle, fell back and passed it by 0.29 m where 0.6 m was planned.
-            let room_left = (ob.path_offset_m - r) + ob.left_m;
-            let room_right = ob.right_m - (ob.path_offset_m + r);
+            // Where a moving obstacle will be across the path when the body's front reaches
+            // its circle: closing in at the car's speed less the obstacle's along the path,
+            // 2 m/s at least (a car at rest sets off), within the horizon; the corridor where
+            // it is now.
+            let closing_mps = max(v - ob.velocity.along_mps, MEET_CLOSING_MPS);
+            let gap_m = max(ob.ahead_m - front - r, 0.0);
+            let meet_s = min(gap_m / closing_mps, self.stage.horizon_s());
+            let offset_m = ob.path_offset_m + ob.velocity.right_mps * meet_s;
+            let room_left = (offset_m - r) + ob.left_m;
+            let room_right = ob.right_m - (offset_m + r);
             let need = body.width_m
                 + lateral::corridor_margin_m(&t.weights, ob.left_m, ob.right_m, 0.5 * body.width_m);
             let room = |s: ObstacleSide| match s {
@@ -1379,15 +1421,27 @@ impl MpcConfig {
                 ObstacleSide::Left => ObstacleSide::Right,
                 ObstacleSide::Right => ObstacleSide::Left,
             };
-            let keep = memory
-                .filter(|s| room(*s) >= need && room(other(*s)) < room(*s) + t.side_hysteresis_m);
+            // One that crosses the path is passed behind, never ahead of it: the side it
+            // leaves, whatever the room (the other side's room closes as it comes).
+            let behind = if ob.velocity.right_mps > CROSSING_MPS {
+                Some(ObstacleSide::Left)
+            } else if ob.velocity.right_mps < -CROSSING_MPS {
+                Some(ObstacleSide::Right)
+            } else {
+                None
+            };
+            let keep = memory.filter(|s| {
+                behind.is_none_or(|b| b == *s)
+                    && room(*s) >= need
+                    && room(other(*s)) < room(*s) + t.side_hysteresis_m
+            });
             let side = match keep {
                 Some(s) => s,
                 None => {
-                    let s = if room_left >= room_right {
-                        ObstacleSide::Left
-                    } else {
-                        ObstacleSide::Right
+                    let s = match behind {
+                        Some(b) => b,
+                        None if room_left >= room_right => ObstacleSide::Left,
+                        None => ObstacleSide::Right,
                     };
                     // Once it left no passage, it takes the hysteresis's room more to pass:
                     // room within the position's noise of the need flipped the judgement
@@ -1426,6 +1480,7 @@ impl MpcConfig {
                     radius_m: r,
                     ahead_m: ob.ahead_m,
                     path_offset_m: ob.path_offset_m,
+                    velocity: ob.velocity,
                 },
                 side,
             ));
@@ -1734,12 +1789,10 @@ fn shift_values(v: &mut [f32; STEPS + 1], f: &[f32; STEPS]) {
     }
 }
 
+/// Every field finite, by one test of their sum (a NaN or an infinity in any one, or values
+/// too large to add, is not; fewer instructions and less flash than a test each).
 fn pose_ok(p: &Pose) -> bool {
-    p.x_m.is_finite()
-        && p.y_m.is_finite()
-        && p.heading_rad.is_finite()
-        && p.sin_heading.is_finite()
-        && p.cos_heading.is_finite()
+    (p.x_m + p.y_m + p.heading_rad + p.sin_heading + p.cos_heading).is_finite()
 }
 
 fn sample_ok(s: &Sample) -> bool {
@@ -1780,15 +1833,19 @@ fn input_ok(input: &MpcInput) -> bool {
             && r.curvature_per_m.is_finite()
             && r.speed_mps.is_finite()
     });
+    // The fields that must be finite by one test of their sum, as in `pose_ok`.
     let obstacles_ok = input.obstacles.iter().flatten().all(|o| {
-        o.east_m.is_finite()
-            && o.north_m.is_finite()
-            && o.radius_m.is_finite()
-            && o.radius_m >= 0.0
-            && o.ahead_m.is_finite()
-            && o.path_offset_m.is_finite()
-            && !o.left_m.is_nan()
-            && !o.right_m.is_nan()
+        let v = &o.velocity;
+        let sum = o.east_m
+            + o.north_m
+            + o.radius_m
+            + o.ahead_m
+            + o.path_offset_m
+            + v.east_mps
+            + v.north_mps
+            + v.along_mps
+            + v.right_mps;
+        sum.is_finite() && o.radius_m >= 0.0 && !o.left_m.is_nan() && !o.right_m.is_nan()
     });
     pose_ok(&car.pose)
         && car.speed_mps.is_finite()
