@@ -174,10 +174,10 @@ enum Command {
         out: Option<PathBuf>,
     },
     /// Close the loop: the plant simulator, the node and its controller on one bus, over a
-    /// scenario (dlc, obstacle, loop); writes DIR/session.can.log, session.tx.log,
+    /// scenario (dlc, obstacle, loop, crossing); writes DIR/session.can.log, session.tx.log,
     /// metrics.json and plots.
     ClosedLoop {
-        /// dlc (ISO 3888-2 double lane change), obstacle, loop.
+        /// dlc (ISO 3888-2 double lane change), obstacle, loop, crossing (a pedestrian).
         #[arg(long)]
         scenario: String,
         /// mpc or pure-pursuit.

@@ -103,6 +103,13 @@ impl Scorer {
         }
     }
 
+    /// The obstacles are now at these circles (east, north, radius), in the course's order:
+    /// obstacles that move.
+    pub fn move_obstacles(&mut self, circles: &[(f64, f64, f64)]) {
+        self.obstacles.clear();
+        self.obstacles.extend_from_slice(circles);
+    }
+
     /// The body at rear axle `(x, y)`, `heading`.
     pub fn observe(&mut self, x: f64, y: f64, heading: f64) {
         let reach = self.body.length_m + self.body.width_m;

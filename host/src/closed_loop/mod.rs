@@ -341,6 +341,53 @@ impl DriveByWire {
     }
 }
 
+/// The course's obstacles where they are now: those that walk set off as the car comes near
+/// ([`planner::ObstacleWalk`]).
+struct Walkers {
+    /// When each set off, s (`None`: not yet, or it does not walk).
+    started_s: Vec<Option<f64>>,
+    /// Each one's circle now: east, north, radius.
+    circles: Vec<(f64, f64, f64)>,
+}
+
+impl Walkers {
+    fn new(course: &Course) -> Self {
+        Self {
+            started_s: vec![None; course.obstacles.len()],
+            circles: course
+                .obstacles
+                .iter()
+                .map(|o| (o.east_m, o.north_m, o.radius_m))
+                .collect(),
+        }
+    }
+
+    /// At `t_s`, the car's rear axle at `(x, y)`.
+    fn step(&mut self, course: &Course, t_s: f64, x: f64, y: f64) {
+        let car_x = course.frame.to_course(x, y).0;
+        for ((o, started), circle) in course
+            .obstacles
+            .iter()
+            .zip(&mut self.started_s)
+            .zip(&mut self.circles)
+        {
+            let Some(walk) = o.walk else { continue };
+            let obstacle_x = course.frame.to_course(o.east_m, o.north_m).0;
+            if started.is_none() && obstacle_x - car_x <= walk.start_within_m {
+                *started = Some(t_s);
+            }
+            if let Some(t0) = *started {
+                let dt = t_s - t0;
+                *circle = (
+                    o.east_m + walk.east_mps * dt,
+                    o.north_m + walk.north_mps * dt,
+                    o.radius_m,
+                );
+            }
+        }
+    }
+}
+
 /// Runs `course` with `vehicle` (its sensors set for `options.receiver`) and `driver` in the
 /// node's place.
 pub fn run(
@@ -377,7 +424,13 @@ pub fn run(
     planner.send_origin(sim_options.origin_deg.0, sim_options.origin_deg.1);
     // Note: the scenarios' paths have 2..=256 points and at most 4 obstacles (host tests).
     let _ = planner.send_path(&course.path);
-    let _ = planner.send_obstacles(&course.obstacles);
+    // A course with an obstacle that moves has the planner send every obstacle each tick where
+    // it is (`Planner::obstacle_frames`); the others', queued once behind the path.
+    let moving = course.obstacles.iter().any(|o| o.walk.is_some());
+    if !moving {
+        let _ = planner.send_obstacles(&course.obstacles);
+    }
+    let mut walkers = Walkers::new(course);
     let replan_us = options.replan_s.map(|s| (s * 1e6).round().max(1.0) as u64);
     let mut last_plan_us = 0u64;
 
@@ -408,6 +461,10 @@ pub fn run(
             let command = dbw.command(step, t_us);
             rig.step(&command);
             let truth = rig.truth();
+            if moving {
+                walkers.step(course, t_us as f64 * 1e-6, truth.x, truth.y);
+                scorer.move_obstacles(&walkers.circles);
+            }
             scorer.observe(truth.x, truth.y, truth.heading);
         }
         // The frames of this tick: the sensors' (logged by now) and the planner's.
@@ -428,7 +485,18 @@ pub fn run(
             if planner.pending() == 0 && tick_start >= last_plan_us + every {
                 last_plan_us = tick_start;
                 let _ = planner.send_path(&course.path);
-                let _ = planner.send_obstacles(&course.obstacles);
+                if !moving {
+                    let _ = planner.send_obstacles(&course.obstacles);
+                }
+            }
+        }
+        if moving {
+            // Where the obstacles are at the tick's start, before the queued frames.
+            for frame in planner.obstacle_frames(&walkers.circles) {
+                rx.push(TimedFrame {
+                    t_us: tick_start + 250,
+                    frame,
+                });
             }
         }
         for (i, frame) in planner.take_tick_frames().into_iter().enumerate() {

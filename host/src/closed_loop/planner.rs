@@ -38,6 +38,22 @@ pub struct PlannedObstacle {
     pub north_m: f64,
     /// Radius, m.
     pub radius_m: f64,
+    /// How it moves from there, if it does.
+    pub walk: Option<ObstacleWalk>,
+}
+
+/// An obstacle that sets off across the car's way: from where the course puts it, at a
+/// constant velocity, once the car's rear axle is within `start_within_m` of it along the
+/// course. A course with one has the planner send every obstacle each tick where it is then
+/// (a perception's rate), not queued behind the path ([`Planner::obstacle_frames`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObstacleWalk {
+    /// Velocity east, m/s.
+    pub east_mps: f64,
+    /// Velocity north, m/s.
+    pub north_mps: f64,
+    /// How near the car comes along the course before it sets off, m.
+    pub start_within_m: f64,
 }
 
 /// Why the planner refused a path.
@@ -168,6 +184,28 @@ impl Planner {
             );
         }
         Ok(())
+    }
+
+    /// OBSTACLE frames for `circles` (east, north, radius) in slots 0.., to send at once, not
+    /// queued: an obstacle that moves, sent every tick where it is.
+    pub fn obstacle_frames(&mut self, circles: &[(f64, f64, f64)]) -> Vec<CanFrame> {
+        circles
+            .iter()
+            .take(OBSTACLE_SLOTS)
+            .enumerate()
+            .map(|(slot, &(east_m, north_m, radius_m))| {
+                let c = self.counter(OBSTACLE);
+                Obstacle {
+                    obstacle_id: slot as u8,
+                    circle: Some(ObstacleCircle {
+                        east_m: east_m as f32,
+                        north_m: north_m as f32,
+                        radius_m: radius_m as f32,
+                    }),
+                }
+                .encode(c)
+            })
+            .collect()
     }
 
     /// The frames to send during the next tick, at most [`PATH_FRAMES_PER_TICK`].

@@ -118,6 +118,14 @@ pub fn write_plots(dir: &Path, output: &RunOutput, body: &Body) -> Result<Vec<Pa
         fig = fig
             .line("obstacle", circle(o.east_m, o.north_m, o.radius_m))
             .color((214, 39, 40));
+        if let Some(w) = o.walk {
+            // Where it walks: its first 8 s from where it sets off.
+            let walk = vec![
+                (o.east_m, o.north_m),
+                (o.east_m + 8.0 * w.east_mps, o.north_m + 8.0 * w.north_mps),
+            ];
+            fig = fig.line("its walk, 8 s", walk).color((214, 39, 40));
+        }
     }
     fig = fig
         .line(

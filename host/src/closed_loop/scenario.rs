@@ -18,7 +18,7 @@
 //! Frame: east/north metres from the simulator's origin; the car starts at rest on the path's
 //! first point, heading along it. The lateral coordinate `y` of a course is positive to the
 //! left of its direction of travel (a lane change to the left is the standard's).
-use super::planner::{PlannedObstacle, PlannedPoint};
+use super::planner::{ObstacleWalk, PlannedObstacle, PlannedPoint};
 use crate::sim::config::Body;
 
 /// Base circle radius of a cone, m: a 500 mm traffic cone's base is about 0.3 m across [I].
@@ -49,10 +49,12 @@ pub enum Kind {
     Obstacle,
     /// A parking-lot loop.
     Loop,
+    /// A pedestrian crossing the road ahead of the car.
+    Crossing,
 }
 
 /// Names accepted by `catmodel closed-loop --scenario`.
-pub const SCENARIO_NAMES: [&str; 3] = ["dlc", "obstacle", "loop"];
+pub const SCENARIO_NAMES: [&str; 4] = ["dlc", "obstacle", "loop", "crossing"];
 
 impl Kind {
     /// The scenario called `name`.
@@ -61,6 +63,7 @@ impl Kind {
             "dlc" => Some(Kind::DoubleLaneChange),
             "obstacle" => Some(Kind::Obstacle),
             "loop" => Some(Kind::Loop),
+            "crossing" => Some(Kind::Crossing),
             _ => None,
         }
     }
@@ -71,6 +74,7 @@ impl Kind {
             Kind::DoubleLaneChange => "dlc",
             Kind::Obstacle => "obstacle",
             Kind::Loop => "loop",
+            Kind::Crossing => "crossing",
         }
     }
 
@@ -80,6 +84,7 @@ impl Kind {
             Kind::DoubleLaneChange => 10.0,
             Kind::Obstacle => 8.0,
             Kind::Loop => 4.0,
+            Kind::Crossing => 8.0,
         }
     }
 }
@@ -513,12 +518,47 @@ pub fn obstacle(speed_mps: f64) -> Course {
             east_m,
             north_m,
             radius_m: OBSTACLE_RADIUS_M,
+            walk: None,
         }],
         cones: Vec::new(),
         lanes: Vec::new(),
         frame,
         scored_stations_m: (x_obstacle - 30.0, x_obstacle + 30.0),
     }
+}
+
+/// The pedestrian of the crossing: radius, m; where it stands, m right of the car's lane
+/// centre; its walking speed to the left, m/s; how near the car comes before it sets off, m.
+pub const PEDESTRIAN_RADIUS_M: f64 = 0.4;
+/// See [`PEDESTRIAN_RADIUS_M`].
+pub const PEDESTRIAN_FROM_RIGHT_M: f64 = 6.0;
+/// See [`PEDESTRIAN_RADIUS_M`].
+pub const PEDESTRIAN_SPEED_MPS: f64 = 1.5;
+/// See [`PEDESTRIAN_RADIUS_M`].
+pub const PEDESTRIAN_STARTS_WITHIN_M: f64 = 35.0;
+
+/// The obstacle's road (two lanes, the car in the right-hand one) with a pedestrian crossing it
+/// from the right where the obstacle stood: it sets off as the car comes within 35 m and
+/// walks to the left at 1.5 m/s, the planner sending its circle every tick.
+pub fn crossing(speed_mps: f64) -> Course {
+    let mut course = obstacle(speed_mps);
+    course.kind = Kind::Crossing;
+    let frame = course.frame;
+    let x_crossing = run_up_m(speed_mps) + OBSTACLE_AHEAD_M;
+    let (east_m, north_m) = frame.to_local(x_crossing, -PEDESTRIAN_FROM_RIGHT_M);
+    let (left_e, left_n) = frame.to_local(x_crossing, 1.0);
+    let (zero_e, zero_n) = frame.to_local(x_crossing, 0.0);
+    course.obstacles = vec![PlannedObstacle {
+        east_m,
+        north_m,
+        radius_m: PEDESTRIAN_RADIUS_M,
+        walk: Some(ObstacleWalk {
+            east_mps: (left_e - zero_e) * PEDESTRIAN_SPEED_MPS,
+            north_mps: (left_n - zero_n) * PEDESTRIAN_SPEED_MPS,
+            start_within_m: PEDESTRIAN_STARTS_WITHIN_M,
+        }),
+    }];
+    course
 }
 
 /// Radius of the loop's half circles, m.
@@ -584,5 +624,6 @@ pub fn course(kind: Kind, body: &Body, speed_mps: f64) -> Course {
         Kind::DoubleLaneChange => double_lane_change(body, speed_mps),
         Kind::Obstacle => obstacle(speed_mps),
         Kind::Loop => parking_loop(speed_mps),
+        Kind::Crossing => crossing(speed_mps),
     }
 }
