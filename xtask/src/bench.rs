@@ -9,11 +9,11 @@
 //! worst-case bound ([`bound`], printed after the table) exceeds the tick budget.
 use std::fmt::Write as _;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 
 use catmodel_app::budget::{CONTROL_TICK_BUDGET_INSTRUCTIONS, TICK_BUDGET_INSTRUCTIONS};
 
-use super::{bound, cargo_build, qemu_command, root, INSTALL_QEMU};
+use super::{bound, cargo_build, qemu_stderr_cached, root};
 
 /// Max instructions per call allowed by `--check`: about 1.5x what was measured (README,
 /// "Instructions per component on the target"), so a regression, not noise, trips it (QEMU
@@ -82,18 +82,7 @@ pub struct Row {
 /// on stderr (its rows).
 pub fn run_bench(features: &str, bin: &str) -> Result<String> {
     let elf = cargo_build(features, bin)?;
-    let output = qemu_command(&elf).args(["-append", bin]).output();
-    let output = match output {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
-        }
-        other => other.context("running qemu-system-arm")?,
-    };
-    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
-    if !output.status.success() {
-        bail!("{bin} failed ({}):\n{stderr}", output.status);
-    }
-    Ok(stderr)
+    qemu_stderr_cached(&elf, bin, &[])
 }
 
 /// The rows and the timing overhead printed by a benchmark firmware.

@@ -38,7 +38,7 @@ use catmodel_app::budget::{
 };
 
 use super::bench::{self, MPC_BENCH};
-use super::{cargo_build, drives, qemu_append, qemu_command, qemu_path, root, INSTALL_QEMU};
+use super::{cargo_build, drives, qemu_append, qemu_path, qemu_stderr_cached, root};
 
 /// The stage row of the model-predictive controller's solve (`Stage::MpcSolve`).
 const SOLVE_ROW: &str = "mpc_solve";
@@ -575,20 +575,10 @@ pub fn measure_stages() -> Result<Bound> {
             qemu_path(&list)?,
         ],
     )?;
-    let output = qemu_command(&elf).args(["-append", &append]).output();
-    let output = match output {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
-        }
-        other => other.context("running qemu-system-arm")?,
-    };
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    if !output.status.success() {
-        bail!(
-            "the stage measurement failed ({}):\n{stderr}",
-            output.status
-        );
-    }
+    let mut inputs = vec![list.clone()];
+    inputs.extend(drives.iter().map(|d| root().join(d)));
+    let stderr =
+        qemu_stderr_cached(&elf, &append, &inputs).context("the stage measurement failed")?;
     // A drive's name: its file's stem, or its directory's for a closed-loop session.
     let names = drives
         .iter()

@@ -176,6 +176,68 @@ fn qemu_command(elf: &Path) -> Command {
     command
 }
 
+/// What a QEMU run of `elf` with `append` printed on stderr, from `target/qemu/cache` when the
+/// very same run was made before. A run is deterministic (`-icount shift=0`: the same kernel,
+/// command line and input files execute the same instructions and print the same counts), so
+/// its key is a hash of what it depends on: QEMU's version, the kernel's bytes, the command
+/// line, and each input file's name and bytes. The measurements every `cargo qemu` repeats
+/// (the stage firmware over its drives, the controller's worst-case solve) then run once per
+/// firmware build and drives. Only successful runs are kept.
+fn qemu_stderr_cached(elf: &Path, append: &str, inputs: &[PathBuf]) -> Result<String> {
+    let version = Command::new("qemu-system-arm").arg("--version").output();
+    let version = match version {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            bail!("qemu-system-arm is not installed; install it with:\n    {INSTALL_QEMU}")
+        }
+        other => other.context("running qemu-system-arm --version")?.stdout,
+    };
+    let mut key = Fnv64::default();
+    key.field(&version);
+    key.field(&std::fs::read(elf).with_context(|| format!("reading {}", elf.display()))?);
+    key.field(append.as_bytes());
+    for input in inputs {
+        key.field(input.as_os_str().as_encoded_bytes());
+        key.field(&std::fs::read(input).with_context(|| format!("reading {}", input.display()))?);
+    }
+    let cache = root().join("target").join("qemu").join("cache");
+    let name = elf
+        .file_name()
+        .map_or_else(|| "run".into(), |n| n.to_string_lossy());
+    let entry = cache.join(format!("{name}-{:016x}.stderr", key.0));
+    if let Ok(stderr) = std::fs::read_to_string(&entry) {
+        return Ok(stderr);
+    }
+    let output = qemu_command(elf)
+        .args(["-append", append])
+        .output()
+        .context("running qemu-system-arm")?;
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    if !output.status.success() {
+        bail!("{} failed ({}):\n{stderr}", name, output.status);
+    }
+    std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
+    std::fs::write(&entry, &stderr).with_context(|| format!("writing {}", entry.display()))?;
+    Ok(stderr)
+}
+
+/// FNV-1a, 64 bits, over length-prefixed fields (so that no two field lists hash the same
+/// bytes): a cache key, not a digest against tampering.
+struct Fnv64(u64);
+
+impl Default for Fnv64 {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv64 {
+    fn field(&mut self, bytes: &[u8]) {
+        for &b in (bytes.len() as u64).to_le_bytes().iter().chain(bytes) {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
 /// The kernel's path as QEMU is given it: relative to the repository, QEMU's working
 /// directory, when inside (QEMU passes it on as the firmware's first argument, [`qemu_append`]).
 fn kernel_path(elf: &Path) -> &Path {
@@ -945,6 +1007,23 @@ fn size() -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cache_key_is_fnv1a_and_keeps_its_fields_apart() {
+        // FNV-1a 64 of "a" (the published test vector), with this key's length prefix taken off
+        // by hashing the raw byte after the offset basis.
+        let mut raw = Fnv64::default();
+        raw.0 = (raw.0 ^ u64::from(b'a')).wrapping_mul(0x0000_0100_0000_01b3);
+        assert_eq!(raw.0, 0xaf63_dc4c_8601_ec8c);
+        let key = |fields: &[&[u8]]| {
+            let mut k = Fnv64::default();
+            fields.iter().for_each(|f| k.field(f));
+            k.0
+        };
+        assert_ne!(key(&[b"ab", b"c"]), key(&[b"a", b"bc"]));
+        assert_ne!(key(&[b"", b"x"]), key(&[b"x", b""]));
+        assert_eq!(key(&[b"ab", b"c"]), key(&[b"ab", b"c"]));
+    }
 
     #[test]
     fn the_command_line_check_is_the_firmwares_buffer() {
