@@ -3,8 +3,8 @@
 pedestrian speeds, slower cars, an oncoming car and a standing object whose detection jitters,
 for the published car with its standard receiver's position bound (models/paper.toml, 2 m) and
 with an RTK-class bound (the same file at 0.2 m). Prints one line per run and a summary per
-binary: the runs whose body touched the object while the car moved (above 0.5 m/s) and the runs
-that lost their path (fallback 5). docs/bus.md, "Obstacles that move", has the figures.
+binary: the runs whose body touched the object while the car moved (above 0.5 m/s), the runs
+that lost their path (fallback 5) and the runs that stopped short of the road's end (100 m). docs/bus.md, "Obstacles that move", has the figures.
 
 usage: sil-moving-sweep.py [--catmodel BIN]...   (default target/release/catmodel)
 """
@@ -33,11 +33,16 @@ for name, model in (("rtk", rtk), ("standard", paper)):
             cases.append((name, model, ["--scenario", "pedestrian", "--ped-speed", str(speed), "--seed", str(seed)]))
     for speed in (2, 4, 6):
         cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", str(speed)]))
-    cases.append((name, model, ["--scenario", "standing", "--obstacle-noise-m", "0.1"]))
+    for noise in (0.1, 0.2):
+        for seed in (0, 1):
+            cases.append((name, model, ["--scenario", "standing", "--obstacle-noise-m", str(noise), "--seed", str(seed)]))
+    for speed in (0.5, 1.0, 1.5):
+        cases.append((name, model, ["--scenario", "pedestrian", "--ped-speed", str(speed), "--obstacle-noise-m", "0.1"]))
+    cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "4", "--obstacle-noise-m", "0.1"]))
     cases.append((name, model, ["--scenario", "oncoming", "--lead-speed", "8"]))
 
 for binary in binaries:
-    touched = lost = 0
+    touched = lost = stopped = 0
     least = None
     for name, model, args in cases:
         out = subprocess.run(
@@ -50,7 +55,10 @@ for binary in binaries:
             least = clear if least is None else min(least, clear)
             touched += clear < 0
         lost += "5" in d["fallback_reasons"]
+        # A slower car ahead is followed, not passed: its runs end behind it.
+        stopped += "slowcar" not in args and d["final_east"] < 100.0
         print(f"{name:8s} {' '.join(args[1:]):38s} clearance while moving {clear} m, "
               f"fallbacks {d['fallback_reasons']}, stopped at {d['final_east']} m", flush=True)
     print(f"== {binary}: {len(cases)} runs, the body touched the object in {touched}, "
-          f"lost the path in {lost}; least clearance while moving {least} m", flush=True)
+          f"lost the path in {lost}, stopped short of the road's end in {stopped}; "
+          f"least clearance while moving {least} m", flush=True)

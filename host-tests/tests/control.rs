@@ -1244,6 +1244,157 @@ fn a_standing_obstacle_whose_circle_jitters_stands() {
     assert!(m.east_mps > OBSTACLE_STILL_MPS, "{m:?}");
 }
 
+/// A detector's scatter: Gaussian (the sum of twelve uniforms), standard deviation `sigma`, from
+/// a fixed LCG seeded with `seed`.
+fn detector_noise(seed: u64, sigma: f64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        let mut sum = 0.0;
+        for _ in 0..12 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            sum += (state >> 11) as f64 / (1u64 << 53) as f64;
+        }
+        (sum - 6.0) * sigma
+    }
+}
+
+/// One tick of [`obstacle_frames`]: t, the centre sent, the centre the node holds, its motion.
+type ObstacleFrame = (f64, (f32, f32), (f32, f32), ObstacleMotion);
+
+/// Sends slot `id` the circles of `track` once a tick from `t0_s` for `seconds`, as the bus
+/// carries them; returns per tick what [`ObstacleFrame`] holds.
+fn obstacle_frames(
+    inputs: &mut PlannerInputs,
+    id: u8,
+    (t0_s, seconds): (f64, f64),
+    mut track: impl FnMut(f64) -> (f64, f64),
+) -> Vec<ObstacleFrame> {
+    let start = (t0_s / 0.02).round() as u64;
+    (start..start + (seconds / 0.02).round() as u64)
+        .map(|tick| {
+            let t = tick as f64 * 0.02;
+            let (e, n) = track(t);
+            let sent = (
+                ((e / 0.02).round() * 0.02) as f32,
+                ((n / 0.02).round() * 0.02) as f32,
+            );
+            let circle = ObstacleCircle {
+                east_m: sent.0,
+                north_m: sent.1,
+                radius_m: 0.5,
+            };
+            let message = PlannerMessage::Obstacle(
+                Obstacle {
+                    obstacle_id: id,
+                    circle: Some(circle),
+                },
+                (tick % 16) as u8,
+            );
+            inputs.receive(&message, tick * 20_000);
+            let held = inputs.obstacles()[usize::from(id)].unwrap();
+            let motion = inputs.obstacle_motion()[usize::from(id)];
+            (t, sent, (held.east_m, held.north_m), motion)
+        })
+        .collect()
+}
+
+/// The least-squares speed of a span of frames (the test's own fit).
+fn span_speed(frames: &[ObstacleFrame]) -> f64 {
+    let k = frames.len() as f64;
+    let mean = |f: &dyn Fn(&ObstacleFrame) -> f64| frames.iter().map(f).sum::<f64>() / k;
+    let t0 = mean(&|f| f.0);
+    let e0 = mean(&|f| f64::from(f.1 .0));
+    let n0 = mean(&|f| f64::from(f.1 .1));
+    let stt: f64 = frames.iter().map(|f| (f.0 - t0).powi(2)).sum();
+    let ve: f64 = frames
+        .iter()
+        .map(|f| (f.0 - t0) * (f64::from(f.1 .0) - e0))
+        .sum::<f64>()
+        / stt;
+    let vn: f64 = frames
+        .iter()
+        .map(|f| (f.0 - t0) * (f64::from(f.1 .1) - n0))
+        .sum::<f64>()
+        / stt;
+    ve.hypot(vn)
+}
+
+#[test]
+fn a_standing_object_seen_by_a_noisy_detector_stands_at_its_mean() {
+    // 0.1 m of Gaussian scatter per axis, 60 s: spans whose fitted speed passes the still speed
+    // (which moved the object by that speed times the time to meet it), and circles 0.25 m
+    // and more from the object, which the side decision took as they came.
+    let mut noise = detector_noise(11, 0.1);
+    let mut inputs = PlannerInputs::new();
+    let frames = obstacle_frames(&mut inputs, 3, (0.0, 60.0), |_| {
+        (12.0 + noise(), 30.0 + noise())
+    });
+    let off = |p: (f32, f32)| f64::from(p.0 - 12.0).hypot(f64::from(p.1 - 30.0));
+    let fast_spans = frames
+        .chunks(26)
+        .filter(|c| span_speed(c) > f64::from(OBSTACLE_STILL_MPS))
+        .count();
+    assert!(
+        fast_spans >= 2,
+        "the scatter makes no span look moving: {fast_spans}"
+    );
+    assert!(frames.iter().any(|f| off(f.1) > 0.25));
+    for (t, _, held, motion) in &frames {
+        assert_eq!((motion.east_mps, motion.north_mps), (0.0, 0.0), "t {t}");
+        if *t >= 1.0 {
+            assert!(off(*held) < 0.06, "t {t}: held {held:?}");
+        }
+    }
+}
+
+#[test]
+fn an_object_that_sets_off_is_followed_within_its_detectors_scatter() {
+    // Standing 3 s with 0.05 m of scatter, then walking north at 1.5 m/s: the circle the node
+    // holds is never more than the reach and two frames of walking from the object; the
+    // walk is measured within a span or two.
+    let mut noise = detector_noise(5, 0.05);
+    let mut inputs = PlannerInputs::new();
+    let truth = |t: f64| (20.0, -6.0 + 1.5 * (t - 3.0).max(0.0));
+    let frames = obstacle_frames(&mut inputs, 0, (0.0, 6.0), |t| {
+        let (e, n) = truth(t);
+        (e + noise(), n + noise())
+    });
+    for (t, _, held, _) in frames.iter().filter(|f| f.0 >= 1.0) {
+        let (e, n) = truth(*t);
+        let lag = f64::from(held.0 - e as f32).hypot(f64::from(held.1 - n as f32));
+        // Three sigmas of 0.07 m (both axes), two ticks at 1.5 m/s, and one frame's scatter.
+        assert!(lag < 0.21 + 0.06 + 0.15, "t {t}: held {held:?}, lag {lag}");
+    }
+    let last = frames.last().unwrap().3;
+    assert!((last.north_mps - 1.5).abs() < 0.1, "{last:?}");
+}
+
+#[test]
+fn a_detectors_outlier_does_not_move_a_standing_object() {
+    let mut noise = detector_noise(3, 0.03);
+    let mut inputs = PlannerInputs::new();
+    let mut tick = 0;
+    let frames = obstacle_frames(&mut inputs, 1, (0.0, 4.0), |_| {
+        tick += 1;
+        // One circle off every second by turns 1 m (within the jump a tick allows) and 1.4 m
+        // (beyond it: the velocity starts afresh, the centre keeps its mean).
+        let outlier = match tick % 100 {
+            50 => 1.0,
+            0 => 1.4,
+            _ => 0.0,
+        };
+        (5.0 + noise(), 8.0 + outlier + noise())
+    });
+    for (t, sent, held, _) in frames.iter().filter(|f| f.0 >= 1.0) {
+        assert!(
+            (held.1 - 8.0).abs() < 0.05,
+            "t {t}: sent {sent:?}, held {held:?}"
+        );
+    }
+}
+
 #[test]
 fn a_jump_a_silence_or_a_cleared_slot_starts_the_motion_afresh() {
     let mut inputs = PlannerInputs::new();

@@ -21,6 +21,7 @@ use crate::can::codec::{LocalOrigin, ObstacleCircle, PlannerMessage};
 use crate::can::counter::CounterChecker;
 use crate::can::spec::OBSTACLE_SLOTS;
 use crate::in_place::fill;
+use crate::math::{self, max, min};
 
 use super::path::{Path, PathCar, PathError, Waypoint, MAX_PATH_POINTS};
 
@@ -87,22 +88,61 @@ pub enum PlannerEvent {
 /// of the centre's track over at least this long (25 frames at one a tick: a detector's
 /// 0.1 m of noise on each circle is 0.14 m/s of it, the bus's 0.02 m resolution 0.03 m/s).
 pub const OBSTACLE_VELOCITY_SPAN_US: u64 = 500_000;
+/// A span of a standing object whose velocity is not yet a motion ([`OBSTACLE_MOTION_SIGMAS`])
+/// goes on gathering frames up to this long, us, its fit tested at each: the velocity's standard error falls
+/// with the span's length to the power 1.5, so a detector's 0.1 m of scatter hides a walk of
+/// 0.58 m/s over 0.5 s and of 0.21 m/s over 1 s.
+pub const OBSTACLE_VELOCITY_SPAN_MAX_US: u64 = 1_000_000;
 /// A slot silent for longer starts its motion afresh, us.
 pub const OBSTACLE_SILENT_US: u64 = 2_000_000;
 /// Slower is taken as standing still, m/s: a standing object whose detection moves its circle
 /// by centimetres from frame to frame does not move.
 pub const OBSTACLE_STILL_MPS: f32 = 0.3;
+/// A standing object's span shows a motion only if its velocity is this many times its own
+/// standard error (from the fit's residuals) or more (a moving object goes on moving while it
+/// is above [`OBSTACLE_STILL_MPS`]): a detector whose circles scatter by 0.1 m measures a standing
+/// object at 0.14 m/s per axis over a span, past [`OBSTACLE_STILL_MPS`] in one span of twelve,
+/// and each such span moved the object by its speed times the time to meet it. For a velocity
+/// of zero the measured speed over its standard error has a Rayleigh law (above 5.5 once in
+/// `exp(5.5^2 / 2)`, 3.6 million); a span tested at every frame from 0.5 to 1 s
+/// ([`OBSTACLE_VELOCITY_SPAN_MAX_US`]) calls a standing object with 0.2 m of scatter moving in
+/// none of 20 000 simulated spans at 5.5, 3 in 10 000 at 5.0 and 28 in 10 000 at 4.3 (the
+/// simulation: `scripts/obstacle-motion-false-rate.py`).
+pub const OBSTACLE_MOTION_SIGMAS: f32 = 5.5;
 /// Faster than this between two frames (plus [`OBSTACLE_JUMP_M`]) is another object in the
 /// slot, not a motion, m/s.
 pub const OBSTACLE_MAX_MPS: f32 = 40.0;
 /// See [`OBSTACLE_MAX_MPS`], m.
 pub const OBSTACLE_JUMP_M: f32 = 0.5;
 
+/// An obstacle's centre is the mean of its circles over about this long, s, each moved on by
+/// the measured velocity to the latest's time (an exponential mean, the frames since the mean
+/// started counted equally until there are this long of them): a detector's 0.1 m of scatter
+/// on each circle is 0.014 m of it at one circle a tick.
+pub const OBSTACLE_CENTRE_TIME_S: f32 = 0.5;
+/// A circle farther from the mean centre than this many times the circles' scatter about the
+/// last span's line (both axes) is not taken into it (before a span is measured, farther than
+/// [`OBSTACLE_JUMP_M`]): one of a detector's outliers. The scatter over both axes is
+/// `sqrt(2)` times the scatter per axis, so at 3 one circle in 8 000 (`exp(9)`) falls beyond
+/// it.
+pub const OBSTACLE_CENTRE_SIGMAS: f32 = 3.0;
+/// The least such reach, m: a few times the bus's 0.02 m resolution.
+pub const OBSTACLE_CENTRE_REACH_MIN_M: f32 = 0.05;
+/// The most, m: a detector that scatters by 0.35 m per axis. Capped lower, at 0.5 m, a
+/// scatter of 0.3 m put a quarter of the circles beyond reach and three in a row once a
+/// second, each time restarting the mean at a circle 0.5 m off or more.
+pub const OBSTACLE_CENTRE_REACH_MAX_M: f32 = 1.5;
+/// So many circles in a row beyond reach of the mean centre: the object has moved, and the
+/// mean starts afresh at the latest circle (an object that sets off, or turns, is lagged by its
+/// reach and two frames of its motion at most).
+pub const OBSTACLE_CENTRE_OUTLIERS: u8 = 3;
+
 /// An obstacle slot's motion, measured from its circles: the slope of a least-squares line
-/// through the centres of a span of frames at least [`OBSTACLE_VELOCITY_SPAN_US`] long, held
-/// until the next span ends. Zero (the obstacle stands) for a slot sent once, after a jump or
-/// [`OBSTACLE_SILENT_US`] of silence (until a span of frames after it), and below
-/// [`OBSTACLE_STILL_MPS`].
+/// through the centres of a span of frames at least [`OBSTACLE_VELOCITY_SPAN_US`] long (up to
+/// [`OBSTACLE_VELOCITY_SPAN_MAX_US`] while it is no motion), held until the next span ends.
+/// Zero (the obstacle stands) for a slot sent once, after a jump or [`OBSTACLE_SILENT_US`] of silence (until a span of frames after it), below
+/// [`OBSTACLE_STILL_MPS`], and a standing one until its span's velocity is
+/// [`OBSTACLE_MOTION_SIGMAS`] of its standard error.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ObstacleMotion {
@@ -112,12 +152,20 @@ pub struct ObstacleMotion {
     pub north_mps: f32,
     /// The span being measured: its first frame's centre and time (us), and the sums of the
     /// fit over its frames, in s and m from that first frame: count, t, t^2, east, north,
-    /// t east, t north.
+    /// t east, t north, east^2 + north^2.
     origin: (f32, f32),
     origin_us: u64,
-    sums: [f32; 7],
+    sums: [f32; 8],
     /// The latest frame's time, us.
     last_us: u64,
+    /// The centre estimated ([`OBSTACLE_CENTRE_TIME_S`]) at the latest frame, m east and north.
+    centre: (f32, f32),
+    /// How far the centre may be from the latest circle, m ([`OBSTACLE_CENTRE_SIGMAS`]).
+    reach_m: f32,
+    /// Frames in the mean since it started, saturating.
+    frames: u16,
+    /// Circles beyond reach of the centre in a row.
+    outliers: u8,
 }
 
 impl ObstacleMotion {
@@ -127,60 +175,132 @@ impl ObstacleMotion {
         north_mps: 0.0,
         origin: (0.0, 0.0),
         origin_us: 0,
-        sums: [0.0; 7],
+        sums: [0.0; 8],
         last_us: 0,
+        centre: (0.0, 0.0),
+        reach_m: OBSTACLE_JUMP_M,
+        frames: 0,
+        outliers: 0,
     };
 
-    /// Takes the slot's new circle `now` at `t_us`, `before` being what the slot held.
+    /// Takes the slot's new circle `now` at `t_us`, `before` being what the slot held; returns
+    /// what it holds now: the circle at the centre estimated from the circles so far, `None`
+    /// for a cleared slot.
     #[inline(never)]
     fn observe(
         &mut self,
         before: Option<&ObstacleCircle>,
         now: Option<&ObstacleCircle>,
         t_us: u64,
-    ) {
+    ) -> Option<ObstacleCircle> {
         // Microseconds since the last frame; a time that went back, or more than the silence,
         // as the silence and one more.
         let since_last = t_us
             .checked_sub(self.last_us)
             .filter(|d| *d <= OBSTACLE_SILENT_US)
             .map_or(OBSTACLE_SILENT_US as u32 + 1, |d| d as u32);
-        let continues = match (before, now) {
-            (Some(b), Some(c)) => {
+        // A frame after a silence or a cleared slot starts afresh; one farther from the last
+        // than the object can have gone (a jump) starts the velocity afresh, and the centre too
+        // if it is farther than any scatter the centre takes (another object in the slot);
+        // nearer, it is one of the centre's outliers (a detector's scatter of 0.4 m puts one
+        // circle in 200 more than 1.3 m from the centre, the jump a tick allows).
+        let (fresh, jumped, far) = match (before, now) {
+            (Some(b), Some(c)) if since_last <= OBSTACLE_SILENT_US as u32 => {
                 let (de, dn) = (c.east_m - b.east_m, c.north_m - b.north_m);
-                let reach = OBSTACLE_MAX_MPS * since_last as f32 * 1e-6 + OBSTACLE_JUMP_M;
-                since_last <= OBSTACLE_SILENT_US as u32 && de * de + dn * dn <= reach * reach
+                let d2 = de * de + dn * dn;
+                let gate = OBSTACLE_MAX_MPS * since_last as f32 * 1e-6 + OBSTACLE_JUMP_M;
+                let far = 2.0 * OBSTACLE_CENTRE_REACH_MAX_M;
+                (false, d2 > gate * gate, d2 > far * far)
             }
-            _ => false,
+            _ => (true, false, false),
         };
-        if !continues {
+        if fresh || jumped {
+            let centre = (self.centre, self.reach_m, self.frames, self.outliers);
             *self = Self::STILL;
+            if !fresh {
+                (self.centre, self.reach_m, self.frames, self.outliers) = centre;
+            }
         }
-        let Some(c) = now else { return };
+        let c = now?;
         if self.sums[0] == 0.0 {
             self.origin = (c.east_m, c.north_m);
             self.origin_us = t_us;
         }
         self.last_us = t_us;
+        // The centre: where the last one has gone at the measured velocity, then a running
+        // mean of the circles about that. A circle beyond reach of it is not taken in, unless
+        // [`OBSTACLE_CENTRE_OUTLIERS`] come in a row: then the object has moved otherwise, and
+        // the mean starts afresh at the latest.
+        let raw = (c.east_m, c.north_m);
+        let dt = since_last as f32 * 1e-6;
+        let went = (
+            self.centre.0 + self.east_mps * dt,
+            self.centre.1 + self.north_mps * dt,
+        );
+        let (de, dn) = (raw.0 - went.0, raw.1 - went.1);
+        if de * de + dn * dn > self.reach_m * self.reach_m {
+            self.outliers = self.outliers.saturating_add(1);
+        } else {
+            self.outliers = 0;
+        }
+        if fresh || far || self.outliers >= OBSTACLE_CENTRE_OUTLIERS {
+            (self.centre, self.frames, self.outliers) = (raw, 1, 0);
+        } else if self.outliers == 0 {
+            self.frames = self.frames.saturating_add(1);
+            let a = max(dt / OBSTACLE_CENTRE_TIME_S, 1.0 / f32::from(self.frames));
+            self.centre = (went.0 + a * de, went.1 + a * dn);
+        } else {
+            self.centre = went;
+        }
+        let held = ObstacleCircle {
+            east_m: self.centre.0,
+            north_m: self.centre.1,
+            ..*c
+        };
         // Within a span: at most the silence per frame, and a span closes at its first frame
         // past OBSTACLE_VELOCITY_SPAN_US.
         let span_us = (t_us.saturating_sub(self.origin_us)).min(u64::from(u32::MAX)) as u32;
         let t = span_us as f32 * 1e-6;
         let (e, n) = (c.east_m - self.origin.0, c.north_m - self.origin.1);
-        for (sum, term) in self
-            .sums
-            .iter_mut()
-            .zip([1.0, t, t * t, e, n, t * e, t * n])
+        for (sum, term) in
+            self.sums
+                .iter_mut()
+                .zip([1.0, t, t * t, e, n, t * e, t * n, e * e + n * n])
         {
             *sum += term;
         }
         if span_us < OBSTACLE_VELOCITY_SPAN_US as u32 {
-            return;
+            return Some(held);
         }
-        let [k, st, stt, se, sn, ste, stn] = self.sums;
+        let [k, st, stt, se, sn, ste, stn, sqq] = self.sums;
         let spread = k * stt - st * st;
         let (ve, vn) = ((k * ste - st * se) / spread, (k * stn - st * sn) / spread);
-        let moving = ve * ve + vn * vn >= OBSTACLE_STILL_MPS * OBSTACLE_STILL_MPS;
+        // The residuals' sum of squares over both axes, k times over: k sum q^2 - (sum q)^2
+        // less the fitted slope's share, spread v^2. The variance per axis of the residuals
+        // is that / (2 k (k - 2)), and of each slope that times k / spread, so the test
+        // v^2 >= c^2 var is v^2 spread (2 (k - 2)) >= c^2 rss.
+        let speed2 = ve * ve + vn * vn;
+        let rss = k * sqq - se * se - sn * sn - spread * speed2;
+        let significant = speed2 * spread * (2.0 * (k - 2.0))
+            >= OBSTACLE_MOTION_SIGMAS * OBSTACLE_MOTION_SIGMAS * rss;
+        // Significance to set off; a moving object goes on moving above the still speed (so a
+        // walk of 0.5 m/s under 0.1 m of scatter does not stop at every other span), and a
+        // span that finds it below closes at once (it stopped).
+        let was_moving = self.east_mps != 0.0 || self.north_mps != 0.0;
+        let moving =
+            speed2 >= OBSTACLE_STILL_MPS * OBSTACLE_STILL_MPS && (significant || was_moving);
+        if !moving && !was_moving && span_us < OBSTACLE_VELOCITY_SPAN_MAX_US as u32 {
+            return Some(held);
+        }
+        // The scatter about the line, both axes: rss / (k (k - 2)).
+        let scatter2 = max(rss, 0.0) / (k * (k - 2.0));
+        self.reach_m = min(
+            max(
+                OBSTACLE_CENTRE_SIGMAS * math::sqrt(scatter2),
+                OBSTACLE_CENTRE_REACH_MIN_M,
+            ),
+            OBSTACLE_CENTRE_REACH_MAX_M,
+        );
         (self.east_mps, self.north_mps) = if moving && spread > 0.0 {
             (ve, vn)
         } else {
@@ -189,7 +309,8 @@ impl ObstacleMotion {
         // The next span starts with this frame.
         self.origin = (c.east_m, c.north_m);
         self.origin_us = t_us;
-        self.sums = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.sums = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        Some(held)
     }
 }
 
@@ -408,8 +529,7 @@ impl PlannerInputs {
                 if let (Some(slot), Some(motion)) =
                     (self.obstacles.get_mut(id), self.motion.get_mut(id))
                 {
-                    motion.observe(slot.as_ref(), o.circle.as_ref(), t_us);
-                    *slot = o.circle;
+                    *slot = motion.observe(slot.as_ref(), o.circle.as_ref(), t_us);
                 }
                 PlannerEvent::None
             }
