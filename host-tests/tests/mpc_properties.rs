@@ -245,13 +245,25 @@ fn solve_on_a_straight(
     path_max_curvature_per_m: f32,
     place: impl Fn(&TestPath) -> Option<Obstacle>,
 ) -> MpcOutput {
+    solve_on_a_straight_at(cfg, tuning, offset_m, path_max_curvature_per_m, 10.0, place)
+}
+
+/// As [`solve_on_a_straight`], the car at `speed_mps` (its speed model steady there).
+fn solve_on_a_straight_at(
+    cfg: &VehicleConfig,
+    tuning: MpcTuning,
+    offset_m: f32,
+    path_max_curvature_per_m: f32,
+    speed_mps: f32,
+    place: impl Fn(&TestPath) -> Option<Obstacle>,
+) -> MpcOutput {
     let path = arc(0.0, 3.0, 3.0, 10.0);
-    let speeds = [10.0f32; PLAN_STEPS + 1];
+    let speeds = [speed_mps; PLAN_STEPS + 1];
     let reference = path.reference(5.0, &speeds, &ESCAPE_BODY, &StageClock::UNIFORM);
     let (x, y, h) = path.pose(5.0);
     let pose = Pose::new(x as f32 + offset_m, y as f32, h as f32);
     let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
-    let model_state = eq5.steady_state_for_output(10.0).unwrap();
+    let model_state = eq5.steady_state_for_output(speed_mps).unwrap();
     let mut obstacles = [None; MAX_OBSTACLES];
     obstacles[0] = place(&path);
     let mpc = mpc_for(cfg, ESCAPE_BODY, tuning);
@@ -261,13 +273,17 @@ fn solve_on_a_straight(
         obstacles: &obstacles,
         car: CarState {
             pose,
-            speed_mps: 10.0,
+            speed_mps,
             lateral: LateralState::default(),
             steer_rad: 0.0,
-            mode: Mode::Dynamic,
+            mode: if speed_mps < 5.0 {
+                Mode::Kinematic
+            } else {
+                Mode::Dynamic
+            },
             speed_model: &model_state,
             speed_bias_mps: 0.0,
-            last_speed_cmd_mps: 10.0,
+            last_speed_cmd_mps: speed_mps,
         },
         position_uncertainty_m: 0.1,
         path_max_curvature_per_m,
@@ -313,6 +329,31 @@ fn a_crossing_obstacle_is_passed_behind() {
     let walking_in = solve(-2.5, 0.5, 0.0);
     assert_eq!(walking_in.sides[0], None, "{walking_in:?}");
     assert!(walking_in.speed_cmd_mps < 9.0, "{walking_in:?}");
+}
+
+/// A car at rest sets off past an obstacle only if it can get beside it before its front
+/// reaches it at full lock: here one 0.5 m right of a straight path, its inflated circle
+/// 1.0 m, passed on the left, which takes a shift of 1.4 m (4.7 m forward at the lock's
+/// radius, less the plan's tolerance). 2 m short of it the car stays (no passage, speed 0);
+/// 8 m short it sets off on the left. (Before, it set off from 2 m as from 8.)
+#[test]
+fn a_car_at_rest_sets_off_only_past_an_obstacle_it_can_get_beside() {
+    let cfg = VehicleConfig::default();
+    let front = f64::from(ESCAPE_BODY.length_m - ESCAPE_BODY.rear_overhang_m);
+    let solve = |gap_m: f64| {
+        solve_on_a_straight_at(&cfg, DEFAULT_TUNING, 0.0, 0.0, 0.0, |path| {
+            // The rear axle at station 5; the inflated radius 0.3 + 0.1 + 0.6.
+            Some(path.place(0.5, 5.0 + front + 1.0 + gap_m, 0.3, 5.0))
+        })
+    };
+    let near = solve(2.0);
+    assert_eq!(near.status, ControlStatus::Fallback, "{near:?}");
+    assert_eq!(near.speed_cmd_mps, 0.0, "{near:?}");
+    assert_eq!(near.sides[0], None, "{near:?}");
+    let far = solve(8.0);
+    assert_ne!(far.status, ControlStatus::Fallback, "{far:?}");
+    assert_eq!(far.sides[0], Some(ObstacleSide::Left), "{far:?}");
+    assert!(far.speed_cmd_mps > 0.5, "{far:?}");
 }
 
 /// `MpcTuning::line_rule`: a path that asks for the lock (here its largest curvature is the

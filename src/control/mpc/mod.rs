@@ -1378,6 +1378,22 @@ impl MpcConfig {
         let v = max(input.car.speed_mps, 0.0);
         let stopping_m = v * t.stop_delay_s + v * v / (2.0 * t.speed.decel_mps2);
         let reach_m = max(stopping_m, horizon_m(input));
+        // A car at a crawl passes an obstacle only if it can get beside it before its front
+        // reaches it: a sideways shift of d at full lock takes 2 sqrt(R d - d^2 / 4) forward
+        // (two opposite arcs of the lock's radius R), the plan's tolerance of an obstacle
+        // allowed. One stopped 3.5 m short of an object set off when a side seemed to open,
+        // at the path's speed, could not swerve, and rolled into it on the speed loop's delay
+        // before its fallback held (docs/findings.md). Faster, the plan and its fallback decide.
+        let crawl = v < MEET_CLOSING_MPS;
+        let lock_r = self.vehicle.wheelbase_m / math::tan(self.vehicle.max_steer_rad);
+        let car_offset_m = input.reference.first().map_or(0.0, |r| {
+            let (sh, ch) = math::sin_cos(r.at.pose.heading_rad);
+            let (dx, dy) = (
+                input.car.pose.x_m - r.at.pose.x_m,
+                input.car.pose.y_m - r.at.pose.y_m,
+            );
+            dx * ch - dy * sh
+        });
         for (((slot, memory), blocked), ob) in out
             .iter_mut()
             .zip(state.sides.iter_mut())
@@ -1417,6 +1433,15 @@ impl MpcConfig {
                 ObstacleSide::Left => room_left,
                 ObstacleSide::Right => room_right,
             };
+            let swerves = |s: ObstacleSide| {
+                let half = 0.5 * body.width_m;
+                let shift = match s {
+                    ObstacleSide::Left => car_offset_m + half - (offset_m - r),
+                    ObstacleSide::Right => offset_m + r - (car_offset_m - half),
+                };
+                let d = clamp(shift - t.obstacle_tolerance_m, 0.0, 2.0 * lock_r);
+                !crawl || gap_m <= 0.0 || 2.0 * math::sqrt(lock_r * d - 0.25 * d * d) <= gap_m
+            };
             let other = |s: ObstacleSide| match s {
                 ObstacleSide::Left => ObstacleSide::Right,
                 ObstacleSide::Right => ObstacleSide::Left,
@@ -1432,6 +1457,7 @@ impl MpcConfig {
             };
             let keep = memory.filter(|s| {
                 behind.is_none_or(|b| b == *s)
+                    && swerves(*s)
                     && room(*s) >= need
                     && room(other(*s)) < room(*s) + t.side_hysteresis_m
             });
@@ -1448,7 +1474,7 @@ impl MpcConfig {
                     // from tick to tick, and the pickup of docs/findings.md squeezed past
                     // where it had been stopping.
                     let hysteresis = if *blocked { t.side_hysteresis_m } else { 0.0 };
-                    if room(s) < need + hysteresis || room(s).is_nan() {
+                    if room(s) < need + hysteresis || room(s).is_nan() || !swerves(s) {
                         *memory = None;
                         *blocked = true;
                         // No passage: the speed plan stops the front short of the inflated
