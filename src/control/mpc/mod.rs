@@ -663,6 +663,13 @@ struct NoPassageStop {
     in_reach: bool,
 }
 
+/// The car's rear axle right of the reference's first point, m.
+fn lateral_offset_m(input: &MpcInput) -> f32 {
+    let car = &input.car.pose;
+    let at = &input.reference[0].at.pose;
+    (car.x_m - at.x_m) * at.cos_heading - (car.y_m - at.y_m) * at.sin_heading
+}
+
 /// What [`MpcConfig::decide_sides`] decided.
 struct Sides {
     /// Per obstacle slot: the inflated circle and its side, for the obstacles the plan passes.
@@ -1290,8 +1297,7 @@ impl MpcConfig {
     fn initial_state(&self, input: &MpcInput, steer_ramp_rad: Option<f32>) -> SVector<f32, NX> {
         let car = &input.car;
         let at = &input.reference[0].at.pose;
-        let (dx, dy) = (car.pose.x_m - at.x_m, car.pose.y_m - at.y_m);
-        let e_y = dx * at.cos_heading - dy * at.sin_heading;
+        let e_y = lateral_offset_m(input);
         let e_psi = math::wrap_pi(car.pose.heading_rad - at.heading_rad);
         let (vy, r) = match self.mode(input) {
             Mode::Dynamic => (car.lateral.vy_mps, car.lateral.yaw_rate_rps),
@@ -1386,14 +1392,7 @@ impl MpcConfig {
         // before its fallback held (docs/findings.md). Faster, the plan and its fallback decide.
         let crawl = v < MEET_CLOSING_MPS;
         let lock_r = self.vehicle.wheelbase_m / math::tan(self.vehicle.max_steer_rad);
-        let car_offset_m = input.reference.first().map_or(0.0, |r| {
-            let (sh, ch) = math::sin_cos(r.at.pose.heading_rad);
-            let (dx, dy) = (
-                input.car.pose.x_m - r.at.pose.x_m,
-                input.car.pose.y_m - r.at.pose.y_m,
-            );
-            dx * ch - dy * sh
-        });
+        let car_offset_m = lateral_offset_m(input);
         for (((slot, memory), blocked), ob) in out
             .iter_mut()
             .zip(state.sides.iter_mut())
