@@ -15,8 +15,8 @@
 #                                          data/bundled.can.log --tx-out` into it; .ci/run checks
 #                                          that cargo qemu's frames equal it, stack field aside)
 #
-# Uses $CATMODEL if set, else builds the CLI with `cargo build -p catmodel-host` (the dev
-# profile is optimised; the simulator's f64 arithmetic gives the same bytes in every profile).
+# Uses $CATMODEL if set, else builds the CLI with `cargo build --release -p catmodel-host` (the
+# build CI's tests made; the simulator's f64 arithmetic gives the same bytes in every profile).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,8 +29,8 @@ case "${1:-}" in
 esac
 
 if [[ -z "${CATMODEL:-}" ]]; then
-  cargo build --quiet -p catmodel-host
-  CATMODEL="${CARGO_TARGET_DIR:-target}/debug/catmodel"
+  cargo build --quiet --release -p catmodel-host
+  CATMODEL="${CARGO_TARGET_DIR:-target}/release/catmodel"
 fi
 
 tmp="$(mktemp -d)"

@@ -5,8 +5,8 @@
 //! so and pins the measured figure, so that a regression fails and an improvement is a one-line
 //! change.
 //!
-//! Release builds only (about 40 runs of the rig; CI runs
-//! `cargo test --release -p catmodel-host --test closed_loop_goals`): the unoptimised build
+//! Release builds only (about 40 runs of the rig; CI runs every test in release,
+//! `cargo test --workspace --release`): the unoptimised build
 //! ignores them.
 use catmodel::control::mpc::DEFAULT_TUNING;
 use catmodel::node::NodeConfig;
