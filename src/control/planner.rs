@@ -109,6 +109,12 @@ pub const OBSTACLE_STILL_MPS: f32 = 0.3;
 /// none of 20 000 simulated spans at 5.5, 3 in 10 000 at 5.0 and 28 in 10 000 at 4.3 (the
 /// simulation: `scripts/obstacle-motion-false-rate.py`).
 pub const OBSTACLE_MOTION_SIGMAS: f32 = 5.5;
+/// A moving object's span whose velocity is within this many of its standard errors of the
+/// velocity held is the same motion: the velocity held becomes the mean of the two, so that a
+/// walk's scatter does not take it below [`OBSTACLE_STILL_MPS`] for a span (a walk of 0.5 m/s
+/// under 0.1 m of scatter did, about one span in sixteen, and the car took the pedestrian for
+/// one standing and passed ahead of it: docs/findings.md). Farther, the span's is taken.
+pub const OBSTACLE_SAME_SIGMAS: f32 = 3.0;
 /// Faster than this between two frames (plus [`OBSTACLE_JUMP_M`]) is another object in the
 /// slot, not a motion, m/s.
 pub const OBSTACLE_MAX_MPS: f32 = 40.0;
@@ -287,13 +293,24 @@ impl ObstacleMotion {
         // walk of 0.5 m/s under 0.1 m of scatter does not stop at every other span), and a
         // span that finds it below closes at once (it stopped).
         let was_moving = self.east_mps != 0.0 || self.north_mps != 0.0;
+        // The scatter about the line, both axes: rss / (k (k - 2)); each slope's variance
+        // that times k / spread.
+        let scatter2 = max(rss, 0.0) / (k * (k - 2.0));
+        let (de, dn) = (ve - self.east_mps, vn - self.north_mps);
+        let same = was_moving
+            && (de * de + dn * dn) * spread
+                <= OBSTACLE_SAME_SIGMAS * OBSTACLE_SAME_SIGMAS * scatter2 * k;
+        let (ve, vn) = if same {
+            (0.5 * (ve + self.east_mps), 0.5 * (vn + self.north_mps))
+        } else {
+            (ve, vn)
+        };
+        let speed2 = ve * ve + vn * vn;
         let moving =
             speed2 >= OBSTACLE_STILL_MPS * OBSTACLE_STILL_MPS && (significant || was_moving);
         if !moving && !was_moving && span_us < OBSTACLE_VELOCITY_SPAN_MAX_US as u32 {
             return Some(held);
         }
-        // The scatter about the line, both axes: rss / (k (k - 2)).
-        let scatter2 = max(rss, 0.0) / (k * (k - 2.0));
         self.reach_m = min(
             max(
                 OBSTACLE_CENTRE_SIGMAS * math::sqrt(scatter2),
