@@ -1387,13 +1387,10 @@ fn a_slow_walk_under_a_detectors_scatter_keeps_moving_and_its_stop_is_seen() {
             let (e, n) = truth(t);
             (e + noise(), n + noise())
         });
-        let walking: Vec<_> = frames.iter().filter(|f| f.0 < 20.0).collect();
+        let walking: Vec<ObstacleFrame> = frames.iter().filter(|f| f.0 < 20.0).copied().collect();
         let slow_spans = walking
             .chunks(26)
-            .filter(|c| {
-                let c: Vec<ObstacleFrame> = c.iter().map(|f| **f).collect();
-                span_speed(&c) < f64::from(OBSTACLE_STILL_MPS)
-            })
+            .filter(|c| span_speed(c) < f64::from(OBSTACLE_STILL_MPS))
             .count();
         let first = walking
             .iter()
