@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Objects that move, over `catmodel sil --stdio`: scripts/sil-moving.py's scenarios across
-pedestrian speeds, slower cars, an oncoming car and a standing object whose detection jitters,
+pedestrian speeds, slower cars, slower cars that brake to a stop, an oncoming car and a standing
+object whose detection jitters,
 for the published car with its standard receiver's position bound (models/paper.toml, 2 m) and
 with an RTK-class bound (the same file at 0.2 m). Prints one line per run and a summary per
 binary: the runs whose body touched the object while the car moved (above 0.5 m/s), the runs
@@ -48,6 +49,11 @@ for name, model in (("rtk", rtk), ("standard", paper)):
         cases.append((name, model, ["--scenario", "pedestrian", "--ped-speed", str(speed), "--obstacle-noise-m", "0.1"] + once))
     cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "4", "--obstacle-noise-m", "0.1"] + once))
     cases.append((name, model, ["--scenario", "oncoming", "--lead-speed", "8"] + once))
+    # A car ahead that brakes hard and stops in the lane (Euro NCAP's car-to-car rear, braking:
+    # 6 m/s^2), and one that stops at 9 m/s^2 under a detector's scatter.
+    cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "6", "--lead-brake-at", "10"] + once))
+    cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "4", "--lead-brake-at", "12",
+                                "--lead-decel", "9", "--obstacle-noise-m", "0.1"] + once))
 
 for binary in binaries:
     touched = lost = stopped = 0

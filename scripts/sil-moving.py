@@ -4,10 +4,12 @@
 
 usage: sil-moving.py --scenario {pedestrian,slowcar,oncoming,standing,none} [--road {straight,wave}]
                      [--replan S] [--speed V] [--model FILE] [--gnss-noise-m 0.02] [--sweep S]
-                     [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--out CSV]
+                     [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--lead-speed 4]
+                     [--lead-brake-at T] [--lead-decel 6] [--out CSV]
 pedestrian: crosses the road 45 m ahead at --ped-speed from t = 2 s, from 6 m to the right
 (--ped-from right) or left;
-slowcar: a car 30 m ahead in the lane at --lead-speed; oncoming: a car in the left lane
+slowcar: a car 30 m ahead in the lane at --lead-speed (with --lead-brake-at T, braking from
+t = T s at --lead-decel m/s^2, default 6, to a stop where it stays); oncoming: a car in the left lane
 (3.5 m left) coming towards the car at --lead-speed from 150 m; standing: an object standing
 in the lane 45 m ahead. --obstacle-noise-m adds Gaussian noise to each circle sent (a detector's).
 --sweep S sends, every tick, the circle that covers the object from now to S seconds ahead (its
@@ -39,6 +41,8 @@ ap.add_argument("--right", type=float, default=1.75)
 ap.add_argument("--ped-speed", type=float, default=1.5)
 ap.add_argument("--ped-from", choices=["right", "left"], default="right")
 ap.add_argument("--lead-speed", type=float, default=4.0)
+ap.add_argument("--lead-brake-at", type=float, default=None)
+ap.add_argument("--lead-decel", type=float, default=6.0)
 ap.add_argument("--duration", type=float, default=40.0)
 ap.add_argument("--seed", type=int, default=0)
 ap.add_argument("--sweep", type=float, default=0.0)
@@ -95,6 +99,9 @@ def obstacle_at(t):
         return (45.0, road(45.0)[1] - side*(6.0 - a.ped_speed*max(0.0, t-t0)), 0.4)
     if a.scenario == "slowcar":
         s = 30.0 + a.lead_speed*t
+        if a.lead_brake_at is not None and t > a.lead_brake_at:
+            tb = min(t - a.lead_brake_at, a.lead_speed/a.lead_decel)
+            s = 30.0 + a.lead_speed*a.lead_brake_at + a.lead_speed*tb - a.lead_decel*tb*tb/2
         e, n = road(s); return (e, n, 1.5)
     if a.scenario == "oncoming":
         s = 150.0 - a.lead_speed*t
