@@ -677,9 +677,7 @@ fn run(cli: Cli) -> Result<()> {
             for u in speed_unit_problems([&log], [&e]) {
                 eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
             }
-            if let Some(why) =
-                identify::steering_gain_problem(std::slice::from_ref(&e), &file.vehicle)
-            {
+            if let Some(why) = identify::steering_problem(std::slice::from_ref(&e), &file.vehicle) {
                 eprintln!(
                     "catmodel: warning: {}: {why}: the yaw-rate scores below compare the model's \
                      steering with it",

@@ -108,7 +108,7 @@ pub struct Identification {
     /// The cornering stiffnesses, when the drives determine them (else the file keeps the car
     /// file's `[dynamics]`, and a note says why).
     pub dynamics: Option<dynamics::DynamicsFit>,
-    /// Why the training logs' steering cannot be the schema's ([`steering_gain_problem`]):
+    /// Why the training logs' steering cannot be the schema's ([`steering_problem`]):
     /// `catmodel identify` refuses to write the file unless `--force`, which writes it without
     /// `[lateral]`.
     pub steering_problem: Option<String>,
@@ -360,11 +360,17 @@ type SteadyTurn = (f64, f64, f64);
 /// steady, its transient reads as understeer (0.0038 s^2/m^2 instead of the plant's 0.0015
 /// with `steps-at-speed` in the set).
 fn steady_turns(e: &Experiment) -> Vec<SteadyTurn> {
+    steady_samples(e, 2.0, 0.01)
+}
+
+/// As [`steady_turns`], faster than `min_speed_mps` and with |angle| above `min_angle_rad`
+/// (0: straight driving too).
+fn steady_samples(e: &Experiment, min_speed_mps: f64, min_angle_rad: f64) -> Vec<SteadyTurn> {
     let mut pts = Vec::new();
     let behind = (LATERAL_STEADY_S / e.ts_s).round() as usize;
     for k in behind..e.len().saturating_sub(e.yaw_half_width) {
         let (v, d) = (e.vel[k], e.delta_rad[k]);
-        if v <= 2.0 || d.abs() <= 0.01 {
+        if v <= min_speed_mps || d.abs() < min_angle_rad {
             continue;
         }
         let window = k - behind..=k + e.yaw_half_width;
@@ -525,6 +531,131 @@ pub fn steering_gain_problem(logs: &[Experiment], vehicle: &VehicleSection) -> O
             each.join(", ")
         }
     ))
+}
+
+/// A steering whose zero is this far off, % of the lock, is refused (when it is also
+/// [`STEER_ZERO_SIGMAS`] standard errors from 0): at 10 m/s on the CAT Vehicle, 0.5 % of its
+/// 35.5 deg lock is a yaw rate of 0.012 rad/s with the wheel straight, 0.24 m sideways over the
+/// node's 2 s prediction.
+pub const STEER_ZERO_MAX_PCT: f64 = 0.5;
+/// See [`STEER_ZERO_MAX_PCT`].
+pub const STEER_ZERO_SIGMAS: f64 = 3.0;
+/// Steady samples at speed needed to judge the steering's zero (4 s at 50 Hz).
+pub const MIN_STEER_ZERO_SAMPLES: usize = 200;
+/// Only samples faster than this judge the zero, m/s: the course's yaw rate is noisier
+/// the slower the car (its angle `atan(r L / v)`).
+const STEER_ZERO_MIN_SPEED_MPS: f64 = 4.0;
+
+/// The steering's zero: the `steer` at which the GNSS course runs straight, % of the lock, its
+/// standard error, and the samples. A line `a = g delta + c` through the steady samples at
+/// speed, straight driving included, with `a = atan(r L / v) (1 + K v^2)` the centre angle the
+/// course shows (the car file's understeer K); the zero is `-c / g`. With too little turning
+/// to fit `g` (angles spanning less than 0.02 rad), `g` is 1. `None` with fewer than
+/// [`MIN_STEER_ZERO_SAMPLES`].
+pub fn steer_zero(
+    pts: &[SteadyTurn],
+    vehicle: &VehicleSection,
+    hw: usize,
+) -> Option<(f64, f64, usize)> {
+    let (l, k) = (vehicle.wheelbase_m, vehicle.understeer_s2_per_m2);
+    let xy: Vec<(f64, f64)> = pts
+        .iter()
+        .filter(|p| p.0 > STEER_ZERO_MIN_SPEED_MPS)
+        .map(|&(v, d, r)| (d, (r * l / v).atan() * (1.0 + k * v * v)))
+        .filter(|(d, a)| d.is_finite() && a.is_finite())
+        .collect();
+    let n = xy.len();
+    if n < MIN_STEER_ZERO_SAMPLES {
+        return None;
+    }
+    let nf = n as f64;
+    let mx = xy.iter().map(|p| p.0).sum::<f64>() / nf;
+    let my = xy.iter().map(|p| p.1).sum::<f64>() / nf;
+    let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let (lo, hi) = xy
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.0), hi.max(p.0))
+        });
+    // Each yaw rate is a central difference over 2 hw + 1 samples: one independent error.
+    let window = (2 * hw + 1) as f64;
+    let (g, zero_rad, var) = if hi - lo >= 0.02 && sxx > 0.0 {
+        let g = xy.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
+        let c = my - g * mx;
+        let rss: f64 = xy.iter().map(|p| (p.1 - c - g * p.0).powi(2)).sum();
+        let s2 = rss / (nf - 2.0) * window;
+        // var(-c / g) to first order, c and g correlated through the mean angle.
+        let var_c = s2 * (1.0 / nf + mx * mx / sxx);
+        let var_g = s2 / sxx;
+        let cov = -mx * s2 / sxx;
+        let z = -c / g;
+        let var = (var_c + z * z * var_g + 2.0 * z * cov) / (g * g);
+        (g, z, var)
+    } else {
+        let z = xy.iter().map(|p| p.0 - p.1).sum::<f64>() / nf;
+        let rss: f64 = xy.iter().map(|p| (p.0 - p.1 - z).powi(2)).sum();
+        (1.0, z, rss / (nf - 1.0) * window / nf)
+    };
+    if !(g.is_finite() && g > 0.0 && zero_rad.is_finite() && var.is_finite()) {
+        return None;
+    }
+    let per_pct = vehicle.max_steer_deg.to_radians() / 100.0;
+    Some((zero_rad / per_pct, var.sqrt() / per_pct, n))
+}
+
+/// Why the steering's zero of `logs` cannot be the car's: `steer` is
+/// [`STEER_ZERO_MAX_PCT`] or more off where the GNSS course runs straight (black-box probe:
+/// a sensor 5 % off its zero gave a steering gain of 0.932 and a yaw-rate fit of 65.9 % instead
+/// of 80.5 %, with exit 0 and no note; the node, reading the same sensor, predicts a car that
+/// drives straight on a circle). `None` when the zero is within it, or too few steady samples
+/// at speed to tell.
+pub fn steering_zero_problem(logs: &[Experiment], vehicle: &VehicleSection) -> Option<String> {
+    let hw = logs.first().map_or(1, |e| e.yaw_half_width);
+    let per_log: Vec<(&str, Vec<SteadyTurn>)> = logs
+        .iter()
+        .map(|e| {
+            (
+                e.name.as_str(),
+                steady_samples(e, STEER_ZERO_MIN_SPEED_MPS, 0.0),
+            )
+        })
+        .collect();
+    let all: Vec<SteadyTurn> = per_log.iter().flat_map(|p| p.1.clone()).collect();
+    let (zero, se, n) = steer_zero(&all, vehicle, hw)?;
+    if zero.abs() < STEER_ZERO_MAX_PCT || zero.abs() < STEER_ZERO_SIGMAS * se {
+        return None;
+    }
+    let each: Vec<String> = per_log
+        .iter()
+        .filter_map(|(name, pts)| {
+            steer_zero(pts, vehicle, hw).map(|(z, _, _)| format!("{name} {z:+.2} %"))
+        })
+        .collect();
+    let (side, fix) = if zero > 0.0 {
+        ("left", format!("subtract {zero:.2} from"))
+    } else {
+        ("right", format!("add {:.2} to", -zero))
+    };
+    Some(format!(
+        "the steering's zero is off: the GNSS course runs straight at `steer` = {zero:+.2} % \
+         +- {se:.2} over {n} samples of steady driving faster than {STEER_ZERO_MIN_SPEED_MPS} \
+         m/s (per log: {}), so a `steer` of 0 turns the car {side} (at most \
+         {STEER_ZERO_MAX_PCT} % is taken as the car's): the node reads the same `steer` on the \
+         bus, so recalibrate the steering sensor's zero; to identify from these logs, {fix} \
+         every `steer` (positive = right)",
+        if each.is_empty() {
+            "none has enough alone".into()
+        } else {
+            each.join(", ")
+        }
+    ))
+}
+
+/// Why the steering of `logs` cannot be the car's as the schema has it: a gain no car has
+/// ([`steering_gain_problem`]: the other sign, another unit) or a zero that is off
+/// ([`steering_zero_problem`]).
+pub fn steering_problem(logs: &[Experiment], vehicle: &VehicleSection) -> Option<String> {
+    steering_gain_problem(logs, vehicle).or_else(|| steering_zero_problem(logs, vehicle))
 }
 
 /// Steering gain and understeer term from `r = v tan(g delta / (1 + K v^2)) / L` by
@@ -860,7 +991,7 @@ pub fn identify(
     };
     // A steering no car has (the other sign, degrees) is the log's, not the car's: named as a
     // refusal, and the lateral model is not fitted to it.
-    let steering_problem = steering_gain_problem(&training, &vehicle);
+    let steering_problem = steering_problem(&training, &vehicle);
     let lateral = match &steering_problem {
         Some(why) => {
             notes.push(format!("lateral model not identified: {why}"));
