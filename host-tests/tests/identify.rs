@@ -839,18 +839,18 @@ fn a_steering_zero_that_is_off_is_named_with_its_offset() {
     let at_rate = |hz: f64| {
         let mut p = VehicleConfig::default();
         p.sensors.gnss.period_s = 1.0 / hz;
-        (format!("CAT Vehicle at {hz} Hz"), p, paper.clone())
+        (format!("CAT Vehicle at {hz} Hz"), p, paper)
     };
     let mut plants = vec![
         (
             "CAT Vehicle".to_string(),
             VehicleConfig::default(),
-            paper.clone(),
+            paper,
         ),
         (
             "CAT Vehicle RTK".to_string(),
             with_rtk(VehicleConfig::default()),
-            paper.clone(),
+            paper,
         ),
         (
             "hatchback".to_string(),
