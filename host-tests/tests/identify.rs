@@ -923,3 +923,69 @@ fn a_steering_zero_that_is_off_is_named_with_its_offset() {
         }
     }
 }
+
+/// A wheel speed without its sign (black-box probe: a `vel` that is the speed's magnitude while
+/// the car reversed gave a speed delay of 0.20 s instead of 0.84, exit 0). Eq 5-like
+/// responses (0.42 s delay, 1.2 s lag) to reverse commands: signed, as the schema has it,
+/// nothing is said; the same as a magnitude is named with the stretch. A reverse asked for while
+/// the car still rolls forward at 10 m/s (it brakes first) is not taken for one, nor a reverse
+/// too short to have been taken.
+#[test]
+fn a_wheel_speed_without_its_sign_in_reverse_is_named() {
+    use catmodel_host::identify::units::unsigned_reverse;
+    let respond = |command: &[f64], v0: f64| -> Vec<f64> {
+        let (delay, tau) = (21, 1.2);
+        let mut v = v0;
+        (0..command.len())
+            .map(|k| {
+                let u = if k >= delay { command[k - delay] } else { v0 };
+                v += (u - v) * 0.02 / tau;
+                v
+            })
+            .collect()
+    };
+    let check = |what: &str, command: Vec<f64>, v0: f64, named: bool| {
+        let vel = respond(&command, v0);
+        let signed = experiment(what, command.clone(), vel.clone());
+        assert_eq!(unsigned_reverse(&signed), None, "{what}: signed");
+        let magnitude = experiment(what, command, vel.iter().map(|v| v.abs()).collect());
+        let why = unsigned_reverse(&magnitude);
+        assert_eq!(why.is_some(), named, "{what}: {why:?}");
+        why
+    };
+    let why = check(
+        "park and reverse",
+        steps(&[(10.0, 3.0), (5.0, 0.0), (8.0, -2.0), (5.0, 0.0)]),
+        0.0,
+        true,
+    )
+    .unwrap();
+    assert!(
+        why.starts_with("`vel` stays positive while `input_vel` asks for reverse (t = 15.0 to 23.0 s")
+            && why.contains("`input_vel` -2.00 m/s")
+            && why.contains("1 such stretch(es)")
+            && why.contains("negative in reverse"),
+        "{why}"
+    );
+    // Reverse asked for at 10 m/s: the signed speed crosses 0 after 3.3 s.
+    check(
+        "reverse from speed",
+        steps(&[(10.0, 10.0), (12.0, -1.0), (5.0, 0.0)]),
+        10.0,
+        true,
+    );
+    // Asked for briefly at 20 m/s: the car is still braking when the command ends (1.9 m/s
+    // 3 s on, 0.2 m/s at the end): no reverse to judge.
+    check(
+        "reverse from 20 m/s, briefly",
+        steps(&[(10.0, 20.0), (4.5, -0.5), (5.0, 0.0)]),
+        20.0,
+        false,
+    );
+    check(
+        "a short reverse",
+        steps(&[(5.0, 0.0), (3.2, -1.0), (5.0, 0.0)]),
+        0.0,
+        false,
+    );
+}

@@ -594,8 +594,9 @@ fn run(cli: Cli) -> Result<()> {
             if !units.is_empty() {
                 if !force {
                     bail!(
-                        "{}\n{} not written: the wheel speed of {} log(s) is not in m/s by \
-                         their GNSS track (--force identifies anyway)",
+                        "{}\n{} not written: the wheel speed is not the log schema's (m/s by \
+                         the GNSS track, negative in reverse) in {} case(s) (--force identifies \
+                         anyway)",
                         units.join("\n"),
                         out.display(),
                         units.len()
@@ -965,7 +966,8 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 /// `FILE: why` for each log whose wheel speed its GNSS track says is not in m/s
-/// ([`identify::units::SpeedScale::problem`]).
+/// ([`identify::units::SpeedScale::problem`]), or that stays positive while the car is asked
+/// to reverse ([`identify::units::unsigned_reverse`]).
 fn speed_unit_problems<'a>(
     paths: impl IntoIterator<Item = &'a PathBuf>,
     experiments: impl IntoIterator<Item = &'a identify::preprocess::Experiment>,
@@ -973,9 +975,13 @@ fn speed_unit_problems<'a>(
     paths
         .into_iter()
         .zip(experiments)
-        .filter_map(|(p, e)| {
-            let problem = e.speed_scale.and_then(|s| s.problem())?;
-            Some(format!("{}: {problem}", p.display()))
+        .flat_map(|(p, e)| {
+            let unit = e.speed_scale.and_then(|s| s.problem());
+            let sign = identify::units::unsigned_reverse(e);
+            [unit, sign]
+                .into_iter()
+                .flatten()
+                .map(move |problem| format!("{}: {problem}", p.display()))
         })
         .collect()
 }
