@@ -842,11 +842,7 @@ fn a_steering_zero_that_is_off_is_named_with_its_offset() {
         (format!("CAT Vehicle at {hz} Hz"), p, paper)
     };
     let mut plants = vec![
-        (
-            "CAT Vehicle".to_string(),
-            VehicleConfig::default(),
-            paper,
-        ),
+        ("CAT Vehicle".to_string(), VehicleConfig::default(), paper),
         (
             "CAT Vehicle RTK".to_string(),
             with_rtk(VehicleConfig::default()),
@@ -961,8 +957,9 @@ fn a_wheel_speed_without_its_sign_in_reverse_is_named() {
     )
     .unwrap();
     assert!(
-        why.starts_with("`vel` stays positive while `input_vel` asks for reverse (t = 15.0 to 23.0 s")
-            && why.contains("`input_vel` -2.00 m/s")
+        why.starts_with(
+            "`vel` stays positive while `input_vel` asks for reverse (t = 15.0 to 23.0 s"
+        ) && why.contains("`input_vel` -2.00 m/s")
             && why.contains("1 such stretch(es)")
             && why.contains("negative in reverse"),
         "{why}"

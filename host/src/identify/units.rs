@@ -1,4 +1,5 @@
-//! The wheel speed's unit, checked against the GNSS track (review finding 04).
+//! The wheel speed's unit, checked against the GNSS track (review finding 04), and its sign in
+//! reverse, against the commands ([`unsigned_reverse`]).
 //!
 //! The log schema's speeds are m/s, and its range (-10..80 m/s) cannot tell km/h or mph in town
 //! from m/s on a motorway: a training set in km/h (37 at most) was identified with exit 0 and
@@ -514,8 +515,8 @@ pub fn unsigned_reverse(e: &super::preprocess::Experiment) -> Option<String> {
     let &(t0, t1, command, median) = found.first()?;
     Some(format!(
         "`vel` stays positive while `input_vel` asks for reverse (t = {t0:.1} to {t1:.1} s: \
-         `input_vel` {command:.2} m/s, `vel` {median:+.2} m/s {REVERSE_SETTLE_S} s on; {} such \
-         stretch(es)): the wheel speed looks unsigned (its magnitude); the log schema's `vel` is \
+         `input_vel` {command:.2} m/s, `vel` {median:+.2} m/s once the speed loop had taken it; \
+         {} such stretch(es)): the wheel speed looks unsigned (its magnitude); the log schema's `vel` is \
          negative in reverse: give it the sign of the direction of travel, or cut the reversing \
          out",
         found.len()
