@@ -390,6 +390,70 @@ fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// A reverse command (`input_vel` below this, m/s) held ...
+pub const REVERSE_COMMAND_MPS: f64 = -0.3;
+/// ... this long has been taken by any car's speed loop, s: eq 5's 0.42 s delay and 1.2 s time
+/// constant twice over; the wheel speed is negative from there on.
+pub const REVERSE_SETTLE_S: f64 = 3.0;
+/// A car rolling forward when reverse is asked for first brakes to a stop, at least this hard,
+/// m/s^2 (the settling starts after it).
+const REVERSE_BRAKING_MPS2: f64 = 2.0;
+/// Shortest stretch after the settling that is judged, s.
+const REVERSE_JUDGED_S: f64 = 0.5;
+
+/// A wheel speed without its sign (black-box probe: a `vel` that is the speed's magnitude,
+/// positive while the car reversed 12 m under a signed `input_vel`, gave a speed delay of
+/// 0.20 s instead of 0.84 and a training fit of 83.4 %, exit 0 and no note, and the validation
+/// on a drive without reversing hid it). The log schema's `vel` is negative in reverse; a wheel
+/// speed sensor that reports a magnitude keeps it positive. Each stretch of `e` where
+/// `input_vel` has asked for reverse (below [`REVERSE_COMMAND_MPS`]) for more than
+/// [`REVERSE_SETTLE_S`] (and the time to brake from the speed it started at) is judged over
+/// the rest of the stretch (at least [`REVERSE_JUDGED_S`]): a wheel speed never below
+/// -0.1 m/s whose median is above [`MOVING`] is not the schema's. `None` when every such
+/// stretch goes backwards, or there is none.
+pub fn unsigned_reverse(e: &super::preprocess::Experiment) -> Option<String> {
+    let settle = (REVERSE_SETTLE_S / e.ts_s).round() as usize;
+    let judged = (REVERSE_JUDGED_S / e.ts_s).round() as usize;
+    let n = e.len().min(e.vel.len()).min(e.input_vel.len());
+    let mut found: Vec<(f64, f64, f64, f64)> = Vec::new();
+    let mut k = 0;
+    while k < n {
+        if e.input_vel[k] >= REVERSE_COMMAND_MPS {
+            k += 1;
+            continue;
+        }
+        let start = k;
+        while k < n && e.input_vel[k] < REVERSE_COMMAND_MPS {
+            k += 1;
+        }
+        // A car still rolling forward first brakes to a stop.
+        let braking = (e.vel[start].max(0.0) / REVERSE_BRAKING_MPS2 / e.ts_s).round() as usize;
+        if k - start < settle + braking + judged {
+            continue;
+        }
+        let tail = start + settle + braking..k;
+        let mut vel = e.vel[tail.clone()].to_vec();
+        if vel.iter().any(|v| *v < -0.1) {
+            continue;
+        }
+        vel.sort_by(f64::total_cmp);
+        let median = vel[vel.len() / 2];
+        if median > MOVING {
+            let command = e.input_vel[tail.clone()].iter().sum::<f64>() / tail.len() as f64;
+            found.push((e.t[start], e.t[k - 1], command, median));
+        }
+    }
+    let &(t0, t1, command, median) = found.first()?;
+    Some(format!(
+        "`vel` stays positive while `input_vel` asks for reverse (t = {t0:.1} to {t1:.1} s: \
+         `input_vel` {command:.2} m/s, `vel` {median:+.2} m/s once the speed loop had taken it; \
+         {} such stretch(es)): the wheel speed looks unsigned (its magnitude); the log schema's `vel` is \
+         negative in reverse: give it the sign of the direction of travel, or cut the reversing \
+         out",
+        found.len()
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,68 +521,4 @@ mod tests {
         // A parked car: nothing to judge by.
         assert_eq!(drive(0.0, 1.0, 10.0), None);
     }
-}
-
-/// A reverse command (`input_vel` below this, m/s) held ...
-pub const REVERSE_COMMAND_MPS: f64 = -0.3;
-/// ... this long has been taken by any car's speed loop, s: eq 5's 0.42 s delay and 1.2 s time
-/// constant twice over; the wheel speed is negative from there on.
-pub const REVERSE_SETTLE_S: f64 = 3.0;
-/// A car rolling forward when reverse is asked for first brakes to a stop, at least this hard,
-/// m/s^2 (the settling starts after it).
-const REVERSE_BRAKING_MPS2: f64 = 2.0;
-/// Shortest stretch after the settling that is judged, s.
-const REVERSE_JUDGED_S: f64 = 0.5;
-
-/// A wheel speed without its sign (black-box probe: a `vel` that is the speed's magnitude,
-/// positive while the car reversed 12 m under a signed `input_vel`, gave a speed delay of
-/// 0.20 s instead of 0.84 and a training fit of 83.4 %, exit 0 and no note, and the validation
-/// on a drive without reversing hid it). The log schema's `vel` is negative in reverse; a wheel
-/// speed sensor that reports a magnitude keeps it positive. Each stretch of `e` where
-/// `input_vel` has asked for reverse (below [`REVERSE_COMMAND_MPS`]) for more than
-/// [`REVERSE_SETTLE_S`] (and the time to brake from the speed it started at) is judged over
-/// the rest of the stretch (at least [`REVERSE_JUDGED_S`]): a wheel speed never below
-/// -0.1 m/s whose median is above [`MOVING`] is not the schema's. `None` when every such
-/// stretch goes backwards, or there is none.
-pub fn unsigned_reverse(e: &super::preprocess::Experiment) -> Option<String> {
-    let settle = (REVERSE_SETTLE_S / e.ts_s).round() as usize;
-    let judged = (REVERSE_JUDGED_S / e.ts_s).round() as usize;
-    let n = e.len().min(e.vel.len()).min(e.input_vel.len());
-    let mut found: Vec<(f64, f64, f64, f64)> = Vec::new();
-    let mut k = 0;
-    while k < n {
-        if e.input_vel[k] >= REVERSE_COMMAND_MPS {
-            k += 1;
-            continue;
-        }
-        let start = k;
-        while k < n && e.input_vel[k] < REVERSE_COMMAND_MPS {
-            k += 1;
-        }
-        // A car still rolling forward first brakes to a stop.
-        let braking = (e.vel[start].max(0.0) / REVERSE_BRAKING_MPS2 / e.ts_s).round() as usize;
-        if k - start < settle + braking + judged {
-            continue;
-        }
-        let tail = start + settle + braking..k;
-        let mut vel = e.vel[tail.clone()].to_vec();
-        if vel.iter().any(|v| *v < -0.1) {
-            continue;
-        }
-        vel.sort_by(f64::total_cmp);
-        let median = vel[vel.len() / 2];
-        if median > MOVING {
-            let command = e.input_vel[tail.clone()].iter().sum::<f64>() / tail.len() as f64;
-            found.push((e.t[start], e.t[k - 1], command, median));
-        }
-    }
-    let &(t0, t1, command, median) = found.first()?;
-    Some(format!(
-        "`vel` stays positive while `input_vel` asks for reverse (t = {t0:.1} to {t1:.1} s: \
-         `input_vel` {command:.2} m/s, `vel` {median:+.2} m/s once the speed loop had taken it; \
-         {} such stretch(es)): the wheel speed looks unsigned (its magnitude); the log schema's `vel` is \
-         negative in reverse: give it the sign of the direction of travel, or cut the reversing \
-         out",
-        found.len()
-    ))
 }
