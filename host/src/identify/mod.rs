@@ -979,6 +979,28 @@ pub fn identify(
     let correlation_dx = correlation::rank(&training, &vehicle, |e| &e.dx);
     let correlation_vel = correlation::rank(&training, &vehicle, |e| &e.vel);
 
+    // Fixes late behind the wheel speed: the lateral model's lag would take the latency in.
+    for e in training.iter().chain(&validation) {
+        if let Some((lag, se)) = units::gnss_latency(e) {
+            if lag.abs() > units::GNSS_LATENCY_NOTE_S && lag.abs() > units::GNSS_LATENCY_SIGMAS * se
+            {
+                notes.push(format!(
+                    "{}: the GNSS fixes are {:.2} s +- {se:.2} {} the wheel speed (the lag \
+                     that best fits the speed along the track with `vel`): the lateral \
+                     model's lag takes it in, and the node, fed fixes as late, predicts from \
+                     positions that old; log the fixes at their time of validity, or use a \
+                     receiver with less latency",
+                    e.name,
+                    lag.abs(),
+                    if lag > 0.0 {
+                        "late behind"
+                    } else {
+                        "early ahead of"
+                    }
+                ));
+            }
+        }
+    }
     let speed = identify_speed(&training, &validation, opts)?;
     let dx_dt_tfs = match identify_dx_dt(&training, opts)? {
         Ok(tfs) => Some(tfs),
