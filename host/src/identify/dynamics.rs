@@ -106,6 +106,7 @@ fn mask(e: &Experiment) -> Vec<bool> {
         .map(|k| {
             k >= hw
                 && k + hw < e.len()
+                && !e.in_gnss_gap(k)
                 && e.vel[k - hw..=k + hw]
                     .iter()
                     .all(|&v| v > MIN_FIT_SPEED_MPS)

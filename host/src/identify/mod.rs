@@ -370,7 +370,7 @@ fn steady_samples(e: &Experiment, min_speed_mps: f64, min_angle_rad: f64) -> Vec
     let behind = (LATERAL_STEADY_S / e.ts_s).round() as usize;
     for k in behind..e.len().saturating_sub(e.yaw_half_width) {
         let (v, d) = (e.vel[k], e.delta_rad[k]);
-        if v <= min_speed_mps || d.abs() < min_angle_rad {
+        if v <= min_speed_mps || d.abs() < min_angle_rad || e.in_gnss_gap(k) {
             continue;
         }
         let window = k - behind..=k + e.yaw_half_width;

@@ -489,7 +489,9 @@ pub fn gnss_latency(e: &super::preprocess::Experiment) -> Option<(f64, f64)> {
     let track: Vec<f64> = (0..n).map(|k| e.dx[k].hypot(e.dy[k])).collect();
     // Samples whose neighbourhood, every lag included, is moving.
     let moving: Vec<usize> = (1 + max_lag..n - 1 - max_lag)
-        .filter(|&k| e.vel[k - max_lag..=k + max_lag].iter().all(|v| *v > MOVING))
+        .filter(|&k| {
+            !e.in_gnss_gap(k) && e.vel[k - max_lag..=k + max_lag].iter().all(|v| *v > MOVING)
+        })
         .collect();
     if moving.len() < GNSS_LATENCY_MIN_SAMPLES {
         return None;

@@ -144,14 +144,23 @@ pub fn scores(experiments: &[Experiment], sims: &[Simulated]) -> Scores {
         score(&y, &yh)
     };
     let have_yaw = sims.iter().all(|s| s.yaw_model.is_some());
+    // The GNSS-derived outputs are scored where the track was measured, not interpolated
+    // across an outage ([`Experiment::gnss_gap`]).
+    let fixed = |e: &Experiment, measured: &[f64], model: &[f64]| -> (Vec<f64>, Vec<f64>) {
+        (0..measured.len().min(model.len()))
+            .filter(|&k| !e.in_gnss_gap(k))
+            .map(|k| (measured[k], model[k]))
+            .unzip()
+    };
     Scores {
         vel_model: cat(&|e, s| (e.vel.clone(), s.vel_model.clone())),
         vel_kinematic: cat(&|e, s| (e.vel.clone(), s.vel_kinematic.clone())),
-        dx_model: cat(&|e, s| (e.dx.clone(), s.dx_model.clone())),
-        dx_kinematic: cat(&|e, s| (e.dx.clone(), s.dx_kinematic.clone())),
-        yaw_model: have_yaw
-            .then(|| cat(&|e, s| (e.yaw_rate.clone(), s.yaw_model.clone().unwrap_or_default()))),
-        yaw_kinematic: cat(&|e, s| (e.yaw_rate.clone(), s.yaw_kinematic.clone())),
+        dx_model: cat(&|e, s| fixed(e, &e.dx, &s.dx_model)),
+        dx_kinematic: cat(&|e, s| fixed(e, &e.dx, &s.dx_kinematic)),
+        yaw_model: have_yaw.then(|| {
+            cat(&|e, s| fixed(e, &e.yaw_rate, s.yaw_model.as_deref().unwrap_or_default()))
+        }),
+        yaw_kinematic: cat(&|e, s| fixed(e, &e.yaw_rate, &s.yaw_kinematic)),
     }
 }
 
