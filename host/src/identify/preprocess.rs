@@ -372,6 +372,11 @@ fn onto_grid(name: &str, t: &[f64], v: &[f64], grid: &[f64]) -> Result<Vec<f64>>
 pub const MAX_PAUSE_S: f64 = 5.0;
 
 /// The median interval between consecutive times (at least 2), s.
+/// Below this wheel speed a sample counts as standing for [`STANDING_NOTE_SHARE`], m/s.
+const STANDING_MPS: f64 = 0.1;
+/// A log that stands more than this share of its time says so in a note.
+pub const STANDING_NOTE_SHARE: f64 = 0.3;
+
 /// An interval between fixes longer than this many of the receiver's periods is an outage.
 pub const GNSS_GAP_PERIODS: f64 = 2.5;
 
@@ -385,7 +390,7 @@ fn gnss_gaps(tg: &[f64], grid: &[f64], reach: usize) -> (Vec<bool>, f64) {
     let period = median_interval(tg);
     let mut gap = vec![false; grid.len()];
     let mut total = 0.0;
-    if !(period > 0.0) || grid.is_empty() {
+    if period.is_nan() || period <= 0.0 || grid.is_empty() {
         return (gap, total);
     }
     let (g0, ts) = (
@@ -712,6 +717,20 @@ pub fn preprocess_rows(
     let yaw_half_width = 4 * half_width;
     let mut yaw_rate = derivative(&heading, opts.ts_s, yaw_half_width);
     zero_unless_moving(&mut yaw_rate, &vel, yaw_half_width);
+    // A log that stands much of its time scores its speed models on samples that every model
+    // gets right (black-box probe: 300 s of standstill halved the validation MSE and raised
+    // the fit 2.8 points for the same model).
+    let standing = vel.iter().filter(|v| v.abs() < STANDING_MPS).count();
+    if standing as f64 > STANDING_NOTE_SHARE * vel.len() as f64 {
+        notes.push(format!(
+            "{name}: the car stands {:.0} s of the log's {:.0} s ({:.0} %): the fit % and MSE \
+             of the speed models count those samples, where every model is right, and read \
+             better than over the driving alone",
+            standing as f64 * opts.ts_s,
+            vel.len() as f64 * opts.ts_s,
+            100.0 * standing as f64 / vel.len() as f64
+        ));
+    }
     let (gnss_gap, outage_s) = gnss_gaps(
         &tg,
         &grid,
