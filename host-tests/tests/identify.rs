@@ -890,18 +890,14 @@ fn a_steering_zero_that_is_off_is_named_with_its_offset() {
                     println!("{what}, {offset} % off: too noisy to tell");
                     continue;
                 };
-                let zero: f64 = why
-                    .split("`steer` = ")
-                    .nth(1)
-                    .and_then(|r| r.split(' ').next())
-                    .and_then(|z| z.parse().ok())
-                    .unwrap_or_else(|| panic!("{what}: {why}"));
-                let se: f64 = why
-                    .split(" % +- ")
-                    .nth(1)
-                    .and_then(|r| r.split(' ').next())
-                    .and_then(|z| z.parse().ok())
-                    .unwrap_or_else(|| panic!("{what}: {why}"));
+                let number_after = |marker: &str| -> f64 {
+                    why.split(marker)
+                        .nth(1)
+                        .and_then(|r| r.split(' ').next())
+                        .and_then(|z| z.parse().ok())
+                        .unwrap_or_else(|| panic!("{what}: {why}"))
+                };
+                let (zero, se) = (number_after("`steer` = "), number_after(" % +- "));
                 assert!(
                     (zero - offset).abs() < 0.2 + 2.0 * se,
                     "{what}, {offset} % off: {why}"
