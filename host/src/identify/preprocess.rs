@@ -371,7 +371,6 @@ fn onto_grid(name: &str, t: &[f64], v: &[f64], grid: &[f64]) -> Result<Vec<f64>>
 /// added 180 000 straight-line samples and improved the fit's MSE 65 times).
 pub const MAX_PAUSE_S: f64 = 5.0;
 
-/// The median interval between consecutive times (at least 2), s.
 /// Below this wheel speed a sample counts as standing for [`STANDING_NOTE_SHARE`], m/s.
 const STANDING_MPS: f64 = 0.1;
 /// A log that stands more than this share of its time says so in a note.
@@ -415,6 +414,7 @@ fn gnss_gaps(tg: &[f64], grid: &[f64], reach: usize) -> (Vec<bool>, f64) {
     (gap, total)
 }
 
+/// The median interval between consecutive times (at least 2), s.
 fn median_interval(t: &[f64]) -> f64 {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     d.sort_by(f64::total_cmp);
