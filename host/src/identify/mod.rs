@@ -240,6 +240,7 @@ pub fn identify_speed(
             inputs: u,
             output: &e.vel,
             weight: experiment_weight(&e.vel),
+            skip: &[],
         })
         .collect();
     let arx = arx::select_siso(&data, opts.max_delay_samples)?;
@@ -307,6 +308,7 @@ pub fn identify_dx_dt(
             inputs: u,
             output: &e.dx,
             weight: 1.0,
+            skip: &e.gnss_gap,
         })
         .collect();
     let arx = arx::estimate(&data, 2, &[3; 4], &[0; 4]).ok();
@@ -783,6 +785,8 @@ pub fn identify_lateral(
             inputs: u,
             output: &e.yaw_rate,
             weight: 1.0,
+            // Where the track is interpolated across an outage the course is not measured.
+            skip: &e.gnss_gap,
         })
         .collect();
     let ts = opts.preprocess.ts_s;

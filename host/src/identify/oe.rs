@@ -26,6 +26,21 @@ pub struct Data<'a> {
     pub output: &'a [f64],
     /// Weight of this experiment's squared errors (1 = plain sum).
     pub weight: f64,
+    /// Samples whose errors do not count (the output measured there is not the system's: a
+    /// track interpolated across a GNSS outage); empty: every sample counts. The simulation
+    /// still runs through them.
+    pub skip: &'a [bool],
+}
+
+impl Data<'_> {
+    /// The square root of the weight of sample `k`'s squared error.
+    fn root_weight(&self, k: usize) -> f64 {
+        if self.skip.get(k).copied().unwrap_or(false) {
+            0.0
+        } else {
+            self.weight.sqrt()
+        }
+    }
 }
 
 /// Structure of one block.
@@ -100,18 +115,20 @@ fn regressors(
         for d in data {
             let u = d.inputs[j];
             let xs = states(&dss, u);
-            let w = d.weight.sqrt();
             for i in 0..spec.order {
-                block_cols[i].extend(xs.iter().map(|x| w * x[i]));
+                block_cols[i].extend(xs.iter().enumerate().map(|(k, x)| d.root_weight(k) * x[i]));
             }
             if spec.proper {
                 // s^n / D(s) u = u - sum_i a_i s^(n-1-i) / D(s) u.
-                block_cols[spec.order].extend(delayed(u, spec.delay_samples).zip(&xs).map(
-                    |(v, x)| {
-                        let lower: f64 = den.iter().zip(x).map(|(a, xi)| a * xi).sum();
-                        w * (v - lower)
-                    },
-                ));
+                block_cols[spec.order].extend(
+                    delayed(u, spec.delay_samples)
+                        .zip(&xs)
+                        .enumerate()
+                        .map(|(k, (v, x))| {
+                            let lower: f64 = den.iter().zip(x).map(|(a, xi)| a * xi).sum();
+                            d.root_weight(k) * (v - lower)
+                        }),
+                );
             }
         }
         cols.extend(block_cols);
@@ -201,8 +218,10 @@ fn evaluate(data: &[Data], specs: &[BlockSpec], dens: &[Vec<f64>], ts_s: f64) ->
     let y: Vec<f64> = data
         .iter()
         .flat_map(|d| {
-            let w = d.weight.sqrt();
-            d.output.iter().map(move |v| w * v)
+            d.output
+                .iter()
+                .enumerate()
+                .map(move |(k, v)| d.root_weight(k) * v)
         })
         .collect();
     let theta = lstsq(&cols, &y).ok()?;

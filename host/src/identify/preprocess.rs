@@ -381,9 +381,14 @@ pub const STANDING_NOTE_SHARE: f64 = 0.3;
 const BURST_STEP_M: f64 = 2.0;
 /// See [`BURST_STEP_M`].
 const BURST_STEP_SHARE: f64 = 0.2;
+/// ... plus this many times the scatter of the windows' medians that the receiver's noise
+/// makes.
+const BURST_SIGMAS: f64 = 6.0;
 /// A burst returns within this, s.
 const BURST_MAX_S: f64 = 10.0;
-/// The step back matches the step off to within this share of it.
+/// The step back is at least this share of the step off and at most its inverse. (Its
+/// direction is not compared: measured along the track's direction over the window before
+/// it, which lies inside the burst, it is off by the burst's own drift.)
 const BURST_RETURN_SHARE: f64 = 0.5;
 
 /// Bursts of fixes that step off the track and back (multipath near buildings, a receiver
@@ -394,8 +399,9 @@ const BURST_RETURN_SHARE: f64 = 0.5;
 /// distance the wheel speed drives between the windows' middle times, along the track's
 /// direction over the window before that (or against the distance alone when the car barely
 /// moved there): a vector off by more than [`BURST_STEP_M`] plus [`BURST_STEP_SHARE`] of that
-/// distance. A step off and one back, opposite within [`BURST_RETURN_SHARE`] and within
-/// [`BURST_MAX_S`], bound a burst. A step with no return is left alone (a jump no car makes is
+/// distance, and [`BURST_SIGMAS`] times the scatter the receiver's noise gives the medians
+/// (a 5 Hz receiver's 0.5 m: about 3 m; a 100 Hz one's 0.3 m: 0.3 m). A step off and the last step of a like size ([`BURST_RETURN_SHARE`]) within
+/// [`BURST_MAX_S`] bound a burst (a burst whose offset swells inside it steps there too). A step with no return is left alone (a jump no car makes is
 /// [`gnss_discontinuity`]'s). Black-box probe: one or two bursts of 3-8 m lasting 2 s took the
 /// yaw-rate fit from 80.5 % to 68.1 %, five got the lateral model refused; neither the lone
 /// outlier's test nor the step's (100 m) saw them.
@@ -406,6 +412,17 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         return Vec::new();
     }
     let w = ((0.5 / period).round() as usize).max(3);
+    // The receiver's white noise per axis, from the second differences of the fixes (the
+    // car's own acceleration adds a t^2 that is small at any rate a receiver has); the
+    // difference of two windows' medians scatters by about 1.25 sigma sqrt(2 / w) per axis.
+    let noise = {
+        let mut d2: Vec<f64> = xy
+            .windows(3)
+            .flat_map(|p| [0, 1].map(|a| (p[2][a] - 2.0 * p[1][a] + p[0][a]).abs()))
+            .collect();
+        median(&mut d2) / (0.6745 * 6f64.sqrt())
+    };
+    let scatter = 1.25 * noise * (2.0 / w as f64).sqrt();
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
@@ -419,7 +436,11 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
     let speed_at = |time: f64| {
         let k = tv.partition_point(|x| *x < time).clamp(1, tv.len() - 1);
         let (t0, t1) = (tv[k - 1], tv[k]);
-        let f = if t1 > t0 { ((time - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        let f = if t1 > t0 {
+            ((time - t0) / (t1 - t0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         (vel[k - 1] + f * (vel[k] - vel[k - 1])).abs()
     };
     // The step's vector off the continued track at each fix, and its excess over the
@@ -443,7 +464,8 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
             let k = if m > 0.0 { (m - d) / m } else { 0.0 };
             [moved[0] * k, moved[1] * k]
         };
-        let excess = off[0].hypot(off[1]) - (BURST_STEP_M + BURST_STEP_SHARE * d);
+        let excess =
+            off[0].hypot(off[1]) - (BURST_STEP_M + BURST_STEP_SHARE * d + BURST_SIGMAS * scatter);
         if excess > 0.0 {
             // A step spans the fixes whose windows straddle it: keep the largest.
             match steps.last_mut() {
@@ -465,8 +487,13 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         let size = off[0].hypot(off[1]);
         let back = steps[j + 1..]
             .iter()
-            .take_while(|s| t[s.0] - t[a] <= BURST_MAX_S)
-            .position(|s| (s.1[0] + off[0]).hypot(s.1[1] + off[1]) < BURST_RETURN_SHARE * size);
+            .filter(|s| t[s.0] - t[a] <= BURST_MAX_S)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rposition(|s| {
+                let back = s.1[0].hypot(s.1[1]);
+                back > BURST_RETURN_SHARE * size && back < size / BURST_RETURN_SHARE
+            });
         if let Some(k) = back {
             let b = steps[j + 1 + k].0;
             bursts.push((a, b, size));
