@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use catmodel::model::paper;
 use catmodel_host::identify::preprocess::{preprocess_rows, Experiment, PreprocessOptions};
-use catmodel_host::identify::{self, simulate, IdentifyOptions};
+use catmodel_host::identify::{self, simulate, validate, IdentifyOptions};
 use catmodel_host::logcsv::LogRow;
 use catmodel_host::model_file;
 use catmodel_host::sim::config::VehicleConfig;
@@ -1200,5 +1200,124 @@ fn a_log_that_mostly_stands_says_so() {
     assert!(
         note.starts_with("standstill-1: the car stands ") && note.contains("read better than"),
         "{note}"
+    );
+}
+
+/// Bursts of fixes that step off the track and back (multipath; black-box probe: one or two
+/// bursts of 3-8 m for 2 s took the yaw-rate validation fit from 80.5 % to 68.1 %, five got a
+/// correct lateral model refused, and neither the lone outlier's rule nor the step's saw them)
+/// are found against the wheel speed, named and left out: the simulator's validation drive
+/// with two such bursts (one in a turn) gives the same lateral model as without them (yaw-rate
+/// fits within 1 point, steering gain within 1 %). No burst is found in the drives as recorded
+/// on two cars at receiver rates from 1 to 100 Hz, RTK and with faults.
+#[test]
+fn bursts_of_fixes_off_the_track_are_found_and_left_out() {
+    use catmodel_host::sim::{self, SimOptions};
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let simulate = |plant: &VehicleConfig, scenario: &str, seed: u64, faults: bool| {
+        let scenario = sim::scenario::Scenario::builtin(scenario).unwrap();
+        let options = SimOptions {
+            seed,
+            faults,
+            ..SimOptions::default()
+        };
+        sim::simulate(&scenario, plant, &options).log
+    };
+    let bursts_in = |e: &Experiment| {
+        e.log_notes
+            .iter()
+            .find(|n| n.contains("burst(s) of fixes"))
+            .cloned()
+    };
+    // None in clean drives.
+    let hatchback_file = vehicles_dir().join("../../models/hatchback.toml");
+    let hatchback = model_file::load(&hatchback_file).unwrap().vehicle;
+    let mut plants = vec![
+        ("CAT Vehicle", VehicleConfig::default(), base.vehicle),
+        (
+            "CAT Vehicle RTK",
+            with_rtk(VehicleConfig::default()),
+            base.vehicle,
+        ),
+        (
+            "hatchback",
+            VehicleConfig::load(&vehicles_dir().join("hatchback.toml")).unwrap(),
+            hatchback,
+        ),
+    ];
+    for hz in [1.0, 5.0, 10.0] {
+        let mut p = VehicleConfig::default();
+        p.sensors.gnss.period_s = 1.0 / hz;
+        plants.push(("CAT Vehicle, slower receiver", p, base.vehicle));
+    }
+    for (name, plant, vehicle) in &plants {
+        for (scenario, faults) in [
+            ("validation", false),
+            ("suburb", true),
+            ("turn-left", false),
+        ] {
+            let rows = simulate(plant, scenario, 4, faults);
+            let e =
+                preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default()).unwrap();
+            assert_eq!(bursts_in(&e), None, "{name}, {scenario}, faults {faults}");
+        }
+    }
+    // Two bursts in the validation drive: 3 m at their ends, 8 m in their middle, each in one
+    // direction (3 + 5 sin(pi u), u over the burst's 2 s).
+    let clean_rows = simulate(&VehicleConfig::default(), "validation", 2, false);
+    let mut rows = clean_rows.clone();
+    let bursts = [(70.0, 0.7), (150.0, 2.5)];
+    for r in &mut rows {
+        for &(start, direction) in &bursts {
+            let u = (r.t - start) / 2.0;
+            if (0.0..1.0).contains(&u) {
+                let m = 3.0 + 5.0 * (std::f64::consts::PI * u).sin();
+                if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
+                    r.lat = Some(lat + m * f64::cos(direction) / 111_320.0);
+                    r.lon =
+                        Some(lon + m * f64::sin(direction) / (111_320.0 * lat.to_radians().cos()));
+                }
+            }
+        }
+    }
+    let opts = PreprocessOptions::default();
+    let clean = preprocess_rows("validation", &clean_rows, &base.vehicle, &opts).unwrap();
+    let burst = preprocess_rows("validation", &rows, &base.vehicle, &opts).unwrap();
+    let note = bursts_in(&burst).expect("found");
+    assert!(
+        note.starts_with("validation: 2 burst(s) of fixes"),
+        "{note}"
+    );
+    let validation = sim_experiment_of("validation", 3, &VehicleConfig::default(), &base.vehicle);
+    let lateral = |e: Experiment| {
+        let id = identify::identify(
+            vec![e],
+            vec![validation.clone()],
+            &base,
+            &IdentifyOptions::default(),
+        )
+        .unwrap();
+        let gain = id.model.lateral.as_ref().expect("identified").steer_gain;
+        let fit = |s: Option<validate::Score>| s.unwrap().fit_percent.unwrap();
+        (
+            gain,
+            fit(id.training_scores.yaw_model),
+            fit(id.validation_scores.unwrap().yaw_model),
+        )
+    };
+    let (gain0, training0, validation0) = lateral(clean);
+    let (gain, training, validation_fit) = lateral(burst);
+    println!(
+        "without the bursts: gain {gain0:.4}, yaw fit {training0:.2} / {validation0:.2} %; \
+         with them: {gain:.4}, {training:.2} / {validation_fit:.2} %"
+    );
+    assert!((gain / gain0 - 1.0).abs() < 0.01, "{gain} vs {gain0}");
+    assert!(
+        (training - training0).abs() < 1.0,
+        "{training} vs {training0}"
+    );
+    assert!(
+        (validation_fit - validation0).abs() < 1.0,
+        "{validation_fit} vs {validation0}"
     );
 }

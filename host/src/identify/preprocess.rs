@@ -384,6 +384,8 @@ const BURST_STEP_SHARE: f64 = 0.2;
 /// ... plus this many times the scatter of the windows' medians that the receiver's noise
 /// makes.
 const BURST_SIGMAS: f64 = 6.0;
+/// Receivers whose three fixes span more than this, s, are not searched (below 3 Hz).
+const BURST_WINDOW_MAX_S: f64 = 1.0;
 /// A burst returns within this, s.
 const BURST_MAX_S: f64 = 10.0;
 /// The step back is at least this share of the step off and at most its inverse. (Its
@@ -412,6 +414,11 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         return Vec::new();
     }
     let w = ((0.5 / period).round() as usize).max(3);
+    if w as f64 * period > BURST_WINDOW_MAX_S {
+        // A slow receiver's three fixes span seconds, over which a turn bends the track more
+        // than a burst moves it: too slow to tell (a 2 s burst is two fixes at 1 Hz).
+        return Vec::new();
+    }
     // The receiver's white noise per axis, from the second differences of the fixes (the
     // car's own acceleration adds a t^2 that is small at any rate a receiver has); the
     // difference of two windows' medians scatters by about 1.25 sigma sqrt(2 / w) per axis.
