@@ -386,8 +386,9 @@ const BURST_STEP_SHARE: f64 = 0.2;
 const BURST_SIGMAS: f64 = 6.0;
 /// Receivers whose three fixes span more than this, s, are not searched (below 3 Hz).
 const BURST_WINDOW_MAX_S: f64 = 1.0;
-/// A burst returns within this, s.
-const BURST_MAX_S: f64 = 10.0;
+/// A burst returns within this, s: less than the longest pause in the fixes that is
+/// interpolated ([`MAX_PAUSE_S`]), so that leaving a burst out never makes one.
+const BURST_MAX_S: f64 = 4.0;
 /// The step back is at least this share of the step off and at most its inverse. (Its
 /// direction is not compared: measured along the track's direction over the window before
 /// it, which lies inside the burst, it is off by the burst's own drift.)
@@ -403,7 +404,9 @@ const BURST_RETURN_SHARE: f64 = 0.5;
 /// moved there): a vector off by more than [`BURST_STEP_M`] plus [`BURST_STEP_SHARE`] of that
 /// distance, and [`BURST_SIGMAS`] times the scatter the receiver's noise gives the medians
 /// (a 5 Hz receiver's 0.5 m: about 3 m; a 100 Hz one's 0.3 m: 0.3 m). A step off and the last step of a like size ([`BURST_RETURN_SHARE`]) within
-/// [`BURST_MAX_S`] bound a burst (a burst whose offset swells inside it steps there too). A step with no return is left alone (a jump no car makes is
+/// [`BURST_MAX_S`] bound a burst (a burst whose offset swells inside it steps there too). The
+/// wheel's distance is taken in the track's metres (the median ratio of the two), so that a
+/// `vel` in km/h is the unit check's to name. A step with no return is left alone (a jump no car makes is
 /// [`gnss_discontinuity`]'s). Black-box probe: one or two bursts of 3-8 m lasting 2 s took the
 /// yaw-rate fit from 80.5 % to 68.1 %, five got the lateral model refused; neither the lone
 /// outlier's test nor the step's (100 m) saw them.
@@ -452,15 +455,44 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
     };
     // The step's vector off the continued track at each fix, and its excess over the
     // threshold.
-    let mut steps: Vec<(usize, [f64; 2], f64)> = Vec::new();
-    for i in 2 * w..=n - w {
-        let (before, tb) = centre(i - w..i);
-        let (after, ta) = centre(i..i + w);
-        let (earlier, _) = centre(i - 2 * w..i - w);
-        if ta - tb > 4.0 * w as f64 * period {
-            continue; // an outage: the gap's interpolation is another rule's
+    // Each fix's windows: the medians before and after it and over the window before that,
+    // and the wheel's distance between the first two (an outage between them, the gap's
+    // interpolation, is another rule's).
+    let windows: Vec<(usize, [f64; 2], [f64; 2], [f64; 2], f64)> = (2 * w..=n - w)
+        .filter_map(|i| {
+            let (before, tb) = centre(i - w..i);
+            let (after, ta) = centre(i..i + w);
+            let (earlier, _) = centre(i - 2 * w..i - w);
+            (ta - tb <= 4.0 * w as f64 * period).then(|| {
+                (
+                    i,
+                    earlier,
+                    before,
+                    after,
+                    speed_at(0.5 * (ta + tb)) * (ta - tb),
+                )
+            })
+        })
+        .collect();
+    // The wheel's distance in the track's metres: the median ratio of the two where the car
+    // moves (1 in m/s; a `vel` in another unit, or a wheel speed the track contradicts, is the
+    // unit check's to name, not a burst everywhere).
+    let scale = {
+        let mut ratios: Vec<f64> = windows
+            .iter()
+            .filter(|w| w.4 > 0.5)
+            .map(|w| (w.3[0] - w.2[0]).hypot(w.3[1] - w.2[1]) / w.4)
+            .collect();
+        if ratios.is_empty() {
+            1.0
+        } else {
+            median(&mut ratios)
         }
-        let d = speed_at(0.5 * (ta + tb)) * (ta - tb);
+    };
+    let mut steps: Vec<(usize, [f64; 2], f64)> = Vec::new();
+    let (mut last_exceeding, mut run_start) = (0, 0);
+    for &(i, earlier, before, after, wheel) in &windows {
+        let d = scale * wheel;
         let chord = [before[0] - earlier[0], before[1] - earlier[1]];
         let len = chord[0].hypot(chord[1]);
         let moved = [after[0] - before[0], after[1] - before[1]];
@@ -474,15 +506,21 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         let excess =
             off[0].hypot(off[1]) - (BURST_STEP_M + BURST_STEP_SHARE * d + BURST_SIGMAS * scatter);
         if excess > 0.0 {
-            // A step spans the fixes whose windows straddle it: keep the largest.
+            // A step spans the run of fixes whose windows straddle it, 2 w at most: one step,
+            // at the run's largest (a longer run, a burst that keeps moving, is cut in steps
+            // of 2 w).
             match steps.last_mut() {
-                Some(last) if i - last.0 < w => {
+                Some(last) if i == last_exceeding + 1 && i < run_start + 2 * w => {
                     if excess > last.2 {
                         *last = (i, off, excess);
                     }
                 }
-                _ => steps.push((i, off, excess)),
+                _ => {
+                    steps.push((i, off, excess));
+                    run_start = i;
+                }
             }
+            last_exceeding = i;
         }
     }
     let mut bursts = Vec::new();
