@@ -394,6 +394,11 @@ const BURST_MAX_S: f64 = 4.0;
 /// it, which lies inside the burst, it is off by the burst's own drift.)
 const BURST_RETURN_SHARE: f64 = 0.5;
 
+/// A fix's windows for [`gnss_bursts`]: its index, the median positions over the window
+/// before the one before it, the one before it and the one after it, and the wheel's
+/// distance between the last two.
+type StepWindows = (usize, [f64; 2], [f64; 2], [f64; 2], f64);
+
 /// Bursts of fixes that step off the track and back (multipath near buildings, a receiver
 /// that loses and regains a correction): index ranges of `t` (fixes `a..b`) and how far the
 /// first steps off, m. A step is found at fix `i` by comparing the median position of the
@@ -458,7 +463,7 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
     // Each fix's windows: the medians before and after it and over the window before that,
     // and the wheel's distance between the first two (an outage between them, the gap's
     // interpolation, is another rule's).
-    let windows: Vec<(usize, [f64; 2], [f64; 2], [f64; 2], f64)> = (2 * w..=n - w)
+    let windows: Vec<StepWindows> = (2 * w..=n - w)
         .filter_map(|i| {
             let (before, tb) = centre(i - w..i);
             let (after, ta) = centre(i..i + w);
