@@ -396,8 +396,8 @@ const BURST_RETURN_SHARE: f64 = 0.5;
 
 /// A fix's windows for [`gnss_bursts`]: its index, the median positions over the window
 /// before the one before it, the one before it and the one after it, and the wheel's
-/// distance between the last two.
-type StepWindows = (usize, [f64; 2], [f64; 2], [f64; 2], f64);
+/// distance between the last two with the ratio of their time to the first two's.
+type StepWindows = (usize, [f64; 2], [f64; 2], [f64; 2], [f64; 2]);
 
 /// Bursts of fixes that step off the track and back (multipath near buildings, a receiver
 /// that loses and regains a correction): index ranges of `t` (fixes `a..b`) and how far the
@@ -407,7 +407,9 @@ type StepWindows = (usize, [f64; 2], [f64; 2], [f64; 2], f64);
 /// distance the wheel speed drives between the windows' middle times, along the track's
 /// direction over the window before that (or against the distance alone when the car barely
 /// moved there): a vector off by more than [`BURST_STEP_M`] plus [`BURST_STEP_SHARE`] of that
-/// distance, and [`BURST_SIGMAS`] times the scatter the receiver's noise gives the medians
+/// distance, and [`BURST_SIGMAS`] times the scatter the receiver's noise gives the medians;
+/// and the track's own continuation (its velocity over the window before) must miss it by as
+/// much, so that a wheel speed wrong for a moment is no step of the track
 /// (a 5 Hz receiver's 0.5 m: about 3 m; a 100 Hz one's 0.3 m: 0.3 m). A step off and the last step of a like size ([`BURST_RETURN_SHARE`]) within
 /// [`BURST_MAX_S`] bound a burst (a burst whose offset swells inside it steps there too). The
 /// wheel's distance is taken in the track's metres (the median ratio of the two), so that a
@@ -467,14 +469,15 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         .filter_map(|i| {
             let (before, tb) = centre(i - w..i);
             let (after, ta) = centre(i..i + w);
-            let (earlier, _) = centre(i - 2 * w..i - w);
+            let (earlier, te) = centre(i - 2 * w..i - w);
+            let ratio = if tb > te { (ta - tb) / (tb - te) } else { 1.0 };
             (ta - tb <= 4.0 * w as f64 * period).then(|| {
                 (
                     i,
                     earlier,
                     before,
                     after,
-                    speed_at(0.5 * (ta + tb)) * (ta - tb),
+                    [speed_at(0.5 * (ta + tb)) * (ta - tb), ratio],
                 )
             })
         })
@@ -485,8 +488,8 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
     let scale = {
         let mut ratios: Vec<f64> = windows
             .iter()
-            .filter(|w| w.4 > 0.5)
-            .map(|w| (w.3[0] - w.2[0]).hypot(w.3[1] - w.2[1]) / w.4)
+            .filter(|w| w.4[0] > 0.5)
+            .map(|w| (w.3[0] - w.2[0]).hypot(w.3[1] - w.2[1]) / w.4[0])
             .collect();
         if ratios.is_empty() {
             1.0
@@ -496,7 +499,7 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
     };
     let mut steps: Vec<(usize, [f64; 2], f64)> = Vec::new();
     let (mut last_exceeding, mut run_start) = (0, 0);
-    for &(i, earlier, before, after, wheel) in &windows {
+    for &(i, earlier, before, after, [wheel, ratio]) in &windows {
         let d = scale * wheel;
         let chord = [before[0] - earlier[0], before[1] - earlier[1]];
         let len = chord[0].hypot(chord[1]);
@@ -508,8 +511,14 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
             let k = if m > 0.0 { (m - d) / m } else { 0.0 };
             [moved[0] * k, moved[1] * k]
         };
-        let excess =
-            off[0].hypot(off[1]) - (BURST_STEP_M + BURST_STEP_SHARE * d + BURST_SIGMAS * scatter);
+        let threshold =
+            |distance: f64| BURST_STEP_M + BURST_STEP_SHARE * distance + BURST_SIGMAS * scatter;
+        // The track's own continuation (its velocity over the window before) must miss the
+        // step too: a wheel speed that is wrong for a moment (a corrupt run of samples) moves
+        // the wheel's prediction, not the track.
+        let own = [moved[0] - ratio * chord[0], moved[1] - ratio * chord[1]];
+        let excess = (off[0].hypot(off[1]) - threshold(d))
+            .min(own[0].hypot(own[1]) - threshold(ratio * len));
         if excess > 0.0 {
             // A step spans the run of fixes whose windows straddle it, 2 w at most: one step,
             // at the run's largest (a longer run, a burst that keeps moving, is cut in steps
