@@ -1203,6 +1203,46 @@ fn a_log_that_mostly_stands_says_so() {
     );
 }
 
+/// Two logs of one file name from two folders (`a/drive.csv`, `b/drive.csv`) are told apart
+/// by their paths in every note (each was named `drive` before, and the notes of one read as
+/// the other's); a file name of its own stays short.
+#[test]
+fn logs_of_one_file_name_are_named_by_their_paths() {
+    use catmodel_host::identify::preprocess::log_names;
+    use std::path::PathBuf;
+    let names = log_names(&[
+        Path::new("a/drive.csv"),
+        Path::new("b/drive.csv"),
+        Path::new("b/turn.csv"),
+        Path::new("plain"),
+    ]);
+    assert_eq!(names, ["a/drive", "b/drive", "turn", "plain"]);
+
+    let dir = std::env::temp_dir().join(format!("catmodel-log-names-{}", std::process::id()));
+    let out = catmodel_host::sim::run_named("standstill", None, &Default::default()).unwrap();
+    let paths: Vec<PathBuf> = ["a", "b"]
+        .iter()
+        .map(|sub| {
+            std::fs::create_dir_all(dir.join(sub)).unwrap();
+            let path = dir.join(sub).join("drive.csv");
+            catmodel_host::logcsv::write_log(&path, &out.log).unwrap();
+            path
+        })
+        .collect();
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let set = identify::load_all(&paths, &base.vehicle, &PreprocessOptions::default()).unwrap();
+    for (e, path) in set.iter().zip(&paths) {
+        let name = path.display().to_string().replace(".csv", "");
+        assert_eq!(e.name, name);
+        let note = e.log_notes.iter().find(|n| n.contains("the car stands"));
+        assert!(
+            note.is_some_and(|n| n.starts_with(&format!("{name}: "))),
+            "{note:?}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Bursts of fixes that step off the track and back (multipath; black-box probe: one or two
 /// bursts of 3-8 m for 2 s took the yaw-rate validation fit from 80.5 % to 68.1 %, five got a
 /// correct lateral model refused, and neither the lone outlier's rule nor the step's saw them)

@@ -565,12 +565,19 @@ fn run(cli: Cli) -> Result<()> {
             let opts = identify::IdentifyOptions::default();
             let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
                 .with_message("reading logs");
-            let read = |paths: &[PathBuf]| -> Result<Vec<identify::preprocess::Experiment>> {
+            // One name per log over both sets: a training and a validation log of one file
+            // name are told apart by their paths.
+            let all: Vec<&std::path::Path> =
+                logs.iter().chain(&validate).map(|p| p.as_path()).collect();
+            let mut names = identify::preprocess::log_names(&all).into_iter();
+            let mut read = |paths: &[PathBuf]| -> Result<Vec<identify::preprocess::Experiment>> {
                 paths
                     .iter()
-                    .map(|p| {
-                        let e = identify::preprocess::load_experiment(
+                    .zip(names.by_ref())
+                    .map(|(p, name)| {
+                        let e = identify::preprocess::load_named(
                             p,
+                            &name,
                             &base.vehicle,
                             &opts.preprocess,
                         );

@@ -123,8 +123,10 @@ type Signal = fn(&Experiment) -> &[f64];
 /// The sample of a signal farthest from its median over `set`, if it stands out.
 fn outlier(set: &[Experiment], column: &'static str, f: Signal) -> Option<Suspect> {
     let mut all: Vec<f64> = set.iter().flat_map(|e| f(e).iter().copied()).collect();
-    all.sort_by(f64::total_cmp);
-    let median = *all.get(all.len() / 2)?;
+    let median = super::stats::median(&mut all);
+    if !median.is_finite() {
+        return None;
+    }
     let mut dev: Vec<f64> = all.iter().map(|v| (v - median).abs()).collect();
     dev.sort_by(f64::total_cmp);
     let p90 = *dev.get(dev.len() * 9 / 10)?;
@@ -327,8 +329,10 @@ pub fn locate(suspect: &Suspect, log: &crate::logcsv::Log) -> Option<(usize, f64
         _ => return None,
     };
     let mut values: Vec<f64> = log.rows.iter().filter_map(get).collect();
-    values.sort_by(f64::total_cmp);
-    let median = *values.get(values.len() / 2)?;
+    let median = super::stats::median(&mut values);
+    if !median.is_finite() {
+        return None;
+    }
     log.rows
         .iter()
         .zip(&log.lines)

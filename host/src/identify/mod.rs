@@ -23,11 +23,12 @@ pub mod preprocess;
 pub mod receiver;
 pub mod report;
 pub mod simulate;
+pub mod stats;
 pub mod steering;
 pub mod units;
 pub mod validate;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -895,9 +896,11 @@ pub fn load_all(
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Vec<Experiment>> {
+    let refs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
     paths
         .iter()
-        .map(|p| preprocess::load_experiment(p, vehicle, opts))
+        .zip(preprocess::log_names(&refs))
+        .map(|(p, name)| preprocess::load_named(p, &name, vehicle, opts))
         .collect()
 }
 
@@ -917,8 +920,10 @@ fn receiver_rate(model: &mut ModelFile, training: &[Experiment]) -> Option<Strin
         .map(|e| e.gnss_rate_hz)
         .filter(|r| r.is_finite() && *r > 0.0)
         .collect();
-    rates.sort_by(f64::total_cmp);
-    let measured = *rates.get(rates.len() / 2)?;
+    let measured = stats::median(&mut rates);
+    if !measured.is_finite() {
+        return None;
+    }
     let base = model.vehicle.gnss_rate_hz;
     let (rate, lost) = set_receiver_rate(model, measured)?;
     let mut note = format!(

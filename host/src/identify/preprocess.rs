@@ -7,6 +7,8 @@
 //! of an LTI system stays an input/output pair of the same system after it (up to the edges).
 use std::path::Path;
 
+use super::stats::{median, median_interval, noise_from_second_differences};
+
 use anyhow::{anyhow, bail, Context, Result};
 use catmodel::geodesy::{geodetic_to_enu, Geodetic};
 use catmodel::signal::{filtfilt, fir, resample, smooth};
@@ -172,16 +174,6 @@ const FIX_PLAUSIBLE: Plausible = Plausible {
     tolerance: 10.0,
     max_rate: 80.0,
 };
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
 
 /// Indices of the samples of `t`, `values` (one or more coordinates per sample) that stand
 /// apart from the median of their [`OUTLIER_NEIGHBOURS`] neighbours before *and* after by more
@@ -437,13 +429,9 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
             .windows(3)
             .flat_map(|p| [0, 1].map(|a| (p[2][a] - 2.0 * p[1][a] + p[0][a]).abs()))
             .collect();
-        median(&mut d2) / (0.6745 * 6f64.sqrt())
+        noise_from_second_differences(&mut d2)
     };
     let scatter = 1.25 * noise * (2.0 / w as f64).sqrt();
-    let median = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let centre = |r: std::ops::Range<usize>| -> ([f64; 2], f64) {
         let mut x: Vec<f64> = xy[r.clone()].iter().map(|p| p[0]).collect();
         let mut y: Vec<f64> = xy[r.clone()].iter().map(|p| p[1]).collect();
@@ -600,13 +588,6 @@ fn gnss_gaps(tg: &[f64], grid: &[f64], reach: usize) -> (Vec<bool>, f64) {
     (gap, total)
 }
 
-/// The median interval between consecutive times (at least 2), s.
-fn median_interval(t: &[f64]) -> f64 {
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    d.sort_by(f64::total_cmp);
-    d.get(d.len() / 2).copied().unwrap_or(f64::NAN)
-}
-
 /// Refuses a pause in a needed sensor longer than [`MAX_PAUSE_S`] (or ten of its periods),
 /// naming the column and the times around it.
 fn check_pauses(name: &str, t: &[f64]) -> Result<()> {
@@ -684,19 +665,52 @@ pub fn taps(opts: &PreprocessOptions) -> Result<Vec<f64>> {
     Ok(taps)
 }
 
-/// Reads and preprocesses one log file. Errors name the file and what is missing.
+/// The names the logs at `paths` go by in notes, figures and reports: each file's name without
+/// `.csv`, or, for a file name that two of them share (`a/drive.csv`, `b/drive.csv`), the path
+/// as given without `.csv` (by the file name alone the notes of one read as the other's).
+pub fn log_names(paths: &[&Path]) -> Vec<String> {
+    let short = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy())
+            .map(|n| n.strip_suffix(".csv").unwrap_or(&n).to_string())
+            .unwrap_or_else(|| "log".into())
+    };
+    let names: Vec<String> = paths.iter().map(|p| short(p)).collect();
+    paths
+        .iter()
+        .zip(&names)
+        .map(
+            |(p, name)| match names.iter().filter(|n| *n == name).count() {
+                1 => name.clone(),
+                _ => {
+                    let path = p.display().to_string();
+                    path.strip_suffix(".csv").unwrap_or(&path).to_string()
+                }
+            },
+        )
+        .collect()
+}
+
+/// Reads and preprocesses one log file, named by its file name ([`log_names`]). Errors name
+/// the file and what is missing.
 pub fn load_experiment(
     path: &Path,
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
+    let name = log_names(&[path]).remove(0);
+    load_named(path, &name, vehicle, opts)
+}
+
+/// [`load_experiment`] under the name `name` (one of [`log_names`] of a set of logs).
+pub fn load_named(
+    path: &Path,
+    name: &str,
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+) -> Result<Experiment> {
     let log = logcsv::read_log(path).map_err(|e| anyhow!("{e}"))?;
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .map(|n| n.trim_end_matches(".csv").to_string())
-        .unwrap_or_else(|| "log".into());
-    let mut e = match preprocess_rows(&name, &log.rows, vehicle, opts) {
+    let mut e = match preprocess_rows(name, &log.rows, vehicle, opts) {
         Ok(e) => e,
         // The step's line, where the log is to be split.
         Err(err) => match err.downcast_ref::<GnssStep>() {

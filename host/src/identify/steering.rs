@@ -382,9 +382,8 @@ fn fastest_movement(reports: &[(f64, f64)]) -> f64 {
     fastest
 }
 
-/// The reports' noise, %: the median absolute second difference over its value for white
-/// noise of unit deviation (`0.6745 sqrt(6)`); the steering itself, a lagged and rate-limited
-/// movement, bends only at a ramp's corners, which the median leaves out.
+/// The reports' noise, %, from their second differences: the steering itself, a lagged and
+/// rate-limited movement, bends only at a ramp's corners, which the median leaves out.
 fn report_noise(reports: &[(f64, f64)]) -> f64 {
     let mut d2: Vec<f64> = reports
         .windows(3)
@@ -396,9 +395,7 @@ fn report_noise(reports: &[(f64, f64)]) -> f64 {
     if d2.is_empty() {
         return 0.0;
     }
-    d2.sort_by(f64::total_cmp);
-    let median = d2.get(d2.len() / 2).copied().unwrap_or(0.0);
-    median / (0.6745 * 6f64.sqrt())
+    super::stats::noise_from_second_differences(&mut d2)
 }
 
 /// RMS error at `reports` of the actuator model started at `start_pct` at the first report:

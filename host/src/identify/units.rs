@@ -47,6 +47,8 @@
 //! positive = right); one of the other sign matters only through `l` and is the steering
 //! check's to refuse (`identify::steering_gain_problem`).
 
+use super::stats::{median, median_interval};
+
 /// Wheel speed above which a sample counts as moving, in the log's unit (m/s, or whatever the
 /// log holds: the test is only that the car is not standing).
 pub const MOVING: f64 = 0.5;
@@ -269,9 +271,9 @@ pub fn speed_scale(
     }
     let factor = antenna_factors(tv, ts, steer_pct, lever);
     let wheel = wheel_distance(tv, vel, &factor);
-    let max_gap = MAX_GAP_PERIODS * median_step(tg);
+    let max_gap = MAX_GAP_PERIODS * median_interval(tg);
     // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
-    let max_wheel_gap = MAX_GAP_PERIODS * median_step(tv);
+    let max_wheel_gap = MAX_GAP_PERIODS * median_interval(tv);
     let moving_between = |a: f64, b: f64| -> bool {
         let lo = tv.partition_point(|t| *t < a);
         let hi = tv.partition_point(|t| *t <= b);
@@ -374,22 +376,6 @@ pub fn speed_scale(
 /// Chords refused in a row before a stretch's start counts as an outlier itself.
 const MAX_REFUSED_CHORDS: usize = 3;
 
-/// The median interval between consecutive times (at least 2).
-fn median_step(t: &[f64]) -> f64 {
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    median(&mut d)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    match n {
-        0 => f64::NAN,
-        _ if n % 2 == 1 => v[n / 2],
-        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
-}
-
 /// A reverse command (`input_vel` below this, m/s) held ...
 pub const REVERSE_COMMAND_MPS: f64 = -0.3;
 /// ... this long has been taken by any car's speed loop, s: eq 5's 0.42 s delay and 1.2 s time
@@ -436,8 +422,7 @@ pub fn unsigned_reverse(e: &super::preprocess::Experiment) -> Option<String> {
         if vel.iter().any(|v| *v < -0.1) {
             continue;
         }
-        vel.sort_by(f64::total_cmp);
-        let median = vel[vel.len() / 2];
+        let median = median(&mut vel);
         if median > MOVING {
             let command = e.input_vel[tail.clone()].iter().sum::<f64>() / tail.len() as f64;
             found.push((e.t[start], e.t[k - 1], command, median));
