@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use catmodel::node::NodeConfig;
 use catmodel_app::budget::{CONTROL_TICK_BUDGET_INSTRUCTIONS, TICK_BUDGET_INSTRUCTIONS};
 
@@ -220,7 +220,8 @@ fn run(elf: &Path, host: &Path, car: &NodeConfig, spec: Spec) -> Result<Outcome>
     let dir = root().join("target").join("adversarial");
     let path = dir.join(format!("{}.log", spec.name));
     drives::write_candump(&path, &drives::generate(&spec, car))?;
-    let out = dir.join("run");
+    // Each drive its own output directory: drives run side by side (`main`).
+    let out = dir.join("run").join(&spec.name);
     let run = run_qemu(elf, &out, Some(&path), &[])?;
     let replay_frames = if run.trailer.rx_queue_drops == 0 {
         let replay_tx = out.join("replay-tx.log");
@@ -289,9 +290,33 @@ pub fn adversarial(args: &[String]) -> Result<()> {
     let elf = cargo_build("qemu", "catmodel-qemu")?;
     let host = bound::host_binary()?;
     let mut rng = Rng::new(seed);
+    // The targeted drives two at a time: a QEMU run and its host replay take one core each.
     let mut outcomes: Vec<Outcome> = Vec::new();
-    for spec in targeted(&car) {
-        outcomes.push(run(&elf, &host, &car, spec)?);
+    let mut specs = targeted(&car).into_iter();
+    loop {
+        let pair: Vec<Spec> = specs.by_ref().take(2).collect();
+        if pair.is_empty() {
+            break;
+        }
+        let done: Vec<Result<Outcome>> = std::thread::scope(|s| {
+            let handles: Vec<_> = pair
+                .into_iter()
+                .map(|spec| {
+                    let (elf, host, car) = (&elf, &host, &car);
+                    s.spawn(move || run(elf, host, car, spec))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err(anyhow!("a drive's thread panicked")))
+                })
+                .collect()
+        });
+        for outcome in done {
+            outcomes.push(outcome?);
+        }
     }
     let mut best: Option<Spec> = None;
     let mut best_tick = 0;

@@ -512,12 +512,11 @@ pub fn host_binary() -> Result<PathBuf> {
 
 /// Records the closed-loop sessions into `dir` (`catmodel closed-loop --scenario S --out
 /// DIR/closed-loop-S`); returns their bus inputs' paths relative to the repository.
-pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
-    let host = host_binary()?;
+pub fn write_closed_loop_sessions(dir: &Path, host: &Path) -> Result<Vec<String>> {
     let mut paths = Vec::new();
     for scenario in CLOSED_LOOP_SCENARIOS {
         let out = dir.join(format!("closed-loop-{scenario}"));
-        let mut command = Command::new(&host);
+        let mut command = Command::new(host);
         command
             .current_dir(root())
             .args(["closed-loop", "--scenario", scenario, "--out"])
@@ -548,19 +547,39 @@ pub fn write_closed_loop_sessions(dir: &Path) -> Result<Vec<String>> {
 /// firmware and measures every stage in QEMU; the controller's solve row is composed with its
 /// worst case ([`mpc_worst_solve`]).
 pub fn measure() -> Result<Bound> {
-    let mut bound = measure_stages()?;
-    let (worst, which) = mpc_worst_solve()?;
+    // Side by side: the stages' QEMU runs take one core, the controller benchmark's build (a
+    // fat-LTO link of one codegen unit) and its QEMU run another.
+    // Cargo is called here before, and by the benchmark's thread only after: a build waits for
+    // another's lock on the target directory.
+    let host = host_binary()?;
+    let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
+    let (stages, solve) = std::thread::scope(|s| {
+        let solve = s.spawn(mpc_worst_solve);
+        let stages = measure_stages_built(&host, &elf);
+        let solve = solve
+            .join()
+            .unwrap_or_else(|_| Err(anyhow!("the controller benchmark's thread panicked")));
+        (stages, solve)
+    });
+    let mut bound = stages?;
+    let (worst, which) = solve?;
     bound.compose_solve(worst, &which);
     Ok(bound)
 }
 
 /// [`measure`] without the controller's worst-case solve (the caller composes it).
 pub fn measure_stages() -> Result<Bound> {
+    let host = host_binary()?;
+    let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
+    measure_stages_built(&host, &elf)
+}
+
+/// [`measure_stages`] with the host binary and the stage firmware built (no cargo call).
+fn measure_stages_built(host: &Path, elf: &Path) -> Result<Bound> {
     let car = baked_car()?;
     let dir = root().join("target").join("qemu").join("stages");
     let mut drives = write_stage_corpus(&car, &dir)?;
-    drives.extend(write_closed_loop_sessions(&dir)?);
-    let elf = cargo_build("qemu", "catmodel-qemu-stages")?;
+    drives.extend(write_closed_loop_sessions(&dir, host)?);
     // The drives go in a list file: a command line of their paths outgrows the firmware's
     // buffer as drives are added or the checkout's path grows.
     let list = dir.join("drives.list");
@@ -568,7 +587,7 @@ pub fn measure_stages() -> Result<Bound> {
     text.push('\n');
     std::fs::write(&list, text).with_context(|| format!("writing {}", list.display()))?;
     let append = qemu_append(
-        &elf,
+        elf,
         &[
             "catmodel-qemu-stages".into(),
             "--stages".into(),
@@ -578,7 +597,7 @@ pub fn measure_stages() -> Result<Bound> {
     let mut inputs = vec![list.clone()];
     inputs.extend(drives.iter().map(|d| root().join(d)));
     let stderr =
-        qemu_stderr_cached(&elf, &append, &inputs).context("the stage measurement failed")?;
+        qemu_stderr_cached(elf, &append, &inputs).context("the stage measurement failed")?;
     // A drive's name: its file's stem, or its directory's for a closed-loop session.
     let names = drives
         .iter()

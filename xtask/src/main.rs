@@ -100,6 +100,14 @@ fn root() -> PathBuf {
 }
 
 fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
+    cargo_build_all(features, &[bin])?
+        .pop()
+        .ok_or_else(|| anyhow!("no binary to build"))
+}
+
+/// [`cargo_build`] of several binaries of one feature set in one cargo run: their fat-LTO links
+/// (one codegen unit each, one core each) run side by side.
+fn cargo_build_all(features: &str, bins: &[&str]) -> Result<Vec<PathBuf>> {
     // Said before minutes of building, not after.
     prereq::ensure_target()?;
     if features == "qemu" {
@@ -117,17 +125,15 @@ fn cargo_build(features: &str, bin: &str) -> Result<PathBuf> {
             "--features",
             features,
         ])
-        .args(["--bin", bin, "--target", TARGET])
+        .args(bins.iter().flat_map(|bin| ["--bin", bin]))
+        .args(["--target", TARGET])
         .status()
         .context("running cargo build")?;
     if !status.success() {
-        bail!("building {bin} failed");
+        bail!("building {} failed", bins.join(", "));
     }
-    Ok(root()
-        .join("target")
-        .join(TARGET)
-        .join(FIRMWARE_PROFILE)
-        .join(bin))
+    let dir = root().join("target").join(TARGET).join(FIRMWARE_PROFILE);
+    Ok(bins.iter().map(|bin| dir.join(bin)).collect())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -512,7 +518,8 @@ fn resolve_model_env() -> Result<()> {
 /// Builds and runs the QEMU firmware over `input` (default: the bundled drive), writes
 /// `target/qemu/timing.json`, prints the table, and checks the run.
 fn qemu_run(input: Option<&Path>) -> Result<Verdict> {
-    let elf = cargo_build("qemu", "catmodel-qemu")?;
+    // The stage-measurement firmware of the bound (below) with it, in one build.
+    let elf = cargo_build_all("qemu", &["catmodel-qemu", "catmodel-qemu-stages"])?.remove(0);
     let out_dir = root().join("target").join("qemu");
     let run = run_qemu(&elf, &out_dir, input, &[])?;
 
