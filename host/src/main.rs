@@ -565,29 +565,10 @@ fn run(cli: Cli) -> Result<()> {
             let opts = identify::IdentifyOptions::default();
             let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
                 .with_message("reading logs");
-            // One name per log over both sets: a training and a validation log of one file
-            // name are told apart by their paths.
-            let all: Vec<&std::path::Path> =
-                logs.iter().chain(&validate).map(|p| p.as_path()).collect();
-            let mut names = identify::preprocess::log_names(&all).into_iter();
-            let mut read = |paths: &[PathBuf]| -> Result<Vec<identify::preprocess::Experiment>> {
-                paths
-                    .iter()
-                    .zip(names.by_ref())
-                    .map(|(p, name)| {
-                        let e = identify::preprocess::load_named(
-                            p,
-                            &name,
-                            &base.vehicle,
-                            &opts.preprocess,
-                        );
-                        progress.inc(1);
-                        e
-                    })
-                    .collect()
-            };
-            let training = read(&logs)?;
-            let validation = read(&validate)?;
+            let [training, validation] =
+                identify::load_sets([&logs, &validate], &base.vehicle, &opts.preprocess, || {
+                    progress.inc(1)
+                })?;
             progress.finish_and_clear();
             for e in training.iter().chain(&validation) {
                 print_notes(&e.log_notes);

@@ -896,12 +896,36 @@ pub fn load_all(
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Vec<Experiment>> {
-    let refs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
-    paths
+    let [set, _] = load_sets([paths, &[]], vehicle, opts, || {})?;
+    Ok(set)
+}
+
+/// Loads and preprocesses two sets of logs (training and validation), named over both
+/// ([`preprocess::log_names`]: a training and a validation log of one file name are told apart
+/// by their paths); `each` is called after each log.
+pub fn load_sets(
+    sets: [&[PathBuf]; 2],
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+    mut each: impl FnMut(),
+) -> Result<[Vec<Experiment>; 2]> {
+    let all: Vec<&Path> = sets
         .iter()
-        .zip(preprocess::log_names(&refs))
-        .map(|(p, name)| preprocess::load_named(p, &name, vehicle, opts))
-        .collect()
+        .flat_map(|s| s.iter().map(PathBuf::as_path))
+        .collect();
+    let mut names = preprocess::log_names(&all).into_iter();
+    let mut read = |paths: &[PathBuf]| -> Result<Vec<Experiment>> {
+        paths
+            .iter()
+            .zip(names.by_ref())
+            .map(|(p, name)| {
+                let e = preprocess::load_named(p, &name, vehicle, opts);
+                each();
+                e
+            })
+            .collect()
+    };
+    Ok([read(sets[0])?, read(sets[1])?])
 }
 
 /// How far the logs' GNSS rate may stray from the base file's before the identified file takes
