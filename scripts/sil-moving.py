@@ -4,10 +4,10 @@
 
 usage: sil-moving.py --scenario {pedestrian,slowcar,oncoming,standing,none} [--road {straight,wave}]
                      [--replan S] [--speed V] [--model FILE] [--gnss-noise-m 0.02] [--sweep S]
-                     [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--lead-speed 4]
+                     [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--ped-stop-at T] [--lead-speed 4]
                      [--lead-brake-at T] [--lead-decel 6] [--out CSV]
 pedestrian: crosses the road 45 m ahead at --ped-speed from t = 2 s, from 6 m to the right
-(--ped-from right) or left;
+(--ped-from right) or left (with --ped-stop-at T, stops at t = T s where it is, and stays);
 slowcar: a car 30 m ahead in the lane at --lead-speed (with --lead-brake-at T, braking from
 t = T s at --lead-decel m/s^2, default 6, to a stop where it stays); oncoming: a car in the left lane
 (3.5 m left) coming towards the car at --lead-speed from 150 m; standing: an object standing
@@ -40,6 +40,7 @@ ap.add_argument("--left", type=float, default=1.75)
 ap.add_argument("--right", type=float, default=1.75)
 ap.add_argument("--ped-speed", type=float, default=1.5)
 ap.add_argument("--ped-from", choices=["right", "left"], default="right")
+ap.add_argument("--ped-stop-at", type=float, default=None)
 ap.add_argument("--lead-speed", type=float, default=4.0)
 ap.add_argument("--lead-brake-at", type=float, default=None)
 ap.add_argument("--lead-decel", type=float, default=6.0)
@@ -96,7 +97,8 @@ def obstacle_at(t):
         # crosses the road 45 m ahead of the start from right to left, starting when t = 2 s at 6 m right
         t0 = 2.0
         side = 1.0 if a.ped_from == "right" else -1.0
-        return (45.0, road(45.0)[1] - side*(6.0 - a.ped_speed*max(0.0, t-t0)), 0.4)
+        walked = max(0.0, (t if a.ped_stop_at is None else min(t, a.ped_stop_at)) - t0)
+        return (45.0, road(45.0)[1] - side*(6.0 - a.ped_speed*walked), 0.4)
     if a.scenario == "slowcar":
         s = 30.0 + a.lead_speed*t
         if a.lead_brake_at is not None and t > a.lead_brake_at:

@@ -258,6 +258,27 @@ fn solve_on_a_straight_at(
     place: impl Fn(&TestPath) -> Option<Obstacle>,
 ) -> MpcOutput {
     let path = arc(0.0, 3.0, 3.0, 10.0);
+    solve_on(
+        &path,
+        cfg,
+        tuning,
+        offset_m,
+        path_max_curvature_per_m,
+        speed_mps,
+        place,
+    )
+}
+
+/// As [`solve_on_a_straight_at`], on `path`.
+fn solve_on(
+    path: &TestPath,
+    cfg: &VehicleConfig,
+    tuning: MpcTuning,
+    offset_m: f32,
+    path_max_curvature_per_m: f32,
+    speed_mps: f32,
+    place: impl Fn(&TestPath) -> Option<Obstacle>,
+) -> MpcOutput {
     let speeds = [speed_mps; PLAN_STEPS + 1];
     let reference = path.reference(5.0, &speeds, &ESCAPE_BODY, &StageClock::UNIFORM);
     let (x, y, h) = path.pose(5.0);
@@ -265,7 +286,7 @@ fn solve_on_a_straight_at(
     let eq5 = SsBlock::<2>::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
     let model_state = eq5.steady_state_for_output(speed_mps).unwrap();
     let mut obstacles = [None; MAX_OBSTACLES];
-    obstacles[0] = place(&path);
+    obstacles[0] = place(path);
     let mpc = mpc_for(cfg, ESCAPE_BODY, tuning);
     let mut state = MpcState::default();
     let input = MpcInput {
@@ -294,12 +315,16 @@ fn solve_on_a_straight_at(
 
 /// An obstacle that crosses the path is passed behind: on the side it leaves, though the
 /// other has more room where it is now (the side with room for one that stands, or one that
-/// moves along the path). Here 1 m left of a straight path 30 m ahead.
+/// moves along the path). Here 1 m left of a straight path 30 m ahead, 4 m of corridor either
+/// side. Behind it is where it is now (it may stop there, braking at 1 g: 0.11 m on from
+/// 1.5 m/s), not where it will be: with 3 m of corridor on the left there is no room behind it
+/// yet, and the car slows for it.
 #[test]
 fn a_crossing_obstacle_is_passed_behind() {
     let cfg = VehicleConfig::default();
-    let solve = |east_m: f64, east_mps: f32, north_mps: f32| {
-        solve_on_a_straight(&cfg, DEFAULT_TUNING, 0.0, 0.0, |path| {
+    let solve = |corridor_m: f64, east_m: f64, east_mps: f32, north_mps: f32| {
+        let path = arc(0.0, corridor_m, corridor_m, 10.0);
+        solve_on(&path, &cfg, DEFAULT_TUNING, 0.0, 0.0, 10.0, |path| {
             let mut o = path.place(east_m, 35.0, 0.3, 5.0);
             // The path runs north: along is north, right is east.
             o.velocity = ObstacleVelocity {
@@ -312,7 +337,7 @@ fn a_crossing_obstacle_is_passed_behind() {
         })
     };
     let side = |east_mps: f32, north_mps: f32| {
-        let out = solve(-1.0, east_mps, north_mps);
+        let out = solve(4.0, -1.0, east_mps, north_mps);
         assert_ne!(out.status, ControlStatus::Fallback, "{out:?}");
         out.sides[0]
     };
@@ -322,13 +347,69 @@ fn a_crossing_obstacle_is_passed_behind() {
     assert_eq!(side(-1.5, 0.0), Some(ObstacleSide::Right));
     // Below the crossing speed, as if it stood.
     assert_eq!(side(0.25, 0.0), Some(ObstacleSide::Right));
+    // The inflated circle (1.0 m) 1.11 m left of the path at least leaves 1.89 m of a 3 m
+    // corridor, less than the body's 1.81 m and the corner rows' 0.15 m.
+    let no_room_yet = solve(3.0, -1.0, 1.5, 0.0);
+    assert_eq!(no_room_yet.sides[0], None, "{no_room_yet:?}");
+    assert!(no_room_yet.speed_cmd_mps < 9.0, "{no_room_yet:?}");
     // 2.5 m left and walking into the lane: the room is ahead of it, where it is going, and
     // none behind it yet: no side; the car stops short of it (a stand-still obstacle there is
     // passed on the right).
-    assert_eq!(solve(-2.5, 0.0, 0.0).sides[0], Some(ObstacleSide::Right));
-    let walking_in = solve(-2.5, 0.5, 0.0);
+    assert_eq!(
+        solve(4.0, -2.5, 0.0, 0.0).sides[0],
+        Some(ObstacleSide::Right)
+    );
+    let walking_in = solve(4.0, -2.5, 0.5, 0.0);
     assert_eq!(walking_in.sides[0], None, "{walking_in:?}");
     assert!(walking_in.speed_cmd_mps < 9.0, "{walking_in:?}");
+}
+
+/// A car ahead is planned around wherever it can be: from where braking at 1 g from now would
+/// stop it to where it goes on at its measured velocity. Here a car at 6 m/s, 14 m ahead in
+/// the lane of a straight path (6 m of corridor on the left), overtaken at 10 m/s by a car
+/// already 1 m left of the path. Going on, it is met after the 2 s horizon; braked, it stops
+/// 1.8 m on and the body's front reaches it after about 1 s. Every plan step's body keeps the
+/// inflated circle's margin (0.6 m and the position's 0.1 m, less the 0.25 m a plan's
+/// obstacle rows are allowed) from where it would have stopped: 0.61 m at least. (Before,
+/// the plan passed where it would have gone on: 0.23 m.)
+#[test]
+fn a_car_ahead_is_passed_clear_of_where_it_would_stop_braking() {
+    let cfg = VehicleConfig::default();
+    let path = arc(0.0, 6.0, 3.0, 10.0);
+    let (station, ahead, speed, radius) = (5.0_f64, 14.0_f64, 6.0_f32, 1.0_f32);
+    let out = solve_on(&path, &cfg, DEFAULT_TUNING, -1.0, 0.0, 10.0, |path| {
+        let mut o = path.place(0.0, station + ahead, f64::from(radius), station);
+        // The path runs north: along is north.
+        o.velocity = ObstacleVelocity {
+            east_mps: 0.0,
+            north_mps: speed,
+            along_mps: speed,
+            right_mps: 0.0,
+        };
+        Some(o)
+    });
+    assert_ne!(out.status, ControlStatus::Fallback, "{out:?}");
+    assert_eq!(out.sides[0], Some(ObstacleSide::Left), "{out:?}");
+    // Its stop, by hand: v^2 / 2a = 16 / 20 m on.
+    let stopped_north = (station + ahead) as f32 + 1.8;
+    let front = ESCAPE_BODY.length_m - ESCAPE_BODY.rear_overhang_m;
+    let rear = -ESCAPE_BODY.rear_overhang_m;
+    let half = 0.5 * ESCAPE_BODY.width_m;
+    let mut least = f32::INFINITY;
+    for p in &out.plan {
+        // Where it would be braked at 1 g from now (it stops at 0.4 s).
+        let t = p.t_s.min(0.6);
+        let north = (station + ahead) as f32 + speed * t - 5.0 * t * t;
+        assert!(north <= stopped_north + 1e-4);
+        let (dx, dy) = (0.0 - p.x_m, north - p.y_m);
+        let (sh, ch) = p.heading_rad.sin_cos();
+        let along = dx * sh + dy * ch;
+        let lateral = dx * ch - dy * sh;
+        let ox = along - along.clamp(rear, front);
+        let oy = (lateral.abs() - half).max(0.0);
+        least = least.min((ox * ox + oy * oy).sqrt() - radius);
+    }
+    assert!(least >= 0.6 + 0.1 - 0.25, "least clearance {least} m");
 }
 
 /// A car at rest sets off past an obstacle only if it can get beside it before its front

@@ -458,18 +458,22 @@ fn on_straight(east: f32, north: f32, r: f32, car: &Car, half_width: f32) -> Obs
     }
 }
 
-/// Four large obstacles beside the road: every stage has every row.
+/// Four large obstacles beside the road: every stage has every row. They move (oncoming, and
+/// drifting towards the road below the crossing speed): a moving obstacle's row is the
+/// dearer, found over the segment between where it would have braked and where it goes on
+/// (`lateral::obstacle_row`), which here reaches past both ends of the body.
 fn worst_obstacles(car: &Car) -> [Option<Obstacle>; MAX_OBSTACLES] {
     let y0 = car.pose.y_m;
     core::array::from_fn(|i| {
         let side = if i % 2 == 0 { 1.0 } else { -1.0 };
-        Some(on_straight(
-            side * 35.0,
-            y0 + 8.0 * i as f32,
-            30.0,
-            car,
-            25.0,
-        ))
+        let mut o = on_straight(side * 35.0, y0 + 8.0 * i as f32, 30.0, car, 25.0);
+        o.velocity = ObstacleVelocity {
+            east_mps: -side * 0.2,
+            north_mps: -12.0,
+            along_mps: -12.0,
+            right_mps: -side * 0.2,
+        };
+        Some(o)
     })
 }
 
@@ -568,14 +572,7 @@ fn run_parts(b: &Bench, st: &mut Statics) {
         core::array::from_fn(|i| {
             worst_obstacles(&car).get(i).copied().flatten().map(|o| {
                 (
-                    InflatedObstacle {
-                        x_m: o.east_m,
-                        y_m: o.north_m,
-                        radius_m: o.radius_m + 0.7,
-                        ahead_m: o.ahead_m,
-                        path_offset_m: o.path_offset_m,
-                        velocity: o.velocity,
-                    },
+                    InflatedObstacle::new(&o, o.radius_m + 0.7),
                     if o.east_m > 0.0 {
                         ObstacleSide::Left
                     } else {

@@ -518,6 +518,15 @@ pub fn taper_reference(
     part
 }
 
+/// How hard an object on the road may brake, m/s^2: a car's full braking on dry asphalt, about
+/// 1 g (a tyre's friction coefficient of 0.9 to 1.0). A moving obstacle is planned around
+/// wherever it can be at each stage, from where it would be had it braked at this from now to
+/// where it will be at its measured velocity ([`InflatedObstacle::braked_s`]): its velocity
+/// is measured over half a second and more (`control::planner::ObstacleMotion`), so a car
+/// ahead that brakes is seen late, and a plan that passes it where it would have gone on
+/// passes it closer than its margin (docs/bus.md, "Obstacles that move").
+pub const OBSTACLE_BRAKE_MPS2: f32 = 10.0;
+
 /// One obstacle as the rows see it (inflated radius).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InflatedObstacle {
@@ -533,9 +542,25 @@ pub struct InflatedObstacle {
     pub path_offset_m: f32,
     /// How it moves.
     pub velocity: ObstacleVelocity,
+    /// Its speed, m/s (the velocity's length).
+    pub speed_mps: f32,
 }
 
 impl InflatedObstacle {
+    /// `ob` with its radius inflated to `radius_m`.
+    pub fn new(ob: &super::Obstacle, radius_m: f32) -> Self {
+        let v = &ob.velocity;
+        Self {
+            x_m: ob.east_m,
+            y_m: ob.north_m,
+            radius_m,
+            ahead_m: ob.ahead_m,
+            path_offset_m: ob.path_offset_m,
+            velocity: ob.velocity,
+            speed_mps: math::sqrt(v.east_mps * v.east_mps + v.north_mps * v.north_mps),
+        }
+    }
+
     /// Where it will be `t_s` from now (moved at its velocity; a standing one is itself).
     pub fn at(&self, t_s: f32) -> Self {
         let v = &self.velocity;
@@ -545,6 +570,24 @@ impl InflatedObstacle {
             ahead_m: self.ahead_m + v.along_mps * t_s,
             path_offset_m: self.path_offset_m + v.right_mps * t_s,
             ..*self
+        }
+    }
+
+    /// The time at which, going on at its velocity, it would be where braking at
+    /// [`OBSTACLE_BRAKE_MPS2`] from now brings it in `t_s`: `t - a t^2 / 2 v` until it stops
+    /// (`t = v / a`), then `v / 2 a` (its stopping distance over its speed). `t_s` for one
+    /// that stands.
+    pub fn braked_s(&self, t_s: f32) -> f32 {
+        let speed = self.speed_mps;
+        let moving = speed > 0.0;
+        if !moving {
+            return t_s;
+        }
+        let stop_s = speed / OBSTACLE_BRAKE_MPS2;
+        if t_s < stop_s {
+            t_s - 0.5 * OBSTACLE_BRAKE_MPS2 * t_s * t_s / speed
+        } else {
+            0.5 * stop_s
         }
     }
 }
@@ -626,31 +669,73 @@ fn side_row(
 }
 
 /// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
-/// facing it stays beyond its inflated circle. `None` when the obstacle is ahead of the front
-/// or behind the rear by more than its radius.
+/// facing it stays beyond its inflated circle, wherever on the segment from `near` to `far`
+/// (where it is at the stage had it braked, and going on; `None` for one that stands) the
+/// circle is. `None` when the whole segment is ahead of the front or behind the rear by more
+/// than its radius.
 pub fn obstacle_row(
     at: &Sample,
-    obstacle: &InflatedObstacle,
+    near: &InflatedObstacle,
+    far: Option<&InflatedObstacle>,
     side: ObstacleSide,
     body: &Body,
     lin: (f32, f32, f32),
     w: &Weights,
 ) -> Option<Row> {
     let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
-    let (dx, dy) = (obstacle.x_m - at.pose.x_m, obstacle.y_m - at.pose.y_m);
-    let along = dx * sr + dy * cr;
-    let lateral = dx * cr - dy * sr;
+    let project = |o: &InflatedObstacle| {
+        let (dx, dy) = (o.x_m - at.pose.x_m, o.y_m - at.pose.y_m);
+        (dx * sr + dy * cr, dx * cr - dy * sr)
+    };
     let rear = -body.rear_overhang_m;
     let front = body.length_m - body.rear_overhang_m;
-    let r = obstacle.radius_m;
-    if !(along > rear - r && along < front + r) {
-        return None;
+    let r = near.radius_m;
+    // The circle at `along`, `lateral`: the nearest point of the side line, the circle's half
+    // chord there (its radius beside the body; beyond the body's end, only within its half
+    // chord) and how far it reaches towards the side. `None` out of the body's reach.
+    let reach = |along: f32, lateral: f32| {
+        let ahead = clamp(along, rear, front);
+        let beyond = along - ahead;
+        let within = beyond * beyond < r * r;
+        if !within {
+            return None;
+        }
+        let half_chord = if beyond == 0.0 {
+            r
+        } else {
+            math::sqrt(r * r - beyond * beyond)
+        };
+        let towards = match side {
+            ObstacleSide::Left => half_chord - lateral,
+            ObstacleSide::Right => lateral + half_chord,
+        };
+        Some((ahead, lateral, half_chord, towards))
+    };
+    let (along0, lateral0) = project(near);
+    let mut best = reach(along0, lateral0);
+    if let Some(far) = far {
+        // The segment's point that binds the side hardest lies at one of its ends or where it
+        // crosses the body's ends: between those the lateral is linear and the reach the
+        // radius; outside, the reach only shrinks.
+        let (along1, lateral1) = project(far);
+        let d_along = along1 - along0;
+        let mut take = |c: Option<(f32, f32, f32, f32)>| {
+            if let Some(c) = c {
+                if best.is_none_or(|b| c.3 > b.3) {
+                    best = Some(c);
+                }
+            }
+        };
+        take(reach(along1, lateral1));
+        for edge in [rear, front] {
+            let s = (edge - along0) / d_along;
+            // Not finite for a segment across the path.
+            if (0.0..=1.0).contains(&s) {
+                take(reach(edge, lateral0 + s * (lateral1 - lateral0)));
+            }
+        }
     }
-    // Nearest point of the side line, and how far the centre lies beyond the body's end:
-    // there the circle only reaches the side line within its half chord.
-    let ahead = clamp(along, rear, front);
-    let beyond = along - ahead;
-    let half_chord = math::sqrt(max(r * r - beyond * beyond, 0.0));
+    let (ahead, lateral, half_chord, _) = best?;
     Some(side_row(at, body, ahead, side, lateral, half_chord, lin, w))
 }
 
@@ -758,16 +843,24 @@ pub fn build(
         let t_s = setup.stage.time_s(k + 1);
         for (i, ob) in obstacles.iter().enumerate() {
             let Some((ob, side)) = ob else { continue };
-            let ob = &ob.at(t_s);
+            // Where it will be then going on, and where it would be had it braked from now:
+            // the terminal row asks the car beside the nearer.
+            let (near, far) = if ob.speed_mps > 0.0 {
+                (ob.at(ob.braked_s(t_s)), Some(ob.at(t_s)))
+            } else {
+                (*ob, None)
+            };
+            let near = &near;
             let terminal = end
-                .then(|| terminal_row(&r1.at, ob, *side, body, lin_b, w, (station_m, preview_m)))
+                .then(|| terminal_row(&r1.at, near, *side, body, lin_b, w, (station_m, preview_m)))
                 .flatten();
             if terminal.is_some() {
                 if let Some(m) = terminal_mask.get_mut(k) {
                     *m |= 1 << i;
                 }
             }
-            let row = terminal.or_else(|| obstacle_row(&r1.at, ob, *side, body, lin_b, w));
+            let row = terminal
+                .or_else(|| obstacle_row(&r1.at, near, far.as_ref(), *side, body, lin_b, w));
             if let (Some(slot), Some(r)) = (st.rows.get_mut(ROW_OBSTACLE + i), row) {
                 *slot = r;
             }

@@ -1420,12 +1420,17 @@ impl MpcConfig {
             // its circle: closing in at the car's speed less the obstacle's along the path,
             // 2 m/s at least (a car at rest sets off), within the horizon; the corridor where
             // it is now.
+            // It may also have braked by then (lateral::OBSTACLE_BRAKE_MPS2): the rows keep
+            // the body clear of everywhere between, so the room is what both leave.
             let closing_mps = max(v - ob.velocity.along_mps, MEET_CLOSING_MPS);
             let gap_m = max(ob.ahead_m - front - r, 0.0);
             let meet_s = min(gap_m / closing_mps, self.stage.horizon_s());
+            let inflated = InflatedObstacle::new(ob, r);
             let offset_m = ob.path_offset_m + ob.velocity.right_mps * meet_s;
-            let room_left = (offset_m - r) + ob.left_m;
-            let room_right = ob.right_m - (offset_m + r);
+            let braked_m = ob.path_offset_m + ob.velocity.right_mps * inflated.braked_s(meet_s);
+            let (leftmost_m, rightmost_m) = (min(offset_m, braked_m), max(offset_m, braked_m));
+            let room_left = (leftmost_m - r) + ob.left_m;
+            let room_right = ob.right_m - (rightmost_m + r);
             let need = body.width_m
                 + lateral::corridor_margin_m(&t.weights, ob.left_m, ob.right_m, 0.5 * body.width_m);
             let room = |s: ObstacleSide| match s {
@@ -1435,8 +1440,8 @@ impl MpcConfig {
             let swerves = |s: ObstacleSide| {
                 let half = 0.5 * body.width_m;
                 let shift = match s {
-                    ObstacleSide::Left => car_offset_m + half - (offset_m - r),
-                    ObstacleSide::Right => offset_m + r - (car_offset_m - half),
+                    ObstacleSide::Left => car_offset_m + half - (leftmost_m - r),
+                    ObstacleSide::Right => rightmost_m + r - (car_offset_m - half),
                 };
                 let d = clamp(shift - t.obstacle_tolerance_m, 0.0, 2.0 * lock_r);
                 !crawl || gap_m <= 0.0 || 2.0 * math::sqrt(lock_r * d - 0.25 * d * d) <= gap_m
@@ -1498,17 +1503,7 @@ impl MpcConfig {
             };
             *blocked = false;
             *memory = Some(side);
-            *slot = Some((
-                InflatedObstacle {
-                    x_m: ob.east_m,
-                    y_m: ob.north_m,
-                    radius_m: r,
-                    ahead_m: ob.ahead_m,
-                    path_offset_m: ob.path_offset_m,
-                    velocity: ob.velocity,
-                },
-                side,
-            ));
+            *slot = Some((inflated, side));
         }
         Ok(Sides { placed: out, stop })
     }
