@@ -669,27 +669,33 @@ fn side_row(
 }
 
 /// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
-/// facing it stays beyond its inflated circle, wherever on the segment from `near` to `far`
-/// (where it is at the stage had it braked, and going on; `None` for one that stands) the
-/// circle is. `None` when the whole segment is ahead of the front or behind the rear by more
-/// than its radius.
+/// facing it stays beyond its inflated circle, wherever on the segment from where it is at
+/// `near_s` to where it is at `far_s` from now (where it is at the stage had it braked, and
+/// going on: [`InflatedObstacle::braked_s`]; the same time for one that stands) the circle
+/// is. `None` when the whole segment is ahead of the front or behind the rear by more than
+/// its radius.
+#[allow(clippy::too_many_arguments)]
 pub fn obstacle_row(
     at: &Sample,
-    near: &InflatedObstacle,
-    far: Option<&InflatedObstacle>,
+    ob: &InflatedObstacle,
+    (near_s, far_s): (f32, f32),
     side: ObstacleSide,
     body: &Body,
     lin: (f32, f32, f32),
     w: &Weights,
 ) -> Option<Row> {
     let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
-    let project = |o: &InflatedObstacle| {
-        let (dx, dy) = (o.x_m - at.pose.x_m, o.y_m - at.pose.y_m);
-        (dx * sr + dy * cr, dx * cr - dy * sr)
-    };
+    // Its centre and velocity along and across the stage's heading.
+    let (dx, dy) = (ob.x_m - at.pose.x_m, ob.y_m - at.pose.y_m);
+    let (along_now, lateral_now) = (dx * sr + dy * cr, dx * cr - dy * sr);
+    let v = &ob.velocity;
+    let (along_mps, lateral_mps) = (
+        v.east_mps * sr + v.north_mps * cr,
+        v.east_mps * cr - v.north_mps * sr,
+    );
     let rear = -body.rear_overhang_m;
     let front = body.length_m - body.rear_overhang_m;
-    let r = near.radius_m;
+    let r = ob.radius_m;
     // The circle at `along`, `lateral`: the nearest point of the side line, the circle's half
     // chord there (its radius beside the body; beyond the body's end, only within its half
     // chord) and how far it reaches towards the side. `None` out of the body's reach.
@@ -711,14 +717,18 @@ pub fn obstacle_row(
         };
         Some((ahead, lateral, half_chord, towards))
     };
-    let (along0, lateral0) = project(near);
+    let (along0, lateral0) = (
+        along_now + along_mps * near_s,
+        lateral_now + lateral_mps * near_s,
+    );
     let mut best = reach(along0, lateral0);
-    if let Some(far) = far {
+    if far_s != near_s {
         // The segment's point that binds the side hardest lies at one of its ends or where it
         // crosses the body's ends: between those the lateral is linear and the reach the
         // radius; outside, the reach only shrinks.
-        let (along1, lateral1) = project(far);
-        let d_along = along1 - along0;
+        let d_s = far_s - near_s;
+        let (d_along, d_lateral) = (along_mps * d_s, lateral_mps * d_s);
+        let (along1, lateral1) = (along0 + d_along, lateral0 + d_lateral);
         let mut take = |c: Option<(f32, f32, f32, f32)>| {
             if let Some(c) = c {
                 if best.is_none_or(|b| c.3 > b.3) {
@@ -731,7 +741,7 @@ pub fn obstacle_row(
             let s = (edge - along0) / d_along;
             // Not finite for a segment across the path.
             if (0.0..=1.0).contains(&s) {
-                take(reach(edge, lateral0 + s * (lateral1 - lateral0)));
+                take(reach(edge, lateral0 + s * d_lateral));
             }
         }
     }
@@ -845,22 +855,20 @@ pub fn build(
             let Some((ob, side)) = ob else { continue };
             // Where it will be then going on, and where it would be had it braked from now:
             // the terminal row asks the car beside the nearer.
-            let (near, far) = if ob.speed_mps > 0.0 {
-                (ob.at(ob.braked_s(t_s)), Some(ob.at(t_s)))
-            } else {
-                (*ob, None)
-            };
-            let near = &near;
+            let near_s = ob.braked_s(t_s);
             let terminal = end
-                .then(|| terminal_row(&r1.at, near, *side, body, lin_b, w, (station_m, preview_m)))
+                .then(|| {
+                    let near = &ob.at(near_s);
+                    terminal_row(&r1.at, near, *side, body, lin_b, w, (station_m, preview_m))
+                })
                 .flatten();
             if terminal.is_some() {
                 if let Some(m) = terminal_mask.get_mut(k) {
                     *m |= 1 << i;
                 }
             }
-            let row = terminal
-                .or_else(|| obstacle_row(&r1.at, near, far.as_ref(), *side, body, lin_b, w));
+            let row =
+                terminal.or_else(|| obstacle_row(&r1.at, ob, (near_s, t_s), *side, body, lin_b, w));
             if let (Some(slot), Some(r)) = (st.rows.get_mut(ROW_OBSTACLE + i), row) {
                 *slot = r;
             }
