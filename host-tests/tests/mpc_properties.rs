@@ -370,7 +370,7 @@ fn a_crossing_obstacle_is_passed_behind() {
 /// already 1 m left of the path. Going on, it is met after the 2 s horizon; braked, it stops
 /// 1.8 m on and the body's front reaches it after about 1 s. Every plan step's body keeps the
 /// inflated circle's margin (0.6 m and the position's 0.1 m, less the 0.25 m a plan's
-/// obstacle rows are allowed) from where it would have stopped: 0.61 m at least. (Before,
+/// obstacle rows are allowed) from where it would have stopped: 0.63 m at least. (Before,
 /// the plan passed where it would have gone on: 0.23 m.)
 #[test]
 fn a_car_ahead_is_passed_clear_of_where_it_would_stop_braking() {

@@ -669,11 +669,17 @@ fn side_row(
 }
 
 /// The obstacle's half-space at a stage, if the body can reach it there: the side of the body
-/// facing it stays beyond its inflated circle, wherever on the segment from where it is at
-/// `near_s` to where it is at `far_s` from now (where it is at the stage had it braked, and
-/// going on: [`InflatedObstacle::braked_s`]; the same time for one that stands) the circle
-/// is. `None` when the whole segment is ahead of the front or behind the rear by more than
-/// its radius.
+/// facing it stays beyond its inflated circle. `None` when it is ahead of the front or behind
+/// the rear by more than its radius.
+///
+/// A moving one may be anywhere on the segment from where it is at `near_s` from now to where
+/// it is at `far_s` (where it is at the stage had it braked, and going on:
+/// [`InflatedObstacle::braked_s`]): the side is kept its inflated radius beyond the segment's
+/// point that reaches furthest towards it, over the part of the segment within that radius of
+/// the body's length. Beyond the body's ends that is a radius where one circle would ask only
+/// its half chord, and a rectangle about the swept circles there: the row takes no square root
+/// (a circle's exact reach over a segment took two, 122 instructions a row more than the one
+/// circle, and the controller's bound on a long car went over its budget).
 #[allow(clippy::too_many_arguments)]
 pub fn obstacle_row(
     at: &Sample,
@@ -685,68 +691,72 @@ pub fn obstacle_row(
     w: &Weights,
 ) -> Option<Row> {
     let (sr, cr) = (at.pose.sin_heading, at.pose.cos_heading);
-    // Its centre and velocity along and across the stage's heading.
     let (dx, dy) = (ob.x_m - at.pose.x_m, ob.y_m - at.pose.y_m);
     let (along_now, lateral_now) = (dx * sr + dy * cr, dx * cr - dy * sr);
+    let rear = -body.rear_overhang_m;
+    let front = body.length_m - body.rear_overhang_m;
+    let r = ob.radius_m;
+    if far_s == near_s {
+        // One circle (one that stands): the nearest point of the side line, and how far the
+        // centre lies beyond the body's end: there the circle only reaches the side line
+        // within its half chord.
+        let (along, lateral) = (along_now, lateral_now);
+        if !(along > rear - r && along < front + r) {
+            return None;
+        }
+        let ahead = clamp(along, rear, front);
+        let beyond = along - ahead;
+        let half_chord = math::sqrt(max(r * r - beyond * beyond, 0.0));
+        return Some(side_row(at, body, ahead, side, lateral, half_chord, lin, w));
+    }
+    // The segment, along and across the stage's heading.
     let v = &ob.velocity;
     let (along_mps, lateral_mps) = (
         v.east_mps * sr + v.north_mps * cr,
         v.east_mps * cr - v.north_mps * sr,
     );
-    let rear = -body.rear_overhang_m;
-    let front = body.length_m - body.rear_overhang_m;
-    let r = ob.radius_m;
-    // The circle at `along`, `lateral`: the nearest point of the side line, the circle's half
-    // chord there (its radius beside the body; beyond the body's end, only within its half
-    // chord) and how far it reaches towards the side. `None` out of the body's reach.
-    let reach = |along: f32, lateral: f32| {
-        let ahead = clamp(along, rear, front);
-        let beyond = along - ahead;
-        let within = beyond * beyond < r * r;
-        if !within {
-            return None;
-        }
-        let half_chord = if beyond == 0.0 {
-            r
-        } else {
-            math::sqrt(r * r - beyond * beyond)
-        };
-        let towards = match side {
-            ObstacleSide::Left => half_chord - lateral,
-            ObstacleSide::Right => lateral + half_chord,
-        };
-        Some((ahead, lateral, half_chord, towards))
-    };
     let (along0, lateral0) = (
         along_now + along_mps * near_s,
         lateral_now + lateral_mps * near_s,
     );
-    let mut best = reach(along0, lateral0);
-    if far_s != near_s {
-        // The segment's point that binds the side hardest lies at one of its ends or where it
-        // crosses the body's ends: between those the lateral is linear and the reach the
-        // radius; outside, the reach only shrinks.
-        let d_s = far_s - near_s;
-        let (d_along, d_lateral) = (along_mps * d_s, lateral_mps * d_s);
-        let (along1, lateral1) = (along0 + d_along, lateral0 + d_lateral);
-        let mut take = |c: Option<(f32, f32, f32, f32)>| {
-            if let Some(c) = c {
-                if best.is_none_or(|b| c.3 > b.3) {
-                    best = Some(c);
-                }
-            }
-        };
-        take(reach(along1, lateral1));
-        for edge in [rear, front] {
-            let s = (edge - along0) / d_along;
-            // Not finite for a segment across the path.
-            if (0.0..=1.0).contains(&s) {
-                take(reach(edge, lateral0 + s * d_lateral));
-            }
+    let d_s = far_s - near_s;
+    let (d_along, d_lateral) = (along_mps * d_s, lateral_mps * d_s);
+    // Its part within the radius of the body's length: the parameter range (0 at `near_s`,
+    // 1 at `far_s`) over which its along lies between the rear less the radius and the front
+    // plus it.
+    let (lo, hi) = if d_along == 0.0 {
+        if !(along0 > rear - r && along0 < front + r) {
+            return None;
         }
+        (0.0, 1.0)
+    } else {
+        let s_rear = (rear - r - along0) / d_along;
+        let s_front = (front + r - along0) / d_along;
+        (
+            max(math::min(s_rear, s_front), 0.0),
+            math::min(max(s_rear, s_front), 1.0),
+        )
+    };
+    if !(lo < hi) {
+        return None;
     }
-    let (ahead, lateral, half_chord, _) = best?;
-    Some(side_row(at, body, ahead, side, lateral, half_chord, lin, w))
+    // The lateral is linear along it: its end towards the side reaches furthest.
+    let towards = match side {
+        ObstacleSide::Left => d_lateral < 0.0,
+        ObstacleSide::Right => d_lateral > 0.0,
+    };
+    let s = if towards { hi } else { lo };
+    let ahead = clamp(along0 + s * d_along, rear, front);
+    Some(side_row(
+        at,
+        body,
+        ahead,
+        side,
+        lateral0 + s * d_lateral,
+        r,
+        lin,
+        w,
+    ))
 }
 
 /// Stages at the end of the horizon that get [`terminal_row`]s (the last 0.5 s): the car is to
