@@ -737,7 +737,8 @@ pub fn obstacle_row(
             math::min(max(s_rear, s_front), 1.0),
         )
     };
-    if !(lo < hi) {
+    let reaches = lo < hi;
+    if !reaches {
         return None;
     }
     // The lateral is linear along it: its end towards the side reaches furthest.
