@@ -245,18 +245,6 @@ fn solve_on_a_straight(
     path_max_curvature_per_m: f32,
     place: impl Fn(&TestPath) -> Option<Obstacle>,
 ) -> MpcOutput {
-    solve_on_a_straight_at(cfg, tuning, offset_m, path_max_curvature_per_m, 10.0, place)
-}
-
-/// As [`solve_on_a_straight`], the car at `speed_mps` (its speed model steady there).
-fn solve_on_a_straight_at(
-    cfg: &VehicleConfig,
-    tuning: MpcTuning,
-    offset_m: f32,
-    path_max_curvature_per_m: f32,
-    speed_mps: f32,
-    place: impl Fn(&TestPath) -> Option<Obstacle>,
-) -> MpcOutput {
     let path = arc(0.0, 3.0, 3.0, 10.0);
     solve_on(
         &path,
@@ -264,12 +252,14 @@ fn solve_on_a_straight_at(
         tuning,
         offset_m,
         path_max_curvature_per_m,
-        speed_mps,
+        10.0,
         place,
     )
 }
 
-/// As [`solve_on_a_straight_at`], on `path`.
+/// One solve from a fresh state with `tuning` for a car at `speed_mps` (its speed model steady
+/// there) with straight wheels, `offset_m` right of `path` at its station 5 m, on the escape
+/// body, with the obstacle `place` puts on the path; the path's largest curvature as given.
 fn solve_on(
     path: &TestPath,
     cfg: &VehicleConfig,
@@ -422,10 +412,18 @@ fn a_car_at_rest_sets_off_only_past_an_obstacle_it_can_get_beside() {
     let cfg = VehicleConfig::default();
     let front = f64::from(ESCAPE_BODY.length_m - ESCAPE_BODY.rear_overhang_m);
     let solve = |gap_m: f64| {
-        solve_on_a_straight_at(&cfg, DEFAULT_TUNING, 0.0, 0.0, 0.0, |path| {
-            // The rear axle at station 5; the inflated radius 0.3 + 0.1 + 0.6.
-            Some(path.place(0.5, 5.0 + front + 1.0 + gap_m, 0.3, 5.0))
-        })
+        solve_on(
+            &arc(0.0, 3.0, 3.0, 10.0),
+            &cfg,
+            DEFAULT_TUNING,
+            0.0,
+            0.0,
+            0.0,
+            |path| {
+                // The rear axle at station 5; the inflated radius 0.3 + 0.1 + 0.6.
+                Some(path.place(0.5, 5.0 + front + 1.0 + gap_m, 0.3, 5.0))
+            },
+        )
     };
     let near = solve(2.0);
     assert_eq!(near.status, ControlStatus::Fallback, "{near:?}");
