@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Objects that move, over `catmodel sil --stdio`: scripts/sil-moving.py's scenarios across
-pedestrian speeds, slower cars, slower cars that brake to a stop, an oncoming car and a standing
-object whose detection jitters,
+pedestrian speeds, slower cars, slower cars that brake to a stop, slower cars that cut in, an
+oncoming car and a standing object whose detection jitters,
 for the published car with its standard receiver's position bound (models/paper.toml, 2 m) and
 with an RTK-class bound (the same file at 0.2 m). Prints one line per run and a summary per
 binary: the runs whose body touched the object while the car moved (above 0.5 m/s), the runs
@@ -54,6 +54,11 @@ for name, model in (("rtk", rtk), ("standard", paper)):
     cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "6", "--lead-brake-at", "10"] + once))
     cases.append((name, model, ["--scenario", "slowcar", "--lead-speed", "4", "--lead-brake-at", "12",
                                 "--lead-decel", "9", "--obstacle-noise-m", "0.1"] + once))
+    # A slower car in the left-hand lane that changes into the car's lane (3 s): 8 m ahead of
+    # the body's front as it starts (braked for), beside its front half and beside its middle
+    # (driven past: docs/bus.md, "A car that cuts in").
+    for at in (6, 9, 9.5):
+        cases.append((name, model, ["--scenario", "cutin", "--lead-speed", "4", "--cutin-at", str(at)] + once))
 
 for binary in binaries:
     touched = lost = stopped = 0

@@ -2,14 +2,18 @@
 """A receding-horizon planner and a moving obstacle over `catmodel sil --stdio` (docs/bus.md,
 "Obstacles that move"). Reuses the DBC codec, car model and geodesy of scripts/sil-sim.py.
 
-usage: sil-moving.py --scenario {pedestrian,slowcar,oncoming,standing,none} [--road {straight,wave}]
+usage: sil-moving.py --scenario {pedestrian,slowcar,cutin,oncoming,standing,none} [--road {straight,wave}]
                      [--replan S] [--speed V] [--model FILE] [--gnss-noise-m 0.02] [--sweep S]
                      [--obstacle-noise-m 0] [--ped-speed 1.5] [--ped-from right] [--ped-stop-at T] [--lead-speed 4]
-                     [--lead-brake-at T] [--lead-decel 6] [--out CSV]
+                     [--lead-brake-at T] [--lead-decel 6] [--cutin-gap 15] [--cutin-at 4] [--cutin-s 3]
+                     [--out CSV]
 pedestrian: crosses the road 45 m ahead at --ped-speed from t = 2 s, from 6 m to the right
 (--ped-from right) or left (with --ped-stop-at T, stops at t = T s where it is, and stays);
 slowcar: a car 30 m ahead in the lane at --lead-speed (with --lead-brake-at T, braking from
-t = T s at --lead-decel m/s^2, default 6, to a stop where it stays); oncoming: a car in the left lane
+t = T s at --lead-decel m/s^2, default 6, to a stop where it stays); cutin: a car --cutin-gap m
+ahead of the car's start in the left-hand lane (3.5 m left) at --lead-speed that changes into
+the car's lane at t = --cutin-at s, taking --cutin-s s (a half-cosine sideways: it turns in,
+then straightens, which the node's straight-on prediction does not know); oncoming: a car in the left lane
 (3.5 m left) coming towards the car at --lead-speed from 150 m; standing: an object standing
 in the lane 45 m ahead. --obstacle-noise-m adds Gaussian noise to each circle sent (a detector's).
 --sweep S sends, every tick, the circle that covers the object from now to S seconds ahead (its
@@ -44,6 +48,9 @@ ap.add_argument("--ped-stop-at", type=float, default=None)
 ap.add_argument("--lead-speed", type=float, default=4.0)
 ap.add_argument("--lead-brake-at", type=float, default=None)
 ap.add_argument("--lead-decel", type=float, default=6.0)
+ap.add_argument("--cutin-gap", type=float, default=15.0)
+ap.add_argument("--cutin-at", type=float, default=4.0)
+ap.add_argument("--cutin-s", type=float, default=3.0)
 ap.add_argument("--duration", type=float, default=40.0)
 ap.add_argument("--seed", type=int, default=0)
 ap.add_argument("--sweep", type=float, default=0.0)
@@ -105,6 +112,10 @@ def obstacle_at(t):
             tb = min(t - a.lead_brake_at, a.lead_speed/a.lead_decel)
             s = 30.0 + a.lead_speed*a.lead_brake_at + a.lead_speed*tb - a.lead_decel*tb*tb/2
         e, n = road(s); return (e, n, 1.5)
+    if a.scenario == "cutin":
+        e, n = road(a.cutin_gap + a.lead_speed*t)
+        f = min(max((t - a.cutin_at)/a.cutin_s, 0.0), 1.0)
+        return (e, n + 3.5*0.5*(1.0 + math.cos(math.pi*f)), 1.5)
     if a.scenario == "oncoming":
         s = 150.0 - a.lead_speed*t
         e, n = road(s); return (e, n + 3.5, 1.5)

@@ -402,6 +402,48 @@ fn a_car_ahead_is_passed_clear_of_where_it_would_stop_braking() {
     assert!(least >= 0.6 + 0.1 - 0.25, "least clearance {least} m");
 }
 
+/// A slower car changing into the lane beside the car's front half is driven past, not braked
+/// for: braking keeps the car beside it while it comes across (`MpcConfig::overtakes`). Here a
+/// car (radius 1.5 m) 3 m left of a straight path (two lanes: 6 m of corridor on the left,
+/// 1.75 m on the right) at 4 m/s, coming right at 1.2 m/s, its centre 1 m ahead of the rear
+/// axle of a car at 8 m/s: its inflated circle (2.2 m) already reaches the body's left side.
+/// By hand: past it at 4 m/s closing in (1 + 2.2 + 0.9) / 4 = 1.03 s; behind it braking at
+/// 1 g after 0.8 s, 0.8 + (4 + sqrt(16 + 20 (3.2 + 4.74))) / 10 = 2.52 s. The car keeps to its
+/// side (the obstacle's right), does not brake, and the plan moves it right first. (Before, the
+/// crossing car left no room behind it, and the car braked at once: status 3, speed 0.)
+/// The same car with its circle ahead of the body's front (6 m ahead), or faster than the car
+/// (10 m/s), is braked for.
+#[test]
+fn a_slower_car_cutting_in_beside_the_front_is_driven_past() {
+    let cfg = VehicleConfig::default();
+    let solve = |ahead_m: f64, north_mps: f32| {
+        let path = arc(0.0, 6.0, 1.75, 8.0);
+        solve_on(&path, &cfg, DEFAULT_TUNING, 0.0, 0.0, 8.0, |path| {
+            let mut o = path.place(-3.0, 5.0 + ahead_m, 1.5, 5.0);
+            // The path runs north: along is north, right is east.
+            o.velocity = ObstacleVelocity {
+                east_mps: 1.2,
+                north_mps,
+                along_mps: north_mps,
+                right_mps: 1.2,
+            };
+            Some(o)
+        })
+    };
+    let beside = solve(1.0, 4.0);
+    assert_ne!(beside.status, ControlStatus::Fallback, "{beside:?}");
+    assert_eq!(beside.sides[0], Some(ObstacleSide::Right), "{beside:?}");
+    assert!(beside.speed_cmd_mps >= 7.9, "{beside:?}");
+    // Away from it first: right (east) over the plan's first second.
+    assert!(beside.plan[2].steer_rad > 0.0, "{beside:?}");
+    let away = beside.plan[..=10].iter().map(|p| p.x_m).fold(0.0, f32::max);
+    assert!(away > 0.05, "{beside:?}");
+    let ahead = solve(6.0, 4.0);
+    assert!(ahead.speed_cmd_mps < 1.0, "{ahead:?}");
+    let faster = solve(1.0, 10.0);
+    assert!(faster.speed_cmd_mps < 1.0, "{faster:?}");
+}
+
 /// A car at rest sets off past an obstacle only if it can get beside it before its front
 /// reaches it at full lock: here one 0.5 m right of a straight path, its inflated circle
 /// 1.0 m, passed on the left, which takes a shift of 1.4 m (4.7 m forward at the lock's

@@ -676,6 +676,9 @@ struct Sides {
     placed: [Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES],
     /// The stop for the nearest obstacle that leaves no passage, if any.
     stop: Option<NoPassageStop>,
+    /// Bit `i` set: obstacle slot `i` is alongside the car and being overtaken
+    /// ([`MpcConfig::overtakes`]); a plan that enters it does not make the car brake.
+    overtaken: u8,
 }
 
 /// Why the fallback was taken.
@@ -992,6 +995,7 @@ impl MpcConfig {
         let Sides {
             placed: obstacles,
             stop,
+            overtaken,
         } = match self.decide_sides(state, input) {
             Ok(o) => o,
             Err(reason) => return self.fallback(state, input, &speed_start, reason),
@@ -1091,7 +1095,10 @@ impl MpcConfig {
         // braking needs to take hold (then only braking can help), or for several ticks in a
         // row further out (a solve that has not converged yet resolves it on the next ticks).
         let imminent = self.stage.index_at_s(self.tuning.stop_delay_s) as usize;
-        let v = violations(&state.problem, &states, &terminal_mask, imminent);
+        // Nor is an obstacle the car is overtaking alongside: braking keeps it beside the car
+        // longer, where driving on takes the car past it sooner.
+        let mask = terminal_mask.map(|m| m | overtaken);
+        let v = violations(&state.problem, &states, &mask, imminent);
         let corridor_violation_m = v.corridor_m;
         let tolerance = self.tuning.obstacle_tolerance_m;
         if v.obstacle_m > tolerance {
@@ -1393,11 +1400,13 @@ impl MpcConfig {
         let crawl = v < MEET_CLOSING_MPS;
         let lock_r = self.vehicle.wheelbase_m / math::tan(self.vehicle.max_steer_rad);
         let car_offset_m = lateral_offset_m(input);
-        for (((slot, memory), blocked), ob) in out
+        let mut overtaken = 0u8;
+        for (i, (((slot, memory), blocked), ob)) in out
             .iter_mut()
             .zip(state.sides.iter_mut())
             .zip(state.blocked.iter_mut())
             .zip(input.obstacles)
+            .enumerate()
         {
             let Some(ob) = ob else {
                 *memory = None;
@@ -1426,6 +1435,21 @@ impl MpcConfig {
             let gap_m = max(ob.ahead_m - front - r, 0.0);
             let meet_s = min(gap_m / closing_mps, self.stage.horizon_s());
             let inflated = InflatedObstacle::new(ob, r);
+            if self.overtakes(ob, r, v) {
+                // Beside the car already: there is no stopping short of it, and no passing
+                // behind it. The car keeps to its side of it (the rows push it away as far as
+                // the corridor lets them) and drives on past it.
+                let side = if ob.path_offset_m < car_offset_m {
+                    ObstacleSide::Right
+                } else {
+                    ObstacleSide::Left
+                };
+                overtaken |= 1 << i;
+                *blocked = false;
+                *memory = Some(side);
+                *slot = Some((inflated, side));
+                continue;
+            }
             let offset_m = ob.path_offset_m + ob.velocity.right_mps * meet_s;
             let braked_m = ob.path_offset_m + ob.velocity.right_mps * inflated.braked_s(meet_s);
             let (leftmost_m, rightmost_m) = (min(offset_m, braked_m), max(offset_m, braked_m));
@@ -1505,7 +1529,35 @@ impl MpcConfig {
             *memory = Some(side);
             *slot = Some((inflated, side));
         }
-        Ok(Sides { placed: out, stop })
+        Ok(Sides {
+            placed: out,
+            stop,
+            overtaken,
+        })
+    }
+
+    /// Whether the car is alongside obstacle `ob` (its circle, not inflated, reaches back past
+    /// the body's front) and overtaking it: faster along the path, and its rear past the circle
+    /// inflated to `r` sooner at its speed `v_mps` than braking drops its front behind that
+    /// circle. Braking is taken at its best, [`lateral::OBSTACLE_BRAKE_MPS2`] after the speed
+    /// loop's `stop_delay_s`, and the car's stop is not modelled (both favour braking, the
+    /// fallback's way). A slower car that changes into the car's lane beside its front half is
+    /// such an obstacle: braking for it, the car stayed beside it while it came across, and it
+    /// ran into the car's side (`scripts/sil-moving.py --scenario cutin`, docs/bus.md).
+    fn overtakes(&self, ob: &Obstacle, r: f32, v_mps: f32) -> bool {
+        let front = self.body.length_m - self.body.rear_overhang_m;
+        let closing = v_mps - ob.velocity.along_mps;
+        if !(ob.ahead_m - ob.radius_m < front && closing > 0.0) {
+            return false;
+        }
+        let past_s = (ob.ahead_m + r + self.body.rear_overhang_m) / closing;
+        // Braking: the gap still closes at `closing` over the delay, then the car falls back
+        // at `a`: `a tau^2 / 2 - closing tau = closing delay + back`.
+        let (a, delay) = (lateral::OBSTACLE_BRAKE_MPS2, self.tuning.stop_delay_s);
+        let back_m = front - (ob.ahead_m - r);
+        let under = closing * closing + 2.0 * a * (closing * delay + back_m);
+        let behind_s = delay + (closing + math::sqrt(max(under, 0.0))) / a;
+        past_s < behind_s
     }
 
     /// Caps each stage's speed target at the speed from which the car stops by `at_m` ahead
