@@ -417,7 +417,7 @@ fn mpc_lane_change(vehicle: &VehicleConfig, node: &NodeConfig, speed: f64, seed:
 /// fallback it turned into the obstacle and stopped 1.15 m from it, docs/findings.md). Its
 /// steering is slow for its wheelbase, and its horizon is 3 s now (the steering plan's later
 /// stages longer, `mpc::StageClock`): it swerves in time and passes 2.40 m from it without a
-/// fallback. (The fallback's lane hold: `mpc_closed_loop::an_obstacle_beside_the_car_is_braked_past_along_the_lane`.)
+/// fallback. (The fallback's lane hold: `mpc_closed_loop::an_obstacle_beside_a_slow_car_is_braked_for_along_the_lane`.)
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
 fn a_long_heavy_car_swerves_in_time() {

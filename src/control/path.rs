@@ -252,6 +252,35 @@ impl Best {
     }
 }
 
+/// Point `(east, north)` against the segment from `a` along `(sin, cos)` of its heading,
+/// `length` long: how far along it the point's foot is, how far right of its line the point
+/// is, and the squared distance to the segment.
+#[inline(always)]
+fn foot(
+    a: &Waypoint,
+    (sin_h, cos_h): (f32, f32),
+    length: f32,
+    (east_m, north_m): (f32, f32),
+) -> (f32, f32, f32) {
+    let (px, py) = (east_m - a.east_m, north_m - a.north_m);
+    // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
+    let along = px * sin_h + py * cos_h;
+    let lateral = px * cos_h - py * sin_h;
+    let ex = along - math::clamp(along, 0.0, length);
+    (along, lateral, ex * ex + lateral * lateral)
+}
+
+/// Whether the foot `along` segment `i` (of a path whose last is `last`) is clamped to one of
+/// its end points. The end segments extend beyond the path's ends for the station and offset,
+/// but the distance is to the segment itself, the end point: the extension is a ray without
+/// end, and a path whose end points back at its start (a loop) must not take a car at the
+/// start for one far beyond the end. The foot is clamped to an end point, then, everywhere but
+/// there.
+#[inline(always)]
+fn clamped(along: f32, length: f32, i: usize, last: usize) -> bool {
+    (along < 0.0 && i != 0) || (along > length && i != last)
+}
+
 /// Where a point is relative to the path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Projection {
@@ -788,44 +817,53 @@ impl Path {
             *r = math::min(b.key, m * ((1.0 + VERTEX_TIE) * 1.001) + 1e-4);
         }
         let last = self.len.saturating_sub(2);
+        // The least key so far and its segment (of the range; `usize::MAX`: the best passed
+        // in): a new best writes these two only, and the winner's foot is worked out again
+        // after the search by the same arithmetic. A search where every segment is nearer
+        // than the one before (a path that closes in on the point within the pruning's
+        // margin) then costs two stores a segment more than one where none is, not seven.
+        let mut least = best.map(|b| b.key);
+        let mut winner = [usize::MAX; N];
         let segments = points.iter().zip(directions).zip(starts.iter().zip(ends));
-        for (k, ((a, &(sin_h, cos_h)), (&s_a, &s_b))) in segments.enumerate() {
+        for (k, ((a, &direction), (&s_a, &s_b))) in segments.enumerate() {
             let length = s_b - s_a;
-            for ((b, r), &(east_m, north_m)) in
-                best.iter_mut().zip(reject.iter_mut()).zip(&points_m)
+            for (((l, w), r), &point) in least
+                .iter_mut()
+                .zip(winner.iter_mut())
+                .zip(reject.iter_mut())
+                .zip(&points_m)
             {
-                let (px, py) = (east_m - a.east_m, north_m - a.north_m);
-                // Along the segment (unit vector (sin h, cos h)) and to its right
-                // ((cos h, -sin h)).
-                let along = px * sin_h + py * cos_h;
-                let lateral = px * cos_h - py * sin_h;
-                let ex = along - math::clamp(along, 0.0, length);
-                let d2 = ex * ex + lateral * lateral;
+                let (along, _, d2) = foot(a, direction, length, point);
                 // A key is at least the distance: no key this far beats the best (nor a
                 // NaN's, below).
                 if d2 >= *r {
                     continue;
                 }
-                let i = first + k;
-                // The end segments extend beyond the path's ends for the station and offset,
-                // but the distance is to the segment itself, the end point: the extension is
-                // a ray without end, and a path whose end points back at its start (a loop)
-                // must not take a car at the start for one far beyond the end. The foot is
-                // clamped to an end point, then, everywhere but there.
-                let clamped = (along < 0.0 && i != 0) || (along > length && i != last);
-                let key = Best::key(d2, clamped);
-                if key < b.key {
-                    *b = Best {
-                        segment: i,
-                        d2,
-                        key,
-                        clamped,
-                        along,
-                        lateral,
-                    };
+                let key = Best::key(d2, clamped(along, length, first + k, last));
+                if key < *l {
+                    *l = key;
+                    *w = k;
                     *r = key;
                 }
             }
+        }
+        for ((b, &w), &point) in best.iter_mut().zip(&winner).zip(&points_m) {
+            let (Some(a), Some(&direction), Some(&s_a), Some(&s_b)) =
+                (points.get(w), directions.get(w), starts.get(w), ends.get(w))
+            else {
+                continue;
+            };
+            let length = s_b - s_a;
+            let (along, lateral, d2) = foot(a, direction, length, point);
+            let clamped = clamped(along, length, first + w, last);
+            *b = Best {
+                segment: first + w,
+                d2,
+                key: Best::key(d2, clamped),
+                clamped,
+                along,
+                lateral,
+            };
         }
         best
     }

@@ -961,6 +961,22 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             corridor_widening_m: 0.002,
             ..plain("stages-path-round")
         },
+        // The same on a wide arc (40 m radius) round its obstacles: the search for an
+        // obstacle's nearest segment finds every segment about as near (within the bus's
+        // 0.02 m resolution of a point, which on the lock's small circle set the segments
+        // apart by more than the search's pruning lets through), so it prunes none: its
+        // dearest run, which the full-lock circle reached only for a car whose lock is wide.
+        Spec {
+            seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
+            speed: Profile::Const(4.0),
+            steer: Profile::Const(steer_for_curvature_pct(car, 1.0 / ARC_RADIUS_M, 4.0)),
+            path_points: MAX_PATH_POINTS,
+            path_spacing_m: 0.08,
+            obstacles: MAX_OBSTACLES,
+            obstacles_at_centre: true,
+            corridor_widening_m: 0.002,
+            ..plain("stages-path-arc")
+        },
         // Obstacles sent every tick as they move: the planner frames whose handling fits a
         // slot's motion (docs/bus.md, "Obstacles that move"), every slot's fit closing in the
         // same tick.
@@ -979,6 +995,31 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
         },
         path_jump(car, plain("stages-path-jump")),
     ]
+}
+
+/// The radius of `stages-path-arc`'s path, m.
+const ARC_RADIUS_M: f64 = 40.0;
+
+/// The steering, percent (at most the lock), at which `car`'s model drives `curvature_per_m`
+/// at `speed_mps`: bisection over the model's own conversion (monotonic in the percent).
+fn steer_for_curvature_pct(car: &NodeConfig, curvature_per_m: f64, speed_mps: f64) -> f64 {
+    let curvature = |pct: f64| {
+        let center = car.vehicle.steer_pct_to_center_rad(pct as f32);
+        f64::from(car.vehicle.curvature_per_m(center, speed_mps as f32))
+    };
+    let (mut lo, mut hi) = (0.0, 100.0);
+    if curvature(hi) <= curvature_per_m {
+        return hi;
+    }
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if curvature(mid) < curvature_per_m {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
 /// A position that jumps back along a dense path, onto a part of it farther than
