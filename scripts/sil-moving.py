@@ -197,7 +197,10 @@ while t < a.duration:
         elif m.name == "STATE_POSITION": valid = v["position_valid"] == 1
     st = int(cmd["status"])
     if valid and valid_since is None: valid_since = tt
-    if engaged is None and st == 1 and valid_since is not None and tt - valid_since >= 1.0: engaged = tt
+    # The node drives once it tracks (status 1); a cut-in's car in the other lane may keep it
+    # avoiding (status 2) from the start, which it drives too.
+    engage_on = (1, 2) if a.scenario == "cutin" else (1,)
+    if engaged is None and st in engage_on and valid_since is not None and tt - valid_since >= 1.0: engaged = tt
     sc, vc = cmd["steer_cmd_pct"], cmd["speed_cmd_mps"]
     for x in (sc, vc):
         if x is not None and (x != x): stats["nan"] += 1
