@@ -671,11 +671,53 @@ fn nearest_by_brute_force(p: &Path, east: f32, north: f32) -> Projection {
     best.unwrap().1
 }
 
+/// A path that starts north from the origin, turns round and comes back south 8 m east of
+/// it: the point (3, -4), before the path's start, is 5 m from its first point and 5 m from
+/// the segment from (8, -3) to (8, -5), an exact tie in f32 (found by the search's old form,
+/// which tested the path's ends in the loop). Reversed, the first point is the last.
+fn u_turn() -> Vec<Waypoint> {
+    [
+        (0.0, 0.0),
+        (0.0, 1.0),
+        (0.0, 2.0),
+        (1.0, 3.5),
+        (3.0, 4.5),
+        (5.0, 4.5),
+        (7.0, 3.5),
+        (8.0, 2.0),
+        (8.0, 1.0),
+        (8.0, -1.0),
+        (8.0, -3.0),
+        (8.0, -5.0),
+        (8.0, -7.0),
+    ]
+    .iter()
+    .map(|&(e, n)| wp(e, n))
+    .collect()
+}
+
+/// A point beyond the path's start (not a corner: the first segment extends) as near as a
+/// later segment projects onto the first segment, the first of equals; beyond the path's end,
+/// onto the earlier segment. Each as the brute force finds it, and for the obstacles' search
+/// (`Path::project_each`, the whole path in one pass).
+#[test]
+fn a_point_beyond_an_end_as_near_as_another_segment_takes_the_first_of_them() {
+    let forward = path_of(&u_turn());
+    let mut back = u_turn();
+    back.reverse();
+    let back = path_of(&back);
+    for (p, segment) in [(&forward, 0), (&back, 1)] {
+        let brute = nearest_by_brute_force(p, 3.0, -4.0);
+        assert_eq!(brute.segment, segment);
+        assert_eq!(p.project_each([(3.0, -4.0); 4]), [Some(brute); 4]);
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(1024))]
-    /// The node's search (every segment's distance, the rest only for a segment that may
-    /// beat the nearest sampled point) finds what the brute force does, for points anywhere
-    /// near a path or far from it, on it, and at its corners.
+    /// The node's search (every segment tested in full, a foot off its segment a corner but
+    /// at the path's ends, which are tested again after) finds what the brute force does, for
+    /// points anywhere near a path or far from it, on it, and at its corners.
     #[test]
     fn the_projection_is_the_brute_forces(
         pts in arb_path(),

@@ -206,9 +206,6 @@ pub struct NarrowestLocated {
 /// whether it is a segment's end point rather than a foot on it.
 type Nearest = (Projection, f32, bool);
 
-/// Every how many points a search samples the path's points first (`Path::scan_segments`).
-const SCAN_STRIDE: usize = 8;
-
 /// The nearest segment so far of a search (`Path::scan_segments`).
 #[derive(Clone, Copy)]
 struct Best {
@@ -252,22 +249,39 @@ impl Best {
     }
 }
 
+/// A point against a segment ([`foot`]).
+#[derive(Clone, Copy)]
+struct Foot {
+    /// How far along the segment the point's foot is, m.
+    along: f32,
+    /// How far right of the segment's line the point is, m.
+    lateral: f32,
+    /// How far the foot lies beyond the segment's ends, m (0 on it).
+    off: f32,
+    /// The squared distance to the segment, m^2.
+    d2: f32,
+}
+
 /// Point `(east, north)` against the segment from `a` along `(sin, cos)` of its heading,
-/// `length` long: how far along it the point's foot is, how far right of its line the point
-/// is, and the squared distance to the segment.
+/// `length` long.
 #[inline(always)]
 fn foot(
     a: &Waypoint,
     (sin_h, cos_h): (f32, f32),
     length: f32,
     (east_m, north_m): (f32, f32),
-) -> (f32, f32, f32) {
+) -> Foot {
     let (px, py) = (east_m - a.east_m, north_m - a.north_m);
     // Along the segment (unit vector (sin h, cos h)) and to its right ((cos h, -sin h)).
     let along = px * sin_h + py * cos_h;
     let lateral = px * cos_h - py * sin_h;
-    let ex = along - math::clamp(along, 0.0, length);
-    (along, lateral, ex * ex + lateral * lateral)
+    let off = along - math::clamp(along, 0.0, length);
+    Foot {
+        along,
+        lateral,
+        off,
+        d2: off * off + lateral * lateral,
+    }
 }
 
 /// Whether the foot `along` segment `i` (of a path whose last is `last`) is clamped to one of
@@ -777,10 +791,10 @@ impl Path {
 
     /// The search over segments `range` (within the path) for each of `points`, from its
     /// `best` on; the best of each after them: the least key ([`Best::key`]), the first segment
-    /// of equal ones. Every segment's distance is computed (the cost is the same wherever the
-    /// points are), the rest only for a segment that may beat the best: no more than the nearest
-    /// of every [`SCAN_STRIDE`]th point (a point is no nearer than the segments it ends), so
-    /// that a point the path approaches from afar does not make every segment a new best.
+    /// of equal ones. Every segment is tested in full for every point, with no branch on the
+    /// data: the search costs the same wherever the points are (the tick's bound needs no drive
+    /// to find its dearest geometry, docs/firmware.md "Where the obstacles' search prunes
+    /// nothing").
     fn scan_segments_each<const N: usize>(
         &self,
         range: core::ops::Range<usize>,
@@ -798,52 +812,53 @@ impl Path {
         ) else {
             return best;
         };
-        let mut sampled = [f32::INFINITY; N];
-        for w in points
-            .iter()
-            .step_by(SCAN_STRIDE)
-            .chain(self.points.get(range.end))
-        {
-            for (m, &(east_m, north_m)) in sampled.iter_mut().zip(&points_m) {
-                let (dx, dy) = (east_m - w.east_m, north_m - w.north_m);
-                *m = math::min(*m, dx * dx + dy * dy);
-            }
-        }
-        // The key of the segment that starts (or ends) at the nearest sampled point is at most
-        // this (the margins cover the rounding of the two ways of computing a distance, and a
-        // point on the path).
-        let mut reject = [0.0; N];
-        for ((r, b), m) in reject.iter_mut().zip(&best).zip(&sampled) {
-            *r = math::min(b.key, m * ((1.0 + VERTEX_TIE) * 1.001) + 1e-4);
-        }
         let last = self.len.saturating_sub(2);
         // The least key so far and its segment (of the range; `usize::MAX`: the best passed
-        // in): a new best writes these two only, and the winner's foot is worked out again
-        // after the search by the same arithmetic. A search where every segment is nearer
-        // than the one before (a path that closes in on the point within the pruning's
-        // margin) then costs two stores a segment more than one where none is, not seven.
+        // in). In the loop a foot off its segment is a corner, a key `VERTEX_TIE` farther,
+        // on every segment: no more than the key `clamped` gives, which the path's two end
+        // segments (a foot beyond the path's end is not a corner) are given after it.
         let mut least = best.map(|b| b.key);
         let mut winner = [usize::MAX; N];
         let segments = points.iter().zip(directions).zip(starts.iter().zip(ends));
         for (k, ((a, &direction), (&s_a, &s_b))) in segments.enumerate() {
             let length = s_b - s_a;
-            for (((l, w), r), &point) in least
-                .iter_mut()
-                .zip(winner.iter_mut())
-                .zip(reject.iter_mut())
-                .zip(&points_m)
-            {
-                let (along, _, d2) = foot(a, direction, length, point);
-                // A key is at least the distance: no key this far beats the best (nor a
-                // NaN's, below).
-                if d2 >= *r {
-                    continue;
-                }
-                let key = Best::key(d2, clamped(along, length, first + k, last));
+            for ((l, w), &point) in least.iter_mut().zip(winner.iter_mut()).zip(&points_m) {
+                let f = foot(a, direction, length, point);
+                let key = if f.off != 0.0 {
+                    f.d2 * (1.0 + VERTEX_TIE)
+                } else {
+                    f.d2
+                };
                 if key < *l {
                     *l = key;
                     *w = k;
-                    *r = key;
+                }
+            }
+        }
+        // The end segments' own keys, in the order the loop met them: the first segment before
+        // every later one of an equal key (not before the best passed in), the last after
+        // every earlier one.
+        for end in [0, last] {
+            let Some(k) = end.checked_sub(first).filter(|&k| k < points.len()) else {
+                continue;
+            };
+            let (Some(a), Some(&direction), Some(&s_a), Some(&s_b)) =
+                (points.get(k), directions.get(k), starts.get(k), ends.get(k))
+            else {
+                continue;
+            };
+            let length = s_b - s_a;
+            for ((l, w), &point) in least.iter_mut().zip(winner.iter_mut()).zip(&points_m) {
+                let f = foot(a, direction, length, point);
+                let key = Best::key(f.d2, clamped(f.along, length, end, last));
+                let wins = if end == first {
+                    key < *l || (key == *l && *w != usize::MAX)
+                } else {
+                    key < *l || *w == k
+                };
+                if wins {
+                    *l = key;
+                    *w = k;
                 }
             }
         }
@@ -854,15 +869,15 @@ impl Path {
                 continue;
             };
             let length = s_b - s_a;
-            let (along, lateral, d2) = foot(a, direction, length, point);
-            let clamped = clamped(along, length, first + w, last);
+            let f = foot(a, direction, length, point);
+            let clamped = clamped(f.along, length, first + w, last);
             *b = Best {
                 segment: first + w,
-                d2,
-                key: Best::key(d2, clamped),
+                d2: f.d2,
+                key: Best::key(f.d2, clamped),
                 clamped,
-                along,
-                lateral,
+                along: f.along,
+                lateral: f.lateral,
             };
         }
         best

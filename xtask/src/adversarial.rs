@@ -170,6 +170,10 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         path_once: rng.below(2) == 0,
         obstacles: rng.below(5) as usize,
         obstacles_at_centre: rng.below(2) == 0,
+        // Not drawn: `stages-path-far` places them so for every car, and the search's draws
+        // stay those of the figures it found.
+        obstacles_far_m: 0.0,
+        heading_rad: 0.3,
         obstacles_moving_mps: [0.0, 1.5, 30.0][rng.below(3) as usize],
         corridor_widening_m: [0.0, 0.002, -0.002][rng.below(3) as usize],
     }
