@@ -844,13 +844,20 @@ proptest! {
         f in -0.2f32..1.2,
         g in -0.2f32..1.2,
         hint in 0usize..MAX_PATH_POINTS,
+        to_hint in 0usize..MAX_PATH_POINTS,
     ) {
         let p = path_of(&pts);
         let (from, to) = (f * p.length_m(), g * p.length_m());
-        prop_assert_eq!(
-            p.narrowest_corridor(from, to, hint).unwrap(),
-            narrowest_by_brute_force(&p, from, to)
-        );
+        let brute = narrowest_by_brute_force(&p, from, to);
+        prop_assert_eq!(p.narrowest_corridor(from, to, hint).unwrap(), brute);
+        // The ends' searches started apart (the node starts the far end's from where it was at
+        // the station before): the same stretch, and the far end's segment as sampling finds it.
+        let located = p.narrowest_corridor_located(from, to, (hint, to_hint)).unwrap();
+        prop_assert_eq!(located.narrowest, brute);
+        let last = p.len() - 2;
+        let s_to = to.clamp(0.0, p.length_m());
+        let on = (0..=last).rev().find(|&i| p.station_of(i).unwrap() <= s_to).unwrap_or(0);
+        prop_assert_eq!(located.to_segment, on);
     }
 }
 

@@ -200,6 +200,8 @@ pub struct NarrowestLocated {
     pub left_segment: usize,
     /// The segment `narrowest.right_station_m` is on.
     pub right_segment: usize,
+    /// The segment the stretch's far end (`to_m`) is on.
+    pub to_segment: usize,
 }
 
 /// A nearest point found by `Path::nearest_split`: its projection, its squared distance and
@@ -1185,17 +1187,19 @@ impl Path {
     /// `None` without a path. What a controller needs to keep a body's side, between the axle
     /// and a corner, inside.
     pub fn narrowest_corridor(&self, from_m: f32, to_m: f32, hint: usize) -> Option<Narrowest> {
-        self.narrowest_corridor_located(from_m, to_m, hint)
+        self.narrowest_corridor_located(from_m, to_m, (hint, hint))
             .map(|located| located.narrowest)
     }
 
-    /// [`Path::narrowest_corridor`], with the segments its two stations are on: hints that
-    /// make sampling the path there one step.
+    /// [`Path::narrowest_corridor`], with the segments its two stations are on (hints that
+    /// make sampling the path there one step) and the segment `to_m` is on; `hints` are where
+    /// the searches for `from_m`'s and `to_m`'s segments start (the result is the same from
+    /// any, [`Path::segment_at`]; a near one makes it a step or two).
     pub fn narrowest_corridor_located(
         &self,
         from_m: f32,
         to_m: f32,
-        hint: usize,
+        hints: (usize, usize),
     ) -> Option<NarrowestLocated> {
         if self.len < 2 || !(from_m.is_finite() && to_m.is_finite()) {
             return None;
@@ -1209,7 +1213,12 @@ impl Path {
         };
         let length = self.length_m();
         let (a, b) = (math::clamp(lo, 0.0, length), math::clamp(hi, 0.0, length));
-        let (seg_a, seg_b) = (self.segment_at(a, hint), self.segment_at(b, hint));
+        let (hint_a, hint_b) = if from_m <= to_m {
+            hints
+        } else {
+            (hints.1, hints.0)
+        };
+        let (seg_a, seg_b) = (self.segment_at(a, hint_a), self.segment_at(b, hint_b));
         let start = self.widths_in(seg_a, a)?;
         let end = self.widths_in(seg_b, b)?;
         let first = seg_a + 1;
@@ -1281,6 +1290,7 @@ impl Path {
             },
             left_segment,
             right_segment,
+            to_segment: if ahead { seg_b } else { seg_a },
         })
     }
 

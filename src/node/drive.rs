@@ -798,14 +798,17 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
 
 /// Where the corridor binds the body's left and right sides between the rear axle at station
 /// `axle_m` and the body's end at `end_m` ([`Path::narrowest_corridor`]); one path sample when
-/// both sides bind at the same station (the end's corners, mostly).
+/// both sides bind at the same station (the end's corners, mostly). `hints` start the searches
+/// for the axle's and the end's segments; `end_hint` is set to the end's, for the next station.
 fn side_points(
     path: &Path,
     axle_m: f32,
     end_m: f32,
     hint: usize,
+    end_hint: &mut usize,
 ) -> Option<(SidePoint, SidePoint)> {
-    let located = path.narrowest_corridor_located(axle_m, end_m, hint)?;
+    let located = path.narrowest_corridor_located(axle_m, end_m, (hint, *end_hint))?;
+    *end_hint = located.to_segment;
     let n = located.narrowest;
     let widths = (n.left_m, n.right_m);
     let left = SidePoint {
@@ -949,14 +952,17 @@ fn mpc_tick<P: StageProbe>(
     // there walk the body's length).
     let mut s = s0;
     let mut seg = hint;
+    // The body's ends' segments, each the next station's hint: the ends move on as the
+    // stations do, a step or two of the search rather than a body's length from the axle.
+    let (mut front_seg, mut rear_seg) = (hint, hint);
     for (k, r) in reference.iter_mut().enumerate() {
         if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
             s += 0.5 * (v0 + v1) * stage.stage_s(k - 1);
         }
         seg = path.segment_hint(s, seg);
         let at = path.sample(s, seg)?;
-        let (front_left, front_right) = side_points(path, s, s + front, seg)?;
-        let (rear_left, rear_right) = side_points(path, s, s - rear, seg)?;
+        let (front_left, front_right) = side_points(path, s, s + front, seg, &mut front_seg)?;
+        let (rear_left, rear_right) = side_points(path, s, s - rear, seg, &mut rear_seg)?;
         *r = ReferencePoint {
             at: sample(&at, (at.left_m, at.right_m)),
             curvature_per_m: at.curvature_per_m,

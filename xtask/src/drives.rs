@@ -1009,11 +1009,27 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             steer: Profile::Const(0.0),
             heading_rad: 0.0,
             path_points: MAX_PATH_POINTS,
-            path_spacing_m: 0.08,
+            path_spacing_m: 0.06,
             obstacles: MAX_OBSTACLES,
             obstacles_far_m: FAR_OBSTACLE_M,
             corridor_widening_m: 0.002,
             ..plain("stages-path-far")
+        },
+        // The densest path the node accepts (`control::path::MIN_SEGMENT_M`: PATH_POINT's
+        // 0.02 m grid allows (0.04, 0.04) m steps, 0.057 m, where a planner's own spacing is
+        // 0.08 m), driven slowly enough that the plan's horizon and the body stay on it: every
+        // search the reference makes in metres holds the most points it can (127 366
+        // instructions in drive_reference for the published car, 123 847 on the drives above).
+        Spec {
+            seconds: (9.0_f64).max(5.0 + 40.0 * period_s),
+            speed: Profile::Const(1.5),
+            steer: Profile::Const(0.0),
+            heading_rad: core::f64::consts::FRAC_PI_4,
+            path_points: MAX_PATH_POINTS,
+            path_spacing_m: DENSEST_SPACING_M,
+            obstacles: MAX_OBSTACLES,
+            corridor_widening_m: 0.002,
+            ..plain("stages-path-densest")
         },
         // Obstacles sent every tick as they move: the planner frames whose handling fits a
         // slot's motion (docs/bus.md, "Obstacles that move"), every slot's fit closing in the
@@ -1040,6 +1056,10 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
 /// of its first point, 600^2 + 22.4^2, is 0.14 % above its last's, 600^2 + 2^2 (the node's
 /// search once pruned by 0.3 %).
 const FAR_OBSTACLE_M: f64 = 600.0;
+
+/// `stages-path-densest`'s spacing, m: the bus's grid steps (0.04, 0.04) m along a diagonal,
+/// the least spacing above `control::path::MIN_SEGMENT_M` a decoded path can have.
+const DENSEST_SPACING_M: f64 = 0.04 * core::f64::consts::SQRT_2;
 
 /// The radius of `stages-path-arc`'s path, m.
 const ARC_RADIUS_M: f64 = 40.0;
