@@ -798,8 +798,9 @@ fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {
 
 /// Where the corridor binds the body's left and right sides between the rear axle at station
 /// `axle_m` and the body's end at `end_m` ([`Path::narrowest_corridor`]); one path sample when
-/// both sides bind at the same station (the end's corners, mostly). `hints` start the searches
-/// for the axle's and the end's segments; `end_hint` is set to the end's, for the next station.
+/// both sides bind at the same station (the end's corners, mostly). `hint` and `end_hint`
+/// start the searches for the axle's and the end's segments; `end_hint` is then set to the
+/// end's, for the next station.
 fn side_points(
     path: &Path,
     axle_m: f32,
