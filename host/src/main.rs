@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use catmodel_host::outputs::{Kind, Paths};
 use catmodel_host::progress::Progress;
 use catmodel_host::{csv2can, decode, evaluate, identify, logcsv, model_file, replay, sim};
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(
@@ -22,265 +22,304 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run the built-in plant simulator: writes DIR/NAME.csv, DIR/NAME.can.log, DIR/NAME.truth.csv.
-    SimulateDrive {
-        /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
-        /// circle-left, circle-right, validation, smoke, standstill, parked-1h, suburb, steps-at-speed.
-        #[arg(long)]
-        scenario: String,
-        /// Output directory.
-        #[arg(long)]
-        out: PathBuf,
-        /// Repetition (noise and small command variations).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Vehicle parameters (TOML); default: the CAT Vehicle.
-        #[arg(long)]
-        vehicle: Option<PathBuf>,
-        /// GNSS receiver: standard (the vehicle file's) or rtk (survey grade: 1 cm, as
-        /// `closed-loop --receiver rtk`).
-        #[arg(long, default_value = "standard")]
-        receiver: String,
-        /// Inject sensor faults (GNSS dropouts and outliers, lost reports).
-        #[arg(long)]
-        faults: bool,
-    },
+    SimulateDrive(SimulateDriveArgs),
     /// Encode a log (CSV schema) as the node's input frames, candump format.
-    Csv2can {
-        /// Log CSV.
-        log: PathBuf,
-        /// candump file to write.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Csv2can(Csv2canArgs),
     /// Run the very same Node as the firmware over a candump log.
-    Replay {
-        /// candump log of the node's input frames.
-        log: PathBuf,
-        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
-        #[arg(long, value_parser = parse_origin)]
-        origin: Option<(f64, f64)>,
-        /// Predictions CSV to write (`t,step,horizon_s,x,y,heading,speed,mode`).
-        #[arg(long)]
-        out: PathBuf,
-        /// Also write the frames the node sends, candump, stamped with the tick time.
-        #[arg(long)]
-        tx_out: Option<PathBuf>,
-        /// Model file (default: the published models, models/paper.toml, as in the firmware).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
-        /// holds several.
-        #[arg(long, value_name = "NAME")]
-        interface: Option<String>,
-    },
+    Replay(ReplayArgs),
     /// Score predictions against ground truth, beside a kinematic raw-GNSS baseline.
-    Evaluate {
-        /// Predictions CSV from `replay`.
-        predictions: PathBuf,
-        /// Ground truth CSV (`t,x,y,heading,yaw_rate,speed`).
-        #[arg(long)]
-        truth: PathBuf,
-        /// The candump the predictions came from (for the baseline and raw GNSS); default:
-        /// NAME.can.log beside NAME.truth.csv.
-        #[arg(long)]
-        inputs: Option<PathBuf>,
-        /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
-        #[arg(long, value_parser = parse_origin)]
-        origin: Option<(f64, f64)>,
-        /// The car's model file (its geometry for the kinematic baseline, its GNSS antenna and
-        /// receiver address; default: models/paper.toml).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Also write the evaluation as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Write figures (SVG) into this directory: path.svg, error_vs_horizon.svg,
-        /// gnss_window.svg, position_error_time.svg.
-        #[arg(long, value_name = "DIR")]
-        plots: Option<PathBuf>,
-    },
+    Evaluate(EvaluateArgs),
     /// Identify the models (eq 5, eq 7, lateral) from driving logs; write a model file.
-    Identify {
-        /// Training logs (CSV schema).
-        #[arg(required = true)]
-        logs: Vec<PathBuf>,
-        /// Validation logs.
-        #[arg(long, num_args = 1..)]
-        validate: Vec<PathBuf>,
-        /// Model file to write (TOML).
-        #[arg(long)]
-        out: PathBuf,
-        /// Write a report (Markdown summary and SVG plots) into this directory.
-        #[arg(long)]
-        report: Option<PathBuf>,
-        /// Vehicle, hybrid thresholds and fallback models from this model file
-        /// (default: models/paper.toml as built in).
-        #[arg(long)]
-        base: Option<PathBuf>,
-        /// The car the logs come from: a TOML file with the model file's [vehicle] table and
-        /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
-        #[arg(long)]
-        vehicle: Option<PathBuf>,
-        /// Write the model even if a fit is below the floor (the warning goes into the file),
-        /// or a log's wheel speed is not in m/s by its GNSS track (km/h, mph).
-        #[arg(long)]
-        force: bool,
-    },
+    Identify(IdentifyArgs),
     /// The steering actuator's lag (`[vehicle] steer_lag_s`) and, when the session shows it, its
     /// rate limit (`max_steer_rate_pct_per_s`) from candump logs of a session in which the
     /// controller drove: its CONTROL_COMMAND frames and the car's STEERING_REPORT.
-    IdentifySteering {
-        /// candump logs (e.g. a recorder's of the whole bus, or closed-loop's session.can.log
-        /// and session.tx.log), merged by time.
-        #[arg(required = true)]
-        logs: Vec<PathBuf>,
-        /// The car's model file: its steering rate limit is used when the session does not
-        /// show the limit, and compared with it when it does.
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// The fit's window starts here, s of the logs' clock (default: a second after the
-        /// first tracking command).
-        #[arg(long)]
-        from: Option<f64>,
-        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
-        /// holds several.
-        #[arg(long, value_name = "NAME")]
-        interface: Option<String>,
-    },
+    IdentifySteering(IdentifySteeringArgs),
     /// The GNSS receiver's error (`[control] position_uncertainty_m`) from candump logs of the
     /// car parked: each axis's deviation and correlation time, and the bound to declare.
-    ReceiverError {
-        /// candump logs, merged by time.
-        #[arg(required = true)]
-        logs: Vec<PathBuf>,
-        /// The car's model file: the receiver's NMEA 2000 source address (default: the
-        /// published car's).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
-        /// holds several.
-        #[arg(long, value_name = "NAME")]
-        interface: Option<String>,
-    },
+    ReceiverError(ReceiverErrorArgs),
     /// Simulate each model of a model file over one log, beside the kinematic model.
-    Compare {
-        /// Log CSV.
-        log: PathBuf,
-        /// Model file.
-        #[arg(long)]
-        model: PathBuf,
-        /// CSV to write: t,vel,vel_model,vel_kinematic,dx,dx_model,dx_kinematic.
-        #[arg(long)]
-        out: Option<PathBuf>,
-    },
+    Compare(CompareArgs),
     /// Close the loop: the plant simulator, the node and its controller on one bus, over a
     /// scenario (dlc, obstacle, loop, crossing); writes DIR/session.can.log, session.tx.log,
     /// metrics.json and plots.
-    ClosedLoop {
-        /// dlc (ISO 3888-2 double lane change), obstacle, loop, crossing (a pedestrian).
-        #[arg(long)]
-        scenario: String,
-        /// mpc or pure-pursuit.
-        #[arg(long, default_value = "mpc")]
-        controller: String,
-        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
-        #[arg(long)]
-        vehicle: Option<PathBuf>,
-        /// Model file for the node (default: the published models). Without --vehicle the
-        /// plant's GNSS receiver is the one the file declares (its rate and antenna).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
-        #[arg(long, default_value = "rtk")]
-        receiver: String,
-        /// Target speed, m/s (default: the scenario's).
-        #[arg(long)]
-        speed: Option<f64>,
-        /// Sensor noise seed.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// The planner replans: it sends the path (a new path id) and obstacles again every
-        /// SECONDS (default: once).
-        #[arg(long, value_name = "SECONDS")]
-        replan_every: Option<f64>,
-        /// The car starts this far to the right of the path's first point (negative: left), m:
-        /// how the controller returns to a path it is not on.
-        #[arg(
-            long,
-            value_name = "METRES",
-            default_value_t = 0.0,
-            allow_negative_numbers = true
-        )]
-        start_offset: f64,
-        /// Inject the vehicle file's sensor faults (its [faults]: GNSS outages and outliers,
-        /// lost bus reports), as simulate-drive does; off by default.
-        #[arg(long)]
-        faults: bool,
-        /// Output directory.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    ClosedLoop(ClosedLoopArgs),
     /// The ISO 3888-2 double lane change's speeds for one car: each controller's highest clean
     /// speed (3 seeds, RTK receiver) and the offline optimiser's limit (perfect plant
     /// knowledge); prints JSON.
-    DlcLimits {
-        /// Controllers to measure (pure-pursuit, mpc), comma-separated.
-        #[arg(long, default_value = "pure-pursuit", value_delimiter = ',')]
-        controllers: Vec<String>,
-        /// Also run the offline optimiser (minutes).
-        #[arg(long)]
-        optimal: bool,
-        /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
-        #[arg(long)]
-        vehicle: Option<PathBuf>,
-        /// Model file for the node (default: the published models).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Also write the result as JSON.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Write the optimiser's best run at its limit as figures into this directory.
-        #[arg(long, value_name = "DIR")]
-        plots: Option<PathBuf>,
-    },
+    DlcLimits(DlcLimitsArgs),
     /// Software in the loop: the node (and its controller) in lockstep over stdin/stdout.
     /// Input lines: candump frames and `TICK SECONDS.UUUUUU`, every 20 ms on multiples of
     /// 0.020000 s; on each TICK the node runs and writes that tick's frames as candump lines,
     /// then `END SECONDS.UUUUUU`.
-    Sil {
-        /// Talk over stdin/stdout (the only transport).
-        #[arg(long, required = true)]
-        stdio: bool,
-        /// Model file (default: the published models).
-        #[arg(long)]
-        model: Option<PathBuf>,
-        /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
-        #[arg(long, value_parser = parse_origin)]
-        origin: Option<(f64, f64)>,
-    },
+    Sil(SilArgs),
     /// Decode a candump log (e.g. target/qemu/tx.log) with catmodel.dbc: signals, CRC, counters.
-    Decode {
-        /// candump log.
-        log: PathBuf,
-        /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
-        #[arg(long, value_delimiter = ',')]
-        messages: Vec<String>,
-        /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
-        #[arg(long)]
-        csv: bool,
-        /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
-        /// holds several.
-        #[arg(long, value_name = "NAME")]
-        interface: Option<String>,
-    },
+    Decode(DecodeArgs),
     /// Print the discrete state-space matrices of every model block as JSON.
-    Discretize {
-        /// Model file.
-        model: PathBuf,
-        /// Sample time, s (default: the file's).
-        #[arg(long)]
-        ts: Option<f64>,
-    },
+    Discretize(DiscretizeArgs),
+}
+
+#[derive(Args)]
+struct SimulateDriveArgs {
+    /// straight-2.5, straight-5, straight-7.5, straight-10, turn-left, turn-right,
+    /// circle-left, circle-right, validation, smoke, standstill, parked-1h, suburb, steps-at-speed.
+    #[arg(long)]
+    scenario: String,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Repetition (noise and small command variations).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Vehicle parameters (TOML); default: the CAT Vehicle.
+    #[arg(long)]
+    vehicle: Option<PathBuf>,
+    /// GNSS receiver: standard (the vehicle file's) or rtk (survey grade: 1 cm, as
+    /// `closed-loop --receiver rtk`).
+    #[arg(long, default_value = "standard")]
+    receiver: String,
+    /// Inject sensor faults (GNSS dropouts and outliers, lost reports).
+    #[arg(long)]
+    faults: bool,
+}
+
+#[derive(Args)]
+struct Csv2canArgs {
+    /// Log CSV.
+    log: PathBuf,
+    /// candump file to write.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct ReplayArgs {
+    /// candump log of the node's input frames.
+    log: PathBuf,
+    /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+    #[arg(long, value_parser = parse_origin)]
+    origin: Option<(f64, f64)>,
+    /// Predictions CSV to write (`t,step,horizon_s,x,y,heading,speed,mode`).
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write the frames the node sends, candump, stamped with the tick time.
+    #[arg(long)]
+    tx_out: Option<PathBuf>,
+    /// Model file (default: the published models, models/paper.toml, as in the firmware).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+    /// holds several.
+    #[arg(long, value_name = "NAME")]
+    interface: Option<String>,
+}
+
+#[derive(Args)]
+struct EvaluateArgs {
+    /// Predictions CSV from `replay`.
+    predictions: PathBuf,
+    /// Ground truth CSV (`t,x,y,heading,yaw_rate,speed`).
+    #[arg(long)]
+    truth: PathBuf,
+    /// The candump the predictions came from (for the baseline and raw GNSS); default:
+    /// NAME.can.log beside NAME.truth.csv.
+    #[arg(long)]
+    inputs: Option<PathBuf>,
+    /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
+    #[arg(long, value_parser = parse_origin)]
+    origin: Option<(f64, f64)>,
+    /// The car's model file (its geometry for the kinematic baseline, its GNSS antenna and
+    /// receiver address; default: models/paper.toml).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Also write the evaluation as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write figures (SVG) into this directory: path.svg, error_vs_horizon.svg,
+    /// gnss_window.svg, position_error_time.svg.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct IdentifyArgs {
+    /// Training logs (CSV schema).
+    #[arg(required = true)]
+    logs: Vec<PathBuf>,
+    /// Validation logs.
+    #[arg(long, num_args = 1..)]
+    validate: Vec<PathBuf>,
+    /// Model file to write (TOML).
+    #[arg(long)]
+    out: PathBuf,
+    /// Write a report (Markdown summary and SVG plots) into this directory.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Vehicle, hybrid thresholds and fallback models from this model file
+    /// (default: models/paper.toml as built in).
+    #[arg(long)]
+    base: Option<PathBuf>,
+    /// The car the logs come from: a TOML file with the model file's [vehicle] table and
+    /// optionally [dynamics] and [inputs] (README, "A second car"); replaces the base file's.
+    #[arg(long)]
+    vehicle: Option<PathBuf>,
+    /// Write the model even if a fit is below the floor (the warning goes into the file),
+    /// or a log's wheel speed is not in m/s by its GNSS track (km/h, mph).
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Args)]
+struct IdentifySteeringArgs {
+    /// candump logs (e.g. a recorder's of the whole bus, or closed-loop's session.can.log
+    /// and session.tx.log), merged by time.
+    #[arg(required = true)]
+    logs: Vec<PathBuf>,
+    /// The car's model file: its steering rate limit is used when the session does not
+    /// show the limit, and compared with it when it does.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// The fit's window starts here, s of the logs' clock (default: a second after the
+    /// first tracking command).
+    #[arg(long)]
+    from: Option<f64>,
+    /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+    /// holds several.
+    #[arg(long, value_name = "NAME")]
+    interface: Option<String>,
+}
+
+#[derive(Args)]
+struct ReceiverErrorArgs {
+    /// candump logs, merged by time.
+    #[arg(required = true)]
+    logs: Vec<PathBuf>,
+    /// The car's model file: the receiver's NMEA 2000 source address (default: the
+    /// published car's).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+    /// holds several.
+    #[arg(long, value_name = "NAME")]
+    interface: Option<String>,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// Log CSV.
+    log: PathBuf,
+    /// Model file.
+    #[arg(long)]
+    model: PathBuf,
+    /// CSV to write: t,vel,vel_model,vel_kinematic,dx,dx_model,dx_kinematic.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct ClosedLoopArgs {
+    /// dlc (ISO 3888-2 double lane change), obstacle, loop, crossing (a pedestrian).
+    #[arg(long)]
+    scenario: String,
+    /// mpc or pure-pursuit.
+    #[arg(long, default_value = "mpc")]
+    controller: String,
+    /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+    #[arg(long)]
+    vehicle: Option<PathBuf>,
+    /// Model file for the node (default: the published models). Without --vehicle the
+    /// plant's GNSS receiver is the one the file declares (its rate and antenna).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// GNSS receiver: rtk (survey grade) or standard (the vehicle file's).
+    #[arg(long, default_value = "rtk")]
+    receiver: String,
+    /// Target speed, m/s (default: the scenario's).
+    #[arg(long)]
+    speed: Option<f64>,
+    /// Sensor noise seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The planner replans: it sends the path (a new path id) and obstacles again every
+    /// SECONDS (default: once).
+    #[arg(long, value_name = "SECONDS")]
+    replan_every: Option<f64>,
+    /// The car starts this far to the right of the path's first point (negative: left), m:
+    /// how the controller returns to a path it is not on.
+    #[arg(
+        long,
+        value_name = "METRES",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    start_offset: f64,
+    /// Inject the vehicle file's sensor faults (its [faults]: GNSS outages and outliers,
+    /// lost bus reports), as simulate-drive does; off by default.
+    #[arg(long)]
+    faults: bool,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct DlcLimitsArgs {
+    /// Controllers to measure (pure-pursuit, mpc), comma-separated.
+    #[arg(long, default_value = "pure-pursuit", value_delimiter = ',')]
+    controllers: Vec<String>,
+    /// Also run the offline optimiser (minutes).
+    #[arg(long)]
+    optimal: bool,
+    /// Vehicle parameters of the plant (TOML); default: the CAT Vehicle.
+    #[arg(long)]
+    vehicle: Option<PathBuf>,
+    /// Model file for the node (default: the published models).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Also write the result as JSON.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write the optimiser's best run at its limit as figures into this directory.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct SilArgs {
+    /// Talk over stdin/stdout (the only transport).
+    #[arg(long, required = true)]
+    stdio: bool,
+    /// Model file (default: the published models).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
+    #[arg(long, value_parser = parse_origin)]
+    origin: Option<(f64, f64)>,
+}
+
+#[derive(Args)]
+struct DecodeArgs {
+    /// candump log.
+    log: PathBuf,
+    /// Only these messages: names, NAME* for a prefix, or hex ids; comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    messages: Vec<String>,
+    /// Long CSV, one row per signal: t_s,id,message,check,signal,raw,value,unit,label,data.
+    #[arg(long)]
+    csv: bool,
+    /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
+    /// holds several.
+    #[arg(long, value_name = "NAME")]
+    interface: Option<String>,
+}
+
+#[derive(Args)]
+struct DiscretizeArgs {
+    /// Model file.
+    model: PathBuf,
+    /// Sample time, s (default: the file's).
+    #[arg(long)]
+    ts: Option<f64>,
 }
 
 /// The published model file, built into the binary.
@@ -325,632 +364,752 @@ fn main() -> ExitCode {
     }
 }
 
+/// Runs the subcommand the command line names.
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::SimulateDrive {
-            scenario,
-            out,
-            seed,
-            vehicle,
-            receiver,
-            faults,
-        } => {
-            let mut paths = Paths::new()
-                .input_opt(vehicle.as_deref(), "--vehicle")
-                .output(&out, "--out", Kind::Dir);
-            for ext in ["csv", "can.log", "truth.csv"] {
-                paths = paths.output(&out.join(format!("{scenario}.{ext}")), "--out", Kind::File);
-            }
-            paths.check()?;
-            let options = sim::SimOptions {
-                seed,
-                faults,
-                ..sim::SimOptions::default()
-            };
-            let receiver =
-                catmodel_host::closed_loop::Receiver::from_name(&receiver).ok_or_else(|| {
-                    anyhow::anyhow!("unknown receiver `{receiver}`; known: standard, rtk")
-                })?;
-            let mut cfg =
-                sim::load_vehicle(vehicle.as_deref()).map_err(|e| anyhow::anyhow!("{e}"))?;
-            receiver.apply(&mut cfg.sensors.gnss);
-            let progress = Progress::spinner(&format!("simulating {scenario}"));
-            let output =
-                sim::run_named_on(&scenario, &cfg, &options).map_err(|e| anyhow::anyhow!("{e}"))?;
-            progress.set_message("writing");
-            let (log_path, truth_path) =
-                sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let can_path = out.join(format!("{scenario}.can.log"));
-            let encoded = csv2can::encode_log(&output.log)?;
-            replay::write_file(&can_path, &csv2can::to_candump(&encoded.frames))?;
+        Command::SimulateDrive(args) => simulate_drive(args),
+        Command::Csv2can(args) => csv2can(args),
+        Command::Replay(args) => replay(args),
+        Command::Evaluate(args) => evaluate(args),
+        Command::Identify(args) => identify(args),
+        Command::IdentifySteering(args) => identify_steering(args),
+        Command::ReceiverError(args) => receiver_error(args),
+        Command::Compare(args) => compare(args),
+        Command::ClosedLoop(args) => closed_loop(args),
+        Command::DlcLimits(args) => dlc_limits(args),
+        Command::Sil(args) => sil(args),
+        Command::Decode(args) => decode(args),
+        Command::Discretize(args) => discretize(args),
+    }
+}
+
+/// Simulates a scenario on the plant and writes its log, candump and ground truth.
+fn simulate_drive(args: SimulateDriveArgs) -> Result<()> {
+    let SimulateDriveArgs {
+        scenario,
+        out,
+        seed,
+        vehicle,
+        receiver,
+        faults,
+    } = args;
+    let mut paths = Paths::new()
+        .input_opt(vehicle.as_deref(), "--vehicle")
+        .output(&out, "--out", Kind::Dir);
+    for ext in ["csv", "can.log", "truth.csv"] {
+        paths = paths.output(&out.join(format!("{scenario}.{ext}")), "--out", Kind::File);
+    }
+    paths.check()?;
+    let options = sim::SimOptions {
+        seed,
+        faults,
+        ..sim::SimOptions::default()
+    };
+    let receiver = catmodel_host::closed_loop::Receiver::from_name(&receiver)
+        .ok_or_else(|| anyhow::anyhow!("unknown receiver `{receiver}`; known: standard, rtk"))?;
+    let mut cfg = sim::load_vehicle(vehicle.as_deref()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    receiver.apply(&mut cfg.sensors.gnss);
+    let progress = Progress::spinner(&format!("simulating {scenario}"));
+    let output =
+        sim::run_named_on(&scenario, &cfg, &options).map_err(|e| anyhow::anyhow!("{e}"))?;
+    progress.set_message("writing");
+    let (log_path, truth_path) =
+        sim::write_outputs(&out, &scenario, &output).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let can_path = out.join(format!("{scenario}.can.log"));
+    let encoded = csv2can::encode_log(&output.log)?;
+    replay::write_file(&can_path, &csv2can::to_candump(&encoded.frames))?;
+    progress.finish();
+    eprintln!(
+        "wrote {}, {}, {}",
+        log_path.display(),
+        can_path.display(),
+        truth_path.display()
+    );
+    Ok(())
+}
+
+/// Encodes a CSV log as the node's input frames, candump.
+fn csv2can(args: Csv2canArgs) -> Result<()> {
+    let Csv2canArgs { log, out } = args;
+    Paths::new()
+        .input(&log, "LOG")
+        .output(&out, "--out", Kind::File)
+        .check()?;
+    let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
+    print_notes(&read.notes.messages());
+    if read.rows.is_empty() {
+        // An empty candump would replay to nothing, with success: not a drive.
+        bail!(
+            "{}: no data rows (a header alone): a log with no rows is not a drive; \
+             nothing written to {}",
+            log.display(),
+            out.display()
+        );
+    }
+    let encoded =
+        csv2can::encode_log(&read.rows).map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
+    if let Some(note) = encoded.note() {
+        print_notes(&[format!("{}: {note}", log.display())]);
+    }
+    replay::write_file(&out, &csv2can::to_candump(&encoded.frames))?;
+    eprintln!("wrote {} frames to {}", encoded.frames.len(), out.display());
+    Ok(())
+}
+
+/// Runs the node over a candump log and writes its predictions.
+fn replay(args: ReplayArgs) -> Result<()> {
+    let ReplayArgs {
+        log,
+        origin,
+        out,
+        tx_out,
+        model,
+        interface,
+    } = args;
+    Paths::new()
+        .input(&log, "LOG")
+        .input_opt(model.as_deref(), "--model")
+        .output(&out, "--out", Kind::File)
+        .output_opt(tx_out.as_deref(), "--tx-out", Kind::File)
+        .check()?;
+    let reading = Progress::spinner(&format!("reading {}", log.display()));
+    let text = replay::read_bytes(&log)?;
+    reading.finish();
+    let mut config = catmodel_host::node_config(model.as_deref())?;
+    config.origin_e7 = origin.map(to_e7);
+    let declared_hz = 1.0 / f64::from(config.estimator.gnss_period_s);
+    let still = config.estimator.course_min_speed_mps;
+    let (result, report) = replay_with_progress(
+        &log,
+        &text,
+        interface.as_deref(),
+        config,
+        &out,
+        tx_out.as_deref(),
+    )?;
+    replay::print_report(&log, &report);
+    print_replay_counts(&result);
+    print_replay_warnings(&result, &report, declared_hz, still);
+    Ok(())
+}
+
+/// Replays a log's bytes through the node under a progress bar, writing `out` (and `tx_out`).
+fn replay_with_progress(
+    log: &Path,
+    text: &[u8],
+    interface: Option<&str>,
+    config: catmodel::node::NodeConfig,
+    out: &Path,
+    tx_out: Option<&Path>,
+) -> Result<(replay::ReplayStats, replay::LogReport)> {
+    let progress = Progress::bar(replay::estimate_ticks(text), "replay");
+    let mut done = 0;
+    // The log is parsed while the node runs; the files are written only if it all
+    // parses.
+    let replayed = replay::replay_file(log, text, interface, config, out, tx_out, |ticks| {
+        progress.inc(ticks - done);
+        done = ticks;
+    })?;
+    progress.finish();
+    Ok(replayed)
+}
+
+/// What the replay read and rejected, on stderr: frames, ticks, the node's counters, and
+/// what it refused of a planner's messages.
+fn print_replay_counts(result: &replay::ReplayStats) {
+    let c = result.counters;
+    eprintln!(
+        "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
+        result.frames + result.filtered, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
+        c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
+        result.unsupported
+    );
+    // Logs with a planner on the bus: what it sent and the node refused (NODE_STATUS
+    // carries only a bit of it).
+    if result.planner.counters != Default::default() {
+        eprintln!("catmodel: {}", result.planner);
+    }
+}
+
+/// The replay's warnings on stderr: the receiver's rate, the steering, the local frame's
+/// reach, and why the node never had a position if it did not.
+fn print_replay_warnings(
+    result: &replay::ReplayStats,
+    report: &replay::LogReport,
+    declared_hz: f64,
+    still: f32,
+) {
+    let c = result.counters;
+    if let Some(note) = catmodel_host::gnss_rate_note(&c, result.gnss_rate, declared_hz) {
+        eprintln!("catmodel: warning: {note}");
+    }
+    if let Some(note) =
+        catmodel_host::steering_note(&result.steering, Some(result.steering_mismatch_ticks))
+    {
+        eprintln!("catmodel: warning: {note}");
+    }
+    if let Some(note) = replay::frame_note(result) {
+        eprintln!("catmodel: warning: {note}");
+    }
+    // No position at any tick (the rate's mismatch and the frame's reach have their
+    // own warnings above): why, as far as the replay can tell.
+    let no_position = result.ticks > 0
+        && result.valid_ticks == 0
+        && c.gnss_rate_mismatch == 0
+        && result.fixes_beyond_frame == 0;
+    if no_position && result.max_speed_mps < still {
+        eprintln!(
+            "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \
+             A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
+            result.ticks, result.max_speed_mps
+        );
+    } else if no_position && report.timestamps.batched() {
+        eprintln!(
+            "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate): \
+             the log's timestamps come in batches (the warning above), which bunch the fixes in time",
+            result.ticks, c.gnss_gate_rejects
+        );
+    } else if no_position {
+        eprintln!(
+            "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
+             Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",
+            result.ticks, c.gnss_gate_rejects
+        );
+    }
+}
+
+/// Scores predictions against ground truth and the kinematic baseline.
+fn evaluate(args: EvaluateArgs) -> Result<()> {
+    let EvaluateArgs {
+        predictions,
+        truth,
+        inputs,
+        origin,
+        model,
+        json,
+        plots,
+    } = args;
+    let (inputs, inputs_arg) = match inputs {
+        Some(p) => (p, "--inputs"),
+        None => (sibling_candump(&truth)?, "--inputs (its default)"),
+    };
+    Paths::new()
+        .input(&predictions, "PREDICTIONS")
+        .input(&truth, "--truth")
+        .input(&inputs, inputs_arg)
+        .input_opt(model.as_deref(), "--model")
+        .output_opt(json.as_deref(), "--json", Kind::File)
+        .output_opt(plots.as_deref(), "--plots", Kind::Dir)
+        .check()?;
+    let model = model_file::load(&model.unwrap_or_else(model_file::paper_path))?;
+    let car = catmodel_host::Car::from_model(&model);
+    let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
+    let progress = Progress::spinner("reading");
+    let data = catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
+    progress.set_message("evaluating");
+    let e = data.evaluate();
+    let e = match e {
+        Ok(e) => e,
+        Err(err) => {
             progress.finish();
+            return Err(err);
+        }
+    };
+    let written = match &plots {
+        Some(dir) => {
+            progress.set_message("plotting");
+            data.write_plots(dir, &e)?
+        }
+        None => Vec::new(),
+    };
+    progress.finish();
+    print!("{}", evaluate::format_table(&e));
+    if let Some(path) = json {
+        replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
+    }
+    for p in written {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// Identifies the models from driving logs and writes the model file.
+fn identify(args: IdentifyArgs) -> Result<()> {
+    let IdentifyArgs {
+        logs,
+        validate,
+        out,
+        report,
+        base,
+        vehicle,
+        force,
+    } = args;
+    Paths::new()
+        .inputs(&logs, "LOGS")
+        .inputs(&validate, "--validate")
+        .input_opt(base.as_deref(), "--base")
+        .input_opt(vehicle.as_deref(), "--vehicle")
+        .output(&out, "--out", Kind::File)
+        .output_opt(report.as_deref(), "--report", Kind::Dir)
+        .check()?;
+    let base = load_base(base.as_deref())?;
+    let base = match vehicle {
+        Some(car) => identify::car::apply(&base, &car)?,
+        None => base,
+    };
+    let opts = identify::IdentifyOptions::default();
+    let [training, validation] = read_identify_logs(&logs, &validate, &base, &opts)?;
+    for e in training.iter().chain(&validation) {
+        print_notes(&e.log_notes);
+    }
+    // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
+    // word and a wrong model (review finding 04): refused before the minutes of fitting.
+    let units = speed_unit_problems(
+        logs.iter().chain(&validate),
+        training.iter().chain(&validation),
+    );
+    refuse_speed_units(&units, &out, force)?;
+    let mut id = fit_models(training, validation, &base, &opts)?;
+    print!("{}", identify::summary(&id));
+    // The report first: it is what shows why a model falls below the floor.
+    if let Some(dir) = report {
+        let index = identify::report::write_report(&dir, &id)?;
+        eprintln!("wrote {}", index.display());
+    }
+    refuse_steering_problem(&id, &out, force)?;
+    let violations = check_fit_floor(&id, &logs, &out, force)?;
+    identify::floor::mark_forced(&mut id.model, &violations);
+    write_identified_model(&out, &id.model)
+}
+
+/// Reads and preprocesses the training and validation logs under a progress bar.
+fn read_identify_logs(
+    logs: &[PathBuf],
+    validate: &[PathBuf],
+    base: &model_file::ModelFile,
+    opts: &identify::IdentifyOptions,
+) -> Result<[Vec<identify::preprocess::Experiment>; 2]> {
+    let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
+        .with_message("reading logs");
+    let sets = identify::load_sets([logs, validate], &base.vehicle, &opts.preprocess, || {
+        progress.inc(1)
+    })?;
+    progress.finish_and_clear();
+    Ok(sets)
+}
+
+/// Refuses logs whose wheel speed is not in m/s ([`speed_unit_problems`]) before fitting;
+/// with `--force`, warns and goes on.
+fn refuse_speed_units(units: &[String], out: &Path, force: bool) -> Result<()> {
+    if !units.is_empty() {
+        if !force {
+            bail!(
+                "{}\n{} not written: the wheel speed is not the log schema's (m/s by \
+                 the GNSS track, negative in reverse) in {} case(s) (--force identifies \
+                 anyway)",
+                units.join("\n"),
+                out.display(),
+                units.len()
+            );
+        }
+        for u in units {
+            eprintln!("catmodel: warning: {u} (identified anyway: --force)");
+        }
+    }
+    Ok(())
+}
+
+/// Fits the models to the logs under a spinner.
+fn fit_models(
+    training: Vec<identify::preprocess::Experiment>,
+    validation: Vec<identify::preprocess::Experiment>,
+    base: &model_file::ModelFile,
+    opts: &identify::IdentifyOptions,
+) -> Result<identify::Identification> {
+    let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
+    spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+    let id = identify::identify(training, validation, base, opts)?;
+    spinner.finish_and_clear();
+    Ok(id)
+}
+
+/// Refuses a training steering the fit found wrong; with `--force`, warns and goes on.
+fn refuse_steering_problem(id: &identify::Identification, out: &Path, force: bool) -> Result<()> {
+    // A steering of the other sign or in degrees (review finding 01) is the log's:
+    // refused as the wheel speed's unit is; --force writes the file without [lateral].
+    if let Some(why) = &id.steering_problem {
+        if !force {
+            bail!(
+                "{why}\n{} not written: the training logs' `steer` is not the log \
+                 schema's (--force writes the file without [lateral])",
+                out.display()
+            );
+        }
+        eprintln!("catmodel: warning: {why} (identified anyway, without [lateral]: --force)");
+    }
+    Ok(())
+}
+
+/// Warns of each fit below the floor, with the training log's line that stands out if one
+/// does; refuses them unless `--force`. Returns them for the file's warning.
+fn check_fit_floor(
+    id: &identify::Identification,
+    logs: &[PathBuf],
+    out: &Path,
+    force: bool,
+) -> Result<Vec<identify::floor::FloorViolation>> {
+    let violations = identify::floor::check(id);
+    for v in &violations {
+        eprintln!("catmodel: warning: {v}");
+        if let Some((path, line, value)) = v.suspect.as_ref().and_then(|s| locate_suspect(s, logs))
+        {
             eprintln!(
-                "wrote {}, {}, {}",
-                log_path.display(),
-                can_path.display(),
-                truth_path.display()
+                "catmodel: warning: {}:{line}: this line's value {value} stands out",
+                path.display()
             );
-            Ok(())
         }
-        Command::Csv2can { log, out } => {
-            Paths::new()
-                .input(&log, "LOG")
-                .output(&out, "--out", Kind::File)
-                .check()?;
-            let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
-            print_notes(&read.notes.messages());
-            if read.rows.is_empty() {
-                // An empty candump would replay to nothing, with success: not a drive.
-                bail!(
-                    "{}: no data rows (a header alone): a log with no rows is not a drive; \
-                     nothing written to {}",
-                    log.display(),
-                    out.display()
-                );
-            }
-            let encoded = csv2can::encode_log(&read.rows)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
-            if let Some(note) = encoded.note() {
-                print_notes(&[format!("{}: {note}", log.display())]);
-            }
-            replay::write_file(&out, &csv2can::to_candump(&encoded.frames))?;
-            eprintln!("wrote {} frames to {}", encoded.frames.len(), out.display());
-            Ok(())
-        }
-        Command::Replay {
-            log,
-            origin,
-            out,
-            tx_out,
-            model,
-            interface,
+    }
+    if !violations.is_empty() && !force {
+        bail!(
+            "{} not written: {} fit(s) below the {} % floor (see the warnings above; --force writes it anyway, with the warning in the file)",
+            out.display(),
+            violations.len(),
+            identify::floor::FIT_FLOOR_PERCENT
+        );
+    }
+    Ok(violations)
+}
+
+/// Writes the identified model file, if the model file's reader accepts it.
+fn write_identified_model(out: &Path, model: &model_file::ModelFile) -> Result<()> {
+    // Only a file every reader loads is written (the firmware build's too): a model
+    // the reader refuses (an unstable pole, an absurd gain) is named, not saved.
+    model_file::parse(&model_file::to_toml(model), out).map_err(|e| {
+        anyhow::anyhow!(
+            "{} not written: the identified model is refused: {}",
+            out.display(),
+            e.message
+        )
+    })?;
+    model_file::save(out, model).map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
+}
+
+/// Fits the steering actuator's lag and rate limit from a session's candump logs.
+fn identify_steering(args: IdentifySteeringArgs) -> Result<()> {
+    use identify::steering::RateLimit;
+    let IdentifySteeringArgs {
+        logs,
+        model,
+        from,
+        interface,
+    } = args;
+    let file_rate = match &model {
+        Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
+        None => None,
+    };
+    let mut frames = Vec::new();
+    for log in &logs {
+        frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
+    }
+    let series = identify::steering::SteeringSeries::from_frames(&frames);
+    let f = identify::steering::fit(&series, file_rate, from)?;
+    println!(
+        "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %)",
+        f.reports, f.commands, f.from_s, f.to_s, f.span_pct
+    );
+    if series.rejected > 0 {
+        println!(
+            "  {} frames of the two messages rejected (CRC, range, length)",
+            series.rejected
+        );
+    }
+    match f.rate {
+        RateLimit::Measured {
+            pct_per_s,
+            rms_unlimited_pct,
         } => {
-            Paths::new()
-                .input(&log, "LOG")
-                .input_opt(model.as_deref(), "--model")
-                .output(&out, "--out", Kind::File)
-                .output_opt(tx_out.as_deref(), "--tx-out", Kind::File)
-                .check()?;
-            let reading = Progress::spinner(&format!("reading {}", log.display()));
-            let text = replay::read_bytes(&log)?;
-            reading.finish();
-            let mut config = catmodel_host::node_config(model.as_deref())?;
-            config.origin_e7 = origin.map(to_e7);
-            let declared_hz = 1.0 / f64::from(config.estimator.gnss_period_s);
-            let config_course_min_speed_mps = config.estimator.course_min_speed_mps;
-            let progress = Progress::bar(replay::estimate_ticks(&text), "replay");
-            let mut done = 0;
-            // The log is parsed while the node runs; the files are written only if it all
-            // parses.
-            let (result, report) = replay::replay_file(
-                &log,
-                &text,
-                interface.as_deref(),
-                config,
-                &out,
-                tx_out.as_deref(),
-                |ticks| {
-                    progress.inc(ticks - done);
-                    done = ticks;
-                },
-            )?;
-            progress.finish();
-            replay::print_report(&log, &report);
-            let c = result.counters;
-            eprintln!(
-                "replayed {} frames in {} ticks; rejected: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, time {}; skipped: {} remote/FD/error frames",
-                result.frames + result.filtered, result.ticks, c.crc_errors, c.counter_errors, c.dlc_errors,
-                c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
-                result.unsupported
+            println!(
+                "  rate limit {pct_per_s:.1} %/s (report error RMS {rms_unlimited_pct:.2} % without a limit)"
             );
-            // Logs with a planner on the bus: what it sent and the node refused (NODE_STATUS
-            // carries only a bit of it).
-            if result.planner.counters != Default::default() {
-                eprintln!("catmodel: {}", result.planner);
-            }
-            if let Some(note) = catmodel_host::gnss_rate_note(&c, result.gnss_rate, declared_hz) {
-                eprintln!("catmodel: warning: {note}");
-            }
-            if let Some(note) =
-                catmodel_host::steering_note(&result.steering, Some(result.steering_mismatch_ticks))
-            {
-                eprintln!("catmodel: warning: {note}");
-            }
-            if let Some(note) = replay::frame_note(&result) {
-                eprintln!("catmodel: warning: {note}");
-            }
-            let still = config_course_min_speed_mps;
-            // No position at any tick (the rate's mismatch and the frame's reach have their
-            // own warnings above): why, as far as the replay can tell.
-            let no_position = result.ticks > 0
-                && result.valid_ticks == 0
-                && c.gnss_rate_mismatch == 0
-                && result.fixes_beyond_frame == 0;
-            if no_position && result.max_speed_mps < still {
-                eprintln!(
-                    "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \
-                     A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
-                    result.ticks, result.max_speed_mps
-                );
-            } else if no_position && report.timestamps.batched() {
-                eprintln!(
-                    "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate): \
-                     the log's timestamps come in batches (the warning above), which bunch the fixes in time",
-                    result.ticks, c.gnss_gate_rejects
-                );
-            } else if no_position {
-                eprintln!(
-                    "catmodel: warning: the node had no valid position at any of the {} ticks: every prediction is \"not available\" ({} GNSS fixes refused by the gate). \
-                     Check the model file's vehicle.gnss_rate_hz against the receiver: a slower one times out between its fixes",
-                    result.ticks, c.gnss_gate_rejects
+            if let Some(r) = file_rate.filter(|r| (pct_per_s / r - 1.0).abs() > 0.1) {
+                println!(
+                    "  warning: the model file says {r} %/s: the steering does not move at that rate"
                 );
             }
-            Ok(())
         }
-        Command::Evaluate {
-            predictions,
-            truth,
-            inputs,
-            origin,
-            model,
-            json,
-            plots,
-        } => {
-            let (inputs, inputs_arg) = match inputs {
-                Some(p) => (p, "--inputs"),
-                None => (sibling_candump(&truth)?, "--inputs (its default)"),
+        RateLimit::NotShown { at_least_pct_per_s } => {
+            let used = match file_rate {
+                Some(r) => format!("the model file's {r} %/s used"),
+                None => "fitted with no limit".to_string(),
             };
-            Paths::new()
-                .input(&predictions, "PREDICTIONS")
-                .input(&truth, "--truth")
-                .input(&inputs, inputs_arg)
-                .input_opt(model.as_deref(), "--model")
-                .output_opt(json.as_deref(), "--json", Kind::File)
-                .output_opt(plots.as_deref(), "--plots", Kind::Dir)
-                .check()?;
-            let model = model_file::load(&model.unwrap_or_else(model_file::paper_path))?;
-            let car = catmodel_host::Car::from_model(&model);
-            let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
-            let progress = Progress::spinner("reading");
-            let data =
-                catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
-            progress.set_message("evaluating");
-            let e = data.evaluate();
-            let e = match e {
-                Ok(e) => e,
-                Err(err) => {
-                    progress.finish();
-                    return Err(err);
-                }
-            };
-            let written = match &plots {
-                Some(dir) => {
-                    progress.set_message("plotting");
-                    data.write_plots(dir, &e)?
-                }
-                None => Vec::new(),
-            };
-            progress.finish();
-            print!("{}", evaluate::format_table(&e));
-            if let Some(path) = json {
-                replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
-            }
-            for p in written {
-                eprintln!("wrote {}", p.display());
-            }
-            Ok(())
-        }
-        Command::Identify {
-            logs,
-            validate,
-            out,
-            report,
-            base,
-            vehicle,
-            force,
-        } => {
-            Paths::new()
-                .inputs(&logs, "LOGS")
-                .inputs(&validate, "--validate")
-                .input_opt(base.as_deref(), "--base")
-                .input_opt(vehicle.as_deref(), "--vehicle")
-                .output(&out, "--out", Kind::File)
-                .output_opt(report.as_deref(), "--report", Kind::Dir)
-                .check()?;
-            let base = load_base(base.as_deref())?;
-            let base = match vehicle {
-                Some(car) => identify::car::apply(&base, &car)?,
-                None => base,
-            };
-            let opts = identify::IdentifyOptions::default();
-            let progress = indicatif::ProgressBar::new((logs.len() + validate.len()) as u64)
-                .with_message("reading logs");
-            let [training, validation] =
-                identify::load_sets([&logs, &validate], &base.vehicle, &opts.preprocess, || {
-                    progress.inc(1)
-                })?;
-            progress.finish_and_clear();
-            for e in training.iter().chain(&validation) {
-                print_notes(&e.log_notes);
-            }
-            // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
-            // word and a wrong model (review finding 04): refused before the minutes of fitting.
-            let units = speed_unit_problems(
-                logs.iter().chain(&validate),
-                training.iter().chain(&validation),
+            println!(
+                "  rate limit not shown: the commands never asked for more than the steering gave (it moved at up to {at_least_pct_per_s:.1} %/s, so the limit is at least that); {used}"
             );
-            if !units.is_empty() {
-                if !force {
-                    bail!(
-                        "{}\n{} not written: the wheel speed is not the log schema's (m/s by \
-                         the GNSS track, negative in reverse) in {} case(s) (--force identifies \
-                         anyway)",
-                        units.join("\n"),
-                        out.display(),
-                        units.len()
-                    );
-                }
-                for u in &units {
-                    eprintln!("catmodel: warning: {u} (identified anyway: --force)");
-                }
+            if let Some(r) = file_rate.filter(|r| *r < at_least_pct_per_s) {
+                println!("  warning: the model file says {r} %/s, slower than the steering moved");
             }
-            let spinner = indicatif::ProgressBar::new_spinner().with_message("identifying");
-            spinner.enable_steady_tick(std::time::Duration::from_millis(120));
-            let mut id = identify::identify(training, validation, &base, &opts)?;
-            spinner.finish_and_clear();
-            print!("{}", identify::summary(&id));
-            // The report first: it is what shows why a model falls below the floor.
-            if let Some(dir) = report {
-                let index = identify::report::write_report(&dir, &id)?;
-                eprintln!("wrote {}", index.display());
-            }
-            // A steering of the other sign or in degrees (review finding 01) is the log's:
-            // refused as the wheel speed's unit is; --force writes the file without [lateral].
-            if let Some(why) = &id.steering_problem {
-                if !force {
-                    bail!(
-                        "{why}\n{} not written: the training logs' `steer` is not the log \
-                         schema's (--force writes the file without [lateral])",
-                        out.display()
-                    );
-                }
-                eprintln!(
-                    "catmodel: warning: {why} (identified anyway, without [lateral]: --force)"
-                );
-            }
-            let violations = identify::floor::check(&id);
-            for v in &violations {
-                eprintln!("catmodel: warning: {v}");
-                if let Some((path, line, value)) =
-                    v.suspect.as_ref().and_then(|s| locate_suspect(s, &logs))
-                {
-                    eprintln!(
-                        "catmodel: warning: {}:{line}: this line's value {value} stands out",
-                        path.display()
-                    );
-                }
-            }
-            if !violations.is_empty() && !force {
-                bail!(
-                    "{} not written: {} fit(s) below the {} % floor (see the warnings above; --force writes it anyway, with the warning in the file)",
-                    out.display(),
-                    violations.len(),
-                    identify::floor::FIT_FLOOR_PERCENT
-                );
-            }
-            identify::floor::mark_forced(&mut id.model, &violations);
-            // Only a file every reader loads is written (the firmware build's too): a model
-            // the reader refuses (an unstable pole, an absurd gain) is named, not saved.
-            model_file::parse(&model_file::to_toml(&id.model), &out).map_err(|e| {
-                anyhow::anyhow!(
-                    "{} not written: the identified model is refused: {}",
-                    out.display(),
-                    e.message
-                )
-            })?;
-            model_file::save(&out, &id.model)
-                .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
-            eprintln!("wrote {}", out.display());
-            Ok(())
         }
-        Command::Compare { log, model, out } => {
-            Paths::new()
-                .input(&log, "LOG")
-                .input(&model, "--model")
-                .output_opt(out.as_deref(), "--out", Kind::File)
-                .check()?;
-            let file = model_file::load(&model)?;
-            let opts = identify::preprocess::PreprocessOptions::default();
-            let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
-            print_notes(&e.log_notes);
-            for u in speed_unit_problems([&log], [&e]) {
-                eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
-            }
-            if let Some(why) = identify::steering_problem(std::slice::from_ref(&e), &file.vehicle) {
-                eprintln!(
-                    "catmodel: warning: {}: {why}: the yaw-rate scores below compare the model's \
-                     steering with it",
-                    log.display()
-                );
-            }
-            let sim = identify::validate::simulate_all(&file, &e)?;
-            let scores =
-                identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
-            print!(
-                "{}",
-                identify::validate::format_tables(
-                    &format!("{} with {}", log.display(), model.display()),
-                    &scores
-                )
-            );
-            if let Some(path) = out {
-                replay::write_file(&path, &identify::validate::compare_csv(&e, &sim))?;
-            }
-            Ok(())
+    }
+    println!(
+        "  lag {:.3} s and delay {:.3} s: the steering trails a ramp by {:.3} s; report error RMS {:.2} % ({:.2} % with neither)",
+        f.lag_s,
+        f.delay_s,
+        f.trail_s(),
+        f.rms_pct,
+        f.rms_without_pct
+    );
+    println!("  for the car's model file, [vehicle]:");
+    if let RateLimit::Measured { pct_per_s, .. } = f.rate {
+        println!("  max_steer_rate_pct_per_s = {pct_per_s:.1}");
+    }
+    println!("  steer_lag_s = {:.3}", f.trail_s());
+    Ok(())
+}
+
+/// Measures the GNSS receiver's error from candump logs of the car parked.
+fn receiver_error(args: ReceiverErrorArgs) -> Result<()> {
+    use identify::receiver::{AVERAGE_S, MIN_INDEPENDENT, MIN_LOG_S, SIGMAS};
+    let ReceiverErrorArgs {
+        logs,
+        model,
+        interface,
+    } = args;
+    let file = load_base(model.as_deref())?;
+    let source = file.inputs.gnss_source_address;
+    let mut frames = Vec::new();
+    for log in &logs {
+        frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
+    }
+    let r = identify::receiver::measure(&frames, source)?;
+    let parked = match r.speed_reports {
+        0 => "no speed reports: the car is taken to be parked".to_string(),
+        n => format!("{n} speed reports, all parked"),
+    };
+    println!(
+        "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {parked}{}",
+        r.fixes,
+        r.duration_s,
+        r.interval_s,
+        if r.rejected > 0 {
+            format!("; {} fixes rejected (not available, range)", r.rejected)
+        } else {
+            String::new()
         }
-        Command::ClosedLoop {
+    );
+    for (name, a) in [("east", r.east), ("north", r.north)] {
+        let tau = a
+            .correlation_s
+            .map_or("not determined".to_string(), |t| format!("{t:.1} s"));
+        println!(
+            "  {name}: deviation {:.3} m, averaged over {AVERAGE_S} s {:.3} m, correlation time {tau}",
+            a.sigma_m, a.slow_sigma_m
+        );
+    }
+    match r.independent {
+        Some(n) => println!("  the log holds about {n:.0} independent values of the bias"),
+        None => println!("  the error did not forget itself within a quarter of the log"),
+    }
+    if r.long_enough() {
+        println!(
+            "  for the car's model file, [control] ({SIGMAS} standard deviations of the averaged error):"
+        );
+        println!("  position_uncertainty_m = {:.1}", r.uncertainty_m());
+    } else {
+        let need = r.log_needed_s().map_or("far longer".to_string(), |t| {
+            format!(
+                "at least {:.0} minutes ({MIN_INDEPENDENT} independent values of the bias, and {:.0} minutes at least)",
+                (t / 60.0).ceil(),
+                MIN_LOG_S / 60.0
+            )
+        });
+        println!(
+            "  not determined: too short a log to bound the bias ({SIGMAS} standard deviations would be {:.1} m now); record the car parked for {need}",
+            r.uncertainty_m()
+        );
+    }
+    Ok(())
+}
+
+/// Simulates a model file's models over one log beside the kinematic model.
+fn compare(args: CompareArgs) -> Result<()> {
+    let CompareArgs { log, model, out } = args;
+    Paths::new()
+        .input(&log, "LOG")
+        .input(&model, "--model")
+        .output_opt(out.as_deref(), "--out", Kind::File)
+        .check()?;
+    let file = model_file::load(&model)?;
+    let opts = identify::preprocess::PreprocessOptions::default();
+    let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
+    print_notes(&e.log_notes);
+    for u in speed_unit_problems([&log], [&e]) {
+        eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
+    }
+    if let Some(why) = identify::steering_problem(std::slice::from_ref(&e), &file.vehicle) {
+        eprintln!(
+            "catmodel: warning: {}: {why}: the yaw-rate scores below compare the model's \
+             steering with it",
+            log.display()
+        );
+    }
+    let sim = identify::validate::simulate_all(&file, &e)?;
+    let scores = identify::validate::scores(std::slice::from_ref(&e), std::slice::from_ref(&sim));
+    print!(
+        "{}",
+        identify::validate::format_tables(
+            &format!("{} with {}", log.display(), model.display()),
+            &scores
+        )
+    );
+    if let Some(path) = out {
+        replay::write_file(&path, &identify::validate::compare_csv(&e, &sim))?;
+    }
+    Ok(())
+}
+
+/// Runs the plant, the node and its controller on one bus over a scenario.
+fn closed_loop(args: ClosedLoopArgs) -> Result<()> {
+    let ClosedLoopArgs {
+        scenario,
+        controller,
+        vehicle,
+        model,
+        receiver,
+        speed,
+        seed,
+        replan_every,
+        start_offset,
+        faults,
+        out,
+    } = args;
+    let mut paths = Paths::new()
+        .input_opt(vehicle.as_deref(), "--vehicle")
+        .input_opt(model.as_deref(), "--model")
+        .output(&out, "--out", Kind::Dir);
+    for name in catmodel_host::closed_loop::SESSION_FILES {
+        paths = paths.output(&out.join(name), "--out", Kind::File);
+    }
+    paths.check()?;
+    let progress = Progress::spinner(&format!("closed loop: {scenario}"));
+    let (metrics, written) =
+        catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
             scenario,
             controller,
             vehicle,
             model,
             receiver,
-            speed,
+            speed_mps: speed,
             seed,
-            replan_every,
-            start_offset,
+            replan_s: replan_every,
+            start_offset_m: start_offset,
             faults,
             out,
-        } => {
-            let mut paths = Paths::new()
-                .input_opt(vehicle.as_deref(), "--vehicle")
-                .input_opt(model.as_deref(), "--model")
-                .output(&out, "--out", Kind::Dir);
-            for name in catmodel_host::closed_loop::SESSION_FILES {
-                paths = paths.output(&out.join(name), "--out", Kind::File);
-            }
-            paths.check()?;
-            let progress = Progress::spinner(&format!("closed loop: {scenario}"));
-            let (metrics, written) =
-                catmodel_host::closed_loop::command(&catmodel_host::closed_loop::ClosedLoopArgs {
-                    scenario,
-                    controller,
-                    vehicle,
-                    model,
-                    receiver,
-                    speed_mps: speed,
-                    seed,
-                    replan_s: replan_every,
-                    start_offset_m: start_offset,
-                    faults,
-                    out,
-                })?;
-            progress.finish();
-            println!("{}", serde_json::to_string_pretty(&metrics)?);
-            for p in written {
-                eprintln!("wrote {}", p.display());
-            }
-            Ok(())
-        }
-        Command::DlcLimits {
-            controllers,
-            optimal,
-            vehicle,
-            model,
-            json,
-            plots,
-        } => {
-            Paths::new()
-                .input_opt(vehicle.as_deref(), "--vehicle")
-                .input_opt(model.as_deref(), "--model")
-                .output_opt(json.as_deref(), "--json", Kind::File)
-                .output_opt(plots.as_deref(), "--plots", Kind::Dir)
-                .check()?;
-            let progress = Progress::spinner("searching the double lane change's limits");
-            let (cfg, node) =
-                catmodel_host::closed_loop::load_setup(vehicle.as_deref(), model.as_deref())?;
-            let limits =
-                catmodel_host::closed_loop::limits::dlc_limits(&cfg, &node, &controllers, optimal)?;
-            progress.finish();
-            let text = serde_json::to_string_pretty(&limits)?;
-            println!("{text}");
-            // The figures' directory first: `--json` may name a file in it.
-            if let Some(dir) = &plots {
-                std::fs::create_dir_all(dir)
-                    .map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
-            }
-            if let Some(path) = json {
-                replay::write_file(&path, &text)?;
-            }
-            if let (Some(dir), Some(v)) = (plots, limits.optimal_mps) {
-                use catmodel_host::closed_loop::{optimal, plots};
-                let track = optimal::TrackAtSpeed::new(&cfg, v);
-                let rows = track.record(&limits.optimal_profile_pct);
-                for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
-                    eprintln!("wrote {}", p.display());
-                }
-            }
-            Ok(())
-        }
-        Command::Sil {
-            stdio: _,
-            model,
-            origin,
-        } => {
-            let mut config = catmodel_host::node_config(model.as_deref())?;
-            config.origin_e7 = origin.map(to_e7);
-            // The node exactly as the model file configures it, controller included.
-            let mut driver = catmodel_host::closed_loop::driver::NodeDriver::new(
-                config,
-                catmodel_host::closed_loop::driver::Controller::FromModel,
-            );
-            let stdin = std::io::stdin().lock();
-            let stdout = std::io::BufWriter::new(std::io::stdout().lock());
-            let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
-            eprintln!("sil: {summary}");
-            if let Some(w) = summary.timestamps.warning("stdin") {
-                eprintln!("sil: warning: {w}");
-            }
-            if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver)
-            {
-                eprintln!("sil: warning: {note}");
-            }
-            if let Some(note) = catmodel_host::closed_loop::driver::Driver::steering_note(&driver) {
-                eprintln!("sil: warning: {note}");
-            }
-            Ok(())
-        }
-        Command::IdentifySteering {
-            logs,
-            model,
-            from,
-            interface,
-        } => {
-            use identify::steering::RateLimit;
-            let file_rate = match &model {
-                Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
-                None => None,
-            };
-            let mut frames = Vec::new();
-            for log in &logs {
-                frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
-            }
-            let series = identify::steering::SteeringSeries::from_frames(&frames);
-            let f = identify::steering::fit(&series, file_rate, from)?;
-            println!(
-                "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %)",
-                f.reports, f.commands, f.from_s, f.to_s, f.span_pct
-            );
-            if series.rejected > 0 {
-                println!(
-                    "  {} frames of the two messages rejected (CRC, range, length)",
-                    series.rejected
-                );
-            }
-            match f.rate {
-                RateLimit::Measured {
-                    pct_per_s,
-                    rms_unlimited_pct,
-                } => {
-                    println!(
-                        "  rate limit {pct_per_s:.1} %/s (report error RMS {rms_unlimited_pct:.2} % without a limit)"
-                    );
-                    if let Some(r) = file_rate.filter(|r| (pct_per_s / r - 1.0).abs() > 0.1) {
-                        println!(
-                            "  warning: the model file says {r} %/s: the steering does not move at that rate"
-                        );
-                    }
-                }
-                RateLimit::NotShown { at_least_pct_per_s } => {
-                    let used = match file_rate {
-                        Some(r) => format!("the model file's {r} %/s used"),
-                        None => "fitted with no limit".to_string(),
-                    };
-                    println!(
-                        "  rate limit not shown: the commands never asked for more than the steering gave (it moved at up to {at_least_pct_per_s:.1} %/s, so the limit is at least that); {used}"
-                    );
-                    if let Some(r) = file_rate.filter(|r| *r < at_least_pct_per_s) {
-                        println!(
-                            "  warning: the model file says {r} %/s, slower than the steering moved"
-                        );
-                    }
-                }
-            }
-            println!(
-                "  lag {:.3} s and delay {:.3} s: the steering trails a ramp by {:.3} s; report error RMS {:.2} % ({:.2} % with neither)",
-                f.lag_s,
-                f.delay_s,
-                f.trail_s(),
-                f.rms_pct,
-                f.rms_without_pct
-            );
-            println!("  for the car's model file, [vehicle]:");
-            if let RateLimit::Measured { pct_per_s, .. } = f.rate {
-                println!("  max_steer_rate_pct_per_s = {pct_per_s:.1}");
-            }
-            println!("  steer_lag_s = {:.3}", f.trail_s());
-            Ok(())
-        }
-        Command::ReceiverError {
-            logs,
-            model,
-            interface,
-        } => {
-            use identify::receiver::{AVERAGE_S, MIN_INDEPENDENT, MIN_LOG_S, SIGMAS};
-            let file = load_base(model.as_deref())?;
-            let source = file.inputs.gnss_source_address;
-            let mut frames = Vec::new();
-            for log in &logs {
-                frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
-            }
-            let r = identify::receiver::measure(&frames, source)?;
-            let parked = match r.speed_reports {
-                0 => "no speed reports: the car is taken to be parked".to_string(),
-                n => format!("{n} speed reports, all parked"),
-            };
-            println!(
-                "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {parked}{}",
-                r.fixes,
-                r.duration_s,
-                r.interval_s,
-                if r.rejected > 0 {
-                    format!("; {} fixes rejected (not available, range)", r.rejected)
-                } else {
-                    String::new()
-                }
-            );
-            for (name, a) in [("east", r.east), ("north", r.north)] {
-                let tau = a
-                    .correlation_s
-                    .map_or("not determined".to_string(), |t| format!("{t:.1} s"));
-                println!(
-                    "  {name}: deviation {:.3} m, averaged over {AVERAGE_S} s {:.3} m, correlation time {tau}",
-                    a.sigma_m, a.slow_sigma_m
-                );
-            }
-            match r.independent {
-                Some(n) => println!("  the log holds about {n:.0} independent values of the bias"),
-                None => println!("  the error did not forget itself within a quarter of the log"),
-            }
-            if r.long_enough() {
-                println!(
-                    "  for the car's model file, [control] ({SIGMAS} standard deviations of the averaged error):"
-                );
-                println!("  position_uncertainty_m = {:.1}", r.uncertainty_m());
-            } else {
-                let need = r.log_needed_s().map_or("far longer".to_string(), |t| {
-                    format!(
-                        "at least {:.0} minutes ({MIN_INDEPENDENT} independent values of the bias, and {:.0} minutes at least)",
-                        (t / 60.0).ceil(),
-                        MIN_LOG_S / 60.0
-                    )
-                });
-                println!(
-                    "  not determined: too short a log to bound the bias ({SIGMAS} standard deviations would be {:.1} m now); record the car parked for {need}",
-                    r.uncertainty_m()
-                );
-            }
-            Ok(())
-        }
-        Command::Decode {
-            log,
-            messages,
-            csv,
-            interface,
-        } => {
-            let format = if csv {
-                decode::Format::Csv
-            } else {
-                decode::Format::Table
-            };
-            decode::run(&log, interface.as_deref(), &messages, format)
-        }
-        Command::Discretize { model, ts } => {
-            let file = model_file::load(&model)?;
-            let d = identify::discretize::discretize_file(&file, ts)?;
-            println!("{}", serde_json::to_string_pretty(&d)?);
-            Ok(())
+        })?;
+    progress.finish();
+    println!("{}", serde_json::to_string_pretty(&metrics)?);
+    for p in written {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// Finds one car's double lane change speed limits and prints them as JSON.
+fn dlc_limits(args: DlcLimitsArgs) -> Result<()> {
+    let DlcLimitsArgs {
+        controllers,
+        optimal,
+        vehicle,
+        model,
+        json,
+        plots,
+    } = args;
+    Paths::new()
+        .input_opt(vehicle.as_deref(), "--vehicle")
+        .input_opt(model.as_deref(), "--model")
+        .output_opt(json.as_deref(), "--json", Kind::File)
+        .output_opt(plots.as_deref(), "--plots", Kind::Dir)
+        .check()?;
+    let progress = Progress::spinner("searching the double lane change's limits");
+    let (cfg, node) = catmodel_host::closed_loop::load_setup(vehicle.as_deref(), model.as_deref())?;
+    let limits =
+        catmodel_host::closed_loop::limits::dlc_limits(&cfg, &node, &controllers, optimal)?;
+    progress.finish();
+    let text = serde_json::to_string_pretty(&limits)?;
+    println!("{text}");
+    // The figures' directory first: `--json` may name a file in it.
+    if let Some(dir) = &plots {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
+    }
+    if let Some(path) = json {
+        replay::write_file(&path, &text)?;
+    }
+    if let (Some(dir), Some(v)) = (plots, limits.optimal_mps) {
+        use catmodel_host::closed_loop::{optimal, plots};
+        let track = optimal::TrackAtSpeed::new(&cfg, v);
+        let rows = track.record(&limits.optimal_profile_pct);
+        for p in plots::write_optimal_plots(&dir, track.course(), &cfg.body, v, &rows)? {
+            eprintln!("wrote {}", p.display());
         }
     }
+    Ok(())
+}
+
+/// Runs the node in lockstep over stdin/stdout (software in the loop).
+fn sil(args: SilArgs) -> Result<()> {
+    let SilArgs {
+        stdio: _,
+        model,
+        origin,
+    } = args;
+    let mut config = catmodel_host::node_config(model.as_deref())?;
+    config.origin_e7 = origin.map(to_e7);
+    // The node exactly as the model file configures it, controller included.
+    let mut driver = catmodel_host::closed_loop::driver::NodeDriver::new(
+        config,
+        catmodel_host::closed_loop::driver::Controller::FromModel,
+    );
+    let stdin = std::io::stdin().lock();
+    let stdout = std::io::BufWriter::new(std::io::stdout().lock());
+    let summary = catmodel_host::sil::run(&mut driver, stdin, stdout)?;
+    eprintln!("sil: {summary}");
+    if let Some(w) = summary.timestamps.warning("stdin") {
+        eprintln!("sil: warning: {w}");
+    }
+    if let Some(note) = catmodel_host::closed_loop::driver::Driver::gnss_rate_note(&driver) {
+        eprintln!("sil: warning: {note}");
+    }
+    if let Some(note) = catmodel_host::closed_loop::driver::Driver::steering_note(&driver) {
+        eprintln!("sil: warning: {note}");
+    }
+    Ok(())
+}
+
+/// Decodes a candump log with catmodel.dbc.
+fn decode(args: DecodeArgs) -> Result<()> {
+    let DecodeArgs {
+        log,
+        messages,
+        csv,
+        interface,
+    } = args;
+    let format = if csv {
+        decode::Format::Csv
+    } else {
+        decode::Format::Table
+    };
+    decode::run(&log, interface.as_deref(), &messages, format)
+}
+
+/// Prints the discrete state-space matrices of a model file's blocks as JSON.
+fn discretize(args: DiscretizeArgs) -> Result<()> {
+    let DiscretizeArgs { model, ts } = args;
+    let file = model_file::load(&model)?;
+    let d = identify::discretize::discretize_file(&file, ts)?;
+    println!("{}", serde_json::to_string_pretty(&d)?);
+    Ok(())
 }
 
 /// `FILE: why` for each log whose wheel speed its GNSS track says is not in m/s
