@@ -12,7 +12,9 @@
 //!
 //! The fit is Levenberg-Marquardt on `(ln C_f, ln C_r)` from three starts (the car file's
 //! values times 0.5, 1 and 2), with a numerical Jacobian, each residual weighted by the speed
-//! (see `Weight::Speed`). Whether the drives determine the
+//! (see `Weight::Speed`); then again with each drive weighted by its own noise, so that drives
+//! of a noisier receiver beside them do not hide what a steadier one measured. Whether the
+//! drives determine the
 //! stiffnesses is decided from the fit itself: the standard error of each (from the Jacobian,
 //! with the residuals' correlation over the measurement's window taken into account) must be
 //! below [`MAX_RELATIVE_STD_ERROR`] of the value, and the drives must have cornered at speed
@@ -22,6 +24,7 @@ use catmodel::metrics;
 use catmodel::model::dynamic::LateralState;
 
 use super::preprocess::Experiment;
+use super::stats;
 use crate::model_file::{self, DynamicsSection, VehicleSection};
 
 /// Samples count in the fit only where the car was faster than this, m/s (over the whole
@@ -116,14 +119,17 @@ fn mask(e: &Experiment) -> Vec<bool> {
 
 /// How the residuals are scaled.
 #[derive(Clone, Copy, PartialEq)]
-enum Weight {
+enum Weight<'a> {
     /// As measured (for fit %).
     None,
-    /// Times the speed: the course's error from the receiver's position noise falls as one
-    /// over the speed, and so does its rate's; weighting each residual by the inverse of its
-    /// error is the least-squares estimate of least variance (measured: the standard errors
-    /// with the CAT Vehicle's standard receiver fall from 15 % and 21 % to 10 % and 14 %).
-    Speed,
+    /// Times the speed, and times each experiment's weight (one per experiment): the course's
+    /// error from the receiver's position noise falls as one over the speed, and so does its
+    /// rate's; weighting each residual by the inverse of its error is the least-squares
+    /// estimate of least variance (measured: the standard errors with the CAT Vehicle's
+    /// standard receiver fall from 15 % and 21 % to 10 % and 14 %). The experiments' weights
+    /// are one over their own noise ([`stats::inverse_noise_weights`]): logs of another
+    /// receiver count for what they measure.
+    Speed(&'a [f64]),
 }
 
 /// Residuals (measured minus model) over the masked samples of every experiment.
@@ -134,14 +140,13 @@ fn residuals(
     model: impl Fn(&Experiment) -> Vec<f64>,
 ) -> Vec<f64> {
     let mut out = Vec::new();
-    for (e, m) in training.iter().zip(masks) {
+    for (i, (e, m)) in training.iter().zip(masks).enumerate() {
         let y = model(e);
         for k in 0..e.len() {
             if m[k] {
-                let w = if weight == Weight::Speed {
-                    e.vel[k]
-                } else {
-                    1.0
+                let w = match weight {
+                    Weight::None => 1.0,
+                    Weight::Speed(per_log) => e.vel[k] * per_log.get(i).copied().unwrap_or(1.0),
                 };
                 out.push((e.yaw_rate[k] - y[k]) * w);
             }
@@ -196,7 +201,6 @@ pub fn identify_dynamics(
             simulate(e, vehicle, &d, steer_gain)
         })
     };
-    let res = |theta: [f64; 2]| res_weighted(theta, Weight::Speed);
     let measured: Vec<f64> = training
         .iter()
         .zip(&masks)
@@ -206,17 +210,32 @@ pub fn identify_dynamics(
         prior.cornering_front_n_per_rad.ln(),
         prior.cornering_rear_n_per_rad.ln(),
     ];
-    let mut best: Option<([f64; 2], f64, [[f64; 2]; 2])> = None;
+    // Every experiment weighted alike first; then each by its own noise about that fit, and
+    // the fit again from there.
+    let alike = vec![1.0; training.len()];
+    let mut first: Option<([f64; 2], f64)> = None;
     for scale in [1.0f64, 0.5, 2.0] {
         let theta0 = [start[0] + scale.ln(), start[1] + scale.ln()];
-        let (theta, cost, jtj) = levenberg_marquardt(theta0, &res);
-        if best.as_ref().is_none_or(|b| cost < b.1) {
-            best = Some((theta, cost, jtj));
+        let (theta, cost, _) =
+            levenberg_marquardt(theta0, &|t| res_weighted(t, Weight::Speed(&alike)));
+        if first.as_ref().is_none_or(|b| cost < b.1) {
+            first = Some((theta, cost));
         }
     }
-    let Some((theta, cost, jtj)) = best else {
+    let Some((first, _)) = first else {
         return Err("no fit".into());
     };
+    let first_residuals = res_weighted(first, Weight::Speed(&alike));
+    let mut per_log = Vec::with_capacity(training.len());
+    let mut rest = &first_residuals[..];
+    for m in &masks {
+        let (log, after) = rest.split_at(m.iter().filter(|&&b| b).count().min(rest.len()));
+        per_log.push(log);
+        rest = after;
+    }
+    let log_weights = stats::inverse_noise_weights(&per_log);
+    let (theta, cost, jtj) =
+        levenberg_marquardt(first, &|t| res_weighted(t, Weight::Speed(&log_weights)));
     // Standard errors: s^2 (J'J)^-1 in ln C, i.e. relative. The residuals are correlated (the
     // course rate is a central difference over 2 hw + 1 samples of lowpassed positions, and
     // the receiver's bias wanders): counting 2 hw + 1 samples as one independent error is on

@@ -363,8 +363,11 @@ type SteadyTurn = (f64, f64, f64);
 /// steady, its transient reads as understeer (0.0038 s^2/m^2 instead of the plant's 0.0015
 /// with `steps-at-speed` in the set).
 fn steady_turns(e: &Experiment) -> Vec<SteadyTurn> {
-    steady_samples(e, 2.0, 0.01)
+    steady_samples(e, STEADY_TURN_MIN_SPEED_MPS, 0.01)
 }
+
+/// The speed above which [`steady_turns`] count, m/s.
+const STEADY_TURN_MIN_SPEED_MPS: f64 = 2.0;
 
 /// As [`steady_turns`], faster than `min_speed_mps` and with |angle| above `min_angle_rad`
 /// (0: straight driving too).
@@ -672,7 +675,8 @@ pub fn identify_lateral(
 ) -> Result<std::result::Result<LateralFit, String>> {
     // The steering gain and understeer are a steady-state relation: only steady turns count
     // ([`steady_turns`]).
-    let pts: Vec<SteadyTurn> = training.iter().flat_map(steady_turns).collect();
+    let per_log: Vec<Vec<SteadyTurn>> = training.iter().map(steady_turns).collect();
+    let pts: Vec<SteadyTurn> = per_log.concat();
     if pts.len() < MIN_STEADY_TURN_SAMPLES {
         return Ok(Err(format!(
             "only {} samples of steady steering above 0.01 rad at more than 2 m/s (at least {MIN_STEADY_TURN_SAMPLES} needed: drive turns or circles)",
@@ -680,22 +684,29 @@ pub fn identify_lateral(
         )));
     }
     let l = vehicle.wheelbase_m;
-    // Gauss-Newton on (g, K), or on g alone with K the car file's; with J'J and the residuals'
-    // sum of squares at the end, for K's standard error.
-    let gauss_newton = |estimate_k: bool| {
+    let residual =
+        |g: f64, k: f64, (v, d, r): SteadyTurn| r - v * (g * d / (1.0 + k * v * v)).tan() / l;
+    // Gauss-Newton on (g, K), or on g alone with K the car file's, each log's samples weighted
+    // by `log_weights`; with J'J and the weighted residuals' sum of squares at the end, for
+    // K's standard error.
+    let gauss_newton = |estimate_k: bool, log_weights: &[f64]| {
         let (mut g, mut k) = (1.0, vehicle.understeer_s2_per_m2);
         let mut jtj = [[0.0; 2]; 2];
         let mut cost = 0.0;
         for _ in 0..30 {
             let mut jtr = [0.0; 2];
             (jtj, cost) = ([[0.0; 2]; 2], 0.0);
-            for &(v, d, r) in &pts {
+            let weighted = per_log
+                .iter()
+                .zip(log_weights)
+                .flat_map(|(log, &w)| log.iter().map(move |&p| (p, w)));
+            for ((v, d, r), w) in weighted {
                 let den = 1.0 + k * v * v;
                 let arg = g * d / den;
                 let sec2 = 1.0 / arg.cos().powi(2);
-                let res = r - v * arg.tan() / l;
-                let jg = v / l * sec2 * d / den;
-                let jk = -v / l * sec2 * g * d * v * v / (den * den);
+                let res = w * residual(g, k, (v, d, r));
+                let jg = w * v / l * sec2 * d / den;
+                let jk = -w * v / l * sec2 * g * d * v * v / (den * den);
                 let j = [jg, if estimate_k { jk } else { 0.0 }];
                 for a in 0..2 {
                     for b in 0..2 {
@@ -724,7 +735,27 @@ pub fn identify_lateral(
         (g, k, jtj, cost)
     };
     let speed_span = span(pts.iter().map(|p| p.0));
-    let (mut g, mut k, jtj, cost) = gauss_newton(speed_span > 2.0);
+    // Every log alike first; then each weighted by its own noise about that fit (logs of a
+    // standard receiver beside a survey-grade one's: `stats::inverse_noise_weights`), measured
+    // over all its steady driving, straight too: a log of step steers holds a few seconds of
+    // steady turning, and the straights between them at the same speeds.
+    let (g1, k1, _, _) = gauss_newton(speed_span > 2.0, &vec![1.0; per_log.len()]);
+    let first_residuals: Vec<Vec<f64>> = training
+        .iter()
+        .map(|e| {
+            steady_samples(e, STEADY_TURN_MIN_SPEED_MPS, 0.0)
+                .into_iter()
+                .map(|p| residual(g1, k1, p))
+                .collect()
+        })
+        .collect();
+    let log_weights = stats::inverse_noise_weights(
+        &first_residuals
+            .iter()
+            .map(Vec::as_slice)
+            .collect::<Vec<_>>(),
+    );
+    let (mut g, mut k, jtj, cost) = gauss_newton(speed_span > 2.0, &log_weights);
     let understeer = if speed_span > 2.0 {
         // K's standard error, s^2 (J'J)^-1, with the yaw rate's central difference over
         // 2 hw + 1 samples counted as one independent error (as the stiffnesses', dynamics.rs).
@@ -751,7 +782,7 @@ pub fn identify_lateral(
         Understeer::SpeedSpan
     };
     if let Understeer::Undetermined { .. } = understeer {
-        (g, k, _, _) = gauss_newton(false);
+        (g, k, _, _) = gauss_newton(false, &log_weights);
     }
     // The reader's bound (a gain within 0.1..10 and a lock below 90 degrees), so that the file
     // written loads.
