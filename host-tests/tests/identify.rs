@@ -589,6 +589,50 @@ fn cornering_stiffnesses_from_step_steers_at_speed() {
     assert!(why.contains("step steers at speed"), "{why}");
 }
 
+/// A speed loop that answers later than the node's delay line holds (1.28 s): a plant whose
+/// speed controller acts 1.4 s after the command, behind a 0.3 s lag. The model found runs on
+/// the node (its delay within the line, the file written loads), and a note says that the
+/// delay is at the limit, with the ARX search's; the CAT Vehicle's drives (0.88 s) get none.
+#[test]
+fn a_speed_loop_slower_than_the_node_takes_is_named() {
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let mut slow = VehicleConfig::default();
+    slow.speed_controller.command_delay_s = 1.4;
+    let straights = |plant: &VehicleConfig| -> Vec<Experiment> {
+        ["straight-2.5", "straight-5", "straight-7.5", "straight-10"]
+            .iter()
+            .map(|n| sim_experiment_of(n, 1, plant, &base.vehicle))
+            .collect()
+    };
+    let at_limit = |id: &identify::Identification| {
+        id.notes
+            .iter()
+            .find(|n| n.contains("the longest the node runs"))
+            .cloned()
+    };
+    let id = identify::identify(
+        straights(&slow),
+        Vec::new(),
+        &base,
+        &IdentifyOptions::default(),
+    )
+    .unwrap();
+    let note = at_limit(&id).expect("a note on the delay");
+    println!("{note}");
+    assert!(note.contains("64 samples"), "{note}");
+    let delay_s = id.speed.tf.delay_s();
+    assert!(delay_s <= 1.28 + 1e-9, "{delay_s}");
+    assert_round_trips(&id.model);
+    let id = identify::identify(
+        straights(&VehicleConfig::default()),
+        Vec::new(),
+        &base,
+        &IdentifyOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(at_limit(&id), None);
+}
+
 /// Drives of two receivers in one set: the paper-sized set with the car's standard receiver
 /// (turns at 2.5 m/s, straights to 10 m/s) beside two runs of `steps-at-speed` with a
 /// survey-grade one, on the CAT Vehicle (100 Hz) and on a car of 5 Hz. Each drive counts for

@@ -45,7 +45,9 @@ use validate::{Score, Scores, Simulated};
 pub struct IdentifyOptions {
     /// Preprocessing.
     pub preprocess: PreprocessOptions,
-    /// Largest input delay searched for the speed model, samples (60 = 1.2 s).
+    /// Largest input delay searched for the speed model, samples: the node's capacity
+    /// ([`catmodel::node::VELOCITY_DELAY_CAP`], 64 = 1.28 s at 20 ms), so that every model
+    /// found runs on the node.
     pub max_delay_samples: usize,
     /// Denominator order of the speed model (the paper's eq 5: 2).
     pub speed_order: usize,
@@ -57,7 +59,7 @@ impl Default for IdentifyOptions {
     fn default() -> Self {
         Self {
             preprocess: PreprocessOptions::default(),
-            max_delay_samples: 60,
+            max_delay_samples: catmodel::node::VELOCITY_DELAY_CAP,
             speed_order: 2,
             max_iter: 100,
         }
@@ -221,6 +223,33 @@ pub fn fit_siso_with_delay_scan(
     }
     let best = best.context("no delay candidate gave a stable model")?;
     Ok((best, scan))
+}
+
+impl SpeedIdentification {
+    /// The note for a speed model whose input delay is the longest the search and the node
+    /// take ([`IdentifyOptions::max_delay_samples`]), the ARX model's or the transfer
+    /// function's: the car's speed loop answers that late or later, and a later answer is
+    /// stood in for by the numerator's zeros (black-box probe: a car whose loop answered after
+    /// 1.4 s, with a 0.3 s lag, was identified with no word of it; the ARX search had stopped
+    /// at its 1.2 s). `None` below the limit.
+    pub fn delay_at_the_limit(&self, opts: &IdentifyOptions) -> Option<String> {
+        let ts = opts.preprocess.ts_s;
+        let limit = opts.max_delay_samples;
+        let tf_samples = (self.tf.delay_s() / ts).round() as usize;
+        let arx_samples = self.arx.nk.first().copied().unwrap_or(0);
+        (tf_samples >= limit || arx_samples >= limit).then(|| {
+            format!(
+                "speed model: the ARX model's delay is {arx_samples} samples and the transfer \
+                 function's {:.2} s, against the longest the node runs, {limit} samples of \
+                 {:.0} ms ({:.2} s): the car's speed loop answers that late or later, and a \
+                 later answer is approximated by the numerator's zeros; check the step \
+                 responses' delays (`--report`)",
+                self.tf.delay_s(),
+                1e3 * ts,
+                limit as f64 * ts
+            )
+        })
+    }
 }
 
 /// Identifies the speed model (eq 5 form) from `input_vel` -> `vel`.
@@ -1066,6 +1095,9 @@ pub fn identify(
         }
     }
     let speed = identify_speed(&training, &validation, opts)?;
+    if let Some(note) = speed.delay_at_the_limit(opts) {
+        notes.push(note);
+    }
     let dx_dt_tfs = match identify_dx_dt(&training, opts)? {
         Ok(tfs) => Some(tfs),
         Err(why) => {
