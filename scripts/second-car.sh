@@ -15,6 +15,7 @@
 # Uses the release CLI (cargo build --release -p catmodel-host).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/paper-set.sh
 D="${1:-target/second-car}"
 V=host/vehicles/vw-polo.toml
 ORIGIN=32.2319,-110.9501
@@ -22,15 +23,9 @@ ORIGIN=32.2319,-110.9501
 cargo build --quiet --release -p catmodel-host
 B=target/release/catmodel
 rm -rf "$D"
-mkdir -p "$D/seed1" "$D/seed2" "$D/drive"
+mkdir -p "$D/drive"
 
-for s in straight-2.5 straight-5 straight-7.5 straight-10 turn-left turn-right circle-left circle-right; do
-  "$B" simulate-drive --scenario "$s" --seed 1 --vehicle "$V" --out "$D/seed1" 2>/dev/null
-done
-for s in straight-2.5 straight-5 straight-10; do
-  "$B" simulate-drive --scenario "$s" --seed 2 --vehicle "$V" --out "$D/seed2" 2>/dev/null
-done
-"$B" simulate-drive --scenario validation --seed 3 --vehicle "$V" --out "$D" 2>/dev/null
+simulate_paper_set "$B" "$V" "$D"
 
 "$B" identify "$D"/seed1/*[0-9t].csv "$D"/seed2/*[0-9].csv --validate "$D/validation.csv" \
   --vehicle host/vehicles/vw-polo.car.toml --out "$D/vw-polo.toml"

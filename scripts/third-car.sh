@@ -14,6 +14,7 @@
 # Uses the release CLI (cargo build --release -p catmodel-host).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/paper-set.sh
 D="${1:-target/third-car}"
 V=host/vehicles/roadster.toml
 CAR=host/vehicles/roadster.car.toml
@@ -21,15 +22,9 @@ CAR=host/vehicles/roadster.car.toml
 cargo build --quiet --release -p catmodel-host
 B=target/release/catmodel
 rm -rf "$D"
-mkdir -p "$D/seed1" "$D/seed2" "$D/steps1" "$D/steps2"
+mkdir -p "$D/steps1" "$D/steps2"
 
-for s in straight-2.5 straight-5 straight-7.5 straight-10 turn-left turn-right circle-left circle-right; do
-  "$B" simulate-drive --scenario "$s" --seed 1 --vehicle "$V" --out "$D/seed1" 2>/dev/null
-done
-for s in straight-2.5 straight-5 straight-10; do
-  "$B" simulate-drive --scenario "$s" --seed 2 --vehicle "$V" --out "$D/seed2" 2>/dev/null
-done
-"$B" simulate-drive --scenario validation --seed 3 --vehicle "$V" --out "$D" 2>/dev/null
+simulate_paper_set "$B" "$V" "$D"
 for s in 1 2; do
   "$B" simulate-drive --scenario steps-at-speed --seed $s --receiver rtk --vehicle "$V" \
     --out "$D/steps$s" 2>/dev/null
