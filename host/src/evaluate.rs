@@ -9,6 +9,8 @@ use catmodel::model::kinematic::{self, Pose};
 use catmodel::vehicle::VehicleParams;
 use serde::Serialize;
 
+use crate::plot::{decimate, Figure, Style, PALETTE};
+
 /// One row of the predictions CSV (`t,step,horizon_s,x,y,heading,speed,mode`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prediction {
@@ -899,6 +901,15 @@ const ZOOM_WINDOW_S: f64 = 10.0;
 /// Below this speed turning does not count towards picking the path's zoom window, m/s
 /// (a car turning its wheels at standstill shows nothing).
 const ZOOM_MIN_SPEED_MPS: f64 = 2.0;
+/// Series colours ([`PALETTE`]): each kind of series the same in every figure.
+const TRUTH_C: (u8, u8, u8) = PALETTE[0];
+const NODE_C: (u8, u8, u8) = PALETTE[1];
+const BASELINE_C: (u8, u8, u8) = PALETTE[2];
+const GNSS_C: (u8, u8, u8) = PALETTE[3];
+const AXLE_C: (u8, u8, u8) = PALETTE[4];
+const WINDOW_C: (u8, u8, u8) = PALETTE[5];
+/// The truth's legend.
+const TRUTH_LABEL: &str = "truth (rear axle)";
 
 /// The `len_s` window of the drive in which the car turns most (integral of |yaw rate| while
 /// moving at `ZOOM_MIN_SPEED_MPS` or more): where predictions and truth part most visibly.
@@ -1008,46 +1019,111 @@ pub fn write_plots(
     antenna_ahead_m: f64,
     evaluation: &Evaluation,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
-    use crate::plot::{decimate, Figure, PALETTE};
-    let [truth_c, node_c, base_c, gnss_c, axle_c, window_c] = PALETTE;
     std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("creating {}: {e}", dir.display()))?;
     let paths: Vec<_> = PLOT_FILES.iter().map(|f| dir.join(f)).collect();
-    let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
-    let (t0, t1) = predictions.first_last.unwrap_or((0.0, 0.0));
+    write_path_plot(
+        &paths[0],
+        predictions,
+        truth,
+        inputs,
+        vehicle,
+        antenna_ahead_m,
+    )?;
+    write_error_vs_horizon_plot(&paths[1], evaluation)?;
+    write_gnss_window_plot(&paths[2], predictions, truth, inputs, antenna_ahead_m)?;
+    write_position_error_time_plot(&paths[3], predictions, truth, inputs)?;
+    Ok(paths)
+}
 
-    // 1. Path with the ~1 s-ahead predictions, whole drive and the most turning window.
-    // (time the prediction is for, x, y)
+/// `path.svg` ([`write_plots`]): the path with the ~1 s-ahead predictions, the whole drive and
+/// the window where the car turns most.
+fn write_path_plot(
+    path: &std::path::Path,
+    predictions: &KeptPredictions,
+    truth: &Truth,
+    inputs: &BaselineInputs,
+    vehicle: &VehicleParams,
+    antenna_ahead_m: f64,
+) -> anyhow::Result<()> {
+    let (t0, t1) = predictions.first_last.unwrap_or((0.0, 0.0));
     let (h1, node_h1) = predictions
         .path_horizon()
         .unwrap_or((PATH_HORIZON_S, Vec::new()));
-    let ticks: Vec<(f64, Vec<f64>)> = predictions.ticks.iter().map(|&t| (t, vec![h1])).collect();
-    let base_h1: Vec<(f64, f64, f64)> =
-        baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks)
-            .into_iter()
-            .map(|(t, _, (x, y, _, _))| (t + h1, x, y))
-            .collect();
-    let (z0, z1) = turning_window(truth, ZOOM_WINDOW_S);
-    let within = |pts: &[(f64, f64, f64)], max: usize| -> Vec<(f64, f64)> {
-        let xy: Vec<(f64, f64)> = pts
-            .iter()
-            .filter(|p| p.0 >= z0 && p.0 <= z1)
-            .map(|p| (p.1, p.2))
-            .collect();
-        decimate(&xy, max)
-    };
-    let all = |pts: &[(f64, f64, f64)]| -> Vec<(f64, f64)> {
-        decimate(
-            &pts.iter().map(|p| (p.1, p.2)).collect::<Vec<_>>(),
-            MAX_PATH_DOTS,
-        )
-    };
-    let truth_zoom: Vec<(f64, f64)> = truth
-        .samples()
-        .iter()
-        .filter(|s| s.t >= z0 && s.t <= z1)
-        .map(|s| (s.x, s.y))
-        .collect();
-    let (bx0, bx1, by0, by1) = truth_zoom.iter().fold(
+    let base_h1 = baseline_path_horizon(predictions, inputs, vehicle, antenna_ahead_m, h1);
+    let truth_xy: Vec<(f64, f64)> = truth.samples().iter().map(|s| (s.x, s.y)).collect();
+    let zoom = turning_window(truth, ZOOM_WINDOW_S);
+    let (z0, z1) = zoom;
+    let truth_zoom = truth_xy_within(truth, zoom);
+    let margin_m = 2.0;
+    let window_box = box_around(&truth_zoom, margin_m);
+    let base_label = format!("kinematic baseline (raw GNSS), {h1:.1} s ahead");
+    let node_label = format!("node, {h1:.1} s ahead");
+    Figure::new(
+        &format!("Path: truth and predictions {h1:.1} s ahead"),
+        "east (m)",
+        "north (m)",
+    )
+    .size(1400, 720)
+    .subtitle(&format!("Whole drive, t = {t0:.1} .. {t1:.1} s"))
+    .scatter(&base_label, decimate(&xy(&base_h1), MAX_PATH_DOTS))
+    .color(BASELINE_C)
+    .scatter(&node_label, decimate(&xy(&node_h1), MAX_PATH_DOTS))
+    .color(NODE_C)
+    .series(
+        TRUTH_LABEL,
+        decimate(&truth_xy, MAX_PLOT_POINTS),
+        Style::Line { width_px: 1 },
+    )
+    .color(TRUTH_C)
+    .series(
+        "enlarged on the right",
+        window_box,
+        Style::Line { width_px: 2 },
+    )
+    .color(WINDOW_C)
+    .equal_aspect()
+    .panel(
+        &format!("Enlarged: t = {z0:.1} .. {z1:.1} s, where the car turns most"),
+        "east (m)",
+        "north (m)",
+    )
+    .scatter(
+        &base_label,
+        decimate(&xy_within(&base_h1, zoom), MAX_ZOOM_DOTS),
+    )
+    .color(BASELINE_C)
+    .scatter(
+        &node_label,
+        decimate(&xy_within(&node_h1, zoom), MAX_ZOOM_DOTS),
+    )
+    .color(NODE_C)
+    .series(TRUTH_LABEL, truth_zoom, Style::Line { width_px: 1 })
+    .color(TRUTH_C)
+    .equal_aspect()
+    .write_svg(path)?;
+    Ok(())
+}
+
+/// The baseline's predictions `h1_s` ahead at every tick of `predictions`, as `(time the
+/// prediction is for, east, north)`.
+fn baseline_path_horizon(
+    predictions: &KeptPredictions,
+    inputs: &BaselineInputs,
+    vehicle: &VehicleParams,
+    antenna_ahead_m: f64,
+    h1_s: f64,
+) -> Vec<Timed> {
+    let ticks: Vec<(f64, Vec<f64>)> = predictions.ticks.iter().map(|&t| (t, vec![h1_s])).collect();
+    baseline_predictions(inputs, vehicle, antenna_ahead_m, &ticks)
+        .into_iter()
+        .map(|(t, _, (x, y, _, _))| (t + h1_s, x, y))
+        .collect()
+}
+
+/// The closed outline of the box around `points`, `margin_m` wider on every side; empty
+/// without points.
+fn box_around(points: &[(f64, f64)], margin_m: f64) -> Vec<(f64, f64)> {
+    let (bx0, bx1, by0, by1) = points.iter().fold(
         (
             f64::INFINITY,
             f64::NEG_INFINITY,
@@ -1056,8 +1132,7 @@ pub fn write_plots(
         ),
         |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
     );
-    let margin_m = 2.0;
-    let window_box = if bx0 <= bx1 {
+    if bx0 <= bx1 {
         vec![
             (bx0 - margin_m, by0 - margin_m),
             (bx1 + margin_m, by0 - margin_m),
@@ -1067,53 +1142,14 @@ pub fn write_plots(
         ]
     } else {
         Vec::new()
-    };
-    let base_label = format!("kinematic baseline (raw GNSS), {h1:.1} s ahead");
-    let node_label = format!("node, {h1:.1} s ahead");
-    let truth_label = "truth (rear axle)";
-    Figure::new(
-        &format!("Path: truth and predictions {h1:.1} s ahead"),
-        "east (m)",
-        "north (m)",
-    )
-    .size(1400, 720)
-    .subtitle(&format!("Whole drive, t = {t0:.1} .. {t1:.1} s"))
-    .scatter(&base_label, all(&base_h1))
-    .color(base_c)
-    .scatter(&node_label, all(&node_h1))
-    .color(node_c)
-    .series(
-        truth_label,
-        decimate(&truth_xy, MAX_PLOT_POINTS),
-        crate::plot::Style::Line { width_px: 1 },
-    )
-    .color(truth_c)
-    .series(
-        "enlarged on the right",
-        window_box,
-        crate::plot::Style::Line { width_px: 2 },
-    )
-    .color(window_c)
-    .equal_aspect()
-    .panel(
-        &format!("Enlarged: t = {z0:.1} .. {z1:.1} s, where the car turns most"),
-        "east (m)",
-        "north (m)",
-    )
-    .scatter(&base_label, within(&base_h1, MAX_ZOOM_DOTS))
-    .color(base_c)
-    .scatter(&node_label, within(&node_h1, MAX_ZOOM_DOTS))
-    .color(node_c)
-    .series(
-        truth_label,
-        truth_zoom,
-        crate::plot::Style::Line { width_px: 1 },
-    )
-    .color(truth_c)
-    .equal_aspect()
-    .write_svg(&paths[0])?;
+    }
+}
 
-    // 2. Error against horizon.
+/// `error_vs_horizon.svg` ([`write_plots`]): RMS position error against horizon.
+fn write_error_vs_horizon_plot(
+    path: &std::path::Path,
+    evaluation: &Evaluation,
+) -> anyhow::Result<()> {
     let pick = |f: fn(&HorizonRow) -> &ErrorStats| -> Vec<(f64, f64)> {
         evaluation
             .horizons
@@ -1133,44 +1169,37 @@ pub fn write_plots(
         "RMS position error (m)",
     )
     .line("node", node_rms)
-    .color(node_c)
+    .color(NODE_C)
     .line("kinematic baseline (raw GNSS)", base_rms)
-    .color(base_c)
+    .color(BASELINE_C)
     .line("raw GNSS (horizon 0)", vec![(0.0, raw), (last_h, raw)])
-    .color(gnss_c)
+    .color(GNSS_C)
     .line(
         "raw GNSS moved to the rear axle with the true heading (horizon 0)",
         vec![(0.0, raw_axle), (last_h, raw_axle)],
     )
-    .color(axle_c)
+    .color(AXLE_C)
     .y_from_zero()
-    .write_svg(&paths[1])?;
+    .write_svg(path)?;
+    Ok(())
+}
 
-    // 3. Zoomed window: raw vs filtered vs truth.
+/// `gnss_window.svg` ([`write_plots`]): the zoomed window in the middle of the drive, raw vs
+/// filtered vs truth.
+fn write_gnss_window_plot(
+    path: &std::path::Path,
+    predictions: &KeptPredictions,
+    truth: &Truth,
+    inputs: &BaselineInputs,
+    antenna_ahead_m: f64,
+) -> anyhow::Result<()> {
+    let (t0, t1) = predictions.first_last.unwrap_or((0.0, 0.0));
     let mid = 0.5 * (t0 + t1);
-    let (w0, w1) = (
+    let window = (
         (mid - ZOOM_WINDOW_S / 2.0).max(t0),
         (mid + ZOOM_WINDOW_S / 2.0).min(t1),
     );
-    let in_window = |t: f64| t >= w0 && t <= w1;
-    let raw_xy: Vec<(f64, f64)> = inputs
-        .gnss
-        .iter()
-        .filter(|g| in_window(g.0))
-        .map(|g| (g.1, g.2))
-        .collect();
-    let filtered_xy: Vec<(f64, f64)> = predictions
-        .current
-        .iter()
-        .filter(|p| in_window(p.0))
-        .map(|p| (p.1, p.2))
-        .collect();
-    let truth_window: Vec<(f64, f64)> = truth
-        .samples()
-        .iter()
-        .filter(|s| in_window(s.t))
-        .map(|s| (s.x, s.y))
-        .collect();
+    let (w0, w1) = window;
     Figure::new(
         "GNSS: raw fixes, filtered position and truth",
         "east (m)",
@@ -1181,33 +1210,30 @@ pub fn write_plots(
     ))
     .scatter(
         &format!("raw GNSS fixes (antenna, {antenna_ahead_m:.2} m ahead of the rear axle)"),
-        raw_xy,
+        xy_within(&inputs.gnss, window),
     )
-    .color(gnss_c)
-    .line("node, filtered (horizon 0, rear axle)", filtered_xy)
-    .color(node_c)
-    .line(truth_label, truth_window)
-    .color(truth_c)
+    .color(GNSS_C)
+    .line(
+        "node, filtered (horizon 0, rear axle)",
+        xy_within(&predictions.current, window),
+    )
+    .color(NODE_C)
+    .line(TRUTH_LABEL, truth_xy_within(truth, window))
+    .color(TRUTH_C)
     .equal_aspect()
-    .write_svg(&paths[2])?;
+    .write_svg(path)?;
+    Ok(())
+}
 
-    // 4. Position error over time.
-    let filtered_err: Vec<(f64, f64)> = predictions
-        .current
-        .iter()
-        .filter_map(|&(t, x, y)| {
-            let (tx, ty, _, _) = truth.at(t)?;
-            Some((t, ((x - tx).powi(2) + (y - ty).powi(2)).sqrt()))
-        })
-        .collect();
-    let raw_err: Vec<(f64, f64)> = inputs
-        .gnss
-        .iter()
-        .filter_map(|&(t, x, y)| {
-            let (tx, ty, _, _) = truth.at(t)?;
-            Some((t, ((x - tx).powi(2) + (y - ty).powi(2)).sqrt()))
-        })
-        .collect();
+/// `position_error_time.svg` ([`write_plots`]): the current position error over time.
+fn write_position_error_time_plot(
+    path: &std::path::Path,
+    predictions: &KeptPredictions,
+    truth: &Truth,
+    inputs: &BaselineInputs,
+) -> anyhow::Result<()> {
+    let filtered_err = position_error_m(truth, &predictions.current);
+    let raw_err = position_error_m(truth, &inputs.gnss);
     Figure::new(
         "Current position error over time",
         "time (s)",
@@ -1216,18 +1242,53 @@ pub fn write_plots(
     .series(
         "raw GNSS",
         decimate(&raw_err, MAX_PLOT_POINTS),
-        crate::plot::Style::Line { width_px: 1 },
+        Style::Line { width_px: 1 },
     )
-    .color(gnss_c)
+    .color(GNSS_C)
     .series(
         "node, filtered (horizon 0)",
         decimate(&filtered_err, MAX_PLOT_POINTS),
-        crate::plot::Style::Line { width_px: 1 },
+        Style::Line { width_px: 1 },
     )
-    .color(node_c)
+    .color(NODE_C)
     .y_from_zero()
-    .write_svg(&paths[3])?;
-    Ok(paths)
+    .write_svg(path)?;
+    Ok(())
+}
+
+/// `(east, north)` of `points`.
+fn xy(points: &[Timed]) -> Vec<(f64, f64)> {
+    points.iter().map(|p| (p.1, p.2)).collect()
+}
+
+/// `(east, north)` of the `points` timed within `from_s ..= to_s`.
+fn xy_within(points: &[Timed], (from_s, to_s): (f64, f64)) -> Vec<(f64, f64)> {
+    points
+        .iter()
+        .filter(|p| p.0 >= from_s && p.0 <= to_s)
+        .map(|p| (p.1, p.2))
+        .collect()
+}
+
+/// `(east, north)` of the truth within `from_s ..= to_s`.
+fn truth_xy_within(truth: &Truth, (from_s, to_s): (f64, f64)) -> Vec<(f64, f64)> {
+    truth
+        .samples()
+        .iter()
+        .filter(|s| s.t >= from_s && s.t <= to_s)
+        .map(|s| (s.x, s.y))
+        .collect()
+}
+
+/// `(t, distance to the truth then, m)` of each of `points` the truth covers.
+fn position_error_m(truth: &Truth, points: &[Timed]) -> Vec<(f64, f64)> {
+    points
+        .iter()
+        .filter_map(|&(t, x, y)| {
+            let (tx, ty, _, _) = truth.at(t)?;
+            Some((t, ((x - tx).powi(2) + (y - ty).powi(2)).sqrt()))
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -20,7 +20,7 @@ pub mod planner;
 pub mod plots;
 pub mod scenario;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
@@ -30,7 +30,7 @@ use catmodel::node::{NodeConfig, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK};
 
 use crate::csv2can::LogEncoder;
 use crate::logcsv::{LogRow, TruthRow};
-use crate::sim::config::{Gnss, VehicleConfig};
+use crate::sim::config::{Body, Gnss, VehicleConfig};
 use crate::sim::plant::PlantState;
 use crate::sim::scenario::Command;
 use crate::sim::{Rig, SimOptions};
@@ -348,6 +348,8 @@ struct Walkers {
     started_s: Vec<Option<f64>>,
     /// Each one's circle now: east, north, radius.
     circles: Vec<(f64, f64, f64)>,
+    /// Whether any of them walks.
+    moving: bool,
 }
 
 impl Walkers {
@@ -359,6 +361,7 @@ impl Walkers {
                 .iter()
                 .map(|o| (o.east_m, o.north_m, o.radius_m))
                 .collect(),
+            moving: course.obstacles.iter().any(|o| o.walk.is_some()),
         }
     }
 
@@ -399,6 +402,62 @@ pub fn run(
 ) -> RunOutput {
     let mut vehicle = vehicle.clone();
     options.receiver.apply(&mut vehicle.sensors.gnss);
+    let sim_options = SimOptions {
+        seed: options.seed,
+        faults: options.faults,
+        vary_commands: false,
+        ..SimOptions::default()
+    };
+    let initial = start_state(&vehicle, course, options.start_offset_m);
+    let mut rig = Rig::new(&vehicle, &sim_options, initial, 0.0);
+    let mut walkers = Walkers::new(course);
+    let mut planner = PlannerSide::start(
+        course,
+        sim_options.origin_deg,
+        options.replan_s,
+        walkers.moving,
+    );
+    let mut sensors = SensorFrames::new(options.reversed_steering_report);
+    let mut receive_queue = VecDeque::new();
+    let mut dbw = DriveByWire::new();
+    let mut scorer = Scorer::new(&vehicle.body, course);
+    let mut record = TruthRecord::new(course, &vehicle.body);
+    let mut inputs = Vec::new();
+    let mut outputs = Vec::new();
+    let max_ticks = (options.max_time_s * 1e6 / TICK_US as f64).ceil() as u64;
+
+    for n in 1..=max_ticks {
+        let t_tick_us = n * TICK_US;
+        drive_plant(&mut rig, &mut dbw, &mut walkers, &mut scorer, course);
+        // The frames of this tick: the sensors' (logged by now) and the planner's.
+        let mut rx = sensors.due(&mut rig, t_tick_us);
+        rx.extend(planner.tick_frames(course, &walkers, t_tick_us - TICK_US));
+        rx.sort_by_key(|f| f.t_us);
+        inputs.extend_from_slice(&rx);
+        let (report, tx) = node_tick(driver, &mut receive_queue, rx, t_tick_us);
+        let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
+        outputs.extend(tx.iter().map(|&frame| TimedFrame {
+            t_us: t_tick_us,
+            frame,
+        }));
+        record.tick(t_tick_us, &rig, &report, seen, dbw.engaged);
+        if record.ended(dbw.engaged) {
+            break;
+        }
+    }
+
+    let metrics = record.metrics(course, controller_name, options.receiver, &scorer, &dbw);
+    RunOutput {
+        course: course.clone(),
+        inputs,
+        outputs,
+        samples: record.samples,
+        metrics,
+    }
+}
+
+/// The car at rest at `course`'s start, heading along the path's first segment.
+fn start_state(vehicle: &VehicleConfig, course: &Course, start_offset_m: f64) -> PlantState {
     let start = &course.path[0];
     let heading0 = {
         let next = &course.path[1];
@@ -406,234 +465,350 @@ pub fn run(
     };
     let b = vehicle.chassis.cg_to_rear_m;
     // The car's rear axle, `start_offset_m` to the right of the path's first point.
-    let off = options.start_offset_m;
-    let initial = PlantState {
+    let off = start_offset_m;
+    PlantState {
         x_m: start.east_m + b * heading0.sin() + off * heading0.cos(),
         y_m: start.north_m + b * heading0.cos() - off * heading0.sin(),
         heading_rad: heading0,
         ..PlantState::default()
-    };
-    let sim_options = SimOptions {
-        seed: options.seed,
-        faults: options.faults,
-        vary_commands: false,
-        ..SimOptions::default()
-    };
-    let mut rig = Rig::new(&vehicle, &sim_options, initial, 0.0);
-    let mut planner = planner::Planner::new();
-    planner.send_origin(sim_options.origin_deg.0, sim_options.origin_deg.1);
-    // Note: the scenarios' paths have 2..=256 points and at most 4 obstacles (host tests).
-    let _ = planner.send_path(&course.path);
-    // A course with an obstacle that moves has the planner send every obstacle each tick where
-    // it is (`Planner::obstacle_frames`); the others', queued once behind the path.
-    let moving = course.obstacles.iter().any(|o| o.walk.is_some());
-    if !moving {
-        let _ = planner.send_obstacles(&course.obstacles);
     }
-    let mut walkers = Walkers::new(course);
-    let replan_us = options.replan_s.map(|s| (s * 1e6).round().max(1.0) as u64);
-    let mut last_plan_us = 0u64;
+}
 
-    let path = core_path(course);
-    let mut scorer = Scorer::new(&vehicle.body, course);
-    let mut dbw = DriveByWire::new();
-    let mut encoder = LogEncoder::new();
-    let mut pending_rows: Vec<(i64, LogRow)> = Vec::new();
-    let mut inputs = Vec::new();
-    let mut backlog: std::collections::VecDeque<TimedFrame> = std::collections::VecDeque::new();
-    let mut outputs = Vec::new();
-    let mut samples: Vec<Sample> = Vec::new();
-    let mut projection: Option<Projection> = None;
-    let (scored_from, scored_to) = course.scored_stations_m;
-    let mut entry_speed = None;
-    let mut corridor_exit: Option<f64> = None;
-    let mut scored_span: (Option<f64>, Option<f64>) = (None, None);
-    let mut stopped_since: Option<f64> = None;
-    let front_ahead = vehicle.body.length_m - vehicle.body.rear_overhang_m;
-    let max_ticks = (options.max_time_s * 1e6 / TICK_US as f64).ceil() as u64;
-
-    for n in 1..=max_ticks {
-        let t_tick_us = n * TICK_US;
-        // The plant over (T_{n-1}, T_n] with the commands in force.
-        for _ in 0..STEPS_PER_TICK {
-            let step = rig.steps();
-            let t_us = step * PLANT_STEP_US;
-            let command = dbw.command(step, t_us);
-            rig.step(&command);
-            let truth = rig.truth();
-            if moving {
-                walkers.step(course, t_us as f64 * 1e-6, truth.x, truth.y);
-                scorer.move_obstacles(&walkers.circles);
-            }
-            scorer.observe(truth.x, truth.y, truth.heading);
+/// The plant over (T_{n-1}, T_n] with the commands in force: the drive-by-wire's command at
+/// each step, the obstacles that walk where they are, the body scored against them on truth.
+fn drive_plant(
+    rig: &mut Rig,
+    dbw: &mut DriveByWire,
+    walkers: &mut Walkers,
+    scorer: &mut Scorer,
+    course: &Course,
+) {
+    for _ in 0..STEPS_PER_TICK {
+        let step = rig.steps();
+        let t_us = step * PLANT_STEP_US;
+        let command = dbw.command(step, t_us);
+        rig.step(&command);
+        let truth = rig.truth();
+        if walkers.moving {
+            walkers.step(course, t_us as f64 * 1e-6, truth.x, truth.y);
+            scorer.move_obstacles(&walkers.circles);
         }
-        // The frames of this tick: the sensors' (logged by now) and the planner's.
-        pending_rows.extend(rig.take_reports());
-        pending_rows.sort_by_key(|(t, _)| *t);
-        let due = pending_rows.partition_point(|(t, _)| *t as u64 <= t_tick_us);
+        scorer.observe(truth.x, truth.y, truth.heading);
+    }
+}
+
+/// The sensors' side of the bus: the plant's reports, held until their tick and encoded as the
+/// car's frames.
+struct SensorFrames {
+    encoder: LogEncoder,
+    /// Reports logged by the plant and not yet due, with their time, us.
+    pending_rows: Vec<(i64, LogRow)>,
+    /// The drive-by-wire reports its steering with the other sign ([`RunOptions`]).
+    reversed_steering_report: bool,
+}
+
+impl SensorFrames {
+    fn new(reversed_steering_report: bool) -> Self {
+        Self {
+            encoder: LogEncoder::new(),
+            pending_rows: Vec::new(),
+            reversed_steering_report,
+        }
+    }
+
+    /// The frames of every report `rig` has logged at or before the tick at `t_tick_us`.
+    fn due(&mut self, rig: &mut Rig, t_tick_us: u64) -> Vec<TimedFrame> {
+        self.pending_rows.extend(rig.take_reports());
+        self.pending_rows.sort_by_key(|(t, _)| *t);
+        let due = self
+            .pending_rows
+            .partition_point(|(t, _)| *t as u64 <= t_tick_us);
         let mut rx: Vec<TimedFrame> = Vec::new();
-        for (_, mut row) in pending_rows.drain(..due) {
-            if options.reversed_steering_report {
+        for (_, mut row) in self.pending_rows.drain(..due) {
+            if self.reversed_steering_report {
                 row.steer = row.steer.map(|s| -s);
             }
             // Note: the simulator's clock starts at 0 and only counts up, so a row's time is
             // never negative (the only error encode_row reports).
-            let _ = encoder.encode_row(&row, &mut rx);
+            let _ = self.encoder.encode_row(&row, &mut rx);
         }
-        let tick_start = t_tick_us - TICK_US;
-        if let Some(every) = replan_us {
-            if planner.pending() == 0 && tick_start >= last_plan_us + every {
-                last_plan_us = tick_start;
-                let _ = planner.send_path(&course.path);
-                if !moving {
-                    let _ = planner.send_obstacles(&course.obstacles);
-                }
-            }
+        rx
+    }
+}
+
+/// The simulated planner's side of the bus: the course's path and obstacles, sent again every
+/// `replan_us` if it replans.
+struct PlannerSide {
+    planner: planner::Planner,
+    /// Whether an obstacle of the course moves ([`Walkers::moving`]).
+    moving: bool,
+    replan_us: Option<u64>,
+    /// When the path was last queued, us (the first transfer: 0).
+    last_plan_us: u64,
+}
+
+impl PlannerSide {
+    /// The planner's first transfer queued: the origin, the course's path and its obstacles.
+    fn start(course: &Course, origin_deg: (f64, f64), replan_s: Option<f64>, moving: bool) -> Self {
+        let mut planner = planner::Planner::new();
+        planner.send_origin(origin_deg.0, origin_deg.1);
+        // Note: the scenarios' paths have 2..=256 points and at most 4 obstacles (host tests).
+        let _ = planner.send_path(&course.path);
+        // A course with an obstacle that moves has the planner send every obstacle each tick
+        // where it is (`Planner::obstacle_frames`); the others', queued once behind the path.
+        if !moving {
+            let _ = planner.send_obstacles(&course.obstacles);
         }
-        if moving {
+        Self {
+            planner,
+            moving,
+            replan_us: replan_s.map(|s| (s * 1e6).round().max(1.0) as u64),
+            last_plan_us: 0,
+        }
+    }
+
+    /// The planner's frames of the tick that starts at `tick_start_us`, the obstacles that walk
+    /// where `walkers` has them.
+    fn tick_frames(
+        &mut self,
+        course: &Course,
+        walkers: &Walkers,
+        tick_start_us: u64,
+    ) -> Vec<TimedFrame> {
+        self.replan(course, tick_start_us);
+        let mut rx = Vec::new();
+        if self.moving {
             // Where the obstacles are at the tick's start, before the queued frames.
-            for frame in planner.obstacle_frames(&walkers.circles) {
+            for frame in self.planner.obstacle_frames(&walkers.circles) {
                 rx.push(TimedFrame {
-                    t_us: tick_start + 250,
+                    t_us: tick_start_us + 250,
                     frame,
                 });
             }
         }
-        for (i, frame) in planner.take_tick_frames().into_iter().enumerate() {
+        for (i, frame) in self.planner.take_tick_frames().into_iter().enumerate() {
             rx.push(TimedFrame {
-                t_us: tick_start + 500 * (i as u64 + 1),
+                t_us: tick_start_us + 500 * (i as u64 + 1),
                 frame,
             });
         }
-        rx.sort_by_key(|f| f.t_us);
-        inputs.extend_from_slice(&rx);
-        // As the firmware's receive queue and host replay: at most the node's per-tick cap of
-        // frames, in arrival order; the rest wait for the next tick.
-        backlog.extend(rx);
-        let take = backlog.len().min(MAX_RX_FRAMES_PER_TICK);
-        let due: Vec<TimedFrame> = backlog.drain(..take).collect();
-        let mut tx = Vec::new();
-        let tick = Tick {
-            now_us: t_tick_us,
-            platform: PlatformStats::default(),
-        };
-        let report: TickReport = driver.tick(&tick, &due, &mut tx);
-        let seen = dbw.receive(t_tick_us, rig.steps(), &tx);
-        outputs.extend(tx.iter().map(|&frame| TimedFrame {
-            t_us: t_tick_us,
-            frame,
-        }));
+        rx
+    }
 
-        // Records and scores on truth.
+    /// A planner that replans queues the path and obstacles again once the previous transfer
+    /// has gone out and `replan_us` has passed since it was queued.
+    fn replan(&mut self, course: &Course, tick_start_us: u64) {
+        let Some(every) = self.replan_us else { return };
+        if self.planner.pending() == 0 && tick_start_us >= self.last_plan_us + every {
+            self.last_plan_us = tick_start_us;
+            let _ = self.planner.send_path(&course.path);
+            if !self.moving {
+                let _ = self.planner.send_obstacles(&course.obstacles);
+            }
+        }
+    }
+}
+
+/// The node's tick at `t_tick_us` over this tick's frames `rx` behind those still in
+/// `receive_queue`: what it reports and the frames it sends.
+fn node_tick(
+    driver: &mut dyn Driver,
+    receive_queue: &mut VecDeque<TimedFrame>,
+    rx: Vec<TimedFrame>,
+    t_tick_us: u64,
+) -> (TickReport, Vec<CanFrame>) {
+    // As the firmware's receive queue and host replay: at most the node's per-tick cap of
+    // frames, in arrival order; the rest wait for the next tick.
+    receive_queue.extend(rx);
+    let take = receive_queue.len().min(MAX_RX_FRAMES_PER_TICK);
+    let due: Vec<TimedFrame> = receive_queue.drain(..take).collect();
+    let mut tx = Vec::new();
+    let tick = Tick {
+        now_us: t_tick_us,
+        platform: PlatformStats::default(),
+    };
+    let report = driver.tick(&tick, &due, &mut tx);
+    (report, tx)
+}
+
+/// Records and scores on truth, tick by tick: the samples, and what the metrics take from them.
+struct TruthRecord {
+    path: Path,
+    projection: Option<Projection>,
+    /// The course's scored stations, from and to, m.
+    scored_stations_m: (f64, f64),
+    /// The body's front ahead of the rear axle, m.
+    front_ahead_m: f64,
+    body_width_m: f64,
+    /// Truth speed as the front reached the scored range, m/s.
+    entry_speed_mps: Option<f64>,
+    /// How far the body was outside the corridor at most in the scored range, m.
+    corridor_exit_m: Option<f64>,
+    /// When the rear axle reached the start and the end of the scored range, s.
+    scored_span_s: (Option<f64>, Option<f64>),
+    /// Since when the car has been at rest while engaged, s.
+    stopped_since_s: Option<f64>,
+    samples: Vec<Sample>,
+}
+
+impl TruthRecord {
+    fn new(course: &Course, body: &Body) -> Self {
+        Self {
+            path: core_path(course),
+            projection: None,
+            scored_stations_m: course.scored_stations_m,
+            front_ahead_m: body.length_m - body.rear_overhang_m,
+            body_width_m: body.width_m,
+            entry_speed_mps: None,
+            corridor_exit_m: None,
+            scored_span_s: (None, None),
+            stopped_since_s: None,
+            samples: Vec::new(),
+        }
+    }
+
+    /// Records the tick at `t_tick_us`: the car (`rig`) on the path, the node's `report`, the
+    /// command the drive-by-wire `seen` and whether it is `engaged`.
+    fn tick(
+        &mut self,
+        t_tick_us: u64,
+        rig: &Rig,
+        report: &TickReport,
+        seen: ControlCommand,
+        engaged: bool,
+    ) {
+        let (scored_from, scored_to) = self.scored_stations_m;
         let truth = rig.truth();
-        projection = path.project(truth.x as f32, truth.y as f32, projection.as_ref());
-        let (station, lateral) = projection.map_or((f64::NAN, f64::NAN), |p| {
+        self.projection =
+            self.path
+                .project(truth.x as f32, truth.y as f32, self.projection.as_ref());
+        let (station, lateral) = self.projection.map_or((f64::NAN, f64::NAN), |p| {
             (f64::from(p.station_m), f64::from(p.lateral_m))
         });
         // The body's sides at the rear axle against the corridor there.
         if station >= scored_from && station <= scored_to {
-            if let Some(at) = projection.and_then(|p| path.sample(p.station_m, p.segment)) {
+            if let Some(at) = self
+                .projection
+                .and_then(|p| self.path.sample(p.station_m, p.segment))
+            {
                 let exit = metrics::corridor_exit_m(
                     lateral,
-                    vehicle.body.width_m,
+                    self.body_width_m,
                     (f64::from(at.left_m), f64::from(at.right_m)),
                 );
-                corridor_exit = Some(corridor_exit.map_or(exit, |e: f64| e.max(exit)));
+                self.corridor_exit_m = Some(self.corridor_exit_m.map_or(exit, |e| e.max(exit)));
             }
         }
         let t_s = t_tick_us as f64 * 1e-6;
-        if entry_speed.is_none() && station + front_ahead >= scored_from {
-            entry_speed = Some(truth.speed);
+        if self.entry_speed_mps.is_none() && station + self.front_ahead_m >= scored_from {
+            self.entry_speed_mps = Some(truth.speed);
         }
-        if station >= scored_from && scored_span.0.is_none() {
-            scored_span.0 = Some(t_s);
+        if station >= scored_from && self.scored_span_s.0.is_none() {
+            self.scored_span_s.0 = Some(t_s);
         }
-        if station >= scored_to && scored_span.1.is_none() {
-            scored_span.1 = Some(t_s);
+        if station >= scored_to && self.scored_span_s.1.is_none() {
+            self.scored_span_s.1 = Some(t_s);
         }
-        samples.push(Sample {
+        self.samples.push(Sample {
             t_s,
             truth,
             estimate: report
                 .pose
                 .map(|p| (f64::from(p.x_m), f64::from(p.y_m), f64::from(p.heading_rad))),
             command: seen,
-            engaged: dbw.engaged,
+            engaged,
             steer_pct: rig.steer_pct(),
             station_m: station,
             lateral_m: lateral,
         });
-        // The end: past the scored range with room to spare, or at rest while engaged.
-        if dbw.engaged && truth.speed < 0.05 {
-            let since = *stopped_since.get_or_insert(t_s);
-            if t_s - since >= STOPPED_END_S {
-                break;
-            }
-        } else {
-            stopped_since = None;
-        }
-        if station >= scored_to + front_ahead + 5.0 {
-            break;
-        }
     }
 
-    let (cone_hits, min_cone) = scorer.cones();
-    let scored: Vec<f64> = samples
-        .iter()
-        .filter(|s| s.station_m >= scored_from && s.station_m <= scored_to)
-        .map(|s| s.lateral_m)
-        .collect();
-    let lateral_rms = (!scored.is_empty())
-        .then(|| (scored.iter().map(|e| e * e).sum::<f64>() / scored.len() as f64).sqrt());
-    let lateral_max = scored.iter().map(|e| e.abs()).reduce(f64::max);
-    let completed = scored_span.1.is_some();
-    let min_obstacle = scorer.obstacle_clearance_m();
-    let total_time_s = samples.last().map_or(0.0, |s| s.t_s);
-    let metrics = Metrics {
-        scenario: course.kind.name().to_string(),
-        controller: controller_name.to_string(),
-        receiver: options.receiver.name().to_string(),
-        target_speed_mps: course.speed_mps,
-        entry_speed_mps: entry_speed,
-        cone_hits,
-        gates_missed: scorer.gates_missed(),
-        min_cone_clearance_m: min_cone,
-        min_obstacle_clearance_m: min_obstacle,
-        completed,
-        lateral_rms_m: lateral_rms,
-        lateral_max_m: lateral_max,
-        corridor_exit_m: corridor_exit,
-        scored_time_s: match scored_span {
-            (Some(a), Some(b)) => Some(b - a),
-            _ => None,
-        },
-        driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
-        total_time_s,
-        status_ticks: dbw.status_ticks,
-        fallback_ticks: {
-            let names = fallback_names();
-            dbw.fallback_ticks
-                .iter()
-                .map(|(raw, n)| (fallback_name(&names, *raw), *n))
-                .collect()
-        },
-        clean: completed
-            && cone_hits == 0
-            && scorer.gates_missed() == 0
-            && min_obstacle.is_none_or(|d| d > 0.0)
-            // The double lane change is scored by its cones and gates (ISO 3888-2): the
-            // body may pass over the lane's edge between two cones.
-            // Elsewhere the car must not have left the road: some of its body in the corridor
-            // at every tick.
-            && (course.kind == scenario::Kind::DoubleLaneChange
-                || corridor_exit.is_none_or(|e| e < vehicle.body.width_m)),
-    };
-    RunOutput {
-        course: course.clone(),
-        inputs,
-        outputs,
-        samples,
-        metrics,
+    /// Whether the run ends after the last tick recorded: past the scored range with room to
+    /// spare, or at rest while engaged.
+    fn ended(&mut self, engaged: bool) -> bool {
+        let Some(last) = self.samples.last() else {
+            return false;
+        };
+        if engaged && last.truth.speed < 0.05 {
+            let since = *self.stopped_since_s.get_or_insert(last.t_s);
+            if last.t_s - since >= STOPPED_END_S {
+                return true;
+            }
+        } else {
+            self.stopped_since_s = None;
+        }
+        last.station_m >= self.scored_stations_m.1 + self.front_ahead_m + 5.0
+    }
+
+    /// The lateral error's RMS and largest magnitude over the scored range, m.
+    fn scored_lateral_m(&self) -> (Option<f64>, Option<f64>) {
+        let (scored_from, scored_to) = self.scored_stations_m;
+        let scored: Vec<f64> = self
+            .samples
+            .iter()
+            .filter(|s| s.station_m >= scored_from && s.station_m <= scored_to)
+            .map(|s| s.lateral_m)
+            .collect();
+        let lateral_rms = (!scored.is_empty())
+            .then(|| (scored.iter().map(|e| e * e).sum::<f64>() / scored.len() as f64).sqrt());
+        let lateral_max = scored.iter().map(|e| e.abs()).reduce(f64::max);
+        (lateral_rms, lateral_max)
+    }
+
+    /// The run's scores: this record's, `scorer`'s cones, gates and obstacles, and the
+    /// drive-by-wire's ticks.
+    fn metrics(
+        &self,
+        course: &Course,
+        controller_name: &str,
+        receiver: Receiver,
+        scorer: &Scorer,
+        dbw: &DriveByWire,
+    ) -> Metrics {
+        let (cone_hits, min_cone) = scorer.cones();
+        let (lateral_rms, lateral_max) = self.scored_lateral_m();
+        let completed = self.scored_span_s.1.is_some();
+        let min_obstacle = scorer.obstacle_clearance_m();
+        let total_time_s = self.samples.last().map_or(0.0, |s| s.t_s);
+        Metrics {
+            scenario: course.kind.name().to_string(),
+            controller: controller_name.to_string(),
+            receiver: receiver.name().to_string(),
+            target_speed_mps: course.speed_mps,
+            entry_speed_mps: self.entry_speed_mps,
+            cone_hits,
+            gates_missed: scorer.gates_missed(),
+            min_cone_clearance_m: min_cone,
+            min_obstacle_clearance_m: min_obstacle,
+            completed,
+            lateral_rms_m: lateral_rms,
+            lateral_max_m: lateral_max,
+            corridor_exit_m: self.corridor_exit_m,
+            scored_time_s: match self.scored_span_s {
+                (Some(a), Some(b)) => Some(b - a),
+                _ => None,
+            },
+            driven_time_s: dbw.engaged_at_s.map_or(0.0, |t| total_time_s - t),
+            total_time_s,
+            status_ticks: dbw.status_ticks,
+            fallback_ticks: {
+                let names = fallback_names();
+                dbw.fallback_ticks
+                    .iter()
+                    .map(|(raw, n)| (fallback_name(&names, *raw), *n))
+                    .collect()
+            },
+            clean: completed
+                && cone_hits == 0
+                && scorer.gates_missed() == 0
+                && min_obstacle.is_none_or(|d| d > 0.0)
+                // The double lane change is scored by its cones and gates (ISO 3888-2): the
+                // body may pass over the lane's edge between two cones.
+                // Elsewhere the car must not have left the road: some of its body in the
+                // corridor at every tick.
+                && (course.kind == scenario::Kind::DoubleLaneChange
+                    || self.corridor_exit_m.is_none_or(|e| e < self.body_width_m)),
+        }
     }
 }
 
