@@ -1063,232 +1063,32 @@ pub fn identify(
         bail!("no training logs");
     }
     let vehicle = base.vehicle;
-    let mut notes = Vec::new();
-    let steps: Vec<delay::StepResponse> = training
-        .iter()
-        .chain(&validation)
-        .flat_map(|e| delay::step_responses(&e.name, &e.t, &e.input_vel, &e.vel))
-        .collect();
+    let steps = speed_steps(&training, &validation);
     let correlation_dx = correlation::rank(&training, &vehicle, |e| &e.dx);
     let correlation_vel = correlation::rank(&training, &vehicle, |e| &e.vel);
-
-    // Fixes late behind the wheel speed: the lateral model's lag would take the latency in.
-    for e in training.iter().chain(&validation) {
-        if let Some((lag, se)) = units::gnss_latency(e) {
-            if lag.abs() > units::GNSS_LATENCY_NOTE_S && lag.abs() > units::GNSS_LATENCY_SIGMAS * se
-            {
-                notes.push(format!(
-                    "{}: the GNSS fixes are {:.2} s +- {se:.2} {} the wheel speed (the lag \
-                     that best fits the speed along the track with `vel`): the lateral \
-                     model's lag takes it in, and the node, fed fixes as late, predicts from \
-                     positions that old; log the fixes at their time of validity, or use a \
-                     receiver with less latency",
-                    e.name,
-                    lag.abs(),
-                    if lag > 0.0 {
-                        "late behind"
-                    } else {
-                        "early ahead of"
-                    }
-                ));
-            }
-        }
-    }
+    let mut notes = gnss_latency_notes(&training, &validation);
     let speed = identify_speed(&training, &validation, opts)?;
-    if let Some(note) = speed.delay_at_the_limit(opts) {
-        notes.push(note);
-    }
-    let dx_dt_tfs = match identify_dx_dt(&training, opts)? {
-        Ok(tfs) => Some(tfs),
-        Err(why) => {
-            notes.push(format!(
-                "dx/dt (eq 7) not re-identified: {why}; the model file keeps the input model's dx_dt"
-            ));
-            None
-        }
-    };
-    // A steering no car has (the other sign, degrees) is the log's, not the car's: named as a
-    // refusal, and the lateral model is not fitted to it.
-    let steering_problem = steering_problem(&training, &vehicle);
-    let lateral = match &steering_problem {
-        Some(why) => {
-            notes.push(format!("lateral model not identified: {why}"));
-            None
-        }
-        None => match identify_lateral(&training, &vehicle, opts)? {
-            Ok(l) => Some(l),
-            Err(why) => {
-                notes.push(format!("lateral model not identified: {why}"));
-                None
-            }
-        },
-    };
+    notes.extend(speed.delay_at_the_limit(opts));
+    let dx_dt_tfs = dx_dt_or_kept(&training, opts, &mut notes)?;
+    let (steering_problem, lateral) =
+        lateral_unless_steering_problem(&training, &vehicle, opts, &mut notes)?;
+    let identified_dynamics = cornering_stiffnesses(&training, base, lateral.as_ref(), &mut notes);
 
-    let identified_dynamics = match (&base.dynamics, &lateral) {
-        (None, _) => {
-            notes.push("[dynamics] not identified: the car file has none (its mass, yaw inertia and centre of gravity are needed; the cornering stiffnesses are then fitted)".into());
-            None
-        }
-        (Some(prior), lateral) => {
-            let steer_gain = lateral.as_ref().map_or(1.0, |l| l.steer_gain);
-            match dynamics::identify_dynamics(&training, &vehicle, prior, steer_gain) {
-                Ok(fit) => {
-                    notes.push(format!(
-                        "[dynamics] cornering stiffnesses identified from {} samples at speed ({} cornering): C_f {:.0} N/rad (+-{:.1} %), C_r {:.0} N/rad (+-{:.1} %); course rate fit {:.1} % (the car file's stiffnesses {:.1} %, kinematic {:.1} %)",
-                        fit.samples,
-                        fit.cornering_samples,
-                        fit.section.cornering_front_n_per_rad,
-                        100.0 * fit.relative_std_error.0,
-                        fit.section.cornering_rear_n_per_rad,
-                        100.0 * fit.relative_std_error.1,
-                        fit.fit_percent,
-                        fit.prior_fit_percent,
-                        fit.kinematic_fit_percent
-                    ));
-                    Some(fit)
-                }
-                Err(why) => {
-                    notes.push(format!(
-                        "[dynamics] cornering stiffnesses not identified, the car file's kept: {why}"
-                    ));
-                    None
-                }
-            }
-        }
+    let fitted = Fitted {
+        speed: speed.tf,
+        dx_dt: dx_dt_tfs.as_deref(),
+        lateral,
+        dynamics: identified_dynamics.as_ref(),
     };
-
-    let mut model = base.clone();
-    model.name = "identified".into();
-    if let Some(note) = receiver_rate(&mut model, &training) {
-        notes.push(note);
-    }
-    if let Some(fit) = &identified_dynamics {
-        model.dynamics = Some(fit.section);
-    }
-    let names: Vec<&str> = training.iter().map(|e| e.name.as_str()).collect();
-    model.description = format!(
-        "Identified by catmodel identify from {} log(s): {}",
-        training.len(),
-        names.join(", ")
-    );
-    model.speed = Model {
-        equation: "eq 5 form (2nd order, input delay), simulation-error fit".into(),
-        output: model_file::SPEED_SIGNALS.output.into(),
-        output_unit: model_file::SPEED_SIGNALS.output_unit.into(),
-        blocks: vec![Block {
-            input: model_file::SPEED_INPUTS[0].into(),
-            input_unit: model_file::SPEED_SIGNALS.input_units[0].into(),
-            tf: speed.tf,
-        }],
-        fit: Fit::default(),
-    };
-    if let Some(tfs) = &dx_dt_tfs {
-        model.dx_dt = Model {
-            equation: "eq 7 form (MISO, proper 2nd-order blocks), simulation-error fit".into(),
-            output: model_file::DX_DT_SIGNALS.output.into(),
-            output_unit: model_file::DX_DT_SIGNALS.output_unit.into(),
-            blocks: tfs
-                .iter()
-                .zip(model_file::DX_DT_INPUTS)
-                .zip(model_file::DX_DT_SIGNALS.input_units)
-                .map(|((tf, i), u)| Block {
-                    input: i.into(),
-                    input_unit: (*u).into(),
-                    tf: *tf,
-                })
-                .collect(),
-            fit: Fit::default(),
-        };
-    }
-    if let Some(l) = lateral.as_ref() {
-        match l.understeer {
-            Understeer::Estimated { .. } => {}
-            Understeer::SpeedSpan => notes.push(format!(
-                "lateral model: the understeer is the car file's ({} s^2/m^2), not estimated: the steady turns span less than 2 m/s of speed (drive circles at two speeds, or steps-at-speed)",
-                l.understeer_s2_per_m2
-            )),
-            Understeer::Undetermined {
-                estimate,
-                relative_std_error,
-            } => notes.push(format!(
-                "lateral model: the understeer is the car file's ({} s^2/m^2): the drives gave {estimate:.5} with a standard error of {:.0} % (at most {:.0} %): they do not determine it (drive circles at several speeds, or a receiver with a steadier course)",
-                l.understeer_s2_per_m2,
-                100.0 * relative_std_error,
-                100.0 * MAX_UNDERSTEER_RELATIVE_STD_ERROR
-            )),
-        }
-    }
-    model.lateral = lateral.map(|l| Lateral {
-        steer_gain: l.steer_gain,
-        understeer_s2_per_m2: l.understeer_s2_per_m2,
-        model: Model {
-            equation: "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order".into(),
-            output: model_file::LATERAL_SIGNALS.output.into(),
-            output_unit: model_file::LATERAL_SIGNALS.output_unit.into(),
-            blocks: vec![Block {
-                input: model_file::LATERAL_INPUTS[0].into(),
-                input_unit: model_file::LATERAL_SIGNALS.input_units[0].into(),
-                tf: l.tf,
-            }],
-            fit: Fit::default(),
-        },
-    });
-
-    let training_sims: Vec<Simulated> = training
-        .iter()
-        .map(|e| validate::simulate_all(&model, e))
-        .collect::<Result<_>>()?;
-    let validation_sims: Vec<Simulated> = validation
-        .iter()
-        .map(|e| validate::simulate_all(&model, e))
-        .collect::<Result<_>>()?;
+    let mut model = identified_model(base, &training, fitted, &mut notes);
+    let training_sims = simulate_each(&model, &training)?;
+    let validation_sims = simulate_each(&model, &validation)?;
     let training_scores = validate::scores(&training, &training_sims);
     let validation_scores =
         (!validation.is_empty()).then(|| validate::scores(&validation, &validation_sims));
     let vs = validation_scores.as_ref();
-    // A lateral model that does worse than the kinematic model with the nominal steering on
-    // the validation drive is worth a word (black-box probe: 80.5 % against 82.1 %, silently).
-    if let Some((m, k)) = vs.and_then(|v| {
-        v.yaw_model
-            .and_then(|m| m.fit_percent)
-            .zip(v.yaw_kinematic.fit_percent)
-    }) {
-        if m < k {
-            notes.push(format!(
-                "lateral model: on the validation drive it fits the yaw rate {m:.1} %, below the \
-                 kinematic model with the nominal steering ({k:.1} %): its steering gain and lag \
-                 do not carry over to that drive better than the car file's geometry does"
-            ));
-        }
-    }
-    let source = "catmodel identify";
-    let note = "fit % over the concatenated logs, each simulated from its inputs alone";
-    model.speed.fit = fit_from(
-        source,
-        &training_scores.vel_model,
-        &training_scores.vel_kinematic,
-        vs.map(|v| (&v.vel_model, &v.vel_kinematic)),
-        note.into(),
-    );
-    if dx_dt_tfs.is_some() {
-        model.dx_dt.fit = fit_from(
-            source,
-            &training_scores.dx_model,
-            &training_scores.dx_kinematic,
-            vs.map(|v| (&v.dx_model, &v.dx_kinematic)),
-            "x, y are metres from each log's first GNSS fix: the model depends on where the car drives".into(),
-        );
-    }
-    if let (Some(l), Some(tr)) = (model.lateral.as_mut(), training_scores.yaw_model.as_ref()) {
-        let val = vs.and_then(|v| v.yaw_model.as_ref().map(|y| (y, &v.yaw_kinematic)));
-        l.model.fit = fit_from(
-            source,
-            tr,
-            &training_scores.yaw_kinematic,
-            val,
-            "yaw rate from the GNSS course; kinematic = nominal steering".into(),
-        );
-    }
+    notes.extend(lateral_below_kinematic(vs));
+    write_fits(&mut model, &training_scores, vs, dx_dt_tfs.is_some());
     if dx_dt_tfs.is_some() {
         notes.push("dx/dt (eq 7) takes absolute positions x, y as inputs: it describes the places it was trained on, not the car; compare its validation fit with the training fit before trusting it elsewhere".into());
     }
@@ -1310,6 +1110,311 @@ pub fn identify(
         notes,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The speed's step responses (Fig 2) in every log, training then validation.
+fn speed_steps(training: &[Experiment], validation: &[Experiment]) -> Vec<delay::StepResponse> {
+    training
+        .iter()
+        .chain(validation)
+        .flat_map(|e| delay::step_responses(&e.name, &e.t, &e.input_vel, &e.vel))
+        .collect()
+}
+
+/// A note for each log whose GNSS fixes come measurably late behind (or early ahead of) its
+/// wheel speed ([`units::gnss_latency`]).
+fn gnss_latency_notes(training: &[Experiment], validation: &[Experiment]) -> Vec<String> {
+    let mut notes = Vec::new();
+    // Fixes late behind the wheel speed: the lateral model's lag would take the latency in.
+    for e in training.iter().chain(validation) {
+        if let Some((lag, se)) = units::gnss_latency(e) {
+            if lag.abs() > units::GNSS_LATENCY_NOTE_S && lag.abs() > units::GNSS_LATENCY_SIGMAS * se
+            {
+                notes.push(format!(
+                    "{}: the GNSS fixes are {:.2} s +- {se:.2} {} the wheel speed (the lag \
+                     that best fits the speed along the track with `vel`): the lateral \
+                     model's lag takes it in, and the node, fed fixes as late, predicts from \
+                     positions that old; log the fixes at their time of validity, or use a \
+                     receiver with less latency",
+                    e.name,
+                    lag.abs(),
+                    if lag > 0.0 {
+                        "late behind"
+                    } else {
+                        "early ahead of"
+                    }
+                ));
+            }
+        }
+    }
+    notes
+}
+
+/// The dx/dt model's blocks ([`identify_dx_dt`]), or `None` with a note when the logs do not
+/// excite it (the file then keeps the base file's).
+fn dx_dt_or_kept(
+    training: &[Experiment],
+    opts: &IdentifyOptions,
+    notes: &mut Vec<String>,
+) -> Result<Option<Vec<TransferFunction>>> {
+    Ok(match identify_dx_dt(training, opts)? {
+        Ok(tfs) => Some(tfs),
+        Err(why) => {
+            notes.push(format!(
+                "dx/dt (eq 7) not re-identified: {why}; the model file keeps the input model's dx_dt"
+            ));
+            None
+        }
+    })
+}
+
+/// The training logs' steering problem ([`steering_problem`]) and the lateral model
+/// ([`identify_lateral`]), which is fitted only when there is none; a note says why the
+/// model is missing.
+fn lateral_unless_steering_problem(
+    training: &[Experiment],
+    vehicle: &VehicleSection,
+    opts: &IdentifyOptions,
+    notes: &mut Vec<String>,
+) -> Result<(Option<String>, Option<LateralFit>)> {
+    // A steering no car has (the other sign, degrees) is the log's, not the car's: named as a
+    // refusal, and the lateral model is not fitted to it.
+    let steering_problem = steering_problem(training, vehicle);
+    let fitted = match &steering_problem {
+        Some(why) => Err(why.clone()),
+        None => identify_lateral(training, vehicle, opts)?,
+    };
+    let lateral = match fitted {
+        Ok(l) => Some(l),
+        Err(why) => {
+            notes.push(format!("lateral model not identified: {why}"));
+            None
+        }
+    };
+    Ok((steering_problem, lateral))
+}
+
+/// The cornering stiffnesses ([`dynamics::identify_dynamics`], with the lateral model's
+/// steering gain), when the car file has a `[dynamics]` and the drives determine them; a note
+/// either way.
+fn cornering_stiffnesses(
+    training: &[Experiment],
+    base: &ModelFile,
+    lateral: Option<&LateralFit>,
+    notes: &mut Vec<String>,
+) -> Option<dynamics::DynamicsFit> {
+    let Some(prior) = &base.dynamics else {
+        notes.push("[dynamics] not identified: the car file has none (its mass, yaw inertia and centre of gravity are needed; the cornering stiffnesses are then fitted)".into());
+        return None;
+    };
+    let steer_gain = lateral.map_or(1.0, |l| l.steer_gain);
+    match dynamics::identify_dynamics(training, &base.vehicle, prior, steer_gain) {
+        Ok(fit) => {
+            notes.push(format!(
+                "[dynamics] cornering stiffnesses identified from {} samples at speed ({} cornering): C_f {:.0} N/rad (+-{:.1} %), C_r {:.0} N/rad (+-{:.1} %); course rate fit {:.1} % (the car file's stiffnesses {:.1} %, kinematic {:.1} %)",
+                fit.samples,
+                fit.cornering_samples,
+                fit.section.cornering_front_n_per_rad,
+                100.0 * fit.relative_std_error.0,
+                fit.section.cornering_rear_n_per_rad,
+                100.0 * fit.relative_std_error.1,
+                fit.fit_percent,
+                fit.prior_fit_percent,
+                fit.kinematic_fit_percent
+            ));
+            Some(fit)
+        }
+        Err(why) => {
+            notes.push(format!(
+                "[dynamics] cornering stiffnesses not identified, the car file's kept: {why}"
+            ));
+            None
+        }
+    }
+}
+
+/// What the drives determined, for [`identified_model`].
+struct Fitted<'a> {
+    /// The speed model (eq 5 form).
+    speed: TransferFunction,
+    /// The dx/dt model's blocks; `None`: the base file's model is kept.
+    dx_dt: Option<&'a [TransferFunction]>,
+    /// The lateral model; `None`: the file has none.
+    lateral: Option<LateralFit>,
+    /// The cornering stiffnesses; `None`: the base file's `[dynamics]` is kept.
+    dynamics: Option<&'a dynamics::DynamicsFit>,
+}
+
+/// The model file to write: the base file with the logs' receiver rate ([`receiver_rate`])
+/// and the fitted models (their fits not yet scored), and notes on what it keeps.
+fn identified_model(
+    base: &ModelFile,
+    training: &[Experiment],
+    fitted: Fitted,
+    notes: &mut Vec<String>,
+) -> ModelFile {
+    let mut model = base.clone();
+    model.name = "identified".into();
+    if let Some(note) = receiver_rate(&mut model, training) {
+        notes.push(note);
+    }
+    if let Some(fit) = fitted.dynamics {
+        model.dynamics = Some(fit.section);
+    }
+    let names: Vec<&str> = training.iter().map(|e| e.name.as_str()).collect();
+    model.description = format!(
+        "Identified by catmodel identify from {} log(s): {}",
+        training.len(),
+        names.join(", ")
+    );
+    model.speed = speed_model(fitted.speed);
+    if let Some(tfs) = fitted.dx_dt {
+        model.dx_dt = dx_dt_model(tfs);
+    }
+    if let Some(l) = fitted.lateral.as_ref() {
+        notes.extend(understeer_note(l));
+    }
+    model.lateral = fitted.lateral.map(lateral_section);
+    model
+}
+
+/// The speed model's section (eq 5 form), its fit not yet scored.
+fn speed_model(tf: TransferFunction) -> Model {
+    Model {
+        equation: "eq 5 form (2nd order, input delay), simulation-error fit".into(),
+        output: model_file::SPEED_SIGNALS.output.into(),
+        output_unit: model_file::SPEED_SIGNALS.output_unit.into(),
+        blocks: vec![Block {
+            input: model_file::SPEED_INPUTS[0].into(),
+            input_unit: model_file::SPEED_SIGNALS.input_units[0].into(),
+            tf,
+        }],
+        fit: Fit::default(),
+    }
+}
+
+/// The dx/dt model's section (eq 7 form, one block per input), its fit not yet scored.
+fn dx_dt_model(tfs: &[TransferFunction]) -> Model {
+    Model {
+        equation: "eq 7 form (MISO, proper 2nd-order blocks), simulation-error fit".into(),
+        output: model_file::DX_DT_SIGNALS.output.into(),
+        output_unit: model_file::DX_DT_SIGNALS.output_unit.into(),
+        blocks: tfs
+            .iter()
+            .zip(model_file::DX_DT_INPUTS)
+            .zip(model_file::DX_DT_SIGNALS.input_units)
+            .map(|((tf, i), u)| Block {
+                input: i.into(),
+                input_unit: (*u).into(),
+                tf: *tf,
+            })
+            .collect(),
+        fit: Fit::default(),
+    }
+}
+
+/// Why the lateral model's understeer is the car file's, when it is ([`Understeer`]).
+fn understeer_note(l: &LateralFit) -> Option<String> {
+    match l.understeer {
+        Understeer::Estimated { .. } => None,
+        Understeer::SpeedSpan => Some(format!(
+            "lateral model: the understeer is the car file's ({} s^2/m^2), not estimated: the steady turns span less than 2 m/s of speed (drive circles at two speeds, or steps-at-speed)",
+            l.understeer_s2_per_m2
+        )),
+        Understeer::Undetermined {
+            estimate,
+            relative_std_error,
+        } => Some(format!(
+            "lateral model: the understeer is the car file's ({} s^2/m^2): the drives gave {estimate:.5} with a standard error of {:.0} % (at most {:.0} %): they do not determine it (drive circles at several speeds, or a receiver with a steadier course)",
+            l.understeer_s2_per_m2,
+            100.0 * relative_std_error,
+            100.0 * MAX_UNDERSTEER_RELATIVE_STD_ERROR
+        )),
+    }
+}
+
+/// The lateral model's section, its fit not yet scored.
+fn lateral_section(l: LateralFit) -> Lateral {
+    Lateral {
+        steer_gain: l.steer_gain,
+        understeer_s2_per_m2: l.understeer_s2_per_m2,
+        model: Model {
+            equation: "yaw rate = G(s) v tan(g delta / (1 + K v^2)) / L, G first order".into(),
+            output: model_file::LATERAL_SIGNALS.output.into(),
+            output_unit: model_file::LATERAL_SIGNALS.output_unit.into(),
+            blocks: vec![Block {
+                input: model_file::LATERAL_INPUTS[0].into(),
+                input_unit: model_file::LATERAL_SIGNALS.input_units[0].into(),
+                tf: l.tf,
+            }],
+            fit: Fit::default(),
+        },
+    }
+}
+
+/// Every model of `model` simulated over each experiment of `set`.
+fn simulate_each(model: &ModelFile, set: &[Experiment]) -> Result<Vec<Simulated>> {
+    set.iter()
+        .map(|e| validate::simulate_all(model, e))
+        .collect()
+}
+
+/// The note for a lateral model that fits the validation drives' yaw rate worse than the
+/// kinematic model with the nominal steering.
+fn lateral_below_kinematic(validation: Option<&Scores>) -> Option<String> {
+    // A lateral model that does worse than the kinematic model with the nominal steering on
+    // the validation drive is worth a word (black-box probe: 80.5 % against 82.1 %, silently).
+    let (m, k) = validation.and_then(|v| {
+        v.yaw_model
+            .and_then(|m| m.fit_percent)
+            .zip(v.yaw_kinematic.fit_percent)
+    })?;
+    (m < k).then(|| {
+        format!(
+            "lateral model: on the validation drive it fits the yaw rate {m:.1} %, below the \
+             kinematic model with the nominal steering ({k:.1} %): its steering gain and lag \
+             do not carry over to that drive better than the car file's geometry does"
+        )
+    })
+}
+
+/// Each identified model's scores, training and validation, beside the kinematic model's,
+/// into its `fit` section (the dx/dt model's only when it was identified, else the base
+/// file's stays).
+fn write_fits(
+    model: &mut ModelFile,
+    training: &Scores,
+    validation: Option<&Scores>,
+    dx_dt_identified: bool,
+) {
+    let source = "catmodel identify";
+    let note = "fit % over the concatenated logs, each simulated from its inputs alone";
+    model.speed.fit = fit_from(
+        source,
+        &training.vel_model,
+        &training.vel_kinematic,
+        validation.map(|v| (&v.vel_model, &v.vel_kinematic)),
+        note.into(),
+    );
+    if dx_dt_identified {
+        model.dx_dt.fit = fit_from(
+            source,
+            &training.dx_model,
+            &training.dx_kinematic,
+            validation.map(|v| (&v.dx_model, &v.dx_kinematic)),
+            "x, y are metres from each log's first GNSS fix: the model depends on where the car drives".into(),
+        );
+    }
+    if let (Some(l), Some(tr)) = (model.lateral.as_mut(), training.yaw_model.as_ref()) {
+        let val = validation.and_then(|v| v.yaw_model.as_ref().map(|y| (y, &v.yaw_kinematic)));
+        l.model.fit = fit_from(
+            source,
+            tr,
+            &training.yaw_kinematic,
+            val,
+            "yaw rate from the GNSS course; kinematic = nominal steering".into(),
+        );
+    }
 }
 
 /// Plain-text summary for the terminal: delay/settling means, the speed model, the tables.

@@ -738,141 +738,26 @@ pub fn preprocess_rows(
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
     let mut notes = Vec::new();
-    let log_name = name;
-    let scalar = |name: &str, get: fn(&LogRow) -> Option<f64>, p, notes: &mut Vec<String>| {
-        let (mut t, v) = column(rows, get);
-        let mut v: Vec<[f64; 1]> = v.into_iter().map(|x| [x]).collect();
-        drop_impossible(
-            log_name,
-            name,
-            &mut t,
-            &mut v,
-            p,
-            |x| format!("{}", x[0]),
-            notes,
-        );
-        (t, v.into_iter().map(|[x]| x).collect::<Vec<f64>>())
+    let mut needed = |column: &str, get: fn(&LogRow) -> Option<f64>, p: Plausible| {
+        plausible_column(name, rows, column, get, p, &mut notes)
     };
-    let (tv, vel) = scalar("vel", |r| r.vel, SPEED_PLAUSIBLE, &mut notes);
-    let (tc, cmd) = scalar("input_vel", |r| r.input_vel, SPEED_PLAUSIBLE, &mut notes);
-    let (ts_, steer) = scalar("steer", |r| r.steer, STEER_PLAUSIBLE, &mut notes);
-    let (mut tg, mut latlon): (Vec<f64>, Vec<(f64, f64)>) = rows
-        .iter()
-        .filter_map(|r| match (r.lat, r.lon) {
-            (Some(a), Some(b)) => Some((r.t, (a, b))),
-            _ => None,
-        })
-        .unzip();
-    if let Some(&first) = latlon.first() {
-        // Fixes in metres from the first, for the plausibility check.
-        let o = Geodetic {
-            lat_deg: first.0,
-            lon_deg: first.1,
-            height_m: 0.0,
-        };
-        let mut metres: Vec<[f64; 2]> = latlon
-            .iter()
-            .map(|(a, b)| {
-                let e = geodetic_to_enu(*a, *b, 0.0, &o);
-                [e.east_m, e.north_m]
-            })
-            .collect();
-        let dropped = drop_impossible(
-            name,
-            "lat/lon",
-            &mut tg,
-            &mut metres,
-            FIX_PLAUSIBLE,
-            |m| format!("{:.1} m east, {:.1} m north of the first fix", m[0], m[1]),
-            &mut notes,
-        );
-        for &i in dropped.iter().rev() {
-            latlon.remove(i);
-        }
-        if let Some(step) = gnss_discontinuity(&tg, &metres) {
-            return Err(step.into());
-        }
-        let bursts = gnss_bursts(&tg, &metres, &tv, &vel);
-        if let Some(&(first, _, size)) = bursts.first() {
-            let fixes: usize = bursts.iter().map(|b| b.1 - b.0).sum();
-            notes.push(format!(
-                "{log_name}: {} burst(s) of fixes that step off the track the wheel speed \
-                 continues and step back (multipath), {fixes} fixes in all, the first at t = \
-                 {:.2} s ({size:.1} m off): left out",
-                bursts.len(),
-                tg[first]
-            ));
-            for &(a, b, _) in bursts.iter().rev() {
-                tg.drain(a..b);
-                latlon.drain(a..b);
-            }
-        }
-    }
-    let mut missing = Vec::new();
-    for (n, len) in [
-        ("vel", tv.len()),
-        ("input_vel", tc.len()),
-        ("steer", ts_.len()),
-        ("lat/lon", tg.len()),
-    ] {
-        if len < 2 {
-            missing.push(n);
-        }
-    }
-    if !missing.is_empty() {
-        bail!(
-            "log has no usable data in column(s) {} (need at least 2 samples each of t, vel, input_vel, steer, lat, lon)",
-            missing.join(", ")
-        );
-    }
-    for (name, t) in [
+    let (tv, vel) = needed("vel", |r| r.vel, SPEED_PLAUSIBLE);
+    let (tc, cmd) = needed("input_vel", |r| r.input_vel, SPEED_PLAUSIBLE);
+    let (ts_, steer) = needed("steer", |r| r.steer, STEER_PLAUSIBLE);
+    let (mut tg, mut latlon) = gnss_fixes(rows);
+    clean_fixes(name, &mut tg, &mut latlon, (&tv, &vel), &mut notes)?;
+    check_needed([
         ("vel", &tv),
         ("input_vel", &tc),
         ("steer", &ts_),
         ("lat/lon", &tg),
-    ] {
-        check_pauses(name, t)?;
-    }
-    // The grid spans the time where every needed sensor has reported.
-    let t0 = [tv[0], tc[0], ts_[0], tg[0]]
-        .into_iter()
-        .fold(f64::NEG_INFINITY, f64::max);
-    let t1 = [
-        *tv.last().unwrap_or(&0.0),
-        *tc.last().unwrap_or(&0.0),
-        *ts_.last().unwrap_or(&0.0),
-        *tg.last().unwrap_or(&0.0),
-    ]
-    .into_iter()
-    .fold(f64::INFINITY, f64::min);
-    if (t1 - t0).is_nan() || t1 - t0 < opts.min_duration_s {
-        bail!(
-            "too short: the sensors overlap for {:.2} s, at least {} s needed",
-            (t1 - t0).max(0.0),
-            opts.min_duration_s
-        );
-    }
-    let n = resample::fixed_period_len(t0, t1, opts.ts_s)
-        .map_err(|e| anyhow!("grid {t0}..{t1}: {e:?}"))?;
-    let mut grid = vec![0.0; n];
-    resample::fixed_period_grid(t0, opts.ts_s, &mut grid).map_err(|e| anyhow!("grid: {e:?}"))?;
-    // Rounding can push the last grid point a hair past t1.
-    while grid.last().is_some_and(|g| *g > t1) {
-        grid.pop();
-    }
+    ])?;
+    let grid = overlap_grid([&tv, &tc, &ts_, &tg], opts)?;
 
     let origin = latlon[0];
-    let o = Geodetic {
-        lat_deg: origin.0,
-        lon_deg: origin.1,
-        height_m: 0.0,
-    };
-    let (xe, yn): (Vec<f64>, Vec<f64>) = latlon
-        .iter()
-        .map(|(a, b)| {
-            let e = geodetic_to_enu(*a, *b, 0.0, &o);
-            (e.east_m, e.north_m)
-        })
+    let (xe, yn): (Vec<f64>, Vec<f64>) = local_metres(origin, &latlon)
+        .into_iter()
+        .map(|[e, n]| (e, n))
         .unzip();
 
     // On the raw samples: the wheel's distance, moved to the antenna by the steering, against
@@ -887,37 +772,18 @@ pub fn preprocess_rows(
     );
 
     let taps = taps(opts)?;
-    let f = |name: &str, t: &[f64], v: &[f64]| -> Result<Vec<f64>> {
-        let g = onto_grid(name, t, v, &grid)?;
-        filter_signal(&g, &taps, opts.smooth_span).with_context(|| format!("column `{name}`"))
+    let onto = OntoGrid {
+        grid: &grid,
+        taps: &taps,
+        smooth_span: opts.smooth_span,
     };
-    let vel = f("vel", &tv, &vel)?;
-    let input_vel = f("input_vel", &tc, &cmd)?;
-    let steer_pct = f("steer", &ts_, &steer)?;
-    let x = f("lat/lon", &tg, &xe)?;
-    let y = f("lat/lon", &tg, &yn)?;
-    let optional = |name: &str, get: fn(&LogRow) -> Option<f64>| -> Result<Vec<f64>> {
-        let (mut t, mut v) = column(rows, get);
-        if t.len() < 2 {
-            return Ok(vec![0.0; grid.len()]);
-        }
-        // An optional sensor may start late or stop early: hold its end values.
-        if let (Some(&g0), Some(&t0), Some(&v0)) = (grid.first(), t.first(), v.first()) {
-            if t0 > g0 {
-                t.insert(0, g0);
-                v.insert(0, v0);
-            }
-        }
-        if let (Some(&g1), Some(&t1), Some(&v1)) = (grid.last(), t.last(), v.last()) {
-            if t1 < g1 {
-                t.push(g1);
-                v.push(v1);
-            }
-        }
-        f(name, &t, &v)
-    };
-    let accel_pct = optional("accel", |r| r.accel)?;
-    let brake_pct = optional("brake", |r| r.brake)?;
+    let vel = onto.filtered("vel", &tv, &vel)?;
+    let input_vel = onto.filtered("input_vel", &tc, &cmd)?;
+    let steer_pct = onto.filtered("steer", &ts_, &steer)?;
+    let x = onto.filtered("lat/lon", &tg, &xe)?;
+    let y = onto.filtered("lat/lon", &tg, &yn)?;
+    let accel_pct = onto.optional(rows, "accel", |r| r.accel)?;
+    let brake_pct = onto.optional(rows, "brake", |r| r.brake)?;
     let delta_rad = steer_pct
         .iter()
         .map(|p| vehicle.steer_pct_to_rad(*p))
@@ -932,33 +798,13 @@ pub fn preprocess_rows(
     let yaw_half_width = 4 * half_width;
     let mut yaw_rate = derivative(&heading, opts.ts_s, yaw_half_width);
     zero_unless_moving(&mut yaw_rate, &vel, yaw_half_width);
-    // A log that stands much of its time scores its speed models on samples that every model
-    // gets right (black-box probe: 300 s of standstill halved the validation MSE and raised
-    // the fit 2.8 points for the same model).
-    let standing = vel.iter().filter(|v| v.abs() < STANDING_MPS).count();
-    if standing as f64 > STANDING_NOTE_SHARE * vel.len() as f64 {
-        notes.push(format!(
-            "{name}: the car stands {:.0} s of the log's {:.0} s ({:.0} %): the fit % and MSE \
-             of the speed models count those samples, where every model is right, and read \
-             better than over the driving alone",
-            standing as f64 * opts.ts_s,
-            vel.len() as f64 * opts.ts_s,
-            100.0 * standing as f64 / vel.len() as f64
-        ));
-    }
+    notes.extend(standing_note(name, &vel, opts.ts_s));
     let (gnss_gap, outage_s) = gnss_gaps(
         &tg,
         &grid,
         taps.len() / 2 + opts.smooth_span + half_width + yaw_half_width,
     );
-    if outage_s > 0.0 {
-        let left_out = gnss_gap.iter().filter(|g| **g).count() as f64 * opts.ts_s;
-        notes.push(format!(
-            "{name}: {outage_s:.1} s of GNSS outage (fixes more than {GNSS_GAP_PERIODS} of the \
-             receiver's periods apart): the {left_out:.1} s whose track is interpolated across \
-             them are left out of the yaw-rate and dx/dt fits and scores"
-        ));
-    }
+    notes.extend(outage_note(name, &gnss_gap, outage_s, opts.ts_s));
     Ok(Experiment {
         name: name.to_string(),
         t: grid,
@@ -981,6 +827,239 @@ pub fn preprocess_rows(
         speed_scale,
         log_notes: notes,
         gnss_gap,
+    })
+}
+
+/// A needed sensor's samples of the log `log` (t, value), without its impossible ones
+/// ([`drop_impossible`], which names them in `notes`).
+fn plausible_column(
+    log: &str,
+    rows: &[LogRow],
+    name: &str,
+    get: fn(&LogRow) -> Option<f64>,
+    p: Plausible,
+    notes: &mut Vec<String>,
+) -> (Vec<f64>, Vec<f64>) {
+    let (mut t, v) = column(rows, get);
+    let mut v: Vec<[f64; 1]> = v.into_iter().map(|x| [x]).collect();
+    drop_impossible(log, name, &mut t, &mut v, p, |x| format!("{}", x[0]), notes);
+    (t, v.into_iter().map(|[x]| x).collect())
+}
+
+/// The GNSS fixes of the rows that have both `lat` and `lon`: (t, (lat, lon)).
+fn gnss_fixes(rows: &[LogRow]) -> (Vec<f64>, Vec<(f64, f64)>) {
+    rows.iter()
+        .filter_map(|r| match (r.lat, r.lon) {
+            (Some(a), Some(b)) => Some((r.t, (a, b))),
+            _ => None,
+        })
+        .unzip()
+}
+
+/// Fixes (lat, lon) in metres east and north of `origin` (lat, lon), degrees.
+fn local_metres(origin: (f64, f64), latlon: &[(f64, f64)]) -> Vec<[f64; 2]> {
+    let o = Geodetic {
+        lat_deg: origin.0,
+        lon_deg: origin.1,
+        height_m: 0.0,
+    };
+    latlon
+        .iter()
+        .map(|(a, b)| {
+            let e = geodetic_to_enu(*a, *b, 0.0, &o);
+            [e.east_m, e.north_m]
+        })
+        .collect()
+}
+
+/// Leaves out of the fixes `tg`, `latlon` of the log `name` the impossible ones
+/// ([`drop_impossible`]) and the bursts that step off the track the wheel speed (`wheel`: its
+/// times and m/s) continues ([`drop_bursts`]), each named in `notes`; a step no car makes
+/// ([`gnss_discontinuity`]) is the error [`GnssStep`].
+fn clean_fixes(
+    name: &str,
+    tg: &mut Vec<f64>,
+    latlon: &mut Vec<(f64, f64)>,
+    wheel: (&[f64], &[f64]),
+    notes: &mut Vec<String>,
+) -> Result<()> {
+    let Some(&first) = latlon.first() else {
+        return Ok(());
+    };
+    // Fixes in metres from the first, for the plausibility check.
+    let mut metres = local_metres(first, latlon);
+    let dropped = drop_impossible(
+        name,
+        "lat/lon",
+        tg,
+        &mut metres,
+        FIX_PLAUSIBLE,
+        |m| format!("{:.1} m east, {:.1} m north of the first fix", m[0], m[1]),
+        notes,
+    );
+    for &i in dropped.iter().rev() {
+        latlon.remove(i);
+    }
+    if let Some(step) = gnss_discontinuity(tg, &metres) {
+        return Err(step.into());
+    }
+    drop_bursts(name, tg, latlon, &metres, wheel, notes);
+    Ok(())
+}
+
+/// Leaves the bursts of [`gnss_bursts`] out of the fixes `tg`, `latlon` (`metres`: the same
+/// fixes in metres; `tv`, `vel`: the wheel speed's times and m/s), with a note.
+fn drop_bursts(
+    log_name: &str,
+    tg: &mut Vec<f64>,
+    latlon: &mut Vec<(f64, f64)>,
+    metres: &[[f64; 2]],
+    (tv, vel): (&[f64], &[f64]),
+    notes: &mut Vec<String>,
+) {
+    let bursts = gnss_bursts(tg, metres, tv, vel);
+    if let Some(&(first, _, size)) = bursts.first() {
+        let fixes: usize = bursts.iter().map(|b| b.1 - b.0).sum();
+        notes.push(format!(
+            "{log_name}: {} burst(s) of fixes that step off the track the wheel speed \
+             continues and step back (multipath), {fixes} fixes in all, the first at t = \
+             {:.2} s ({size:.1} m off): left out",
+            bursts.len(),
+            tg[first]
+        ));
+        for &(a, b, _) in bursts.iter().rev() {
+            tg.drain(a..b);
+            latlon.drain(a..b);
+        }
+    }
+}
+
+/// Refuses a log unless each needed sensor (name, sample times) has two samples at least and
+/// no pause ([`check_pauses`]).
+fn check_needed(columns: [(&str, &[f64]); 4]) -> Result<()> {
+    let missing: Vec<&str> = columns
+        .iter()
+        .filter(|(_, t)| t.len() < 2)
+        .map(|(n, _)| *n)
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "log has no usable data in column(s) {} (need at least 2 samples each of t, vel, input_vel, steer, lat, lon)",
+            missing.join(", ")
+        );
+    }
+    for (name, t) in columns {
+        check_pauses(name, t)?;
+    }
+    Ok(())
+}
+
+/// The uniform grid (period `opts.ts_s`) over the needed sensors' sample times `columns`
+/// (none empty), refused when shorter than `opts.min_duration_s`.
+fn overlap_grid(columns: [&[f64]; 4], opts: &PreprocessOptions) -> Result<Vec<f64>> {
+    // The grid spans the time where every needed sensor has reported.
+    let t0 = columns
+        .iter()
+        .map(|t| t[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let t1 = columns
+        .iter()
+        .map(|t| *t.last().unwrap_or(&0.0))
+        .fold(f64::INFINITY, f64::min);
+    if (t1 - t0).is_nan() || t1 - t0 < opts.min_duration_s {
+        bail!(
+            "too short: the sensors overlap for {:.2} s, at least {} s needed",
+            (t1 - t0).max(0.0),
+            opts.min_duration_s
+        );
+    }
+    let n = resample::fixed_period_len(t0, t1, opts.ts_s)
+        .map_err(|e| anyhow!("grid {t0}..{t1}: {e:?}"))?;
+    let mut grid = vec![0.0; n];
+    resample::fixed_period_grid(t0, opts.ts_s, &mut grid).map_err(|e| anyhow!("grid: {e:?}"))?;
+    // Rounding can push the last grid point a hair past t1.
+    while grid.last().is_some_and(|g| *g > t1) {
+        grid.pop();
+    }
+    Ok(grid)
+}
+
+/// The grid and the filter ([`filter_signal`]) that every column goes through onto it.
+struct OntoGrid<'a> {
+    /// The grid's times, s.
+    grid: &'a [f64],
+    /// The FIR lowpass's taps ([`taps`]).
+    taps: &'a [f64],
+    /// The moving average's span, samples.
+    smooth_span: usize,
+}
+
+impl OntoGrid<'_> {
+    /// A column's samples (`t`, `v`) onto the grid, filtered.
+    fn filtered(&self, name: &str, t: &[f64], v: &[f64]) -> Result<Vec<f64>> {
+        let g = onto_grid(name, t, v, self.grid)?;
+        filter_signal(&g, self.taps, self.smooth_span).with_context(|| format!("column `{name}`"))
+    }
+
+    /// An optional column of `rows` onto the grid, filtered; zeros when the log has fewer
+    /// than two samples of it.
+    fn optional(
+        &self,
+        rows: &[LogRow],
+        name: &str,
+        get: fn(&LogRow) -> Option<f64>,
+    ) -> Result<Vec<f64>> {
+        let grid = self.grid;
+        let (mut t, mut v) = column(rows, get);
+        if t.len() < 2 {
+            return Ok(vec![0.0; grid.len()]);
+        }
+        // An optional sensor may start late or stop early: hold its end values.
+        if let (Some(&g0), Some(&t0), Some(&v0)) = (grid.first(), t.first(), v.first()) {
+            if t0 > g0 {
+                t.insert(0, g0);
+                v.insert(0, v0);
+            }
+        }
+        if let (Some(&g1), Some(&t1), Some(&v1)) = (grid.last(), t.last(), v.last()) {
+            if t1 < g1 {
+                t.push(g1);
+                v.push(v1);
+            }
+        }
+        self.filtered(name, &t, &v)
+    }
+}
+
+/// The note for a log whose car stands more than [`STANDING_NOTE_SHARE`] of its time (`vel`
+/// on the grid of period `ts_s`).
+fn standing_note(name: &str, vel: &[f64], ts_s: f64) -> Option<String> {
+    // A log that stands much of its time scores its speed models on samples that every model
+    // gets right (black-box probe: 300 s of standstill halved the validation MSE and raised
+    // the fit 2.8 points for the same model).
+    let standing = vel.iter().filter(|v| v.abs() < STANDING_MPS).count();
+    (standing as f64 > STANDING_NOTE_SHARE * vel.len() as f64).then(|| {
+        format!(
+            "{name}: the car stands {:.0} s of the log's {:.0} s ({:.0} %): the fit % and MSE \
+             of the speed models count those samples, where every model is right, and read \
+             better than over the driving alone",
+            standing as f64 * ts_s,
+            vel.len() as f64 * ts_s,
+            100.0 * standing as f64 / vel.len() as f64
+        )
+    })
+}
+
+/// The note for a log with GNSS outages ([`gnss_gaps`]: `outage_s` in all, the grid samples
+/// of period `ts_s` flagged in `gnss_gap` left out).
+fn outage_note(name: &str, gnss_gap: &[bool], outage_s: f64, ts_s: f64) -> Option<String> {
+    (outage_s > 0.0).then(|| {
+        let left_out = gnss_gap.iter().filter(|g| **g).count() as f64 * ts_s;
+        format!(
+            "{name}: {outage_s:.1} s of GNSS outage (fixes more than {GNSS_GAP_PERIODS} of the \
+             receiver's periods apart): the {left_out:.1} s whose track is interpolated across \
+             them are left out of the yaw-rate and dx/dt fits and scores"
+        )
     })
 }
 
