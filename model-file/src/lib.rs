@@ -1218,217 +1218,30 @@ pub fn block_problem(
 /// Parses and validates a model file's text; `path` only names it in errors. A file that parses
 /// is one the node runs ([`ModelFile::node_config`] succeeds).
 pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
+    let at = |message: String| err(path, message);
     // Recorders and editors add a byte-order mark; TOML does not allow one.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let format: FormatOnly = toml::from_str(text).map_err(|e| {
-        err(
-            path,
-            format!("not a valid model file: {}", toml_message(text, &e)),
-        )
-    })?;
-    match format.format.as_deref() {
-        Some(FORMAT) => {}
-        Some("catmodel-model-1") => {
-            return Err(err(
-                path,
-                format!(
-                    "format = \"catmodel-model-1\": written by an older catmodel; this one reads {FORMAT:?}, \
-                     which describes the whole car: add to [vehicle] antenna_ahead_m, gnss_rate_hz, width_m, \
-                     length_m, rear_overhang_m, max_speed_mps, max_steer_rate_pct_per_s, add an [inputs] table, \
-                     optionally [dynamics], and set format = {FORMAT:?} (models/paper.toml shows every key)"
-                ),
-            ))
-        }
-        Some(other) => {
-            return Err(err(
-                path,
-                format!("format = {other:?}: this catmodel reads {FORMAT:?}"),
-            ))
-        }
-        None => return Err(err(path, format!("missing key `format` (expected {FORMAT:?})"))),
-    }
+    format_check(text).map_err(at)?;
     let raw: RawFile = toml::from_str(text).map_err(|e| err(path, toml_message(text, &e)))?;
-    let at = |message: String| err(path, message);
     let ts = raw.sample_time_s;
-    let node_ts = catmodel::SAMPLE_PERIOD_S_F64;
-    if !(ts.is_finite() && (ts - node_ts).abs() <= 1e-12) {
-        return Err(err(
-            path,
-            format!(
-                "sample_time_s = {ts}: the node runs every {node_ts} s; models must be identified and discretized at that period"
-            ),
-        ));
-    }
+    sample_time_check(ts).map_err(at)?;
     let v = &raw.vehicle;
-    for (key, value) in [
-        ("vehicle.wheelbase_m", v.wheelbase_m),
-        ("vehicle.track_m", v.track_m),
-        ("vehicle.max_steer_deg", v.max_steer_deg),
-        ("vehicle.understeer_s2_per_m2", v.understeer_s2_per_m2),
-        ("vehicle.gnss_rate_hz", v.gnss_rate_hz),
-        ("vehicle.width_m", v.width_m),
-        ("vehicle.length_m", v.length_m),
-        ("vehicle.rear_overhang_m", v.rear_overhang_m),
-        ("vehicle.max_speed_mps", v.max_speed_mps),
-        (
-            "vehicle.max_steer_rate_pct_per_s",
-            v.max_steer_rate_pct_per_s,
-        ),
-    ] {
-        range(key, value).map_err(at)?;
-    }
-    if let Some(lag) = v.steer_lag_s {
-        range("vehicle.steer_lag_s", lag).map_err(at)?;
-    }
-    if v.track_m > v.width_m {
-        return Err(err(
-            path,
-            format!(
-                "vehicle.track_m = {}: wider than width_m = {} (the tyres are under the body)",
-                shown(v.track_m),
-                shown(v.width_m)
-            ),
-        ));
-    }
-    if v.rear_overhang_m + v.wheelbase_m > v.length_m {
-        return Err(err(
-            path,
-            format!(
-                "vehicle.length_m = {}: shorter than rear_overhang_m + wheelbase_m = {}",
-                v.length_m,
-                v.rear_overhang_m + v.wheelbase_m
-            ),
-        ));
-    }
-    // The antenna is on the car: from the rear bumper to the front one, within its width, and
-    // a mount's reach more.
-    within(
-        "vehicle.antenna_ahead_m",
-        v.antenna_ahead_m,
-        -v.rear_overhang_m - ANTENNA_MOUNT_M,
-        v.length_m - v.rear_overhang_m + ANTENNA_MOUNT_M,
-        "m",
-        "on the car: from the rear bumper, rear_overhang_m behind the rear axle, to the front one, \
-         length_m - rear_overhang_m ahead of it, and 0.5 m more for a mount",
-    )
-    .map_err(at)?;
-    let half_width_m = v.width_m / 2.0 + ANTENNA_MOUNT_M;
-    within(
-        "vehicle.antenna_left_m",
-        v.antenna_left_m,
-        -half_width_m,
-        half_width_m,
-        "m",
-        "on the car: within width_m / 2 of the centre line, and 0.5 m more for a mount",
-    )
-    .map_err(at)?;
+    vehicle_check(v).map_err(at)?;
+    antenna_check(v).map_err(at)?;
     if let Some(d) = &raw.dynamics {
         dynamics_check(v, d).map_err(at)?;
     }
-    let i = &raw.inputs;
-    for (key, value) in [
-        ("inputs.steer_timeout_s", i.steer_timeout_s),
-        ("inputs.speed_timeout_s", i.speed_timeout_s),
-        ("inputs.pedal_timeout_s", i.pedal_timeout_s),
-    ] {
-        range(key, value).map_err(at)?;
-    }
-    if i.gnss_source_address > 251 {
-        return Err(err(
-            path,
-            format!(
-                "inputs.gnss_source_address = {}: NMEA 2000 source addresses are 0..251",
-                i.gnss_source_address
-            ),
-        ));
-    }
-    range("inputs.gnss_gate_m", i.gnss_gate_m).map_err(at)?;
-    let gnss_timeout_s = InputsSection::gnss_timeout_s(v.gnss_rate_hz);
-    if !(i.gnss_lost_s.is_finite() && i.gnss_lost_s > gnss_timeout_s) {
-        return Err(err(
-            path,
-            format!(
-                "inputs.gnss_lost_s = {}: must be longer than the GNSS timeout ({gnss_timeout_s} s at {} Hz)",
-                i.gnss_lost_s, v.gnss_rate_hz
-            ),
-        ));
-    }
-    range("inputs.gnss_lost_s", i.gnss_lost_s).map_err(at)?;
-    let c = &raw.control;
-    range("control.position_uncertainty_m", c.position_uncertainty_m).map_err(at)?;
-    if let Some(w) = c.mpc_lateral_weight_per_m2 {
-        range("control.mpc_lateral_weight_per_m2", w).map_err(at)?;
-    }
-    let h = &raw.hybrid;
-    for (key, value) in [
-        ("hybrid.enter_dynamic_speed_mps", h.enter_dynamic_speed_mps),
-        (
-            "hybrid.enter_dynamic_lat_accel_mps2",
-            h.enter_dynamic_lat_accel_mps2,
-        ),
-        ("hybrid.exit_dynamic_speed_mps", h.exit_dynamic_speed_mps),
-        (
-            "hybrid.exit_dynamic_lat_accel_mps2",
-            h.exit_dynamic_lat_accel_mps2,
-        ),
-        ("hybrid.min_dwell_ticks", f64::from(h.min_dwell_ticks)),
-    ] {
-        range(key, value).map_err(at)?;
-    }
-    if h.exit_dynamic_speed_mps > h.enter_dynamic_speed_mps
-        || h.exit_dynamic_lat_accel_mps2 > h.enter_dynamic_lat_accel_mps2
-    {
-        return Err(err(
-            path,
-            "hybrid: exit thresholds must not exceed enter thresholds (hysteresis)".into(),
-        ));
-    }
+    inputs_check(&raw.inputs, v.gnss_rate_hz).map_err(at)?;
+    control_check(&raw.control).map_err(at)?;
+    hybrid_check(&raw.hybrid).map_err(at)?;
     if let Some(d) = &raw.dynamics {
-        understeer_check(v, d, h).map_err(at)?;
+        understeer_check(v, d, &raw.hybrid).map_err(at)?;
     }
     let speed = convert_model(path, "speed", raw.speed, &SPEED_SIGNALS, ts, &raw.vehicle)?;
     let dx_dt = convert_model(path, "dx_dt", raw.dx_dt, &DX_DT_SIGNALS, ts, &raw.vehicle)?;
     let lateral = match raw.lateral {
         None => None,
-        Some(l) => {
-            if let Some(why) = steer_gain_problem(raw.vehicle.max_steer_deg, l.steer_gain) {
-                return Err(err(path, why));
-            }
-            range("lateral.understeer_s2_per_m2", l.understeer_s2_per_m2).map_err(at)?;
-            let model = convert_model(
-                path,
-                "lateral",
-                RawModel {
-                    equation: l.equation,
-                    output: l.output,
-                    output_unit: l.output_unit,
-                    blocks: l.blocks,
-                    fit: l.fit,
-                },
-                &LATERAL_SIGNALS,
-                ts,
-                &raw.vehicle,
-            )?;
-            // The node does not run this block (its delay line is not involved): the bound is
-            // the car's, not the node's.
-            for b in &model.blocks {
-                within(
-                    &format!("lateral.blocks[{}].delay_s", b.input),
-                    b.tf.delay_s(),
-                    LATERAL_DELAY_RANGE_S.0,
-                    LATERAL_DELAY_RANGE_S.1,
-                    "s",
-                    "the yaw rate follows the steering within a fraction of a second; its lag is the block's pole, \
-                     and `catmodel identify` scans delays of 0..0.2 s",
-                )
-                .map_err(at)?;
-            }
-            Some(Lateral {
-                steer_gain: l.steer_gain,
-                understeer_s2_per_m2: l.understeer_s2_per_m2,
-                model,
-            })
-        }
+        Some(l) => Some(convert_lateral(path, l, ts, &raw.vehicle)?),
     };
     let file = ModelFile {
         name: raw.name,
@@ -1445,6 +1258,212 @@ pub fn parse(text: &str, path: &Path) -> Result<ModelFile, ModelFileError> {
     };
     file.build_node_config(path)?;
     Ok(file)
+}
+
+/// The `format` key, read before the rest: the one this catmodel reads, or why not (an old
+/// file gets a migration message rather than a list of missing keys).
+fn format_check(text: &str) -> Result<(), String> {
+    let format: FormatOnly = toml::from_str(text)
+        .map_err(|e| format!("not a valid model file: {}", toml_message(text, &e)))?;
+    match format.format.as_deref() {
+        Some(FORMAT) => Ok(()),
+        Some("catmodel-model-1") => Err(format!(
+            "format = \"catmodel-model-1\": written by an older catmodel; this one reads {FORMAT:?}, \
+             which describes the whole car: add to [vehicle] antenna_ahead_m, gnss_rate_hz, width_m, \
+             length_m, rear_overhang_m, max_speed_mps, max_steer_rate_pct_per_s, add an [inputs] table, \
+             optionally [dynamics], and set format = {FORMAT:?} (models/paper.toml shows every key)"
+        )),
+        Some(other) => Err(format!("format = {other:?}: this catmodel reads {FORMAT:?}")),
+        None => Err(format!("missing key `format` (expected {FORMAT:?})")),
+    }
+}
+
+/// `sample_time_s` is the node's period: the delays and discretizations are made at it.
+fn sample_time_check(ts: f64) -> Result<(), String> {
+    let node_ts = catmodel::SAMPLE_PERIOD_S_F64;
+    if ts.is_finite() && (ts - node_ts).abs() <= 1e-12 {
+        Ok(())
+    } else {
+        Err(format!(
+            "sample_time_s = {ts}: the node runs every {node_ts} s; models must be identified and discretized at that period"
+        ))
+    }
+}
+
+/// `[vehicle]`'s numbers within their ranges, and the wheels within the body.
+fn vehicle_check(v: &VehicleSection) -> Result<(), String> {
+    for (key, value) in [
+        ("vehicle.wheelbase_m", v.wheelbase_m),
+        ("vehicle.track_m", v.track_m),
+        ("vehicle.max_steer_deg", v.max_steer_deg),
+        ("vehicle.understeer_s2_per_m2", v.understeer_s2_per_m2),
+        ("vehicle.gnss_rate_hz", v.gnss_rate_hz),
+        ("vehicle.width_m", v.width_m),
+        ("vehicle.length_m", v.length_m),
+        ("vehicle.rear_overhang_m", v.rear_overhang_m),
+        ("vehicle.max_speed_mps", v.max_speed_mps),
+        (
+            "vehicle.max_steer_rate_pct_per_s",
+            v.max_steer_rate_pct_per_s,
+        ),
+    ] {
+        range(key, value)?;
+    }
+    if let Some(lag) = v.steer_lag_s {
+        range("vehicle.steer_lag_s", lag)?;
+    }
+    if v.track_m > v.width_m {
+        return Err(format!(
+            "vehicle.track_m = {}: wider than width_m = {} (the tyres are under the body)",
+            shown(v.track_m),
+            shown(v.width_m)
+        ));
+    }
+    if v.rear_overhang_m + v.wheelbase_m > v.length_m {
+        return Err(format!(
+            "vehicle.length_m = {}: shorter than rear_overhang_m + wheelbase_m = {}",
+            v.length_m,
+            v.rear_overhang_m + v.wheelbase_m
+        ));
+    }
+    Ok(())
+}
+
+/// The antenna is on the car: from the rear bumper to the front one, within its width, and
+/// a mount's reach more.
+fn antenna_check(v: &VehicleSection) -> Result<(), String> {
+    within(
+        "vehicle.antenna_ahead_m",
+        v.antenna_ahead_m,
+        -v.rear_overhang_m - ANTENNA_MOUNT_M,
+        v.length_m - v.rear_overhang_m + ANTENNA_MOUNT_M,
+        "m",
+        "on the car: from the rear bumper, rear_overhang_m behind the rear axle, to the front one, \
+         length_m - rear_overhang_m ahead of it, and 0.5 m more for a mount",
+    )?;
+    let half_width_m = v.width_m / 2.0 + ANTENNA_MOUNT_M;
+    within(
+        "vehicle.antenna_left_m",
+        v.antenna_left_m,
+        -half_width_m,
+        half_width_m,
+        "m",
+        "on the car: within width_m / 2 of the centre line, and 0.5 m more for a mount",
+    )
+}
+
+/// `[inputs]`: the timeouts and gates within their ranges, the receiver's address one NMEA 2000
+/// allows, and GNSS lost only after it went stale at the receiver's rate `gnss_rate_hz`.
+fn inputs_check(i: &InputsSection, gnss_rate_hz: f64) -> Result<(), String> {
+    for (key, value) in [
+        ("inputs.steer_timeout_s", i.steer_timeout_s),
+        ("inputs.speed_timeout_s", i.speed_timeout_s),
+        ("inputs.pedal_timeout_s", i.pedal_timeout_s),
+    ] {
+        range(key, value)?;
+    }
+    if i.gnss_source_address > 251 {
+        return Err(format!(
+            "inputs.gnss_source_address = {}: NMEA 2000 source addresses are 0..251",
+            i.gnss_source_address
+        ));
+    }
+    range("inputs.gnss_gate_m", i.gnss_gate_m)?;
+    let gnss_timeout_s = InputsSection::gnss_timeout_s(gnss_rate_hz);
+    if !(i.gnss_lost_s.is_finite() && i.gnss_lost_s > gnss_timeout_s) {
+        return Err(format!(
+            "inputs.gnss_lost_s = {}: must be longer than the GNSS timeout ({gnss_timeout_s} s at {} Hz)",
+            i.gnss_lost_s, gnss_rate_hz
+        ));
+    }
+    range("inputs.gnss_lost_s", i.gnss_lost_s)
+}
+
+/// `[control]`'s numbers within their ranges.
+fn control_check(c: &ControlSection) -> Result<(), String> {
+    range("control.position_uncertainty_m", c.position_uncertainty_m)?;
+    if let Some(w) = c.mpc_lateral_weight_per_m2 {
+        range("control.mpc_lateral_weight_per_m2", w)?;
+    }
+    Ok(())
+}
+
+/// `[hybrid]`'s thresholds within their ranges, with hysteresis between entering and leaving
+/// the dynamic mode.
+fn hybrid_check(h: &HybridSection) -> Result<(), String> {
+    for (key, value) in [
+        ("hybrid.enter_dynamic_speed_mps", h.enter_dynamic_speed_mps),
+        (
+            "hybrid.enter_dynamic_lat_accel_mps2",
+            h.enter_dynamic_lat_accel_mps2,
+        ),
+        ("hybrid.exit_dynamic_speed_mps", h.exit_dynamic_speed_mps),
+        (
+            "hybrid.exit_dynamic_lat_accel_mps2",
+            h.exit_dynamic_lat_accel_mps2,
+        ),
+        ("hybrid.min_dwell_ticks", f64::from(h.min_dwell_ticks)),
+    ] {
+        range(key, value)?;
+    }
+    if h.exit_dynamic_speed_mps > h.enter_dynamic_speed_mps
+        || h.exit_dynamic_lat_accel_mps2 > h.enter_dynamic_lat_accel_mps2
+    {
+        return Err("hybrid: exit thresholds must not exceed enter thresholds (hysteresis)".into());
+    }
+    Ok(())
+}
+
+/// `[lateral]`: its steering gain and understeer term checked, then its model as the others
+/// ([`convert_model`]), then its delay.
+fn convert_lateral(
+    path: &Path,
+    l: RawLateral,
+    ts: f64,
+    vehicle: &VehicleSection,
+) -> Result<Lateral, ModelFileError> {
+    let at = |message: String| err(path, message);
+    if let Some(why) = steer_gain_problem(vehicle.max_steer_deg, l.steer_gain) {
+        return Err(err(path, why));
+    }
+    range("lateral.understeer_s2_per_m2", l.understeer_s2_per_m2).map_err(at)?;
+    let model = convert_model(
+        path,
+        "lateral",
+        RawModel {
+            equation: l.equation,
+            output: l.output,
+            output_unit: l.output_unit,
+            blocks: l.blocks,
+            fit: l.fit,
+        },
+        &LATERAL_SIGNALS,
+        ts,
+        vehicle,
+    )?;
+    lateral_delay_check(&model).map_err(at)?;
+    Ok(Lateral {
+        steer_gain: l.steer_gain,
+        understeer_s2_per_m2: l.understeer_s2_per_m2,
+        model,
+    })
+}
+
+/// The lateral blocks' delays within [`LATERAL_DELAY_RANGE_S`]. The node does not run this
+/// block (its delay line is not involved): the bound is the car's, not the node's.
+fn lateral_delay_check(model: &Model) -> Result<(), String> {
+    for b in &model.blocks {
+        within(
+            &format!("lateral.blocks[{}].delay_s", b.input),
+            b.tf.delay_s(),
+            LATERAL_DELAY_RANGE_S.0,
+            LATERAL_DELAY_RANGE_S.1,
+            "s",
+            "the yaw rate follows the steering within a fraction of a second; its lag is the block's pole, \
+             and `catmodel identify` scans delays of 0..0.2 s",
+        )?;
+    }
+    Ok(())
 }
 
 /// The `toml` crate's message on one line, with the line and column it points at (the crate's
@@ -2042,20 +2061,39 @@ fn write_model_head(out: &mut String, model: &Model) {
 /// The model file as commented TOML, in the layout of `models/paper.toml`.
 pub fn to_toml(f: &ModelFile) -> String {
     let mut o = String::new();
+    write_top_level(&mut o, f);
+    write_vehicle(&mut o, &f.vehicle);
+    if let Some(d) = &f.dynamics {
+        write_dynamics(&mut o, d);
+    }
+    write_inputs(&mut o, &f.inputs);
+    write_control(&mut o, &f.control);
+    write_hybrid(&mut o, &f.hybrid);
+    write_speed(&mut o, &f.speed);
+    write_dx_dt(&mut o, &f.dx_dt);
+    if let Some(l) = &f.lateral {
+        write_lateral(&mut o, l);
+    }
+    o
+}
+
+fn write_top_level(out: &mut String, f: &ModelFile) {
     let _ = writeln!(
-        o,
+        out,
         "# catmodel model file (README, \"Model file\"). Stable keys; comments are ignored."
     );
-    let _ = writeln!(o, "format = {}", quoted(FORMAT));
-    let _ = writeln!(o, "name = {}", quoted(&f.name));
-    let _ = writeln!(o, "description = {}", quoted(&f.description));
+    let _ = writeln!(out, "format = {}", quoted(FORMAT));
+    let _ = writeln!(out, "name = {}", quoted(&f.name));
+    let _ = writeln!(out, "description = {}", quoted(&f.description));
     let _ = writeln!(
-        o,
+        out,
         "# Sample time of the node and of every discretization, s; every delay_s is a whole multiple."
     );
-    let _ = writeln!(o, "sample_time_s = {}", num(f.sample_time_s));
-    let v = &f.vehicle;
-    let _ = writeln!(o, "\n[vehicle]");
+    let _ = writeln!(out, "sample_time_s = {}", num(f.sample_time_s));
+}
+
+fn write_vehicle(out: &mut String, v: &VehicleSection) {
+    let _ = writeln!(out, "\n[vehicle]");
     let rows = [
         ("wheelbase_m", v.wheelbase_m, "L"),
         ("track_m", v.track_m, "T (tread), eq 3-4"),
@@ -2103,37 +2141,40 @@ pub fn to_toml(f: &ModelFile) -> String {
         ),
     ];
     for (key, value, comment) in rows {
-        let _ = writeln!(o, "{key} = {}  # {comment}", num(value));
+        let _ = writeln!(out, "{key} = {}  # {comment}", num(value));
     }
     if let Some(lag) = v.steer_lag_s {
         let _ = writeln!(
-            o,
+            out,
             "steer_lag_s = {}  # how far the steering trails a ramp command (identify-steering): the MPC's command leads its plan by it",
             num(lag)
         );
     }
-    if let Some(d) = &f.dynamics {
-        let _ = writeln!(o, "\n[dynamics]");
-        let _ = writeln!(
-            o,
-            "# linear-tyre single-track model of the dynamic (high-speed) mode"
-        );
-        let rows = [
-            ("mass_kg", d.mass_kg),
-            ("yaw_inertia_kg_m2", d.yaw_inertia_kg_m2),
-            ("cg_to_front_m", d.cg_to_front_m),
-            ("cg_to_rear_m", d.cg_to_rear_m),
-            ("cornering_front_n_per_rad", d.cornering_front_n_per_rad),
-            ("cornering_rear_n_per_rad", d.cornering_rear_n_per_rad),
-        ];
-        for (key, value) in rows {
-            let _ = writeln!(o, "{key} = {}", num(value));
-        }
-    }
-    let i = &f.inputs;
-    let _ = writeln!(o, "\n[inputs]");
+}
+
+fn write_dynamics(out: &mut String, d: &DynamicsSection) {
+    let _ = writeln!(out, "\n[dynamics]");
     let _ = writeln!(
-        o,
+        out,
+        "# linear-tyre single-track model of the dynamic (high-speed) mode"
+    );
+    let rows = [
+        ("mass_kg", d.mass_kg),
+        ("yaw_inertia_kg_m2", d.yaw_inertia_kg_m2),
+        ("cg_to_front_m", d.cg_to_front_m),
+        ("cg_to_rear_m", d.cg_to_rear_m),
+        ("cornering_front_n_per_rad", d.cornering_front_n_per_rad),
+        ("cornering_rear_n_per_rad", d.cornering_rear_n_per_rad),
+    ];
+    for (key, value) in rows {
+        let _ = writeln!(out, "{key} = {}", num(value));
+    }
+}
+
+fn write_inputs(out: &mut String, i: &InputsSection) {
+    let _ = writeln!(out, "\n[inputs]");
+    let _ = writeln!(
+        out,
         "# an input older than its timeout is stale; GNSS's follows gnss_rate_hz"
     );
     let rows = [
@@ -2142,89 +2183,100 @@ pub fn to_toml(f: &ModelFile) -> String {
         ("pedal_timeout_s", i.pedal_timeout_s),
     ];
     for (key, value) in rows {
-        let _ = writeln!(o, "{key} = {}", num(value));
+        let _ = writeln!(out, "{key} = {}", num(value));
     }
-    let _ = writeln!(o, "gnss_source_address = {}", i.gnss_source_address);
-    let _ = writeln!(o, "gnss_gate_m = {}", num(i.gnss_gate_m));
-    let _ = writeln!(o, "gnss_lost_s = {}", num(i.gnss_lost_s));
-    let c = &f.control;
-    let _ = writeln!(o, "\n[control]");
+    let _ = writeln!(out, "gnss_source_address = {}", i.gnss_source_address);
+    let _ = writeln!(out, "gnss_gate_m = {}", num(i.gnss_gate_m));
+    let _ = writeln!(out, "gnss_lost_s = {}", num(i.gnss_lost_s));
+}
+
+fn write_control(out: &mut String, c: &ControlSection) {
+    let _ = writeln!(out, "\n[control]");
     let _ = writeln!(
-        o,
+        out,
         "# the controller that follows the planner's path: \"mpc\" or \"pure-pursuit\""
     );
-    let _ = writeln!(o, "controller = {}", quoted(c.controller.as_str()));
+    let _ = writeln!(out, "controller = {}", quoted(c.controller.as_str()));
     let _ = writeln!(
-        o,
+        out,
         "position_uncertainty_m = {}  # the position estimate's error bound (2 sigma): obstacles are inflated by it",
         num(c.position_uncertainty_m)
     );
     if let Some(w) = c.mpc_lateral_weight_per_m2 {
         let _ = writeln!(
-            o,
+            out,
             "mpc_lateral_weight_per_m2 = {}  # the MPC's weight on the offset from the planner's line (built-in: 10)",
             num(w)
         );
     }
-    let h = &f.hybrid;
-    let _ = writeln!(o, "\n[hybrid]");
+}
+
+fn write_hybrid(out: &mut String, h: &HybridSection) {
+    let _ = writeln!(out, "\n[hybrid]");
     let _ = writeln!(
-        o,
+        out,
         "# kinematic -> dynamic above enter_*, back below both exit_*; each mode kept >= min_dwell_ticks x 20 ms"
     );
     let _ = writeln!(
-        o,
+        out,
         "enter_dynamic_speed_mps = {}",
         num(h.enter_dynamic_speed_mps)
     );
     let _ = writeln!(
-        o,
+        out,
         "enter_dynamic_lat_accel_mps2 = {}",
         num(h.enter_dynamic_lat_accel_mps2)
     );
     let _ = writeln!(
-        o,
+        out,
         "exit_dynamic_speed_mps = {}",
         num(h.exit_dynamic_speed_mps)
     );
     let _ = writeln!(
-        o,
+        out,
         "exit_dynamic_lat_accel_mps2 = {}",
         num(h.exit_dynamic_lat_accel_mps2)
     );
-    let _ = writeln!(o, "min_dwell_ticks = {}", h.min_dwell_ticks);
+    let _ = writeln!(out, "min_dwell_ticks = {}", h.min_dwell_ticks);
+}
 
+fn write_speed(out: &mut String, speed: &Model) {
     let _ = writeln!(
-        o,
+        out,
         "\n# Internal speed controller: commanded speed -> measured speed."
     );
-    let _ = writeln!(o, "[speed]");
-    write_model_head(&mut o, &f.speed);
-    write_blocks(&mut o, "speed", &f.speed);
-    write_fit(&mut o, "speed", &f.speed.fit);
+    let _ = writeln!(out, "[speed]");
+    write_model_head(out, speed);
+    write_blocks(out, "speed", speed);
+    write_fit(out, "speed", &speed.fit);
+}
 
+fn write_dx_dt(out: &mut String, dx_dt: &Model) {
     let _ = writeln!(
-        o,
+        out,
         "\n# Car dynamics, MISO: dx/dt (east) = h1 v_m + h2 x + h3 y + h4 phi, inputs in this order."
     );
-    let _ = writeln!(o, "[dx_dt]");
-    write_model_head(&mut o, &f.dx_dt);
-    write_blocks(&mut o, "dx_dt", &f.dx_dt);
-    write_fit(&mut o, "dx_dt", &f.dx_dt.fit);
+    let _ = writeln!(out, "[dx_dt]");
+    write_model_head(out, dx_dt);
+    write_blocks(out, "dx_dt", dx_dt);
+    write_fit(out, "dx_dt", &dx_dt.fit);
+}
 
-    if let Some(l) = &f.lateral {
-        let _ = writeln!(
-            o,
-            "\n# Lateral model for the hybrid predictor: yaw rate = G(s) r_kin,\n# r_kin = v tan(steer_gain delta / (1 + K v^2)) / L, delta = max_steer_deg / 100 * steer %."
-        );
-        let _ = writeln!(o, "[lateral]");
-        let _ = writeln!(o, "steer_gain = {}", num(l.steer_gain));
-        let _ = writeln!(o, "understeer_s2_per_m2 = {}", num(l.understeer_s2_per_m2));
-        write_model_head(&mut o, &l.model);
-        write_blocks(&mut o, "lateral", &l.model);
-        write_fit(&mut o, "lateral", &l.model.fit);
-    }
-    o
+fn write_lateral(out: &mut String, l: &Lateral) {
+    let _ = writeln!(
+        out,
+        "\n# Lateral model for the hybrid predictor: yaw rate = G(s) r_kin,\n# r_kin = v tan(steer_gain delta / (1 + K v^2)) / L, delta = max_steer_deg / 100 * steer %."
+    );
+    let _ = writeln!(out, "[lateral]");
+    let _ = writeln!(out, "steer_gain = {}", num(l.steer_gain));
+    let _ = writeln!(
+        out,
+        "understeer_s2_per_m2 = {}",
+        num(l.understeer_s2_per_m2)
+    );
+    write_model_head(out, &l.model);
+    write_blocks(out, "lateral", &l.model);
+    write_fit(out, "lateral", &l.model.fit);
 }
 
 /// Path of the published model file in this repository (tests, and the CLI's default).
