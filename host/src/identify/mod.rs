@@ -704,28 +704,136 @@ pub fn identify_lateral(
 ) -> Result<std::result::Result<LateralFit, String>> {
     // The steering gain and understeer are a steady-state relation: only steady turns count
     // ([`steady_turns`]).
-    let per_log: Vec<Vec<SteadyTurn>> = training.iter().map(steady_turns).collect();
-    let pts: Vec<SteadyTurn> = per_log.concat();
-    if pts.len() < MIN_STEADY_TURN_SAMPLES {
-        return Ok(Err(format!(
-            "only {} samples of steady steering above 0.01 rad at more than 2 m/s (at least {MIN_STEADY_TURN_SAMPLES} needed: drive turns or circles)",
-            pts.len()
-        )));
+    let turns = SteadyTurns {
+        per_log: training.iter().map(steady_turns).collect(),
+        vehicle,
+    };
+    if let Some(why) = turns.too_few() {
+        return Ok(Err(why));
     }
-    let l = vehicle.wheelbase_m;
-    let residual =
-        |g: f64, k: f64, (v, d, r): SteadyTurn| r - v * (g * d / (1.0 + k * v * v)).tan() / l;
-    // Gauss-Newton on (g, K), or on g alone with K the car file's, each log's samples weighted
-    // by `log_weights`; with J'J and the weighted residuals' sum of squares at the end, for
-    // K's standard error.
-    let gauss_newton = |estimate_k: bool, log_weights: &[f64]| {
-        let (mut g, mut k) = (1.0, vehicle.understeer_s2_per_m2);
+    let estimate_k = turns.speed_span_mps() > 2.0;
+    let log_weights = turns.log_weights(training, estimate_k);
+    let weighted = turns.gauss_newton(estimate_k, &log_weights);
+    let understeer = if estimate_k {
+        let hw = training.first().map_or(1, |e| e.yaw_half_width);
+        understeer_verdict(&weighted, turns.samples(), hw)
+    } else {
+        Understeer::SpeedSpan
+    };
+    // An understeer the drives do not determine is the car file's: the gain is fitted again
+    // with it.
+    let (g, k) = match understeer {
+        Understeer::Undetermined { .. } => turns.gauss_newton(false, &log_weights).gain_and_k(),
+        _ => weighted.gain_and_k(),
+    };
+    if let Some(why) = steady_state_problem(vehicle, g, k) {
+        return Ok(Err(why));
+    }
+    let tf = yaw_rate_lag(training, vehicle, (g, k), opts)?;
+    Ok(Ok(LateralFit {
+        steer_gain: g,
+        understeer_s2_per_m2: k,
+        understeer,
+        tf,
+    }))
+}
+
+/// The steady turns of each training log and the car they are fitted for, in
+/// [`identify_lateral`].
+struct SteadyTurns<'a> {
+    /// Each log's samples ([`steady_turns`]), in the logs' order.
+    per_log: Vec<Vec<SteadyTurn>>,
+    /// Its wheelbase, and the understeer each fit starts from (and keeps when K is not
+    /// estimated).
+    vehicle: &'a VehicleSection,
+}
+
+/// The result of [`SteadyTurns::gauss_newton`]: the estimates, with J'J and the weighted
+/// residuals' sum of squares at the end, for K's standard error.
+struct GaussNewton {
+    /// Steering gain g.
+    steer_gain: f64,
+    /// Understeer K, s^2/m^2.
+    understeer_s2_per_m2: f64,
+    /// J'J of the last iteration (K's row and column zero when K is the car file's).
+    jtj: [[f64; 2]; 2],
+    /// The weighted residuals' sum of squares, (rad/s)^2.
+    cost: f64,
+}
+
+impl GaussNewton {
+    fn gain_and_k(&self) -> (f64, f64) {
+        (self.steer_gain, self.understeer_s2_per_m2)
+    }
+}
+
+impl SteadyTurns<'_> {
+    /// Samples over all logs.
+    fn samples(&self) -> usize {
+        self.per_log.iter().map(Vec::len).sum()
+    }
+
+    /// Why the logs hold too few samples ([`MIN_STEADY_TURN_SAMPLES`]) to fit on; `None` when
+    /// they hold enough.
+    fn too_few(&self) -> Option<String> {
+        let n = self.samples();
+        (n < MIN_STEADY_TURN_SAMPLES).then(|| {
+            format!(
+                "only {n} samples of steady steering above 0.01 rad at more than 2 m/s (at least {MIN_STEADY_TURN_SAMPLES} needed: drive turns or circles)"
+            )
+        })
+    }
+
+    /// The samples' speed span over all logs, m/s: K is estimated only when it is above 2 m/s.
+    fn speed_span_mps(&self) -> f64 {
+        span(self.per_log.iter().flatten().map(|p| p.0))
+    }
+
+    /// The measured yaw rate less the steady-state model's with gain `g` and understeer `k`,
+    /// rad/s.
+    fn residual_rad_per_s(&self, g: f64, k: f64, (v, d, r): SteadyTurn) -> f64 {
+        r - v * (g * d / (1.0 + k * v * v)).tan() / self.vehicle.wheelbase_m
+    }
+
+    /// Each log's weight in the final fit: the inverse of its noise about a first fit with
+    /// every log alike.
+    fn log_weights(&self, training: &[Experiment], estimate_k: bool) -> Vec<f64> {
+        // Every log alike first; then each weighted by its own noise about that fit (logs of a
+        // standard receiver beside a survey-grade one's: `stats::inverse_noise_weights`),
+        // measured over all its steady driving, straight too: a log of step steers holds a few
+        // seconds of steady turning, and the straights between them at the same speeds.
+        let (g1, k1) = self
+            .gauss_newton(estimate_k, &vec![1.0; self.per_log.len()])
+            .gain_and_k();
+        let first_residuals: Vec<Vec<f64>> = training
+            .iter()
+            .map(|e| {
+                steady_samples(e, STEADY_TURN_MIN_SPEED_MPS, 0.0)
+                    .into_iter()
+                    .map(|p| self.residual_rad_per_s(g1, k1, p))
+                    .collect()
+            })
+            .collect();
+        stats::inverse_noise_weights(
+            &first_residuals
+                .iter()
+                .map(Vec::as_slice)
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    /// Gauss-Newton on (g, K), or on g alone with K the car file's, each log's samples
+    /// weighted by `log_weights`.
+    fn gauss_newton(&self, estimate_k: bool, log_weights: &[f64]) -> GaussNewton {
+        let l = self.vehicle.wheelbase_m;
+        let (mut g, mut k) = (1.0, self.vehicle.understeer_s2_per_m2);
         let mut jtj = [[0.0; 2]; 2];
         let mut cost = 0.0;
         for _ in 0..30 {
             let mut jtr = [0.0; 2];
             (jtj, cost) = ([[0.0; 2]; 2], 0.0);
-            let weighted = per_log
+            let weighted = self
+                .per_log
                 .iter()
                 .zip(log_weights)
                 .flat_map(|(log, &w)| log.iter().map(move |&p| (p, w)));
@@ -733,7 +841,7 @@ pub fn identify_lateral(
                 let den = 1.0 + k * v * v;
                 let arg = g * d / den;
                 let sec2 = 1.0 / arg.cos().powi(2);
-                let res = w * residual(g, k, (v, d, r));
+                let res = w * self.residual_rad_per_s(g, k, (v, d, r));
                 let jg = w * v / l * sec2 * d / den;
                 let jk = -w * v / l * sec2 * g * d * v * v / (den * den);
                 let j = [jg, if estimate_k { jk } else { 0.0 }];
@@ -761,71 +869,61 @@ pub fn identify_lateral(
                 break;
             }
         }
-        (g, k, jtj, cost)
+        GaussNewton {
+            steer_gain: g,
+            understeer_s2_per_m2: k,
+            jtj,
+            cost,
+        }
+    }
+}
+
+/// Whether the understeer K of `fit` (over `samples` steady turns, yaw rates over `2 hw + 1`
+/// samples) is estimated: its standard error relative to K at most
+/// [`MAX_UNDERSTEER_RELATIVE_STD_ERROR`]; else undetermined.
+fn understeer_verdict(fit: &GaussNewton, samples: usize, hw: usize) -> Understeer {
+    let (jtj, k) = (fit.jtj, fit.understeer_s2_per_m2);
+    // K's standard error, s^2 (J'J)^-1, with the yaw rate's central difference over
+    // 2 hw + 1 samples counted as one independent error (as the stiffnesses', dynamics.rs).
+    let s2 = fit.cost / (samples as f64 - 2.0).max(1.0) * (2 * hw + 1) as f64;
+    let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
+    let se = if det > 0.0 {
+        (s2 * jtj[0][0] / det).sqrt()
+    } else {
+        f64::INFINITY
     };
-    let speed_span = span(pts.iter().map(|p| p.0));
-    // Every log alike first; then each weighted by its own noise about that fit (logs of a
-    // standard receiver beside a survey-grade one's: `stats::inverse_noise_weights`), measured
-    // over all its steady driving, straight too: a log of step steers holds a few seconds of
-    // steady turning, and the straights between them at the same speeds.
-    let (g1, k1, _, _) = gauss_newton(speed_span > 2.0, &vec![1.0; per_log.len()]);
-    let first_residuals: Vec<Vec<f64>> = training
-        .iter()
-        .map(|e| {
-            steady_samples(e, STEADY_TURN_MIN_SPEED_MPS, 0.0)
-                .into_iter()
-                .map(|p| residual(g1, k1, p))
-                .collect()
-        })
-        .collect();
-    let log_weights = stats::inverse_noise_weights(
-        &first_residuals
-            .iter()
-            .map(Vec::as_slice)
-            .collect::<Vec<_>>(),
-    );
-    let (mut g, mut k, jtj, cost) = gauss_newton(speed_span > 2.0, &log_weights);
-    let understeer = if speed_span > 2.0 {
-        // K's standard error, s^2 (J'J)^-1, with the yaw rate's central difference over
-        // 2 hw + 1 samples counted as one independent error (as the stiffnesses', dynamics.rs).
-        let hw = training.first().map_or(1, |e| e.yaw_half_width);
-        let s2 = cost / (pts.len() as f64 - 2.0).max(1.0) * (2 * hw + 1) as f64;
-        let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
-        let se = if det > 0.0 {
-            (s2 * jtj[0][0] / det).sqrt()
-        } else {
-            f64::INFINITY
-        };
-        let relative = se / k;
-        if relative.is_finite() && relative <= MAX_UNDERSTEER_RELATIVE_STD_ERROR {
-            Understeer::Estimated {
-                relative_std_error: relative,
-            }
-        } else {
-            Understeer::Undetermined {
-                estimate: k,
-                relative_std_error: relative,
-            }
+    let relative = se / k;
+    if relative.is_finite() && relative <= MAX_UNDERSTEER_RELATIVE_STD_ERROR {
+        Understeer::Estimated {
+            relative_std_error: relative,
         }
     } else {
-        Understeer::SpeedSpan
-    };
-    if let Understeer::Undetermined { .. } = understeer {
-        (g, k, _, _) = gauss_newton(false, &log_weights);
+        Understeer::Undetermined {
+            estimate: k,
+            relative_std_error: relative,
+        }
     }
+}
+
+/// Why the steering gain `g` or the understeer `k` cannot be written; `None` when both can.
+fn steady_state_problem(vehicle: &VehicleSection, g: f64, k: f64) -> Option<String> {
     // The reader's bound (a gain within 0.1..10 and a lock below 90 degrees), so that the file
     // written loads.
     if let Some(why) = model_file::steer_gain_problem(vehicle.max_steer_deg, g) {
-        return Ok(Err(format!(
-            "steering gain estimate {g} is implausible ({why})"
-        )));
+        return Some(format!("steering gain estimate {g} is implausible ({why})"));
     }
-    if let Some(why) = model_file::range_problem("lateral.understeer_s2_per_m2", k) {
-        return Ok(Err(format!(
-            "understeer estimate {k} is implausible ({why})"
-        )));
-    }
-    // Dynamic part over whole experiments.
+    model_file::range_problem("lateral.understeer_s2_per_m2", k)
+        .map(|why| format!("understeer estimate {k} is implausible ({why})"))
+}
+
+/// The lateral model's dynamic part over whole experiments: the lag with delay from the
+/// kinematic yaw rate with the fitted `(g, K)` to the measured one, by output error.
+fn yaw_rate_lag(
+    training: &[Experiment],
+    vehicle: &VehicleSection,
+    (g, k): (f64, f64),
+    opts: &IdentifyOptions,
+) -> Result<TransferFunction> {
     let r_kin: Vec<Vec<f64>> = training
         .iter()
         .map(|e| {
@@ -860,7 +958,11 @@ pub fn identify_lateral(
         ts,
         opts.max_iter,
     )?;
-    let mut tf = fit.tfs[0];
+    lag_within_sample_rate(fit.tfs[0])
+}
+
+/// `tf` with its pole at most [`MAX_LATERAL_POLE_PER_S`].
+fn lag_within_sample_rate(mut tf: TransferFunction) -> Result<TransferFunction> {
     let den = tf.to_monic();
     let a = den.denominator()[1];
     if a > MAX_LATERAL_POLE_PER_S {
@@ -873,12 +975,7 @@ pub fn identify_lateral(
         )
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     }
-    Ok(Ok(LateralFit {
-        steer_gain: g,
-        understeer_s2_per_m2: k,
-        understeer,
-        tf,
-    }))
+    Ok(tf)
 }
 
 /// The lateral model's steady-state part and lag.
