@@ -2069,8 +2069,18 @@ pub fn to_toml(f: &ModelFile) -> String {
     write_inputs(&mut o, &f.inputs);
     write_control(&mut o, &f.control);
     write_hybrid(&mut o, &f.hybrid);
-    write_speed(&mut o, &f.speed);
-    write_dx_dt(&mut o, &f.dx_dt);
+    write_model_section(
+        &mut o,
+        "Internal speed controller: commanded speed -> measured speed.",
+        "speed",
+        &f.speed,
+    );
+    write_model_section(
+        &mut o,
+        "Car dynamics, MISO: dx/dt (east) = h1 v_m + h2 x + h3 y + h4 phi, inputs in this order.",
+        "dx_dt",
+        &f.dx_dt,
+    );
     if let Some(l) = &f.lateral {
         write_lateral(&mut o, l);
     }
@@ -2240,26 +2250,14 @@ fn write_hybrid(out: &mut String, h: &HybridSection) {
     let _ = writeln!(out, "min_dwell_ticks = {}", h.min_dwell_ticks);
 }
 
-fn write_speed(out: &mut String, speed: &Model) {
-    let _ = writeln!(
-        out,
-        "\n# Internal speed controller: commanded speed -> measured speed."
-    );
-    let _ = writeln!(out, "[speed]");
-    write_model_head(out, speed);
-    write_blocks(out, "speed", speed);
-    write_fit(out, "speed", &speed.fit);
-}
-
-fn write_dx_dt(out: &mut String, dx_dt: &Model) {
-    let _ = writeln!(
-        out,
-        "\n# Car dynamics, MISO: dx/dt (east) = h1 v_m + h2 x + h3 y + h4 phi, inputs in this order."
-    );
-    let _ = writeln!(out, "[dx_dt]");
-    write_model_head(out, dx_dt);
-    write_blocks(out, "dx_dt", dx_dt);
-    write_fit(out, "dx_dt", &dx_dt.fit);
+/// One model's table, `[table]` with its comment line, head, blocks and fit (`[speed]`,
+/// `[dx_dt]`).
+fn write_model_section(out: &mut String, comment: &str, table: &str, model: &Model) {
+    let _ = writeln!(out, "\n# {comment}");
+    let _ = writeln!(out, "[{table}]");
+    write_model_head(out, model);
+    write_blocks(out, table, model);
+    write_fit(out, table, &model.fit);
 }
 
 fn write_lateral(out: &mut String, l: &Lateral) {
