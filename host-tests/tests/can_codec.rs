@@ -1328,6 +1328,10 @@ fn candump_rejects_with_reasons() {
             ErrorFrame,
         ),
         ("(1.000000)  can0  800   [1]  00", IdOutOfRange),
+        // `-x` in the screen format: `RX` or `TX`, then two flag columns.
+        ("(1.000000)  can0  RX -  123   [1]  00", MissingSeparator),
+        ("(1.000000)  can0  RX x -  123   [1]  00", MissingSeparator),
+        ("(1.000000)  can0  RX - -  123   [2]  00", LengthMismatch),
     ];
     for (line, want) in cases {
         assert_eq!(parse_line(line), Err(*want), "{line:?}");
@@ -1399,6 +1403,36 @@ fn candump_lines_as_can_utils_writes_them() {
             "(1700000000.003745) can0 100#ECFF0000000000BB",
         ),
         ("(1.000000) can0 123# R", "(1.000000) can0 123#"),
+        // `-N`: nanoseconds (`%010llu.%09llu`), in the log and the screen format; candump
+        // without `-N` writes `tv_nsec / 1000`, so the same frame reads the same either way.
+        (
+            "(1700000000.003296999) can0 09F8011C#7F323613F65BDEBD",
+            "(1700000000.003296) can0 09F8011C#7F323613F65BDEBD",
+        ),
+        (
+            " (1700000000.003296001)  can0  09F8011C   [8]  7F 32 36 13 F6 5B DE BD",
+            "(1700000000.003296) can0 09F8011C#7F323613F65BDEBD",
+        ),
+        // `-t A`: the date (`strftime("%Y-%m-%d %H:%M:%S")`, local time, read as UTC), with
+        // microseconds or, with `-N`, nanoseconds.
+        (
+            " (2023-11-14 22:13:20.003296)  can0  09F8011C   [8]  7F 32 36 13 F6 5B DE BD",
+            "(1700000000.003296) can0 09F8011C#7F323613F65BDEBD",
+        ),
+        (
+            " (2023-11-14 22:13:20.003296999)  can0       101   [2]  9B 00",
+            "(1700000000.003296) can0 101#9B00",
+        ),
+        // `-x` in the screen format: `  RX` / `  TX` and the CAN FD flags (`- -` for a
+        // classic frame) after the name.
+        (
+            " (1700000000.003296)  can0  RX - -  09F8011C   [8]  7F 32 36 13 F6 5B DE BD",
+            "(1700000000.003296) can0 09F8011C#7F323613F65BDEBD",
+        ),
+        (
+            " (2023-11-14 22:13:20.003296)  can0  TX - -       101   [2]  9B 00",
+            "(1700000000.003296) can0 101#9B00",
+        ),
     ] {
         assert_eq!(parse_line(written), parse_line(log), "{written:?}");
         assert!(parse_line(written).is_ok(), "{written:?}");
@@ -1413,6 +1447,88 @@ fn candump_lines_as_can_utils_writes_them() {
         parse_line("(1.000000) can0 123#R R"),
         Err(CandumpError::RemoteFrame)
     );
+}
+
+/// `candump -t A`'s dates against seconds since 1970 computed by Python
+/// (`calendar.timegm(time.strptime(DATE, "%Y-%m-%d %H:%M:%S"))`), across the Gregorian
+/// calendar's leap-year rules; every day from 1970 to 2400 one day after the one before; and
+/// what is no date refused.
+#[test]
+fn candump_dates_are_seconds_since_1970() {
+    let t_s = |date: &str| {
+        parse_line(&format!("({date}.000000) can0 123#00")).map(|f| f.t_us / 1_000_000)
+    };
+    for (date, want) in [
+        ("1970-01-01 00:00:00", 0),
+        ("1972-02-29 12:00:00", 68_212_800),
+        ("1999-12-31 23:59:59", 946_684_799),
+        ("2000-02-29 00:00:00", 951_782_400),
+        ("2000-03-01 00:00:00", 951_868_800),
+        ("2023-11-14 22:13:20", 1_700_000_000),
+        ("2024-12-31 23:59:59", 1_735_689_599),
+        ("2038-01-19 03:14:08", 2_147_483_648),
+        ("2100-02-28 00:00:00", 4_107_456_000),
+        ("2100-03-01 00:00:00", 4_107_542_400),
+        ("2400-02-29 00:00:00", 13_574_563_200),
+        ("9999-12-31 23:59:59", 253_402_300_799),
+    ] {
+        assert_eq!(t_s(date), Ok(want), "{date}");
+    }
+    // Every date that parses is the day after the last one that did, and a year has 365 days
+    // or, by the Gregorian rule, 366.
+    let mut last = None;
+    for year in 1970..=2400u64 {
+        let mut days = 0;
+        for month in 1..=12 {
+            for day in 1..=31 {
+                if let Ok(t) = t_s(&format!("{year}-{month:02}-{day:02} 00:00:00")) {
+                    if let Some(last) = last {
+                        assert_eq!(t, last + 86_400, "{year}-{month:02}-{day:02}");
+                    }
+                    last = Some(t);
+                    days += 1;
+                }
+            }
+        }
+        let leap =
+            year.is_multiple_of(4) && (!year.is_multiple_of(100) || year.is_multiple_of(400));
+        assert_eq!(days, if leap { 366 } else { 365 }, "{year}");
+    }
+    // A leap second (`:60`, as a `right/` time zone writes it) is the next minute's first.
+    assert_eq!(t_s("2016-12-31 23:59:60"), t_s("2017-01-01 00:00:00"));
+    for date in [
+        "1969-12-31 23:59:59",
+        "2023-02-29 00:00:00",
+        "1900-02-29 00:00:00",
+        "2023-13-01 00:00:00",
+        "2023-00-10 00:00:00",
+        "2023-04-31 00:00:00",
+        "2023-01-00 00:00:00",
+        "2023-01-01 24:00:00",
+        "2023-01-01 12:60:00",
+        "2023-01-01 12:00:61",
+        "23-01-01 12:00:00",
+        "2023-1-01 12:00:00",
+        "2023-01-01 12:00",
+        "2023-01-01T12:00:00",
+        "2023-01-01  12:00:00",
+        "2023-01-01 12:00:00:00",
+        "2023/01/01 12:00:00",
+    ] {
+        assert_eq!(t_s(date), Err(CandumpError::BadTimestamp), "{date}");
+    }
+    // Six or nine decimals, nothing between.
+    for stamp in [
+        "2023-11-14 22:13:20.12345",
+        "2023-11-14 22:13:20.1234567",
+        "1.12345678",
+    ] {
+        assert_eq!(
+            parse_line(&format!("({stamp}) can0 123#00")),
+            Err(CandumpError::BadTimestamp),
+            "{stamp}"
+        );
+    }
 }
 
 /// `candump -d`: `DROPCOUNT: dropped %u CAN frame%s on '%s' socket (total drops %u)`.

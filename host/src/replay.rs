@@ -402,6 +402,10 @@ impl<'a> LineReader<'a> {
                         ": the timestamps look like `candump -td`'s, each the time since the \
                          frame before, which cannot be replayed: record with `-ta` (absolute) \
                          or `-tz` (from the first frame)"
+                    } else if dated_timestamp(line) {
+                        ": `candump -t A` writes the recorder's local time, which goes back an \
+                         hour where daylight saving time ends: record with `-ta` (seconds \
+                         since 1970, UTC)"
                     } else {
                         ""
                     }
@@ -481,13 +485,24 @@ fn short_timestamp(line: &str) -> bool {
         .is_some_and(|(secs, _)| secs.len() < 10)
 }
 
+/// Whether the line's timestamp is a date (`candump -t A`: `(2024-01-01 12:00:00.123456)`).
+fn dated_timestamp(line: &str) -> bool {
+    line.trim_start()
+        .strip_prefix('(')
+        .and_then(|rest| rest.split_once(')'))
+        .is_some_and(|(stamp, _)| stamp.contains(' '))
+}
+
 /// What is wrong with a rejected candump line, in words.
 pub fn candump_reason(e: candump::CandumpError) -> &'static str {
     use candump::CandumpError as E;
     match e {
         E::Empty => "empty line",
         E::MissingTimestamp => "expected `(SECONDS.UUUUUU)` at the start",
-        E::BadTimestamp => "timestamp is not `(SECONDS.UUUUUU)` with six decimals",
+        E::BadTimestamp => {
+            "timestamp is not `(SECONDS.UUUUUU)` with six or nine decimals, nor a date \
+             `(YYYY-MM-DD HH:MM:SS.UUUUUU)` from 1970 on"
+        }
         E::MissingInterface => "no interface name after the timestamp",
         E::BadInterface => "interface name empty, too long or not printable",
         E::MissingSeparator => "no `#` between identifier and data",

@@ -85,6 +85,71 @@ fn the_screen_format_as_candump_prints_it_replays_like_the_log() {
     assert_eq!(got, want);
 }
 
+/// The seconds and microseconds of a log line's `(SSSSSSSSSS.UUUUUU)`, and the rest.
+fn stamp(line: &str) -> (u64, &str, &str) {
+    let close = line.find(')').unwrap();
+    let (s, us) = line[1..close].split_once('.').unwrap();
+    (s.parse().unwrap(), us, &line[close + 1..])
+}
+
+/// `candump -N` (nanoseconds) in the log format, and `candump -t A -N -x` (the date, local
+/// time, nanoseconds, `RX - -`) in the screen format: the same predictions as the plain log;
+/// and a date log whose clock goes back (daylight saving time ends) is refused with the cause.
+#[test]
+fn nanoseconds_dates_and_screen_flags_replay_like_the_log() {
+    let dir = tmp_dir("dated");
+    let plain = smoke();
+    let (code, want, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let ns = each_line(&plain, |l| {
+        let (s, us, rest) = stamp(l);
+        format!("({s:010}.{us}789){rest}")
+    });
+    // The smoke drive starts at 0 s: 1970-01-01 at midnight, and lasts less than an hour.
+    let date = |s: u64| format!("1970-01-01 00:{:02}:{:02}", s / 60, s % 60);
+    let dated = each_line(&plain, |l| {
+        let (s, us, _) = stamp(l);
+        let written = screen(l).replacen("  can0  ", "  can0  RX - -  ", 1);
+        let close = written.find(')').unwrap();
+        format!(" ({}.{us}001{}", date(s), &written[close..])
+    });
+    assert!(
+        dated.starts_with(" (1970-01-01 00:00:00.003296001)  can0  RX - -  09F8011C   [8]"),
+        "{}",
+        &dated[..80]
+    );
+    for (name, text) in [("ns.log", ns), ("dated.log", dated.clone())] {
+        let (code, got, stderr) = replay(&dir, name, &text, &[]);
+        assert_eq!(code, 0, "{name}: {stderr}");
+        assert_eq!(got, want, "{name}");
+    }
+    // Local time goes back an hour where daylight saving time ends: the first half of the
+    // drive stamped an hour later than the second.
+    let at = dated.lines().count() / 2;
+    let shifted: String = dated
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let l = if i < at {
+                l.replacen("(1970-01-01 00:", "(1970-01-01 01:", 1)
+            } else {
+                l.to_owned()
+            };
+            l + "\n"
+        })
+        .collect();
+    let (code, _, stderr) = replay(&dir, "dst.log", &shifted, &[]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains(&format!("dst.log:{}: time goes backwards", at + 1)),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("`candump -t A` writes the recorder's local time"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn delta_timestamps_are_refused_by_name() {
     let dir = tmp_dir("delta");

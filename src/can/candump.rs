@@ -3,7 +3,11 @@
 //!
 //! - Timestamp: decimal seconds, a dot, exactly six decimals; converted to integer microseconds
 //!   without any float. [`format_line`] pads the seconds to 10 digits as can-utils does
-//!   (`%010lu.%06lu`); [`parse_line`] accepts 1 to 20 digits.
+//!   (`%010lu.%06lu`); [`parse_line`] accepts 1 to 20 digits. Also read: nine decimals
+//!   (`candump -N`, nanoseconds, in the log and the screen format alike), truncated to the
+//!   microsecond as candump truncates them without `-N`, so that one recording reads the same
+//!   either way; and the date of `candump -t A` (`2024-01-01 12:00:00.123456`, the recorder's
+//!   local time), read as if it were UTC: only differences of time matter to a replay.
 //! - Interface: 1 to 15 printable characters (Linux `IFNAMSIZ` - 1), after one or more spaces:
 //!   candump right-aligns the names to the longest one it has seen (`%*s`), so a log of `can0`
 //!   and `vcan0` writes `(...)  can0 123#00`.
@@ -21,7 +25,8 @@
 //! - Also read: candump's screen format with a timestamp (`candump -ta` / `-td` / `-tz`, what
 //!   `candump -t a can0 > file` records): `(1700000000.123456)  can0  123   [4]  DE AD BE EF`,
 //!   any whitespace between the fields ([`parse_line`] tells the two apart by the `[LEN]`
-//!   field); [`format_line`] writes the log format only.
+//!   field); with `-x`, `RX` or `TX` and two flag columns after the name (`can0  RX - -  123`),
+//!   read and ignored. [`format_line`] writes the log format only.
 //! - Frames the node does not use, well-formed lines that readers skip and count
 //!   ([`CandumpError::is_unsupported_frame`]): remote frames (`123#R`), CAN FD frames
 //!   (`123##1...`) and error frames (`candump -e`: an 8-digit identifier with the kernel's
@@ -29,6 +34,7 @@
 //!
 //! No allocation, no panic: this is what the QEMU replay bus parses on the target.
 use core::fmt::Write;
+use core::str::SplitAsciiWhitespace;
 
 use super::frame::{CanFrame, CanId, TimedFrame};
 
@@ -40,8 +46,9 @@ pub enum CandumpError {
     Empty,
     /// The line does not start with `(`.
     MissingTimestamp,
-    /// The timestamp is not `SECONDS.UUUUUU` (digits, one dot, six decimals, closing `)`), or
-    /// it overflows 64-bit microseconds.
+    /// The timestamp is not `SECONDS.UUUUUU` (digits, one dot, six or nine decimals, closing
+    /// `)`) nor a date `YYYY-MM-DD HH:MM:SS.UUUUUU` from 1970 on, or it overflows 64-bit
+    /// microseconds.
     BadTimestamp,
     /// No interface after the timestamp (the line ends, or no single space follows `)`).
     MissingInterface,
@@ -135,6 +142,77 @@ pub fn parse_timestamp(text: &str) -> Result<u64, CandumpError> {
         .ok_or(CandumpError::BadTimestamp)
 }
 
+/// Two ASCII digits, at most `max`.
+fn two_digits(text: &str, max: u64) -> Option<u64> {
+    (text.len() == 2)
+        .then(|| parse_decimal(text))
+        .flatten()
+        .filter(|v| *v <= max)
+}
+
+/// Days from 1970-01-01 to `year-month-day` (proleptic Gregorian calendar, the one `strftime`
+/// writes); `None` for a date that does not exist or is before 1970.
+fn days_since_epoch(year: u64, month: u64, day: u64) -> Option<u64> {
+    /// Days of a common year before each month's first day.
+    const BEFORE_MONTH: [u64; 12] = [0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334];
+    const MONTH_DAYS: [u64; 12] = [31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
+    let is_leap = |y: u64| y.is_multiple_of(4) && (!y.is_multiple_of(100) || y.is_multiple_of(400));
+    let index = usize::try_from(month.checked_sub(1)?).ok()?;
+    let leap_day = u64::from(is_leap(year) && month > 2);
+    let month_days = MONTH_DAYS.get(index)? + u64::from(is_leap(year) && month == 2);
+    let before_month = BEFORE_MONTH.get(index)?;
+    if year < 1970 || day == 0 || day > month_days {
+        return None;
+    }
+    // Leap days in the years 1970 ..= year - 1 (1968 was the last one before).
+    let leap_days_to = |y: u64| y / 4 - y / 100 + y / 400;
+    let leap_days = leap_days_to(year - 1) - leap_days_to(1969);
+    Some((year - 1970) * 365 + leap_days + before_month + leap_day + day - 1)
+}
+
+/// A candump timestamp to microseconds: [`parse_timestamp`]'s `SECONDS.UUUUUU`, nine decimals
+/// (`candump -N`: truncated to the microsecond, as candump itself writes microseconds), or the
+/// date of `candump -t A` (`YYYY-MM-DD HH:MM:SS` and six or nine decimals, local time read as
+/// UTC).
+fn parse_stamp(text: &str) -> Result<u64, CandumpError> {
+    let (seconds, frac) = text.rsplit_once('.').ok_or(CandumpError::BadTimestamp)?;
+    let micros = match frac.len() {
+        6 => parse_decimal(frac),
+        9 => parse_decimal(frac).map(|ns| ns / 1000),
+        _ => None,
+    }
+    .ok_or(CandumpError::BadTimestamp)?;
+    let seconds = match seconds.split_once(' ') {
+        None if !seconds.is_empty() && seconds.len() <= 20 => parse_decimal(seconds),
+        None => None,
+        Some((date, clock)) => date_seconds(date, clock),
+    }
+    .ok_or(CandumpError::BadTimestamp)?;
+    seconds
+        .checked_mul(1_000_000)
+        .and_then(|us| us.checked_add(micros))
+        .ok_or(CandumpError::BadTimestamp)
+}
+
+/// `YYYY-MM-DD` and `HH:MM:SS` (`strftime("%Y-%m-%d %H:%M:%S")`) to seconds since 1970 (a
+/// leap second's `:60` included).
+fn date_seconds(date: &str, clock: &str) -> Option<u64> {
+    let mut ymd = date.split('-');
+    let (year, month, day) = (ymd.next()?, ymd.next()?, ymd.next()?);
+    let mut hms = clock.split(':');
+    let (hour, minute, second) = (hms.next()?, hms.next()?, hms.next()?);
+    if ymd.next().is_some() || hms.next().is_some() || year.len() != 4 {
+        return None;
+    }
+    let days = days_since_epoch(
+        parse_decimal(year)?,
+        two_digits(month, 12)?,
+        two_digits(day, 31)?,
+    )?;
+    let in_day = two_digits(hour, 23)? * 3600 + two_digits(minute, 59)? * 60;
+    Some(days * 86_400 + in_day + two_digits(second, 60)?)
+}
+
 fn parse_id(text: &str) -> Result<CanId, CandumpError> {
     let value = parse_hex_u32(text).ok_or(CandumpError::BadId)?;
     let id = match text.len() {
@@ -221,12 +299,8 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
         .strip_prefix('(')
         .ok_or(CandumpError::MissingTimestamp)?;
     let (stamp, rest) = rest.split_once(')').ok_or(CandumpError::BadTimestamp)?;
-    let t_us = parse_timestamp(stamp)?;
-    if rest
-        .split_ascii_whitespace()
-        .nth(2)
-        .is_some_and(|t| t.starts_with('['))
-    {
+    let t_us = parse_stamp(stamp)?;
+    if screen_fields(rest).is_some_and(|(_, _, len, _)| len.starts_with('[')) {
         return parse_screen(t_us, rest);
     }
     // One space, more when candump right-aligned the name to a longer one (`%*s`).
@@ -262,14 +336,13 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
 /// whitespace between the fields; `remote request` in place of the data for a remote frame, a
 /// length above 8 for a CAN FD frame.
 fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
-    let mut tokens = rest.split_ascii_whitespace();
-    let iface = tokens.next().ok_or(CandumpError::MissingInterface)?;
+    let (iface, id, len_text, mut tokens) =
+        screen_fields(rest).ok_or(CandumpError::MissingSeparator)?;
     if iface.len() > MAX_IFACE_LEN || !iface.bytes().all(|c| c.is_ascii_graphic()) {
         return Err(CandumpError::BadInterface);
     }
-    let id = parse_id(tokens.next().ok_or(CandumpError::MissingSeparator)?)?;
-    let len_text = tokens
-        .next()
+    let id = parse_id(id)?;
+    let len_text = Some(len_text)
         .and_then(|t| t.strip_prefix('['))
         .and_then(|t| t.strip_suffix(']'))
         .ok_or(CandumpError::MissingSeparator)?;
@@ -316,6 +389,25 @@ fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
             data,
         },
     })
+}
+
+/// The interface, identifier and `[LEN]` tokens of a screen-format line's rest (after the
+/// timestamp's `)`), past `candump -x`'s `RX` / `TX` and its two flag columns (`- -`, or the
+/// CAN FD / XL flags), and the tokens after them (the data); `None` if the line has fewer
+/// tokens.
+fn screen_fields(rest: &str) -> Option<(&str, &str, &str, SplitAsciiWhitespace<'_>)> {
+    let mut tokens = rest.split_ascii_whitespace();
+    let iface = tokens.next()?;
+    let mut id = tokens.next()?;
+    if matches!(id, "RX" | "TX") {
+        let flag = |t: &str| matches!(t, "-" | "B" | "E" | "S" | "R");
+        if !(flag(tokens.next()?) && flag(tokens.next()?)) {
+            return None;
+        }
+        id = tokens.next()?;
+    }
+    let len = tokens.next()?;
+    Some((iface, id, len, tokens))
 }
 
 /// Writes `frame` as one candump line on interface `iface`, without a line terminator:

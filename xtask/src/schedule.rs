@@ -3,6 +3,8 @@
 //! just before one and at an epoch time; on each, the QEMU firmware's frames must equal host
 //! replay's (`catmodel replay --tx-out`), timestamps included (the firmware-only stack field
 //! aside, as `tx-compare`). The host-side property test is `host-tests/tests/app_loops.rs`.
+//! The epoch drive is also written as `candump -t A -N -x` prints it (a date, nanoseconds,
+//! `RX - -`, the screen format), and the firmware's frames on it must be the same bytes.
 use std::path::Path;
 use std::process::Command;
 
@@ -67,10 +69,100 @@ pub fn tick_schedule() -> Result<()> {
             bail!("start {start}: the first tick is {first_line:?}, expected it at {stamp}");
         }
     }
+    recorder_notation(&elf, &dir, &bundled)?;
     println!(
-        "tick schedule: QEMU and host replay tick at the same times on drives starting at {STARTS_US:?} us"
+        "tick schedule: QEMU and host replay tick at the same times on drives starting at {STARTS_US:?} us, \
+         and alike on the epoch drive in candump's screen format with dates and nanoseconds"
     );
     Ok(())
+}
+
+/// The epoch drive as `candump -t A -N -x can0 > FILE` prints it (a date, nanoseconds, `RX -
+/// -`, the screen format): host replay's frames must be the log format's, byte for byte, and the
+/// QEMU firmware's the same (but the stack field, as `tx-compare`).
+fn recorder_notation(elf: &Path, dir: &Path, bundled: &str) -> Result<()> {
+    let start = STARTS_US[4];
+    let mut screen = String::new();
+    for line in shifted(bundled, start)?.lines() {
+        let frame = parse_line(line).map_err(|e| anyhow::anyhow!("{line}: {e:?}"))?;
+        let id = match frame.frame.id {
+            catmodel::can::CanId::Standard(id) => format!("{id:>8X}"),
+            catmodel::can::CanId::Extended(id) => format!("{id:08X}"),
+        };
+        let bytes: Vec<String> = frame
+            .frame
+            .payload()
+            .iter()
+            .map(|b| format!("{b:02X}"))
+            .collect();
+        screen.push_str(&format!(
+            " ({}.{:06}123)  can0  RX - -  {id}   [{}]  {}\n",
+            utc_date(frame.t_us / 1_000_000),
+            frame.t_us % 1_000_000,
+            bytes.len(),
+            bytes.join(" ")
+        ));
+    }
+    let drive = dir.join("start-epoch-dated.can.log");
+    std::fs::write(&drive, screen)?;
+    let out = dir.join("qemu-epoch-dated");
+    run_qemu(elf, &out, Some(&drive), &[])?;
+    let host_tx = dir.join("replay-epoch-dated.tx.log");
+    replay(&drive, &host_tx)?;
+    // Host replay: the same bytes as on the log format; the firmware: the same frames but the
+    // stack field it measures.
+    let plain_tx = dir.join(format!("replay-{start}.tx.log"));
+    if std::fs::read(&host_tx)? != std::fs::read(&plain_tx)? {
+        bail!(
+            "{}: host replay's frames differ from the same drive's in the log format",
+            drive.display()
+        );
+    }
+    print!("start {start:>16} us, `candump -t A -N -x`: ");
+    txcompare::tx_compare(&[
+        out.join("tx.log").display().to_string(),
+        plain_tx.display().to_string(),
+    ])?;
+    Ok(())
+}
+
+/// `strftime("%Y-%m-%d %H:%M:%S")` of `secs` since 1970, UTC.
+fn utc_date(secs: u64) -> String {
+    let leap = |y: u64| y.is_multiple_of(4) && (!y.is_multiple_of(100) || y.is_multiple_of(400));
+    let (mut days, in_day) = (secs / 86_400, secs % 86_400);
+    let mut year = 1970;
+    while days >= 365 + u64::from(leap(year)) {
+        days -= 365 + u64::from(leap(year));
+        year += 1;
+    }
+    let mut month = 1;
+    for len in [
+        31,
+        28 + u64::from(leap(year)),
+        31,
+        30,
+        31,
+        30,
+        31,
+        31,
+        30,
+        31,
+        30,
+        31,
+    ] {
+        if days < len {
+            break;
+        }
+        days -= len;
+        month += 1;
+    }
+    format!(
+        "{year}-{month:02}-{:02} {:02}:{:02}:{:02}",
+        days + 1,
+        in_day / 3600,
+        in_day / 60 % 60,
+        in_day % 60
+    )
 }
 
 fn replay(drive: &Path, tx: &Path) -> Result<()> {
@@ -95,4 +187,21 @@ fn replay(drive: &Path, tx: &Path) -> Result<()> {
         bail!("catmodel replay {} failed", drive.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// Dates against Python's `time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(SECS))`.
+    #[test]
+    fn utc_dates() {
+        for (secs, date) in [
+            (0, "1970-01-01 00:00:00"),
+            (951_782_400, "2000-02-29 00:00:00"),
+            (1_700_000_000, "2023-11-14 22:13:20"),
+            (1_735_689_599, "2024-12-31 23:59:59"),
+            (4_107_542_400, "2100-03-01 00:00:00"),
+        ] {
+            assert_eq!(super::utc_date(secs), date);
+        }
+    }
 }
