@@ -421,6 +421,11 @@ fn gnss_bursts(t: &[f64], xy: &[[f64; 2]], tv: &[f64], vel: &[f64]) -> Vec<(usiz
         // than a burst moves it: too slow to tell (a 2 s burst is two fixes at 1 Hz).
         return Vec::new();
     }
+    if n < 3 * w {
+        // Fewer fixes than the three windows a step is measured over (a receiver that got its
+        // fix late in the log, or lost it at once): nothing to compare.
+        return Vec::new();
+    }
     // The receiver's white noise per axis, from the second differences of the fixes (the
     // car's own acceleration adds a t^2 that is small at any rate a receiver has); the
     // difference of two windows' medians scatters by about 1.25 sigma sqrt(2 / w) per axis.
@@ -1117,4 +1122,22 @@ pub fn course(dx: &[f64], dy: &[f64], speed_mps: &[f64], min_speed_mps: f64) -> 
         out.push(prev);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 100 Hz receiver's 0.5 s windows are 50 fixes: a log with 12 to 149 fixes (its fix got
+    /// late, or was lost at once) has no three windows to compare. It underflowed the window
+    /// range and panicked `identify` and `compare` (a black-box probe, 0.15-0.45 s of fixes).
+    #[test]
+    fn too_few_fixes_for_the_windows_find_no_burst() {
+        for n in [12, 49, 50, 99, 149, 150] {
+            let t: Vec<f64> = (0..n).map(|k| 10.0 + 0.01 * k as f64).collect();
+            let xy: Vec<[f64; 2]> = t.iter().map(|t| [5.0 * t, 0.0]).collect();
+            let (tv, vel) = (vec![0.0, 20.0], vec![5.0, 5.0]);
+            assert!(gnss_bursts(&t, &xy, &tv, &vel).is_empty(), "{n} fixes");
+        }
+    }
 }
