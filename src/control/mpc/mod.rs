@@ -758,6 +758,11 @@ pub struct MpcState {
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
     /// Ticks in a row whose plan entered an inflated obstacle beyond the tolerance.
     obstacle_violation_ticks: u16,
+    /// The car brakes for an obstacle its plans did not clear
+    /// ([`FallbackReason::ObstacleNotCleared`]): it goes on braking until a plan enters no
+    /// inflated obstacle at all (or the path is new), instead of taking the first plan back
+    /// that enters one by no more than the tolerance.
+    obstacle_braking: bool,
     /// The commanded steering ramp (without the lead) after the last accepted solve, rad.
     steer_ramp_rad: Option<f32>,
 }
@@ -781,6 +786,7 @@ impl MpcState {
             blocked: [false; MAX_OBSTACLES],
             last_steer_plan: None,
             obstacle_violation_ticks: 0,
+            obstacle_braking: false,
             steer_ramp_rad: None,
         }
     }
@@ -802,6 +808,7 @@ impl MpcState {
             addr_of_mut!((*slot).blocked).write([false; MAX_OBSTACLES]);
             addr_of_mut!((*slot).last_steer_plan).write(None);
             addr_of_mut!((*slot).obstacle_violation_ticks).write(0);
+            addr_of_mut!((*slot).obstacle_braking).write(false);
             addr_of_mut!((*slot).steer_ramp_rad).write(None);
         }
     }
@@ -829,6 +836,7 @@ impl MpcState {
         self.blocked = [false; MAX_OBSTACLES];
         self.last_steer_plan = None;
         self.obstacle_violation_ticks = 0;
+        self.obstacle_braking = false;
         self.steer_ramp_rad = None;
     }
 }
@@ -1097,10 +1105,25 @@ impl MpcConfig {
         let imminent = self.stage.index_at_s(self.tuning.stop_delay_s) as usize;
         // Nor is an obstacle the car is overtaking alongside: braking keeps it beside the car
         // longer, where driving on takes the car past it sooner.
-        let mask = terminal_mask.map(|m| m | overtaken);
+        // Braking for an obstacle its plans did not clear, the car takes a plan back only
+        // when it ends beside the obstacle too: one that ends short of it, not aside, would
+        // drive the car on into it beyond the horizon.
+        let mask = if state.obstacle_braking {
+            [overtaken; STEPS]
+        } else {
+            terminal_mask.map(|m| m | overtaken)
+        };
         let v = violations(&state.problem, &states, &mask, imminent);
         let corridor_violation_m = v.corridor_m;
-        let tolerance = self.tuning.obstacle_tolerance_m;
+        // Braking for an obstacle already, a plan is taken back only when it clears every
+        // one: a plan that reaches the obstacle by the tolerance at its horizon's end, taken
+        // back and dropped again ticks later, sped a braking car up towards the obstacle it
+        // could not clear (docs/findings.md).
+        let tolerance = if state.obstacle_braking {
+            0.0
+        } else {
+            self.tuning.obstacle_tolerance_m
+        };
         if v.obstacle_m > tolerance {
             state.obstacle_violation_ticks = state.obstacle_violation_ticks.saturating_add(1);
         } else {
@@ -1111,6 +1134,7 @@ impl MpcConfig {
         // loop's 0.4 s delay).
         if (v.obstacle_imminent_m > tolerance && state.obstacle_violation_ticks >= 2)
             || state.obstacle_violation_ticks > self.tuning.obstacle_persist_ticks
+            || (state.obstacle_braking && state.obstacle_violation_ticks > 0)
         {
             return self.fallback(
                 state,
@@ -1119,6 +1143,7 @@ impl MpcConfig {
                 FallbackReason::ObstacleNotCleared,
             );
         }
+        state.obstacle_braking = false;
         let mut steer = [0.0f32; STEPS + 1];
         let mut e_psi = [0.0f32; STEPS + 1];
         for ((s, e), x) in steer.iter_mut().zip(e_psi.iter_mut()).zip(states.iter()) {
@@ -1696,6 +1721,7 @@ impl MpcConfig {
                 *s = held;
             }
             state.last_steer_plan = None;
+            state.obstacle_braking = true;
         } else if let Some((plan, age)) = &mut state.last_steer_plan {
             *age = age.saturating_add(1);
             // The plan was made `age` ticks ago: stage k now is `age` ticks after its stage k.
