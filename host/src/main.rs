@@ -860,13 +860,49 @@ fn identify_steering(args: IdentifySteeringArgs) -> Result<()> {
         f.rms_pct,
         f.rms_without_pct
     );
+    let trail = f.trail_s();
+    if f.lag_s >= identify::steering::MAX_LAG_S - 1e-6
+        || f.delay_s >= identify::steering::MAX_DELAY_S - 1e-6
+    {
+        println!(
+            "  warning: the fit is at the edge of its search (a lag up to {} s, a delay up to {} \
+             s): the steering trails a ramp by {trail:.3} s or more, and the rate limit fitted \
+             beside it may stand in for the rest",
+            identify::steering::MAX_LAG_S,
+            identify::steering::MAX_DELAY_S
+        );
+    }
+    if f.rms_pct > STEERING_FIT_EXPLAINS * f.rms_without_pct {
+        println!(
+            "  warning: the lag, delay and rate limit take only {:.0} % of the reports' error \
+             away ({:.2} % of {:.2} %): this session does not determine them (another actuator \
+             than a rate-limited lag, or reports that trail far behind)",
+            100.0 * (1.0 - f.rms_pct / f.rms_without_pct),
+            f.rms_pct,
+            f.rms_without_pct
+        );
+    }
     println!("  for the car's model file, [vehicle]:");
     if let RateLimit::Measured { pct_per_s, .. } = f.rate {
         println!("  max_steer_rate_pct_per_s = {pct_per_s:.1}");
     }
-    println!("  steer_lag_s = {:.3}", f.trail_s());
+    let max_lag = model_file::STEER_LAG_RANGE_S.1;
+    if trail > max_lag {
+        println!(
+            "  steer_lag_s = {max_lag:.3}  # the most the model file takes: the steering trails \
+             by {trail:.3} s, longer than the controller's command can lead its plan by; the \
+             car will follow its plans late"
+        );
+    } else {
+        println!("  steer_lag_s = {trail:.3}");
+    }
     Ok(())
 }
+
+/// `identify-steering` warns when its fit leaves more than this share of the error it starts
+/// from (neither lag nor delay): a good fit leaves the reports' noise (0.2 % RMS on the
+/// built-in plant, a tenth of a ramp's error or less).
+const STEERING_FIT_EXPLAINS: f64 = 0.5;
 
 /// Measures the GNSS receiver's error from candump logs of the car parked.
 fn receiver_error(args: ReceiverErrorArgs) -> Result<()> {

@@ -910,6 +910,53 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
             .unwrap_or_else(|| panic!("{text}"));
         assert!((measured / rate - 1.0).abs() <= 0.03, "{rate}: {text}");
     }
+    // An actuator slower than the model file can declare (a black-box probe's bus: its
+    // advice, 0.35 s, was one the reader refuses, and the fit sat at its search's edge without
+    // a word): 0.3 s of lag and 30 %/s, driven by the node with the CAT Vehicle's file. The
+    // fit is at the edge and says so, the lag advised is the most the file takes, with why.
+    let dir = tmp_dir("steering-lag-0.3");
+    let vehicle = dir.join("vehicle.toml");
+    std::fs::write(
+        &vehicle,
+        cat.replace("\nlag_s = 0.05", "\nlag_s = 0.3").replace(
+            "\nrate_limit_pct_per_s = 60.0 ",
+            "\nrate_limit_pct_per_s = 30.0 ",
+        ),
+    )
+    .unwrap();
+    let paper = root.join("../models/paper.toml");
+    cl_ok(&[
+        "--scenario",
+        "loop",
+        "--speed",
+        "6",
+        "--receiver",
+        "rtk",
+        "--vehicle",
+        vehicle.to_str().unwrap(),
+        "--model",
+        paper.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let out = Command::new(BIN)
+        .args([
+            "identify-steering",
+            dir.join("session.can.log").to_str().unwrap(),
+            dir.join("session.tx.log").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("warning: the fit is at the edge of its search"),
+        "{text}"
+    );
+    assert!(
+        text.contains("steer_lag_s = 0.250  # the most the model file takes"),
+        "{text}"
+    );
     // Only the reports: the commands are needed, and the error says so.
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("closed_loop_steering-lag-0.09");
     let out = Command::new(BIN)

@@ -568,6 +568,80 @@ pub fn steering_gain_problem(logs: &[Experiment], vehicle: &VehicleSection) -> O
     ))
 }
 
+/// Two logs' steering gains this far apart (the larger over the smaller) are not one car's
+/// steering: a sensor that clips (a probe's `steer` held at +-50 % while the wheels turned to
+/// full lock read 1.97 on its circles against 0.99 on its turns, pooled into 1.93 and
+/// written), logs of two cars, a sensor changed between them. Within one car's logs they
+/// agree to a few per cent (the tyres' slip at full lock against a gentle turn).
+pub const STEER_GAIN_SPREAD: f64 = 1.25;
+/// ... and this many standard errors of their difference apart.
+pub const STEER_GAIN_SPREAD_SIGMAS: f64 = 3.5;
+
+/// Why the logs' steering gains cannot be one car's ([`STEER_GAIN_SPREAD`]), naming each
+/// log's and, where the largest log's `steer` is held at its largest magnitude below the
+/// lock through its steady turns, the clip. `None` when they agree, or fewer than two logs
+/// have [`MIN_STEADY_TURN_SAMPLES`] / 5 steady turns.
+pub fn steering_gain_spread_problem(
+    logs: &[Experiment],
+    vehicle: &VehicleSection,
+) -> Option<String> {
+    let per_log: Vec<(&Experiment, Vec<SteadyTurn>, f64, f64)> = logs
+        .iter()
+        .map(|e| (e, steady_turns(e)))
+        .filter(|(_, pts)| pts.len() >= MIN_STEADY_TURN_SAMPLES / 5)
+        .map(|(e, pts)| {
+            let (g, se) = steer_gain_alone(&pts, vehicle, e.yaw_half_width);
+            (e, pts, g, se)
+        })
+        .filter(|p| p.2.is_finite() && p.2 > 0.0 && p.3.is_finite())
+        .collect();
+    let by_gain =
+        |a: &&(&Experiment, Vec<SteadyTurn>, f64, f64),
+         b: &&(&Experiment, Vec<SteadyTurn>, f64, f64)| a.2.total_cmp(&b.2);
+    let lo = per_log.iter().min_by(by_gain)?;
+    let hi = per_log.iter().max_by(by_gain)?;
+    if hi.2 / lo.2 < STEER_GAIN_SPREAD || hi.2 - lo.2 < STEER_GAIN_SPREAD_SIGMAS * hi.3.hypot(lo.3)
+    {
+        return None;
+    }
+    let each: Vec<String> = per_log
+        .iter()
+        .map(|(e, _, g, se)| format!("{} {g:.3} +- {se:.3}", e.name))
+        .collect();
+    // The largest log's steady turns at its largest |steer|: a clip holds the sensor there.
+    let largest = hi.0.steer_pct.iter().fold(0.0f64, |m, s| m.max(s.abs()));
+    let largest_rad = hi.0.delta_rad.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    let at_largest =
+        hi.1.iter()
+            .filter(|p| p.1.abs() > largest_rad * (1.0 - 1e-6))
+            .count();
+    let cause = if largest < 95.0 && at_largest * 2 >= hi.1.len() {
+        format!(
+            "`steer` in {} is held at its largest, {largest:.1} % of the lock, through {} of \
+             its {} samples of steady turning, while the GNSS course turns the car {:.2} \
+             times as far as the others' logs say: a steering sensor that clips at \
+             {largest:.1} %, whose turns beyond it read as {largest:.1} % (the node reads the \
+             same sensor on the bus): fix the sensor's range, or leave the logs that turn \
+             beyond it out",
+            hi.0.name,
+            at_largest,
+            hi.1.len(),
+            hi.2 / lo.2
+        )
+    } else {
+        "check that the logs are of one car, with one steering sensor, calibrated alike".into()
+    };
+    Some(format!(
+        "the logs' steering gains (the centre-tyre angle the GNSS course shows over the nominal \
+         one from `steer`) disagree, {} against {} ({:.0} % apart; one car's steering turns it \
+         alike in every log) (per log: {}): {cause}",
+        hi.0.name,
+        lo.0.name,
+        (hi.2 / lo.2 - 1.0) * 100.0,
+        each.join(", ")
+    ))
+}
+
 /// A steering whose zero is this far off, % of the lock, is refused (when it is also
 /// [`STEER_ZERO_SIGMAS`] standard errors from 0): at 10 m/s on the CAT Vehicle, 0.5 % of its
 /// 35.5 deg lock is a yaw rate of 0.012 rad/s with the wheel straight, 0.24 m sideways over the
@@ -687,10 +761,13 @@ pub fn steering_zero_problem(logs: &[Experiment], vehicle: &VehicleSection) -> O
 }
 
 /// Why the steering of `logs` cannot be the car's as the schema has it: a gain no car has
-/// ([`steering_gain_problem`]: the other sign, another unit) or a zero that is off
+/// ([`steering_gain_problem`]: the other sign, another unit), gains that differ from log to
+/// log ([`steering_gain_spread_problem`]: a sensor that clips) or a zero that is off
 /// ([`steering_zero_problem`]).
 pub fn steering_problem(logs: &[Experiment], vehicle: &VehicleSection) -> Option<String> {
-    steering_gain_problem(logs, vehicle).or_else(|| steering_zero_problem(logs, vehicle))
+    steering_gain_problem(logs, vehicle)
+        .or_else(|| steering_gain_spread_problem(logs, vehicle))
+        .or_else(|| steering_zero_problem(logs, vehicle))
 }
 
 /// Steering gain and understeer term from `r = v tan(g delta / (1 + K v^2)) / L` by
