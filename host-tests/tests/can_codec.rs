@@ -349,6 +349,7 @@ fn node_status_pages_round_trip_and_saturate() {
         planner_refused_recently: false,
         gnss_rate_mismatch: true,
         steering_mismatch: false,
+        outside_corridor: true,
     };
     let pages = [
         NodeStatus::Health {

@@ -1245,9 +1245,12 @@ pub struct HealthFlags {
     /// The car turns by another share of its steering than the model file says: the node uses
     /// the gain it measured.
     pub steering_mismatch: bool,
+    /// The car's body, as the node estimates it, is more than
+    /// [`crate::node::drive::OUTSIDE_CORRIDOR_M`] outside the corridor.
+    pub outside_corridor: bool,
 }
 
-const HEALTH_BITS: [&SignalSpec; 14] = [
+const HEALTH_BITS: [&SignalSpec; 15] = [
     &sig::STEER_STALE,
     &sig::SPEED_STALE,
     &sig::PEDAL_STALE,
@@ -1262,10 +1265,11 @@ const HEALTH_BITS: [&SignalSpec; 14] = [
     &sig::PLANNER_REFUSED_RECENTLY,
     &sig::GNSS_RATE_MISMATCH,
     &sig::STEERING_MISMATCH,
+    &sig::OUTSIDE_CORRIDOR,
 ];
 
 impl HealthFlags {
-    const fn as_array(&self) -> [bool; 14] {
+    const fn as_array(&self) -> [bool; 15] {
         [
             self.steer_stale,
             self.speed_stale,
@@ -1281,9 +1285,10 @@ impl HealthFlags {
             self.planner_refused_recently,
             self.gnss_rate_mismatch,
             self.steering_mismatch,
+            self.outside_corridor,
         ]
     }
-    const fn from_array(b: [bool; 14]) -> Self {
+    const fn from_array(b: [bool; 15]) -> Self {
         Self {
             steer_stale: b[0],
             speed_stale: b[1],
@@ -1299,6 +1304,7 @@ impl HealthFlags {
             planner_refused_recently: b[11],
             gnss_rate_mismatch: b[12],
             steering_mismatch: b[13],
+            outside_corridor: b[14],
         }
     }
 }

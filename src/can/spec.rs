@@ -518,6 +518,11 @@ pub mod sig {
     /// says, and the node uses the gain it measured ([`crate::node::steering`]).
     pub const STEERING_MISMATCH: SignalSpec =
         SignalSpec::uint("steering_mismatch", 22, 1).on_page(0);
+    /// Page 0 health bit: the car's body, as the node estimates it, is more than
+    /// [`crate::node::drive::OUTSIDE_CORRIDOR_M`] outside the corridor while the controller
+    /// drives (the corridor's rows are soft: a bend the body cannot sweep inside it, a reversal
+    /// the steering cannot follow at the path's speed).
+    pub const OUTSIDE_CORRIDOR: SignalSpec = SignalSpec::uint("outside_corridor", 23, 1).on_page(0);
     /// Page 0: ticks that overran since boot, saturating.
     pub const OVERRUN_COUNT: SignalSpec = SignalSpec::uint("overrun_count", 24, 16).on_page(0);
     /// Page 0: duration of the previous step, us; 0xFFFF = not available.
@@ -927,6 +932,7 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
         PLANNER_REFUSED_RECENTLY,
         GNSS_RATE_MISMATCH,
         STEERING_MISMATCH,
+        OUTSIDE_CORRIDOR,
         OVERRUN_COUNT,
         LAST_STEP_US,
         CRC_ERRORS,

@@ -139,7 +139,17 @@ pub struct DriveOutput {
     /// The controller's planned trajectory at the PREDICTION frames' horizons (0.2 .. 2 s),
     /// when it has one (the model-predictive controller, while it drives).
     pub plan: Option<[PredictedPoint; PREDICTION_POINTS]>,
+    /// How far the body, as estimated, is outside the corridor, m (measured by the
+    /// model-predictive controller's last solve; 0 in its fallback and with pure pursuit).
+    pub outside_corridor_m: f32,
 }
+
+/// A body outside the corridor by more than this raises NODE_STATUS `outside_corridor`, m:
+/// the corridor's rows are soft, and a bend the body cannot sweep
+/// inside the corridor, or a reversal the steering cannot follow at the path's speed, was
+/// driven outside it while CONTROL_COMMAND said "tracking" (a black-box probe: 0.6 m out of a
+/// hairpin for 8.6 s, 2.2 m out of a figure eight at 8 m/s).
+pub const OUTSIDE_CORRIDOR_M: f32 = 0.1;
 
 /// What one planner frame did ([`Drive::receive`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -605,6 +615,7 @@ impl Drive {
                         speed_cmd_mps: Some(out.speed_cmd_mps),
                     },
                     plan: None,
+                    outside_corridor_m: 0.0,
                 }
             }
         };
@@ -670,6 +681,7 @@ impl Drive {
                 speed_cmd_mps: Some(0.0),
             },
             plan: None,
+            outside_corridor_m: 0.0,
         })
     }
 
@@ -698,6 +710,7 @@ impl Drive {
                 speed_cmd_mps: Some(0.0),
             },
             plan: None,
+            outside_corridor_m: 0.0,
         }
     }
 }
@@ -768,6 +781,7 @@ fn mpc_command(out: &MpcOutput) -> DriveOutput {
             speed_cmd_mps: Some(out.speed_cmd_mps),
         },
         plan: Some(prediction_points(out)),
+        outside_corridor_m: out.outside_corridor_m,
     }
 }
 

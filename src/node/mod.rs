@@ -834,6 +834,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             gnss_rejected_us: self.gnss.last_reject_us(),
             gnss_rate_mismatch: self.gnss.rate_mismatch(),
             steering_mismatch: self.steering.mismatch() || self.drive.borrow().steering_reversed(),
+            outside_corridor: drive.outside_corridor_m > drive::OUTSIDE_CORRIDOR_M,
             mode: motion.mode,
             speed_mps: motion.speed_mps,
             yaw_rate_rps: self.models.yaw_rate_rps,

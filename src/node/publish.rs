@@ -39,6 +39,8 @@ pub struct Outputs<'a> {
     pub gnss_rate_mismatch: bool,
     /// The node uses a steering gain other than the model file's.
     pub steering_mismatch: bool,
+    /// The body is outside the corridor ([`crate::node::drive::DriveOutput`]).
+    pub outside_corridor: bool,
     /// Lateral model in use.
     pub mode: Mode,
     /// Speed used, m/s.
@@ -161,6 +163,7 @@ impl Health {
                     planner_refused_recently: recent(now, self.last_planner_reject_us),
                     gnss_rate_mismatch: out.gnss_rate_mismatch,
                     steering_mismatch: out.steering_mismatch,
+                    outside_corridor: out.outside_corridor,
                 },
                 overrun_count: tick.platform.overruns,
                 last_step_us: tick.platform.last_step_us,

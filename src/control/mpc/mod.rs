@@ -736,8 +736,12 @@ pub struct MpcOutput {
     pub primal_residual: f32,
     /// Lateral dual residual.
     pub dual_residual: f32,
-    /// Largest corridor violation of the plan's body corners, m (0 inside).
+    /// Largest corridor violation of the plan's body corners, m (0 inside), against the
+    /// corridor as relaxed for a car that starts outside it (`lateral::relax_corridor`).
     pub corridor_violation_m: f32,
+    /// How far the body's corners are outside the corridor at the start (the car as the node
+    /// estimates it now), m (0 inside; the corridor margin within its edges not counted).
+    pub outside_corridor_m: f32,
     /// Passing side chosen for each obstacle slot (`None`: no obstacle, or not in reach).
     pub sides: [Option<ObstacleSide>; MAX_OBSTACLES],
 }
@@ -1049,7 +1053,7 @@ impl MpcConfig {
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
             }
         };
-        lateral::relax_corridor(
+        let start_outside_m = lateral::relax_corridor(
             &mut state.problem,
             &x0,
             (
@@ -1186,6 +1190,9 @@ impl MpcConfig {
             primal_residual: report.primal_residual,
             dual_residual: report.dual_residual,
             corridor_violation_m,
+            // The rows keep the corridor margin inside the corridor's edges (less where the
+            // room is narrower than two margins): beyond them by the margin is outside it.
+            outside_corridor_m: max(start_outside_m - weights.corridor_margin_m, 0.0),
             sides: state.sides,
         }
     }
@@ -1751,6 +1758,7 @@ impl MpcConfig {
             primal_residual: 0.0,
             dual_residual: 0.0,
             corridor_violation_m: 0.0,
+            outside_corridor_m: 0.0,
             sides: state.sides,
         }
     }
