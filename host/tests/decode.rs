@@ -136,6 +136,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                         );
                         assert_eq!(flag(&d, "gnss_rate_mismatch"), health.gnss_rate_mismatch);
                         assert_eq!(flag(&d, "steering_mismatch"), health.steering_mismatch);
+                        assert_eq!(flag(&d, "outside_corridor"), health.outside_corridor);
                         agree(&d, "overrun_count", Some(overrun_count as f32));
                         agree(&d, "last_step_us", last_step_us.map(|v| v as f32));
                     }
@@ -189,7 +190,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                 // Only the page's own signals (+ counter, page, crc) are shown.
                 let page_signals = d.signals.len() - 3;
                 assert!(
-                    (2..=17).contains(&page_signals),
+                    (2..=18).contains(&page_signals),
                     "{page_signals} signals on page {}",
                     m.page()
                 );

@@ -1304,20 +1304,27 @@ fn gnss_latency_notes(training: &[Experiment], validation: &[Experiment]) -> Vec
         if let Some((lag, se)) = units::gnss_latency(e) {
             if lag.abs() > units::GNSS_LATENCY_NOTE_S && lag.abs() > units::GNSS_LATENCY_SIGMAS * se
             {
-                notes.push(format!(
-                    "{}: the GNSS fixes are {:.2} s +- {se:.2} {} the wheel speed (the lag \
-                     that best fits the speed along the track with `vel`): the lateral \
-                     model's lag takes it in, and the node, fed fixes as late, predicts from \
-                     positions that old; log the fixes at their time of validity, or use a \
-                     receiver with less latency",
-                    e.name,
-                    lag.abs(),
-                    if lag > 0.0 {
-                        "late behind"
-                    } else {
-                        "early ahead of"
-                    }
-                ));
+                let best_fit = "(the lag that best fits the speed along the track with `vel`)";
+                notes.push(if lag > 0.0 {
+                    format!(
+                        "{}: the GNSS fixes are {lag:.2} s +- {se:.2} late behind the wheel \
+                         speed {best_fit}: the lateral model's lag takes it in, and the node, fed \
+                         fixes as late, predicts from positions that old; log the fixes at their \
+                         time of validity, or use a receiver with less latency",
+                        e.name
+                    )
+                } else {
+                    // Fixes ahead of the wheel: it is the wheel speed that comes late (the
+                    // black-box probe's note said the fixes were "early" and blamed the
+                    // receiver's latency).
+                    format!(
+                        "{}: the wheel speed `vel` is {:.2} s +- {se:.2} late behind the GNSS \
+                         track {best_fit}: a wheel speed logged late, or filtered on its way to \
+                         the log; the speed models' delays take it in; log `vel` at its time \
+                         of measurement",
+                        e.name, -lag
+                    )
+                });
             }
         }
     }
