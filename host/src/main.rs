@@ -419,6 +419,9 @@ fn simulate_drive(args: SimulateDriveArgs) -> Result<()> {
     let encoded = csv2can::encode_log(&output.log)?;
     replay::write_file(&can_path, &csv2can::to_candump(&encoded.frames))?;
     progress.finish();
+    if let Some(warning) = sim::slide_warning(&scenario, &output.truth, &cfg) {
+        eprintln!("catmodel: warning: {warning}");
+    }
     eprintln!(
         "wrote {}, {}, {}",
         log_path.display(),

@@ -90,7 +90,11 @@ pub fn delay_samples(delay_s: f64, ts_s: f64) -> Result<usize, ModelError> {
         });
     }
     let nearest = libm::round(ratio);
-    if (ratio - nearest).abs() > DELAY_INTEGER_RTOL * nearest.max(1.0) {
+    // A delay that rounds to no sample is no delay only if it is none: 0.88 s at a sample
+    // period of 1e9 s (ratio 8.8e-10, within the tolerance of 0) was taken as 0 samples.
+    if (ratio - nearest).abs() > DELAY_INTEGER_RTOL * nearest.max(1.0)
+        || (nearest == 0.0 && delay_s > 0.0)
+    {
         return Err(ModelError::FractionalDelay { delay_s, ts_s });
     }
     // Note: 0 <= nearest <= 2^20, exact in usize.
@@ -400,6 +404,15 @@ mod tests {
             Err(ModelError::InvalidSamplePeriod)
         );
         assert_eq!(delay_samples(0.1, f64::NAN), Err(ModelError::NotFinite));
+        // A delay far shorter than one sample is no whole number of them (a probe's `discretize
+        // --ts 1e9` wrote 0 samples for 0.88 s, where `--ts 100` refused).
+        assert_eq!(
+            delay_samples(0.88, 1e9),
+            Err(ModelError::FractionalDelay {
+                delay_s: 0.88,
+                ts_s: 1e9
+            })
+        );
         assert!(matches!(
             delay_samples(1e9, 0.02),
             Err(ModelError::DelayTooLong { .. })
