@@ -856,11 +856,13 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
 fn identify_steering_finds_the_plants_lag_from_a_session() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cat = std::fs::read_to_string(root.join("vehicles/cat-vehicle.toml")).unwrap();
-    for (lag, rate) in [(0.05, 60.0), (0.09, 43.0)] {
+    assert_eq!(cat.matches("\nlag_s = 0.05").count(), 1);
+    assert_eq!(cat.matches("\nrate_limit_pct_per_s = 60.0 ").count(), 1);
+    // A session of the CAT Vehicle's plant with the actuator's lag and rate limit, driven over
+    // `session` (closed-loop's scenario arguments); what identify-steering prints.
+    let identify = |lag: f64, rate: f64, session: &[&str]| -> String {
         let dir = tmp_dir(&format!("steering-lag-{lag}"));
         let vehicle = dir.join("vehicle.toml");
-        assert_eq!(cat.matches("\nlag_s = 0.05").count(), 1);
-        assert_eq!(cat.matches("\nrate_limit_pct_per_s = 60.0 ").count(), 1);
         std::fs::write(
             &vehicle,
             cat.replace("\nlag_s = 0.05", &format!("\nlag_s = {lag}"))
@@ -870,18 +872,10 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
                 ),
         )
         .unwrap();
-        cl_ok(&[
-            "--scenario",
-            "dlc",
-            "--speed",
-            "8",
-            "--receiver",
-            "rtk",
-            "--vehicle",
-            vehicle.to_str().unwrap(),
-            "--out",
-            dir.to_str().unwrap(),
-        ]);
+        let mut args = session.to_vec();
+        args.extend(["--receiver", "rtk", "--vehicle", vehicle.to_str().unwrap()]);
+        args.extend(["--out", dir.to_str().unwrap()]);
+        cl_ok(&args);
         let out = Command::new(BIN)
             .args([
                 "identify-steering",
@@ -890,12 +884,16 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
             ])
             .output()
             .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout);
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
         assert!(
             out.status.success(),
             "{text}{}",
             String::from_utf8_lossy(&out.stderr)
         );
+        text
+    };
+    for (lag, rate) in [(0.05, 60.0), (0.09, 43.0)] {
+        let text = identify(lag, rate, &["--scenario", "dlc", "--speed", "8"]);
         let key: f64 = text
             .split("steer_lag_s = ")
             .nth(1)
@@ -914,41 +912,19 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
     // advice, 0.35 s, was one the reader refuses, and the fit sat at its search's edge without
     // a word): 0.3 s of lag and 30 %/s, driven by the node with the CAT Vehicle's file. The
     // fit is at the edge and says so, the lag advised is the most the file takes, with why.
-    let dir = tmp_dir("steering-lag-0.3");
-    let vehicle = dir.join("vehicle.toml");
-    std::fs::write(
-        &vehicle,
-        cat.replace("\nlag_s = 0.05", "\nlag_s = 0.3").replace(
-            "\nrate_limit_pct_per_s = 60.0 ",
-            "\nrate_limit_pct_per_s = 30.0 ",
-        ),
-    )
-    .unwrap();
     let paper = root.join("../models/paper.toml");
-    cl_ok(&[
-        "--scenario",
-        "loop",
-        "--speed",
-        "6",
-        "--receiver",
-        "rtk",
-        "--vehicle",
-        vehicle.to_str().unwrap(),
-        "--model",
-        paper.to_str().unwrap(),
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
-    let out = Command::new(BIN)
-        .args([
-            "identify-steering",
-            dir.join("session.can.log").to_str().unwrap(),
-            dir.join("session.tx.log").to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}");
+    let text = identify(
+        0.3,
+        30.0,
+        &[
+            "--scenario",
+            "loop",
+            "--speed",
+            "6",
+            "--model",
+            paper.to_str().unwrap(),
+        ],
+    );
     assert!(
         text.contains("warning: the fit is at the edge of its search"),
         "{text}"
