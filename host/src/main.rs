@@ -527,6 +527,17 @@ fn print_replay_counts(result: &replay::ReplayStats) {
         c.range_errors, c.gnss_gate_rejects, c.gnss_rate_mismatch, result.filtered + u64::from(c.unknown_ids), c.time_errors,
         result.unsupported
     );
+    if result.rx_queue_drops > 0 {
+        eprintln!(
+            "catmodel: warning: {} frames were dropped by the full receive queue ({} frames), as \
+             the firmware drops them (NODE_STATUS rx_queue_drops): the bus carried more frames \
+             the acceptance filter admits than the node takes ({} a tick), e.g. a second GNSS \
+             receiver or a gateway repeating the drive-by-wire's reports",
+            result.rx_queue_drops,
+            catmodel::node::RX_QUEUE_LEN,
+            catmodel::node::MAX_RX_FRAMES_PER_TICK
+        );
+    }
     // Logs with a planner on the bus: what it sent and the node refused (NODE_STATUS
     // carries only a bit of it).
     if result.planner.counters != Default::default() {

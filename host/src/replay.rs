@@ -1,10 +1,14 @@
 //! `catmodel replay`: the very same [`Node`] as the firmware, stepped every 20 ms of log time
 //! over a candump file, with the tick schedule of docs/architecture.md (so that its frames are
-//! byte-identical to the QEMU run's `target/qemu/tx.log`). Like the firmware's receive path, it
-//! refuses frames that are not node inputs (the acceptance filter,
-//! [`catmodel::can::spec::is_node_input`]) and hands each tick at most
-//! [`MAX_RX_FRAMES_PER_TICK`] due frames, the rest to the following ticks; unlike the
-//! firmware's 64-frame receive queue, it never drops one.
+//! byte-identical to the QEMU run's `target/qemu/tx.log`). Its frames go through the firmware's
+//! receive path, as `sil`'s do ([`crate::sil::RxQueue`]): the acceptance filter
+//! ([`catmodel::can::spec::is_node_input`]), the 64-frame receive queue, which drops a frame
+//! given to it full and counts it (NODE_STATUS `rx_queue_drops`), and at most
+//! [`MAX_RX_FRAMES_PER_TICK`] frames a tick, the rest left queued. (It used to hold every frame
+//! back, never dropping one: a bus with other receivers' fixes, which the filter admits, grew a
+//! backlog without end, every input went stale, and the log ran longer than it lasted, where
+//! the firmware drops and keeps up: a black-box probe's drive replayed with no position at
+//! any tick, where `sil` scored 1.36 m.)
 //!
 //! The text around the node is written for speed (the issue's "replay >= 100x faster than
 //! NumPy/SciPy"): the log is read at once and parsed line by line in place, the CSV and the
@@ -17,7 +21,6 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
 use catmodel::can::codec::{GnssPosition, ModelMode, Prediction, StateMotion, StatePosition};
-use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::steering::SteeringCheck;
 use catmodel::node::{
@@ -584,6 +587,8 @@ pub struct ReplayStats {
     /// The node's planner refusals (on no status page but as the bit
     /// `planner_refused_recently`) and the first one's reason, as `sil` sums them up.
     pub planner: PlannerRefusals,
+    /// Frames dropped because the receive queue was full (as the firmware drops them).
+    pub rx_queue_drops: u32,
 }
 
 /// What a replay should say about the local frame: fixes beyond its validity radius
@@ -671,6 +676,7 @@ pub fn replay_with_progress(
         fixes_beyond_frame: 0,
         gnss_rate: None,
         planner: PlannerRefusals::default(),
+        rx_queue_drops: 0,
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -1110,13 +1116,13 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
-    let mut filtered = 0u64;
     let mut valid_ticks = 0u64;
     let mut max_speed_mps = 0.0f32;
     let mut steering_mismatch_ticks = 0u64;
     let mut origin_moves = 0u32;
     let mut planner = PlannerRefusals::default();
     let mut rx: Vec<TimedFrame> = Vec::with_capacity(MAX_RX_FRAMES_PER_TICK);
+    let mut queue = crate::sil::RxQueue::default();
     let (written, ticks, input_ok) = std::thread::scope(|scope| {
         let writer = scope.spawn(move || {
             let mut out = TextOut::new(csv, tx_log);
@@ -1153,24 +1159,21 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
             let mut batch = Vec::with_capacity(BATCH_TICKS);
             loop {
                 let mut tx = TxFrames::new();
-                let tick = Tick {
-                    now_us: now,
-                    platform: PlatformStats::default(),
-                };
-                // What the firmware's app does: the acceptance filter first (its refusals
-                // never wait), then at most the node's per-tick cap of due frames, the rest
-                // left for the next tick.
-                rx.clear();
+                // What the firmware's app does: the frames due arrive through the acceptance
+                // filter into the receive queue (dropped when it is full), and the tick takes
+                // at most the node's per-tick cap of them, the rest left queued.
                 while let Some(f) = source.peek_due(now) {
-                    if !is_node_input(f.frame.id) {
-                        filtered += 1;
-                    } else if rx.len() < MAX_RX_FRAMES_PER_TICK {
-                        rx.push(f);
-                    } else {
-                        break;
-                    }
+                    queue.push(f);
                     source.take();
                 }
+                queue.take_tick(&mut rx);
+                let tick = Tick {
+                    now_us: now,
+                    platform: PlatformStats {
+                        rx_queue_drops: queue.drops(),
+                        ..PlatformStats::default()
+                    },
+                };
                 frames += rx.len() as u64;
                 fix_times_us.extend(
                     rx.iter()
@@ -1206,8 +1209,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 }
                 // The last tick is the one at or after the last frame once every frame is
                 // taken (the QEMU run stops there too): another one follows while a frame
-                // remains.
-                let more = source.has_more();
+                // remains, in the log or in the queue.
+                let more = source.has_more() || !queue.is_empty();
                 if source.input_ok() == Some(false) {
                     break;
                 }
@@ -1237,7 +1240,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     });
     let stats = ReplayStats {
         frames,
-        filtered,
+        filtered: queue.filtered(),
+        rx_queue_drops: queue.drops(),
         unsupported: 0,
         ticks,
         valid_ticks,
