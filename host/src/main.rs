@@ -482,6 +482,7 @@ fn replay(args: ReplayArgs) -> Result<()> {
     config.origin_e7 = origin.map(to_e7);
     let declared_hz = 1.0 / f64::from(config.estimator.gnss_period_s);
     let still = config.estimator.course_min_speed_mps;
+    let gnss_source = config.gnss_source;
     let (result, report) = replay_with_progress(
         &log,
         &text,
@@ -492,7 +493,7 @@ fn replay(args: ReplayArgs) -> Result<()> {
     )?;
     replay::print_report(&log, &report);
     print_replay_counts(&result);
-    print_replay_warnings(&result, &report, declared_hz, still);
+    print_replay_warnings(&result, &report, (declared_hz, gnss_source), still);
     Ok(())
 }
 
@@ -550,7 +551,7 @@ fn print_replay_counts(result: &replay::ReplayStats) {
 fn print_replay_warnings(
     result: &replay::ReplayStats,
     report: &replay::LogReport,
-    declared_hz: f64,
+    (declared_hz, gnss_source): (f64, u8),
     still: f32,
 ) {
     let c = result.counters;
@@ -567,10 +568,15 @@ fn print_replay_warnings(
     }
     // No position at any tick (the rate's mismatch and the frame's reach have their
     // own warnings above): why, as far as the replay can tell.
+    let other_sources = replay::other_sources_note(result, gnss_source);
+    if let Some(note) = &other_sources {
+        eprintln!("catmodel: warning: {note}");
+    }
     let no_position = result.ticks > 0
         && result.valid_ticks == 0
         && c.gnss_rate_mismatch == 0
-        && result.fixes_beyond_frame == 0;
+        && result.fixes_beyond_frame == 0
+        && !(result.fixes == 0 && other_sources.is_some());
     if no_position && result.max_speed_mps < still {
         eprintln!(
             "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \

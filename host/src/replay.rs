@@ -589,6 +589,38 @@ pub struct ReplayStats {
     pub planner: PlannerRefusals,
     /// Frames dropped because the receive queue was full (as the firmware drops them).
     pub rx_queue_drops: u32,
+    /// GNSS positions given to the node from the model file's receiver
+    /// (`[inputs] gnss_source_address`).
+    pub fixes: u64,
+    /// GNSS positions given to the node from other source addresses (refused as unknown ids),
+    /// by address.
+    pub other_gnss_sources: Vec<(u8, u64)>,
+}
+
+/// What a replay should say about GNSS positions of receivers at source addresses other than
+/// the model file's: with none of its own, which address to declare (a black-box probe's
+/// receiver at 0x1D had its 30 161 fixes counted as unknown ids and the model file's
+/// `gnss_rate_hz` blamed); beside its own, that they were refused. `None` without them.
+pub fn other_sources_note(stats: &ReplayStats, declared: u8) -> Option<String> {
+    let (busiest, _) = *stats.other_gnss_sources.iter().max_by_key(|(_, n)| *n)?;
+    let list = stats
+        .other_gnss_sources
+        .iter()
+        .map(|(sa, n)| format!("{n} from {sa} (0x{sa:02X})"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    Some(if stats.fixes == 0 {
+        format!(
+            "no GNSS position came from source address {declared} (the model file's [inputs] \
+             gnss_source_address), and {list} did: the node refused them as unknown ids; if \
+             that is the car's receiver, set gnss_source_address = {busiest}"
+        )
+    } else {
+        format!(
+            "GNSS positions from other source addresses than the model file's {declared} were \
+             refused as unknown ids ({list}): the node uses one receiver's fixes"
+        )
+    })
 }
 
 /// What a replay should say about the local frame: fixes beyond its validity radius
@@ -677,6 +709,8 @@ pub fn replay_with_progress(
         gnss_rate: None,
         planner: PlannerRefusals::default(),
         rx_queue_drops: 0,
+        fixes: 0,
+        other_gnss_sources: Vec::new(),
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -1113,6 +1147,8 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     let mut node = crate::new_node(config);
     // The times of the receiver's position frames, for the rate the whole log shows.
     let mut fix_times_us: Vec<u64> = Vec::new();
+    // Positions of receivers at other source addresses, by address (refused as unknown ids).
+    let mut other_sources = [0u64; 256];
     let (to_writer, messages) = std::sync::mpsc::sync_channel::<ToWriter>(8);
     let (to_node, spare) = std::sync::mpsc::channel::<Vec<(u64, TxFrames)>>();
     let mut frames = 0u64;
@@ -1175,11 +1211,15 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                     },
                 };
                 frames += rx.len() as u64;
-                fix_times_us.extend(
-                    rx.iter()
-                        .filter(|f| GnssPosition::decode(&f.frame, gnss_source).is_ok())
-                        .map(|f| f.t_us),
-                );
+                for f in &rx {
+                    match GnssPosition::decode(&f.frame, gnss_source) {
+                        Ok(_) => fix_times_us.push(f.t_us),
+                        Err(catmodel::can::codec::DecodeError::WrongSource { got }) => {
+                            other_sources[usize::from(got)] += 1;
+                        }
+                        Err(_) => {}
+                    }
+                }
                 let before = *node.drive().planner().counters();
                 let estimate = node.step(&tick, &rx, &mut tx);
                 planner.observe(
@@ -1242,6 +1282,13 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         frames,
         filtered: queue.filtered(),
         rx_queue_drops: queue.drops(),
+        fixes: fix_times_us.len() as u64,
+        other_gnss_sources: other_sources
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n > 0)
+            .map(|(sa, n)| (sa as u8, *n))
+            .collect(),
         unsupported: 0,
         ticks,
         valid_ticks,

@@ -355,3 +355,46 @@ fn timestamps_in_batches_coarser_than_a_tick_are_named() {
         assert!(!warned(&stderr), "{name}: {stderr}");
     }
 }
+
+/// The smoke drive's GNSS positions (PGN 129025, `09F8011C`: source address 0x1C) with another
+/// source address, as from a receiver configured otherwise: `replay` names the address the
+/// positions came from and the key to set (a black-box probe's 0x1D receiver had its fixes
+/// counted as unknown ids and the model file's `gnss_rate_hz` blamed). With four more receivers
+/// beside the car's, 14 frames a tick reach the 12 the node takes: the receive queue drops
+/// frames, as the firmware's does, and the warning says so.
+#[test]
+fn gnss_positions_of_other_source_addresses_are_named() {
+    let dir = tmp_dir("other-sources");
+    let plain = smoke();
+    assert!(plain.contains(" 09F8011C#"));
+    let moved = plain.replace(" 09F8011C#", " 09F8011D#");
+    let (code, _, stderr) = replay(&dir, "sa1d.log", &moved, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("no GNSS position came from source address 28")
+            && stderr.contains("set gnss_source_address = 29"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("gnss_rate_hz"), "{stderr}");
+    let flooded = each_line(&plain, |l| {
+        if l.contains(" 09F8011C#") {
+            ["1C", "1D", "00", "01", "02"]
+                .iter()
+                .map(|sa| l.replace(" 09F8011C#", &format!(" 09F801{sa}#")))
+                .collect::<Vec<_>>()
+                .join("\n")
+        } else {
+            l.to_string()
+        }
+    });
+    let (code, _, stderr) = replay(&dir, "flooded.log", &flooded, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("frames were dropped by the full receive queue (64 frames)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("GNSS positions from other source addresses than the model file's 28"),
+        "{stderr}"
+    );
+}

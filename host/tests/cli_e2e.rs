@@ -847,6 +847,22 @@ fn receiver_error_from_a_parked_car() {
     ]);
     let moved = fails(&["receiver-error", s(&dir.join("straight-5.can.log"))]);
     assert!(moved.contains("the car moved"), "{moved}");
+    // The same drive without its speed reports (a recording that kept the receiver's frames
+    // alone): the fixes' spread tells that it moved (a black-box probe's such log was taken to
+    // be parked, and 410.7 m advised, which the model file refuses).
+    let drive = std::fs::read_to_string(dir.join("straight-5.can.log")).unwrap();
+    let gnss_only: String = drive
+        .lines()
+        .filter(|l| !l.contains(" 101#"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let gnss_only_path = dir.join("gnss-only.can.log");
+    std::fs::write(&gnss_only_path, gnss_only).unwrap();
+    let moved = fails(&["receiver-error", s(&gnss_only_path)]);
+    assert!(
+        moved.contains("the car moved (the logs have no speed report to tell"),
+        "{moved}"
+    );
     // Every fix stamped alike (a recorder that lost its clock): refused with the reason.
     let stamped = std::fs::read_to_string(dir.join("standstill.can.log")).unwrap();
     let same: String = stamped

@@ -12,6 +12,7 @@
 //! deviation from `n` of them is uncertain by about `1 / sqrt(2 n)`: a log shorter than
 //! [`MIN_INDEPENDENT`] independent values, or than [`MIN_LOG_S`], is reported as too short. The bound to declare is
 //! [`SIGMAS`] standard deviations of the worse axis.
+use crate::model_file;
 use anyhow::{bail, Result};
 use catmodel::can::codec::{GnssPosition, SpeedReport};
 use catmodel::can::frame::TimedFrame;
@@ -150,7 +151,7 @@ pub fn measure(frames: &[TimedFrame], source: u8) -> Result<ReceiverError> {
         (Some(a), Some(b)) => Some(duration_s / (2.0 * a.max(b))),
         _ => None,
     };
-    Ok(ReceiverError {
+    let measured = ReceiverError {
         east: e,
         north: n,
         fixes: fixes.len(),
@@ -159,7 +160,27 @@ pub fn measure(frames: &[TimedFrame], source: u8) -> Result<ReceiverError> {
         independent,
         speed_reports,
         rejected,
-    })
+    };
+    // A bound beyond what the model file takes is no receiver's error: the car moved (a
+    // black-box probe's drive with its speed reports filtered out of the log was taken to be
+    // parked, and `position_uncertainty_m = 410.7` advised, which the reader refuses).
+    let bound = measured.uncertainty_m();
+    if let Some(why) = model_file::range_problem("control.position_uncertainty_m", bound) {
+        let east_span = east.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v))
+            - east.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+        let north_span = north.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v))
+            - north.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+        bail!(
+            "the fixes spread over {east_span:.0} m east and {north_span:.0} m north, a bound of \
+             {bound:.1} m ({why}): the car moved{}; record the receiver with the car parked",
+            if speed_reports == 0 {
+                " (the logs have no speed report to tell: SPEED_REPORT, 0x101)"
+            } else {
+                ""
+            }
+        );
+    }
+    Ok(measured)
 }
 
 /// Standard deviation about the mean.
