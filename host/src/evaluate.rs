@@ -49,6 +49,13 @@ pub struct BaselineInputs {
     pub local_origins: Vec<(f64, f64, f64)>,
 }
 
+/// The truth is not interpolated across a gap longer than this, s: a reference system that
+/// lost its fix, or two sessions' truths joined. A straight line across a black-box probe's
+/// 30 s hole scored the filtered position 10.3 m RMS against 1.4 m on the full truth, and the
+/// floor, computed from the same line, called it 1.03 times the floor. (The simulator's truth
+/// is every 10 ms.)
+pub const TRUTH_GAP_S: f64 = 0.5;
+
 /// Truth interpolated in time, heading unwrapped before interpolation.
 pub struct Truth {
     samples: Vec<TruthSample>,
@@ -81,7 +88,25 @@ impl Truth {
         &self.samples
     }
 
-    /// `(x, y, heading, speed)` at time `t`, linearly interpolated; `None` outside the record.
+    /// The gaps longer than [`TRUTH_GAP_S`]: their count, total and the longest `(from, to)`.
+    pub fn gaps(&self) -> (usize, f64, Option<(f64, f64)>) {
+        let mut longest: Option<(f64, f64)> = None;
+        let (mut count, mut total) = (0, 0.0);
+        for w in self.samples.windows(2) {
+            let span = w[1].t - w[0].t;
+            if span > TRUTH_GAP_S {
+                count += 1;
+                total += span;
+                if longest.is_none_or(|(a, b)| span > b - a) {
+                    longest = Some((w[0].t, w[1].t));
+                }
+            }
+        }
+        (count, total, longest)
+    }
+
+    /// `(x, y, heading, speed)` at time `t`, linearly interpolated; `None` outside the record
+    /// and within a gap in it longer than [`TRUTH_GAP_S`].
     pub fn at(&self, t: f64) -> Option<(f64, f64, f64, f64)> {
         let s = &self.samples;
         let first = s.first()?;
@@ -92,6 +117,9 @@ impl Truth {
         let i = s.partition_point(|p| p.t <= t).clamp(1, s.len().max(2) - 1);
         let (a, b) = (&s[i - 1], &s.get(i).unwrap_or(&s[i - 1]));
         let span = b.t - a.t;
+        if span > TRUTH_GAP_S {
+            return None;
+        }
         let w = if span > 0.0 { (t - a.t) / span } else { 0.0 };
         let lerp = |p: f64, q: f64| p + (q - p) * w;
         let ha = self.unwrapped_heading[i - 1];
@@ -1320,6 +1348,31 @@ mod tests {
                 })
                 .collect(),
         )
+    }
+
+    /// A gap in the truth (its reference lost its fix) is not interpolated across: a black-box
+    /// probe's 30 s hole scored the filtered position 10.3 m RMS against 1.4 m, without a word.
+    #[test]
+    fn the_truth_is_not_interpolated_across_a_gap() {
+        let line = truth_line();
+        let holed = Truth::new(
+            line.samples()
+                .iter()
+                .filter(|s| !(3.0..6.0).contains(&s.t))
+                .copied()
+                .collect(),
+        );
+        assert_eq!(line.gaps(), (0, 0.0, None));
+        let (n, total, longest) = holed.gaps();
+        assert_eq!(n, 1);
+        assert!((total - 3.01).abs() < 1e-9, "{total}");
+        let (from, to) = longest.unwrap();
+        assert!((from - 2.99).abs() < 1e-9 && (to - 6.0).abs() < 1e-9);
+        assert_eq!(holed.at(4.5), None);
+        assert_eq!(holed.at(2.985).map(|p| p.1), line.at(2.985).map(|p| p.1));
+        assert_eq!(holed.at(2.995), None);
+        // Within the sampling, interpolated as before.
+        assert!((holed.at(7.005).unwrap().1 - 70.05).abs() < 1e-9);
     }
 
     #[test]

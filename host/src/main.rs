@@ -626,6 +626,16 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
     let origin = origin.unwrap_or(catmodel_host::SIM_ORIGIN_DEG);
     let progress = Progress::spinner("reading");
     let data = catmodel_host::EvaluationData::read(&predictions, &truth, &inputs, origin, car)?;
+    let gap_warning = match data.truth.gaps() {
+        (gaps @ 1.., total_s, Some((from, to))) => Some(format!(
+            "catmodel: warning: {}: the truth has {gaps} gap(s) longer than {} s ({total_s:.1} s \
+             in all, the longest from t = {from} to {to} s): nothing is scored within them (a \
+             straight line across them is not where the car was)",
+            truth.display(),
+            catmodel_host::evaluate::TRUTH_GAP_S
+        )),
+        _ => None,
+    };
     progress.set_message("evaluating");
     let e = data.evaluate();
     let e = match e {
@@ -643,6 +653,9 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
         None => Vec::new(),
     };
     progress.finish();
+    if let Some(w) = gap_warning {
+        eprintln!("{w}");
+    }
     print!("{}", evaluate::format_table(&e));
     if let Some(path) = json {
         replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
