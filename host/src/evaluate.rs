@@ -1632,7 +1632,7 @@ mod tests {
                 speed: 0.0,
             },
             TruthSample {
-                t: 1.0,
+                t: 0.1,
                 x: 0.0,
                 y: 0.0,
                 heading: -3.1,
@@ -1640,7 +1640,7 @@ mod tests {
                 speed: 0.0,
             },
         ]);
-        let (_, _, h, _) = truth.at(0.5).unwrap();
+        let (_, _, h, _) = truth.at(0.05).unwrap();
         assert!((h.abs() - std::f64::consts::PI).abs() < 1e-9, "{h}");
     }
 }
