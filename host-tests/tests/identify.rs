@@ -37,6 +37,7 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         log_notes: Vec::new(),
         gnss_rate_hz: 100.0,
         speed_scale: None,
+        speed_disagreement: None,
         gnss_gap: Vec::new(),
     }
 }
@@ -1761,4 +1762,79 @@ fn a_simulated_drive_beyond_the_grip_is_named() {
             && warning.contains("from t = 112."),
         "{warning}"
     );
+}
+
+/// A wheel speed that sticks (black-box probe: a `vel` stuck for 20 s passed without a word;
+/// stuck through a stop, the speed model's fit fell from 82 % to 63 % and the lateral fit was
+/// refused for the receiver's course, which was right). Stuck at its cruising value from 4 s
+/// before the stop, the span is named, from when the car slowed to the log's end;
+/// dropped to zero while the car cruises, named the other way; untouched, nothing is named.
+/// On three receivers (100 Hz, RTK, 1 Hz) and a second car.
+#[test]
+fn a_wheel_speed_that_sticks_is_named() {
+    use catmodel_host::sim::{self, SimOptions};
+    let paper = model_file::load(&model_file::paper_path()).unwrap().vehicle;
+    let hatchback_file = vehicles_dir().join("../../models/hatchback.toml");
+    let hatchback = model_file::load(&hatchback_file).unwrap().vehicle;
+    let mut one_hz = VehicleConfig::default();
+    one_hz.sensors.gnss.period_s = 1.0;
+    let plants = [
+        ("CAT Vehicle", VehicleConfig::default(), paper),
+        ("CAT Vehicle RTK", with_rtk(VehicleConfig::default()), paper),
+        ("CAT Vehicle at 1 Hz", one_hz, paper),
+        (
+            "hatchback",
+            VehicleConfig::load(&vehicles_dir().join("hatchback.toml")).unwrap(),
+            hatchback,
+        ),
+    ];
+    for (name, plant, vehicle) in &plants {
+        let base = sim::scenario::Scenario::builtin("straight-10").unwrap();
+        let options = SimOptions {
+            seed: 4,
+            ..SimOptions::default()
+        };
+        let rows = sim::simulate(&base, plant, &options).log;
+        let judged = |edit: &dyn Fn(f64, f64) -> f64| {
+            let mut rows = rows.clone();
+            for r in &mut rows {
+                r.vel = r.vel.map(|v| edit(r.t, v));
+            }
+            preprocess_rows("straight-10", &rows, vehicle, &PreprocessOptions::default())
+                .unwrap_or_else(|e| panic!("{name}: {e:#}"))
+                .speed_disagreement
+        };
+        assert_eq!(judged(&|_, v| v), None, "{name}: untouched");
+        // Stuck from 4 s before the command to stop (the car cruises at 10 m/s until then).
+        let stop = rows
+            .iter()
+            .find(|r| r.t > 30.0 && r.input_vel == Some(0.0))
+            .map(|r| r.t)
+            .unwrap();
+        let from = stop - 4.0;
+        let held = rows
+            .iter()
+            .find(|r| r.t >= from && r.vel.is_some())
+            .and_then(|r| r.vel)
+            .unwrap();
+        let stuck = judged(&|t, v| if t >= from { held } else { v })
+            .unwrap_or_else(|| panic!("{name}: a wheel speed stuck through the stop not named"));
+        println!("{name}: stop at {stop:.1} s, stuck: {}", stuck.problem());
+        assert!(stuck.wheel_m > stuck.track_m + 20.0, "{name}: {stuck:?}");
+        assert!(
+            (stop..=stop + 5.0).contains(&stuck.from_s) && stuck.to_s >= stop + 6.0,
+            "{name}: {stuck:?}"
+        );
+        assert!(
+            stuck.problem().contains("sticks at its last value"),
+            "{name}"
+        );
+        // Zero from 20 to 30 s while the car cruises.
+        let zero = judged(&|t, v| if (20.0..30.0).contains(&t) { 0.0 } else { v })
+            .unwrap_or_else(|| panic!("{name}: a wheel speed at zero while moving not named"));
+        println!("{name}: zero: {}", zero.problem());
+        assert!(zero.track_m > zero.wheel_m + 40.0, "{name}: {zero:?}");
+        assert!(zero.from_s >= 17.0 && zero.to_s <= 33.0, "{name}: {zero:?}");
+        assert!(zero.problem().contains("drops to zero"), "{name}");
+    }
 }

@@ -224,7 +224,17 @@ impl Car {
 /// The baseline's inputs from a candump of the node's input frames, GNSS in local metres
 /// around `origin_deg`. Frames the node would reject are skipped here too.
 pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64), car: &Car) -> Result<BaselineInputs> {
-    let frames = replay::read_candump_reporting(path, None)?.frames;
+    // Only the messages read below are kept: the rest of a busy bus is counted, not held.
+    let frames = replay::read_candump_selected_reporting(path, None, |f| {
+        matches!(decode_planner(f), Ok(PlannerMessage::LocalOrigin(..)))
+            || matches!(
+                decode_input(f, car.gnss_source),
+                Ok(InputMessage::Steering(..)
+                    | InputMessage::Speed(..)
+                    | InputMessage::GnssPosition(_))
+            )
+    })?
+    .frames;
     let frame = LocalFrame::new(
         (origin_deg.0 * 1e7).round() as i32,
         (origin_deg.1 * 1e7).round() as i32,

@@ -738,8 +738,8 @@ fn refuse_speed_units(units: &[String], out: &Path, force: bool) -> Result<()> {
         if !force {
             bail!(
                 "{}\n{} not written: the wheel speed is not the log schema's (m/s by \
-                 the GNSS track, negative in reverse) in {} case(s) (--force identifies \
-                 anyway)",
+                 the GNSS track, negative in reverse) or does not follow the track in {} \
+                 case(s) (--force identifies anyway)",
                 units.join("\n"),
                 out.display(),
                 units.len()
@@ -1193,8 +1193,13 @@ fn speed_unit_problems<'a>(
         .zip(experiments)
         .flat_map(|(p, e)| {
             let unit = e.speed_scale.and_then(|s| s.problem());
+            // A wheel speed in another unit disagrees everywhere: named once, as the unit.
+            let stuck = e
+                .speed_disagreement
+                .filter(|_| unit.is_none())
+                .map(|d| d.problem());
             let sign = identify::units::unsigned_reverse(e);
-            [unit, sign]
+            [unit, stuck, sign]
                 .into_iter()
                 .flatten()
                 .map(move |problem| format!("{}: {problem}", p.display()))

@@ -272,6 +272,56 @@ pub fn read_candump_log_on(path: &Path, interface: Option<&str>) -> Result<Candu
     parse_candump_bytes(path, &bytes, interface)
 }
 
+/// [`read_candump_log_on`] keeping only the frames `select` takes, read a line at a time: the
+/// memory is the frames kept, not the file. Every line is still checked and counted (the
+/// report's timestamps, interfaces, drops), so a log refused or warned about by
+/// [`read_candump_log_on`] is refused or warned about here alike. For commands that pick a
+/// few messages out of a bus (`evaluate`'s inputs): an hour of other ECUs' traffic (5.4 M
+/// frames, 257 MB) took 464 MB read whole, against 88 MB for the node's inputs alone.
+pub fn read_candump_selected(
+    path: &Path,
+    interface: Option<&str>,
+    select: impl Fn(&CanFrame) -> bool,
+) -> Result<CandumpLog> {
+    use std::io::BufRead;
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut input = std::io::BufReader::with_capacity(1 << 16, file);
+    let mut reader = LineReader::new(path, interface);
+    let mut line = Vec::new();
+    let mut lineno = 0;
+    loop {
+        line.clear();
+        let n = input
+            .read_until(b'\n', &mut line)
+            .with_context(|| format!("{}: reading", path.display()))?;
+        if n == 0 {
+            break;
+        }
+        lineno += 1;
+        let unterminated = line.last() != Some(&b'\n');
+        let text = line.strip_suffix(b"\n").unwrap_or(&line);
+        let text = std::str::from_utf8(text)
+            .map_err(|e| anyhow::anyhow!("{}:{lineno}: reading: {e}", path.display()))?;
+        let kept = reader.log.frames.len();
+        reader.push(lineno, text, unterminated)?;
+        if reader.log.frames.len() > kept && !select(&reader.log.frames[kept].frame) {
+            reader.log.frames.truncate(kept);
+        }
+    }
+    reader.finish()
+}
+
+/// [`read_candump_selected`] for the CLI, printing the report as [`read_candump_reporting`].
+pub fn read_candump_selected_reporting(
+    path: &Path,
+    interface: Option<&str>,
+    select: impl Fn(&CanFrame) -> bool,
+) -> Result<CandumpLog> {
+    let log = read_candump_selected(path, interface, select)?;
+    print_report(path, &log.report);
+    Ok(log)
+}
+
 /// [`read_candump`] over text already in memory; `path` names the file in errors.
 pub fn parse_candump(path: &Path, text: &str) -> Result<Vec<TimedFrame>> {
     parse_candump_log(path, text).map(|log| log.frames)
@@ -1946,10 +1996,22 @@ mod tests {
         assert_eq!(fast, slow);
         assert_eq!(fast.len(), 3);
         assert_eq!(fast[2].t_us, 2_000_000);
+        // The selecting reader: every frame kept, the same log and report; one identifier
+        // kept, its frames alone, the report still of every line.
+        let whole = read_candump_log(&p).unwrap();
+        assert_eq!(read_candump_selected(&p, None, |_| true).unwrap(), whole);
+        let one = read_candump_selected(&p, None, |f| f.id == CanId::Standard(0x100)).unwrap();
+        assert_eq!(one.frames, whole.frames[..1]);
+        assert_eq!(one.report, whole.report);
         let mut bad = text.as_bytes().to_vec();
         bad.extend_from_slice(b"\n(3.000000) can0 100#\xff\n");
         std::fs::write(&p, &bad).unwrap();
         let err = format!("{:#}", read_candump(&p).unwrap_err());
+        assert!(err.contains("a.log:6: reading"), "{err}");
+        let err = format!(
+            "{:#}",
+            read_candump_selected(&p, None, |_| true).unwrap_err()
+        );
         assert!(err.contains("a.log:6: reading"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -95,6 +95,9 @@ pub struct Experiment {
     /// The wheel speed against the GNSS track ([`super::units`]): about 1 when `vel` is in
     /// m/s; `None` when the log has too few moving stretches to judge by.
     pub speed_scale: Option<super::units::SpeedScale>,
+    /// The longest span over which the wheel speed and the GNSS track disagree (a wheel speed
+    /// that sticks, [`super::units::disagreement`]); `None`: none.
+    pub speed_disagreement: Option<super::units::Disagreement>,
     /// Samples whose GNSS-derived signals (`dx`, `dy`, `heading`, `yaw_rate`) rest on the
     /// interpolation across an outage ([`gnss_gaps`]): left out of the fits and scores that
     /// use them. Empty: none.
@@ -775,14 +778,10 @@ pub fn preprocess_rows(
 
     // On the raw samples: the wheel's distance, moved to the antenna by the steering, against
     // the track's (a `vel` in km/h passes the schema's range in town).
-    let speed_scale = super::units::speed_scale(
-        (&tv, &vel),
-        (&ts_, &steer),
-        &super::units::LeverArm::of(vehicle),
-        &tg,
-        &xe,
-        &yn,
-    );
+    let lever = super::units::LeverArm::of(vehicle);
+    let speed_scale = super::units::speed_scale((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
+    let speed_disagreement =
+        super::units::disagreement((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
 
     let taps = taps(opts)?;
     let onto = OntoGrid {
@@ -838,6 +837,7 @@ pub fn preprocess_rows(
         yaw_half_width,
         gnss_rate_hz: 1.0 / median_interval(&tg),
         speed_scale,
+        speed_disagreement,
         log_notes: notes,
         gnss_gap,
     })

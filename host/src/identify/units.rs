@@ -254,40 +254,100 @@ fn interpolate(t: &[f64], y: &[f64], at: f64) -> Option<f64> {
 /// The steering samples of a log, `(t, steer_pct)`, sorted by time.
 pub type Steering<'a> = (&'a [f64], &'a [f64]);
 
+/// The wheel's distance and the GNSS track of one log, side by side: what [`speed_scale`]
+/// and [`disagreement`] compare.
+struct WheelTrack<'a> {
+    tv: &'a [f64],
+    vel: &'a [f64],
+    /// Cumulative distance by the wheel speed at each of `tv`, moved to the antenna.
+    wheel: Vec<f64>,
+    tg: &'a [f64],
+    east: &'a [f64],
+    north: &'a [f64],
+    /// Longest interval between fixes that is not an outage, s.
+    max_gap: f64,
+    /// Longest interval between wheel speed samples that is not a pause, s.
+    max_wheel_gap: f64,
+}
+
+impl<'a> WheelTrack<'a> {
+    /// `None` with fewer than two samples of either.
+    fn new(
+        (tv, vel): (&'a [f64], &'a [f64]),
+        (ts, steer_pct): Steering,
+        lever: &LeverArm,
+        tg: &'a [f64],
+        east: &'a [f64],
+        north: &'a [f64],
+    ) -> Option<Self> {
+        if tv.len() < 2 || tg.len() < 2 {
+            return None;
+        }
+        let factor = antenna_factors(tv, ts, steer_pct, lever);
+        Some(Self {
+            tv,
+            vel,
+            wheel: wheel_distance(tv, vel, &factor),
+            tg,
+            east,
+            north,
+            max_gap: MAX_GAP_PERIODS * median_interval(tg),
+            // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
+            max_wheel_gap: MAX_GAP_PERIODS * median_interval(tv),
+        })
+    }
+
+    /// Whether the wheel speed is reported without a pause from `a` to `b`, s.
+    fn wheel_regular(&self, a: f64, b: f64) -> Option<std::ops::RangeInclusive<usize>> {
+        let tv = self.tv;
+        let lo = tv.partition_point(|t| *t < a);
+        let hi = tv.partition_point(|t| *t <= b);
+        (lo > 0
+            && hi < tv.len()
+            && tv[lo - 1..=hi]
+                .windows(2)
+                .all(|w| w[1] - w[0] <= self.max_wheel_gap))
+        .then(|| lo - 1..=hi)
+    }
+
+    /// Whether the car moves from `a` to `b` by every wheel speed sample, reported without a
+    /// pause.
+    fn moving_between(&self, a: f64, b: f64) -> bool {
+        self.wheel_regular(a, b)
+            .is_some_and(|r| self.vel[r].iter().all(|v| v.abs() >= MOVING))
+    }
+
+    /// The wheel's distance between fixes `i` and `j`.
+    fn wheel_between(&self, i: usize, j: usize) -> Option<f64> {
+        Some(
+            interpolate(self.tv, &self.wheel, self.tg[j])?
+                - interpolate(self.tv, &self.wheel, self.tg[i])?,
+        )
+    }
+
+    /// The straight line from fix `i` to fix `j`, m.
+    fn chord(&self, i: usize, j: usize) -> f64 {
+        (self.east[j] - self.east[i]).hypot(self.north[j] - self.north[i])
+    }
+}
+
 /// [`SpeedScale`] of a log: the wheel speed samples `(tv, vel)`, the steering `(ts,
 /// steer_pct)` and the fixes `(tg, east, north)` in metres (each sorted by time), the antenna
 /// where `lever` puts it. `None` when the log has fewer than [`MIN_STRETCHES`] stretches to
 /// judge by (a parked car, a log too short).
 pub fn speed_scale(
-    (tv, vel): (&[f64], &[f64]),
-    (ts, steer_pct): Steering,
+    wheel: (&[f64], &[f64]),
+    steering: Steering,
     lever: &LeverArm,
     tg: &[f64],
     east: &[f64],
     north: &[f64],
 ) -> Option<SpeedScale> {
-    if tv.len() < 2 || tg.len() < 2 {
-        return None;
-    }
-    let factor = antenna_factors(tv, ts, steer_pct, lever);
-    let wheel = wheel_distance(tv, vel, &factor);
-    let max_gap = MAX_GAP_PERIODS * median_interval(tg);
-    // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
-    let max_wheel_gap = MAX_GAP_PERIODS * median_interval(tv);
-    let moving_between = |a: f64, b: f64| -> bool {
-        let lo = tv.partition_point(|t| *t < a);
-        let hi = tv.partition_point(|t| *t <= b);
-        lo > 0
-            && hi < tv.len()
-            && tv[lo - 1..=hi]
-                .windows(2)
-                .all(|w| w[1] - w[0] <= max_wheel_gap)
-            && vel[lo - 1..=hi].iter().all(|v| v.abs() >= MOVING)
-    };
-    let wheel_between = |i: usize, j: usize| -> Option<f64> {
-        Some(interpolate(tv, &wheel, tg[j])? - interpolate(tv, &wheel, tg[i])?)
-    };
-    let chord = |i: usize, j: usize| (east[j] - east[i]).hypot(north[j] - north[i]);
+    let wt = WheelTrack::new(wheel, steering, lever, tg, east, north)?;
+    let max_gap = wt.max_gap;
+    let moving_between = |a: f64, b: f64| wt.moving_between(a, b);
+    let wheel_between = |i: usize, j: usize| wt.wheel_between(i, j);
+    let chord = |i: usize, j: usize| wt.chord(i, j);
 
     // 1. The log's own ratio, roughly: the median over every chord of MIN_CHORD_M along the
     // track while moving. The median ignores the few chords to an outlier fix; it is what the
@@ -371,6 +431,185 @@ pub fn speed_scale(
             .is_off_the_axle()
             .then_some((lever.ahead_m, lever.left_m)),
     })
+}
+
+/// Length of the windows in which [`disagreement`] compares the wheel with the track, s.
+pub const WINDOW_S: f64 = 2.5;
+/// A window disagrees when the wheel's distance and the track's differ by more than this, m
+/// (a standard receiver's error moves a 2.5 s track by a metre or so; fixes 0.5 s late move
+/// it by half a second of the change of speed over the window, 2.5 m braking at 5 m/s^2) ...
+pub const DISAGREE_MIN_M: f64 = 5.0;
+/// ... and by more than this share of the longer of the two (a wheel speed a few per cent off,
+/// the kinematic model's error on a turn, fixes 0.5 s late under the hardest braking are far
+/// inside).
+pub const DISAGREE_SHARE: f64 = 0.5;
+/// Windows in a row that must disagree, the same way, before the span is named: one alone may
+/// be a few fixes off the track together.
+pub const DISAGREE_WINDOWS: usize = 2;
+
+/// A span of a log over which the wheel speed and the GNSS track disagree: a wheel speed that
+/// sticks at the last value while the car stops or speeds up, or drops to zero while it moves
+/// (black-box probe: a `vel` stuck for 20 s passed without a word; stuck through a stop, it
+/// took the speed model's fit from 82 % to 63 % and the lateral fit was refused for the
+/// receiver's course, which was right).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disagreement {
+    /// Start and end of the span, s (the log's time).
+    pub from_s: f64,
+    /// See `from_s`.
+    pub to_s: f64,
+    /// The distance by the wheel speed over the span, moved to the antenna, m.
+    pub wheel_m: f64,
+    /// The distance along the GNSS track, m.
+    pub track_m: f64,
+    /// The windows compared, s: [`WINDOW_S`], or three of a slow receiver's periods.
+    pub window_s: f64,
+}
+
+impl Disagreement {
+    /// The problem in words, with what to do.
+    pub fn problem(&self) -> String {
+        let what = if self.wheel_m > self.track_m {
+            "the wheel speed says the car went further than the GNSS track does: a wheel speed \
+             that sticks at its last value while the car slows or stops"
+        } else {
+            "the GNSS track says the car went further than the wheel speed does: a wheel speed \
+             that sticks or drops to zero while the car moves"
+        };
+        format!(
+            "the wheel speed `vel` disagrees with the GNSS track from t = {:.1} to {:.1} s: \
+             {:.1} m by the wheel speed, {:.1} m along the track (every {:.1} s of the \
+             span differs by more than {DISAGREE_MIN_M} m and {:.0} %); {what}, or fixes of \
+             another receiver. The speed model would be fitted to it: split the log there (the \
+             parts before and after are logs of their own), or fix the sensor",
+            self.from_s,
+            self.to_s,
+            self.wheel_m,
+            self.track_m,
+            self.window_s,
+            DISAGREE_SHARE * 100.0
+        )
+    }
+}
+
+/// The longest span of a log over which the wheel speed and the GNSS track disagree (the
+/// arguments as [`speed_scale`]'s): the log is cut into windows of [`WINDOW_S`] (three periods
+/// of a slow receiver) between fixes,
+/// each with regular fixes and wheel speed samples (an outage or a sensor's pause ends a span);
+/// in each, the wheel's distance moved to the antenna and the track's length
+/// ([`track_length`]: a standing car's noise adds a metre at most) are compared, and
+/// [`DISAGREE_WINDOWS`] windows in a row that differ, the same way, by more than
+/// [`DISAGREE_MIN_M`] and [`DISAGREE_SHARE`] of the longer make a span. Fixes far off the
+/// track (bursts) are left out before, by the log's reader. `None` when nothing disagrees.
+pub fn disagreement(
+    wheel: (&[f64], &[f64]),
+    steering: Steering,
+    lever: &LeverArm,
+    tg: &[f64],
+    east: &[f64],
+    north: &[f64],
+) -> Option<Disagreement> {
+    let wt = WheelTrack::new(wheel, steering, lever, tg, east, north)?;
+    // A slow receiver's window spans three of its periods (four fixes).
+    let period = wt.max_gap / MAX_GAP_PERIODS;
+    let window = WINDOW_S.max(3.0 * period);
+    let mut best: Option<(usize, Disagreement)> = None;
+    // The current run of windows that disagree: (windows, sign, span).
+    let mut run: Option<(usize, bool, Disagreement)> = None;
+    let mut i = 0;
+    while i + 1 < tg.len() {
+        let mut j = i;
+        while j + 1 < tg.len()
+            && tg[j + 1] - tg[i] <= window + 0.25 * period
+            && tg[j + 1] - tg[j] <= wt.max_gap
+        {
+            j += 1;
+        }
+        let full = tg[j] - tg[i] >= 0.75 * window;
+        let judged = if full && wt.wheel_regular(tg[i], tg[j]).is_some() {
+            wt.wheel_between(i, j).map(|w| (w, track_length(&wt, i, j)))
+        } else {
+            None
+        };
+        let verdict = judged.and_then(|(w, g)| {
+            let differs = (w - g).abs() > DISAGREE_MIN_M.max(DISAGREE_SHARE * w.max(g));
+            differs.then_some((w > g, w, g))
+        });
+        run = match (run, verdict) {
+            (Some((n, sign, mut d)), Some((s, w, g))) if s == sign => {
+                d.to_s = tg[j];
+                d.wheel_m += w;
+                d.track_m += g;
+                Some((n + 1, sign, d))
+            }
+            (_, Some((s, w, g))) => Some((
+                1,
+                s,
+                Disagreement {
+                    from_s: tg[i],
+                    to_s: tg[j],
+                    wheel_m: w,
+                    track_m: g,
+                    window_s: window,
+                },
+            )),
+            (_, None) => None,
+        };
+        if let Some((n, _, d)) = run {
+            if n >= DISAGREE_WINDOWS && best.is_none_or(|(m, _)| n > m) {
+                best = Some((n, d));
+            }
+        }
+        // The next window starts where this one ends (or after the outage that ended it).
+        i = if j > i { j } else { i + 1 };
+    }
+    best.map(|(_, d)| d)
+}
+
+/// Least spacing of the points along a window's track, s: on a turn at speed the chord
+/// between points 0.5 s apart is within a per cent of the arc.
+const TRACK_POINT_S: f64 = 0.5;
+
+/// The length of the track from fix `i` to fix `j`: the polyline through points every
+/// [`TRACK_POINT_S`] or the receiver's [`MAX_GAP_PERIODS`] periods if longer, each the median
+/// of the fixes within half of that of its time (at least [`MAX_GAP_PERIODS`] periods: five
+/// fixes):
+/// a fast receiver's white noise averages out, a fix far off the track moves no median, and a
+/// slow receiver's noise is not summed fix by fix (a standing car's track at 2 Hz with 0.6 m of white noise: 6 m every 2.5 s fix by fix,
+/// 1-2 m so).
+fn track_length(wt: &WheelTrack, i: usize, j: usize) -> f64 {
+    let (a, b) = (wt.tg[i], wt.tg[j]);
+    let spacing = TRACK_POINT_S.max(wt.max_gap);
+    // At least five fixes in every median: two far off the track in a row move none.
+    let half = (0.5 * spacing).max(wt.max_gap);
+    let steps = ((b - a) / spacing).round().max(1.0) as usize;
+    let point = |t: f64| -> (f64, f64) {
+        let lo = wt.tg.partition_point(|x| *x < t - half);
+        let hi = wt.tg.partition_point(|x| *x <= t + half);
+        if hi > lo {
+            (
+                median(&mut wt.east[lo..hi].to_vec()),
+                median(&mut wt.north[lo..hi].to_vec()),
+            )
+        } else {
+            // No fix within: the nearest (the window's fixes are regular, so one is near).
+            let k = wt.tg.partition_point(|x| *x < t).clamp(i, j);
+            let k = if k > i && t - wt.tg[k - 1] < wt.tg[k] - t {
+                k - 1
+            } else {
+                k
+            };
+            (wt.east[k], wt.north[k])
+        }
+    };
+    let mut last = point(a);
+    let mut length = 0.0;
+    for m in 1..=steps {
+        let p = point(a + (b - a) * m as f64 / steps as f64);
+        length += (p.0 - last.0).hypot(p.1 - last.1);
+        last = p;
+    }
+    length
 }
 
 /// Chords refused in a row before a stretch's start counts as an outlier itself.
