@@ -1851,7 +1851,7 @@ fn pure_pursuit_without_path_or_position_holds_the_car() {
 }
 
 #[test]
-fn a_car_beside_its_corridor_or_against_the_path_has_lost_it() {
+fn a_car_beside_its_corridor_past_its_end_or_against_the_path_has_lost_it() {
     // Path north, corridor 1.0 m left (west) and 1.5 m right (east); a body 1.8 m wide is lost
     // when its rear axle is more than 1.8 m outside: east of 3.3 m or west of -2.8 m.
     let p = path_of(&straight(0.0, 0.0, 0.0, 30, 1.0));
@@ -1874,6 +1874,18 @@ fn a_car_beside_its_corridor_or_against_the_path_has_lost_it() {
     close(lost(0.0, -(FRAC_PI_2 - 0.01)), 0.0, false);
     close(lost(0.0, FRAC_PI_2 + 0.01), 0.0, true);
     close(lost(0.0, std::f32::consts::PI), 0.0, true);
+    // Past the path's end (its last point 29 m north) on its line: lost beyond a body width
+    // (a black-box probe's path behind the car was "tracking" with the car 46 m past its end).
+    // Before its start it is not: the car drives onto it.
+    let along = |north: f32| {
+        p.track(&Pose::new(0.0, north, 0.0), None)
+            .unwrap()
+            .has_lost_path(1.8)
+    };
+    assert!(!along(29.0 + 1.75));
+    assert!(along(29.0 + 1.85));
+    assert!(along(29.0 + 46.0));
+    assert!(!along(-10.0));
 }
 
 #[test]

@@ -1764,11 +1764,15 @@ fn a_simulated_drive_beyond_the_grip_is_named() {
     );
 }
 
+/// An edit of a log row with a fix, given the fix of the row before (as edited).
+type FixEdit = dyn Fn(&mut catmodel_host::logcsv::LogRow, Option<(f64, f64)>);
+
 /// A wheel speed that sticks (black-box probe: a `vel` stuck for 20 s passed without a word;
 /// stuck through a stop, the speed model's fit fell from 82 % to 63 % and the lateral fit was
 /// refused for the receiver's course, which was right). Stuck at its cruising value from 4 s
 /// before the stop, the span is named, from when the car slowed to the log's end;
 /// dropped to zero while the car cruises, named the other way; untouched, nothing is named.
+/// Fixes off the track for 3 s are no disagreement, and fixes held are named as the fixes'.
 /// On three receivers (100 Hz, RTK, 1 Hz) and a second car.
 #[test]
 fn a_wheel_speed_that_sticks_is_named() {
@@ -1836,5 +1840,44 @@ fn a_wheel_speed_that_sticks_is_named() {
         assert!(zero.track_m > zero.wheel_m + 40.0, "{name}: {zero:?}");
         assert!(zero.from_s >= 17.0 && zero.to_s <= 33.0, "{name}: {zero:?}");
         assert!(zero.problem().contains("drops to zero"), "{name}");
+        // The fixes, not the wheel speed: 15 m off the track for 3 s and back (multipath,
+        // which the log's reader leaves in below 3 Hz) is no disagreement; the last fix
+        // repeated for 10 s while the car cruises (a recorder through an outage) is named as
+        // the fixes' at 1 Hz.
+        let fixes = |edit: &FixEdit| {
+            let mut rows = rows.clone();
+            let mut last = None;
+            for r in &mut rows {
+                if r.lat.is_some() && r.lon.is_some() {
+                    edit(r, last);
+                    last = r.lat.zip(r.lon);
+                }
+            }
+            preprocess_rows("straight-10", &rows, vehicle, &PreprocessOptions::default())
+                .unwrap_or_else(|e| panic!("{name}: {e:#}"))
+                .speed_disagreement
+        };
+        let off = fixes(&|r, _| {
+            if (20.0..23.0).contains(&r.t) {
+                r.lat = r.lat.map(|lat| lat + 15.0 / 111_000.0);
+            }
+        });
+        assert_eq!(off, None, "{name}: a burst off the track");
+        let held = fixes(&|r, before| {
+            if (40.0..50.0).contains(&r.t) {
+                if let Some((lat, lon)) = before {
+                    (r.lat, r.lon) = (Some(lat), Some(lon));
+                }
+            }
+        });
+        // A fast receiver's held fixes may leave the track in a burst, which the log's reader
+        // takes out (a gap, nothing to compare); a slow one's reach the check.
+        if name.contains("1 Hz") {
+            let held = held.unwrap_or_else(|| panic!("{name}: fixes held for 10 s not named"));
+            assert!(held.repeated_fixes, "{name}: {held:?}");
+            assert!(held.problem().contains("holds its last fix"), "{name}");
+        } else {
+            assert!(held.is_none_or(|d| d.repeated_fixes), "{name}: {held:?}");
+        }
     }
 }

@@ -1077,6 +1077,14 @@ fn closed_loop(args: ClosedLoopArgs) -> Result<()> {
             out,
         })?;
     progress.finish();
+    if metrics.driven_time_s == 0.0 {
+        eprintln!(
+            "catmodel: warning: the node never took the car over from the launch driver \
+             (no CONTROL_COMMAND to drive: no position, speed model or settled heading; the \
+             session's NODE_STATUS frames say which): nothing of this run is the \
+             controller's, and it is not completed"
+        );
+    }
     println!("{}", serde_json::to_string_pretty(&metrics)?);
     for p in written {
         eprintln!("wrote {}", p.display());

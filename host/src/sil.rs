@@ -157,7 +157,7 @@ pub fn run(
                     return Err(malformed(format!(
                         "{} out of range (above {} s)",
                         quoted(text),
-                        MAX_TIME_US / 1_000_000
+                        timestamp(MAX_TICK_US)
                     )))
                 }
                 _ => {
@@ -169,11 +169,11 @@ pub fn run(
             };
             // As replay refuses a frame time beyond it (year 292 000): keeps the node's tick
             // arithmetic from overflowing.
-            if t_us > MAX_TIME_US {
+            if t_us > MAX_TICK_US {
                 return Err(malformed(format!(
                     "TICK {} out of range (above {} s)",
                     timestamp(t_us),
-                    MAX_TIME_US / 1_000_000
+                    timestamp(MAX_TICK_US)
                 )));
             }
             if let Some(prev) = last_tick.filter(|p| t_us <= *p) {
@@ -229,6 +229,7 @@ pub fn run(
     output.flush().map_err(SilError::Io)?;
     Ok(SilSummary {
         ticks,
+        never_ticked: queue.len() as u64,
         filtered: queue.filtered,
         unsupported: queue.unsupported,
         rx_queue_drops: queue.drops,
@@ -283,8 +284,13 @@ fn check_tick_schedule(t_us: u64, previous_us: Option<u64>) -> Result<(), String
     })
 }
 
-/// Frame and tick times above this are refused (as `replay` refuses them), us.
-const MAX_TIME_US: u64 = u64::MAX / 2;
+/// Ticks after this are refused, us: the last tick of the schedule at or below the largest
+/// time `replay` accepts for a frame (`u64::MAX / 2`, year 292 000). On the schedule itself,
+/// so that no TICK accepted is told to be followed by one that is not, and the limit the
+/// error names is the limit applied (a black-box probe's TICK 9223372036854.775800 was told
+/// to expect 9223372036854.780000, out of range; 9223372036854.760000 was accepted where the
+/// error said "above 9223372036854 s").
+const MAX_TICK_US: u64 = u64::MAX / 2 / SAMPLE_PERIOD_US * SAMPLE_PERIOD_US;
 
 /// Longest part of a bad line an error repeats, characters.
 const QUOTE_CHARS: usize = 80;
@@ -303,6 +309,10 @@ fn quoted(text: &str) -> String {
 pub struct SilSummary {
     /// Ticks run.
     pub ticks: u64,
+    /// Frames still in the receive queue when the input ended: given after the last TICK, or
+    /// held over the per-tick cap, no TICK took them to the node (a black-box probe's were
+    /// left out of the summary without a word).
+    pub never_ticked: u64,
     /// Frames the acceptance filter refused (not node inputs).
     pub filtered: u64,
     /// Remote, CAN FD and error frames skipped.
@@ -325,13 +335,15 @@ impl std::fmt::Display for SilSummary {
         write!(
             f,
             "{} ticks; frames not given to the node: {} not node inputs (acceptance filter), \
-             {} remote/FD/error frames, {} dropped by the full receive queue; rejected by the \
-             node: crc {}, counter {}, dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, \
-             stamped after their TICK {}; {}",
+             {} remote/FD/error frames, {} dropped by the full receive queue, {} queued when \
+             the input ended (no TICK after them); rejected by the node: crc {}, counter {}, \
+             dlc {}, range {}, gnss gate {}, gnss rate {}, unknown id {}, stamped after their \
+             TICK {}; {}",
             self.ticks,
             self.filtered,
             self.unsupported,
             self.rx_queue_drops,
+            self.never_ticked,
             c.crc_errors,
             c.counter_errors,
             c.dlc_errors,
@@ -450,6 +462,18 @@ mod tests {
         let (line, reason) = malformed(b"TICK 0.020000\nTICK 9223372036855.000000\n");
         assert_eq!(line, 2);
         assert!(reason.contains("out of range"), "{reason}");
+        // The last tick of the schedule is taken; past it, what the error names is what is
+        // refused (the first TICK of the probe's was told to expect one out of range).
+        let (result, _) = session(b"TICK 9223372036854.760000\n");
+        assert_eq!(result.unwrap().ticks, 1);
+        for late in ["9223372036854.775800", "9223372036854.780000"] {
+            let (line, reason) = malformed(format!("TICK {late}\n").as_bytes());
+            assert_eq!(line, 1);
+            assert!(
+                reason.contains("out of range (above 9223372036854.760000 s)"),
+                "{reason}"
+            );
+        }
     }
 
     #[test]
@@ -459,7 +483,7 @@ mod tests {
         let (line, reason) = malformed(b"TICK 0.020000\nTICK 99999999999999.000000\n");
         assert_eq!(line, 2);
         assert!(
-            reason.contains("out of range (above 9223372036854 s)")
+            reason.contains("out of range (above 9223372036854.760000 s)")
                 && !reason.contains("six decimals"),
             "{reason}"
         );
@@ -511,6 +535,31 @@ mod tests {
             input.push_str(&format!("TICK 1.{:02}0000\n", 2 * k));
         }
         session(input.as_bytes()).0.unwrap()
+    }
+
+    /// Frames given after the last TICK never reach the node: the summary counts them (a
+    /// black-box probe's were dropped without a word).
+    #[test]
+    fn frames_after_the_last_tick_are_counted() {
+        let report = catmodel::can::SteeringReport {
+            steer_pct: Some(1.0),
+        };
+        let line = |t_us: u64, counter: u8| candump_line(t_us, &report.encode(counter));
+        let input = format!(
+            "{}\nTICK 0.020000\n{}\n{}\n",
+            line(10_000, 0),
+            line(30_000, 1),
+            line(35_000, 2)
+        );
+        let (result, _) = session(input.as_bytes());
+        let summary = result.unwrap();
+        assert_eq!((summary.ticks, summary.never_ticked), (1, 2));
+        assert!(
+            summary
+                .to_string()
+                .contains("2 queued when the input ended (no TICK after them)"),
+            "{summary}"
+        );
     }
 
     #[test]
@@ -615,6 +664,7 @@ mod tests {
             summary,
             SilSummary {
                 ticks: 1,
+                never_ticked: 0,
                 filtered: 1,
                 unsupported: 2,
                 rx_queue_drops: 0,

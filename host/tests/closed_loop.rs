@@ -400,6 +400,38 @@ fn closed_loop_command_errors_name_the_problem() {
     }
 }
 
+/// A run the node never drives is not completed, and says so: a model file whose receiver
+/// the plant's fixes do not match (a black-box probe's `models/stress/random-long-slow.toml`
+/// on the CAT Vehicle: every fix refused, no position) left the launch driver rolling through
+/// the obstacle, and `metrics.json` said `completed: true` with nothing on stderr.
+#[test]
+fn a_run_the_node_never_drove_is_not_completed() {
+    let dir = tmp_dir("never-drove");
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../models/stress/random-long-slow.toml"
+    );
+    let out = cl(&[
+        "--scenario",
+        "obstacle",
+        "--model",
+        model,
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("the node never took the car over from the launch driver"),
+        "{stderr}"
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(metrics["driven_time_s"], 0.0);
+    assert_eq!(metrics["completed"], false);
+    assert_eq!(metrics["clean"], false);
+}
+
 /// The MPC over `course` with an RTK receiver, seed 0, the planner replanning every `replan_s`
 /// (`None`: one path).
 fn mpc_run(

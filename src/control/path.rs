@@ -147,7 +147,8 @@ pub const CORRIDOR_TOLERANCE_M: f32 = 0.01;
 /// The reference at one station.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PathSample {
-    /// Station (distance along the path from its first point), m; clamped to the path.
+    /// Station (distance along the path from its first point), m; before the path clamped to
+    /// its start, beyond its end on the last segment's extension.
     pub station_m: f32,
     /// Reference position east, m.
     pub east_m: f32,
@@ -324,6 +325,8 @@ pub struct Tracking {
     /// after a long gap). False for a car placed on the path afresh (`Path::acquire`) and for
     /// one whose nearest point is still in its window (past the path's end, or beside it).
     pub left_window: bool,
+    /// How far the rear axle projects past the path's last point, m (0 or less: not past it).
+    pub past_end_m: f32,
 }
 
 /// A car turned further than this from the path's direction is driving against it, rad.
@@ -344,14 +347,20 @@ impl Tracking {
 
     /// Whether the car has lost the path, for a body `body_width_m` wide: its rear axle more
     /// than a body width outside the corridor (the body, however it is turned, cannot reach
-    /// back into it without a new plan: the planner's to make), or the car turned more than
-    /// [`LOST_HEADING_RAD`] from the path (driving against it). A controller falls back (status
-    /// 3, braking) rather than steer back on its own: a car beside its corridor or facing
-    /// the wrong way has left what the planner checked. A non-finite input counts as lost.
+    /// back into it without a new plan: the planner's to make), or more than a body width past
+    /// the path's last point (the corridor ends there; the stop at the end overshoots by a
+    /// metre or so, docs/controller.md), or the car turned more than [`LOST_HEADING_RAD`] from
+    /// the path (driving against it). A controller falls back (status 3, braking) rather than
+    /// steer back on its own: a car beside its corridor, beyond its end or facing the wrong
+    /// way has left what the planner checked. (A black-box probe's path that lay behind the
+    /// car, on its line, was reported "tracking" while the car stopped 46 m past its end.) A
+    /// non-finite input counts as lost.
     pub fn has_lost_path(&self, body_width_m: f32) -> bool {
         let outside = self.outside_corridor_m();
         let heading = self.heading_error_rad;
-        !(outside <= body_width_m && heading.abs() <= LOST_HEADING_RAD)
+        !(outside <= body_width_m
+            && self.past_end_m <= body_width_m
+            && heading.abs() <= LOST_HEADING_RAD)
     }
 }
 
@@ -1422,6 +1431,7 @@ impl Path {
             heading_error_rad: math::wrap_pi(pose.heading_rad - reference.heading_rad),
             reference,
             left_window,
+            past_end_m: projection.station_m - self.length_m(),
         })
     }
 

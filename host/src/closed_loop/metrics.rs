@@ -206,7 +206,8 @@ pub struct Metrics {
     pub min_cone_clearance_m: Option<f64>,
     /// Smallest body-obstacle clearance, m (negative: a collision).
     pub min_obstacle_clearance_m: Option<f64>,
-    /// Whether the rear axle got past the scored range's end.
+    /// Whether the rear axle got past the scored range's end, with the controller driving
+    /// (engaged before it got there).
     pub completed: bool,
     /// RMS of the rear axle's lateral error from the path over the scored range, m (truth).
     pub lateral_rms_m: Option<f64>,

@@ -767,7 +767,13 @@ impl TruthRecord {
     ) -> Metrics {
         let (cone_hits, min_cone) = scorer.cones();
         let (lateral_rms, lateral_max) = self.scored_lateral_m();
-        let completed = self.scored_span_s.1.is_some();
+        // Under the controller: a node that never took the car (no position, a model file
+        // its plant refuses) leaves the launch driver rolling through the course, which a
+        // black-box probe's run reported as completed.
+        let completed = match (self.scored_span_s.1, dbw.engaged_at_s) {
+            (Some(end), Some(engaged)) => engaged <= end,
+            _ => false,
+        };
         let min_obstacle = scorer.obstacle_clearance_m();
         let total_time_s = self.samples.last().map_or(0.0, |s| s.t_s);
         Metrics {

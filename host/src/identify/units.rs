@@ -464,17 +464,26 @@ pub struct Disagreement {
     pub track_m: f64,
     /// The windows compared, s: [`WINDOW_S`], or three of a slow receiver's periods.
     pub window_s: f64,
+    /// Most of the span's fixes repeat the one before exactly: the fixes stood still, not the
+    /// wheel speed.
+    pub repeated_fixes: bool,
 }
 
 impl Disagreement {
     /// The problem in words, with what to do.
     pub fn problem(&self) -> String {
-        let what = if self.wheel_m > self.track_m {
+        let what = if self.repeated_fixes {
+            "the wheel speed says the car went further than the GNSS track does, and most of \
+             the span's fixes repeat the one before exactly: a receiver or recorder that holds \
+             its last fix through an outage (drop the repeated fixes: the log's reader bridges \
+             an outage)"
+        } else if self.wheel_m > self.track_m {
             "the wheel speed says the car went further than the GNSS track does: a wheel speed \
              that sticks at its last value while the car slows or stops"
         } else {
             "the GNSS track says the car went further than the wheel speed does: a wheel speed \
-             that sticks or drops to zero while the car moves"
+             that sticks or drops to zero while the car moves, or a car carried (a ferry, a \
+             trailer)"
         };
         format!(
             "the wheel speed `vel` disagrees with the GNSS track from t = {:.1} to {:.1} s: \
@@ -494,13 +503,17 @@ impl Disagreement {
 
 /// The longest span of a log over which the wheel speed and the GNSS track disagree (the
 /// arguments as [`speed_scale`]'s): the log is cut into windows of [`WINDOW_S`] (three periods
-/// of a slow receiver) between fixes,
-/// each with regular fixes and wheel speed samples (an outage or a sensor's pause ends a span);
-/// in each, the wheel's distance moved to the antenna and the track's length
-/// ([`track_length`]: a standing car's noise adds a metre at most) are compared, and
-/// [`DISAGREE_WINDOWS`] windows in a row that differ, the same way, by more than
-/// [`DISAGREE_MIN_M`] and [`DISAGREE_SHARE`] of the longer make a span. Fixes far off the
-/// track (bursts) are left out before, by the log's reader. `None` when nothing disagrees.
+/// of a slow receiver) between fixes, each with regular fixes and wheel speed samples (an
+/// outage or a sensor's pause ends a span). In each, the wheel's distance moved to the antenna
+/// is compared with the track, measured the way that cannot make a healthy log disagree
+/// ([`TrackMeasure`]): that the track went further than the wheel, by the straight line
+/// between its ends (a receiver's noise does not lengthen it, a bend only shortens it); that
+/// it went less far, by its length ([`TrackMeasure::length`]: noise and bends only lengthen
+/// it). [`DISAGREE_WINDOWS`] windows in a row that differ, the same way, by more than
+/// [`DISAGREE_MIN_M`] and [`DISAGREE_SHARE`] of the longer make a span; where the track went
+/// further, the two windows' straight lines must also go on one way (over both, at least half
+/// their sum): fixes that jump off the track and come back, which the log's reader leaves in
+/// for a receiver under 3 Hz, do not. `None` when nothing disagrees.
 pub fn disagreement(
     wheel: (&[f64], &[f64]),
     steering: Steering,
@@ -510,12 +523,14 @@ pub fn disagreement(
     north: &[f64],
 ) -> Option<Disagreement> {
     let wt = WheelTrack::new(wheel, steering, lever, tg, east, north)?;
+    let measure = TrackMeasure::new(&wt);
     // A slow receiver's window spans three of its periods (four fixes).
     let period = wt.max_gap / MAX_GAP_PERIODS;
     let window = WINDOW_S.max(3.0 * period);
     let mut best: Option<(usize, Disagreement)> = None;
-    // The current run of windows that disagree: (windows, sign, span).
-    let mut run: Option<(usize, bool, Disagreement)> = None;
+    // The current run of windows that disagree: (windows, the track went further, the span,
+    // where the run's last window started).
+    let mut run: Option<(usize, bool, Disagreement, f64)> = None;
     let mut i = 0;
     while i + 1 < tg.len() {
         let mut j = i;
@@ -525,37 +540,51 @@ pub fn disagreement(
         {
             j += 1;
         }
-        let full = tg[j] - tg[i] >= 0.75 * window;
-        let judged = if full && wt.wheel_regular(tg[i], tg[j]).is_some() {
-            wt.wheel_between(i, j).map(|w| (w, track_length(&wt, i, j)))
+        let (a, b) = (tg[i], tg[j]);
+        let full = b - a >= 0.75 * window;
+        let wheel_m = if full && wt.wheel_regular(a, b).is_some() {
+            wt.wheel_between(i, j)
         } else {
             None
         };
-        let verdict = judged.and_then(|(w, g)| {
-            let differs = (w - g).abs() > DISAGREE_MIN_M.max(DISAGREE_SHARE * w.max(g));
-            differs.then_some((w > g, w, g))
+        let differs =
+            |w: f64, g: f64| (w - g).abs() > DISAGREE_MIN_M.max(DISAGREE_SHARE * w.max(g));
+        let verdict = wheel_m.and_then(|w| {
+            let line = measure.line(a, b);
+            if line > w && differs(w, line) {
+                return Some((true, w, line));
+            }
+            let length = measure.length(a, b);
+            (w > length && differs(w, length)).then_some((false, w, length))
         });
         run = match (run, verdict) {
-            (Some((n, sign, mut d)), Some((s, w, g))) if s == sign => {
-                d.to_s = tg[j];
+            (Some((n, further, mut d, last_from)), Some((f, w, g)))
+                if f == further
+                    && (!further
+                        || measure.line(last_from, b)
+                            >= 0.5 * (measure.line(last_from, a) + g)) =>
+            {
+                d.to_s = b;
                 d.wheel_m += w;
                 d.track_m += g;
-                Some((n + 1, sign, d))
+                Some((n + 1, further, d, a))
             }
-            (_, Some((s, w, g))) => Some((
+            (_, Some((f, w, g))) => Some((
                 1,
-                s,
+                f,
                 Disagreement {
-                    from_s: tg[i],
-                    to_s: tg[j],
+                    from_s: a,
+                    to_s: b,
                     wheel_m: w,
                     track_m: g,
                     window_s: window,
+                    repeated_fixes: false,
                 },
+                a,
             )),
             (_, None) => None,
         };
-        if let Some((n, _, d)) = run {
+        if let Some((n, _, d, _)) = run {
             if n >= DISAGREE_WINDOWS && best.is_none_or(|(m, _)| n > m) {
                 best = Some((n, d));
             }
@@ -563,53 +592,90 @@ pub fn disagreement(
         // The next window starts where this one ends (or after the outage that ended it).
         i = if j > i { j } else { i + 1 };
     }
-    best.map(|(_, d)| d)
+    best.map(|(_, mut d)| {
+        d.repeated_fixes = repeats_fixes(&wt, d.from_s, d.to_s);
+        d
+    })
+}
+
+/// Whether most of the fixes from `a` to `b` s repeat the one before exactly: a receiver or
+/// recorder that holds its last fix through an outage, not a wheel speed that sticks.
+fn repeats_fixes(wt: &WheelTrack, a: f64, b: f64) -> bool {
+    let lo = wt.tg.partition_point(|t| *t < a);
+    let hi = wt.tg.partition_point(|t| *t <= b);
+    let repeated = (lo.max(1)..hi)
+        .filter(|&k| wt.east[k] == wt.east[k - 1] && wt.north[k] == wt.north[k - 1])
+        .count();
+    hi > lo + 1 && 2 * repeated > hi - lo
 }
 
 /// Least spacing of the points along a window's track, s: on a turn at speed the chord
 /// between points 0.5 s apart is within a per cent of the arc.
 const TRACK_POINT_S: f64 = 0.5;
 
-/// The length of the track from fix `i` to fix `j`: the polyline through points every
-/// [`TRACK_POINT_S`] or the receiver's [`MAX_GAP_PERIODS`] periods if longer, each the median
-/// of the fixes within half of that of its time (at least [`MAX_GAP_PERIODS`] periods: five
-/// fixes):
-/// a fast receiver's white noise averages out, a fix far off the track moves no median, and a
-/// slow receiver's noise is not summed fix by fix (a standing car's track at 2 Hz with 0.6 m of white noise: 6 m every 2.5 s fix by fix,
-/// 1-2 m so).
-fn track_length(wt: &WheelTrack, i: usize, j: usize) -> f64 {
-    let (a, b) = (wt.tg[i], wt.tg[j]);
-    let spacing = TRACK_POINT_S.max(wt.max_gap);
-    // At least five fixes in every median: two far off the track in a row move none.
-    let half = (0.5 * spacing).max(wt.max_gap);
-    let steps = ((b - a) / spacing).round().max(1.0) as usize;
-    let point = |t: f64| -> (f64, f64) {
-        let lo = wt.tg.partition_point(|x| *x < t - half);
-        let hi = wt.tg.partition_point(|x| *x <= t + half);
+/// The track at any time: the median of the fixes within half a second (at least
+/// [`MAX_GAP_PERIODS`] of the receiver's periods: five fixes) of it, so that a fast receiver's
+/// white noise averages out and a fix or two far off the track move nothing; measured between
+/// two times as a straight line or a length.
+struct TrackMeasure<'a> {
+    wt: &'a WheelTrack<'a>,
+    /// Half the span of the fixes a point is the median of, s.
+    half_s: f64,
+    /// Spacing of the points of [`Self::length`], s.
+    spacing_s: f64,
+}
+
+impl<'a> TrackMeasure<'a> {
+    fn new(wt: &'a WheelTrack<'a>) -> Self {
+        Self {
+            wt,
+            half_s: TRACK_POINT_S.max(wt.max_gap),
+            spacing_s: TRACK_POINT_S.max(wt.max_gap),
+        }
+    }
+
+    /// The track at `t`, s: the median east and north of the fixes within `half_s`, or the
+    /// nearest fix when none is.
+    fn point(&self, t: f64) -> (f64, f64) {
+        let wt = self.wt;
+        let lo = wt.tg.partition_point(|x| *x < t - self.half_s);
+        let hi = wt.tg.partition_point(|x| *x <= t + self.half_s);
         if hi > lo {
-            (
+            return (
                 median(&mut wt.east[lo..hi].to_vec()),
                 median(&mut wt.north[lo..hi].to_vec()),
-            )
-        } else {
-            // No fix within: the nearest (the window's fixes are regular, so one is near).
-            let k = wt.tg.partition_point(|x| *x < t).clamp(i, j);
-            let k = if k > i && t - wt.tg[k - 1] < wt.tg[k] - t {
-                k - 1
-            } else {
-                k
-            };
-            (wt.east[k], wt.north[k])
+            );
         }
-    };
-    let mut last = point(a);
-    let mut length = 0.0;
-    for m in 1..=steps {
-        let p = point(a + (b - a) * m as f64 / steps as f64);
-        length += (p.0 - last.0).hypot(p.1 - last.1);
-        last = p;
+        let k = wt.tg.partition_point(|x| *x < t).min(wt.tg.len() - 1);
+        let k = if k > 0 && t - wt.tg[k - 1] < wt.tg[k] - t {
+            k - 1
+        } else {
+            k
+        };
+        (wt.east[k], wt.north[k])
     }
-    length
+
+    /// The straight line from the track at `a` to the track at `b`, m.
+    fn line(&self, a: f64, b: f64) -> f64 {
+        let (p, q) = (self.point(a), self.point(b));
+        (q.0 - p.0).hypot(q.1 - p.1)
+    }
+
+    /// The length of the track from `a` to `b`: the polyline through its points every
+    /// [`TRACK_POINT_S`] (or the receiver's [`MAX_GAP_PERIODS`] periods if longer). A standing
+    /// car's noise lengthens it by a metre or two in a window (at 2 Hz with 0.6 m of white
+    /// noise, fix by fix: 6 m).
+    fn length(&self, a: f64, b: f64) -> f64 {
+        let steps = ((b - a) / self.spacing_s).round().max(1.0) as usize;
+        let mut last = self.point(a);
+        let mut length = 0.0;
+        for m in 1..=steps {
+            let p = self.point(a + (b - a) * m as f64 / steps as f64);
+            length += (p.0 - last.0).hypot(p.1 - last.1);
+            last = p;
+        }
+        length
+    }
 }
 
 /// Chords refused in a row before a stretch's start counts as an outlier itself.
