@@ -962,22 +962,7 @@ fn the_wheel_speed_is_moved_to_the_antenna_before_its_unit_is_judged() {
 #[test]
 fn a_steering_sensor_that_clips_is_named() {
     use catmodel_host::sim::{self, SimOptions};
-    let paper = model_file::load(&model_file::paper_path()).unwrap().vehicle;
-    let hatchback_file = vehicles_dir().join("../../models/hatchback.toml");
-    let hatchback = model_file::load(&hatchback_file).unwrap().vehicle;
-    let mut ten_hz = VehicleConfig::default();
-    ten_hz.sensors.gnss.period_s = 0.1;
-    let plants = [
-        ("CAT Vehicle", VehicleConfig::default(), paper),
-        ("CAT Vehicle RTK", with_rtk(VehicleConfig::default()), paper),
-        ("CAT Vehicle at 10 Hz", ten_hz, paper),
-        (
-            "hatchback",
-            VehicleConfig::load(&vehicles_dir().join("hatchback.toml")).unwrap(),
-            hatchback,
-        ),
-    ];
-    for (name, plant, vehicle) in &plants {
+    for (name, plant, vehicle) in &four_plants("CAT Vehicle at 10 Hz", 0.1) {
         let set = |clip: f64| -> Vec<_> {
             ["turn-left", "turn-right", "circle-left", "circle-right"]
                 .iter()
@@ -1764,8 +1749,32 @@ fn a_simulated_drive_beyond_the_grip_is_named() {
     );
 }
 
+/// Four plants with the model file's vehicle section each is identified with: the CAT
+/// Vehicle with its receiver, with RTK, and with a receiver every `slow_period_s` (named
+/// `slow_name`), and the hatchback.
+fn four_plants(
+    slow_name: &'static str,
+    slow_period_s: f64,
+) -> [(&'static str, VehicleConfig, model_file::VehicleSection); 4] {
+    let paper = model_file::load(&model_file::paper_path()).unwrap().vehicle;
+    let hatchback_file = vehicles_dir().join("../../models/hatchback.toml");
+    let hatchback = model_file::load(&hatchback_file).unwrap().vehicle;
+    let mut slow = VehicleConfig::default();
+    slow.sensors.gnss.period_s = slow_period_s;
+    [
+        ("CAT Vehicle", VehicleConfig::default(), paper),
+        ("CAT Vehicle RTK", with_rtk(VehicleConfig::default()), paper),
+        (slow_name, slow, paper),
+        (
+            "hatchback",
+            VehicleConfig::load(&vehicles_dir().join("hatchback.toml")).unwrap(),
+            hatchback,
+        ),
+    ]
+}
+
 /// An edit of a log row with a fix, given the fix of the row before (as edited).
-type FixEdit = dyn Fn(&mut catmodel_host::logcsv::LogRow, Option<(f64, f64)>);
+type FixEdit = dyn Fn(&mut LogRow, Option<(f64, f64)>);
 
 /// A wheel speed that sticks (black-box probe: a `vel` stuck for 20 s passed without a word;
 /// stuck through a stop, the speed model's fit fell from 82 % to 63 % and the lateral fit was
@@ -1777,22 +1786,7 @@ type FixEdit = dyn Fn(&mut catmodel_host::logcsv::LogRow, Option<(f64, f64)>);
 #[test]
 fn a_wheel_speed_that_sticks_is_named() {
     use catmodel_host::sim::{self, SimOptions};
-    let paper = model_file::load(&model_file::paper_path()).unwrap().vehicle;
-    let hatchback_file = vehicles_dir().join("../../models/hatchback.toml");
-    let hatchback = model_file::load(&hatchback_file).unwrap().vehicle;
-    let mut one_hz = VehicleConfig::default();
-    one_hz.sensors.gnss.period_s = 1.0;
-    let plants = [
-        ("CAT Vehicle", VehicleConfig::default(), paper),
-        ("CAT Vehicle RTK", with_rtk(VehicleConfig::default()), paper),
-        ("CAT Vehicle at 1 Hz", one_hz, paper),
-        (
-            "hatchback",
-            VehicleConfig::load(&vehicles_dir().join("hatchback.toml")).unwrap(),
-            hatchback,
-        ),
-    ];
-    for (name, plant, vehicle) in &plants {
+    for (name, plant, vehicle) in &four_plants("CAT Vehicle at 1 Hz", 1.0) {
         let base = sim::scenario::Scenario::builtin("straight-10").unwrap();
         let options = SimOptions {
             seed: 4,

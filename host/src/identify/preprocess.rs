@@ -779,9 +779,10 @@ pub fn preprocess_rows(
     // On the raw samples: the wheel's distance, moved to the antenna by the steering, against
     // the track's (a `vel` in km/h passes the schema's range in town).
     let lever = super::units::LeverArm::of(vehicle);
-    let speed_scale = super::units::speed_scale((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
-    let speed_disagreement =
-        super::units::disagreement((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
+    let wheel_track =
+        super::units::WheelTrack::new((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
+    let speed_scale = wheel_track.as_ref().and_then(super::units::speed_scale);
+    let speed_disagreement = wheel_track.as_ref().and_then(super::units::disagreement);
 
     let taps = taps(opts)?;
     let onto = OntoGrid {

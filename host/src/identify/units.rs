@@ -256,7 +256,7 @@ pub type Steering<'a> = (&'a [f64], &'a [f64]);
 
 /// The wheel's distance and the GNSS track of one log, side by side: what [`speed_scale`]
 /// and [`disagreement`] compare.
-struct WheelTrack<'a> {
+pub struct WheelTrack<'a> {
     tv: &'a [f64],
     vel: &'a [f64],
     /// Cumulative distance by the wheel speed at each of `tv`, moved to the antenna.
@@ -268,11 +268,15 @@ struct WheelTrack<'a> {
     max_gap: f64,
     /// Longest interval between wheel speed samples that is not a pause, s.
     max_wheel_gap: f64,
+    /// Where the wheel speed was moved to.
+    lever: LeverArm,
 }
 
 impl<'a> WheelTrack<'a> {
+    /// The wheel speed samples `(tv, vel)`, the steering `(ts, steer_pct)` and the fixes `(tg,
+    /// east, north)` in metres (each sorted by time), the antenna where `lever` puts it;
     /// `None` with fewer than two samples of either.
-    fn new(
+    pub fn new(
         (tv, vel): (&'a [f64], &'a [f64]),
         (ts, steer_pct): Steering,
         lever: &LeverArm,
@@ -294,6 +298,7 @@ impl<'a> WheelTrack<'a> {
             max_gap: MAX_GAP_PERIODS * median_interval(tg),
             // The wheel speed's own gaps break a stretch too (a sensor pause is not a distance).
             max_wheel_gap: MAX_GAP_PERIODS * median_interval(tv),
+            lever: *lever,
         })
     }
 
@@ -331,19 +336,10 @@ impl<'a> WheelTrack<'a> {
     }
 }
 
-/// [`SpeedScale`] of a log: the wheel speed samples `(tv, vel)`, the steering `(ts,
-/// steer_pct)` and the fixes `(tg, east, north)` in metres (each sorted by time), the antenna
-/// where `lever` puts it. `None` when the log has fewer than [`MIN_STRETCHES`] stretches to
-/// judge by (a parked car, a log too short).
-pub fn speed_scale(
-    wheel: (&[f64], &[f64]),
-    steering: Steering,
-    lever: &LeverArm,
-    tg: &[f64],
-    east: &[f64],
-    north: &[f64],
-) -> Option<SpeedScale> {
-    let wt = WheelTrack::new(wheel, steering, lever, tg, east, north)?;
+/// [`SpeedScale`] of a log ([`WheelTrack`]). `None` when the log has fewer than
+/// [`MIN_STRETCHES`] stretches to judge by (a parked car, a log too short).
+pub fn speed_scale(wt: &WheelTrack) -> Option<SpeedScale> {
+    let (tg, lever) = (wt.tg, &wt.lever);
     let max_gap = wt.max_gap;
     let moving_between = |a: f64, b: f64| wt.moving_between(a, b);
     let wheel_between = |i: usize, j: usize| wt.wheel_between(i, j);
@@ -501,8 +497,8 @@ impl Disagreement {
     }
 }
 
-/// The longest span of a log over which the wheel speed and the GNSS track disagree (the
-/// arguments as [`speed_scale`]'s): the log is cut into windows of [`WINDOW_S`] (three periods
+/// The longest span of a log ([`WheelTrack`]) over which the wheel speed and the GNSS track
+/// disagree: the log is cut into windows of [`WINDOW_S`] (three periods
 /// of a slow receiver) between fixes, each with regular fixes and wheel speed samples (an
 /// outage or a sensor's pause ends a span). In each, the wheel's distance moved to the antenna
 /// is compared with the track, measured the way that cannot make a healthy log disagree
@@ -514,16 +510,9 @@ impl Disagreement {
 /// further, the two windows' straight lines must also go on one way (over both, at least half
 /// their sum): fixes that jump off the track and come back, which the log's reader leaves in
 /// for a receiver under 3 Hz, do not. `None` when nothing disagrees.
-pub fn disagreement(
-    wheel: (&[f64], &[f64]),
-    steering: Steering,
-    lever: &LeverArm,
-    tg: &[f64],
-    east: &[f64],
-    north: &[f64],
-) -> Option<Disagreement> {
-    let wt = WheelTrack::new(wheel, steering, lever, tg, east, north)?;
-    let measure = TrackMeasure::new(&wt);
+pub fn disagreement(wt: &WheelTrack) -> Option<Disagreement> {
+    let tg = wt.tg;
+    let measure = TrackMeasure::new(wt);
     // A slow receiver's window spans three of its periods (four fixes).
     let period = wt.max_gap / MAX_GAP_PERIODS;
     let window = WINDOW_S.max(3.0 * period);
@@ -593,7 +582,7 @@ pub fn disagreement(
         i = if j > i { j } else { i + 1 };
     }
     best.map(|(_, mut d)| {
-        d.repeated_fixes = repeats_fixes(&wt, d.from_s, d.to_s);
+        d.repeated_fixes = repeats_fixes(wt, d.from_s, d.to_s);
         d
     })
 }
@@ -840,7 +829,8 @@ mod tests {
             .map(|(k, t)| v * t + if k % 2 == 0 { 0.4 } else { -0.4 })
             .collect();
         let north = vec![0.0; n];
-        speed_scale((&tv, &vel), (&[], &[]), &LeverArm::NONE, &tg, &east, &north)
+        let wt = WheelTrack::new((&tv, &vel), (&[], &[]), &LeverArm::NONE, &tg, &east, &north)?;
+        speed_scale(&wt)
     }
 
     /// The antenna's speed over the rear axle's is the ratio of their kinematic circles.
