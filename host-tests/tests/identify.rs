@@ -1834,6 +1834,82 @@ fn a_wheel_speed_that_sticks_is_named() {
         assert!(zero.track_m > zero.wheel_m + 40.0, "{name}: {zero:?}");
         assert!(zero.from_s >= 17.0 && zero.to_s <= 33.0, "{name}: {zero:?}");
         assert!(zero.problem().contains("drops to zero"), "{name}");
+        assert!(!zero.car_stood, "{name}: the commands ask the car to move");
+        // The receiver's, not the wheel speed's: once the car stands (15 s more of it), 3 s
+        // without fixes, then fixes 18 m off converging back over 8 s (the ninth probe's
+        // receiver after an outage).
+        let mut parked = base.clone();
+        parked.segments.last_mut().unwrap().duration_s += 15.0;
+        let mut parked = sim::simulate(&parked, plant, &options).log;
+        for r in &mut parked {
+            if (58.0..61.0).contains(&r.t) {
+                (r.lat, r.lon) = (None, None);
+            } else if (61.0..69.0).contains(&r.t) {
+                // 15 m east and 10 m north at first (18 m), none at the end.
+                let off = (69.0 - r.t) / 8.0;
+                let m_per_deg = 111_320.0 * sim::geo::ORIGIN_LAT_DEG.to_radians().cos();
+                r.lon = r.lon.map(|lon| lon + 15.0 * off / m_per_deg);
+                r.lat = r.lat.map(|lat| lat + 10.0 * off / 111_320.0);
+            }
+        }
+        let converging = preprocess_rows("parked", &parked, vehicle, &PreprocessOptions::default())
+            .unwrap_or_else(|e| panic!("{name}: {e:#}"))
+            .speed_disagreement;
+        println!("{name}: converging: {converging:?}");
+        if name.contains("1 Hz") {
+            assert!(converging.is_none_or(|d| d.car_stood), "{name}");
+        } else {
+            let d = converging.unwrap_or_else(|| panic!("{name}: the receiver's motion"));
+            assert!(d.car_stood && d.track_m > 10.0, "{name}: {d:?}");
+            assert!(
+                d.problem().contains("re-converging after an outage"),
+                "{name}"
+            );
+        }
+        // Speed steps: stuck at 8 m/s from 22 to 40 s while the car speeds up to 12 m/s at
+        // 28 s (less than half: the windows alone do not tell it), named as held; a healthy
+        // wheel speed of 5 km/h steps holds its values too, and is not.
+        let steps = sim::scenario::Scenario::builtin("steps-at-speed").unwrap();
+        let steps = sim::simulate(&steps, plant, &options).log;
+        let judged_steps = |edit: &dyn Fn(f64, f64) -> f64| {
+            let mut rows = steps.clone();
+            for r in &mut rows {
+                r.vel = r.vel.map(|v| edit(r.t, v));
+            }
+            preprocess_rows(
+                "steps-at-speed",
+                &rows,
+                vehicle,
+                &PreprocessOptions::default(),
+            )
+            .unwrap_or_else(|e| panic!("{name}: {e:#}"))
+            .speed_disagreement
+        };
+        let at_22 = steps
+            .iter()
+            .find(|r| r.t >= 22.0 && r.vel.is_some())
+            .and_then(|r| r.vel)
+            .unwrap();
+        let held = judged_steps(&|t, v| if (22.0..40.0).contains(&t) { at_22 } else { v })
+            .unwrap_or_else(|| panic!("{name}: a wheel speed held from 8 to 12 m/s not named"));
+        println!("{name}: held: {}", held.problem());
+        let (value, slowest, fastest) = held.held.unwrap_or_else(|| panic!("{held:?}"));
+        assert_eq!(value, at_22, "{name}");
+        assert!(slowest < 9.0 && fastest > 11.0, "{name}: {held:?}");
+        assert!(
+            (22.0..=28.0).contains(&held.from_s) && (34.0..=40.0).contains(&held.to_s),
+            "{name}: {held:?}"
+        );
+        assert!(
+            held.problem().contains("sticks at its last value"),
+            "{name}"
+        );
+        let step = 5.0 / 3.6;
+        assert_eq!(
+            judged_steps(&|_, v| (v / step).round() * step),
+            None,
+            "{name}: 5 km/h steps"
+        );
         // The fixes, not the wheel speed: 15 m off the track for 3 s and back (multipath,
         // which the log's reader leaves in below 3 Hz) is no disagreement; the last fix
         // repeated for 10 s while the car cruises (a recorder through an outage) is named as

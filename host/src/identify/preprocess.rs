@@ -96,7 +96,8 @@ pub struct Experiment {
     /// m/s; `None` when the log has too few moving stretches to judge by.
     pub speed_scale: Option<super::units::SpeedScale>,
     /// The longest span over which the wheel speed and the GNSS track disagree (a wheel speed
-    /// that sticks, [`super::units::disagreement`]); `None`: none.
+    /// that sticks, [`super::units::disagreement`]), or else over which it holds one value
+    /// while the track's speed changes ([`super::units::held_speed`]); `None`: none.
     pub speed_disagreement: Option<super::units::Disagreement>,
     /// Samples whose GNSS-derived signals (`dx`, `dy`, `heading`, `yaw_rate`) rest on the
     /// interpolation across an outage ([`gnss_gaps`]): left out of the fits and scores that
@@ -782,7 +783,17 @@ pub fn preprocess_rows(
     let wheel_track =
         super::units::WheelTrack::new((&tv, &vel), (&ts_, &steer), &lever, &tg, &xe, &yn);
     let speed_scale = wheel_track.as_ref().and_then(super::units::speed_scale);
-    let speed_disagreement = wheel_track.as_ref().and_then(super::units::disagreement);
+    let speed_disagreement = wheel_track.as_ref().and_then(|wt| {
+        let mut d = super::units::disagreement(wt).or_else(|| super::units::held_speed(wt))?;
+        d.car_stood = d.track_m > d.wheel_m
+            && super::units::stood_by_its_sensors(
+                (&tv, &vel),
+                (&tc, &cmd),
+                d.from_s - super::units::STOOD_BEFORE_S,
+                d.to_s,
+            );
+        Some(d)
+    });
 
     let taps = taps(opts)?;
     let onto = OntoGrid {

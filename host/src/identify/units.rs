@@ -549,11 +549,60 @@ pub struct Disagreement {
     /// Most of the span's fixes repeat the one before exactly: the fixes stood still, not the
     /// wheel speed.
     pub repeated_fixes: bool,
+    /// The wheel speed held one value exactly over the span while the track's speed changed
+    /// ([`held_speed`]): `(the value, the track's slowest and fastest window, m/s)`.
+    pub held: Option<(f64, f64, f64)>,
+    /// The track went further while the wheel speed and the speed commands both say the car
+    /// stood, from a second before the span to its end ([`stood_by_its_sensors`]): the
+    /// receiver's, not the wheel speed's.
+    pub car_stood: bool,
 }
+
+/// Whether every wheel speed `(tv, vel)` and speed command `(tc, cmd)` sample from `a` to `b`
+/// s is under [`MOVING`], with at least one of each: the car stood by both (a wheel speed
+/// that drops to zero while the car is asked to move does not).
+pub fn stood_by_its_sensors(
+    (tv, vel): (&[f64], &[f64]),
+    (tc, cmd): (&[f64], &[f64]),
+    a: f64,
+    b: f64,
+) -> bool {
+    let still = |t: &[f64], x: &[f64]| {
+        let lo = t.partition_point(|s| *s < a);
+        let hi = t.partition_point(|s| *s <= b);
+        hi > lo && x[lo..hi].iter().all(|v| v.abs() < MOVING)
+    };
+    still(tv, vel) && still(tc, cmd)
+}
+
+/// How long before a span the car must have stood by its sensors for the track's motion to be
+/// the receiver's, s: a car that stops has stood a second.
+pub const STOOD_BEFORE_S: f64 = 1.0;
 
 impl Disagreement {
     /// The problem in words, with what to do.
     pub fn problem(&self) -> String {
+        if let Some((value, slowest, fastest)) = self.held {
+            return format!(
+                "the wheel speed `vel` holds {value} exactly from t = {:.1} to {:.1} s while the \
+                 GNSS track's speed goes from {slowest:.1} to {fastest:.1} m/s (its slowest and \
+                 fastest {:.1} s, measured the way noise cannot widen): a wheel speed that \
+                 sticks at its last value. The speed model would be fitted to it: split the log \
+                 there (the parts before and after are logs of their own), or fix the sensor",
+                self.from_s, self.to_s, self.window_s
+            );
+        }
+        if self.car_stood {
+            return format!(
+                "the GNSS track moves {:.1} m from t = {:.1} to {:.1} s while the wheel speed \
+                 `vel` ({:.1} m) and the speed commands `input_vel` say the car stands: the \
+                 receiver's fixes, re-converging after an outage or drifting (or a car carried: \
+                 a ferry, a trailer). The dx/dt model would be fitted to a track that moves at \
+                 a standstill: cut the span out or split the log there (the parts before and \
+                 after are logs of their own)",
+                self.track_m, self.from_s, self.to_s, self.wheel_m
+            );
+        }
         let what = if self.repeated_fixes {
             "the wheel speed says the car went further than the GNSS track does, and most of \
              the span's fixes repeat the one before exactly: a receiver or recorder that holds \
@@ -597,34 +646,17 @@ impl Disagreement {
 /// their sum): fixes that jump off the track and come back, which the log's reader leaves in
 /// for a receiver under 3 Hz, do not. `None` when nothing disagrees.
 pub fn disagreement(wt: &WheelTrack) -> Option<Disagreement> {
-    let tg = wt.tg;
     let measure = TrackMeasure::new(wt);
-    // A slow receiver's window spans three of its periods (four fixes).
-    let period = wt.max_gap / MAX_GAP_PERIODS;
-    let window = WINDOW_S.max(3.0 * period);
+    let (window, windows) = windows(wt);
     let mut best: Option<(usize, Disagreement)> = None;
     // The current run of windows that disagree: (windows, the track went further, the span,
     // where the run's last window started).
     let mut run: Option<(usize, bool, Disagreement, f64)> = None;
-    let mut i = 0;
-    while i + 1 < tg.len() {
-        let mut j = i;
-        while j + 1 < tg.len()
-            && tg[j + 1] - tg[i] <= window + 0.25 * period
-            && tg[j + 1] - tg[j] <= wt.max_gap
-        {
-            j += 1;
-        }
-        let (a, b) = (tg[i], tg[j]);
-        let full = b - a >= 0.75 * window;
-        let wheel_m = if full && wt.wheel_regular(a, b).is_some() {
-            wt.wheel_between(i, j)
-        } else {
-            None
-        };
+    for w in &windows {
+        let (a, b) = (w.from_s, w.to_s);
         let differs =
             |w: f64, g: f64| (w - g).abs() > DISAGREE_MIN_M.max(DISAGREE_SHARE * w.max(g));
-        let verdict = wheel_m.and_then(|w| {
+        let verdict = w.wheel_m.and_then(|w| {
             let line = measure.line(a, b);
             if line > w && differs(w, line) {
                 return Some((true, w, line));
@@ -654,6 +686,8 @@ pub fn disagreement(wt: &WheelTrack) -> Option<Disagreement> {
                     track_m: g,
                     window_s: window,
                     repeated_fixes: false,
+                    held: None,
+                    car_stood: false,
                 },
                 a,
             )),
@@ -664,13 +698,139 @@ pub fn disagreement(wt: &WheelTrack) -> Option<Disagreement> {
                 best = Some((n, d));
             }
         }
-        // The next window starts where this one ends (or after the outage that ended it).
-        i = if j > i { j } else { i + 1 };
     }
     best.map(|(_, mut d)| {
         d.repeated_fixes = repeats_fixes(wt, d.from_s, d.to_s);
         d
     })
+}
+
+/// Windows in a row over which the wheel speed must hold one value before [`held_speed`]
+/// judges it (7.5 s at [`WINDOW_S`]).
+pub const HELD_WINDOWS: usize = 3;
+/// The share of its fastest window by which the track's slowest must be slower (and by
+/// [`DISAGREE_MIN_M`]) for a held wheel speed to be named: a wheel speed of 1 km/h steps holds
+/// while the car's speed stays within the step, 14 % at 2 m/s (and under 5 m a window).
+pub const HELD_CHANGE_SHARE: f64 = 0.3;
+
+/// The longest span of a log ([`WheelTrack`]) over which the wheel speed holds one value,
+/// bit for bit, while the GNSS track's speed changes: a sensor stuck at its last value while
+/// the car speeds up or slows by less than [`disagreement`]'s half (the black-box probe's
+/// `vel` held at 8 m/s while the car went 8 -> 12.5 -> 4.7 m/s). A healthy wheel speed holds a
+/// value only while the car's speed stays within its resolution. Over [`HELD_WINDOWS`]
+/// windows or more of one held value (at least [`MOVING`]), the track's distance in its
+/// fastest window, by the straight line (which noise does not lengthen), must beat its
+/// distance in the slowest, by the length (which noise does not shorten), by more than
+/// [`DISAGREE_MIN_M`] and [`HELD_CHANGE_SHARE`] of the former. Whatever the wheel speed's
+/// scale, then: a log in another unit or a tyre a few per cent off holds as the track does.
+pub fn held_speed(wt: &WheelTrack) -> Option<Disagreement> {
+    let measure = TrackMeasure::new(wt);
+    let (window, windows) = windows(wt);
+    let held_value = |w: &Window| {
+        let r = w.wheel.clone()?;
+        let v = wt.vel[*r.start()];
+        (v.abs() >= MOVING && wt.vel[r].iter().all(|x| x.to_bits() == v.to_bits())).then_some(v)
+    };
+    let mut best: Option<(usize, Disagreement)> = None;
+    let mut k = 0;
+    while k < windows.len() {
+        let Some(v) = held_value(&windows[k]) else {
+            k += 1;
+            continue;
+        };
+        // The run of windows, each following the last without a gap, that hold `v`.
+        let mut end = k + 1;
+        while end < windows.len()
+            && windows[end].from_s == windows[end - 1].to_s
+            && held_value(&windows[end]).is_some_and(|x| x.to_bits() == v.to_bits())
+        {
+            end += 1;
+        }
+        let run = &windows[k..end];
+        k = end;
+        if run.len() < HELD_WINDOWS {
+            continue;
+        }
+        let per_s = |m: f64, w: &Window| m / (w.to_s - w.from_s);
+        let fastest = run
+            .iter()
+            .map(|w| (measure.line(w.from_s, w.to_s), w))
+            .max_by(|x, y| per_s(x.0, x.1).total_cmp(&per_s(y.0, y.1)));
+        let slowest = run
+            .iter()
+            .map(|w| (measure.length(w.from_s, w.to_s), w))
+            .min_by(|x, y| per_s(x.0, x.1).total_cmp(&per_s(y.0, y.1)));
+        let (Some((fast_m, fast)), Some((slow_m, slow))) = (fastest, slowest) else {
+            continue;
+        };
+        // Compared over one window's time: the slowest's distance at its speed.
+        let slow_at = per_s(slow_m, slow) * (fast.to_s - fast.from_s);
+        if fast_m - slow_at <= DISAGREE_MIN_M.max(HELD_CHANGE_SHARE * fast_m) {
+            continue;
+        }
+        if best.is_none_or(|(n, _)| run.len() > n) {
+            let (from_s, to_s) = (run[0].from_s, run[run.len() - 1].to_s);
+            best = Some((
+                run.len(),
+                Disagreement {
+                    from_s,
+                    to_s,
+                    wheel_m: run.iter().filter_map(|w| w.wheel_m).sum(),
+                    track_m: measure.length(from_s, to_s),
+                    window_s: window,
+                    repeated_fixes: false,
+                    held: Some((v, per_s(slow_m, slow), per_s(fast_m, fast))),
+                    car_stood: false,
+                },
+            ));
+        }
+    }
+    best.map(|(_, d)| d)
+}
+
+/// One window [`disagreement`] and [`held_speed`] compare the wheel with the track in.
+struct Window {
+    /// First and last fix's time, s.
+    from_s: f64,
+    /// See `from_s`.
+    to_s: f64,
+    /// The wheel speed samples over it, when they are regular and the window long enough.
+    wheel: Option<std::ops::RangeInclusive<usize>>,
+    /// The wheel's distance over it, moved to the antenna, m, with `wheel`.
+    wheel_m: Option<f64>,
+}
+
+/// The windows of a log: [`WINDOW_S`] (three periods of a slow receiver) between fixes, each
+/// starting where the last ended, or after the outage that ended it; with the window's length.
+fn windows(wt: &WheelTrack) -> (f64, Vec<Window>) {
+    let tg = wt.tg;
+    // A slow receiver's window spans three of its periods (four fixes).
+    let period = wt.max_gap / MAX_GAP_PERIODS;
+    let window = WINDOW_S.max(3.0 * period);
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 1 < tg.len() {
+        let mut j = i;
+        while j + 1 < tg.len()
+            && tg[j + 1] - tg[i] <= window + 0.25 * period
+            && tg[j + 1] - tg[j] <= wt.max_gap
+        {
+            j += 1;
+        }
+        let (a, b) = (tg[i], tg[j]);
+        let wheel = (b - a >= 0.75 * window)
+            .then(|| wt.wheel_regular(a, b))
+            .flatten();
+        let wheel_m = wheel.as_ref().and_then(|_| wt.wheel_between(i, j));
+        out.push(Window {
+            from_s: a,
+            to_s: b,
+            wheel: wheel_m.and(wheel),
+            wheel_m,
+        });
+        i = if j > i { j } else { i + 1 };
+    }
+    (window, out)
 }
 
 /// Whether most of the fixes from `a` to `b` s repeat the one before exactly: a receiver or
