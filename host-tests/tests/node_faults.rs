@@ -842,6 +842,96 @@ fn gnss_rate_check_finds_a_faster_receiver_and_spares_a_lossy_one() {
     }
 }
 
+/// The drive `d` with each fix's receive time moved by `offset_us(i)` (`i`: the fix's index)
+/// and, when `copy_after_us` gives an offset for a fix, a copy of it received that much later
+/// (a receiver faster than the drive's 100 Hz); in time order.
+fn retimed_fixes(
+    d: Vec<bus::Labelled>,
+    offset_us: impl Fn(u64) -> i64,
+    copy_after_us: impl Fn(u64) -> Option<u64>,
+) -> Vec<bus::Labelled> {
+    let mut out = Vec::new();
+    for mut l in d {
+        if l.kind == Kind::Gnss {
+            let i = (l.frame.t_us - bus::START_US) / 10_000;
+            l.frame.t_us = l.frame.t_us.saturating_add_signed(offset_us(i));
+            if let Some(after) = copy_after_us(i) {
+                let mut copy = l;
+                copy.frame.t_us += after;
+                out.push(copy);
+            }
+        }
+        out.push(l);
+    }
+    out.sort_by_key(|l| l.frame.t_us);
+    out
+}
+
+/// A receiver faster than declared whose intervals do not tell it (the eighth black-box
+/// probe's): twice the rate on the period (10 ms on a 50 Hz file: not under half of 20 ms),
+/// twice the rate with its intervals 8 and 12 ms, and 200 Hz on the 100 Hz file with 4 and
+/// 6 ms, whose fourth fix of each tick is over the cap and never reaches the intervals. Each is
+/// found by counting the fixes that arrive ([`catmodel::node::gnss::RATE_WINDOW_PERIODS`]):
+/// not used, counted, flagged, no position. A receiver at the declared rate whose receive
+/// times scatter by up to 4 ms, or come in bunches of three ticks' fixes, never is.
+#[test]
+fn gnss_rate_check_counts_the_fixes_of_a_receiver_faster_than_declared() {
+    let fifty_hz = || {
+        let mut c = config();
+        c.estimator = catmodel::node::estimator::EstimatorConfig::design(
+            50.0,
+            c.estimator.antenna_ahead_m,
+            c.estimator.antenna_left_m,
+        )
+        .unwrap();
+        c
+    };
+    let found = |config: catmodel::node::NodeConfig, d: Vec<bus::Labelled>, case: &str| {
+        let ticks = run_with(config, &frames(&d), |_| PlatformStats::default());
+        assert!(health(&ticks).gnss_rate_mismatch, "{case}");
+        for t in window(&ticks, 1.0, 6.0) {
+            assert!(!t.position().position_valid, "{case}: t={}", t.t_s());
+        }
+        ticks.last().unwrap().counters
+    };
+    let twice = found(fifty_hz(), drive(10.0, 0.0, 6.0), "twice the rate");
+    assert!(twice.gnss_rate_mismatch > 500, "{twice:?}");
+    let scattered = retimed_fixes(drive(10.0, 0.0, 6.0), |i| -2_000 * (i % 2) as i64, |_| None);
+    found(fifty_hz(), scattered, "twice the rate, 8 and 12 ms");
+    let fast = retimed_fixes(
+        drive(10.0, 0.0, 6.0),
+        |_| 0,
+        |i| Some(if i % 2 == 0 { 4_000 } else { 6_000 }),
+    );
+    let c = found(config(), fast, "200 Hz, 4 and 6 ms");
+    assert!(
+        c.gnss_rate_mismatch > 500 && c.gnss_gate_rejects > 0,
+        "{c:?}"
+    );
+
+    // The declared rate: scattered by a fixed pseudo-random +-4 ms, or handed over three
+    // ticks' fixes at once (every fix received when the third tick's last is).
+    let jitter = |i: u64| {
+        let x = i
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((x >> 33) % 9) as i64 * 1_000 - 4_000
+    };
+    let bunched = |i: u64| (2 - (i % 3) as i64) * 10_000;
+    for (case, offset) in [
+        ("scattered", &jitter as &dyn Fn(u64) -> i64),
+        ("bunched", &bunched),
+    ] {
+        let d = retimed_fixes(drive(10.0, 5.0, 30.0), offset, |_| None);
+        let ticks = run(&frames(&d));
+        let c = ticks.last().unwrap().counters;
+        assert_eq!(c.gnss_rate_mismatch, 0, "{case}");
+        for t in window(&ticks, 1.5, 30.0) {
+            assert!(t.position().position_valid, "{case}: t={}", t.t_s());
+        }
+    }
+}
+
 /// The node's STATE_MOTION heading against the truth, RMS over the ticks from `from_s`, rad;
 /// and whether NODE_STATUS said `steering_mismatch` on every page 0 from then.
 fn heading_rms_and_mismatch(

@@ -20,6 +20,22 @@ use super::{bump, NodeConfig};
 /// rate `p` (`p` = 0.5: once in 10^6).
 pub const RATE_MISMATCH_FIXES: u16 = 20;
 
+/// Declared periods over which the fixes that arrive are counted, used or over a tick's cap
+/// ([`GNSS_FIXES_PER_TICK`]): a receiver faster than declared whose intervals scatter about
+/// half a period (200 Hz on a 100 Hz file: 4 and 6 ms) never makes [`RATE_MISMATCH_FIXES`]
+/// short intervals in a row, and one at twice the rate makes none (50 ms on a 10 Hz file is
+/// not under half of 100 ms); the fixes over a tick's cap never reach the intervals at all
+/// (the eighth black-box probe: 230-240 Hz counted as gate rejects, the rate never named).
+pub const RATE_WINDOW_PERIODS: u32 = 20;
+/// A window of [`RATE_WINDOW_PERIODS`] with at least this many tenths of its periods in fixes
+/// is crowded: the receiver runs at least 1.4 times faster than declared. A receiver at the
+/// declared rate brings one fix more or less per window with its jitter, and a queue that
+/// hands over the fixes of a few ticks at once moves them to the next window, not more: 20
+/// or 21 of 20 (1.05).
+pub const CROWDED_TENTHS: u32 = 14;
+/// A window with at most this many tenths of its periods in fixes ends a crowded receiver.
+pub const UNCROWDED_TENTHS: u32 = 12;
+
 /// The plausibility gate learns the receiver: it tracks the median distance of the fixes from
 /// where dead reckoning put the antenna at their time, and rejects a fix beyond this many
 /// times that median (the model file's `gnss_gate_m` stays the most the gate allows). For
@@ -62,11 +78,19 @@ struct RateCheck {
     fast_in_row: u16,
     /// Consecutive intervals on the period (they end a mismatch).
     normal_in_row: u16,
-    /// The receiver runs at another rate than declared.
-    mismatch: bool,
+    /// The intervals say the receiver runs at another rate than declared.
+    off_intervals: bool,
     /// The latest interval off the period, us (0: none yet): the receiver's period when in
-    /// mismatch.
+    /// mismatch (the mean interval of the last crowded window, when crowded).
     off_interval_us: u32,
+    /// Where the window of [`RATE_WINDOW_PERIODS`] counted in started, us.
+    window_start_us: Option<u64>,
+    /// The fixes that arrived in it (a window of more than 65 535 fixes is crowded anyway).
+    arrivals: u16,
+    /// The last window was crowded ([`CROWDED_TENTHS`]), and none since uncrowded.
+    crowded: bool,
+    /// The mismatch as the last used fix found it: a new one forgets the estimator once.
+    reported: bool,
 }
 
 /// What one fix's interval changed.
@@ -79,11 +103,57 @@ enum RateChange {
 }
 
 impl RateCheck {
-    /// The fix received at `t_us`, with the estimator designed for fixes `period_us` apart.
-    /// Integer work only: it runs for every fix of the estimating tick.
+    /// Whether the receiver runs at another rate than declared, by its intervals or its count.
+    fn mismatch(&self) -> bool {
+        self.off_intervals || self.crowded
+    }
+
+    /// A fix arrived at `t_us`, used or over a tick's cap: counted in the window of
+    /// [`RATE_WINDOW_PERIODS`] of `period_us`, which the first fix at or past its end closes.
+    /// Integer work only (a division when crowded, one instruction on the MCU).
+    fn arrive(&mut self, t_us: u64, period_us: u32) {
+        let start = *self.window_start_us.get_or_insert(t_us);
+        // A window that lasts over 71 minutes (a receiver silent that long) is not judged.
+        let elapsed = u32::try_from(t_us.saturating_sub(start)).unwrap_or(u32::MAX);
+        if u64::from(elapsed) >= u64::from(period_us) * u64::from(RATE_WINDOW_PERIODS) {
+            // `arrivals` fixes in `elapsed`: at least CROWDED_TENTHS / 10 of its periods?
+            // (Under 2^16 times 2^32 times 10, over 2^32 times 14: no overflow.)
+            let fixes_tenths = u64::from(self.arrivals) * u64::from(period_us) * 10;
+            let elapsed_tenths = |tenths: u32| u64::from(elapsed) * u64::from(tenths);
+            if elapsed < u32::MAX && fixes_tenths >= elapsed_tenths(CROWDED_TENTHS) {
+                self.crowded = true;
+                self.off_interval_us = elapsed / u32::from(self.arrivals.max(1));
+            } else if fixes_tenths <= elapsed_tenths(UNCROWDED_TENTHS) {
+                self.crowded = false;
+            }
+            self.window_start_us = Some(t_us);
+            self.arrivals = 0;
+        }
+        self.arrivals = self.arrivals.saturating_add(1);
+    }
+
+    /// The fix received at `t_us`, with the estimator designed for fixes `period_us` apart:
+    /// [`RateChange::Began`] when the receiver has just been found at another rate, by its
+    /// intervals or by its count ([`Self::arrive`]). Integer work only: it runs for every fix
+    /// of the estimating tick.
     fn observe(&mut self, t_us: u64, period_us: u32) -> RateChange {
+        self.arrive(t_us, period_us);
+        self.observe_interval(t_us, period_us);
+        let now = self.mismatch();
+        let began = now && !self.reported;
+        self.reported = now;
+        if began {
+            RateChange::Began
+        } else {
+            RateChange::None
+        }
+    }
+
+    /// The interval from the last used fix to `t_us`: [`RATE_MISMATCH_FIXES`] in a row off
+    /// the period set [`Self::off_intervals`], as many on it clear it.
+    fn observe_interval(&mut self, t_us: u64, period_us: u32) {
         let Some(last) = self.last_us.replace(t_us) else {
-            return RateChange::None;
+            return;
         };
         let interval = u32::try_from(t_us.saturating_sub(last)).unwrap_or(u32::MAX);
         let slow = interval >= period_us.saturating_add(period_us / 2);
@@ -95,17 +165,17 @@ impl RateCheck {
         self.slow_in_row = bump_if(self.slow_in_row, slow);
         self.fast_in_row = bump_if(self.fast_in_row, fast);
         self.normal_in_row = bump_if(self.normal_in_row, !(slow || fast));
-        if !self.mismatch
-            && (self.slow_in_row >= RATE_MISMATCH_FIXES || self.fast_in_row >= RATE_MISMATCH_FIXES)
-        {
-            self.mismatch = true;
-            return RateChange::Began;
+        if self.slow_in_row >= RATE_MISMATCH_FIXES || self.fast_in_row >= RATE_MISMATCH_FIXES {
+            self.off_intervals = true;
+        } else if self.normal_in_row >= RATE_MISMATCH_FIXES {
+            self.off_intervals = false;
         }
-        if self.mismatch && self.normal_in_row >= RATE_MISMATCH_FIXES {
-            self.mismatch = false;
-        }
-        RateChange::None
     }
+}
+
+/// The receiver's period the estimator was designed for, us.
+fn period_us(cfg: &EstimatorConfig) -> u32 {
+    (cfg.gnss_period_s * 1e6) as u32
 }
 
 /// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
@@ -259,7 +329,7 @@ impl Gnss {
     /// Whether the receiver's fixes come at another rate than the model file declares
     /// ([`RATE_MISMATCH_FIXES`]): they are not used.
     pub fn rate_mismatch(&self) -> bool {
-        self.rate.mismatch
+        self.rate.mismatch()
     }
 
     /// The latest interval between the receiver's fixes that was off the declared period, us
@@ -281,9 +351,11 @@ impl Gnss {
         }
     }
 
-    /// A fix received at `t_us` was rejected (counted by the caller).
-    pub fn rejected(&mut self, t_us: u64) {
+    /// A fix received at `t_us` over the tick's cap ([`GNSS_FIXES_PER_TICK`]) was rejected
+    /// (counted by the caller): it still counts in the receiver's rate ([`RateCheck::arrive`]).
+    pub fn over_cap(&mut self, config: &NodeConfig, t_us: u64) {
         self.last_reject_us = Some(t_us);
+        self.rate.arrive(t_us, period_us(&config.estimator));
     }
 
     /// The tick's fixes (received before `now_us`, in arrival order), with the car at
@@ -328,12 +400,11 @@ impl Gnss {
         } = *fix;
         let counters = &mut inputs.counters;
         let cfg = &config.estimator;
-        let period_us = (cfg.gnss_period_s * 1e6) as u32;
-        if self.rate.observe(t_us, period_us) == RateChange::Began {
+        if self.rate.observe(t_us, period_us(cfg)) == RateChange::Began {
             self.estimator.forget();
             self.cog = None;
         }
-        if self.rate.mismatch {
+        if self.rate.mismatch() {
             bump(&mut counters.gnss_rate_mismatch);
             probe.lap(Stage::GnssFixCheck);
             return;

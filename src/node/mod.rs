@@ -589,7 +589,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
                 Some(Routed::Gnss(GnssMessage::Fix(fix))) => {
                     if let Err(over) = fixes.push(fix) {
                         bump(&mut self.inputs.counters.gnss_gate_rejects);
-                        self.gnss.rejected(over.t_us);
+                        self.gnss.over_cap(&self.config, over.t_us);
                     }
                 }
                 Some(Routed::Gnss(GnssMessage::Course(course))) => {

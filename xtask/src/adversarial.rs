@@ -60,7 +60,8 @@ fn targeted(car: &NodeConfig) -> Vec<Spec> {
             hi: 100.0,
             period_s: 0.3,
         },
-        gnss_hz: 200.0,
+        // As fast as the node still takes the receiver (faster is `gnss_rate_mismatch`).
+        gnss_hz: drives::TAKEN_FASTER * car.estimator.declared_gnss_rate_hz(),
         cog_hz: 200.0,
         gnss_dropout: Some(Periodic {
             first_s: 2.0,
@@ -145,7 +146,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
             len_s: rng.range(0.005, len_max),
         })
     };
-    let rates = [1.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0];
+    let rates = [1.0, 5.0, 10.0, 20.0, 50.0, 100.0, 130.0, 150.0, 200.0];
     let cog_rates = [0.0, 1.0, 10.0, 50.0, 100.0, 200.0];
     Spec {
         name,
