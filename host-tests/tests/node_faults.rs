@@ -930,6 +930,28 @@ fn gnss_rate_check_counts_the_fixes_of_a_receiver_faster_than_declared() {
             assert!(t.position().position_valid, "{case}: t={}", t.t_s());
         }
     }
+    // Held back by a gateway: a tenth of a second's fixes handed over at once, every tenth
+    // of a second or once in half a second (the bursts of the bound's drives). One window
+    // of 20 periods then holds 30 fixes now and then, never two in a row; the cap of three a
+    // tick leaves most of each batch out (gate rejects), not taken for another receiver.
+    for every in [10, 50] {
+        let held = move |i: u64| {
+            let k = i % every;
+            if k < 10 {
+                (9 - k as i64) * 10_000
+            } else {
+                0
+            }
+        };
+        let d = retimed_fixes(drive(10.0, 5.0, 30.0), held, |_| None);
+        let ticks = run(&frames(&d));
+        let c = ticks.last().unwrap().counters;
+        assert_eq!(
+            c.gnss_rate_mismatch, 0,
+            "batches of 0.1 s every {every} fixes"
+        );
+        assert!(c.gnss_gate_rejects > 0, "{c:?}");
+    }
 }
 
 /// The node's STATE_MOTION heading against the truth, RMS over the ticks from `from_s`, rad;

@@ -28,10 +28,11 @@ pub const RATE_MISMATCH_FIXES: u16 = 20;
 /// (the eighth black-box probe: 230-240 Hz counted as gate rejects, the rate never named).
 pub const RATE_WINDOW_PERIODS: u32 = 20;
 /// A window of [`RATE_WINDOW_PERIODS`] with at least this many tenths of its periods in fixes
-/// is crowded: the receiver runs at least 1.4 times faster than declared. A receiver at the
-/// declared rate brings one fix more or less per window with its jitter, and a queue that
-/// hands over the fixes of a few ticks at once moves them to the next window, not more: 20
-/// or 21 of 20 (1.05).
+/// is crowded, and two in a row say the receiver runs at least 1.4 times faster than
+/// declared. A receiver at the declared rate brings one fix more or less per window with its
+/// jitter; a gateway that holds its fixes back and hands them over at once moves them from
+/// one window into the next, which a single window would count as crowded (a tenth of a
+/// second's fixes: 30 of 20), never into two windows in a row.
 pub const CROWDED_TENTHS: u32 = 14;
 /// A window with at most this many tenths of its periods in fixes ends a crowded receiver.
 pub const UNCROWDED_TENTHS: u32 = 12;
@@ -87,7 +88,9 @@ struct RateCheck {
     window_start_us: Option<u64>,
     /// The fixes that arrived in it (a window of more than 65 535 fixes is crowded anyway).
     arrivals: u16,
-    /// The last window was crowded ([`CROWDED_TENTHS`]), and none since uncrowded.
+    /// Windows crowded in a row ([`CROWDED_TENTHS`]), up to 2.
+    crowded_windows: u8,
+    /// Two windows in a row were crowded, and none since uncrowded.
     crowded: bool,
     /// The mismatch as the last used fix found it: a new one forgets the estimator once.
     reported: bool,
@@ -121,10 +124,16 @@ impl RateCheck {
             let fixes_tenths = u64::from(self.arrivals) * u64::from(period_us) * 10;
             let elapsed_tenths = |tenths: u32| u64::from(elapsed) * u64::from(tenths);
             if elapsed < u32::MAX && fixes_tenths >= elapsed_tenths(CROWDED_TENTHS) {
-                self.crowded = true;
-                self.off_interval_us = elapsed / u32::from(self.arrivals.max(1));
-            } else if fixes_tenths <= elapsed_tenths(UNCROWDED_TENTHS) {
-                self.crowded = false;
+                self.crowded_windows = self.crowded_windows.saturating_add(1).min(2);
+                if self.crowded_windows >= 2 {
+                    self.crowded = true;
+                    self.off_interval_us = elapsed / u32::from(self.arrivals.max(1));
+                }
+            } else {
+                self.crowded_windows = 0;
+                if fixes_tenths <= elapsed_tenths(UNCROWDED_TENTHS) {
+                    self.crowded = false;
+                }
             }
             self.window_start_us = Some(t_us);
             self.arrivals = 0;
