@@ -14,6 +14,10 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// The median of the absolute value of a unit normal: a median absolute deviation over this is
+/// the deviation of Gaussian noise.
+pub const MEDIAN_ABS_UNIT_NORMAL: f64 = 0.6745;
+
 /// The median interval between consecutive times, s (NaN for fewer than two).
 pub fn median_interval(t: &[f64]) -> f64 {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
@@ -26,7 +30,7 @@ pub fn median_interval(t: &[f64]) -> f64 {
 /// ramp's corners, a car's acceleration) are few or small, and the median leaves them out.
 /// NaN for none.
 pub fn noise_from_second_differences(d2: &mut [f64]) -> f64 {
-    median(d2) / (0.6745 * 6f64.sqrt())
+    median(d2) / (MEDIAN_ABS_UNIT_NORMAL * 6f64.sqrt())
 }
 
 /// Residuals a log needs for its own noise to weigh it in [`inverse_noise_weights`] (5 s at

@@ -396,8 +396,7 @@ fn fix_noise(tg: &[f64], east: &[f64], north: &[f64], max_gap: f64) -> f64 {
     if residuals.is_empty() {
         return 0.0;
     }
-    // The median absolute value of a unit normal.
-    median(&mut residuals) / 0.6745
+    median(&mut residuals) / super::stats::MEDIAN_ABS_UNIT_NORMAL
 }
 
 /// [`SpeedScale`] of a log ([`WheelTrack`]). `None` when the log has fewer than
