@@ -363,6 +363,11 @@ def main():
     ap.add_argument("--gnss-white", type=float, default=0.02)
     ap.add_argument("--gnss-bias", type=float, default=0.0, help="bias sigma per axis (tau 60 s)")
     ap.add_argument("--pos-unc", type=float, default=0.5)
+    ap.add_argument("--glitch-at", type=float, default=None, help="s after engagement: fixes moved sideways")
+    ap.add_argument("--glitch-m", type=float, default=1.0, help="the glitch's step to the right, m")
+    ap.add_argument("--glitch-fixes", type=int, default=2, help="how many fixes the glitch moves")
+    ap.add_argument("--cog-from-fixes", action="store_true",
+                    help="COG and SOG differenced from the reported fixes (as some receivers do), not Doppler")
     ap.add_argument("--steer-gain", type=float, default=1.0)
     ap.add_argument("--rate-factor", type=float, default=1.0)
     ap.add_argument("--steer-lag", type=float, default=0.06)
@@ -429,6 +434,7 @@ def main():
     obs_state = {}  # slot -> on?
     bias = [0.0, 0.0]; tau = 60.0
     gper = 1.0 / a.gnss_hz; next_fix = gper
+    glitched = 0; prev_fix = None
     dbw_c = 0
     t = 0.0; tick = 0
     steer_cmd = 0.0; speed_cmd = 0.0
@@ -457,13 +463,21 @@ def main():
                     for j in range(2):
                         bias[j] = k * bias[j] + math.sqrt(1 - k * k) * a.gnss_bias * rng.gauss(0, 1)
                     ae, an = P.antenna()
-                    lat, lon = enu2geo(ae + bias[0] + rng.gauss(0, a.gnss_white),
-                                       an + bias[1] + rng.gauss(0, a.gnss_white))
+                    fe = ae + bias[0] + rng.gauss(0, a.gnss_white)
+                    fn = an + bias[1] + rng.gauss(0, a.gnss_white)
+                    if a.glitch_at is not None and engaged is not None and t - engaged >= a.glitch_at \
+                            and glitched < a.glitch_fixes:
+                        glitched += 1
+                        fe += a.glitch_m * math.cos(P.h); fn -= a.glitch_m * math.sin(P.h)
+                    lat, lon = enu2geo(fe, fn)
                     lines.append(line(t, msgs["GNSS_POSITION_RAPID"],
                                       enc(msgs["GNSS_POSITION_RAPID"], {"latitude_deg": lat, "longitude_deg": lon})))
                     side = P.vy - P.lr * P.r
                     ve = P.v * math.sin(P.h) + side * math.cos(P.h) + P.c["ant"] * P.r * math.cos(P.h)
                     vn = P.v * math.cos(P.h) - side * math.sin(P.h) - P.c["ant"] * P.r * math.sin(P.h)
+                    if a.cog_from_fixes and prev_fix is not None:
+                        ve, vn = (fe - prev_fix[0]) / gper, (fn - prev_fix[1]) / gper
+                    prev_fix = (fe, fn)
                     cog = math.atan2(ve, vn) % (2 * math.pi)
                     sog = math.hypot(ve, vn)
                     lines.append(line(t, msgs["GNSS_COG_SOG_RAPID"], enc(msgs["GNSS_COG_SOG_RAPID"],

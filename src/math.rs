@@ -245,6 +245,24 @@ pub fn i64_to_f32(x: i64) -> f32 {
 // maxNum/minNum, which the Cortex-M4F has no instruction for (a call to software `fmaxf`:
 // measured, the MPC solver's iterations took a third more instructions with it).
 
+/// One step of a running median of magnitudes (a stochastic approximation, in its logarithm:
+/// up by `step` of itself when a sample is larger, down when not) towards a sample given by
+/// its square `sample_sq`, kept within `[lo, hi]`; a step that is not finite keeps `median`.
+/// The node's gates learn their receiver's scatter with it, with no square root per sample.
+#[inline]
+pub fn median_step(median: f32, sample_sq: f32, step: f32, lo: f32, hi: f32) -> f32 {
+    let next = if sample_sq > median * median {
+        median * (1.0 + step)
+    } else {
+        median * (1.0 - step)
+    };
+    if next.is_finite() {
+        clamp(next, lo, hi)
+    } else {
+        median
+    }
+}
+
 /// The larger of `a` and `b` by one comparison (`b` if either is NaN).
 #[inline(always)]
 pub fn max(a: f32, b: f32) -> f32 {

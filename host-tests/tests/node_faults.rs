@@ -306,6 +306,43 @@ fn gnss_jump_beyond_the_gate_is_rejected_and_a_persistent_one_is_followed() {
 }
 
 #[test]
+fn a_glitch_under_the_gate_is_rejected_and_a_lasting_step_is_taken() {
+    // Healthy fixes on a straight and in a turn: the step gate rejects none of them.
+    for steer_pct in [0.0, 30.0] {
+        let ticks = run(&frames(&drive(10.0, steer_pct, 10.0)));
+        assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 0);
+    }
+    // 0.1 s of fixes 0.9 m to the side (a multipath glitch under the plausibility gate's 1 m
+    // floor): the step gate rejects all ten, and the position stays on the car.
+    let mut d = drive(10.0, 0.0, 10.0);
+    shift_fixes(&mut d, 5.0, 5.1, 0.9);
+    let ticks = run(&frames(&d));
+    assert_eq!(ticks.last().unwrap().counters.gnss_gate_rejects, 10);
+    let worst = window(&ticks, 4.0, 10.0)
+        .iter()
+        .map(|t| position_error(t, 10.0, 0.0))
+        .fold(0.0, f64::max);
+    assert!(worst < 0.02, "{worst}");
+    // A step that lasts (an RTK solution going from fixed to float) is the receiver's: taken
+    // after 0.15 s of rejections at most (14 fixes at 100 Hz; sooner as the gate widens with
+    // the time since the last fix taken), and followed, the receiver never stale.
+    let mut d = drive(10.0, 0.0, 10.0);
+    shift_fixes(&mut d, 5.0, 10.0, 0.3);
+    let ticks = run(&frames(&d));
+    let rejects = ticks.last().unwrap().counters.gnss_gate_rejects;
+    assert!((1..=14).contains(&rejects), "{rejects}");
+    let last = ticks.last().unwrap();
+    let (_, n, _) = rear_axle(10.0, 0.0, last.t_s());
+    let north = f64::from(last.position().north_m.unwrap());
+    assert!((north - (n + 0.3)).abs() < 0.02, "{north} {n}");
+    for t in window(&ticks, 5.0, 10.0) {
+        if let NodeStatus::Health { health, .. } = t.status() {
+            assert!(!health.gnss_stale, "t={}", t.t_s());
+        }
+    }
+}
+
+#[test]
 fn a_car_that_leaves_the_nodes_own_frame_takes_the_frame_along() {
     // The fixes jump 25 km north at 5 s and stay there (the car far from where the node's
     // frame was built, beyond its 20 km validity radius). A frame the node chose at its first

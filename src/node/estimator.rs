@@ -68,6 +68,31 @@ const CHORD_NOISE_M: f32 = 0.13;
 /// Ticks over which the chords' errors are correlated (each chord shares all but one fix with
 /// the previous tick's): the chord's 0.63 s.
 const CHORD_CORRELATED_TICKS: f32 = 31.5;
+/// The antenna's velocity error a receiver's course over ground carries, one sigma, m/s: a
+/// course from the carrier's Doppler is good to 0.05 m/s (u-blox NEO-M8 data sheet, velocity
+/// accuracy); a receiver that differences its own fixes does worse, hence four times that.
+/// The course's error is this over the speed (`EstimatorState::correct_heading_on_cog`).
+const COG_NOISE_MPS: f32 = 0.2;
+/// A course over ground further from the heading than this many standard deviations of their
+/// difference (the heading's variance and the course's) is refused: a receiver whose course
+/// is differenced from its own fixes turns a multipath glitch of a metre into a course tens
+/// of degrees off, which the fixes' step gate (`super::gnss`) does not see.
+const COG_GATE_SIGMAS: f32 = 5.0;
+/// ... or further than this many of the learnt median of their differences (the receiver's
+/// own scatter, whatever it is: 8.9 medians of |x| are 6 sigma), whichever is wider.
+const COG_GATE_MEDIANS: f32 = 8.9;
+/// The learnt median of the course's difference from the heading starts here and stays
+/// within `[COG_MEDIAN_MIN_RAD, COG_MEDIAN_MAX_RAD]`, rad (the gate from 0.9 rad wide, and
+/// never narrower than 5 sigma of the course's own error).
+const COG_MEDIAN_START_RAD: f32 = 0.1;
+const COG_MEDIAN_MIN_RAD: f32 = 0.001;
+const COG_MEDIAN_MAX_RAD: f32 = 0.35;
+/// The learnt median's step per tick, as a share of it (from the start to a Doppler course's
+/// in about 150 ticks).
+const COG_MEDIAN_STEP: f32 = 0.03;
+/// Courses refused for this many ticks in a row are the heading's error, not the course's:
+/// the next is taken, its difference counted in the heading's variance (0.5 s).
+const COG_REFUSED_TICKS_MAX: u16 = 25;
 /// The heading's variance when a first course sets it, rad^2: one course at the lowest speed
 /// a course is read at, 0.5 rad (one sigma).
 const HEADING_INITIAL_VAR_RAD2: f32 = 0.25;
@@ -309,6 +334,11 @@ pub struct EstimatorState {
     /// The heading's error variance as the heading filter reckons it, rad^2
     /// ([`Self::correct_heading_on_track`]).
     heading_var_rad2: f32,
+    /// Ticks in a row whose course over ground the gate refused
+    /// ([`Self::correct_heading_on_cog`]).
+    cog_refused_ticks: u16,
+    /// The learnt median of the course's difference from the heading, rad ([`COG_GATE_MEDIANS`]).
+    cog_median_rad: f32,
 }
 
 impl Default for EstimatorState {
@@ -333,6 +363,8 @@ impl Default for EstimatorState {
             turned_len: 0,
             corrected_rad: 0.0,
             heading_var_rad2: HEADING_INITIAL_VAR_RAD2,
+            cog_refused_ticks: 0,
+            cog_median_rad: COG_MEDIAN_START_RAD,
         }
     }
 }
@@ -465,6 +497,11 @@ impl EstimatorState {
     /// over a tick is the car's motion alone.
     pub fn dead_reckoned(&self) -> Xy {
         self.odo_now
+    }
+
+    /// The sine and cosine of the heading the last [`Self::propagate`] moved along.
+    pub fn heading_sin_cos(&self) -> (f32, f32) {
+        self.heading_sin_cos
     }
 
     /// The heading's error variance as the heading filter reckons it, rad^2.
@@ -746,6 +783,27 @@ impl EstimatorState {
         speed_mps: f32,
         rates: Rates,
     ) -> f32 {
+        let course_now = self.course_now(cfg, course_rad, age_s, speed_mps, rates);
+        match self.heading_rad {
+            None => {
+                self.heading_rad = Some(course_now);
+                self.heading_var_rad2 = HEADING_INITIAL_VAR_RAD2;
+            }
+            Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
+        }
+        course_now
+    }
+
+    /// The antenna's course measured `age_s` ago, its lead removed and carried to now
+    /// ([`Self::correct_heading`]).
+    fn course_now(
+        &self,
+        cfg: &EstimatorConfig,
+        course_rad: f32,
+        age_s: f32,
+        speed_mps: f32,
+        rates: Rates,
+    ) -> f32 {
         // The antenna's speed along the heading; the course says nothing when it is not ahead.
         // The rates when the course was measured: the sweep over a window around then.
         let turned = self.swept_since(age_s, rates).turned_rad;
@@ -762,15 +820,62 @@ impl EstimatorState {
         } else {
             0.0
         };
-        let course_now = math::wrap_pi(course_rad - lead_rad + turned);
-        match self.heading_rad {
-            None => {
-                self.heading_rad = Some(course_now);
-                self.heading_var_rad2 = HEADING_INITIAL_VAR_RAD2;
+        math::wrap_pi(course_rad - lead_rad + turned)
+    }
+
+    /// [`Self::correct_heading`] with the receiver's course over ground, and the heading's
+    /// variance updated for it (the same scalar filter as the chords',
+    /// [`Self::correct_heading_on_track`], at the course gain): the course's error is
+    /// [`COG_NOISE_MPS`] over the speed, and one course pulls the heading on every tick until
+    /// the next one comes, so its variance counts once per tick of the receiver's period.
+    /// Without it the variance grew to its cap while a receiver's course held the heading
+    /// to hundredths of a radian, and what reads it (the control pose's drift, the step
+    /// gate in `super::gnss`) took the heading for unknown.
+    pub fn correct_heading_on_cog(
+        &mut self,
+        cfg: &EstimatorConfig,
+        course_rad: f32,
+        age_s: f32,
+        speed_mps: f32,
+        rates: Rates,
+    ) -> Option<f32> {
+        let Some(heading) = self.heading_rad else {
+            return Some(self.correct_heading(cfg, course_rad, age_s, speed_mps, rates));
+        };
+        let course_now = self.course_now(cfg, course_rad, age_s, speed_mps, rates);
+        let ticks = math::max(cfg.gnss_period_s / crate::SAMPLE_PERIOD_S, 1.0);
+        let sigma = COG_NOISE_MPS / math::max(speed_mps, cfg.course_min_speed_mps);
+        let cog_var = sigma * sigma * ticks;
+        let innovation = math::wrap_pi(course_now - heading);
+        let mut var = self.heading_var_rad2;
+        let limit = math::max(
+            COG_GATE_SIGMAS * math::sqrt(var + cog_var),
+            COG_GATE_MEDIANS * self.cog_median_rad,
+        );
+        self.cog_median_rad = math::median_step(
+            self.cog_median_rad,
+            innovation * innovation,
+            COG_MEDIAN_STEP,
+            COG_MEDIAN_MIN_RAD,
+            COG_MEDIAN_MAX_RAD,
+        );
+        // `!(a <= b)`: a NaN course is refused.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !(innovation.abs() <= limit) {
+            if self.cog_refused_ticks < COG_REFUSED_TICKS_MAX {
+                self.cog_refused_ticks += 1;
+                return None;
             }
-            Some(h) => self.turn_heading(h, cfg.course_gain * math::wrap_pi(course_now - h)),
+            var = math::max(var, innovation * innovation);
         }
-        course_now
+        self.cog_refused_ticks = 0;
+        let gain = cfg.course_gain;
+        self.turn_heading(heading, gain * innovation);
+        self.heading_var_rad2 = math::min(
+            (1.0 - gain) * (1.0 - gain) * var + gain * gain * cog_var,
+            HEADING_MAX_VAR_RAD2,
+        );
+        Some(course_now)
     }
 
     /// The heading moved by a course correction, which is remembered for

@@ -225,6 +225,8 @@ pub struct Gnss {
     rate: RateCheck,
     /// The learnt gate ([`GATE_MEDIANS`]).
     gate: GateStats,
+    /// The step gate ([`StepGate`]).
+    step: StepGate,
 }
 
 /// The learnt gate's state ([`GATE_MEDIANS`]).
@@ -263,22 +265,143 @@ impl GateStats {
     /// A fix `d2_m2` (squared) from where the antenna should have been: the median steps
     /// towards it, whether the fix is accepted or not (rejected fixes are above the median).
     fn observe(&mut self, d2_m2: f32, configured_m: f32) {
-        let median = self.median_m.unwrap_or(configured_m / GATE_MEDIANS);
-        let next = if d2_m2 > median * median {
-            median * (1.0 + GATE_MEDIAN_STEP)
-        } else {
-            median * (1.0 - GATE_MEDIAN_STEP)
-        };
         // Within the gate's range: never above the configured gate's, never below the floor's
         // (below it the gate does not tighten, and a lasting step would have further to
         // climb: from the floor's median a 2.5 m step opens the gate in about 30 fixes).
-        if next.is_finite() {
-            self.median_m = Some(math::clamp(
-                next,
-                GATE_FLOOR_M / GATE_MEDIANS,
-                math::max(configured_m, GATE_FLOOR_M) / GATE_MEDIANS,
-            ));
+        self.median_m = Some(median_step(
+            self.median_m.unwrap_or(configured_m / GATE_MEDIANS),
+            d2_m2,
+            GATE_FLOOR_M / GATE_MEDIANS,
+            math::max(configured_m, GATE_FLOOR_M) / GATE_MEDIANS,
+        ));
+    }
+}
+
+/// One step of a learnt median ([`GATE_MEDIAN_STEP`]) towards a sample `d2_m2` (squared),
+/// kept within `[lo_m, hi_m]`.
+fn median_step(median_m: f32, d2_m2: f32, lo_m: f32, hi_m: f32) -> f32 {
+    math::median_step(median_m, d2_m2, GATE_MEDIAN_STEP, lo_m, hi_m)
+}
+
+/// The step gate: a fix's step from the last accepted fix, against the dead reckoning's
+/// displacement between the two fixes' instants, across the heading. The plausibility gate
+/// ([`GATE_MEDIANS`]) compares a fix with the filtered track carried forward, whose error in a
+/// manoeuvre at the grip limit is decimetres, so its floor is a metre, and a multipath glitch
+/// under a metre passed into the lowpass: the sixth black-box probe's two fixes 1 m to the
+/// side at 20 Hz turned the heading and took the car out of its corridor (docs/findings.md).
+/// Between two fixes the dead reckoning drifts by far less (its heading's error and the turn
+/// it may have misjudged, times the distance driven, plus [`STEP_GAP_MPS`] for the slide),
+/// and the receiver's own scatter from fix to fix is learnt as a median, so a step across the
+/// heading beyond both is a glitch. Along the heading a fix's latency jitter and the wheel
+/// speed's scale move it, and the lateral control does not feel it, so only the side is
+/// judged. A step that lasts is the receiver's new level (an RTK solution changing from
+/// fixed to float): after [`STEP_PERSIST_S`] of rejections the fix is taken, before the
+/// receiver would count as stale.
+#[derive(Clone, Copy, Debug, Default)]
+struct StepGate {
+    /// The last accepted fix (`None` after the filters restarted: no reference).
+    last: Option<StepRef>,
+    /// The learnt median of the step's error across the heading, m (`None`: the configured
+    /// gate's, as for [`GateStats`]).
+    median_m: Option<f32>,
+    /// Fixes the step gate rejected in a row.
+    rejects_in_row: u16,
+}
+
+/// An accepted fix, as the step gate remembers it.
+#[derive(Clone, Copy, Debug)]
+struct StepRef {
+    /// The fix, local m.
+    fix: Xy,
+    /// Where dead reckoning had the antenna at the fix's instant.
+    odo: Xy,
+    /// The heading then, rad.
+    heading_rad: f32,
+    /// Its receive time, us.
+    t_us: u64,
+}
+
+/// The step gate rejects a step across the heading beyond this many of its learnt medians
+/// ([`StepGate`]): the median of |x| for a Gaussian x of sigma is 0.6745 sigma, so 6 sigma.
+pub const STEP_MEDIANS: f32 = 8.9;
+
+/// The step gate never rejects a step across the heading under this, m: a fix's quantum on
+/// the bus is 0.011 m (1e-7 degree), and a gateway's jitter in a turn moves a fix sideways by
+/// centimetres.
+pub const STEP_FLOOR_M: f32 = 0.15;
+
+/// The dead reckoning's sideways slide the step gate allows per second between two fixes,
+/// m/s: the rear axle's slide the single-track model misjudges at the grip limit.
+pub const STEP_GAP_MPS: f32 = 0.5;
+
+/// The heading's error the step gate allows, in standard deviations of the heading filter's
+/// own variance, times the distance driven between the fixes.
+pub const STEP_HEADING_SIGMAS: f32 = 3.0;
+
+/// The share of the turn between two fixes the step gate allows the dead reckoning to have
+/// misjudged, times the distance driven (an arc turning by psi over d metres lies psi d / 2
+/// to the side of its chord: the whole of that sideways motion, misjudged).
+pub const STEP_TURN_SHARE: f32 = 0.5;
+
+/// A step that lasts this long is the receiver's, s ([`StepGate`]): its fix this many periods,
+/// rounded, after the last accepted one is taken; at least two fixes. Under the GNSS timeout
+/// at every rate (0.2 s at least, 2.5 periods).
+pub const STEP_PERSIST_S: f32 = 0.15;
+
+/// The step gate's verdict on a fix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum StepVerdict {
+    /// Use the fix.
+    Accept,
+    /// A glitch: reject the fix.
+    Reject,
+}
+
+impl StepGate {
+    /// The fix `fix`, taken when dead reckoning had the antenna at `odo`, at `t_us`, with the
+    /// estimator's heading `heading_rad` (sine and cosine `sin_cos`) and its variance.
+    #[allow(clippy::too_many_arguments)]
+    fn check(
+        &mut self,
+        cfg: &EstimatorConfig,
+        configured_m: f32,
+        fix: Xy,
+        odo: Xy,
+        (heading_rad, (s, c)): (f32, (f32, f32)),
+        heading_var_rad2: f32,
+        t_us: u64,
+    ) -> StepVerdict {
+        let Some(last) = self.last else {
+            return StepVerdict::Accept;
+        };
+        let (dx, dy) = (odo.x_m - last.odo.x_m, odo.y_m - last.odo.y_m);
+        let (ex, ey) = (fix.x_m - last.fix.x_m - dx, fix.y_m - last.fix.y_m - dy);
+        // Right of the heading is (cos, -sin) (headings clockwise from north).
+        let across = ex * c - ey * s;
+        let gap_s = math::u64_to_f32(t_us.saturating_sub(last.t_us)) * 1e-6;
+        let d = math::sqrt(dx * dx + dy * dy);
+        let turned = math::wrap_pi(heading_rad - last.heading_rad).abs();
+        let allowed = STEP_FLOOR_M
+            + STEP_GAP_MPS * gap_s
+            + d * (STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2) + STEP_TURN_SHARE * turned);
+        let median = self.median_m.unwrap_or(configured_m / STEP_MEDIANS);
+        let limit = math::max(STEP_MEDIANS * median, allowed);
+        self.median_m = Some(median_step(
+            median,
+            across * across,
+            STEP_FLOOR_M / STEP_MEDIANS,
+            math::max(configured_m, STEP_FLOOR_M) / STEP_MEDIANS,
+        ));
+        let persist = math::max(STEP_PERSIST_S / cfg.gnss_period_s + 0.5, 2.0) as u16;
+        // `!(a <= b)`: a NaN step is rejected.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let beyond = !(across.abs() <= limit);
+        if beyond && self.rejects_in_row.saturating_add(1) < persist {
+            self.rejects_in_row = self.rejects_in_row.saturating_add(1);
+            return StepVerdict::Reject;
         }
+        self.rejects_in_row = 0;
+        StepVerdict::Accept
     }
 }
 
@@ -500,6 +623,34 @@ impl Gnss {
                 antenna = None;
             }
         }
+        // The step gate, while the filters run on fixes (after a restart there is no step).
+        let odo =
+            self.estimator
+                .dead_reckoned_back(self.estimator.dead_reckoned(), age_s, speed_mps);
+        let heading = self.estimator.heading_rad();
+        if let (Some(_), Some(h)) = (antenna, heading) {
+            let verdict = self.step.check(
+                cfg,
+                config.gnss_gate_m,
+                fix,
+                odo,
+                (h, self.estimator.heading_sin_cos()),
+                self.estimator.heading_var_rad2(),
+                t_us,
+            );
+            if verdict == StepVerdict::Reject {
+                bump(&mut counters.gnss_gate_rejects);
+                self.last_reject_us = Some(t_us);
+                probe.lap(Stage::GnssFixCheck);
+                return;
+            }
+        }
+        self.step.last = heading.map(|heading_rad| StepRef {
+            fix,
+            odo,
+            heading_rad,
+            t_us,
+        });
         self.rejects_in_row = 0;
         self.gate.last_accept_us = Some(t_us);
         probe.lap(Stage::GnssFixCheck);
@@ -564,10 +715,8 @@ impl Gnss {
         let measured = match self.cog {
             Some((cog, t)) if moving && now_us.saturating_sub(t) <= gnss_timeout_us => {
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
-                Some(
-                    self.estimator
-                        .correct_heading(cfg, cog, age_s, speed_mps, rates),
-                )
+                self.estimator
+                    .correct_heading_on_cog(cfg, cog, age_s, speed_mps, rates)
             }
             _ if moving => {
                 // The time since the latest fix: with a slow receiver the same chord steers
