@@ -86,7 +86,19 @@ const COG_GATE_MEDIANS: f32 = 8.9;
 /// never narrower than 5 sigma of the course's own error).
 const COG_MEDIAN_START_RAD: f32 = 0.1;
 const COG_MEDIAN_MIN_RAD: f32 = 0.001;
-const COG_MEDIAN_MAX_RAD: f32 = 0.35;
+const COG_MEDIAN_MAX_RAD: f32 = 1.0;
+/// A receiver whose courses' learnt median difference from the heading is above this, rad, is
+/// not used for the heading (until it is below [`COG_USABLE_BELOW_RAD`]): the filtered track's
+/// chords correct it instead ([`EstimatorState::correct_heading_on_track`]). A course
+/// differenced from the receiver's own fixes scatters by their noise over the distance between
+/// two fixes (0.5 m of noise at 10 Hz and 8 m/s: 0.9 rad), and pulled the heading about until
+/// the car left its corridor by metres (`scripts/sil-drive.py --cog-from-fixes`,
+/// docs/findings.md); a course from the carrier's Doppler is within hundredths of a radian.
+/// The median follows the heading's error too: a heading that has drifted leaves the courses
+/// to the chords until they have brought it back.
+pub const COG_SCATTERED_ABOVE_RAD: f32 = 0.06;
+/// See [`COG_SCATTERED_ABOVE_RAD`].
+pub const COG_USABLE_BELOW_RAD: f32 = 0.04;
 /// The learnt median's step per tick, as a share of it (from the start to a Doppler course's
 /// in about 150 ticks).
 const COG_MEDIAN_STEP: f32 = 0.03;
@@ -249,6 +261,28 @@ impl Swept {
     }
 }
 
+/// What [`EstimatorState::correct_heading_on_cog`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CogCorrection {
+    /// The heading was pulled towards the course.
+    Applied {
+        /// The heading the course measured now (the course carried to now, its lead removed).
+        measured_rad: f32,
+    },
+    /// The course was too far from the heading, and refused ([`COG_GATE_SIGMAS`]).
+    Refused,
+    /// The receiver's courses scatter too much to steer the heading
+    /// ([`COG_SCATTERED_ABOVE_RAD`]): the caller corrects it on the track instead.
+    Scattered,
+    /// No heading yet: a course is judged against one, so the first heading comes from the
+    /// filtered track ([`EstimatorState::track_course`]), whose chord is 1.5 m long at
+    /// least. A receiver's course at walking pace can be anything (differenced from fixes
+    /// with 2 cm of noise at 100 Hz and 2 m/s, it is: `scripts/sil-drive.py
+    /// --cog-from-fixes` set the heading 3.1 rad off, and the node lost its path before it
+    /// had driven).
+    NoHeading,
+}
+
 /// What [`EstimatorState::correct_heading_on_track`] did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrackCorrection {
@@ -339,6 +373,8 @@ pub struct EstimatorState {
     cog_refused_ticks: u16,
     /// The learnt median of the course's difference from the heading, rad ([`COG_GATE_MEDIANS`]).
     cog_median_rad: f32,
+    /// The receiver's courses scatter too much to use ([`COG_SCATTERED_ABOVE_RAD`]).
+    cog_scattered: bool,
 }
 
 impl Default for EstimatorState {
@@ -365,6 +401,8 @@ impl Default for EstimatorState {
             heading_var_rad2: HEADING_INITIAL_VAR_RAD2,
             cog_refused_ticks: 0,
             cog_median_rad: COG_MEDIAN_START_RAD,
+            // Unproven until its scatter is learnt (0.6 s of a Doppler receiver's courses).
+            cog_scattered: true,
         }
     }
 }
@@ -838,10 +876,20 @@ impl EstimatorState {
         age_s: f32,
         speed_mps: f32,
         rates: Rates,
-    ) -> Option<f32> {
+    ) -> CogCorrection {
         let Some(heading) = self.heading_rad else {
-            return Some(self.correct_heading(cfg, course_rad, age_s, speed_mps, rates));
+            return CogCorrection::NoHeading;
         };
+        if self.cog_scattered {
+            // While the courses scatter they only teach the median: as received, neither
+            // carried to now (a course is at most a period old: 0.01 rad at 100 Hz and
+            // 1 rad/s) nor its lead (the antenna's swing in a turn) taken off. The tick
+            // corrects the heading on the chords instead, and does not pay for both (the
+            // estimating tick's bound).
+            let innovation = math::wrap_pi(course_rad - heading);
+            self.learn_cog_scatter(innovation);
+            return CogCorrection::Scattered;
+        }
         let course_now = self.course_now(cfg, course_rad, age_s, speed_mps, rates);
         let ticks = math::max(cfg.gnss_period_s / crate::SAMPLE_PERIOD_S, 1.0);
         let sigma = COG_NOISE_MPS / math::max(speed_mps, cfg.course_min_speed_mps);
@@ -852,19 +900,14 @@ impl EstimatorState {
             COG_GATE_SIGMAS * math::sqrt(var + cog_var),
             COG_GATE_MEDIANS * self.cog_median_rad,
         );
-        self.cog_median_rad = math::median_step(
-            self.cog_median_rad,
-            innovation * innovation,
-            COG_MEDIAN_STEP,
-            COG_MEDIAN_MIN_RAD,
-            COG_MEDIAN_MAX_RAD,
-        );
+        // (Scattered from the next tick on, if so.)
+        self.learn_cog_scatter(innovation);
         // `!(a <= b)`: a NaN course is refused.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(innovation.abs() <= limit) {
             if self.cog_refused_ticks < COG_REFUSED_TICKS_MAX {
                 self.cog_refused_ticks += 1;
-                return None;
+                return CogCorrection::Refused;
             }
             var = math::max(var, innovation * innovation);
         }
@@ -875,7 +918,29 @@ impl EstimatorState {
             (1.0 - gain) * (1.0 - gain) * var + gain * gain * cog_var,
             HEADING_MAX_VAR_RAD2,
         );
-        Some(course_now)
+        CogCorrection::Applied {
+            measured_rad: course_now,
+        }
+    }
+
+    /// A course's difference from the heading, into the learnt median and the scattered
+    /// state ([`COG_SCATTERED_ABOVE_RAD`], [`COG_USABLE_BELOW_RAD`]).
+    fn learn_cog_scatter(&mut self, innovation_rad: f32) {
+        self.cog_median_rad = math::median_step(
+            self.cog_median_rad,
+            innovation_rad * innovation_rad,
+            COG_MEDIAN_STEP,
+            COG_MEDIAN_MIN_RAD,
+            COG_MEDIAN_MAX_RAD,
+        );
+        self.cog_scattered = if self.cog_scattered {
+            self.cog_median_rad >= COG_USABLE_BELOW_RAD
+        } else {
+            self.cog_median_rad > COG_SCATTERED_ABOVE_RAD
+        };
+        if self.cog_scattered {
+            self.cog_refused_ticks = 0;
+        }
     }
 
     /// The heading moved by a course correction, which is remembered for
@@ -1395,5 +1460,83 @@ mod tests {
             crossed |= now < 0.0;
         }
         assert!(crossed, "the integral wrapped");
+    }
+
+    /// A receiver's course over ground: used once its scatter about the heading is learnt to
+    /// be small (within a second), it holds the heading's variance to what it measures (the
+    /// variance grew to its cap before); a course far off for a few ticks (a receiver that
+    /// differences a multipath glitch of its own fixes) does not turn the heading; a heading
+    /// that is off by half a radian follows the courses after half a second of them; courses
+    /// that scatter by half a radian are not used.
+    #[test]
+    fn courses_over_ground_are_gated_against_the_heading() {
+        let cfg = EstimatorConfig::design(20.0, 0.0, 0.0).unwrap();
+        let v = 6.0f32;
+        let straight = Rates::default();
+        let mut st = EstimatorState::default();
+        assert_eq!(
+            st.correct_heading_on_cog(&cfg, 1.0, 0.0, v, straight),
+            CogCorrection::NoHeading
+        );
+        st.correct_heading(&cfg, 1.0, 0.0, v, straight);
+        // A receiver's courses scattered by 0.03 rad about the truth (1 rad) for 4 s.
+        let scatter = |tick: u32| 0.03 * libm::sinf(tick as f32 * 1.7);
+        for tick in 0..200 {
+            st.propagate(&cfg, v, straight, 0.02);
+            let taken = st.correct_heading_on_cog(&cfg, 1.0 + scatter(tick), 0.0, v, straight);
+            if tick >= 50 {
+                assert!(
+                    matches!(taken, CogCorrection::Applied { .. }),
+                    "tick {tick}: a healthy course refused: {taken:?}"
+                );
+            }
+        }
+        let sigma = math::sqrt(st.heading_var_rad2());
+        assert!(sigma < 0.05, "{sigma}");
+        assert!((st.heading_rad().unwrap() - 1.0).abs() < 0.01);
+        // Three ticks of a course 1.2 rad off (a glitch of 1 m to the side at 20 Hz and 6 m/s,
+        // differenced): refused, the heading unmoved.
+        for _ in 0..3 {
+            st.propagate(&cfg, v, straight, 0.02);
+            assert_eq!(
+                st.correct_heading_on_cog(&cfg, 2.2, 0.0, v, straight),
+                CogCorrection::Refused
+            );
+        }
+        assert!((st.heading_rad().unwrap() - 1.0).abs() < 0.01);
+        // The heading off by 0.5 rad (say a wrong steering gain turned it): the courses are
+        // refused or left to the chords, never pulled in half a radian at once; once the chords
+        // (the node's; here set by hand) have the heading back, the courses are used again
+        // within 1.5 s.
+        st.heading_rad = Some(0.5);
+        for tick in 0..100 {
+            st.propagate(&cfg, v, straight, 0.02);
+            let before = st.heading_rad().unwrap();
+            st.correct_heading_on_cog(&cfg, 1.0 + scatter(tick), 0.0, v, straight);
+            let step = (st.heading_rad().unwrap() - before).abs();
+            assert!(step < 0.03, "tick {tick}: {step}");
+        }
+        st.heading_rad = Some(1.0);
+        let back = (0..100u32).find(|&tick| {
+            st.propagate(&cfg, v, straight, 0.02);
+            let taken = st.correct_heading_on_cog(&cfg, 1.0 + scatter(tick), 0.0, v, straight);
+            matches!(taken, CogCorrection::Applied { .. })
+        });
+        assert!(matches!(back, Some(t) if t < 75), "{back:?}");
+        // Courses scattered by half a radian (differenced from fixes with 0.5 m of noise at
+        // 10 Hz and 6 m/s): left to the chords within a second, the heading not pulled about.
+        let heading = st.heading_rad().unwrap();
+        let mut used_late = 0;
+        for tick in 0..250u32 {
+            st.propagate(&cfg, v, straight, 0.02);
+            let wild = 1.0 + 0.5 * libm::sinf(tick as f32 * 2.3) * libm::cosf(tick as f32 * 0.37);
+            let taken = st.correct_heading_on_cog(&cfg, wild, 0.0, v, straight);
+            if tick >= 50 && matches!(taken, CogCorrection::Applied { .. }) {
+                used_late += 1;
+            }
+        }
+        assert_eq!(used_late, 0);
+        let moved = (st.heading_rad().unwrap() - heading).abs();
+        assert!(moved < 0.05, "{moved}");
     }
 }

@@ -8,7 +8,9 @@ use crate::geodesy::{Enu, GeodesyError, LocalFrame};
 use crate::math;
 use crate::model::kinematic::Pose;
 
-use super::estimator::{EstimatorConfig, EstimatorState, Rates, TrackCorrection, Xy};
+use super::estimator::{
+    CogCorrection, EstimatorConfig, EstimatorState, Rates, TrackCorrection, Xy,
+};
 use super::inputs::{GnssCourse, GnssFix, Inputs};
 use super::stage::{Stage, StageProbe, GAP_FILL_PER_TICK, GNSS_FIXES_PER_TICK};
 use super::{bump, NodeConfig};
@@ -217,6 +219,8 @@ pub struct Gnss {
     estimator: EstimatorState,
     /// The receiver's course (rad) and its receive time, while the car moves.
     cog: Option<(f32, u64)>,
+    /// Courses in a row within [`COG_AGREE_RAD`] of the one before ([`COG_AGREEING`]).
+    cog_agreeing: u8,
     /// Consecutive fixes the gate rejected.
     rejects_in_row: u16,
     /// When the gate last rejected a fix.
@@ -348,6 +352,14 @@ pub const STEP_TURN_SHARE: f32 = 0.5;
 /// at every rate (0.2 s at least, 2.5 periods).
 pub const STEP_PERSIST_S: f32 = 0.15;
 
+/// Before the node has a heading, a course sets it only when this many courses in a row each
+/// agreed with the one before within [`COG_AGREE_RAD`]: a course from the carrier's Doppler
+/// does at once, one differenced from noisy fixes at walking pace never
+/// ([`super::estimator::CogCorrection::NoHeading`]); else the filtered track sets it.
+pub const COG_AGREEING: u8 = 3;
+/// See [`COG_AGREEING`], rad.
+pub const COG_AGREE_RAD: f32 = 0.05;
+
 /// The step gate's verdict on a fix.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum StepVerdict {
@@ -380,7 +392,9 @@ impl StepGate {
         let across = ex * c - ey * s;
         let gap_s = math::u64_to_f32(t_us.saturating_sub(last.t_us)) * 1e-6;
         let d = math::sqrt(dx * dx + dy * dy);
-        let turned = math::wrap_pi(heading_rad - last.heading_rad).abs();
+        // Not wrapped: across +-pi the turn reads as a whole one, and the one fix there is
+        // allowed more than it needs.
+        let turned = (heading_rad - last.heading_rad).abs();
         let allowed = STEP_FLOOR_M
             + STEP_GAP_MPS * gap_s
             + d * (STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2) + STEP_TURN_SHARE * turned);
@@ -479,7 +493,16 @@ impl Gnss {
     /// moves (COG is meaningless when standing still); only true north is understood.
     pub fn receive_course(&mut self, config: &NodeConfig, course: &GnssCourse) {
         if course.sog_mps >= config.estimator.course_min_speed_mps && course.reference == 0 {
-            self.cog = Some((math::wrap_pi(course.cog_rad), course.t_us));
+            let cog = math::wrap_pi(course.cog_rad);
+            let agrees = self
+                .cog
+                .is_some_and(|(last, _)| math::wrap_pi(cog - last).abs() <= COG_AGREE_RAD);
+            self.cog_agreeing = if agrees {
+                self.cog_agreeing.saturating_add(1)
+            } else {
+                0
+            };
+            self.cog = Some((cog, course.t_us));
         }
     }
 
@@ -712,13 +735,30 @@ impl Gnss {
         let cfg = &config.estimator;
         let gnss_timeout_us = config.freshness.timeout_us(Input::Gnss);
         let moving = speed_mps >= cfg.course_min_speed_mps;
-        let measured = match self.cog {
+        // The receiver's course while it is fresh; the chords of the filtered track when there
+        // is none, or its courses scatter too much to steer the heading.
+        let from_cog = match self.cog {
             Some((cog, t)) if moving && now_us.saturating_sub(t) <= gnss_timeout_us => {
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
-                self.estimator
-                    .correct_heading_on_cog(cfg, cog, age_s, speed_mps, rates)
+                Some(
+                    self.estimator
+                        .correct_heading_on_cog(cfg, cog, age_s, speed_mps, rates),
+                )
             }
-            _ if moving => {
+            _ => None,
+        };
+        let measured = match from_cog {
+            Some(CogCorrection::Applied { measured_rad }) => Some(measured_rad),
+            Some(CogCorrection::NoHeading) if self.cog_agreeing >= COG_AGREEING => {
+                let (cog, t) = self.cog.unwrap_or_default();
+                let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
+                Some(
+                    self.estimator
+                        .correct_heading(cfg, cog, age_s, speed_mps, rates),
+                )
+            }
+            Some(CogCorrection::Refused) => None,
+            Some(CogCorrection::Scattered | CogCorrection::NoHeading) | None if moving => {
                 // The time since the latest fix: with a slow receiver the same chord steers
                 // the heading for a whole period, while the car keeps turning.
                 let since_fix_us = inputs

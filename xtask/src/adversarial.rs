@@ -158,6 +158,9 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         gnss_hz: rates[rng.below(rates.len() as u64) as usize],
         cog_hz: cog_rates[rng.below(cog_rates.len() as u64) as usize],
         gnss_noise_m: rng.range(0.0, 3.0),
+        // Not drawn: `stages-cog-scattered` scatters them for every car, and the search's
+        // draws stay those of the figures it found.
+        cog_noise_rad: 0.0,
         gnss_dropout: window(rng, 1.5),
         gnss_gap_exact: rng.below(2) == 0,
         gnss_jump: window(rng, 2.0),

@@ -106,6 +106,8 @@ pub struct Spec {
     pub cog_hz: f64,
     /// White noise on each fix, m.
     pub gnss_noise_m: f64,
+    /// White noise on each course over ground, rad (a receiver that differences its fixes).
+    pub cog_noise_rad: f64,
     /// GNSS silent in these windows.
     pub gnss_dropout: Option<Periodic>,
     /// Each dropout window a gap of exactly its length between two fixes, the second at a
@@ -189,6 +191,7 @@ impl Spec {
             gnss_hz: 100.0,
             cog_hz: 100.0,
             gnss_noise_m: 0.3,
+            cog_noise_rad: 0.0,
             gnss_dropout: None,
             gnss_gap_exact: false,
             gnss_jump: None,
@@ -600,6 +603,12 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
     }
     for (k, t) in ticks_of(spec.cog_hz, 0.0057, spec.seconds).enumerate() {
         let (_, _, h, v) = truth.at(t);
+        // (Drawn only when asked for: the other drives' random streams stay as they were.)
+        let h = if spec.cog_noise_rad > 0.0 {
+            h + spec.cog_noise_rad * rng.normal()
+        } else {
+            h
+        };
         push(
             t,
             GnssCogSog {
@@ -815,6 +824,13 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             gnss_hz: TAKEN_FASTER * gnss_hz,
             cog_hz: TAKEN_FASTER * gnss_hz,
             ..Spec::plain("stages-bursts")
+        },
+        // Courses over ground that scatter (a receiver that differences its fixes): the
+        // estimate judges each against the heading, then corrects the heading on the track's
+        // chords in the same tick (`estimator::CogCorrection::Scattered`).
+        Spec {
+            cog_noise_rad: 0.5,
+            ..plain("stages-cog-scattered")
         },
         // Top speed, full lock, steering flipping: the dynamic model, turns of more than
         // 0.5 rad per 0.2 s segment, headings wrapping, predictions saturating.
