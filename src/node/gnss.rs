@@ -219,8 +219,11 @@ pub struct Gnss {
     estimator: EstimatorState,
     /// The receiver's course (rad) and its receive time, while the car moves.
     cog: Option<(f32, u64)>,
-    /// Courses in a row within [`COG_AGREE_RAD`] of the one before ([`COG_AGREEING`]).
+    /// Courses in a row within [`COG_AGREE_RAD`] of the one before ([`COG_AGREEING`]), as the
+    /// ticks see them (the latest of each tick: judged once a tick, not in the frame stage),
+    /// and the last one seen.
     cog_agreeing: u8,
+    cog_seen: Option<(f32, u64)>,
     /// Consecutive fixes the gate rejected.
     rejects_in_row: u16,
     /// When the gate last rejected a fix.
@@ -293,8 +296,8 @@ fn median_step(median_m: f32, d2_m2: f32, lo_m: f32, hi_m: f32) -> f32 {
 /// manoeuvre at the grip limit is decimetres, so its floor is a metre, and a multipath glitch
 /// under a metre passed into the lowpass: the sixth black-box probe's two fixes 1 m to the
 /// side at 20 Hz turned the heading and took the car out of its corridor (docs/findings.md).
-/// Between two fixes the dead reckoning drifts by far less (its heading's error and the turn
-/// it may have misjudged, times the distance driven, plus [`STEP_GAP_MPS`] for the slide),
+/// Between two fixes the dead reckoning drifts by far less (its heading's error, the turn it
+/// may have misjudged and [`STEP_SLIDE_PER_M`] for the slide, times the distance driven),
 /// and the receiver's own scatter from fix to fix is learnt as a median, so a step across the
 /// heading beyond both is a glitch. Along the heading a fix's latency jitter and the wheel
 /// speed's scale move it, and the lateral control does not feel it, so only the side is
@@ -321,8 +324,6 @@ struct StepRef {
     odo: Xy,
     /// The heading then, rad.
     heading_rad: f32,
-    /// Its receive time, us.
-    t_us: u64,
 }
 
 /// The step gate rejects a step across the heading beyond this many of its learnt medians
@@ -334,9 +335,10 @@ pub const STEP_MEDIANS: f32 = 8.9;
 /// centimetres.
 pub const STEP_FLOOR_M: f32 = 0.15;
 
-/// The dead reckoning's sideways slide the step gate allows per second between two fixes,
-/// m/s: the rear axle's slide the single-track model misjudges at the grip limit.
-pub const STEP_GAP_MPS: f32 = 0.5;
+/// The dead reckoning's sideways slide the step gate allows per metre driven between two
+/// fixes: the rear axle's slide the single-track model misjudges at the grip limit (0.5 m/s
+/// at 10 m/s).
+pub const STEP_SLIDE_PER_M: f32 = 0.05;
 
 /// The heading's error the step gate allows, in standard deviations of the heading filter's
 /// own variance, times the distance driven between the fixes.
@@ -370,7 +372,7 @@ enum StepVerdict {
 }
 
 impl StepGate {
-    /// The fix `fix`, taken when dead reckoning had the antenna at `odo`, at `t_us`, with the
+    /// The fix `fix`, taken when dead reckoning had the antenna at `odo`, with the
     /// estimator's heading `heading_rad` (sine and cosine `sin_cos`) and its variance.
     #[allow(clippy::too_many_arguments)]
     fn check(
@@ -381,7 +383,6 @@ impl StepGate {
         odo: Xy,
         (heading_rad, (s, c)): (f32, (f32, f32)),
         heading_var_rad2: f32,
-        t_us: u64,
     ) -> StepVerdict {
         let Some(last) = self.last else {
             return StepVerdict::Accept;
@@ -390,14 +391,14 @@ impl StepGate {
         let (ex, ey) = (fix.x_m - last.fix.x_m - dx, fix.y_m - last.fix.y_m - dy);
         // Right of the heading is (cos, -sin) (headings clockwise from north).
         let across = ex * c - ey * s;
-        let gap_s = math::u64_to_f32(t_us.saturating_sub(last.t_us)) * 1e-6;
         let d = math::sqrt(dx * dx + dy * dy);
         // Not wrapped: across +-pi the turn reads as a whole one, and the one fix there is
         // allowed more than it needs.
         let turned = (heading_rad - last.heading_rad).abs();
         let allowed = STEP_FLOOR_M
-            + STEP_GAP_MPS * gap_s
-            + d * (STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2) + STEP_TURN_SHARE * turned);
+            + d * (STEP_SLIDE_PER_M
+                + STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2)
+                + STEP_TURN_SHARE * turned);
         let median = self.median_m.unwrap_or(configured_m / STEP_MEDIANS);
         let limit = math::max(STEP_MEDIANS * median, allowed);
         self.median_m = Some(median_step(
@@ -493,16 +494,7 @@ impl Gnss {
     /// moves (COG is meaningless when standing still); only true north is understood.
     pub fn receive_course(&mut self, config: &NodeConfig, course: &GnssCourse) {
         if course.sog_mps >= config.estimator.course_min_speed_mps && course.reference == 0 {
-            let cog = math::wrap_pi(course.cog_rad);
-            let agrees = self
-                .cog
-                .is_some_and(|(last, _)| math::wrap_pi(cog - last).abs() <= COG_AGREE_RAD);
-            self.cog_agreeing = if agrees {
-                self.cog_agreeing.saturating_add(1)
-            } else {
-                0
-            };
-            self.cog = Some((cog, course.t_us));
+            self.cog = Some((math::wrap_pi(course.cog_rad), course.t_us));
         }
     }
 
@@ -659,7 +651,6 @@ impl Gnss {
                 odo,
                 (h, self.estimator.heading_sin_cos()),
                 self.estimator.heading_var_rad2(),
-                t_us,
             );
             if verdict == StepVerdict::Reject {
                 bump(&mut counters.gnss_gate_rejects);
@@ -672,7 +663,6 @@ impl Gnss {
             fix,
             odo,
             heading_rad,
-            t_us,
         });
         self.rejects_in_row = 0;
         self.gate.last_accept_us = Some(t_us);
@@ -747,6 +737,21 @@ impl Gnss {
             }
             _ => None,
         };
+        // Before there is a heading: do the courses agree with each other?
+        if self.estimator.heading_rad().is_none() && self.cog != self.cog_seen {
+            let agrees = match (self.cog, self.cog_seen) {
+                (Some((now, _)), Some((before, _))) => {
+                    math::wrap_pi(now - before).abs() <= COG_AGREE_RAD
+                }
+                _ => false,
+            };
+            self.cog_agreeing = if agrees {
+                self.cog_agreeing.saturating_add(1)
+            } else {
+                0
+            };
+            self.cog_seen = self.cog;
+        }
         let measured = match from_cog {
             Some(CogCorrection::Applied { measured_rad }) => Some(measured_rad),
             Some(CogCorrection::NoHeading) if self.cog_agreeing >= COG_AGREEING => {
