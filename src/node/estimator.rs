@@ -643,6 +643,14 @@ impl EstimatorState {
     /// One GNSS fix in local metres, `age_s` before the current dead-reckoning instant
     /// (fixes arrive between ticks), with the car's speed then.
     pub fn add_fix(&mut self, cfg: &EstimatorConfig, fix: Xy, age_s: f32, speed_mps: f32) {
+        let odo_fix = self.dead_reckoned_back(self.odo_now, age_s, speed_mps);
+        self.add_fix_at(cfg, fix, odo_fix);
+    }
+
+    /// [`Self::add_fix`] with where dead reckoning had the antenna at the fix's instant
+    /// already known (`dead_reckoned_back(dead_reckoned(), age_s, speed_mps)`: the step gate
+    /// computed it).
+    pub fn add_fix_at(&mut self, cfg: &EstimatorConfig, fix: Xy, odo_fix: Xy) {
         if self.fixes == 0 {
             self.fir_x.prime(fix.x_m);
             self.fir_y.prime(fix.y_m);
@@ -656,14 +664,6 @@ impl EstimatorState {
         let fy = cfg.ma.process(&mut self.ma_y, ly);
         let filtered = Xy { x_m: fx, y_m: fy };
         self.filtered = Some(filtered);
-        // Where dead reckoning had the car when the fix was taken (the heading's sine and
-        // cosine were computed once this tick by `propagate`).
-        let (s, c) = self.heading_sin_cos;
-        let back_m = speed_mps * age_s;
-        let odo_fix = Xy {
-            x_m: self.odo_now.x_m - back_m * s,
-            y_m: self.odo_now.y_m - back_m * c,
-        };
         self.odo_head = (self.odo_head + 1) % ODO_LEN;
         if let Some(slot) = self.odo_at_fix.get_mut(self.odo_head) {
             *slot = odo_fix;

@@ -313,6 +313,13 @@ struct StepGate {
     median_m: Option<f32>,
     /// Fixes the step gate rejected in a row.
     rejects_in_row: u16,
+    /// What this tick allows per metre driven, and per metre squared (the turn), and after
+    /// how many rejections a step is the receiver's: set once a tick by [`Gnss::propagate`]
+    /// (the heading and its variance move only between ticks' fixes), so that each fix pays
+    /// for the comparison alone.
+    per_m: f32,
+    per_m2: f32,
+    persist: u16,
 }
 
 /// An accepted fix, as the step gate remembers it.
@@ -322,8 +329,6 @@ struct StepRef {
     fix: Xy,
     /// Where dead reckoning had the antenna at the fix's instant.
     odo: Xy,
-    /// The heading then, rad.
-    heading_rad: f32,
 }
 
 /// The step gate rejects a step across the heading beyond this many of its learnt medians
@@ -345,8 +350,9 @@ pub const STEP_SLIDE_PER_M: f32 = 0.05;
 pub const STEP_HEADING_SIGMAS: f32 = 3.0;
 
 /// The share of the turn between two fixes the step gate allows the dead reckoning to have
-/// misjudged, times the distance driven (an arc turning by psi over d metres lies psi d / 2
-/// to the side of its chord: the whole of that sideways motion, misjudged).
+/// misjudged, times the distance driven (an arc of curvature k over d metres lies k d^2 / 2
+/// to the side of its chord: the whole of that sideways motion, misjudged; k is the tick's
+/// yaw rate over the speed).
 pub const STEP_TURN_SHARE: f32 = 0.5;
 
 /// A step that lasts this long is the receiver's, s ([`StepGate`]): its fix this many periods,
@@ -372,18 +378,26 @@ enum StepVerdict {
 }
 
 impl StepGate {
-    /// The fix `fix`, taken when dead reckoning had the antenna at `odo`, with the
-    /// estimator's heading `heading_rad` (sine and cosine `sin_cos`) and its variance.
-    #[allow(clippy::too_many_arguments)]
-    fn check(
+    /// What the tick allows ([`Self::per_m`]): the heading's variance, the car's speed and
+    /// yaw rate this tick.
+    fn set_tick(
         &mut self,
         cfg: &EstimatorConfig,
-        configured_m: f32,
-        fix: Xy,
-        odo: Xy,
-        (heading_rad, (s, c)): (f32, (f32, f32)),
         heading_var_rad2: f32,
-    ) -> StepVerdict {
+        speed_mps: f32,
+        yaw_rps: f32,
+    ) {
+        self.per_m = STEP_SLIDE_PER_M + STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2);
+        let curvature = yaw_rps.abs() / math::max(speed_mps, cfg.course_min_speed_mps);
+        self.per_m2 = STEP_TURN_SHARE * 0.5 * curvature;
+        if self.persist == 0 {
+            self.persist = math::max(STEP_PERSIST_S / cfg.gnss_period_s + 0.5, 2.0) as u16;
+        }
+    }
+
+    /// The fix `fix`, taken when dead reckoning had the antenna at `odo`, with the heading's
+    /// sine and cosine `(s, c)`.
+    fn check(&mut self, configured_m: f32, fix: Xy, odo: Xy, (s, c): (f32, f32)) -> StepVerdict {
         let Some(last) = self.last else {
             return StepVerdict::Accept;
         };
@@ -392,26 +406,19 @@ impl StepGate {
         // Right of the heading is (cos, -sin) (headings clockwise from north).
         let across = ex * c - ey * s;
         let d = math::sqrt(dx * dx + dy * dy);
-        // Not wrapped: across +-pi the turn reads as a whole one, and the one fix there is
-        // allowed more than it needs.
-        let turned = (heading_rad - last.heading_rad).abs();
-        let allowed = STEP_FLOOR_M
-            + d * (STEP_SLIDE_PER_M
-                + STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2)
-                + STEP_TURN_SHARE * turned);
-        let median = self.median_m.unwrap_or(configured_m / STEP_MEDIANS);
+        let allowed = STEP_FLOOR_M + d * (self.per_m + d * self.per_m2);
+        let median = self.median_m.unwrap_or(configured_m * (1.0 / STEP_MEDIANS));
         let limit = math::max(STEP_MEDIANS * median, allowed);
         self.median_m = Some(median_step(
             median,
             across * across,
             STEP_FLOOR_M / STEP_MEDIANS,
-            math::max(configured_m, STEP_FLOOR_M) / STEP_MEDIANS,
+            math::max(configured_m, STEP_FLOOR_M) * (1.0 / STEP_MEDIANS),
         ));
-        let persist = math::max(STEP_PERSIST_S / cfg.gnss_period_s + 0.5, 2.0) as u16;
         // `!(a <= b)`: a NaN step is rejected.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         let beyond = !(across.abs() <= limit);
-        if beyond && self.rejects_in_row.saturating_add(1) < persist {
+        if beyond && self.rejects_in_row.saturating_add(1) < self.persist {
             self.rejects_in_row = self.rejects_in_row.saturating_add(1);
             return StepVerdict::Reject;
         }
@@ -488,6 +495,12 @@ impl Gnss {
     /// Dead reckoning over `dt_s` (see [`EstimatorState::propagate`]).
     pub fn propagate(&mut self, cfg: &EstimatorConfig, speed_mps: f32, rates: Rates, dt_s: f32) {
         self.estimator.propagate(cfg, speed_mps, rates, dt_s);
+        self.step.set_tick(
+            cfg,
+            self.estimator.heading_var_rad2(),
+            speed_mps,
+            rates.yaw_rps,
+        );
     }
 
     /// A course from the receiver (PGN 129026): kept, with its receive time, while the car
@@ -643,14 +656,12 @@ impl Gnss {
             self.estimator
                 .dead_reckoned_back(self.estimator.dead_reckoned(), age_s, speed_mps);
         let heading = self.estimator.heading_rad();
-        if let (Some(_), Some(h)) = (antenna, heading) {
+        if antenna.is_some() && heading.is_some() {
             let verdict = self.step.check(
-                cfg,
                 config.gnss_gate_m,
                 fix,
                 odo,
-                (h, self.estimator.heading_sin_cos()),
-                self.estimator.heading_var_rad2(),
+                self.estimator.heading_sin_cos(),
             );
             if verdict == StepVerdict::Reject {
                 bump(&mut counters.gnss_gate_rejects);
@@ -659,11 +670,7 @@ impl Gnss {
                 return;
             }
         }
-        self.step.last = heading.map(|heading_rad| StepRef {
-            fix,
-            odo,
-            heading_rad,
-        });
+        self.step.last = heading.map(|_| StepRef { fix, odo });
         self.rejects_in_row = 0;
         self.gate.last_accept_us = Some(t_us);
         probe.lap(Stage::GnssFixCheck);
@@ -704,7 +711,7 @@ impl Gnss {
                 return;
             }
         }
-        self.estimator.add_fix(cfg, fix, age_s, speed_mps);
+        self.estimator.add_fix_at(cfg, fix, odo);
         inputs.freshness.mark(Input::Gnss, t_us);
         probe.lap(Stage::GnssFixFilter);
     }
