@@ -186,10 +186,20 @@ pub fn hypot(x: f32, y: f32) -> f32 {
 /// range are returned unchanged (bit-exact); others are reduced by k * 2 pi with a two-part
 /// 2 pi, so the result is within 1.2e-7 rad of the exact reduction for |x| <= 100 rad (measured;
 /// the node's heading only ever leaves the range by one increment). Non-finite in, NaN out.
+/// The range check is inlined at every call, the reduction is one function: the node calls
+/// this some forty places, and a reduction inlined at each cost the board's flash.
+#[inline(always)]
 pub fn wrap_pi(x: f32) -> f32 {
     if (-PI..PI).contains(&x) {
-        return x;
+        x
+    } else {
+        wrap_pi_reduce(x)
     }
+}
+
+/// [`wrap_pi`] of an angle outside [-PI, PI).
+#[inline(never)]
+fn wrap_pi_reduce(x: f32) -> f32 {
     // One turn out, the usual case (a heading plus an increment, a difference of two
     // headings, a course in [0, 2 pi)): k = +-1 without the division and `floorf`; the same
     // result as the general reduction with that k.
