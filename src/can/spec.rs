@@ -66,6 +66,9 @@ pub struct SignalSpec {
 /// Raw magnitudes below this (2^22) convert between raw and physical exactly in f32.
 const EXACT_BELOW: u64 = 1 << 22;
 
+/// [`SignalSpec::to_raw`]'s fast path holds below this magnitude (2^30: `as i32` exact).
+const WIDE_ABOVE: f32 = 1_073_741_824.0;
+
 /// The adjacent f32 of a finite non-zero `x` in the direction of `toward` (core has no
 /// `next_up` on the embedded target's MSRV path; bit arithmetic is exact).
 fn next_toward(x: f32, toward: f32) -> f32 {
@@ -150,9 +153,43 @@ impl SignalSpec {
             .map_or(u64::MAX, |m| m.wrapping_sub(1))
     }
 
+    /// The signal's place when it lies within one 32-bit half of the payload: the half (0:
+    /// bits 0..32, 1: bits 32..64), the shift within it and the width's mask. `None` when it
+    /// straddles bit 32, is wider than 32 bits or empty.
+    #[inline(always)]
+    fn in_half(&self) -> Option<(u32, u32, u32)> {
+        let start = u32::from(self.start_bit);
+        let len = u32::from(self.len_bits);
+        let end = start + len;
+        if len == 0 || len > 32 || end > 64 || start / 32 != (end - 1) / 32 {
+            return None;
+        }
+        Some((start / 32, start % 32, u32::MAX.wrapping_shr(32 - len)))
+    }
+
     /// Reads the raw value (sign-extended when signed). Bits outside the 64-bit payload read 0.
+    ///
+    /// A signal within one 32-bit half is read with 32-bit shifts: where the signal is not a
+    /// constant (a message's counter, read through its [`Integrity`]) a variable 64-bit shift
+    /// and mask are some twenty instructions on the Cortex-M4, a 32-bit one two. Where it is
+    /// a constant both fold to the same code.
+    #[inline(always)]
     pub fn read_raw(&self, data: &[u8; 8]) -> i64 {
         let word = u64::from_le_bytes(*data);
+        if let Some((half, shift, mask)) = self.in_half() {
+            let w = if half == 0 {
+                word as u32
+            } else {
+                (word >> 32) as u32
+            };
+            let bits = w.wrapping_shr(shift) & mask;
+            return if self.signed {
+                let sign = 1u32.wrapping_shl(u32::from(self.len_bits) - 1);
+                i64::from((bits ^ sign).wrapping_sub(sign) as i32)
+            } else {
+                i64::from(bits)
+            };
+        }
         let bits = word.checked_shr(u32::from(self.start_bit)).unwrap_or(0) & self.mask();
         if self.signed && self.len_bits > 0 && self.len_bits < 64 {
             let sign = 1u64 << (self.len_bits - 1);
@@ -163,13 +200,22 @@ impl SignalSpec {
         }
     }
 
-    /// Writes `raw` (truncated to the signal's width) into `data`, leaving other bits alone.
+    /// Writes `raw` (truncated to the signal's width) into `data`, leaving other bits alone;
+    /// within one 32-bit half with 32-bit shifts, as [`Self::read_raw`].
+    #[inline(always)]
     pub fn write_raw(&self, data: &mut [u8; 8], raw: i64) {
+        let word = u64::from_le_bytes(*data);
+        if let Some((half, shift, mask)) = self.in_half() {
+            let (mut lo, mut hi) = (word as u32, (word >> 32) as u32);
+            let w = if half == 0 { &mut lo } else { &mut hi };
+            *w = (*w & !mask.wrapping_shl(shift)) | ((raw as u32) & mask).wrapping_shl(shift);
+            *data = ((u64::from(hi) << 32) | u64::from(lo)).to_le_bytes();
+            return;
+        }
         let shift = u32::from(self.start_bit);
         let mask = self.mask().checked_shl(shift).unwrap_or(0);
         let value = (raw as u64).checked_shl(shift).unwrap_or(0) & mask;
-        let word = (u64::from_le_bytes(*data) & !mask) | value;
-        *data = word.to_le_bytes();
+        *data = ((word & !mask) | value).to_le_bytes();
     }
 
     /// Whether `raw` is within the signal's valid limits.
@@ -207,19 +253,43 @@ impl SignalSpec {
         physical
     }
 
-    /// Raw value of a physical one, rounded to nearest; `None` if `physical` is not finite or
-    /// the rounded value is outside `raw_min..=raw_max` (the caller then sends "not available").
+    /// Raw value of a physical one, rounded to nearest (halves away from zero); `None` if
+    /// `physical` is not finite or the rounded value is outside `raw_min..=raw_max` (the caller
+    /// then sends "not available").
+    ///
+    /// Below 2^30 in magnitude (every float signal of the table: their limits are below 2^24)
+    /// the rounding is one truncating VCVT and the remainder, which is exact in f32, and the
+    /// limits are compared as integers: about half the instructions of `libm::roundf` and float
+    /// comparisons on the Cortex-M4, same result for every `f32` (`tests::to_raw_*`). Larger
+    /// values, and NaN, go to [`Self::wide_raw`].
+    #[inline]
     pub fn to_raw(&self, physical: f32) -> Option<i64> {
-        let raw = libm::roundf((physical - self.offset) / self.scale);
-        // NaN fails both comparisons; limits of float signals are <= 2^24, exact in f32.
-        if raw.is_finite() && raw >= self.raw_min as f32 && raw <= self.raw_max as f32 {
-            // `raw` is integer-valued: below 2^31 in magnitude `as i32` is exact, and one VCVT
-            // on the Cortex-M4 where `as i64` is a soft-float library call.
-            Some(if (-2_147_483_648.0..2_147_483_648.0).contains(&raw) {
-                i64::from(raw as i32)
-            } else {
-                raw as i64
-            })
+        let scaled = (physical - self.offset) / self.scale;
+        // NaN fails the comparison and goes the wide way too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !(scaled.abs() < WIDE_ABOVE) {
+            return self.wide_raw(scaled);
+        }
+        // `scaled as i32` truncates towards zero and is exact below 2^30; so is the remainder
+        // (an f32 minus its own integer part).
+        let truncated = scaled as i32;
+        let rest = scaled - truncated as f32;
+        let raw = i64::from(truncated + i32::from(rest >= 0.5) - i32::from(rest <= -0.5));
+        if raw >= self.raw_min && raw <= self.raw_max {
+            Some(raw)
+        } else {
+            None
+        }
+    }
+
+    /// [`Self::to_raw`] of a scaled value beyond 2^30 in magnitude, or NaN: out of line.
+    #[cold]
+    #[inline(never)]
+    fn wide_raw(&self, scaled: f32) -> Option<i64> {
+        let raw = libm::roundf(scaled);
+        // NaN and infinities fail; beyond 2^24 every f32 is an integer and `as i64` exact.
+        if raw.is_finite() && (self.raw_min..=self.raw_max).contains(&(raw as i64)) {
+            Some(raw as i64)
         } else {
             None
         }
@@ -997,4 +1067,173 @@ pub const fn worst_case_frame_bits(extended: bool, dlc: u8) -> u32 {
 pub const fn nominal_frame_bits(extended: bool, dlc: u8) -> u32 {
     let g: u32 = if extended { 54 } else { 34 };
     dlc as u32 * 8 + g + 13
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The packer and rounding as they were before the 32-bit paths and the truncating
+    /// rounding (64-bit shifts, `libm::roundf`): the reference the faster code must match bit
+    /// for bit.
+    mod reference {
+        use super::SignalSpec;
+
+        fn mask(s: &SignalSpec) -> u64 {
+            1u64.checked_shl(u32::from(s.len_bits))
+                .map_or(u64::MAX, |m| m.wrapping_sub(1))
+        }
+
+        pub fn read_raw(s: &SignalSpec, data: &[u8; 8]) -> i64 {
+            let word = u64::from_le_bytes(*data);
+            let bits = word.checked_shr(u32::from(s.start_bit)).unwrap_or(0) & mask(s);
+            if s.signed && s.len_bits > 0 && s.len_bits < 64 {
+                let sign = 1u64 << (s.len_bits - 1);
+                (bits ^ sign).wrapping_sub(sign) as i64
+            } else {
+                bits as i64
+            }
+        }
+
+        pub fn write_raw(s: &SignalSpec, data: &mut [u8; 8], raw: i64) {
+            let shift = u32::from(s.start_bit);
+            let mask = mask(s).checked_shl(shift).unwrap_or(0);
+            let value = (raw as u64).checked_shl(shift).unwrap_or(0) & mask;
+            let word = (u64::from_le_bytes(*data) & !mask) | value;
+            *data = word.to_le_bytes();
+        }
+
+        pub fn to_raw(s: &SignalSpec, physical: f32) -> Option<i64> {
+            // The limits compared as integers: in f32 (as before) a 32-bit signal's largest
+            // raw value, 2^32 - 1, rounds to 2^32 and let 2^32 through.
+            let raw = libm::roundf((physical - s.offset) / s.scale);
+            if raw.is_finite() && (s.raw_min..=s.raw_max).contains(&(raw as i64)) {
+                Some(raw as i64)
+            } else {
+                None
+            }
+        }
+    }
+
+    /// Every signal of the table, the counters and the CRC.
+    fn signals() -> impl Iterator<Item = &'static SignalSpec> {
+        MESSAGES.iter().flat_map(|m| m.signals.iter()).chain([
+            &sig::COUNTER_IN,
+            &sig::COUNTER_OUT,
+            &sig::CRC,
+        ])
+    }
+
+    /// A small deterministic generator (xorshift64*), so that the sweep is the same every run.
+    fn next(state: &mut u64) -> u64 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        state.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// The physical values a signal's rounding can go wrong at: its raw limits, one and a half
+    /// and a half raw step either side of them and of zero, the f32 neighbours of each, and
+    /// the values that are not numbers.
+    fn edge_values(s: &SignalSpec) -> Vec<f32> {
+        let mut raws: Vec<f64> = Vec::new();
+        for base in [s.raw_min as f64, s.raw_max as f64, 0.0, 1.0, -1.0] {
+            for d in [-1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5] {
+                raws.push(base + d);
+            }
+        }
+        let mut values = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        for raw in raws {
+            let v = (raw * f64::from(s.scale) + f64::from(s.offset)) as f32;
+            let mut lower = v;
+            let mut upper = v;
+            for _ in 0..3 {
+                lower = f32::from_bits(if lower > 0.0 {
+                    lower.to_bits() - 1
+                } else {
+                    lower.to_bits() + 1
+                });
+                upper = f32::from_bits(if upper >= 0.0 {
+                    upper.to_bits() + 1
+                } else {
+                    upper.to_bits() - 1
+                });
+                values.extend([lower, upper]);
+            }
+            values.push(v);
+        }
+        values
+    }
+
+    #[test]
+    fn to_raw_matches_rounding_half_away_from_zero_at_every_edge() {
+        for s in signals() {
+            for v in edge_values(s) {
+                assert_eq!(s.to_raw(v), reference::to_raw(s, v), "{} at {v:e}", s.name);
+            }
+        }
+    }
+
+    #[test]
+    fn to_raw_matches_the_reference_over_random_bit_patterns_and_halves() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        for s in signals() {
+            for _ in 0..20_000 {
+                // Any f32 at all, and values near the signal's range: halves of a raw step,
+                // where rounding ties.
+                let any = f32::from_bits(next(&mut state) as u32);
+                let span = (s.raw_max - s.raw_min) as f64 * 1.2;
+                let r = (next(&mut state) >> 11) as f64 / (1u64 << 53) as f64;
+                let raw = (s.raw_min as f64 - 0.1 * span + r * span).round() + 0.5;
+                let half = (raw * f64::from(s.scale) + f64::from(s.offset)) as f32;
+                for v in [any, half] {
+                    assert_eq!(s.to_raw(v), reference::to_raw(s, v), "{} at {v:e}", s.name);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn to_raw_rounds_halves_away_from_zero() {
+        let s = SignalSpec::int("t", 0, 16);
+        for (v, raw) in [
+            (2.5, 3),
+            (-2.5, -3),
+            (0.5, 1),
+            (-0.5, -1),
+            (0.49999997, 0),
+            (1.4999999, 1),
+        ] {
+            assert_eq!(s.to_raw(v), Some(raw), "{v}");
+        }
+        assert_eq!(s.to_raw(32_767.4), Some(32_767));
+        assert_eq!(s.to_raw(32_767.5), None);
+        assert_eq!(s.to_raw(-32_768.5), None);
+        assert_eq!(s.to_raw(f32::NAN), None);
+        assert_eq!(s.to_raw(3.0e9), None);
+    }
+
+    #[test]
+    fn packing_matches_the_64_bit_reference_for_every_place_and_width() {
+        let mut state = 0x0123_4567_89AB_CDEFu64;
+        for start in 0..64u8 {
+            for len in 1..=32u8.min(64 - start) {
+                for signed in [false, true] {
+                    let s = SignalSpec {
+                        signed,
+                        ..SignalSpec::uint("t", start, len)
+                    };
+                    for _ in 0..8 {
+                        let data = next(&mut state).to_le_bytes();
+                        let raw = next(&mut state) as i64;
+                        assert_eq!(s.read_raw(&data), reference::read_raw(&s, &data));
+                        let (mut fast, mut slow) = (data, data);
+                        s.write_raw(&mut fast, raw);
+                        reference::write_raw(&s, &mut slow, raw);
+                        assert_eq!(fast, slow, "bit {start}, {len} bits, raw {raw:#x}");
+                    }
+                }
+            }
+        }
+    }
 }
