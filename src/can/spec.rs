@@ -1073,45 +1073,49 @@ pub const fn nominal_frame_bits(extended: bool, dlc: u8) -> u32 {
 mod tests {
     use super::*;
 
-    /// The packer and rounding as they were before the 32-bit paths and the truncating
-    /// rounding (64-bit shifts, `libm::roundf`): the reference the faster code must match bit
-    /// for bit.
+    /// Independent references: the packer bit by bit over the payload's bytes (Intel order:
+    /// bit `b` is bit `b % 8` of byte `b / 8`), the rounding in f64 (`f64::round`, halves away
+    /// from zero, of the same f32 quotient) with the limits compared as integers.
     mod reference {
         use super::SignalSpec;
 
-        fn mask(s: &SignalSpec) -> u64 {
-            1u64.checked_shl(u32::from(s.len_bits))
-                .map_or(u64::MAX, |m| m.wrapping_sub(1))
+        fn bit(data: &[u8; 8], b: u32) -> u64 {
+            u64::from((data[(b / 8) as usize] >> (b % 8)) & 1)
         }
 
         pub fn read_raw(s: &SignalSpec, data: &[u8; 8]) -> i64 {
-            let word = u64::from_le_bytes(*data);
-            let bits = word.checked_shr(u32::from(s.start_bit)).unwrap_or(0) & mask(s);
-            if s.signed && s.len_bits > 0 && s.len_bits < 64 {
-                let sign = 1u64 << (s.len_bits - 1);
-                (bits ^ sign).wrapping_sub(sign) as i64
-            } else {
-                bits as i64
+            let len = u32::from(s.len_bits);
+            let start = u32::from(s.start_bit);
+            let mut value = 0i64;
+            for i in 0..len {
+                if start + i < 64 {
+                    value |= (bit(data, start + i) as i64) << i;
+                }
             }
+            // Two's complement: the top bit weighs -2^(len - 1).
+            if s.signed && len > 0 && value >> (len - 1) & 1 == 1 {
+                value -= 1i64 << len;
+            }
+            value
         }
 
         pub fn write_raw(s: &SignalSpec, data: &mut [u8; 8], raw: i64) {
-            let shift = u32::from(s.start_bit);
-            let mask = mask(s).checked_shl(shift).unwrap_or(0);
-            let value = (raw as u64).checked_shl(shift).unwrap_or(0) & mask;
-            let word = (u64::from_le_bytes(*data) & !mask) | value;
-            *data = word.to_le_bytes();
+            let start = u32::from(s.start_bit);
+            for i in 0..u32::from(s.len_bits) {
+                let b = start + i;
+                if b < 64 {
+                    let byte = &mut data[(b / 8) as usize];
+                    *byte &= !(1 << (b % 8));
+                    *byte |= (((raw >> i) & 1) as u8) << (b % 8);
+                }
+            }
         }
 
         pub fn to_raw(s: &SignalSpec, physical: f32) -> Option<i64> {
-            // The limits compared as integers: in f32 (as before) a 32-bit signal's largest
-            // raw value, 2^32 - 1, rounds to 2^32 and let 2^32 through.
-            let raw = libm::roundf((physical - s.offset) / s.scale);
-            if raw.is_finite() && (s.raw_min..=s.raw_max).contains(&(raw as i64)) {
-                Some(raw as i64)
-            } else {
-                None
-            }
+            let rounded = f64::from((physical - s.offset) / s.scale).round();
+            // NaN and infinities fail; `as i64` saturates beyond any limit of the table.
+            (rounded.is_finite() && (s.raw_min..=s.raw_max).contains(&(rounded as i64)))
+                .then_some(rounded as i64)
         }
     }
 
