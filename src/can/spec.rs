@@ -260,7 +260,8 @@ impl SignalSpec {
     /// Below 2^30 in magnitude (every float signal of the table: their limits are below 2^24)
     /// the rounding is one truncating VCVT and the remainder, which is exact in f32, and the
     /// limits are compared as integers: about half the instructions of `libm::roundf` and float
-    /// comparisons on the Cortex-M4, same result for every `f32` (`tests::to_raw_*`). Larger
+    /// comparisons on the Cortex-M4, and the same rounding as `libm::roundf` for every `f32`
+    /// (`tests::to_raw_*`). Larger
     /// values, and NaN, go to [`Self::wide_raw`].
     #[inline]
     pub fn to_raw(&self, physical: f32) -> Option<i64> {
@@ -275,7 +276,7 @@ impl SignalSpec {
         let truncated = scaled as i32;
         let rest = scaled - truncated as f32;
         let raw = i64::from(truncated + i32::from(rest >= 0.5) - i32::from(rest <= -0.5));
-        if raw >= self.raw_min && raw <= self.raw_max {
+        if self.in_range(raw) {
             Some(raw)
         } else {
             None
@@ -288,7 +289,7 @@ impl SignalSpec {
     fn wide_raw(&self, scaled: f32) -> Option<i64> {
         let raw = libm::roundf(scaled);
         // NaN and infinities fail; beyond 2^24 every f32 is an integer and `as i64` exact.
-        if raw.is_finite() && (self.raw_min..=self.raw_max).contains(&(raw as i64)) {
+        if raw.is_finite() && self.in_range(raw as i64) {
             Some(raw as i64)
         } else {
             None
