@@ -431,6 +431,42 @@ fn a_long_heavy_car_swerves_in_time() {
     assert!(clearance >= 2.0, "body {clearance:.2} m from the obstacle");
 }
 
+/// A short, light car (`tests/data/short-light-car.toml`: 1.87 m wheelbase, 2.7 m body,
+/// 800 kg) at 4 and 6 m/s: its plans turned it 90 degrees in their horizon's last second to
+/// "pass" the obstacle (the stages' stations advance along the path whatever the heading), put
+/// the swerve off from tick to tick, and the car braked 0.11 m short of the obstacle (RTK, seed
+/// 0, 4 m/s) or hit it (-0.31 m, standard receiver, seed 2; -0.27 m at 6 m/s, seed 1). With the
+/// plan's heading error bounded while an obstacle is in the problem (`lateral::heading_row`)
+/// it swerves in time and passes by 2.4-2.8 m (docs/findings.md).
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn a_short_light_car_swerves_early_round_the_obstacle() {
+    let car =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/short-light-car.toml");
+    let (vehicle, node) = load_setup(Some(&car), None).unwrap();
+    for (receiver, speed, seed) in [
+        (Receiver::Rtk, 4.0, 0),
+        (Receiver::Standard, 4.0, 2),
+        (Receiver::Standard, 6.0, 1),
+    ] {
+        let m = drive_with(
+            &vehicle,
+            &node,
+            Controller::Mpc,
+            receiver,
+            Kind::Obstacle,
+            speed,
+            seed,
+        )
+        .metrics;
+        let clearance = m.min_obstacle_clearance_m.unwrap_or(f64::NAN);
+        assert!(
+            m.completed && m.status_ticks[3] == 0 && clearance >= 1.0,
+            "{receiver:?} {speed} m/s seed {seed}: {clearance:.2} m from the obstacle: {m:?}"
+        );
+    }
+}
+
 /// A long car with slow steering (`tests/data/long-slow-steering-20hz.toml`: 3.65 m wheelbase,
 /// 71 %/s) whose plan the receiver's noise put into the inflated obstacle: the fallback braked
 /// it to 2 m/s beside the obstacle, 3.4 m from its path. The return from there was asked of it

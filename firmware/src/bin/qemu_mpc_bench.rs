@@ -599,7 +599,8 @@ fn run_parts(b: &Bench, st: &mut Statics) {
         delta: [0.01; STEPS + 1],
     };
     let p = &mut st.problem;
-    let (built, build) = timed(|| lateral::build(p, &setup, &reference, &lin, &obstacles, 20.0));
+    let (built, build) =
+        timed(|| lateral::build(p, &setup, &reference, &lin, &obstacles, (20.0, 0.6)));
     if built.is_err() {
         fail("the worst-case problem does not build");
     }

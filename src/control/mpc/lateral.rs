@@ -765,18 +765,52 @@ pub fn obstacle_row(
 /// otherwise postponed until the manoeuvre no longer fitted.
 pub const TERMINAL_STAGES: usize = 5;
 
+/// The row keeping the heading error within `limit_rad` either way, in an obstacle slot that
+/// no obstacle row takes at its stage ([`build`]). The stages' stations advance along the path
+/// at the planned speed; a car turned far from the path does not, and without a bound a plan
+/// could "pass" an obstacle by turning a short car 90 degrees in its horizon's last second:
+/// measured on a car of 1.87 m wheelbase at 4 m/s, such plans put the swerve off from tick to
+/// tick until it no longer fitted, and the car braked 0.1 m short of the obstacle or hit it
+/// (docs/findings.md). Soft, with the obstacles' weight per radian.
+pub fn heading_row(limit_rad: f32, w: &Weights) -> Row {
+    Row {
+        a: 0.0,
+        b: 1.0,
+        lower: -limit_rad,
+        upper: limit_rad,
+        rho: w.rho_obstacle,
+        soft_weight: w.obstacle_weight_per_m,
+        active: true,
+    }
+}
+
+/// Which rows of the obstacles' slots [`build`] filled with what, per stage: a bit per slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SlotMasks {
+    /// The slot's row is a [`terminal_row`].
+    pub terminal: [u8; STEPS],
+    /// The slot's row is a [`heading_row`] (no obstacle's).
+    pub heading: [u8; STEPS],
+}
+
 /// Fills `problem` for this solve. `obstacles[i]` with its chosen side (or `None`);
 /// `preview_m`: how far beyond a stage's body front an obstacle still gets that stage's
-/// [`terminal_row`]. Returns, per stage, a bit per obstacle slot whose row is a terminal row.
+/// [`terminal_row`]; `heading_rad`: the [`heading_row`]'s bound, which a stage gets in its
+/// first free obstacle slot while any obstacle is in the problem. Returns which slots hold
+/// terminal and heading rows.
 pub fn build(
     problem: &mut Problem<NX, STEPS, ROWS>,
     setup: &LateralSetup,
     reference: &[ReferencePoint; STEPS + 1],
     lin: &Linearisation,
     obstacles: &[Option<(InflatedObstacle, ObstacleSide)>; MAX_OBSTACLES],
-    preview_m: f32,
-) -> Result<[u8; STEPS], BuildError> {
-    let mut terminal_mask = [0u8; STEPS];
+    (preview_m, heading_rad): (f32, f32),
+) -> Result<SlotMasks, BuildError> {
+    let mut masks = SlotMasks {
+        terminal: [0u8; STEPS],
+        heading: [0u8; STEPS],
+    };
+    let any_obstacle = obstacles.iter().any(Option::is_some);
     let origin = reference.first().map(|r| r.at.pose);
     let w = setup.weights;
     let body = setup.body;
@@ -874,7 +908,7 @@ pub fn build(
                 })
                 .flatten();
             if terminal.is_some() {
-                if let Some(m) = terminal_mask.get_mut(k) {
+                if let Some(m) = masks.terminal.get_mut(k) {
                     *m |= 1 << i;
                 }
             }
@@ -884,6 +918,19 @@ pub fn build(
                 *slot = r;
             }
         }
+        // Only where the last plan came within half of the bound: a row that does not bind
+        // still changes the iterations' path (its penalty joins the heading's cost), and the
+        // plans of cars that never come near it stay what they were.
+        let near_bound = e_b > 0.5 * heading_rad || e_b < -0.5 * heading_rad;
+        if any_obstacle && near_bound {
+            let free = st.rows.iter().skip(ROW_OBSTACLE).position(|r| !r.active);
+            if let (Some(i), Some(m)) = (free, masks.heading.get_mut(k)) {
+                if let Some(slot) = st.rows.get_mut(ROW_OBSTACLE + i) {
+                    *slot = heading_row(heading_rad, w);
+                    *m |= 1 << i;
+                }
+            }
+        }
     }
-    Ok(terminal_mask)
+    Ok(masks)
 }

@@ -349,6 +349,13 @@ pub struct MpcTuning {
     /// How far beyond the body's front at the end of the horizon an obstacle already pulls the
     /// plan's last stages to its side, as time at the current speed, s (lateral::terminal_row).
     pub preview_s: f32,
+    /// While an obstacle is in the problem, the plan's heading error is kept within this, rad,
+    /// at every stage where no obstacle row or terminal row takes the obstacles' row slots
+    /// (`lateral::heading_row`): the stages' stations advance at the planned speed along the
+    /// path, which a car turned far from it does not, and a plan free to turn a short car
+    /// 90 degrees at its horizon's end "passed" an obstacle that way, postponed the swerve
+    /// from tick to tick and braked or hit it (docs/findings.md).
+    pub obstacle_heading_rad: f32,
     /// Time from a speed command of 0 to full braking (the speed loop's delay and rise), s:
     /// an obstacle that leaves no room is acted on once it is within the stopping distance
     /// `v stop_delay + v^2 / (2 decel)` (or the horizon, if that reaches further).
@@ -425,6 +432,7 @@ pub const DEFAULT_TUNING: MpcTuning = MpcTuning {
     // 0.4 s delay + 0.4 s actuator lag. 0.8 s covers the plant, conservatively.
     stop_delay_s: 0.8,
     preview_s: 1.5,
+    obstacle_heading_rad: 0.6,
     // The lane change's path asks 0.47 of the CAT Vehicle's lock, 0.40 of the hatchback's,
     // 0.87 of the van's (on the node's reference); the van is clean to 9.38 m/s at 1, 5.38 at 10.
     line_rule: Some(LineRule {
@@ -857,7 +865,7 @@ impl MpcConfig {
         tuning: MpcTuning,
     ) -> Result<Self, MpcConfigError> {
         let positive = |v: f32| v.is_finite() && v > 0.0;
-        let checks: [(bool, &'static str); 17] = [
+        let checks: [(bool, &'static str); 18] = [
             (positive(body.width_m), "body width_m"),
             (positive(body.length_m), "body length_m"),
             (
@@ -903,6 +911,10 @@ impl MpcConfig {
             (
                 tuning.return_from_m.is_finite() && tuning.return_from_m >= 0.0,
                 "return_from_m (>= 0)",
+            ),
+            (
+                tuning.obstacle_heading_rad > 0.0 && tuning.obstacle_heading_rad < 1.5,
+                "obstacle_heading_rad (0 < h < 1.5)",
             ),
             (
                 tuning.return_heading_rad > 0.0 && tuning.return_heading_rad <= 0.5,
@@ -1045,9 +1057,9 @@ impl MpcConfig {
             input.reference,
             &lin,
             &obstacles,
-            preview_m,
+            (preview_m, self.tuning.obstacle_heading_rad),
         );
-        let terminal_mask = match built {
+        let masks = match built {
             Ok(m) => m,
             Err(BuildError::Discretisation) => {
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
@@ -1079,7 +1091,12 @@ impl MpcConfig {
                 .problem
                 .stages
                 .iter()
-                .any(|st| st.rows.iter().skip(lateral::ROW_OBSTACLE).any(|r| r.active));
+                .zip(&masks.heading)
+                .any(|(st, heading)| {
+                    let mut slots = st.rows.iter().skip(lateral::ROW_OBSTACLE);
+                    (0..MAX_OBSTACLES)
+                        .any(|i| slots.next().is_some_and(|r| r.active) && heading & (1 << i) == 0)
+                });
         if state.lin.is_some() {
             state.workspace.shift_each(&self.stage.tick_shares());
         } else {
@@ -1112,11 +1129,15 @@ impl MpcConfig {
         // Braking for an obstacle its plans did not clear, the car takes a plan back only
         // when it ends beside the obstacle too: one that ends short of it, not aside, would
         // drive the car on into it beyond the horizon.
-        let mask = if state.obstacle_braking {
+        // Heading rows (lateral::heading_row) are no obstacle's: never an obstacle violation.
+        let mut mask = if state.obstacle_braking {
             [overtaken; STEPS]
         } else {
-            terminal_mask.map(|m| m | overtaken)
+            masks.terminal.map(|m| m | overtaken)
         };
+        for (m, heading) in mask.iter_mut().zip(&masks.heading) {
+            *m |= heading;
+        }
         let v = violations(&state.problem, &states, &mask, imminent);
         let corridor_violation_m = v.corridor_m;
         // Braking for an obstacle already, a plan is taken back only when it clears every
