@@ -214,6 +214,10 @@ pub struct Drive {
     /// The car lost the path ([`Tracking::has_lost_path`]): it stays stopped until a new path
     /// loads, however the noisy estimate judges the next ticks.
     lost_path: bool,
+    /// While it stops, a car that lost the path still along it steers the path's curvature at
+    /// this station (moved on by the distance it drives each tick) and segment hint; `None`:
+    /// wheels straight ([`Drive::stop_lost`]).
+    lost_along: Option<(f32, usize)>,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).
     unconfigured: bool,
@@ -250,6 +254,7 @@ impl Drive {
             smoothing: Smoothing::new(),
             heading: HeadingSettle::new(),
             lost_path: false,
+            lost_along: None,
             unconfigured: true,
             follow: SteerFollow::new(),
         }
@@ -284,6 +289,7 @@ impl Drive {
             addr_of_mut!((*p).smoothing).write(Smoothing::new());
             addr_of_mut!((*p).heading).write(HeadingSettle::new());
             addr_of_mut!((*p).lost_path).write(false);
+            addr_of_mut!((*p).lost_along).write(None);
             addr_of_mut!((*p).unconfigured).write(true);
             addr_of_mut!((*p).follow).write(SteerFollow::new());
             slot.assume_init_mut()
@@ -308,6 +314,7 @@ impl Drive {
         self.smoothing = Smoothing::for_estimator(&config.estimator);
         self.heading = HeadingSettle::new();
         self.lost_path = false;
+        self.lost_along = None;
         self.planner.set_car(path_car(config));
         let tuning = mpc_tuning(config);
         self.set_braking(config, &tuning);
@@ -427,6 +434,7 @@ impl Drive {
         self.projection = None;
         self.planned_speeds = None;
         self.lost_path = false;
+        self.lost_along = None;
     }
 
     /// Stage 4: this tick's commands. `probe` marks where the model-predictive controller's
@@ -505,7 +513,8 @@ impl Drive {
             // Latched: a noisy estimate that strays back into the corridor does not hand a
             // car that left it back to a controller; the planner replans (a new path clears
             // it, [`Drive::new_path`]).
-            return self.stop_lost();
+            let steer = lost_steer_pct(path, &mut self.lost_along, config, &pose, inputs);
+            return self.stop_lost(steer);
         }
         // Here, with a path only: the estimating ticks' bound has no room for it.
         if let Some(mpc) = self.mpc_config.as_mut() {
@@ -552,7 +561,10 @@ impl Drive {
                     Ok(solved) => solved,
                     Err(Unplanned::Lost(lost)) => {
                         self.last_tracking = Some(lost);
-                        return self.stop_lost();
+                        self.lost_along = along_when_lost(&lost);
+                        let steer =
+                            lost_steer_pct(path, &mut self.lost_along, config, &pose, inputs);
+                        return self.stop_lost(steer);
                     }
                     Err(Unplanned::LeftWindow(tracking)) => {
                         // The car was found on another part of its path, the rest of the
@@ -595,11 +607,13 @@ impl Drive {
                     &car,
                 );
                 self.last_tracking = out.tracking;
-                if out
+                if let Some(lost) = out
                     .tracking
-                    .is_some_and(|t| t.has_lost_path(config.body.width_m))
+                    .filter(|t| t.has_lost_path(config.body.width_m))
                 {
-                    return self.stop_lost();
+                    self.lost_along = along_when_lost(&lost);
+                    let steer = lost_steer_pct(path, &mut self.lost_along, config, &pose, inputs);
+                    return self.stop_lost(steer);
                 }
                 DriveOutput {
                     command: ControlCommand {
@@ -629,12 +643,11 @@ impl Drive {
         }
     }
 
-    /// The car has lost the path ([`Tracking::has_lost_path`]): speed 0 and the wheels
-    /// straight (the actuator centres them at its rate), so that it brakes to a stop along a
-    /// line instead of on the circle its last steering command would hold it on.
-    fn stop_lost(&mut self) -> DriveOutput {
+    /// The car has lost the path ([`Tracking::has_lost_path`]): speed 0, steering `steer_pct`
+    /// ([`lost_steer_pct`]).
+    fn stop_lost(&mut self, steer_pct: f32) -> DriveOutput {
         self.lost_path = true;
-        self.last_steer_cmd_pct = 0.0;
+        self.last_steer_cmd_pct = steer_pct;
         self.hold(ControlStatus::Fallback, FallbackCause::LostPath)
     }
 
@@ -800,6 +813,56 @@ fn prediction_points(out: &MpcOutput) -> [PredictedPoint; PREDICTION_POINTS] {
         }
     }
     points
+}
+
+/// A car that loses its path turned no further than this from the path's direction brakes
+/// along the path's curves ([`lost_steer_pct`]); one turned further, with the wheels straight,
+/// rad.
+pub const LOST_ALONG_RAD: f32 = core::f32::consts::FRAC_PI_4;
+
+/// Where a car that has just lost its path follows the path's curvature from while it stops:
+/// its projection, if it is still along the path (within [`LOST_ALONG_RAD`] of its direction);
+/// `None` (wheels straight) if it is turned further.
+fn along_when_lost(lost: &Tracking) -> Option<(f32, usize)> {
+    let heading = lost.heading_error_rad;
+    let along = heading.abs() <= LOST_ALONG_RAD && lost.projection.station_m.is_finite();
+    along.then_some((lost.projection.station_m, lost.projection.segment))
+}
+
+/// The steering of a car stopping because it has lost its path, %: for one still along it
+/// (`along`, [`along_when_lost`]) the lane hold ([`mpc::lane_hold_steer_rad`]) at the station
+/// it would have reached had it followed the path (moved on here by this tick's distance,
+/// without a search): it turns parallel to the path and brakes on its curves at the offset it
+/// has. A car that went wide in a bend and braked with its wheels straight left on the
+/// tangent: 3.4 m beside its path at 12.4 m/s, it stopped 15.7 m from it (docs/findings.md).
+/// Wheels straight (0) for a car turned across or against the path, which may have spun and
+/// whose last command may be full lock.
+fn lost_steer_pct(
+    path: &Path,
+    along: &mut Option<(f32, usize)>,
+    config: &NodeConfig,
+    pose: &Pose,
+    inputs: &DriveInputs<'_>,
+) -> f32 {
+    let Some((station_m, hint)) = *along else {
+        return 0.0;
+    };
+    let Some(at) = path.sample_geometry(station_m, hint) else {
+        *along = None;
+        return 0.0;
+    };
+    let v = crate::math::clamp_finite(inputs.speed_mps, 0.0, f32::MAX);
+    let next = station_m + v * crate::SAMPLE_PERIOD_S;
+    *along = Some((next, path.segment_hint(next, hint)));
+    let heading_error = crate::math::wrap_pi(pose.heading_rad - at.heading_rad);
+    let vehicle = &config.vehicle;
+    let steer_rad = mpc::lane_hold_steer_rad(vehicle, heading_error, v, at.curvature_per_m);
+    let pct = steer_rad / (vehicle.max_steer_rad * inputs.steer_scale) * 100.0;
+    if pct.is_finite() {
+        crate::math::clamp(pct, -100.0, 100.0)
+    } else {
+        0.0
+    }
 }
 
 fn sample(s: &PathSample, corridor: (f32, f32)) -> Sample {

@@ -1790,29 +1790,18 @@ impl MpcConfig {
         }
     }
 
-    /// The steering that turns the car to the path's direction at its station and holds it
-    /// there (pure pursuit of a point [`LANE_HOLD_PREVIEW_S`] ahead on the line parallel to the
-    /// path through the car, at least [`LANE_HOLD_MIN_PREVIEW_M`], plus the steering of the
-    /// path's curvature), within the steering range: braking along the lane at the offset the
-    /// car has, neither towards an obstacle beside it nor off the road.
+    /// [`lane_hold_steer_rad`] at the reference's first point (the car's station).
     fn lane_hold_steer_rad(&self, input: &MpcInput) -> f32 {
         let Some(r) = input.reference.first() else {
             return 0.0;
         };
         let heading_error = math::wrap_pi(input.car.pose.heading_rad - r.at.pose.heading_rad);
-        let v = max(finite_or(input.car.speed_mps, 0.0), 0.0);
-        let preview = max(v * LANE_HOLD_PREVIEW_S, LANE_HOLD_MIN_PREVIEW_M);
-        let l = self.vehicle.wheelbase_m;
-        let (sin_e, _) = math::sin_cos(heading_error);
-        let turn = math::atan(-2.0 * l * sin_e / preview);
-        let ff = lateral::feedforward_steer_rad(
-            l,
-            self.vehicle.understeer_s2_per_m2,
-            v,
+        lane_hold_steer_rad(
+            &self.vehicle,
+            heading_error,
+            input.car.speed_mps,
             r.curvature_per_m,
-        );
-        let max_steer = self.vehicle.max_steer_rad;
-        clamp(finite_or(ff + turn, 0.0), -max_steer, max_steer)
+        )
     }
 
     /// Centre-tyre angle to steering percent, within +-100 (0 if not finite).
@@ -1820,6 +1809,30 @@ impl MpcConfig {
         let pct = rad / self.vehicle.max_steer_rad * STEER_PCT_LIMIT;
         clamp(finite_or(pct, 0.0), -STEER_PCT_LIMIT, STEER_PCT_LIMIT)
     }
+}
+
+/// The steering that turns a car `heading_error_rad` off the path's direction (positive:
+/// turned right of it) at `speed_mps` to that direction and holds it there, on a path of
+/// `curvature_per_m` at its station: pure pursuit of a point [`LANE_HOLD_PREVIEW_S`] ahead on
+/// the line parallel to the path through the car, at least [`LANE_HOLD_MIN_PREVIEW_M`], plus
+/// the steering of the path's curvature, within the steering range. Braking along the lane at
+/// the offset the car has, neither towards an obstacle beside it nor off the road (the
+/// fallback's), nor on across the path's bends (a car that has lost its path,
+/// `node::drive`).
+pub fn lane_hold_steer_rad(
+    vehicle: &VehicleParams,
+    heading_error_rad: f32,
+    speed_mps: f32,
+    curvature_per_m: f32,
+) -> f32 {
+    let v = max(finite_or(speed_mps, 0.0), 0.0);
+    let preview = max(v * LANE_HOLD_PREVIEW_S, LANE_HOLD_MIN_PREVIEW_M);
+    let l = vehicle.wheelbase_m;
+    let (sin_e, _) = math::sin_cos(heading_error_rad);
+    let turn = math::atan(-2.0 * l * sin_e / preview);
+    let ff = lateral::feedforward_steer_rad(l, vehicle.understeer_s2_per_m2, v, curvature_per_m);
+    let max_steer = vehicle.max_steer_rad;
+    clamp(finite_or(ff + turn, 0.0), -max_steer, max_steer)
 }
 
 /// The last reference point's station ahead of the first, m (along the first's heading: the
