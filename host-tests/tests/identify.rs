@@ -35,6 +35,7 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         origin_deg: (0.0, 0.0),
         yaw_half_width: 48,
         log_notes: Vec::new(),
+        log_warnings: Vec::new(),
         gnss_rate_hz: 100.0,
         speed_scale: None,
         speed_disagreement: None,
@@ -271,6 +272,74 @@ fn an_impossible_sample_is_named_and_left_out() {
         worst(&e.vel, &clean.vel)
     );
     assert!(worst(&e.y, &clean.y) < 0.01, "{}", worst(&e.y, &clean.y));
+}
+
+/// The first and the last sample of a sensor are judged too, against the samples on their one
+/// side: a first or last `vel` of 70 m/s in a drive at 3-8 m/s, and a first or last fix at
+/// longitude -11 in a drive at -110.95 (as a line cut short writes it), are named and left
+/// out. Before, the ends were skipped: one such speed took a speed fit from 58.5 % to -0.8 %,
+/// and a first fix that far moved the local origin 6300 km.
+#[test]
+fn an_impossible_first_or_last_sample_is_named_and_left_out() {
+    let v = model_file::load(&model_file::paper_path()).unwrap().vehicle;
+    let o = PreprocessOptions::default();
+    let drive = || -> Vec<LogRow> {
+        (0..3000)
+            .map(|k| {
+                let t = k as f64 * 0.02;
+                let vel = 3.0 + 5.0 * (t / 60.0);
+                row(t, Some(vel), Some(vel), Some(10.0 * (t * 0.2).sin()), true)
+            })
+            .collect()
+    };
+    let clean = preprocess_rows("clean", &drive(), &v, &o).unwrap();
+    assert!(clean.log_notes.is_empty(), "{:?}", clean.log_notes);
+    let worst = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    let last = drive().len() - 1;
+    for (what, end) in [("first", 0), ("last", last)] {
+        let mut bad = drive();
+        bad[end].vel = Some(70.0);
+        bad[end].lon = Some(-11.0);
+        let e = preprocess_rows("bad", &bad, &v, &o).unwrap();
+        let side = if end == 0 { "after" } else { "before" };
+        assert_eq!(e.log_notes.len(), 2, "{what}: {:?}", e.log_notes);
+        assert!(
+            e.log_notes[0].starts_with(&format!(
+                "bad: column `vel`: the sample at t = {} s (70 m/s) is impossible beside the \
+                 samples {side} it",
+                bad[end].t
+            )) && e.log_notes[0].ends_with("left out"),
+            "{what}: {}",
+            e.log_notes[0]
+        );
+        assert!(
+            e.log_notes[1].starts_with(&format!(
+                "bad: column `lat/lon`: the sample at t = {} s",
+                bad[end].t
+            )) && e.log_notes[1].ends_with("left out"),
+            "{what}: {}",
+            e.log_notes[1]
+        );
+        // The origin is a fix of the drive's, not the far one; the grid starts or ends one
+        // sample in, and the rest is the clean drive's.
+        let (lat, lon) = e.origin_deg;
+        assert!(
+            (lat - clean.origin_deg.0).abs() < 1e-6 && (lon - clean.origin_deg.1).abs() < 1e-9,
+            "{what}: origin {lat}, {lon}"
+        );
+        let n = e.t.len();
+        assert!(n + 1 >= clean.t.len() && n <= clean.t.len(), "{what}: {n}");
+        let skip = usize::from(end == 0 && n < clean.t.len());
+        let c = |x: &[f64]| x[skip..skip + n].to_vec();
+        assert!(worst(&e.vel, &c(&clean.vel)) < 0.05, "{what}: vel");
+        assert!(worst(&e.x, &c(&clean.x)) < 0.01, "{what}: x");
+        assert!(worst(&e.y, &c(&clean.y)) < 0.01, "{what}: y");
+    }
 }
 
 /// A pause in a needed sensor is refused, naming the column and the times, instead of being
