@@ -503,6 +503,19 @@ fn a_steering_gain_no_car_has_names_its_likely_cause() {
             && steering_wheel.contains("6.2 deg"),
         "{steering_wheel}"
     );
+    // A fraction of the lock (-1..1) gives 100; the road wheels' radians 100 / 0.6196 = 161.4.
+    let fraction = cause(98.9, 1.2).unwrap();
+    assert!(
+        fraction.contains("a fraction of full lock") && fraction.ends_with("multiply it by 100"),
+        "{fraction}"
+    );
+    let radians = cause(159.6, 1.9).unwrap();
+    assert!(
+        radians.contains("road wheels' angle in radians")
+            && radians.contains("100 / 0.62 = 161")
+            && radians.ends_with("multiply it by 161"),
+        "{radians}"
+    );
     // Near zero, within its error of 0: not the sign; no car steers so.
     let none = cause(-0.02, 0.05).unwrap();
     assert!(
@@ -1071,6 +1084,66 @@ fn a_steering_sensor_that_clips_is_named() {
                 why.contains(&format!("a steering sensor that clips at {clip:.1} %")),
                 "{name}: {why}"
             );
+        }
+    }
+}
+
+/// A `steer` written as a fraction of the lock (-1..1) or as the road wheels' angle in radians
+/// (black-box probe: `identify` exited 0 and wrote a model without `[lateral]`, its note
+/// blaming the drives for too few turns; `compare` said nothing): every turn reads under the
+/// 0.01 rad the steady turns need, so the turns are the GNSS course's, and the gain (about 100,
+/// or 100 / max_steer_rad) is named with the likely unit, on two cars. In percent, or on
+/// straight drives alone (a course that turns only by its noise at 2.5 m/s: a gain of 5 +- 23),
+/// nothing is named.
+#[test]
+fn a_steering_as_a_fraction_or_in_radians_is_named() {
+    use catmodel_host::sim::{self, SimOptions};
+    let plants = four_plants("unused", 1.0);
+    for (name, plant, vehicle) in [&plants[0], &plants[3]] {
+        let lock_rad = vehicle.max_steer_deg.to_radians();
+        let set = |scenarios: &[&str], scale: f64| -> Vec<_> {
+            scenarios
+                .iter()
+                .map(|scenario| {
+                    let base = sim::scenario::Scenario::builtin(scenario).unwrap();
+                    let options = SimOptions {
+                        seed: 1,
+                        ..SimOptions::default()
+                    };
+                    let mut rows = sim::simulate(&base, plant, &options).log;
+                    for r in &mut rows {
+                        r.steer = r.steer.map(|s| s * scale);
+                    }
+                    preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default())
+                        .unwrap_or_else(|e| panic!("{name}, {scenario}: {e:#}"))
+                })
+                .collect()
+        };
+        let turns = ["straight-5", "turn-left", "circle-left"];
+        let straight = ["straight-2.5", "straight-10"];
+        for (unit, scale) in [
+            ("percent", 1.0),
+            ("fraction", 0.01),
+            ("radians", 0.01 * lock_rad),
+        ] {
+            let why = identify::steering_problem(&set(&straight, scale), vehicle);
+            assert_eq!(why, None, "{name}, straight drives, {unit}");
+            let why = identify::steering_problem(&set(&turns, scale), vehicle);
+            println!("{name}, {unit}: {why:?}");
+            match unit {
+                "percent" => assert_eq!(why, None, "{name}"),
+                "fraction" => {
+                    let why = why.unwrap_or_else(|| panic!("{name}, {unit}: not named"));
+                    assert!(why.contains("a fraction of full lock"), "{name}: {why}");
+                }
+                _ => {
+                    let why = why.unwrap_or_else(|| panic!("{name}, {unit}: not named"));
+                    assert!(
+                        why.contains("road wheels' angle in radians"),
+                        "{name}: {why}"
+                    );
+                }
+            }
         }
     }
 }
