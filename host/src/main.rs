@@ -660,6 +660,9 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
     if let Some(w) = gap_warning {
         eprintln!("{w}");
     }
+    if let Some(w) = data.coverage_warning(&e) {
+        eprintln!("catmodel: warning: {w}");
+    }
     print!("{}", evaluate::format_table(&e));
     if let Some(path) = json {
         replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
