@@ -787,3 +787,53 @@ fn a_fix_in_nmea_minutes_is_named() {
     let e = error_message(&format!("{HEADER}\n0,1,,,,,91,0\n"));
     assert!(e.ends_with("(WGS-84 latitude)"), "{e}");
 }
+
+/// A last line without a line end (a recorder that lost power mid-line) gets a warning, as the
+/// candump reader gives one: kept when it reads (a number cut short that reads as another, a
+/// longitude `-11` for `-110.95`, is left to the check of each sample against its neighbours),
+/// left out when it does not (too few cells, half a fix, a `t` cut to before the line above).
+/// A line end after it, or blanks after that, give none; a bad line that is not the last is an
+/// error as before.
+#[test]
+fn a_last_line_without_a_line_end_is_warned_of() {
+    let read = |text: &str| logcsv::parse_log(text, Path::new(FILE)).expect("valid");
+    let first = format!("{HEADER}\n0.1,1,1,,0,,32.2,-110.9\n");
+    let kept = read(&format!("{first}0.2,1,1,,0,,32.2,-11"));
+    assert_eq!(kept.rows.len(), 2);
+    assert_eq!(kept.rows[1].lon, Some(-11.0));
+    let w = kept.notes.warnings();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].starts_with("drive.csv:3: the last line has no line end")
+            && w[0].contains("its values are kept"),
+        "{}",
+        w[0]
+    );
+    for cut in [
+        "0.2,1,1,,0,,32.2",
+        "0.2,1,1,,0,,32.2,",
+        "0.",
+        "0.2,1,1,,0,,32.2,-1-",
+    ] {
+        let log = read(&format!("{first}{cut}"));
+        assert_eq!(log.rows.len(), 1, "{cut}");
+        let w = log.notes.warnings();
+        assert_eq!(w.len(), 1, "{cut}: {w:?}");
+        assert!(
+            w[0].starts_with("drive.csv:3: the last line has no line end")
+                && w[0].ends_with("it does not read as a row: left out"),
+            "{cut}: {}",
+            w[0]
+        );
+    }
+    for ended in ["\n", "\r\n", "\n\n", "\n  "] {
+        let log = read(&format!("{first}0.2,1,1,,0,,32.2,-11{ended}"));
+        assert_eq!(log.rows.len(), 2, "{ended:?}");
+        assert!(log.notes.warnings().is_empty(), "{ended:?}");
+    }
+    assert!(read(HEADER).notes.warnings().is_empty());
+    assert_eq!(
+        error_message(&format!("{HEADER}\n0.1,abc,,,,,,\n0.2,1,1,,0,,32.2")),
+        "drive.csv:2:5: column `vel`: not a number: `abc`"
+    );
+}

@@ -288,6 +288,20 @@ pub fn baseline_inputs(path: &Path, origin_deg: (f64, f64), car: &Car) -> Result
     Ok(inputs)
 }
 
+/// Inputs whose GNSS fixes lie further than this from the truth (the median), m, are not the
+/// truth's drive or not in its frame: ten times the node's GNSS gate, beyond any receiver's
+/// error. A black-box probe's `--inputs` of another drive scored a baseline 227 m off with
+/// exit 0.
+pub const INPUTS_FAR_M: f64 = 100.0;
+
+/// Predictions that cover less than this share of the time the truth and the inputs share get
+/// a warning ([`EvaluationData::coverage_warning`]).
+pub const COVERED_SHARE: f64 = 0.9;
+/// ... and miss more than this much of it, s.
+pub const COVER_SLACK_S: f64 = 5.0;
+/// The truth's speed above which the car moves, m/s (the node has no position before).
+const MOVING_MPS: f64 = 0.5;
+
 /// Everything `catmodel evaluate` reads: truth and the baseline's bus inputs, and the
 /// predictions, scored as they are read ([`evaluate::Scorer`]) and kept only as far as the
 /// checks and the figures need them.
@@ -390,7 +404,35 @@ impl EvaluationData {
                 inputs_path.display(),
                 truth_path.display()
             ),
-            Some(_) => {}
+            Some((g0, g1)) => {
+                if let Some((p0, p1)) = self
+                    .predictions
+                    .span
+                    .filter(|(p0, p1)| g1 < *p0 || g0 > *p1)
+                {
+                    bail!(
+                        "the inputs {} (GNSS fixes at t = {g0} .. {g1} s) and the predictions \
+                         {} (t = {p0} .. {p1} s) do not overlap in time: the baseline has no \
+                         input at the predictions' ticks. Is it the candump the predictions \
+                         came from?",
+                        inputs_path.display(),
+                        pred_path.display()
+                    );
+                }
+            }
+        }
+        if let Some((median_m, fixes)) = self.fixes_from_truth_m() {
+            if median_m > INPUTS_FAR_M {
+                bail!(
+                    "the inputs {}: their GNSS fixes lie {median_m:.0} m from the truth {} at \
+                     their times (the median over {fixes} fixes; a receiver's error is metres): \
+                     they are not the drive of the truth (another drive's candump?) or not in \
+                     its frame (evaluate's --origin, the truth frame's origin): the raw GNSS \
+                     error and the baseline cannot be measured on them",
+                    inputs_path.display(),
+                    truth_path.display()
+                );
+            }
         }
         self.check_frame()?;
         if let Some((what, v)) = e.non_finite() {
@@ -403,6 +445,98 @@ impl EvaluationData {
             );
         }
         Ok(e)
+    }
+
+    /// The median distance of the inputs' GNSS fixes from the truth at their times, m, and the
+    /// number of fixes within the truth; `None` without such a fix.
+    fn fixes_from_truth_m(&self) -> Option<(f64, usize)> {
+        let mut d: Vec<f64> = self
+            .inputs
+            .gnss
+            .iter()
+            .filter_map(|&(t, x, y)| {
+                self.truth
+                    .at(t)
+                    .map(|(tx, ty, _, _)| (x - tx).hypot(y - ty))
+            })
+            .collect();
+        if d.is_empty() {
+            return None;
+        }
+        let n = d.len();
+        let mid = n / 2;
+        let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+        Some((*m, n))
+    }
+
+    /// A warning when the predictions leave more than 1 - [`COVERED_SHARE`] and
+    /// [`COVER_SLACK_S`] of the drive the truth and the inputs' fixes share without a
+    /// prediction (from when the car moves): the raw GNSS figures are over all of it, the
+    /// node's over the predictions' (a black-box probe's first 30 s of a 5-minute drive put
+    /// raw GNSS at 0.784 x a floor measured over those 30 s, without a word). It gives raw
+    /// GNSS at the rear axle over the predictions' span, and its ratio to the floor.
+    pub fn coverage_warning(&self, e: &Evaluation) -> Option<String> {
+        let (p0, p1) = self.predictions.span?;
+        let samples = self.truth.samples();
+        let (t0, t1) = (samples.first()?.t, samples.last()?.t);
+        let (g0, g1) = self
+            .inputs
+            .gnss
+            .iter()
+            .fold(None, |r: Option<(f64, f64)>, g| {
+                Some(r.map_or((g.0, g.0), |(a, b)| (a.min(g.0), b.max(g.0))))
+            })?;
+        let (s0, s1) = (t0.max(g0), t1.min(g1));
+        // The node has no position before the car moves: the drive starts there.
+        let m0 = samples
+            .iter()
+            .find(|r| r.t >= s0 && r.t <= s1 && r.speed > MOVING_MPS)
+            .map_or(s0, |r| r.t);
+        let drive = s1 - m0;
+        let uncovered = (p0 - m0).max(0.0) + (s1 - p1).max(0.0);
+        if drive.is_nan()
+            || drive <= 0.0
+            || uncovered <= COVER_SLACK_S
+            || uncovered <= (1.0 - COVERED_SHARE) * drive
+        {
+            return None;
+        }
+        let ahead = self.car.antenna_ahead_m;
+        let mut sq = Vec::new();
+        for &(t, x, y) in &self.inputs.gnss {
+            if t < p0 || t > p1 {
+                continue;
+            }
+            if let Some((tx, ty, th, _)) = self.truth.at(t) {
+                let (ax, ay) = (x - ahead * th.sin(), y - ahead * th.cos());
+                sq.push((ax - tx).powi(2) + (ay - ty).powi(2));
+            }
+        }
+        let within = if sq.is_empty() {
+            "no fix lies within it".to_string()
+        } else {
+            let rms = (sq.iter().sum::<f64>() / sq.len() as f64).sqrt();
+            let floor = e.bias_floor.pos_rms_m;
+            let ratio = if floor > 0.0 {
+                format!(" = {:.3} x the floor", rms / floor)
+            } else {
+                String::new()
+            };
+            format!(
+                "over it raw GNSS at the rear axle is {rms:.3} m RMS ({} fixes){ratio}",
+                sq.len()
+            )
+        };
+        Some(format!(
+            "{}: the predictions cover t = {p0} .. {p1} s of the drive the truth and the \
+             inputs' fixes share, t = {s0} .. {s1} s (the car moving from t = {m0} s): {:.1} s \
+             of its {:.1} s ({:.0} %) have no prediction. The node's figures and the floor are \
+             over the predictions' span, the raw GNSS lines over all of it; {within}",
+            self.paths[0].display(),
+            uncovered.min(drive),
+            drive,
+            100.0 * uncovered.min(drive) / drive
+        ))
     }
 
     /// Refuses predictions that are not in the truth's frame. `replay` without `--origin`

@@ -561,6 +561,19 @@ pub struct LogNotes {
     pub conflicts: usize,
     /// The first conflict.
     pub first_conflict: Option<Conflict>,
+    /// The last line, when the file ends without a line end after it (a recorder that lost
+    /// power mid-line): its number, and whether it was left out (it did not read as a row).
+    pub cut_last_line: Option<CutLine>,
+}
+
+/// The last line of a file that ends without a line end ([`LogNotes::cut_last_line`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CutLine {
+    /// Its number (1-based).
+    pub line: usize,
+    /// Left out: it did not read as a row (too few cells, a number cut short into nothing or
+    /// out of range, a `t` cut to before the line above).
+    pub left_out: bool,
 }
 
 impl LogNotes {
@@ -613,6 +626,35 @@ impl LogNotes {
         }
         out
     }
+
+    /// One line per warning, `FILE:LINE: text`, for stderr: a last line without a line end,
+    /// as the candump reader warns of one.
+    pub fn warnings(&self) -> Vec<String> {
+        let file = self.path.display();
+        self.cut_last_line
+            .iter()
+            .map(|c| {
+                let fate = if c.left_out {
+                    "it does not read as a row: left out"
+                } else {
+                    "its values are kept; a number cut short that reads as another is left to \
+                     the check of each sample against its neighbours (identify, compare)"
+                };
+                format!(
+                    "{file}:{}: the last line has no line end: the recorder may have stopped \
+                     mid-line (lost power); {fate}",
+                    c.line
+                )
+            })
+            .collect()
+    }
+}
+
+/// The physical line number of the last line of `text` when the file ends without a line end
+/// after it (blanks after the last line end are no line).
+fn unterminated_last_line(text: &str) -> Option<usize> {
+    let end = text.trim_end_matches([' ', '\t']);
+    (!end.is_empty() && !end.ends_with('\n')).then(|| end.matches('\n').count() + 1)
 }
 
 /// Reads a driving log. The schema's columns are required but for the pedals, `accel` and
@@ -674,18 +716,31 @@ fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError>
     let mut rows = Vec::new();
     let mut lines = Vec::new();
     let mut pending: Option<PendingRow> = None;
+    // A last line without a line end that does not read is left out with a warning, as the
+    // candump reader does: the recorder stopped in the middle of it.
+    let cut = unterminated_last_line(text);
     for line in table.lines() {
-        let line = line?;
-        let mut values = [None; 8];
-        for (i, v) in values.iter_mut().enumerate() {
-            *v = line.value(i, LOG_RANGES.get(i))?;
-        }
-        let Some(t) = values[T] else {
-            return Err(line.error(T, LogErrorKind::MissingValue));
+        let line = match line {
+            Ok(line) => line,
+            Err(e) => {
+                let n = e.line;
+                leave_out_cut(&mut notes, cut, e, n)?;
+                break;
+            }
         };
         let previous = pending.as_ref().map(|p| p.row.t);
-        if let Some(p) = previous.filter(|p| t < *p) {
-            return Err(line.error(T, LogErrorKind::TimeNotIncreasing { t, previous: p }));
+        let (values, t) = match line_values(&line, previous) {
+            Ok(v) => v,
+            Err(e) => {
+                leave_out_cut(&mut notes, cut, e, line.number)?;
+                break;
+            }
+        };
+        if cut == Some(line.number) {
+            notes.cut_last_line = Some(CutLine {
+                line: line.number,
+                left_out: false,
+            });
         }
         let instant = match pending.take() {
             Some(p) if p.row.t == t => {
@@ -739,8 +794,16 @@ fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError>
         pending = Some(instant);
     }
     if let Some(p) = pending {
-        lines.push(p.line);
-        rows.push(p.finish(path)?);
+        let line = p.line;
+        match p.finish(path) {
+            Ok(row) => {
+                lines.push(line);
+                rows.push(row);
+            }
+            // Half a fix on the cut line (`lon` lost).
+            Err(e) if cut == Some(line) => leave_out_cut(&mut notes, cut, e, line)?,
+            Err(e) => return Err(e),
+        }
     }
     check_sample_interval(&rows, path)?;
     if let Some(fixes) = radians_likely(&rows) {
@@ -754,6 +817,46 @@ fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError>
         });
     }
     Ok(Log { rows, lines, notes })
+}
+
+/// Leaves out the line `line` of a log, which did not read (`e`), with a warning in `notes`
+/// when it is the last line and has no line end (`cut`, [`unterminated_last_line`]); `e`
+/// otherwise.
+fn leave_out_cut(
+    notes: &mut LogNotes,
+    cut: Option<usize>,
+    e: LogError,
+    line: usize,
+) -> Result<(), LogError> {
+    match cut {
+        Some(c) if c == line || c == e.line => {
+            notes.cut_last_line = Some(CutLine {
+                line: c,
+                left_out: true,
+            });
+            Ok(())
+        }
+        _ => Err(e),
+    }
+}
+
+/// The values of a log line (in [`LOG_COLUMNS`] order, each in its range) and its `t`, which
+/// must not be before `previous` (the instant above).
+fn line_values(
+    line: &Line<'_>,
+    previous: Option<f64>,
+) -> Result<([Option<f64>; 8], f64), LogError> {
+    let mut values = [None; 8];
+    for (i, v) in values.iter_mut().enumerate() {
+        *v = line.value(i, LOG_RANGES.get(i))?;
+    }
+    let Some(t) = values[T] else {
+        return Err(line.error(T, LogErrorKind::MissingValue));
+    };
+    if let Some(p) = previous.filter(|p| t < *p) {
+        return Err(line.error(T, LogErrorKind::TimeNotIncreasing { t, previous: p }));
+    }
+    Ok((values, t))
 }
 
 /// The number of fixes when every fix of `rows` lies in the box a latitude and longitude in

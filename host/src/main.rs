@@ -440,6 +440,7 @@ fn csv2can(args: Csv2canArgs) -> Result<()> {
         .check()?;
     let read = logcsv::read_log(&log).map_err(|e| anyhow::anyhow!("{e}"))?;
     print_notes(&read.notes.messages());
+    print_warnings(&read.notes.warnings());
     if read.rows.is_empty() {
         // An empty candump would replay to nothing, with success: not a drive.
         bail!(
@@ -566,6 +567,9 @@ fn print_replay_warnings(
     if let Some(note) = replay::frame_note(result) {
         eprintln!("catmodel: warning: {note}");
     }
+    if let Some(note) = replay::speed_note(result) {
+        eprintln!("catmodel: warning: {note}");
+    }
     // No position at any tick (the rate's mismatch and the frame's reach have their
     // own warnings above): why, as far as the replay can tell.
     let other_sources = replay::other_sources_note(result, gnss_source);
@@ -656,6 +660,9 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
     if let Some(w) = gap_warning {
         eprintln!("{w}");
     }
+    if let Some(w) = data.coverage_warning(&e) {
+        eprintln!("catmodel: warning: {w}");
+    }
     print!("{}", evaluate::format_table(&e));
     if let Some(path) = json {
         replay::write_file(&path, &serde_json::to_string_pretty(&e)?)?;
@@ -694,6 +701,7 @@ fn identify(args: IdentifyArgs) -> Result<()> {
     let [training, validation] = read_identify_logs(&logs, &validate, &base, &opts)?;
     for e in training.iter().chain(&validation) {
         print_notes(&e.log_notes);
+        print_warnings(&e.log_warnings);
     }
     // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
     // word and a wrong model (review finding 04): refused before the minutes of fitting.
@@ -1013,6 +1021,7 @@ fn compare(args: CompareArgs) -> Result<()> {
     let opts = identify::preprocess::PreprocessOptions::default();
     let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
     print_notes(&e.log_notes);
+    print_warnings(&e.log_warnings);
     for u in speed_unit_problems([&log], [&e]) {
         eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
     }
@@ -1234,6 +1243,13 @@ fn locate_suspect(
 fn print_notes(notes: &[String]) {
     for n in notes {
         eprintln!("catmodel: note: {n}");
+    }
+}
+
+/// What reading a file found worth a warning, on stderr: `catmodel: warning: FILE:LINE: ...`.
+fn print_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("catmodel: warning: {w}");
     }
 }
 

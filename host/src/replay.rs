@@ -20,7 +20,9 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
-use catmodel::can::codec::{GnssPosition, ModelMode, Prediction, StateMotion, StatePosition};
+use catmodel::can::codec::{
+    GnssPosition, ModelMode, Prediction, SpeedReport, StateMotion, StatePosition,
+};
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::steering::SteeringCheck;
 use catmodel::node::{
@@ -645,6 +647,59 @@ pub struct ReplayStats {
     /// GNSS positions given to the node from other source addresses (refused as unknown ids),
     /// by address.
     pub other_gnss_sources: Vec<(u8, u64)>,
+    /// Speed reports above the model file's `max_speed_mps`, which the node clamps to it
+    /// without a counter of its own ([`speed_note`]).
+    pub speeds_over_max: SpeedsOverMax,
+}
+
+/// Measured speeds (SPEED_REPORT frames the node took: CRC and length right) above the model
+/// file's `max_speed_mps`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpeedsOverMax {
+    /// The model file's `max_speed_mps`, m/s.
+    pub max_speed_mps: f32,
+    /// Reports above it.
+    pub reports: u64,
+    /// The fastest of them, m/s.
+    pub fastest_mps: f32,
+    /// The first one's time stamp, us.
+    pub first_t_us: Option<u64>,
+}
+
+impl SpeedsOverMax {
+    /// Counts `frame` (stamped `t_us`) if it is a speed report above the limit.
+    fn observe(&mut self, frame: &CanFrame, t_us: u64) {
+        if frame.id != catmodel::can::spec::SPEED_REPORT.id {
+            return;
+        }
+        let Ok((report, _)) = SpeedReport::decode(frame) else {
+            return;
+        };
+        if let Some(v) = report.speed_mps.filter(|v| *v > self.max_speed_mps) {
+            self.reports += 1;
+            self.fastest_mps = self.fastest_mps.max(v);
+            self.first_t_us.get_or_insert(t_us);
+        }
+    }
+}
+
+/// What a replay should say about speed reports above the model file's `max_speed_mps`: the
+/// node clamps its speed to it (as the firmware does, and counts nothing), so its predictions
+/// there fall short of the car. `None` without such reports.
+pub fn speed_note(stats: &ReplayStats) -> Option<String> {
+    let s = &stats.speeds_over_max;
+    let first = s.first_t_us?;
+    Some(format!(
+        "{} speed report(s) (SPEED_REPORT) were above the model file's max_speed_mps \
+         ({} m/s), up to {:.2} m/s, the first at t = {:.6} s: the node clamps its speed to \
+         {} m/s, so its state and predictions there fall behind the car; check \
+         [vehicle] max_speed_mps against the car (and `speed_mps`'s unit on the bus)",
+        s.reports,
+        s.max_speed_mps,
+        s.fastest_mps,
+        first as f64 * 1e-6,
+        s.max_speed_mps
+    ))
 }
 
 /// What a replay should say about GNSS positions of receivers at source addresses other than
@@ -761,6 +816,7 @@ pub fn replay_with_progress(
         rx_queue_drops: 0,
         fixes: 0,
         other_gnss_sources: Vec::new(),
+        speeds_over_max: SpeedsOverMax::default(),
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -1194,6 +1250,10 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
     mut progress: impl FnMut(u64),
 ) -> (ReplayStats, std::io::Result<()>, Option<anyhow::Error>) {
     let gnss_source = config.gnss_source;
+    let mut speeds_over_max = SpeedsOverMax {
+        max_speed_mps: config.max_speed_mps,
+        ..SpeedsOverMax::default()
+    };
     let mut node = crate::new_node(config);
     // The times of the receiver's position frames, for the rate the whole log shows.
     let mut fix_times_us: Vec<u64> = Vec::new();
@@ -1262,6 +1322,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 };
                 frames += rx.len() as u64;
                 for f in &rx {
+                    speeds_over_max.observe(&f.frame, f.t_us);
                     match GnssPosition::decode(&f.frame, gnss_source) {
                         Ok(_) => fix_times_us.push(f.t_us),
                         Err(catmodel::can::codec::DecodeError::WrongSource { got }) => {
@@ -1351,6 +1412,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         fixes_beyond_frame: node.gnss_fixes_beyond_frame(),
         gnss_rate: crate::ReceiverRate::measure(&fix_times_us),
         planner,
+        speeds_over_max,
     };
     let error = if input_ok == Some(true) {
         None
@@ -2091,6 +2153,41 @@ mod tests {
             a
         );
         assert_eq!(csv_a, csv_b);
+    }
+
+    /// Speed reports above the model file's `max_speed_mps` are counted and named (black-box
+    /// probe: the 5-minute drive's reports up to 10 m/s against a file's 5 m/s were clamped
+    /// without a word); the node's frames are the same as without the count; under the limit,
+    /// nothing is said.
+    #[test]
+    fn speeds_above_the_model_files_limit_are_counted() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.can.log");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let run = |max: f32| {
+            let mut config = crate::model_file::paper().node_config();
+            config.max_speed_mps = max;
+            let mut csv = vec![];
+            let stats =
+                replay_text_into(&path, &text, config, &mut csv, None::<&mut Vec<u8>>, |_| {})
+                    .unwrap();
+            (stats, csv)
+        };
+        let (within, _) = run(60.0);
+        assert_eq!(within.speeds_over_max.reports, 0);
+        assert_eq!(speed_note(&within), None);
+        let (over, _) = run(3.0);
+        let s = over.speeds_over_max;
+        assert!(s.reports > 10, "{s:?}");
+        assert!(s.fastest_mps > 3.0 && s.fastest_mps < 20.0, "{s:?}");
+        let note = speed_note(&over).unwrap();
+        assert!(
+            note.starts_with(&format!(
+                "{} speed report(s) (SPEED_REPORT) were above the model file's max_speed_mps \
+                 (3 m/s), up to {:.2} m/s",
+                s.reports, s.fastest_mps
+            )) && note.contains("the node clamps its speed to 3 m/s"),
+            "{note}"
+        );
     }
 
     /// A forward clock jump beyond a day (a clock step, logs joined) is refused with its line,

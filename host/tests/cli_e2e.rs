@@ -795,6 +795,102 @@ fn evaluate_refuses_what_would_mislead() {
     assert!(!out.contains("error"), "{out}");
 }
 
+/// `evaluate` on predictions that cover part of the drive says how much, and gives raw GNSS
+/// over their span beside the figures over the whole drive (black-box probe: the first 30 s
+/// of the 5-minute drive put raw GNSS at "0.784 x the floor", the floor over 30 s and raw GNSS
+/// over 300, without a word); it refuses inputs whose fixes lie 100 m or more from the truth
+/// (another drive's candump scored a baseline 227 m off, exit 0) and inputs whose fixes do not
+/// overlap the predictions in time. The whole drive gets no warning.
+#[test]
+fn evaluate_names_partial_predictions_and_refuses_another_drives_inputs() {
+    let dir = tmp_dir("evaluate-inputs");
+    let truth = data("smoke.truth.csv");
+    let can = data("smoke.can.log");
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let evaluate = |pred: &Path, inputs: &Path, succeeds: bool| -> String {
+        let args = [
+            "evaluate",
+            s(pred),
+            "--truth",
+            s(&truth),
+            "--inputs",
+            s(inputs),
+        ];
+        if succeeds {
+            ok(&args)
+        } else {
+            fails(&args)
+        }
+    };
+    let whole = evaluate(&pred, &can, true);
+    assert!(!whole.contains("warning"), "{whole}");
+
+    // The predictions up to t = 6 s of the 15 s.
+    let text = String::from_utf8(read(&pred)).unwrap();
+    let part: String = text
+        .lines()
+        .filter(|l| {
+            l.starts_with('t') || l.split(',').next().unwrap().parse::<f64>().unwrap() <= 6.0
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let part_csv = dir.join("part.csv");
+    std::fs::write(&part_csv, part).unwrap();
+    let warned = evaluate(&part_csv, &can, true);
+    assert!(
+        warned.contains(&format!(
+            "catmodel: warning: {}: the predictions cover t = 3.86 .. 6 s of the drive",
+            part_csv.display()
+        )) && warned.contains("over it raw GNSS at the rear axle is"),
+        "{warned}"
+    );
+
+    // The log's fixes moved 0.01 deg north (1.1 km), or cut to its first 3 s.
+    let csv = String::from_utf8(read(&data("smoke.csv"))).unwrap();
+    let edited = |name: &str, edit: &dyn Fn(&str) -> Option<String>| -> PathBuf {
+        let mut out = String::new();
+        for (i, l) in csv.lines().enumerate() {
+            if i == 0 {
+                out += l;
+                out += "\n";
+            } else if let Some(l) = edit(l) {
+                out += &l;
+                out += "\n";
+            }
+        }
+        let log = dir.join(format!("{name}.csv"));
+        std::fs::write(&log, out).unwrap();
+        let can = dir.join(format!("{name}.can.log"));
+        ok(&["csv2can", s(&log), "--out", s(&can)]);
+        can
+    };
+    let far = edited("far", &|l| {
+        let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+        if let Ok(lat) = cells[6].parse::<f64>() {
+            cells[6] = format!("{:.9}", lat + 0.01);
+        }
+        Some(cells.join(","))
+    });
+    let err = evaluate(&pred, &far, false);
+    assert!(
+        err.contains(&format!(
+            "the inputs {}: their GNSS fixes lie 110",
+            far.display()
+        )) && err.contains("m from the truth")
+            && err.contains("another drive's candump?"),
+        "{err}"
+    );
+    let early = edited("early", &|l| {
+        (l.split(',').next().unwrap().parse::<f64>().unwrap() < 3.0).then(|| l.to_string())
+    });
+    let err = evaluate(&pred, &early, false);
+    assert!(
+        err.contains("do not overlap in time: the baseline has no input at the predictions' ticks"),
+        "{err}"
+    );
+}
+
 /// `receiver-error` on the simulator's receiver parked for an hour gives the bound the built-in
 /// files declare (the simulator's bias, 0.8 m per axis: 2.0 m, 2.5 standard deviations; seeds
 /// 1 and 2 give 2.1 and 2.0 m); a 20 s standstill is too short and says how long is enough; a

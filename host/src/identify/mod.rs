@@ -427,8 +427,18 @@ pub const MIN_STEADY_TURN_SAMPLES: usize = 250;
 /// Gauss-Newton from 1, and its standard error (the yaw rate's central difference over
 /// `2 hw + 1` samples counted as one independent error, as the understeer's).
 fn steer_gain_alone(pts: &[SteadyTurn], vehicle: &VehicleSection, hw: usize) -> (f64, f64) {
+    steer_gain_from(pts, vehicle, hw, 1.0)
+}
+
+/// [`steer_gain_alone`] from the gain `start`.
+fn steer_gain_from(
+    pts: &[SteadyTurn],
+    vehicle: &VehicleSection,
+    hw: usize,
+    start: f64,
+) -> (f64, f64) {
     let (l, k) = (vehicle.wheelbase_m, vehicle.understeer_s2_per_m2);
-    let mut g = 1.0;
+    let mut g = start;
     let (mut jtj, mut cost) = (0.0, 0.0);
     for _ in 0..50 {
         let mut jtr = 0.0;
@@ -454,6 +464,43 @@ fn steer_gain_alone(pts: &[SteadyTurn], vehicle: &VehicleSection, hw: usize) -> 
     (g, (s2 / jtj).sqrt())
 }
 
+/// The small-angle steering gain of `pts` (`r = v g delta / ((1 + K v^2) L)` by least
+/// squares), a start for [`steer_gain_from`] far from 1; 1 when the steering is all zero.
+fn small_angle_gain(pts: &[SteadyTurn], vehicle: &VehicleSection) -> f64 {
+    let (l, k) = (vehicle.wheelbase_m, vehicle.understeer_s2_per_m2);
+    let (mut ar, mut aa) = (0.0, 0.0);
+    for &(v, d, r) in pts {
+        let a = v * d / ((1.0 + k * v * v) * l);
+        ar += a * r;
+        aa += a * a;
+    }
+    if aa > 0.0 && (ar / aa).is_finite() {
+        ar / aa
+    } else {
+        1.0
+    }
+}
+
+/// The course's curvature (yaw rate over speed) above which a steady sample is a turn when the
+/// steering is too small to say so ([`course_turns`]), 1/m: a circle of 50 m, which takes a
+/// centre-tyre angle of 0.05 rad on a car of 2.5 m, five times [`steady_turns`]' least.
+const COURSE_TURN_CURVATURE: f64 = 0.02;
+
+/// The steady samples of `e` where the GNSS course turns ([`COURSE_TURN_CURVATURE`]), whatever
+/// the steering says: a `steer` written as a fraction of the lock (-1..1) or in radians reads
+/// as under 0.01 rad on every turn, and [`steady_turns`] found none (a black-box probe's such
+/// training set was identified with exit 0, without `[lateral]`, its drives blamed).
+fn course_turns(e: &Experiment) -> Vec<SteadyTurn> {
+    steady_samples(e, STEADY_TURN_MIN_SPEED_MPS, 0.0)
+        .into_iter()
+        .filter(|&(v, _, r)| (r / v).abs() > COURSE_TURN_CURVATURE)
+        .collect()
+}
+
+/// A gain from the course's turns ([`course_turns`]) is judged when it is this many standard
+/// errors from 1.
+const COURSE_GAIN_SIGMAS: f64 = 5.0;
+
 /// A steering gain this many standard errors below 0 turns the car the other way.
 pub const STEER_SIGN_SIGMAS: f64 = 3.0;
 
@@ -466,6 +513,9 @@ pub const MIN_LOCK_DEG: f64 = 10.0;
 /// on a circle reads 1-10 % low, as in [`units`]).
 const STEER_UNIT_TOLERANCE: f64 = 0.15;
 
+/// The steering gain of a `steer` written as a fraction of the lock (-1..1) read as percent.
+pub const STEER_FRACTION_GAIN: f64 = 100.0;
+
 /// Overall steering ratios (steering wheel to road wheels) of road vehicles: about 12:1 on a
 /// sports car, 14-18:1 on most cars, to 20-25:1 on vans, trucks and buses.
 pub const STEERING_RATIO_RANGE: std::ops::RangeInclusive<f64> = 10.0..=25.0;
@@ -476,13 +526,40 @@ pub const STEERING_RATIO_RANGE: std::ops::RangeInclusive<f64> = 10.0..=25.0;
 ///   the CAT Vehicle's 35.5 deg): the lock it implies is 100 deg, more than any wheel turns;
 /// - the steering wheel's angle in degrees gives `100 / (max_steer_deg R)` for a steering
 ///   ratio R ([`STEERING_RATIO_RANGE`]): a lock of `100 / R` deg, 4-10 deg;
+/// - a fraction of the lock (-1..1) gives [`STEER_FRACTION_GAIN`];
+/// - the road wheels' angle in radians gives `100 / max_steer_rad` (161 on 35.5 deg);
 /// - a `steer` of the other sign (positive = left) gives minus the car's gain.
 pub fn steer_gain_cause(g: f64, std_error: f64, max_steer_deg: f64) -> Option<String> {
     let near = |x: f64| (g.abs() / x - 1.0).abs() < STEER_UNIT_TOLERANCE;
     let wheel_deg = 100.0 / max_steer_deg;
+    let wheel_rad = 100.0 / max_steer_deg.to_radians();
     let lock = g.abs() * max_steer_deg;
     let ratio = 100.0 / lock;
-    let unit = if near(wheel_deg) {
+    let fraction = near(STEER_FRACTION_GAIN).then(|| {
+        "`steer` looks like a fraction of full lock (-1..1: a fraction read as percent gives a \
+         gain of 100): the schema's `steer` is percent of full lock: multiply it by 100"
+            .to_string()
+    });
+    let radians = near(wheel_rad).then(|| {
+        format!(
+            "`steer` looks like the road wheels' angle in radians (radians read as percent of \
+             the car file's {max_steer_deg} deg lock, {} rad, give a gain of 100 / {} = {}): \
+             the schema's `steer` is percent of full lock: multiply it by {}",
+            sig3(max_steer_deg.to_radians()),
+            sig3(max_steer_deg.to_radians()),
+            sig3(wheel_rad),
+            sig3(wheel_rad)
+        )
+    });
+    let unit = if fraction.is_some() || radians.is_some() {
+        Some(
+            [fraction, radians]
+                .into_iter()
+                .flatten()
+                .collect::<Vec<_>>()
+                .join("; or "),
+        )
+    } else if near(wheel_deg) {
         Some(format!(
             "`steer` looks like the road wheels' angle in degrees (degrees read as percent of \
              the car file's {max_steer_deg} deg lock give a gain of 100 / {max_steer_deg} = {}): \
@@ -538,22 +615,43 @@ fn sig3(x: f64) -> String {
 /// the car file's understeer, its standard error, each log's own gain where it has
 /// [`MIN_STEADY_TURN_SAMPLES`] / 5, and the likely cause ([`steer_gain_cause`]). `None` when
 /// the gain is one a car has, or too few steady turns to tell.
+/// When the steering reads too small for [`steady_turns`] to find enough (a fraction of the
+/// lock, radians), the turns are the course's ([`course_turns`]) and the gain is fitted from
+/// its small-angle estimate.
 pub fn steering_gain_problem(logs: &[Experiment], vehicle: &VehicleSection) -> Option<String> {
-    let per_log: Vec<(&str, Vec<SteadyTurn>, usize)> = logs
-        .iter()
-        .map(|e| (e.name.as_str(), steady_turns(e), e.yaw_half_width))
-        .collect();
-    let all: Vec<SteadyTurn> = per_log.iter().flat_map(|p| p.1.clone()).collect();
+    let turns = |find: fn(&Experiment) -> Vec<SteadyTurn>| -> Vec<(&str, Vec<SteadyTurn>, usize)> {
+        logs.iter()
+            .map(|e| (e.name.as_str(), find(e), e.yaw_half_width))
+            .collect()
+    };
+    let pooled = |per_log: &[(&str, Vec<SteadyTurn>, usize)]| -> Vec<SteadyTurn> {
+        per_log.iter().flat_map(|p| p.1.clone()).collect()
+    };
+    let mut per_log = turns(steady_turns);
+    let mut all = pooled(&per_log);
+    let (mut start, mut by_course) = (1.0, false);
     if all.len() < MIN_STEADY_TURN_SAMPLES {
-        return None;
+        by_course = true;
+        per_log = turns(course_turns);
+        all = pooled(&per_log);
+        if all.len() < MIN_STEADY_TURN_SAMPLES {
+            return None;
+        }
+        start = small_angle_gain(&all, vehicle);
     }
     let hw = logs.first().map_or(1, |e| e.yaw_half_width);
-    let (g, se) = steer_gain_alone(&all, vehicle, hw);
+    let (g, se) = steer_gain_from(&all, vehicle, hw, start);
+    // The course's turns alone are the course's noise on a straight drive at walking pace (a
+    // gain of 5.1 +- 23 on the simulator's straight-2.5): only a gain that they determine far
+    // from 1 is judged.
+    if by_course && !(se.is_finite() && (g - 1.0).abs() > COURSE_GAIN_SIGMAS * se) {
+        return None;
+    }
     let cause = steer_gain_cause(g, se, vehicle.max_steer_deg)?;
     let each: Vec<String> = per_log
         .iter()
         .filter(|p| p.1.len() >= MIN_STEADY_TURN_SAMPLES / 5)
-        .map(|(name, pts, hw)| format!("{name} {:.3}", steer_gain_alone(pts, vehicle, *hw).0))
+        .map(|(name, pts, hw)| format!("{name} {:.3}", steer_gain_from(pts, vehicle, *hw, start).0))
         .collect();
     Some(format!(
         "the steering gain (the centre-tyre angle the GNSS course shows over the nominal one \

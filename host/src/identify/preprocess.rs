@@ -89,6 +89,9 @@ pub struct Experiment {
     pub yaw_half_width: usize,
     /// What reading the log noticed without refusing it ([`logcsv::LogNotes::messages`]).
     pub log_notes: Vec<String>,
+    /// Warnings on the file as read ([`logcsv::LogNotes::warnings`]: a last line cut short),
+    /// for stderr.
+    pub log_warnings: Vec<String>,
     /// The receiver's fix rate in this log: the reciprocal of the median interval between
     /// fixes, Hz.
     pub gnss_rate_hz: f64,
@@ -150,7 +153,7 @@ fn column(rows: &[LogRow], f: impl Fn(&LogRow) -> Option<f64>) -> (Vec<f64>, Vec
 /// farthest neighbour compared (what the quantity can change in that time).
 #[derive(Clone, Copy, Debug)]
 struct Plausible {
-    /// Physical unit, for the note.
+    /// What follows a value in the note: its physical unit.
     unit: &'static str,
     tolerance: f64,
     max_rate: f64,
@@ -174,19 +177,28 @@ const STEER_PLAUSIBLE: Plausible = Plausible {
 /// GNSS fixes, metres from the first: the node's 10 m plausibility gate (docs/faults.md)
 /// plus 80 m/s (the log schema's top speed).
 const FIX_PLAUSIBLE: Plausible = Plausible {
-    unit: "m",
+    unit: "of where the log starts",
     tolerance: 10.0,
     max_rate: 80.0,
 };
 
 /// Indices of the samples of `t`, `values` (one or more coordinates per sample) that stand
 /// apart from the median of their [`OUTLIER_NEIGHBOURS`] neighbours before *and* after by more
-/// than `p` allows (a step stays with one side; a spike leaves both). The ends, without
-/// neighbours on both sides, are kept.
+/// than `p` allows (a step stays with one side; a spike leaves both). The first and the last
+/// sample, with neighbours on one side only, are judged against those ([`OUTLIER_NEIGHBOURS`]
+/// of them, the next ones for the first and the previous ones for the last) by the same rule:
+/// one corrupt value at a log's end used to pass and ruin the fits (a first `vel` of 70 m/s
+/// took a speed fit from 58.5 % to -0.8 %; a first fix far away moved the local origin).
 fn impossible_samples<const N: usize>(t: &[f64], values: &[[f64; N]], p: Plausible) -> Vec<usize> {
     let k = OUTLIER_NEIGHBOURS;
+    let n = t.len();
     let mut out = Vec::new();
-    for i in 1..t.len().saturating_sub(1) {
+    // With fewer samples than a full side and the sample itself, an end has nothing to be
+    // judged against.
+    if n <= k {
+        return out;
+    }
+    for i in 0..n {
         let apart = |range: std::ops::Range<usize>| -> bool {
             let mut dist2 = 0.0;
             for c in 0..N {
@@ -200,11 +212,30 @@ fn impossible_samples<const N: usize>(t: &[f64], values: &[[f64; N]], p: Plausib
                 .fold(0.0, f64::max);
             dist2.sqrt() > p.tolerance + p.max_rate * span
         };
-        if apart(i.saturating_sub(k)..i) && apart(i + 1..(i + 1 + k).min(t.len())) {
+        let before = i.saturating_sub(k)..i;
+        let after = i + 1..(i + 1 + k).min(n);
+        let impossible = match (i, n - 1 - i) {
+            (0, _) => apart(after),
+            (_, 0) => apart(before),
+            _ => apart(before) && apart(after),
+        };
+        if impossible {
             out.push(i);
         }
     }
     out
+}
+
+/// The neighbours a note on the impossible sample `i` of `len` shows: the one on each side, or
+/// at an end the two it was judged against.
+fn neighbours_shown(i: usize, len: usize) -> (&'static str, usize, usize) {
+    if i == 0 {
+        ("the samples after it", 1, 2)
+    } else if i + 1 == len {
+        ("the samples before it", i - 2, i - 1)
+    } else {
+        ("its neighbours", i - 1, i + 1)
+    }
 }
 
 /// Leaves out the impossible samples of a column ([`impossible_samples`]), naming each in
@@ -222,14 +253,15 @@ fn drop_impossible<const N: usize>(
 ) -> Vec<usize> {
     let bad = impossible_samples(t, values, p);
     for &i in bad.iter().take(3) {
+        let (which, a, b) = neighbours_shown(i, t.len());
         notes.push(format!(
-            "{log}: column `{name}`: the sample at t = {} s ({} {}) is impossible beside its \
-             neighbours ({} and {} {}): left out",
+            "{log}: column `{name}`: the sample at t = {} s ({} {}) is impossible beside \
+             {which} ({} and {} {}): left out",
             t[i],
             show(&values[i]),
             p.unit,
-            show(&values[i - 1]),
-            show(&values[i + 1]),
+            show(&values[a]),
+            show(&values[b]),
             p.unit
         ));
     }
@@ -744,6 +776,7 @@ pub fn load_named(
     let mut log_notes = log.notes.messages();
     log_notes.append(&mut e.log_notes);
     e.log_notes = log_notes;
+    e.log_warnings = log.notes.warnings();
     Ok(e)
 }
 
@@ -851,6 +884,7 @@ pub fn preprocess_rows(
         speed_scale,
         speed_disagreement,
         log_notes: notes,
+        log_warnings: Vec::new(),
         gnss_gap,
     })
 }
@@ -925,6 +959,15 @@ fn coarse_resolution(latlon: &[(f64, f64)]) -> Option<(u32, f64)> {
     })
 }
 
+/// Where the fixes `latlon` (not empty) start: the median latitude and longitude of the
+/// first `2 OUTLIER_NEIGHBOURS + 1`, which one impossible fix among them does not move.
+fn start_of(latlon: &[(f64, f64)]) -> (f64, f64) {
+    let first = &latlon[..latlon.len().min(2 * OUTLIER_NEIGHBOURS + 1)];
+    let mut lat: Vec<f64> = first.iter().map(|f| f.0).collect();
+    let mut lon: Vec<f64> = first.iter().map(|f| f.1).collect();
+    (median(&mut lat), median(&mut lon))
+}
+
 /// Leaves out of the fixes `tg`, `latlon` of the log `name` the impossible ones
 /// ([`drop_impossible`]) and the bursts that step off the track the wheel speed (`wheel`: its
 /// times and m/s) continues ([`drop_bursts`]), each named in `notes`; a step no car makes
@@ -936,9 +979,9 @@ fn clean_fixes(
     wheel: (&[f64], &[f64]),
     notes: &mut Vec<String>,
 ) -> Result<()> {
-    let Some(&first) = latlon.first() else {
+    if latlon.is_empty() {
         return Ok(());
-    };
+    }
     if let Some((decimals, metres)) = coarse_resolution(latlon) {
         let what = format!(
             "`lat`/`lon` are written with {decimals} decimals of a degree: the fixes step by \
@@ -957,15 +1000,17 @@ fn clean_fixes(
              (1 cm) or more"
         ));
     }
-    // Fixes in metres from the first, for the plausibility check.
-    let mut metres = local_metres(first, latlon);
+    // Fixes in metres from the median of the first few (the first may be the impossible
+    // one: 6300 km away, it bent the plane the others were judged in), for the plausibility
+    // check.
+    let mut metres = local_metres(start_of(latlon), latlon);
     let dropped = drop_impossible(
         name,
         "lat/lon",
         tg,
         &mut metres,
         FIX_PLAUSIBLE,
-        |m| format!("{:.1} m east, {:.1} m north of the first fix", m[0], m[1]),
+        |m| format!("{:.1} m east, {:.1} m north", m[0], m[1]),
         notes,
     );
     for &i in dropped.iter().rev() {
