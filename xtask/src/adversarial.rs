@@ -180,6 +180,7 @@ fn random(rng: &mut Rng, car: &NodeConfig, name: String) -> Spec {
         heading_rad: 0.3,
         obstacles_moving_mps: [0.0, 1.5, 30.0][rng.below(3) as usize],
         corridor_widening_m: [0.0, 0.002, -0.002][rng.below(3) as usize],
+        path_offset_m: 0.0,
     }
 }
 

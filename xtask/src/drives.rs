@@ -172,6 +172,10 @@ pub struct Spec {
     /// (`control::path::NARROWEST_TIE_M`) over the front half of a body, the search for the
     /// corridor's binding point reads its way back from the front to near the axle.
     pub corridor_widening_m: f64,
+    /// The path's points this far to the right of the car's track, m: beyond its corridor by
+    /// more than a body width, the car has lost its path (`Tracking::has_lost_path`) along it,
+    /// and stops on the lane hold (`node::drive`).
+    pub path_offset_m: f64,
 }
 
 impl Spec {
@@ -209,6 +213,7 @@ impl Spec {
             heading_rad: 0.3,
             obstacles_moving_mps: 0.0,
             corridor_widening_m: 0.0,
+            path_offset_m: 0.0,
         }
     }
 }
@@ -247,10 +252,13 @@ fn planner_frames(spec: &Spec, truth: &Truth, origin_e7: (i32, i32)) -> Vec<Time
     };
     for k in 0..paths {
         let path_id = (k % 16) as u8;
-        let track = truth.track_ahead(
-            frame_time_s(frames.len()) - 0.2,
-            points,
-            spec.path_spacing_m,
+        let track = offset_right(
+            &truth.track_ahead(
+                frame_time_s(frames.len()) - 0.2,
+                points,
+                spec.path_spacing_m,
+            ),
+            spec.path_offset_m,
         );
         frames.push(
             PathHeader {
@@ -473,6 +481,25 @@ impl Truth {
         let i = ((t_s / TRUTH_DT_S).round().max(0.0) as usize).min(self.samples.len() - 1);
         self.samples[i]
     }
+}
+
+/// `track`'s points moved `offset_m` to the right of its direction there (each point along
+/// its next segment's, the last along the one before).
+fn offset_right(track: &[(f64, f64)], offset_m: f64) -> Vec<(f64, f64)> {
+    if offset_m == 0.0 || track.len() < 2 {
+        return track.to_vec();
+    }
+    (0..track.len())
+        .map(|i| {
+            let (a, b) = match i + 1 < track.len() {
+                true => (track[i], track[i + 1]),
+                false => (track[i - 1], track[i]),
+            };
+            let heading = (b.0 - a.0).atan2(b.1 - a.1);
+            let (e, n) = track[i];
+            (e + offset_m * heading.cos(), n - offset_m * heading.sin())
+        })
+        .collect()
 }
 
 /// Every time `k / hz + phase_s` within the drive.
@@ -1072,6 +1099,17 @@ pub fn stage_corpus(car: &NodeConfig) -> Vec<Spec> {
             ..plain("stages-path-short")
         },
         path_jump(car, plain("stages-path-jump")),
+        // A path beside the car, its corridor a body width and more away: the car has lost it
+        // along it from the first plan on and brakes on the lane hold at the station it would
+        // have reached (`node::drive`), a path sample and the hold's steering in every tick.
+        Spec {
+            seconds: (6.0_f64).max(5.0 + 40.0 * period_s),
+            steer: Profile::Const(0.0),
+            path_points: MAX_PATH_POINTS,
+            path_once: true,
+            path_offset_m: 3.0 + 2.0 * f64::from(car.body.width_m) + 1.0,
+            ..plain("stages-path-lost")
+        },
     ]
 }
 
@@ -1200,6 +1238,43 @@ mod tests {
     fn car(file: &str) -> NodeConfig {
         let path = crate::root().join(file);
         catmodel_model_file::load(&path).unwrap().node_config()
+    }
+
+    /// The lost drive reaches what it is made for: the car loses its path along it and stops
+    /// on the lane hold (`node::drive`, a path sample each tick), for the published car, the
+    /// dearest file found and the van.
+    #[test]
+    fn the_lost_drive_loses_the_path_along_it_for_every_car() {
+        use catmodel::can::codec::{ControlCommand, FallbackCause};
+        for file in [
+            "models/paper.toml",
+            "models/stress/dearest-found.toml",
+            "models/van.toml",
+        ] {
+            let car = car(file);
+            let spec = stage_corpus(&car)
+                .into_iter()
+                .find(|s| s.name == "stages-path-lost")
+                .unwrap();
+            let frames = generate(&spec, &car);
+            let mut node = Node::new(car.clone(), Box::new(Drive::new()));
+            let mut lost = 0;
+            for (now_us, due) in due_ticks(&frames) {
+                let tick = Tick {
+                    now_us,
+                    platform: PlatformStats::default(),
+                };
+                let mut tx = TxFrames::new();
+                let _ = node.step(&tick, &frames[due], &mut tx);
+                let id = catmodel::can::spec::CONTROL_COMMAND.id;
+                for f in tx.iter().filter(|f| f.id == id) {
+                    if let Ok((c, _)) = ControlCommand::decode(f) {
+                        lost += usize::from(c.fallback == FallbackCause::LostPath);
+                    }
+                }
+            }
+            assert!(lost >= 50, "{file}: {lost} ticks lost");
+        }
     }
 
     /// The jump drive reaches what it is made for, for the published car, a 5 Hz receiver that
