@@ -218,6 +218,14 @@ fn bad_input_gets_a_clear_error() {
     );
 }
 
+/// The largest |a - b| over the pairs, 0 for none.
+fn largest_difference(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 /// One corrupt sample that is still in range (a speed of 70 m/s in a drive at 5 m/s, a fix
 /// moved 1 km) is named and left out, instead of moving the identified model without a word
 /// (it halved the speed delay); a step in the command is no outlier; a clean drive has none.
@@ -260,12 +268,7 @@ fn an_impossible_sample_is_named_and_left_out() {
         e.log_notes[1]
     );
     // What is left is the clean drive but for the interpolation over one sample.
-    let worst = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max)
-    };
+    let worst = largest_difference;
     assert!(
         worst(&e.vel, &clean.vel) < 0.05,
         "{}",
@@ -294,12 +297,7 @@ fn an_impossible_first_or_last_sample_is_named_and_left_out() {
     };
     let clean = preprocess_rows("clean", &drive(), &v, &o).unwrap();
     assert!(clean.log_notes.is_empty(), "{:?}", clean.log_notes);
-    let worst = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max)
-    };
+    let worst = largest_difference;
     let last = drive().len() - 1;
     for (what, end) in [("first", 0), ("last", last)] {
         let mut bad = drive();
@@ -1043,25 +1041,10 @@ fn the_wheel_speed_is_moved_to_the_antenna_before_its_unit_is_judged() {
 /// paper-sized sets), far inside `STEER_GAIN_SPREAD`.
 #[test]
 fn a_steering_sensor_that_clips_is_named() {
-    use catmodel_host::sim::{self, SimOptions};
     for (name, plant, vehicle) in &four_plants("CAT Vehicle at 10 Hz", 0.1) {
-        let set = |clip: f64| -> Vec<_> {
-            ["turn-left", "turn-right", "circle-left", "circle-right"]
-                .iter()
-                .map(|scenario| {
-                    let base = sim::scenario::Scenario::builtin(scenario).unwrap();
-                    let options = SimOptions {
-                        seed: 1,
-                        ..SimOptions::default()
-                    };
-                    let mut rows = sim::simulate(&base, plant, &options).log;
-                    for r in &mut rows {
-                        r.steer = r.steer.map(|s| s.clamp(-clip, clip));
-                    }
-                    preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default())
-                        .unwrap_or_else(|e| panic!("{name}, {scenario}: {e:#}"))
-                })
-                .collect()
+        let set = |clip: f64| {
+            let turns = ["turn-left", "turn-right", "circle-left", "circle-right"];
+            steer_altered(name, plant, vehicle, &turns, |s| s.clamp(-clip, clip))
         };
         assert_eq!(
             identify::steering_problem(&set(100.0), vehicle),
@@ -1097,27 +1080,11 @@ fn a_steering_sensor_that_clips_is_named() {
 /// nothing is named.
 #[test]
 fn a_steering_as_a_fraction_or_in_radians_is_named() {
-    use catmodel_host::sim::{self, SimOptions};
     let plants = four_plants("unused", 1.0);
     for (name, plant, vehicle) in [&plants[0], &plants[3]] {
         let lock_rad = vehicle.max_steer_deg.to_radians();
-        let set = |scenarios: &[&str], scale: f64| -> Vec<_> {
-            scenarios
-                .iter()
-                .map(|scenario| {
-                    let base = sim::scenario::Scenario::builtin(scenario).unwrap();
-                    let options = SimOptions {
-                        seed: 1,
-                        ..SimOptions::default()
-                    };
-                    let mut rows = sim::simulate(&base, plant, &options).log;
-                    for r in &mut rows {
-                        r.steer = r.steer.map(|s| s * scale);
-                    }
-                    preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default())
-                        .unwrap_or_else(|e| panic!("{name}, {scenario}: {e:#}"))
-                })
-                .collect()
+        let set = |scenarios: &[&str], scale: f64| {
+            steer_altered(name, plant, vehicle, scenarios, |s| s * scale)
         };
         let turns = ["straight-5", "turn-left", "circle-left"];
         let straight = ["straight-2.5", "straight-10"];
@@ -1889,6 +1856,34 @@ fn a_simulated_drive_beyond_the_grip_is_named() {
             && warning.contains("from t = 112."),
         "{warning}"
     );
+}
+
+/// The built-in `scenarios` simulated on `plant` (seed 1), each log's `steer` passed through
+/// `alter`, preprocessed for `vehicle`.
+fn steer_altered(
+    name: &str,
+    plant: &VehicleConfig,
+    vehicle: &model_file::VehicleSection,
+    scenarios: &[&str],
+    alter: impl Fn(f64) -> f64,
+) -> Vec<Experiment> {
+    use catmodel_host::sim::{self, SimOptions};
+    scenarios
+        .iter()
+        .map(|scenario| {
+            let base = sim::scenario::Scenario::builtin(scenario).unwrap();
+            let options = SimOptions {
+                seed: 1,
+                ..SimOptions::default()
+            };
+            let mut rows = sim::simulate(&base, plant, &options).log;
+            for r in &mut rows {
+                r.steer = r.steer.map(&alter);
+            }
+            preprocess_rows(scenario, &rows, vehicle, &PreprocessOptions::default())
+                .unwrap_or_else(|e| panic!("{name}, {scenario}: {e:#}"))
+        })
+        .collect()
 }
 
 /// Four plants with the model file's vehicle section each is identified with: the CAT

@@ -1235,6 +1235,21 @@ mod tests {
         laps.ticks
     }
 
+    /// The published car, a 5 Hz receiver that bridges 30 s and the van.
+    const THREE_CARS: [&str; 3] = [
+        "models/paper.toml",
+        "models/stress/dearest-found.toml",
+        "models/van.toml",
+    ];
+
+    /// `car`'s stage drive `name`.
+    fn corpus_spec(car: &NodeConfig, name: &str) -> Spec {
+        stage_corpus(car)
+            .into_iter()
+            .find(|s| s.name == name)
+            .unwrap()
+    }
+
     fn car(file: &str) -> NodeConfig {
         let path = crate::root().join(file);
         catmodel_model_file::load(&path).unwrap().node_config()
@@ -1246,16 +1261,9 @@ mod tests {
     #[test]
     fn the_lost_drive_loses_the_path_along_it_for_every_car() {
         use catmodel::can::codec::{ControlCommand, FallbackCause};
-        for file in [
-            "models/paper.toml",
-            "models/stress/dearest-found.toml",
-            "models/van.toml",
-        ] {
+        for file in THREE_CARS {
             let car = car(file);
-            let spec = stage_corpus(&car)
-                .into_iter()
-                .find(|s| s.name == "stages-path-lost")
-                .unwrap();
+            let spec = corpus_spec(&car, "stages-path-lost");
             let frames = generate(&spec, &car);
             let mut node = Node::new(car.clone(), Box::new(Drive::new()));
             let mut lost = 0;
@@ -1283,16 +1291,9 @@ mod tests {
     /// that planned, does not solve itself, and the controller plans again after it.
     #[test]
     fn the_jump_drive_leaves_the_window_on_the_path_for_every_car() {
-        for file in [
-            "models/paper.toml",
-            "models/stress/dearest-found.toml",
-            "models/van.toml",
-        ] {
+        for file in THREE_CARS {
             let car = car(file);
-            let spec = stage_corpus(&car)
-                .into_iter()
-                .find(|s| s.name == "stages-path-jump")
-                .unwrap();
+            let spec = corpus_spec(&car, "stages-path-jump");
             let ticks = laps(&spec, &car);
             let has = |t: &Vec<Stage>, s: Stage| t.contains(&s);
             let jumps: Vec<usize> = (0..ticks.len())
