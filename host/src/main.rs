@@ -846,6 +846,10 @@ fn identify_steering(args: IdentifySteeringArgs) -> Result<()> {
         from,
         interface,
     } = args;
+    Paths::new()
+        .inputs(&logs, "LOGS")
+        .input_opt(model.as_deref(), "--model")
+        .check()?;
     let file_rate = match &model {
         Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
         None => None,
@@ -953,6 +957,10 @@ fn receiver_error(args: ReceiverErrorArgs) -> Result<()> {
         model,
         interface,
     } = args;
+    Paths::new()
+        .inputs(&logs, "LOGS")
+        .input_opt(model.as_deref(), "--model")
+        .check()?;
     let file = load_base(model.as_deref())?;
     let source = file.inputs.gnss_source_address;
     let mut frames = Vec::new();

@@ -80,9 +80,26 @@ impl Paths {
     ///   output of the command is that directory, to be created);
     /// - an output directory that exists and is not a directory.
     ///
+    /// - a file given twice to one argument (the same file, or a copy of it: the same length,
+    ///   first and last 64 KiB), whose frames or rows would count twice: a black-box probe's
+    ///   parked log given twice to `receiver-error` read as a receiver at 200 Hz, a session's
+    ///   frames given twice to `identify-steering` as twice its commands.
+    ///
     /// An output that exists and is neither a regular file nor a directory (`/dev/null`, a
     /// pipe) is written in place and may be given more than once.
     pub fn check(&self) -> Result<()> {
+        for (i, (path, arg)) in self.inputs.iter().enumerate() {
+            let twice = self.inputs[..i]
+                .iter()
+                .find(|(p, a)| a == arg && (same(p, path) || copies(p, path)));
+            if let Some((first, _)) = twice {
+                bail!(
+                    "{}: the same log as {} ({arg}): its contents would count twice; give it once",
+                    path.display(),
+                    first.display()
+                );
+            }
+        }
         for (path, arg, kind) in &self.outputs {
             let meta = std::fs::metadata(path).ok();
             match kind {
@@ -175,6 +192,36 @@ fn same(a: &Path, b: &Path) -> bool {
     resolve(a) == resolve(b)
 }
 
+/// `a` and `b` are regular files of the same length, not empty, whose first and last 64 KiB
+/// are the same: one is a copy of the other (two recordings do not share both ends).
+fn copies(a: &Path, b: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    const SPAN: u64 = 64 * 1024;
+    let len = |p: &Path| {
+        std::fs::metadata(p)
+            .ok()
+            .filter(|m| m.is_file())
+            .map(|m| m.len())
+    };
+    let (Some(la), Some(lb)) = (len(a), len(b)) else {
+        return false;
+    };
+    if la != lb || la == 0 {
+        return false;
+    }
+    let ends = |p: &Path| -> Option<Vec<u8>> {
+        let mut f = std::fs::File::open(p).ok()?;
+        let mut head = vec![0; SPAN.min(la) as usize];
+        f.read_exact(&mut head).ok()?;
+        let mut tail = vec![0; SPAN.min(la) as usize];
+        f.seek(SeekFrom::Start(la - tail.len() as u64)).ok()?;
+        f.read_exact(&mut tail).ok()?;
+        head.extend(tail);
+        Some(head)
+    };
+    matches!((ends(a), ends(b)), (Some(x), Some(y)) if x == y)
+}
+
 /// The absolute form of `path`: its longest existing ancestor canonicalized (symbolic links
 /// and `..` resolved), the rest appended as given.
 fn resolve(path: &Path) -> PathBuf {
@@ -239,6 +286,36 @@ mod tests {
         assert!(Paths::new()
             .input(&input, "LOG")
             .output(&d.join("p.csv"), "--out", Kind::File)
+            .check()
+            .is_ok());
+    }
+
+    #[test]
+    fn a_log_given_twice_to_one_argument_is_refused_and_a_copy_too() {
+        let d = dir();
+        let a = d.join("a.can.log");
+        let b = d.join("b.can.log");
+        let copy = d.join("copy.can.log");
+        std::fs::write(&a, "(1.000000) can0 100#00\n(1.020000) can0 100#01\n").unwrap();
+        std::fs::write(&b, "(1.000000) can0 100#00\n(1.020000) can0 100#02\n").unwrap();
+        std::fs::copy(&a, &copy).unwrap();
+        for twice in [a.clone(), d.join("sub/../a.can.log"), copy] {
+            std::fs::create_dir_all(d.join("sub")).unwrap();
+            let err = Paths::new()
+                .inputs([&a, &b, &twice], "LOGS")
+                .check()
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("the same log as") && err.contains("(LOGS)"),
+                "{err}"
+            );
+        }
+        // Two logs that differ, and one log given to two arguments (training and validation).
+        assert!(Paths::new().inputs([&a, &b], "LOGS").check().is_ok());
+        assert!(Paths::new()
+            .input(&a, "LOGS")
+            .input(&a, "--validate")
             .check()
             .is_ok());
     }
