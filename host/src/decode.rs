@@ -83,6 +83,11 @@ impl Selection {
                 );
             }
         }
+        if selection.names.is_empty() && selection.ids.is_empty() {
+            // `--messages ''` or `--messages ,`: a selection of nothing shows nothing, as if
+            // the log held none of its messages.
+            bail!("--messages: no message named (give names, NAME* or hex identifiers, or leave the option out for all)");
+        }
         Ok(Some(selection))
     }
 

@@ -181,7 +181,7 @@ struct IdentifySteeringArgs {
     model: Option<PathBuf>,
     /// The fit's window starts here, s of the logs' clock (default: a second after the
     /// first tracking command).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_finite_seconds)]
     from: Option<f64>,
     /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
     /// holds several.
@@ -317,8 +317,8 @@ struct DecodeArgs {
 struct DiscretizeArgs {
     /// Model file.
     model: PathBuf,
-    /// Sample time, s (default: the file's).
-    #[arg(long)]
+    /// Sample time, s (default: the file's), 1e-4 to 10.
+    #[arg(long, value_parser = parse_sample_time)]
     ts: Option<f64>,
 }
 
@@ -330,6 +330,26 @@ fn load_base(base: Option<&Path>) -> Result<catmodel_host::model_file::ModelFile
         Some(p) => model_file::load(p)?,
         None => model_file::parse(PAPER_MODEL_TOML, Path::new("models/paper.toml"))?,
     })
+}
+
+/// `--ts`: a finite sample time from 0.1 ms to 10 s (outside, a delay's count of samples
+/// saturates or a model's poles leave the unit circle's useful part; NaN was blamed on the
+/// model file).
+fn parse_sample_time(s: &str) -> Result<f64, String> {
+    let ts: f64 = s.trim().parse().map_err(|e| format!("{s:?}: {e}"))?;
+    if !(1e-4..=10.0).contains(&ts) {
+        return Err(format!("{s}: a sample time from 0.0001 to 10 s"));
+    }
+    Ok(ts)
+}
+
+/// A finite number of seconds (`--from`).
+fn parse_finite_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|e| format!("{s:?}: {e}"))?;
+    if !v.is_finite() {
+        return Err(format!("{s}: not a finite number of seconds"));
+    }
+    Ok(v)
 }
 
 fn parse_origin(s: &str) -> Result<(f64, f64), String> {

@@ -1281,3 +1281,45 @@ fn outputs_never_overwrite_inputs() {
     );
     assert!(!model.exists());
 }
+
+/// Command-line values that would mislead are refused by name (a black-box probe): a sample
+/// time that is not a number was blamed on the model file, one of 1e-12 s gave a delay of
+/// 1 048 577 samples where it is 4.2e11; `--from=-inf` printed "from -inf s"; `--messages ''`
+/// showed no frame with exit 0, as if the log held none.
+#[test]
+fn command_line_values_that_would_mislead_are_refused() {
+    // A value the argument parser refuses: exit 2 and clap's "invalid value" with the reason.
+    let refused = |args: &[&str], why: &str| {
+        let out = run(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("invalid value") && stderr.contains(why),
+            "{args:?}: {stderr}"
+        );
+    };
+    let paper = data("../models/paper.toml");
+    for ts in ["NaN", "1e-12", "inf", "0", "-0.02", "100"] {
+        refused(
+            &["discretize", s(&paper), &format!("--ts={ts}")],
+            "a sample time from 0.0001 to 10 s",
+        );
+    }
+    let fine = run(&["discretize", s(&paper), "--ts", "0.001"]);
+    assert!(fine.status.success());
+    assert!(String::from_utf8_lossy(&fine.stdout).contains("\"ts\": 0.001"));
+    let log = data("smoke.can.log");
+    for from in ["-inf", "NaN", "inf"] {
+        refused(
+            &["identify-steering", s(&log), &format!("--from={from}")],
+            "not a finite number of seconds",
+        );
+    }
+    for messages in ["", ","] {
+        let err = fails(&["decode", s(&log), "--messages", messages]);
+        assert!(
+            err.contains("--messages: no message named"),
+            "{messages:?}: {err}"
+        );
+    }
+}
