@@ -19,7 +19,7 @@
 //! [`check_tick_schedule`]): an error naming the line number (quoting at most 80 characters of
 //! it, or the TICK expected), and nothing more is read.
 use std::collections::VecDeque;
-use std::io::{BufRead, Write};
+use std::io::{BufRead, Read, Write};
 
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{candump, CanFrame, TimedFrame};
@@ -116,6 +116,10 @@ fn timestamp(t_us: u64) -> String {
     format!("{:010}.{:06}", t_us / 1_000_000, t_us % 1_000_000)
 }
 
+/// The longest input line taken, bytes: a classic candump line is under 60, a CAN FD one
+/// under 200.
+pub const MAX_LINE_BYTES: usize = 4096;
+
 /// Runs a session: reads `input` to its end, ticking `driver`, writing to `output`. Returns
 /// what it did.
 pub fn run(
@@ -135,13 +139,25 @@ pub fn run(
     let mut planner = PlannerRefusals::default();
     for line_no in 1.. {
         bytes.clear();
-        if input.read_until(b'\n', &mut bytes).map_err(SilError::Io)? == 0 {
+        let read = (&mut input)
+            .take(MAX_LINE_BYTES as u64 + 1)
+            .read_until(b'\n', &mut bytes)
+            .map_err(SilError::Io)?;
+        if read == 0 {
             break;
         }
         let malformed = |reason: String| SilError::Malformed {
             line: line_no,
             reason,
         };
+        if bytes.len() > MAX_LINE_BYTES {
+            // Refused after the cap, not after the line: a line without an end (a simulator
+            // writing binary, a stream cut of its newlines) would otherwise be held in memory
+            // whole (200 MB for a 200 MB line, measured).
+            return Err(malformed(format!(
+                "longer than {MAX_LINE_BYTES} bytes (a candump line or a TICK is under 200)"
+            )));
+        }
         let text = std::str::from_utf8(&bytes)
             .map_err(|e| malformed(format!("not UTF-8 (byte {})", e.valid_up_to() + 1)))?
             .trim_end();
@@ -395,6 +411,39 @@ mod tests {
         assert_eq!(q.len(), RX_QUEUE_LEN - MAX_RX_FRAMES_PER_TICK);
     }
 
+    /// A line longer than [`MAX_LINE_BYTES`] is refused once the cap is read, not held whole
+    /// (a black-box probe's 200 MB line without an end took 201 MB before its error); a line of
+    /// the cap's length is read as any other.
+    #[test]
+    fn a_line_longer_than_the_cap_is_refused_without_reading_it_whole() {
+        /// Yields `b'A'` forever: a line with no end.
+        struct Endless(usize);
+        impl std::io::Read for Endless {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                buf.fill(b'A');
+                self.0 += buf.len();
+                Ok(buf.len())
+            }
+        }
+        let config = crate::node_config(None).unwrap();
+        let mut driver = NodeDriver::new(config.clone(), Controller::FromModel);
+        let mut endless = std::io::BufReader::new(Endless(0));
+        let err = run(&mut driver, &mut endless, Vec::new()).unwrap_err();
+        assert!(err.to_string().contains("longer than 4096 bytes"), "{err}");
+        assert!(
+            endless.get_ref().0 <= 2 * MAX_LINE_BYTES + 8192,
+            "{}",
+            endless.get_ref().0
+        );
+        // At the cap, with its newline: a malformed line, judged as a line.
+        let mut line = "TICK".to_string();
+        line.push_str(&" ".repeat(MAX_LINE_BYTES - 5));
+        line.push('\n');
+        let mut driver = NodeDriver::new(config, Controller::FromModel);
+        let err = run(&mut driver, line.as_bytes(), Vec::new()).unwrap_err();
+        assert!(err.to_string().contains("expected `TICK"), "{err}");
+    }
+
     #[test]
     fn a_path_given_in_one_tick_loads_over_two_as_on_the_firmware() {
         // A 6-point path is 13 frames: the node takes 12 in the first tick and the 13th in
@@ -449,13 +498,22 @@ mod tests {
         let (line, reason) = malformed(b"TICK 0.020000\n(0.030000) can0 100#\xff\n");
         assert_eq!(line, 2);
         assert!(reason.contains("not UTF-8 (byte 21)"), "{reason}");
-        // A megabyte of garbage: quoted in part, with its length.
+        // A megabyte of garbage: refused at the line cap, not held whole.
         let mut long = b"TICK 0.020000\n".to_vec();
         long.extend(std::iter::repeat_n(b'x', 1 << 20));
         let (line, reason) = malformed(&long);
         assert_eq!(line, 2);
         assert!(
-            reason.len() < 300 && reason.contains("... (1048576 bytes)"),
+            reason.len() < 300 && reason.contains("longer than 4096 bytes"),
+            "{reason}"
+        );
+        // Under the cap: quoted in part, with its length.
+        let mut long = b"TICK 0.020000\n".to_vec();
+        long.extend(std::iter::repeat_n(b'x', 4000));
+        let (line, reason) = malformed(&long);
+        assert_eq!(line, 2);
+        assert!(
+            reason.len() < 300 && reason.contains("... (4000 bytes)"),
             "{reason}"
         );
         // A tick beyond what replay accepts for a frame.
