@@ -46,6 +46,9 @@ pub struct PlannerRefusals {
     /// first of each index, as the node keeps it).
     receiving: Option<Receiving>,
     counter_checks: [CounterChecker; MESSAGES],
+    /// The last PATH_HEADER the node's decoder refused: when, us, and why. The points that
+    /// follow it are strays to the node; the summary names the header.
+    header_refused: Option<(u64, String)>,
 }
 
 impl PartialEq for PlannerRefusals {
@@ -73,8 +76,18 @@ impl PlannerRefusals {
             if f.t_us > now_us {
                 continue;
             }
-            if let Ok(message) = decode_planner(&f.frame) {
-                self.keep(&message);
+            match decode_planner(&f.frame) {
+                Ok(message) => self.keep(&message),
+                Err(e) if f.frame.id == catmodel::can::spec::PATH_HEADER.id => {
+                    let why = match e {
+                        catmodel::can::codec::DecodeError::OutOfRange { signal } => {
+                            format!("its `{signal}` outside the DBC's range")
+                        }
+                        other => format!("{other:?}"),
+                    };
+                    self.header_refused = Some((f.t_us, why));
+                }
+                Err(_) => {}
             }
         }
         if self.first.is_none() && after.rejects() != before.rejects() {
@@ -131,9 +144,20 @@ impl PlannerRefusals {
                 .into();
         }
         if after.stray_frames != before.stray_frames {
-            return "a PATH_POINT or PATH_LIMITS of a path id not being assembled (no \
-                    PATH_HEADER for it, or its assembly was abandoned)"
-                .into();
+            let mut why = String::from(
+                "a PATH_POINT or PATH_LIMITS of a path id not being assembled (no PATH_HEADER \
+                 for it, or its assembly was abandoned)",
+            );
+            if let Some((t_us, refused)) = &self.header_refused {
+                let _ = write!(
+                    why,
+                    "; the PATH_HEADER at {}.{:06} s was refused, {refused} (a path has 2 to \
+                     256 points; counted under `range` or `crc` above)",
+                    t_us / 1_000_000,
+                    t_us % 1_000_000
+                );
+            }
+            return why;
         }
         if after.stuck_counters != before.stuck_counters {
             return "a planner frame repeated its message's rolling counter (each planner \
@@ -253,5 +277,59 @@ impl std::fmt::Display for PlannerRefusals {
             )?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use catmodel::can::codec::{PathHeader, PathPoint};
+
+    /// A PATH_HEADER the decoder refuses (a count over 256 goes out as 0) makes every point
+    /// after it a stray; the first refusal names the header, not only the strays (a black-box
+    /// probe's summary named 602 stray frames and never the header).
+    #[test]
+    fn a_refused_header_is_named_beside_the_strays_it_made() {
+        let header = PathHeader {
+            path_id: 3,
+            count: 301,
+        }
+        .encode(0);
+        let point = PathPoint {
+            path_id: 3,
+            index: 0,
+            east_m: 1.0,
+            north_m: 2.0,
+        }
+        .encode(0);
+        let frames = [
+            TimedFrame {
+                t_us: 18_000,
+                frame: header,
+            },
+            TimedFrame {
+                t_us: 19_000,
+                frame: point,
+            },
+        ];
+        let before = PlannerCounters::default();
+        let after = PlannerCounters {
+            stray_frames: 1,
+            ..before
+        };
+        let mut r = PlannerRefusals::default();
+        let car = catmodel::node::drive::path_car(&crate::node_config(None).unwrap());
+        r.observe(20_000, &frames, (&before, &after), &car);
+        let (t_us, why) = r.first.clone().unwrap();
+        assert_eq!(t_us, 20_000);
+        assert!(
+            why.contains("the PATH_HEADER at 0.018000 s was refused, its `count` outside"),
+            "{why}"
+        );
+        // Without the refused header, the strays alone.
+        let mut r = PlannerRefusals::default();
+        r.observe(20_000, &frames[1..], (&before, &after), &car);
+        let (_, why) = r.first.unwrap();
+        assert!(!why.contains("PATH_HEADER at"), "{why}");
     }
 }
