@@ -214,9 +214,9 @@ pub struct Drive {
     /// The car lost the path ([`Tracking::has_lost_path`]): it stays stopped until a new path
     /// loads, however the noisy estimate judges the next ticks.
     lost_path: bool,
-    /// While it stops, a car that lost the path still along it steers the path's curvature at
-    /// this station (moved on by the distance it drives each tick) and segment hint; `None`:
-    /// wheels straight ([`Drive::stop_lost`]).
+    /// While it stops, a car that lost the path still along it steers the lane hold at this
+    /// station (moved on by the distance it drives each tick) and segment hint; `None`:
+    /// wheels straight ([`lost_steer_pct`]).
     lost_along: Option<(f32, usize)>,
     /// The controller could not be built for this car (the model file's reader refuses such a
     /// car; kept so that a corrupt image falls back instead of driving).

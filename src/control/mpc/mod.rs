@@ -350,8 +350,8 @@ pub struct MpcTuning {
     /// plan's last stages to its side, as time at the current speed, s (lateral::terminal_row).
     pub preview_s: f32,
     /// While an obstacle is in the problem, the plan's heading error is kept within this, rad,
-    /// at every stage where no obstacle row or terminal row takes the obstacles' row slots
-    /// (`lateral::heading_row`): the stages' stations advance at the planned speed along the
+    /// at each stage where the last plan's came within half of it, in an obstacle slot no
+    /// obstacle row or terminal row takes there (`lateral::heading_row`): the stages' stations advance at the planned speed along the
     /// path, which a car turned far from it does not, and a plan free to turn a short car
     /// 90 degrees at its horizon's end "passed" an obstacle that way, postponed the swerve
     /// from tick to tick and braked or hit it (docs/findings.md).
