@@ -56,6 +56,7 @@ fn sweep() {
                     "r" => w.yaw_rate_per_rps2 = x,
                     "lead" => t.steer_lead_s = x,
                     "margin" => w.corridor_margin_m = x,
+                    "near" => w.corridor_margin_near_m = x,
                     "cw" => w.corridor_weight_per_m = x,
                     "rc" => w.rho_corridor = x,
                     "rs" => w.rho_steer = x,
@@ -86,10 +87,9 @@ fn sweep() {
                 let (hits, rms, max, clr) = dlc(t, v, 1);
                 line += &format!(" | {v}: {hits} {rms:.2}/{max:.2} {clr:+.2}");
             } else {
-                let clean = (0..seeds).filter(|&s| dlc(t, v, s).0 == 0).count();
-                let worst = (0..seeds)
-                    .map(|s| dlc(t, v, s).3)
-                    .fold(f64::INFINITY, f64::min);
+                let runs: Vec<_> = (0..seeds).map(|s| dlc(t, v, s)).collect();
+                let clean = runs.iter().filter(|r| r.0 == 0).count();
+                let worst = runs.iter().map(|r| r.3).fold(f64::INFINITY, f64::min);
                 line += &format!(" {v}:{clean}/{seeds}({worst:+.2})");
             }
         }
