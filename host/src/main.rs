@@ -635,7 +635,19 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
     } = args;
     let (inputs, inputs_arg) = match inputs {
         Some(p) => (p, "--inputs"),
-        None => (sibling_candump(&truth)?, "--inputs (its default)"),
+        None => match sibling_candump(&truth) {
+            Some(p) => (p, "--inputs (its default)"),
+            None => {
+                // A truth with no sample is the first thing to fix, whatever its name: said
+                // before the candump it cannot name.
+                catmodel_host::read_truth(&truth)?;
+                bail!(
+                    "{}: cannot guess the candump of this truth file (not NAME.truth.csv); \
+                     pass --inputs FILE.can.log",
+                    truth.display()
+                );
+            }
+        },
     };
     Paths::new()
         .input(&predictions, "PREDICTIONS")
@@ -1281,17 +1293,9 @@ fn print_warnings(warnings: &[String]) {
     }
 }
 
-/// `NAME.truth.csv` -> `NAME.can.log`.
-fn sibling_candump(truth: &Path) -> Result<PathBuf> {
-    let name = truth
-        .file_name()
-        .and_then(|n| n.to_str())
-        .unwrap_or_default();
-    let Some(stem) = name.strip_suffix(".truth.csv") else {
-        bail!(
-            "{}: cannot guess the candump of this truth file; pass --inputs FILE.can.log",
-            truth.display()
-        );
-    };
-    Ok(truth.with_file_name(format!("{stem}.can.log")))
+/// `NAME.truth.csv` -> `NAME.can.log`; `None` for a truth file named otherwise.
+fn sibling_candump(truth: &Path) -> Option<PathBuf> {
+    let name = truth.file_name().and_then(|n| n.to_str())?;
+    let stem = name.strip_suffix(".truth.csv")?;
+    Some(truth.with_file_name(format!("{stem}.can.log")))
 }

@@ -795,6 +795,63 @@ fn evaluate_refuses_what_would_mislead() {
     assert!(!out.contains("error"), "{out}");
 }
 
+/// A truth file with no sample, empty (0 bytes) or a header alone, is named as such, whatever
+/// the file is called and whether `--inputs` is given (a black-box probe: an empty `X.csv` was
+/// "cannot guess the candump of this truth file; pass --inputs FILE.can.log", an empty
+/// `X.truth.csv` "missing header row", a header alone in `X.truth.csv` "opening X.can.log: No
+/// such file"). A truth with samples but a name the candump cannot be guessed from is still
+/// told to pass `--inputs`.
+#[test]
+fn evaluate_names_a_truth_with_no_sample() {
+    let dir = tmp_dir("evaluate-empty-truth");
+    let can = data("smoke.can.log");
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let header = "t,x,y,heading,yaw_rate,speed\n";
+    let cases = [
+        ("X.truth.csv", "", "empty file (0 bytes)"),
+        ("Y.csv", "", "empty file (0 bytes)"),
+        ("H.truth.csv", header, "a header row and no sample"),
+        ("K.csv", header, "a header row and no sample"),
+        (
+            "B.truth.csv",
+            "t,x,y,heading,yaw_rate,speed\r\n\r\n\n",
+            "a header row and no sample",
+        ),
+    ];
+    for (name, text, said) in cases {
+        let truth = dir.join(name);
+        std::fs::write(&truth, text).unwrap();
+        for inputs in [None, Some(&can)] {
+            let mut args = vec!["evaluate", s(&pred), "--truth", s(&truth)];
+            if let Some(c) = inputs {
+                args.extend(["--inputs", s(c)]);
+            }
+            let err = fails(&args);
+            assert!(
+                err.contains(&format!(
+                    "{}: {said}: the truth has no sample to score the predictions against",
+                    truth.display()
+                )),
+                "{name}, --inputs {inputs:?}: {err}"
+            );
+            assert!(
+                !err.contains("cannot guess") && !err.contains("can.log"),
+                "{name}: {err}"
+            );
+        }
+    }
+    // Samples, but no candump to guess from the name.
+    let named_otherwise = dir.join("smoke-truth.csv");
+    std::fs::copy(data("smoke.truth.csv"), &named_otherwise).unwrap();
+    let err = fails(&["evaluate", s(&pred), "--truth", s(&named_otherwise)]);
+    assert!(
+        err.contains("cannot guess the candump of this truth file")
+            && err.contains("pass --inputs FILE.can.log"),
+        "{err}"
+    );
+}
+
 /// `evaluate` on predictions that cover part of the drive says how much, and gives raw GNSS
 /// over their span beside the figures over the whole drive (black-box probe: the first 30 s
 /// of the 5-minute drive put raw GNSS at "0.784 x the floor", the floor over 30 s and raw GNSS
