@@ -1310,7 +1310,8 @@ pub fn set_receiver_rate(
     {
         return None;
     }
-    let rate = ((measured_hz * 10.0).round() / 10.0).clamp(1.0, 100.0);
+    let (lo, hi) = model_file::GNSS_RATE_RANGE_HZ;
+    let rate = rate_to_declare_hz(measured_hz).clamp(lo, hi);
     model.vehicle.gnss_rate_hz = rate;
     let timeout_s = model_file::InputsSection::gnss_timeout_s(rate);
     let mut lost = None;
@@ -1320,6 +1321,40 @@ pub fn set_receiver_rate(
         model.inputs.gnss_lost_s = lost_s;
     }
     Some((rate, lost))
+}
+
+/// A receiver's rate as a model file declares it, from its measured rate (the logs' median
+/// interval): rounded to 0.1 Hz, the receiver's nominal rate and its clock's error apart.
+pub fn rate_to_declare_hz(measured_hz: f64) -> f64 {
+    (measured_hz * 10.0).round() / 10.0
+}
+
+/// Why a log's receiver is too slow for what `identify` and `compare` measure on its track,
+/// or `None`: its fixes come at a rate that, as a model file would declare it
+/// ([`rate_to_declare_hz`]), is below the least a model file may declare
+/// ([`model_file::GNSS_RATE_RANGE_HZ`], the rates the node's lowpass and gap logic are
+/// designed for), and the checks that compare the track with the wheel speed are made for
+/// those rates too. Between fixes two or more seconds apart the track cuts every turn short,
+/// so a black-box probe's 0.5 Hz receiver was refused for "a wheel speed that sticks at its
+/// last value" (`units::disagreement`: 43.6 m by the wheel speed, 6.8 m along the track, on
+/// the 5-minute drive's turns; on the circles, 153.0 m and 18.6 m), noted "the wheel speed
+/// `vel` is 0.62 s +- 0.13 late" on a straight drive, and blamed one `steer` sample, "a
+/// corrupt value there?", for the lateral fit on the turns: the receiver is named instead,
+/// with its rate.
+pub fn slow_receiver(e: &Experiment) -> Option<String> {
+    let (lo, hi) = model_file::GNSS_RATE_RANGE_HZ;
+    let hz = e.gnss_rate_hz;
+    (hz.is_finite() && hz > 0.0 && rate_to_declare_hz(hz) < lo).then(|| {
+        format!(
+            "the GNSS fixes come every {:.2} s ({hz:.2} Hz, the median interval): below the \
+             {lo} Hz a model file may declare (the rates the node's lowpass and gap logic are \
+             designed for: {lo}..{hi} Hz), and too far apart for the track to judge the wheel \
+             speed by (between fixes that far apart the track cuts the turns short, and the \
+             wheel speed reads as going further), to time the fixes against it, or to give \
+             the course the lateral fit needs: set the receiver to send at {lo} Hz or more",
+            1.0 / hz
+        )
+    })
 }
 
 /// The whole pipeline on preprocessed experiments. `base` provides the vehicle, the hybrid
@@ -1399,6 +1434,10 @@ fn gnss_latency_notes(training: &[Experiment], validation: &[Experiment]) -> Vec
     let mut notes = Vec::new();
     // Fixes late behind the wheel speed: the lateral model's lag would take the latency in.
     for e in training.iter().chain(validation) {
+        // A receiver too slow to time the fixes by is named as such ([`slow_receiver`]).
+        if slow_receiver(e).is_some() {
+            continue;
+        }
         if let Some((lag, se)) = units::gnss_latency(e) {
             if lag.abs() > units::gnss_latency_named_above_s(e.gnss_rate_hz)
                 && lag.abs() > units::GNSS_LATENCY_SIGMAS * se
