@@ -302,6 +302,31 @@ pub const COVER_SLACK_S: f64 = 5.0;
 /// The truth's speed above which the car moves, m/s (the node has no position before).
 const MOVING_MPS: f64 = 0.5;
 
+/// The truth file's samples, refused when it holds none: an empty file (0 bytes) or a header
+/// alone. Read first, before the inputs, so that a truth with nothing to score against is what
+/// `evaluate` names (a black-box probe's empty `X.truth.csv` was "missing header row", its
+/// header alone "opening X.can.log: No such file" when the candump beside it was missing, and
+/// an empty `X.csv` "cannot guess the candump of this truth file").
+pub fn read_truth(path: &Path) -> Result<Truth> {
+    // The CSV reader calls an empty text a missing header, which sends the user looking for a
+    // header in a file that holds nothing at all.
+    if std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() == 0) {
+        bail!(
+            "{}: empty file (0 bytes): the truth has no sample to score the predictions against",
+            path.display()
+        );
+    }
+    let rows = logcsv::read_truth(path).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if rows.is_empty() {
+        bail!(
+            "{}: a header row and no sample: the truth has no sample to score the predictions \
+             against",
+            path.display()
+        );
+    }
+    Ok(Truth::new(rows))
+}
+
 /// Everything `catmodel evaluate` reads: truth and the baseline's bus inputs, and the
 /// predictions, scored as they are read ([`evaluate::Scorer`]) and kept only as far as the
 /// checks and the figures need them.
@@ -332,7 +357,7 @@ impl EvaluationData {
         origin_deg: (f64, f64),
         car: Car,
     ) -> Result<Self> {
-        let truth_rows = Truth::new(logcsv::read_truth(truth).map_err(|e| anyhow::anyhow!("{e}"))?);
+        let truth_rows = read_truth(truth)?;
         let bus = baseline_inputs(inputs, origin_deg, &car)?;
         let mut scorer =
             evaluate::Scorer::new(&truth_rows, &bus, &car.vehicle, car.antenna_ahead_m);

@@ -635,7 +635,19 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
     } = args;
     let (inputs, inputs_arg) = match inputs {
         Some(p) => (p, "--inputs"),
-        None => (sibling_candump(&truth)?, "--inputs (its default)"),
+        None => match sibling_candump(&truth) {
+            Some(p) => (p, "--inputs (its default)"),
+            None => {
+                // A truth with no sample is the first thing to fix, whatever its name: said
+                // before the candump it cannot name.
+                catmodel_host::read_truth(&truth)?;
+                bail!(
+                    "{}: cannot guess the candump of this truth file (not NAME.truth.csv); \
+                     pass --inputs FILE.can.log",
+                    truth.display()
+                );
+            }
+        },
     };
     Paths::new()
         .input(&predictions, "PREDICTIONS")
@@ -723,6 +735,13 @@ fn identify(args: IdentifyArgs) -> Result<()> {
         print_notes(&e.log_notes);
         print_warnings(&e.log_warnings);
     }
+    // A receiver slower than a model file may declare: its track cannot judge the wheel
+    // speed, and what would blame the wheel speed names the receiver instead.
+    let slow = slow_receiver_problems(
+        logs.iter().chain(&validate),
+        training.iter().chain(&validation),
+    );
+    refuse_slow_receivers(&slow, &out, force)?;
     // A wheel speed the GNSS track contradicts (km/h, mph) identifies without a
     // word and a wrong model (review finding 04): refused before the minutes of fitting.
     let units = speed_unit_problems(
@@ -757,6 +776,41 @@ fn read_identify_logs(
     })?;
     progress.finish_and_clear();
     Ok(sets)
+}
+
+/// Refuses logs from a receiver slower than a model file may declare
+/// ([`slow_receiver_problems`]) before fitting; with `--force`, warns and goes on.
+fn refuse_slow_receivers(slow: &[String], out: &Path, force: bool) -> Result<()> {
+    if slow.is_empty() {
+        return Ok(());
+    }
+    let (lo, _) = model_file::GNSS_RATE_RANGE_HZ;
+    if !force {
+        bail!(
+            "{}\n{} not written: {} log(s) from a receiver slower than {lo} Hz (--force \
+             identifies anyway: the speed model needs no fix)",
+            slow.join("\n"),
+            out.display(),
+            slow.len()
+        );
+    }
+    for s in slow {
+        eprintln!("catmodel: warning: {s} (identified anyway: --force)");
+    }
+    Ok(())
+}
+
+/// `FILE: why` for each log whose receiver is too slow for its track to be measured
+/// ([`identify::slow_receiver`]).
+fn slow_receiver_problems<'a>(
+    paths: impl IntoIterator<Item = &'a PathBuf>,
+    experiments: impl IntoIterator<Item = &'a identify::preprocess::Experiment>,
+) -> Vec<String> {
+    paths
+        .into_iter()
+        .zip(experiments)
+        .filter_map(|(p, e)| Some(format!("{}: {}", p.display(), identify::slow_receiver(e)?)))
+        .collect()
 }
 
 /// Refuses logs whose wheel speed is not in m/s ([`speed_unit_problems`]) before fitting;
@@ -1050,6 +1104,12 @@ fn compare(args: CompareArgs) -> Result<()> {
     let e = identify::preprocess::load_experiment(&log, &file.vehicle, &opts)?;
     print_notes(&e.log_notes);
     print_warnings(&e.log_warnings);
+    for s in slow_receiver_problems([&log], [&e]) {
+        eprintln!(
+            "catmodel: warning: {s}: the scores below that the track measures (dx/dt, the yaw \
+             rate) are the receiver's as much as the models'"
+        );
+    }
     for u in speed_unit_problems([&log], [&e]) {
         eprintln!("catmodel: warning: {u}: the scores below compare models in m/s with it");
     }
@@ -1238,10 +1298,12 @@ fn speed_unit_problems<'a>(
         .zip(experiments)
         .flat_map(|(p, e)| {
             let unit = e.speed_scale.and_then(|s| s.problem());
-            // A wheel speed in another unit disagrees everywhere: named once, as the unit.
+            // A wheel speed in another unit disagrees everywhere: named once, as the unit. A
+            // receiver too slow for its track to judge the wheel speed by makes it disagree
+            // on every turn: named as the receiver's ([`slow_receiver_problems`]).
             let stuck = e
                 .speed_disagreement
-                .filter(|_| unit.is_none())
+                .filter(|_| unit.is_none() && identify::slow_receiver(e).is_none())
                 .map(|d| d.problem());
             let sign = identify::units::unsigned_reverse(e);
             [unit, stuck, sign]
@@ -1281,17 +1343,9 @@ fn print_warnings(warnings: &[String]) {
     }
 }
 
-/// `NAME.truth.csv` -> `NAME.can.log`.
-fn sibling_candump(truth: &Path) -> Result<PathBuf> {
-    let name = truth
-        .file_name()
-        .and_then(|n| n.to_str())
-        .unwrap_or_default();
-    let Some(stem) = name.strip_suffix(".truth.csv") else {
-        bail!(
-            "{}: cannot guess the candump of this truth file; pass --inputs FILE.can.log",
-            truth.display()
-        );
-    };
-    Ok(truth.with_file_name(format!("{stem}.can.log")))
+/// `NAME.truth.csv` -> `NAME.can.log`; `None` for a truth file named otherwise.
+fn sibling_candump(truth: &Path) -> Option<PathBuf> {
+    let name = truth.file_name().and_then(|n| n.to_str())?;
+    let stem = name.strip_suffix(".truth.csv")?;
+    Some(truth.with_file_name(format!("{stem}.can.log")))
 }

@@ -795,6 +795,63 @@ fn evaluate_refuses_what_would_mislead() {
     assert!(!out.contains("error"), "{out}");
 }
 
+/// A truth file with no sample, empty (0 bytes) or a header alone, is named as such, whatever
+/// the file is called and whether `--inputs` is given (a black-box probe: an empty `X.csv` was
+/// "cannot guess the candump of this truth file; pass --inputs FILE.can.log", an empty
+/// `X.truth.csv` "missing header row", a header alone in `X.truth.csv` "opening X.can.log: No
+/// such file"). A truth with samples but a name the candump cannot be guessed from is still
+/// told to pass `--inputs`.
+#[test]
+fn evaluate_names_a_truth_with_no_sample() {
+    let dir = tmp_dir("evaluate-empty-truth");
+    let can = data("smoke.can.log");
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let header = "t,x,y,heading,yaw_rate,speed\n";
+    let cases = [
+        ("X.truth.csv", "", "empty file (0 bytes)"),
+        ("Y.csv", "", "empty file (0 bytes)"),
+        ("H.truth.csv", header, "a header row and no sample"),
+        ("K.csv", header, "a header row and no sample"),
+        (
+            "B.truth.csv",
+            "t,x,y,heading,yaw_rate,speed\r\n\r\n\n",
+            "a header row and no sample",
+        ),
+    ];
+    for (name, text, said) in cases {
+        let truth = dir.join(name);
+        std::fs::write(&truth, text).unwrap();
+        for inputs in [None, Some(&can)] {
+            let mut args = vec!["evaluate", s(&pred), "--truth", s(&truth)];
+            if let Some(c) = inputs {
+                args.extend(["--inputs", s(c)]);
+            }
+            let err = fails(&args);
+            assert!(
+                err.contains(&format!(
+                    "{}: {said}: the truth has no sample to score the predictions against",
+                    truth.display()
+                )),
+                "{name}, --inputs {inputs:?}: {err}"
+            );
+            assert!(
+                !err.contains("cannot guess") && !err.contains("can.log"),
+                "{name}: {err}"
+            );
+        }
+    }
+    // Samples, but no candump to guess from the name.
+    let named_otherwise = dir.join("smoke-truth.csv");
+    std::fs::copy(data("smoke.truth.csv"), &named_otherwise).unwrap();
+    let err = fails(&["evaluate", s(&pred), "--truth", s(&named_otherwise)]);
+    assert!(
+        err.contains("cannot guess the candump of this truth file")
+            && err.contains("pass --inputs FILE.can.log"),
+        "{err}"
+    );
+}
+
 /// `evaluate` on predictions that cover part of the drive says how much, and gives raw GNSS
 /// over their span beside the figures over the whole drive (black-box probe: the first 30 s
 /// of the 5-minute drive put raw GNSS at "0.784 x the floor", the floor over 30 s and raw GNSS
@@ -1083,6 +1140,91 @@ fn replay_names_the_receivers_rate_from_the_whole_log() {
         stderr.contains("gnss rate 0,") && !stderr.contains("gnss_rate_hz"),
         "{stderr}"
     );
+}
+
+/// A copy of the log `src` with only every `k`-th fix kept (the other rows' `lat`, `lon`
+/// emptied): a receiver at a `k`-th of the rate.
+fn with_every_nth_fix(src: &Path, dst: &Path, k: usize) {
+    let text = String::from_utf8(read(src)).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let lat = header.iter().position(|h| *h == "lat").unwrap();
+    let lon = header.iter().position(|h| *h == "lon").unwrap();
+    let mut fixes = 0;
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+        if i > 0 && !cells[lat].is_empty() {
+            if fixes % k != 0 {
+                cells[lat].clear();
+                cells[lon].clear();
+            }
+            fixes += 1;
+        }
+        out += &(cells.join(",") + "\n");
+    }
+    std::fs::write(dst, out).unwrap();
+}
+
+/// A receiver slower than the 1 Hz a model file may declare is named with its rate, not the
+/// wheel speed (a black-box probe's 0.5 Hz receiver: `identify` refused its drive for "the
+/// wheel speed `vel` disagrees with the GNSS track ...: a wheel speed that sticks at its last
+/// value", 153.0 m by the wheel speed and 18.6 m along the track on the circles; on a straight
+/// drive it noted "the wheel speed `vel` is 0.62 s +- 0.13 late"). The simulator's 1 Hz
+/// receiver on the circles, thinned to 0.5 and 0.2 Hz: refused naming the rate, identified
+/// with `--force` and a warning, `compare` warns; the 1 Hz drive is identified as before.
+#[test]
+fn identify_names_a_receiver_slower_than_1_hz() {
+    let dir = tmp_dir("slow-receiver");
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let car = String::from_utf8(read(&manifest.join("vehicles/cat-vehicle.toml"))).unwrap();
+    let (before, gnss) = car.split_once("[sensors.gnss]").unwrap();
+    let (period, rest) = gnss.split_once("period_s = 0.01").unwrap();
+    let vehicle = dir.join("cat-1hz.toml");
+    std::fs::write(
+        &vehicle,
+        format!("{before}[sensors.gnss]{period}period_s = 1.0{rest}"),
+    )
+    .unwrap();
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "circle-left",
+        "--vehicle",
+        s(&vehicle),
+        "--out",
+        s(&dir),
+    ]);
+    let one_hz = dir.join("circle-left.csv");
+    let model = dir.join("m.toml");
+    let err = ok(&["identify", s(&one_hz), "--out", s(&model)]);
+    assert!(!err.contains("slower than"), "{err}");
+
+    for (k, said) in [(2, "every 2.00 s (0.50 Hz"), (5, "every 5.00 s (0.20 Hz")] {
+        let log = dir.join(format!("circle-left-{k}.csv"));
+        with_every_nth_fix(&one_hz, &log, k);
+        let _ = std::fs::remove_file(&model);
+        let err = fails(&["identify", s(&log), "--out", s(&model)]);
+        assert!(
+            err.contains(&format!(
+                "{}: the GNSS fixes come {said}, the median interval): below the 1 Hz a model \
+                 file may declare",
+                log.display()
+            )) && err.contains("not written: 1 log(s) from a receiver slower than 1 Hz"),
+            "{err}"
+        );
+        assert!(!err.contains("wheel speed `vel`"), "{err}");
+        assert!(!model.exists(), "nothing written");
+        let err = ok(&["identify", s(&log), "--out", s(&model), "--force"]);
+        assert!(
+            err.contains(said) && err.contains("(identified anyway: --force)"),
+            "{err}"
+        );
+        assert!(!err.contains("wheel speed `vel`"), "{err}");
+        let paper = manifest.join("../models/paper.toml");
+        let err = ok(&["compare", s(&log), "--model", s(&paper)]);
+        assert!(err.contains(said), "{err}");
+        assert!(!err.contains("wheel speed `vel`"), "{err}");
+    }
 }
 
 /// Review finding 01: drives whose `steer` has the other sign (positive = left) gave a steering
