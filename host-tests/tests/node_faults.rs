@@ -991,6 +991,35 @@ fn gnss_rate_check_counts_the_fixes_of_a_receiver_faster_than_declared() {
     }
 }
 
+/// Two fixes of a 100 Hz receiver stamped with one receive time every 20 ms (a simulator
+/// that sends a tick's fixes together, an adapter that stamps a batch once; the tenth
+/// black-box probe's): the node takes them a period apart, as measured, and estimates what it
+/// estimates from the same fixes received 10 ms apart. Taken at their receive times they read
+/// as a fix, a 20 ms gap filled by dead reckoning and the fix again, and the node never had a
+/// position (2 250 ticks of `not_ready` on the probe's drive).
+#[test]
+fn gnss_fixes_stamped_together_are_taken_a_period_apart() {
+    let spaced = drive(3.0, 5.0, 12.0);
+    // Each tick's first fix received with its second (the drive's fixes come 3 and 13 ms into
+    // a tick: the pair stays in its tick).
+    let together = retimed_fixes(
+        spaced.clone(),
+        |i| if i % 2 == 0 { 10_000 } else { 0 },
+        |_| None,
+    );
+    assert!(together.windows(2).any(|w| w[0].kind == Kind::Gnss
+        && w[1].kind == Kind::Gnss
+        && w[0].frame.t_us == w[1].frame.t_us));
+    let reference = run(&frames(&spaced));
+    let ticks = run(&frames(&together));
+    let c = ticks.last().unwrap().counters;
+    assert_eq!((c.gnss_rate_mismatch, c.gnss_gate_rejects), (0, 0), "{c:?}");
+    assert_on_the_car(window(&ticks, 1.5, 12.0), 3.0, 5.0, 0.2);
+    for (a, b) in ticks.iter().zip(&reference) {
+        assert_eq!(a.estimate, b.estimate, "t={}", a.t_s());
+    }
+}
+
 /// The node's STATE_MOTION heading against the truth, RMS over the ticks from `from_s`, rad;
 /// and whether NODE_STATUS said `steering_mismatch` on every page 0 from then.
 fn heading_rms_and_mismatch(

@@ -192,6 +192,36 @@ fn period_us(cfg: &EstimatorConfig) -> u32 {
 /// The GNSS fixes of one tick, in arrival order (at most [`GNSS_FIXES_PER_TICK`]).
 pub type TickFixes = heapless::Vec<GnssFix, GNSS_FIXES_PER_TICK>;
 
+/// The times the tick's fixes are taken at: fixes that reached the node together (less than
+/// half a period apart: a recorder or an adapter that stamps a batch of frames with one time,
+/// a simulator that sends two fixes per 20 ms at one instant) get the receiver's spacing, the
+/// latest keeping its receive time and each earlier one a period before the next, as they were
+/// measured; fixes further apart keep theirs. Taken at their receive times, two fixes at one
+/// instant every 20 ms from a 100 Hz receiver read as a fix, a 20 ms gap filled by dead
+/// reckoning and the same fix again: three samples where the lowpass expects two, and a course
+/// over its span of fixes too short to give the heading, so the node never had a position
+/// (docs/findings.md). The rate check still judges the receive times ([`RateCheck`]): a
+/// receiver faster than declared is found by its intervals and its count as before.
+fn spaced_times(fixes: &TickFixes, period_us: u32) -> [u64; GNSS_FIXES_PER_TICK] {
+    let mut taken = [0u64; GNSS_FIXES_PER_TICK];
+    let half_us = u64::from(period_us / 2);
+    // (receive time, time taken) of the fix after this one.
+    let mut next: Option<(u64, u64)> = None;
+    for (fix, taken_us) in fixes.iter().zip(taken.iter_mut()).rev() {
+        let received = fix.t_us;
+        *taken_us = match next {
+            Some((next_received, next_taken))
+                if next_received.saturating_sub(received) < half_us =>
+            {
+                received.min(next_taken.saturating_sub(u64::from(period_us)))
+            }
+            _ => received,
+        };
+        next = Some((received, *taken_us));
+    }
+    taken
+}
+
 /// What one tick may still spend: one local frame built (at the first fix, or moved), and on
 /// gaps filling missing fixes one by one, or one restart on the dead-reckoned track, not both ([`super::stage::Exclusive::GnssGap`]: the tick's bound
 /// counts the dearer of the two, not their sum).
@@ -531,13 +561,15 @@ impl Gnss {
         inputs: &mut Inputs,
         probe: &mut P,
     ) {
+        let taken_us = spaced_times(fixes, period_us(&config.estimator));
         let mut gaps = GapBudget {
             frame_left: self.frame.is_some(),
             fills_left: GAP_FILL_PER_TICK,
             restart_left: true,
         };
-        for fix in fixes {
-            self.receive_fix(config, now_us, fix, speed_mps, inputs, &mut gaps, probe);
+        for (fix, taken_us) in fixes.iter().zip(taken_us) {
+            let timed = (fix, taken_us);
+            self.receive_fix(config, now_us, timed, speed_mps, inputs, &mut gaps, probe);
         }
     }
 
@@ -547,20 +579,20 @@ impl Gnss {
         &mut self,
         config: &NodeConfig,
         now_us: u64,
-        fix: &GnssFix,
+        (fix, t_us): (&GnssFix, u64),
         speed_mps: f32,
         inputs: &mut Inputs,
         gaps: &mut GapBudget,
         probe: &mut P,
     ) {
         let GnssFix {
-            t_us,
+            t_us: received_us,
             lat_e7,
             lon_e7,
         } = *fix;
         let counters = &mut inputs.counters;
         let cfg = &config.estimator;
-        if self.rate.observe(t_us, period_us(cfg)) == RateChange::Began {
+        if self.rate.observe(received_us, period_us(cfg)) == RateChange::Began {
             self.estimator.forget();
             self.cog = None;
         }
