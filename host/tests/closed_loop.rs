@@ -1353,3 +1353,27 @@ fn a_steering_reported_with_the_other_sign_stops_the_car() {
         }
     }
 }
+
+/// The loop's 20 m arcs at 14 m/s ask 9.8 m/s^2 of tyres whose mu g is 8.8: the car spins (the
+/// tenth black-box probe's). The run says so, and the node's steering check does not take the
+/// tyres' saturation for a steering 0.86 times the file's (which the node used and the host
+/// advised to write into the correct model file). At 10 m/s neither note.
+#[test]
+fn a_car_driven_past_its_grip_is_named_and_its_steering_not_rescaled() {
+    use catmodel_host::closed_loop::driver::Driver;
+    use catmodel_host::closed_loop::slide_note;
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let drive = |speed: f64| {
+        let course = scenario::course(Kind::Loop, &vehicle.body, speed);
+        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+        // Seed 1: the seed whose spin the check read as a weaker steering.
+        let options = RunOptions::new(1, Receiver::Rtk);
+        let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+        (slide_note("loop", &out, &vehicle), driver.steering_note())
+    };
+    let (slid, steering) = drive(14.0);
+    let slid = slid.expect("a spin at 14 m/s");
+    assert!(slid.contains("beyond its tyres' grip"), "{slid}");
+    assert_eq!(steering, None);
+    assert_eq!(drive(10.0), (None, None));
+}

@@ -951,9 +951,27 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     if let Some(note) = driver::Driver::steering_note(&driver) {
         eprintln!("closed-loop: warning: {note}");
     }
+    if let Some(note) = slide_note(&args.scenario, &output, &vehicle) {
+        eprintln!("closed-loop: warning: {note}");
+    }
     let mut files = write_session(&args.out, &output)?;
     files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))
+}
+
+/// A run whose car slid beyond its tyres' grip ([`crate::sim::slide_summary`]): the course at
+/// its speed asks more than the plant's tyres give. The node has no grip limit of its own (its
+/// models are linear; the planner's speeds are taken as driveable), so the run measures a car
+/// past its grip; before, a spin on the loop at 14 m/s was reported as `lost_path` alone.
+pub fn slide_note(scenario: &str, output: &RunOutput, vehicle: &VehicleConfig) -> Option<String> {
+    let truth: Vec<_> = output.samples.iter().map(|s| s.truth.clone()).collect();
+    crate::sim::slide_summary(scenario, &truth, vehicle).map(|slid| {
+        format!(
+            "{slid}: the course at this speed asks more than the car's tyres give, and the \
+             node takes the planner's speeds as driveable (its models are linear, with no grip \
+             limit): the run's figures are those of a car beyond its grip"
+        )
+    })
 }
 
 /// The files [`write_session`] writes into its directory, in order.

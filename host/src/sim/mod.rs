@@ -139,6 +139,18 @@ pub const SLIDE_NAMED_S: f64 = 0.5;
 /// 1.28 rad), and `identify` then blamed the validation drive's fit on "another car, another
 /// speed-loop setting, or a fault".
 pub fn slide_warning(name: &str, truth: &[TruthRow], cfg: &VehicleConfig) -> Option<String> {
+    slide_summary(name, truth, cfg).map(|slid| {
+        format!(
+            "{slid}: the scenario asks more than this car has; a drive beyond the grip is not \
+             one the identified models describe, so do not train or validate on it"
+        )
+    })
+}
+
+/// How long and how far the car of `truth` slid beyond its tyres' grip, when it did for
+/// [`SLIDE_NAMED_S`] or more: "NAME: the car slid ..." (the first half of
+/// [`slide_warning`], for a caller with its own advice).
+pub fn slide_summary(name: &str, truth: &[TruthRow], cfg: &VehicleConfig) -> Option<String> {
     let mu_g = cfg.tyre_front.friction_mu.min(cfg.tyre_rear.friction_mu) * 9.81;
     let (mut sliding_s, mut first, mut worst_rad, mut worst_g) = (0.0, None, 0.0f64, 0.0f64);
     for w in truth.windows(2) {
@@ -165,9 +177,7 @@ pub fn slide_warning(name: &str, truth: &[TruthRow], cfg: &VehicleConfig) -> Opt
         format!(
             "{name}: the car slid beyond its tyres' grip for {sliding_s:.1} s, from t = \
              {first:.1} s (the rear axle's sideslip up to {worst_rad:.2} rad, the yaw rate times \
-             the speed up to {worst_g:.1} m/s^2 against the tyres' mu g of {mu_g:.1}): the \
-             scenario asks more than this car has; a drive beyond the grip is not one the \
-             identified models describe, so do not train or validate on it"
+             the speed up to {worst_g:.1} m/s^2 against the tyres' mu g of {mu_g:.1})"
         )
     })
 }
