@@ -69,6 +69,11 @@ pub struct LogReport {
     pub truncated_last_line: Option<usize>,
     /// How the frames' timestamps were taken ([`TimestampStats`]): batched by the recorder?
     pub timestamps: TimestampStats,
+    /// Frames written with can-utils' raw DLC suffix (`123#1122334455667788_9`: a classic
+    /// frame of 8 data bytes whose DLC field said 9..15), read as the 8 bytes they carry; the
+    /// first one's line.
+    pub raw_dlc_frames: u64,
+    pub first_raw_dlc_line: Option<usize>,
 }
 
 /// A step between two distinct timestamps this long or longer spans two of the node's 20 ms
@@ -183,8 +188,18 @@ impl TimestampTracker {
 impl LogReport {
     /// Notes: what the log holds that the user may not expect (frames of several interfaces).
     pub fn notes(&self, path: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(line) = self.first_raw_dlc_line {
+            out.push(format!(
+                "{}:{line}: {} frame(s) carry can-utils' raw DLC suffix (`#<8 bytes>_9` .. \
+                 `_F`: a classic frame of 8 data bytes whose DLC field said 9..15, which ISO \
+                 11898-1 reads as 8): read as the 8 bytes they carry",
+                path.display(),
+                self.raw_dlc_frames
+            ));
+        }
         if self.interfaces.len() < 2 {
-            return Vec::new();
+            return out;
         }
         let list = self
             .interfaces
@@ -192,7 +207,7 @@ impl LogReport {
             .map(|(name, n)| format!("`{name}` ({n} lines)"))
             .collect::<Vec<_>>()
             .join(", ");
-        vec![match &self.kept {
+        out.push(match &self.kept {
             Some(kept) => format!(
                 "{}: frames of {} interfaces, {list}: only `{kept}`'s are read ({} lines of the others skipped)",
                 path.display(),
@@ -204,7 +219,8 @@ impl LogReport {
                 path.display(),
                 self.interfaces.len()
             ),
-        }]
+        });
+        out
     }
 
     /// Warnings: the recording lost frames, its last line was cut short, or its timestamps
@@ -403,7 +419,27 @@ impl<'a> LineReader<'a> {
     #[inline]
     fn push(&mut self, lineno: usize, line: &str, unterminated_last: bool) -> Result<()> {
         let path = self.path;
-        let parsed = candump::parse_line(line);
+        let mut parsed = candump::parse_line(line);
+        let mut raw_dlc = false;
+        if matches!(
+            parsed,
+            Err(candump::CandumpError::BadHex
+                | candump::CandumpError::OddHex
+                | candump::CandumpError::TooLong
+                | candump::CandumpError::TrailingGarbage)
+        ) {
+            match without_raw_dlc(line) {
+                Some(Ok(plain)) => {
+                    parsed = candump::parse_line(&plain);
+                    raw_dlc = parsed.is_ok();
+                }
+                Some(Err(why)) if !unterminated_last => bail!(
+                    "{}:{lineno}: malformed candump line ({why}): {line:?}",
+                    path.display()
+                ),
+                _ => {}
+            }
+        }
         let frame = match parsed {
             Ok(frame) => Some(frame),
             Err(_) if line.trim().is_empty() => return Ok(()),
@@ -438,6 +474,11 @@ impl<'a> LineReader<'a> {
             self.log.unsupported += 1;
             return Ok(());
         };
+        if raw_dlc {
+            let report = &mut self.log.report;
+            report.raw_dlc_frames += 1;
+            report.first_raw_dlc_line.get_or_insert(lineno);
+        }
         // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
         if frame.t_us > u64::MAX / 2 {
             bail!(
@@ -529,6 +570,40 @@ impl LogReport {
         }
         Ok(())
     }
+}
+
+/// A log-format line with can-utils' raw DLC suffix (lib.c's `CC_DLC_DELIM`): `_` and one
+/// hex digit after the data, the DLC field 9..F of a classic frame with 8 data bytes (written
+/// by `candump -l` when the interface reports raw DLCs, `CAN_CTRLMODE_CC_LEN8_DLC`). `None` if
+/// the line has no `_` suffix; the line without it if the suffix is one can-utils writes; the
+/// reason if it is not (a digit below 9, or a frame of other than 8 bytes).
+fn without_raw_dlc(line: &str) -> Option<Result<String, String>> {
+    let t = line.trim_end();
+    // `candump -l -x`: ` R` or ` T` after the frame.
+    let body = t
+        .strip_suffix(" R")
+        .or_else(|| t.strip_suffix(" T"))
+        .unwrap_or(t);
+    let tail = &t[body.len()..];
+    let (frame, dlc) = body.rsplit_once('_')?;
+    let (_, data) = frame.rsplit_once('#')?;
+    let hex = |s: &str| !s.is_empty() && s.bytes().all(|c| c.is_ascii_hexdigit());
+    if !hex(data) || dlc.contains(char::is_whitespace) {
+        return None;
+    }
+    let digit = u8::from_str_radix(dlc, 16).ok().filter(|_| dlc.len() == 1);
+    Some(match digit {
+        Some(9..=15) if data.len() == 16 => Ok(format!("{frame}{tail}")),
+        Some(9..=15) => Err(format!(
+            "raw DLC suffix `_{dlc}` after {} data bytes: can-utils writes it only for a \
+             classic frame of 8",
+            data.len() / 2
+        )),
+        _ => Err(format!(
+            "`_{dlc}` after the data is not a raw DLC suffix: can-utils writes `_` and one hex \
+             digit 9..F, the DLC field of a classic frame of 8 data bytes"
+        )),
+    })
 }
 
 /// Whether the line's timestamp has fewer than the 10 digits of seconds of candump's absolute

@@ -398,3 +398,46 @@ fn gnss_positions_of_other_source_addresses_are_named() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_raw_dlc_suffix_of_can_utils_is_read_and_a_wrong_one_named() {
+    // can-utils' lib.c writes `_` and the DLC field 9..F after the data of a classic frame of
+    // 8 bytes whose DLC said more (CAN_CTRLMODE_CC_LEN8_DLC). A black-box probe's log with it
+    // on every frame was refused: "malformed candump line (data is not hex)".
+    let dir = tmp_dir("raw-dlc");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    let mut k = 0;
+    let suffixed = each_line(&plain, |l| {
+        k += 1;
+        format!("{l}_{:X}", 9 + k % 7)
+    });
+    let (code, got, stderr) = replay(&dir, "dlc.log", &suffixed, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains("dlc.log:1: 3739 frame(s) carry can-utils' raw DLC suffix"),
+        "{stderr}"
+    );
+    // With `candump -l -x`'s flag after it.
+    let flagged = each_line(&plain, |l| format!("{l}_9 R"));
+    let (code, got, stderr) = replay(&dir, "dlcx.log", &flagged, &[]);
+    assert_eq!((code, got == want), (0, true), "{stderr}");
+    // A suffix can-utils never writes is refused by name, not as "data is not hex".
+    for (line, why) in [
+        (
+            "(0000000000.003745) can0 100#ECFF0000000000BB_8",
+            "`_8` after the data is not a raw DLC suffix",
+        ),
+        (
+            "(0000000000.003745) can0 100#ECFF_9",
+            "raw DLC suffix `_9` after 2 data bytes: can-utils writes it only for a classic frame of 8",
+        ),
+    ] {
+        let (first, rest) = plain.split_once('\n').unwrap();
+        let text = format!("{first}\n{line}\n{rest}");
+        let (code, _, stderr) = replay(&dir, "bad.log", &text, &[]);
+        assert_eq!(code, 1, "{stderr}");
+        assert!(stderr.contains(&format!("bad.log:2: malformed candump line ({why}")), "{stderr}");
+    }
+}
