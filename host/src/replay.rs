@@ -74,6 +74,10 @@ pub struct LogReport {
     /// first one's line.
     pub raw_dlc_frames: u64,
     pub first_raw_dlc_line: Option<usize>,
+    /// Frame lines identical to the frame line before them (timestamp, interface, identifier,
+    /// length and data), left out: a logger that wrote frames twice. The first one's line.
+    pub duplicate_lines: u64,
+    pub first_duplicate_line: Option<usize>,
 }
 
 /// A step between two distinct timestamps this long or longer spans two of the node's 20 ms
@@ -238,6 +242,23 @@ impl LogReport {
                 self.drop_lines
             ));
         }
+        if let Some(line) = self.first_duplicate_line {
+            let every = if self.duplicate_lines == self.timestamps.frames {
+                ", every frame of the log twice"
+            } else {
+                ""
+            };
+            out.push(format!(
+                "{}:{line}: {} frame line(s) repeat the line before them exactly (the same \
+                 timestamp to the microsecond, interface, identifier and data){every}: a logger \
+                 that wrote frames twice. No bus carries one frame twice in one microsecond (a \
+                 frame takes over 100 us on the wire), and a report the bus did carry twice \
+                 comes with another rolling counter, which the node checks: each repeat was left \
+                 out, its frame read once",
+                path.display(),
+                self.duplicate_lines
+            ));
+        }
         if let Some(line) = self.truncated_last_line {
             out.push(format!(
                 "{}:{line}: the last line is cut short and has no line end (the recorder stopped mid-line): left out",
@@ -398,6 +419,10 @@ struct LineReader<'a> {
     last_t: Option<u64>,
     timestamps: TimestampTracker,
     log: CandumpLog,
+    /// The interface (index in the report's) of the line [`Self::keep`] last counted.
+    iface: usize,
+    /// The last frame kept and its interface, to tell a line written twice.
+    last: Option<(TimedFrame, usize)>,
 }
 
 impl<'a> LineReader<'a> {
@@ -410,6 +435,8 @@ impl<'a> LineReader<'a> {
             last_t: None,
             timestamps: TimestampTracker::default(),
             log,
+            iface: 0,
+            last: None,
         }
     }
 
@@ -479,6 +506,14 @@ impl<'a> LineReader<'a> {
             report.raw_dlc_frames += 1;
             report.first_raw_dlc_line.get_or_insert(lineno);
         }
+        // A line written twice: the same frame in the same microsecond on one interface.
+        if self.last == Some((frame, self.iface)) {
+            let report = &mut self.log.report;
+            report.duplicate_lines += 1;
+            report.first_duplicate_line.get_or_insert(lineno);
+            return Ok(());
+        }
+        self.last = Some((frame, self.iface));
         // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
         if frame.t_us > u64::MAX / 2 {
             bail!(
@@ -529,9 +564,15 @@ impl<'a> LineReader<'a> {
     fn keep(&mut self, line: &str) -> bool {
         let name = candump::interface_of(line).unwrap_or_default();
         let report = &mut self.log.report;
-        match report.interfaces.iter_mut().find(|(n, _)| n == name) {
-            Some((_, count)) => *count += 1,
-            None => report.interfaces.push((name.to_owned(), 1)),
+        match report.interfaces.iter_mut().position(|(n, _)| n == name) {
+            Some(i) => {
+                report.interfaces[i].1 += 1;
+                self.iface = i;
+            }
+            None => {
+                self.iface = report.interfaces.len();
+                report.interfaces.push((name.to_owned(), 1));
+            }
         }
         let keep = self.interface.is_none_or(|kept| kept == name);
         if !keep {

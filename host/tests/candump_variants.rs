@@ -441,3 +441,43 @@ fn a_raw_dlc_suffix_of_can_utils_is_read_and_a_wrong_one_named() {
         assert!(stderr.contains(&format!("bad.log:2: malformed candump line ({why}")), "{stderr}");
     }
 }
+
+#[test]
+fn lines_written_twice_are_named_and_read_once() {
+    // A black-box probe's log with every line twice replayed with "counter 2243" rejections,
+    // the receiver blamed ("the receiver's fixes came at 200.1 Hz ... set the receiver to send
+    // at 100 Hz or less") and no prediction, the repeat never named.
+    let dir = tmp_dir("twice");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    let twice = each_line(&plain, |l| format!("{l}\n{l}"));
+    let (code, got, stderr) = replay(&dir, "twice.log", &twice, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains(
+            "twice.log:2: 3739 frame line(s) repeat the line before them exactly (the same \
+             timestamp to the microsecond, interface, identifier and data), every frame of the \
+             log twice: a logger that wrote frames twice."
+        ) && stderr.contains("counter 0,"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("Hz"), "{stderr}");
+    // Some lines twice: counted; the same frame on two interfaces is not a repeat.
+    let mut k = 0;
+    let some = each_line(&plain, |l| {
+        k += 1;
+        match k % 100 {
+            0 => format!("{l}\n{l}"),
+            1 => format!("{l}\n{}", l.replace(" can0 ", " can1 ")),
+            _ => l.to_string(),
+        }
+    });
+    let (code, _, stderr) = replay(&dir, "some.log", &some, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("some.log:102: 37 frame line(s) repeat the line before them exactly")
+            && !stderr.contains("every frame"),
+        "{stderr}"
+    );
+}
