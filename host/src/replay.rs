@@ -78,6 +78,117 @@ pub struct LogReport {
     /// length and data), left out: a logger that wrote frames twice. The first one's line.
     pub duplicate_lines: u64,
     pub first_duplicate_line: Option<usize>,
+    /// The node's input messages as the log carries them ([`InputCensus`]).
+    pub inputs: InputCensus,
+}
+
+/// The node's input messages, in [`InputCensus`]'s order.
+pub const INPUT_MESSAGES: [&catmodel::can::spec::MessageSpec; 10] = {
+    use catmodel::can::spec::*;
+    [
+        &STEERING_REPORT,
+        &SPEED_REPORT,
+        &PEDAL_REPORT,
+        &GNSS_POSITION_RAPID,
+        &GNSS_COG_SOG_RAPID,
+        &PATH_HEADER,
+        &PATH_POINT,
+        &PATH_LIMITS,
+        &OBSTACLE,
+        &LOCAL_ORIGIN,
+    ]
+};
+
+/// Index in [`INPUT_MESSAGES`] of the message a frame of `id` is to the node (the GNSS PGNs
+/// from any source and priority, as the acceptance filter takes them).
+pub fn input_index(id: CanId) -> Option<usize> {
+    use catmodel::can::spec::{N2K_PGN_FIELD_MASK, PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
+    match id {
+        CanId::Standard(_) => INPUT_MESSAGES.iter().position(|m| m.id == id),
+        CanId::Extended(raw) => match (raw & N2K_PGN_FIELD_MASK) >> 8 {
+            PGN_POSITION_RAPID => Some(3),
+            PGN_COG_SOG_RAPID => Some(4),
+            _ => None,
+        },
+    }
+}
+
+/// How the log carries each of the node's input messages ([`INPUT_MESSAGES`], by index):
+/// frames the node can read, and CAN FD frames of the message's identifier (skipped: the node
+/// reads classic CAN only).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InputCensus {
+    /// Classic frames of the message's identifier.
+    pub classic: [u64; 10],
+    /// CAN FD frames of it (`ID##...`).
+    pub fd: [u64; 10],
+}
+
+impl InputCensus {
+    /// The warnings: messages that came as CAN FD frames (with none as classic CAN, the node
+    /// never had the message).
+    pub fn warnings(&self, path: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        for (i, spec) in INPUT_MESSAGES.iter().enumerate() {
+            let (fd, classic) = (self.fd[i], self.classic[i]);
+            if fd == 0 {
+                continue;
+            }
+            let name = spec.name;
+            let id = id_text(spec.id);
+            out.push(if classic == 0 {
+                format!(
+                    "{}: no {name} ({id}) arrived as classic CAN: its {fd} frames came as CAN FD \
+                     frames (`##` in the log), which the node does not read (it reads classic \
+                     CAN only; they were skipped), so it ran without {name}",
+                    path.display()
+                )
+            } else {
+                format!(
+                    "{}: {fd} {name} frames ({id}) came as CAN FD frames (`##` in the log), \
+                     beside {classic} as classic CAN: the node reads classic CAN only, and the \
+                     CAN FD ones were skipped",
+                    path.display()
+                )
+            });
+        }
+        out
+    }
+}
+
+/// An identifier as candump writes it, with `0x`: 3 hex digits standard, 8 extended.
+fn id_text(id: CanId) -> String {
+    match id {
+        CanId::Standard(raw) => format!("0x{raw:03X}"),
+        CanId::Extended(raw) => format!("0x{raw:08X}"),
+    }
+}
+
+/// The identifier of a CAN FD frame line (`(TS) IFACE ID##F...`, or the screen format's
+/// `(TS)  IFACE  ID  [LEN] ...`, `-x`'s direction and flags before the identifier), which the
+/// core's parser refuses without it.
+fn fd_frame_id(line: &str) -> Option<CanId> {
+    let (_, rest) = line.trim_start().strip_prefix('(')?.split_once(')')?;
+    let mut tokens = rest.split_ascii_whitespace();
+    tokens.next()?;
+    let mut token = tokens.next()?;
+    let id = match token.split_once("##") {
+        Some((id, _)) => id,
+        None => {
+            if matches!(token, "RX" | "TX") {
+                tokens.next()?;
+                tokens.next()?;
+                token = tokens.next()?;
+            }
+            token
+        }
+    };
+    let raw = u32::from_str_radix(id, 16).ok()?;
+    match id.len() {
+        3 if raw <= 0x7FF => Some(CanId::Standard(raw as u16)),
+        8 if raw <= 0x1FFF_FFFF => Some(CanId::Extended(raw)),
+        _ => None,
+    }
 }
 
 /// A step between two distinct timestamps this long or longer spans two of the node's 20 ms
@@ -234,6 +345,7 @@ impl LogReport {
         if let Some(w) = self.timestamps.warning(&path.display().to_string()) {
             out.push(w);
         }
+        out.extend(self.inputs.warnings(path));
         if let Some(line) = self.first_drop_line {
             out.push(format!(
                 "{}:{line}: the recording lost {} frame(s): candump -d reported drops on {} line(s) (`DROPCOUNT: ...`, skipped); the node saw gaps there",
@@ -499,6 +611,11 @@ impl<'a> LineReader<'a> {
         }
         let Some(frame) = frame else {
             self.log.unsupported += 1;
+            if parsed == Err(candump::CandumpError::FdFrame) {
+                if let Some(i) = fd_frame_id(line).and_then(input_index) {
+                    self.log.report.inputs.fd[i] += 1;
+                }
+            }
             return Ok(());
         };
         if raw_dlc {
@@ -514,6 +631,9 @@ impl<'a> LineReader<'a> {
             return Ok(());
         }
         self.last = Some((frame, self.iface));
+        if let Some(i) = input_index(frame.frame.id) {
+            self.log.report.inputs.classic[i] += 1;
+        }
         // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
         if frame.t_us > u64::MAX / 2 {
             bail!(

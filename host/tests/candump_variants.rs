@@ -481,3 +481,46 @@ fn lines_written_twice_are_named_and_read_once() {
         "{stderr}"
     );
 }
+
+#[test]
+fn an_input_that_came_as_can_fd_is_named() {
+    // A black-box probe's log with every STEERING_REPORT as a CAN FD frame replayed with exit
+    // 0 and 557 of 6117 prediction rows; the only sign was "skipped: 748 remote/FD/error
+    // frames".
+    let dir = tmp_dir("fd-input");
+    let plain = smoke();
+    let fd = plain.replace(" can0 100#", " can0 100##0");
+    let (code, _, stderr) = replay(&dir, "fd.log", &fd, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(
+            "fd.log: no STEERING_REPORT (0x100) arrived as classic CAN: its 748 frames came as \
+             CAN FD frames (`##` in the log), which the node does not read"
+        ),
+        "{stderr}"
+    );
+    let mut k = 0;
+    let some = each_line(&plain, |l| {
+        k += 1;
+        if k % 2 == 0 {
+            l.replace(" can0 101#", " can0 101##1")
+        } else {
+            l.to_string()
+        }
+    });
+    let (code, _, stderr) = replay(&dir, "some.log", &some, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let n = some.matches("101##").count();
+    assert!(n > 0);
+    assert!(
+        stderr.contains(&format!(
+            "some.log: {n} SPEED_REPORT frames (0x101) came as CAN FD frames (`##` in the log), \
+             beside {} as classic CAN",
+            748 - n
+        )),
+        "{stderr}"
+    );
+    // The plain log: no word of CAN FD.
+    let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert!(!stderr.contains("CAN FD"), "{stderr}");
+}
