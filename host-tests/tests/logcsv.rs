@@ -848,3 +848,36 @@ fn a_last_line_without_a_line_end_is_warned_of() {
         "drive.csv:2:5: column `vel`: not a number: `abc`"
     );
 }
+
+#[test]
+fn line_ends_of_a_bare_cr_are_named() {
+    // A black-box probe's log with classic Mac OS line ends (`\r` alone) was refused as
+    // "c11-cr.csv:1:116: column `0`: column `0` appears twice in the header": the whole file
+    // was one header line.
+    let cr = format!("{HEADER}\r0.1,1,1,,0,,32.2,-110.9\r0.2,1,1,,0,,32.2,-110.9\r");
+    let e = error_message(&cr);
+    assert!(
+        e.starts_with(
+            "drive.csv:1:42: a line ends here with a bare CR (`\\r` without `\\n`), and 2 more \
+             after it: the line ends of classic Mac OS"
+        ),
+        "{e}"
+    );
+    let rows = |text: &str| parse(text).map(|r| r.len()).map_err(|e| e.to_string());
+    // From the second data line on (a file that was appended to by another tool).
+    let mixed =
+        format!("{HEADER}\n0.1,1,1,,0,,32.2,-110.9\n0.2,1,1,,0,,32.2,-110.9\r0.3,1,,,,,,\n");
+    let e = rows(&mixed).expect_err("mixed");
+    assert!(
+        e.starts_with("drive.csv:3:24: a line ends here with a bare CR (`\\r` without `\\n`):"),
+        "{e}"
+    );
+    // CRLF, a CRLF file cut before its last LF, and a CR inside a quoted cell still read.
+    for ok in [
+        format!("{HEADER}\r\n0.1,1,1,,0,,32.2,-110.9\r\n"),
+        format!("{HEADER}\r\n0.1,1,1,,0,,32.2,-110.9\r"),
+        format!("{HEADER},note\n0.1,1,1,,0,,32.2,-110.9,\"a\rb\"\n"),
+    ] {
+        assert_eq!(rows(&ok), Ok(1), "{ok:?}");
+    }
+}

@@ -5,7 +5,8 @@
 //! may come in any order; extra columns (unnamed ones too: a trailing comma on every line) are
 //! ignored and named in a note, and never read (bytes that are not UTF-8 in them are accepted);
 //! quoted cells may hold commas and line breaks (RFC 4180); an empty cell means the sensor did
-//! not report at that time; a UTF-8 byte-order mark and CRLF line ends are accepted;
+//! not report at that time; a UTF-8 byte-order mark and CRLF line ends are accepted; a
+//! bare CR outside a quoted cell (classic Mac OS line ends) is refused, named as such;
 //! rows with equal `t` are one instant (several sensors reported then) and are merged into one
 //! row. A value outside its column's physical range ([`LOG_RANGES`]) is an error. Every problem
 //! is an error that names the file, the line, the column (character position and name) and the
@@ -127,6 +128,12 @@ pub enum LogErrorKind {
     UnclosedQuote,
     /// The file has no header row.
     MissingHeader,
+    /// A CR not followed by LF outside a quoted cell: the line ends of classic Mac OS, which
+    /// make the whole file (or the rest of it) one line.
+    BareCarriageReturn {
+        /// Bare CRs in the text from this line on (a quoted cell's included).
+        count: usize,
+    },
     /// The header names a column twice.
     DuplicateColumn(String),
     /// A column the schema requires is absent: the column, and the header found.
@@ -248,6 +255,18 @@ impl fmt::Display for LogErrorKind {
                  at the next lone `\"`; `\"\"` is a quote inside it)"
             ),
             LogErrorKind::MissingHeader => write!(f, "missing header row"),
+            LogErrorKind::BareCarriageReturn { count } => {
+                write!(f, "a line ends here with a bare CR (`\\r` without `\\n`)")?;
+                if *count > 1 {
+                    write!(f, ", and {} more after it", count - 1)?;
+                }
+                write!(
+                    f,
+                    ": the line ends of classic Mac OS, not the schema's LF or CRLF (the lines \
+                     after a bare CR would be read as part of this one): convert them, e.g. \
+                     `tr '\\r' '\\n' < IN > OUT`"
+                )
+            }
             LogErrorKind::DuplicateColumn(c) => {
                 write!(f, "column `{c}` appears twice in the header")
             }
@@ -1098,6 +1117,8 @@ struct Record<'a> {
     line: usize,
     /// Physical lines it spans.
     lines: usize,
+    /// (line, character column) of the first CR outside a quoted cell that no LF follows.
+    bare_cr: Option<(usize, usize)>,
     /// Its text without the line end.
     text: &'a str,
     cells: Vec<Cell<'a>>,
@@ -1124,6 +1145,7 @@ fn next_record(text: &str, line: usize) -> Result<(Record<'_>, &str), UnclosedQu
     let mut next_column = 1;
     let mut at_cell_start = true;
     let mut open_quote: Option<(usize, usize)> = None;
+    let mut bare_cr: Option<(usize, usize)> = None;
     let cell = |start: usize, end: usize, line: usize, char_column: usize| {
         let trimmed = text.get(start..end).unwrap_or("").trim();
         let text = trimmed
@@ -1173,10 +1195,15 @@ fn next_record(text: &str, line: usize) -> Result<(Record<'_>, &str), UnclosedQu
                     let record = Record {
                         line,
                         lines: current_line - line + 1,
+                        bare_cr,
                         text: record_text(text, i),
                         cells,
                     };
                     return Ok((record, text.get(i + 1..).unwrap_or("")));
+                }
+                // A CR that ends the text is a CRLF file cut before its last LF.
+                b'\r' if !matches!(bytes.get(i + 1), Some(&b'\n') | None) => {
+                    bare_cr.get_or_insert((current_line, column));
                 }
                 b' ' | b'\t' | b'\r' => {}
                 _ => at_cell_start = false,
@@ -1191,10 +1218,19 @@ fn next_record(text: &str, line: usize) -> Result<(Record<'_>, &str), UnclosedQu
     let record = Record {
         line,
         lines: current_line - line + 1,
+        bare_cr,
         text: record_text(text, text.len()),
         cells,
     };
     Ok((record, ""))
+}
+
+/// CRs in `text` that no LF follows.
+fn bare_crs(text: &str) -> usize {
+    let b = text.as_bytes();
+    (0..b.len())
+        .filter(|&i| b[i] == b'\r' && b.get(i + 1) != Some(&b'\n'))
+        .count()
 }
 
 /// `text[..end]` without a CR before the line end.
@@ -1243,6 +1279,10 @@ impl<'a> Table<'a> {
             Ok(_) => return Err(err(1, 0, None, LogErrorKind::MissingHeader)),
             Err(UnclosedQuote(l, c)) => return Err(err(l, c, None, LogErrorKind::UnclosedQuote)),
         };
+        if let Some((l, c)) = header.bare_cr {
+            let count = bare_crs(text);
+            return Err(err(l, c, None, LogErrorKind::BareCarriageReturn { count }));
+        }
         let cells = &header.cells;
         for (i, c) in cells.iter().enumerate() {
             if lossy && c.text.contains(char::REPLACEMENT_CHARACTER) {
@@ -1342,6 +1382,11 @@ impl<'t> Iterator for Lines<'t> {
                 return Some(Err(fail(l, c, LogErrorKind::UnclosedQuote)));
             }
         };
+        if let Some((l, c)) = record.bare_cr {
+            let count = bare_crs(self.rest);
+            self.rest = "";
+            return Some(Err(fail(l, c, LogErrorKind::BareCarriageReturn { count })));
+        }
         if record.text.trim().is_empty() {
             // Trailing blank lines are the end of the file, not missing rows.
             if rest.trim().is_empty() {

@@ -69,6 +69,126 @@ pub struct LogReport {
     pub truncated_last_line: Option<usize>,
     /// How the frames' timestamps were taken ([`TimestampStats`]): batched by the recorder?
     pub timestamps: TimestampStats,
+    /// Frames written with can-utils' raw DLC suffix (`123#1122334455667788_9`: a classic
+    /// frame of 8 data bytes whose DLC field said 9..15), read as the 8 bytes they carry; the
+    /// first one's line.
+    pub raw_dlc_frames: u64,
+    pub first_raw_dlc_line: Option<usize>,
+    /// Frame lines identical to the frame line before them (timestamp, interface, identifier,
+    /// length and data), left out: a logger that wrote frames twice. The first one's line.
+    pub duplicate_lines: u64,
+    pub first_duplicate_line: Option<usize>,
+    /// The node's input messages as the log carries them ([`InputCensus`]).
+    pub inputs: InputCensus,
+}
+
+/// The node's input messages, in [`InputCensus`]'s order.
+pub const INPUT_MESSAGES: [&catmodel::can::spec::MessageSpec; 10] = {
+    use catmodel::can::spec::*;
+    [
+        &STEERING_REPORT,
+        &SPEED_REPORT,
+        &PEDAL_REPORT,
+        &GNSS_POSITION_RAPID,
+        &GNSS_COG_SOG_RAPID,
+        &PATH_HEADER,
+        &PATH_POINT,
+        &PATH_LIMITS,
+        &OBSTACLE,
+        &LOCAL_ORIGIN,
+    ]
+};
+
+/// Index in [`INPUT_MESSAGES`] of the message a frame of `id` is to the node (the GNSS PGNs
+/// from any source and priority, as the acceptance filter takes them).
+pub fn input_index(id: CanId) -> Option<usize> {
+    use catmodel::can::spec::{N2K_PGN_FIELD_MASK, PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
+    match id {
+        CanId::Standard(_) => INPUT_MESSAGES.iter().position(|m| m.id == id),
+        CanId::Extended(raw) => match (raw & N2K_PGN_FIELD_MASK) >> 8 {
+            PGN_POSITION_RAPID => Some(3),
+            PGN_COG_SOG_RAPID => Some(4),
+            _ => None,
+        },
+    }
+}
+
+/// How the log carries each of the node's input messages ([`INPUT_MESSAGES`], by index):
+/// frames the node can read, and CAN FD frames of the message's identifier (skipped: the node
+/// reads classic CAN only).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InputCensus {
+    /// Classic frames of the message's identifier.
+    pub classic: [u64; 10],
+    /// CAN FD frames of it (`ID##...`).
+    pub fd: [u64; 10],
+}
+
+impl InputCensus {
+    /// The warnings: messages that came as CAN FD frames (with none as classic CAN, the node
+    /// never had the message).
+    pub fn warnings(&self, path: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        for (i, spec) in INPUT_MESSAGES.iter().enumerate() {
+            let (fd, classic) = (self.fd[i], self.classic[i]);
+            if fd == 0 {
+                continue;
+            }
+            let name = spec.name;
+            let id = id_text(spec.id);
+            out.push(if classic == 0 {
+                format!(
+                    "{}: no {name} ({id}) arrived as classic CAN: its {fd} frames came as CAN FD \
+                     frames (`##` in the log), which the node does not read (it reads classic \
+                     CAN only; they were skipped), so it ran without {name}",
+                    path.display()
+                )
+            } else {
+                format!(
+                    "{}: {fd} {name} frames ({id}) came as CAN FD frames (`##` in the log), \
+                     beside {classic} as classic CAN: the node reads classic CAN only, and the \
+                     CAN FD ones were skipped",
+                    path.display()
+                )
+            });
+        }
+        out
+    }
+}
+
+/// An identifier as candump writes it, with `0x`: 3 hex digits standard, 8 extended.
+fn id_text(id: CanId) -> String {
+    match id {
+        CanId::Standard(raw) => format!("0x{raw:03X}"),
+        CanId::Extended(raw) => format!("0x{raw:08X}"),
+    }
+}
+
+/// The identifier of a CAN FD frame line (`(TS) IFACE ID##F...`, or the screen format's
+/// `(TS)  IFACE  ID  [LEN] ...`, `-x`'s direction and flags before the identifier), which the
+/// core's parser refuses without it.
+fn fd_frame_id(line: &str) -> Option<CanId> {
+    let (_, rest) = line.trim_start().strip_prefix('(')?.split_once(')')?;
+    let mut tokens = rest.split_ascii_whitespace();
+    tokens.next()?;
+    let mut token = tokens.next()?;
+    let id = match token.split_once("##") {
+        Some((id, _)) => id,
+        None => {
+            if matches!(token, "RX" | "TX") {
+                tokens.next()?;
+                tokens.next()?;
+                token = tokens.next()?;
+            }
+            token
+        }
+    };
+    let raw = u32::from_str_radix(id, 16).ok()?;
+    match id.len() {
+        3 if raw <= 0x7FF => Some(CanId::Standard(raw as u16)),
+        8 if raw <= 0x1FFF_FFFF => Some(CanId::Extended(raw)),
+        _ => None,
+    }
 }
 
 /// A step between two distinct timestamps this long or longer spans two of the node's 20 ms
@@ -183,8 +303,18 @@ impl TimestampTracker {
 impl LogReport {
     /// Notes: what the log holds that the user may not expect (frames of several interfaces).
     pub fn notes(&self, path: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        if let Some(line) = self.first_raw_dlc_line {
+            out.push(format!(
+                "{}:{line}: {} frame(s) carry can-utils' raw DLC suffix (`#<8 bytes>_9` .. \
+                 `_F`: a classic frame of 8 data bytes whose DLC field said 9..15, which ISO \
+                 11898-1 reads as 8): read as the 8 bytes they carry",
+                path.display(),
+                self.raw_dlc_frames
+            ));
+        }
         if self.interfaces.len() < 2 {
-            return Vec::new();
+            return out;
         }
         let list = self
             .interfaces
@@ -192,7 +322,7 @@ impl LogReport {
             .map(|(name, n)| format!("`{name}` ({n} lines)"))
             .collect::<Vec<_>>()
             .join(", ");
-        vec![match &self.kept {
+        out.push(match &self.kept {
             Some(kept) => format!(
                 "{}: frames of {} interfaces, {list}: only `{kept}`'s are read ({} lines of the others skipped)",
                 path.display(),
@@ -204,7 +334,8 @@ impl LogReport {
                 path.display(),
                 self.interfaces.len()
             ),
-        }]
+        });
+        out
     }
 
     /// Warnings: the recording lost frames, its last line was cut short, or its timestamps
@@ -214,12 +345,30 @@ impl LogReport {
         if let Some(w) = self.timestamps.warning(&path.display().to_string()) {
             out.push(w);
         }
+        out.extend(self.inputs.warnings(path));
         if let Some(line) = self.first_drop_line {
             out.push(format!(
                 "{}:{line}: the recording lost {} frame(s): candump -d reported drops on {} line(s) (`DROPCOUNT: ...`, skipped); the node saw gaps there",
                 path.display(),
                 self.dropped_frames,
                 self.drop_lines
+            ));
+        }
+        if let Some(line) = self.first_duplicate_line {
+            let every = if self.duplicate_lines == self.timestamps.frames {
+                ", every frame of the log twice"
+            } else {
+                ""
+            };
+            out.push(format!(
+                "{}:{line}: {} frame line(s) repeat the line before them exactly (the same \
+                 timestamp to the microsecond, interface, identifier and data){every}: a logger \
+                 that wrote frames twice. No bus carries one frame twice in one microsecond (a \
+                 frame takes over 100 us on the wire), and a report the bus did carry twice \
+                 comes with another rolling counter, which the node checks: each repeat was left \
+                 out, its frame read once",
+                path.display(),
+                self.duplicate_lines
             ));
         }
         if let Some(line) = self.truncated_last_line {
@@ -382,6 +531,10 @@ struct LineReader<'a> {
     last_t: Option<u64>,
     timestamps: TimestampTracker,
     log: CandumpLog,
+    /// The interface (index in the report's) of the line [`Self::keep`] last counted.
+    iface: usize,
+    /// The last frame kept and its interface, to tell a line written twice.
+    last: Option<(TimedFrame, usize)>,
 }
 
 impl<'a> LineReader<'a> {
@@ -394,6 +547,8 @@ impl<'a> LineReader<'a> {
             last_t: None,
             timestamps: TimestampTracker::default(),
             log,
+            iface: 0,
+            last: None,
         }
     }
 
@@ -403,7 +558,27 @@ impl<'a> LineReader<'a> {
     #[inline]
     fn push(&mut self, lineno: usize, line: &str, unterminated_last: bool) -> Result<()> {
         let path = self.path;
-        let parsed = candump::parse_line(line);
+        let mut parsed = candump::parse_line(line);
+        let mut raw_dlc = false;
+        if matches!(
+            parsed,
+            Err(candump::CandumpError::BadHex
+                | candump::CandumpError::OddHex
+                | candump::CandumpError::TooLong
+                | candump::CandumpError::TrailingGarbage)
+        ) {
+            match without_raw_dlc(line) {
+                Some(Ok(plain)) => {
+                    parsed = candump::parse_line(&plain);
+                    raw_dlc = parsed.is_ok();
+                }
+                Some(Err(why)) if !unterminated_last => bail!(
+                    "{}:{lineno}: malformed candump line ({why}): {line:?}",
+                    path.display()
+                ),
+                _ => {}
+            }
+        }
         let frame = match parsed {
             Ok(frame) => Some(frame),
             Err(_) if line.trim().is_empty() => return Ok(()),
@@ -436,8 +611,29 @@ impl<'a> LineReader<'a> {
         }
         let Some(frame) = frame else {
             self.log.unsupported += 1;
+            if parsed == Err(candump::CandumpError::FdFrame) {
+                if let Some(i) = fd_frame_id(line).and_then(input_index) {
+                    self.log.report.inputs.fd[i] += 1;
+                }
+            }
             return Ok(());
         };
+        if raw_dlc {
+            let report = &mut self.log.report;
+            report.raw_dlc_frames += 1;
+            report.first_raw_dlc_line.get_or_insert(lineno);
+        }
+        // A line written twice: the same frame in the same microsecond on one interface.
+        if self.last == Some((frame, self.iface)) {
+            let report = &mut self.log.report;
+            report.duplicate_lines += 1;
+            report.first_duplicate_line.get_or_insert(lineno);
+            return Ok(());
+        }
+        self.last = Some((frame, self.iface));
+        if let Some(i) = input_index(frame.frame.id) {
+            self.log.report.inputs.classic[i] += 1;
+        }
         // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
         if frame.t_us > u64::MAX / 2 {
             bail!(
@@ -488,9 +684,15 @@ impl<'a> LineReader<'a> {
     fn keep(&mut self, line: &str) -> bool {
         let name = candump::interface_of(line).unwrap_or_default();
         let report = &mut self.log.report;
-        match report.interfaces.iter_mut().find(|(n, _)| n == name) {
-            Some((_, count)) => *count += 1,
-            None => report.interfaces.push((name.to_owned(), 1)),
+        match report.interfaces.iter_mut().position(|(n, _)| n == name) {
+            Some(i) => {
+                report.interfaces[i].1 += 1;
+                self.iface = i;
+            }
+            None => {
+                self.iface = report.interfaces.len();
+                report.interfaces.push((name.to_owned(), 1));
+            }
         }
         let keep = self.interface.is_none_or(|kept| kept == name);
         if !keep {
@@ -529,6 +731,40 @@ impl LogReport {
         }
         Ok(())
     }
+}
+
+/// A log-format line with can-utils' raw DLC suffix (lib.c's `CC_DLC_DELIM`): `_` and one
+/// hex digit after the data, the DLC field 9..F of a classic frame with 8 data bytes (written
+/// by `candump -l` when the interface reports raw DLCs, `CAN_CTRLMODE_CC_LEN8_DLC`). `None` if
+/// the line has no `_` suffix; the line without it if the suffix is one can-utils writes; the
+/// reason if it is not (a digit below 9, or a frame of other than 8 bytes).
+fn without_raw_dlc(line: &str) -> Option<Result<String, String>> {
+    let t = line.trim_end();
+    // `candump -l -x`: ` R` or ` T` after the frame.
+    let body = t
+        .strip_suffix(" R")
+        .or_else(|| t.strip_suffix(" T"))
+        .unwrap_or(t);
+    let tail = &t[body.len()..];
+    let (frame, dlc) = body.rsplit_once('_')?;
+    let (_, data) = frame.rsplit_once('#')?;
+    let hex = |s: &str| !s.is_empty() && s.bytes().all(|c| c.is_ascii_hexdigit());
+    if !hex(data) || dlc.contains(char::is_whitespace) {
+        return None;
+    }
+    let digit = u8::from_str_radix(dlc, 16).ok().filter(|_| dlc.len() == 1);
+    Some(match digit {
+        Some(9..=15) if data.len() == 16 => Ok(format!("{frame}{tail}")),
+        Some(9..=15) => Err(format!(
+            "raw DLC suffix `_{dlc}` after {} data bytes: can-utils writes it only for a \
+             classic frame of 8",
+            data.len() / 2
+        )),
+        _ => Err(format!(
+            "`_{dlc}` after the data is not a raw DLC suffix: can-utils writes `_` and one hex \
+             digit 9..F, the DLC field of a classic frame of 8 data bytes"
+        )),
+    })
 }
 
 /// Whether the line's timestamp has fewer than the 10 digits of seconds of candump's absolute

@@ -398,3 +398,129 @@ fn gnss_positions_of_other_source_addresses_are_named() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_raw_dlc_suffix_of_can_utils_is_read_and_a_wrong_one_named() {
+    // can-utils' lib.c writes `_` and the DLC field 9..F after the data of a classic frame of
+    // 8 bytes whose DLC said more (CAN_CTRLMODE_CC_LEN8_DLC). A black-box probe's log with it
+    // on every frame was refused: "malformed candump line (data is not hex)".
+    let dir = tmp_dir("raw-dlc");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    let mut k = 0;
+    let suffixed = each_line(&plain, |l| {
+        k += 1;
+        format!("{l}_{:X}", 9 + k % 7)
+    });
+    let (code, got, stderr) = replay(&dir, "dlc.log", &suffixed, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains("dlc.log:1: 3739 frame(s) carry can-utils' raw DLC suffix"),
+        "{stderr}"
+    );
+    // With `candump -l -x`'s flag after it.
+    let flagged = each_line(&plain, |l| format!("{l}_9 R"));
+    let (code, got, stderr) = replay(&dir, "dlcx.log", &flagged, &[]);
+    assert_eq!((code, got == want), (0, true), "{stderr}");
+    // A suffix can-utils never writes is refused by name, not as "data is not hex".
+    for (line, why) in [
+        (
+            "(0000000000.003745) can0 100#ECFF0000000000BB_8",
+            "`_8` after the data is not a raw DLC suffix",
+        ),
+        (
+            "(0000000000.003745) can0 100#ECFF_9",
+            "raw DLC suffix `_9` after 2 data bytes: can-utils writes it only for a classic frame of 8",
+        ),
+    ] {
+        let (first, rest) = plain.split_once('\n').unwrap();
+        let text = format!("{first}\n{line}\n{rest}");
+        let (code, _, stderr) = replay(&dir, "bad.log", &text, &[]);
+        assert_eq!(code, 1, "{stderr}");
+        assert!(stderr.contains(&format!("bad.log:2: malformed candump line ({why}")), "{stderr}");
+    }
+}
+
+#[test]
+fn lines_written_twice_are_named_and_read_once() {
+    // A black-box probe's log with every line twice replayed with "counter 2243" rejections,
+    // the receiver blamed ("the receiver's fixes came at 200.1 Hz ... set the receiver to send
+    // at 100 Hz or less") and no prediction, the repeat never named.
+    let dir = tmp_dir("twice");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    let twice = each_line(&plain, |l| format!("{l}\n{l}"));
+    let (code, got, stderr) = replay(&dir, "twice.log", &twice, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains(
+            "twice.log:2: 3739 frame line(s) repeat the line before them exactly (the same \
+             timestamp to the microsecond, interface, identifier and data), every frame of the \
+             log twice: a logger that wrote frames twice."
+        ) && stderr.contains("counter 0,"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("Hz"), "{stderr}");
+    // Some lines twice: counted; the same frame on two interfaces is not a repeat.
+    let mut k = 0;
+    let some = each_line(&plain, |l| {
+        k += 1;
+        match k % 100 {
+            0 => format!("{l}\n{l}"),
+            1 => format!("{l}\n{}", l.replace(" can0 ", " can1 ")),
+            _ => l.to_string(),
+        }
+    });
+    let (code, _, stderr) = replay(&dir, "some.log", &some, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("some.log:102: 37 frame line(s) repeat the line before them exactly")
+            && !stderr.contains("every frame"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn an_input_that_came_as_can_fd_is_named() {
+    // A black-box probe's log with every STEERING_REPORT as a CAN FD frame replayed with exit
+    // 0 and 557 of 6117 prediction rows; the only sign was "skipped: 748 remote/FD/error
+    // frames".
+    let dir = tmp_dir("fd-input");
+    let plain = smoke();
+    let fd = plain.replace(" can0 100#", " can0 100##0");
+    let (code, _, stderr) = replay(&dir, "fd.log", &fd, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(
+            "fd.log: no STEERING_REPORT (0x100) arrived as classic CAN: its 748 frames came as \
+             CAN FD frames (`##` in the log), which the node does not read"
+        ),
+        "{stderr}"
+    );
+    let mut k = 0;
+    let some = each_line(&plain, |l| {
+        k += 1;
+        if k % 2 == 0 {
+            l.replace(" can0 101#", " can0 101##1")
+        } else {
+            l.to_string()
+        }
+    });
+    let (code, _, stderr) = replay(&dir, "some.log", &some, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let n = some.matches("101##").count();
+    assert!(n > 0);
+    assert!(
+        stderr.contains(&format!(
+            "some.log: {n} SPEED_REPORT frames (0x101) came as CAN FD frames (`##` in the log), \
+             beside {} as classic CAN",
+            748 - n
+        )),
+        "{stderr}"
+    );
+    // The plain log: no word of CAN FD.
+    let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert!(!stderr.contains("CAN FD"), "{stderr}");
+}

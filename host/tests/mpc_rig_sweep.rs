@@ -56,7 +56,6 @@ fn sweep() {
                     "r" => w.yaw_rate_per_rps2 = x,
                     "lead" => t.steer_lead_s = x,
                     "margin" => w.corridor_margin_m = x,
-                    "near" => w.corridor_margin_near_m = x,
                     "cw" => w.corridor_weight_per_m = x,
                     "rc" => w.rho_corridor = x,
                     "rs" => w.rho_steer = x,
