@@ -964,7 +964,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
 /// models are linear; the planner's speeds are taken as driveable), so the run measures a car
 /// past its grip; before, a spin on the loop at 14 m/s was reported as `lost_path` alone.
 pub fn slide_note(scenario: &str, output: &RunOutput, vehicle: &VehicleConfig) -> Option<String> {
-    let truth: Vec<_> = output.samples.iter().map(|s| s.truth.clone()).collect();
+    let truth: Vec<_> = output.samples.iter().map(|s| s.truth).collect();
     crate::sim::slide_summary(scenario, &truth, vehicle).map(|slid| {
         format!(
             "{slid}: the course at this speed asks more than the car's tyres give, and the \
