@@ -1074,7 +1074,7 @@ fn a_complete_path_becomes_active_only_when_complete() {
     // All but the last frame: still no path.
     assert!(feed(&mut inputs, &messages[..messages.len() - 1]).is_empty());
     assert!(inputs.path().is_none());
-    assert_eq!(inputs.receiving(), Some((3, 40, 39)));
+    assert_eq!(inputs.receiving(), Some((3, 40, 39, 40)));
     assert_eq!(
         feed(&mut inputs, &messages[messages.len() - 1..]),
         [PlannerEvent::PathActivated(3)]

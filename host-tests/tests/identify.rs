@@ -544,7 +544,9 @@ fn vehicles_dir() -> std::path::PathBuf {
 #[test]
 fn cornering_stiffnesses_from_step_steers_at_speed() {
     let base = model_file::load(&model_file::paper_path()).unwrap();
-    let polo_car = identify::car::apply(&base, &vehicles_dir().join("vw-polo.car.toml")).unwrap();
+    let polo_car = identify::car::apply(&base, &vehicles_dir().join("vw-polo.car.toml"))
+        .unwrap()
+        .file;
     let polo_plant = VehicleConfig::load(&vehicles_dir().join("vw-polo.toml")).unwrap();
     for (name, plant, car) in [
         ("CAT Vehicle", VehicleConfig::default(), &base),

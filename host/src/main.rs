@@ -601,7 +601,20 @@ fn print_replay_warnings(
         && c.gnss_rate_mismatch == 0
         && result.fixes_beyond_frame == 0
         && !(result.fixes == 0 && other_sources.is_some());
-    if no_position && result.max_speed_mps < still {
+    let speed = &catmodel::can::spec::SPEED_REPORT;
+    let speed_reports =
+        catmodel::can::spec::node_input_index(speed.id).map_or(0, |i| report.inputs.classic[i]);
+    if no_position && speed_reports == 0 {
+        // Without speed reports the node's speed is 0 throughout: "the car never moved"
+        // would blame the drive for what the log lacks.
+        eprintln!(
+            "catmodel: warning: the node had no valid position at any of the {} ticks: the log holds no {} ({}) the node could read, \
+             and without the car's speed it has no dead reckoning to carry a position between fixes nor a course to take a heading from",
+            result.ticks,
+            speed.name,
+            replay::id_text(speed.id)
+        );
+    } else if no_position && result.max_speed_mps < still {
         eprintln!(
             "catmodel: warning: the node had no valid position at any of the {} ticks: the car never moved (its speed stayed below {still} m/s, {:.2} m/s at most), so there is no heading from its course and no position. \
              A parked car's log measures the receiver (`catmodel receiver-error`), not the node",
@@ -726,7 +739,11 @@ fn identify(args: IdentifyArgs) -> Result<()> {
         .check()?;
     let base = load_base(base.as_deref())?;
     let base = match vehicle {
-        Some(car) => identify::car::apply(&base, &car)?,
+        Some(car) => {
+            let applied = identify::car::apply(&base, &car)?;
+            print_notes(&applied.notes);
+            applied.file
+        }
         None => base,
     };
     let opts = identify::IdentifyOptions::default();

@@ -23,6 +23,7 @@ use catmodel::can::candump;
 use catmodel::can::codec::{
     GnssPosition, ModelMode, Prediction, SpeedReport, StateMotion, StatePosition,
 };
+use catmodel::can::spec::{node_input_index, NODE_INPUTS};
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::steering::SteeringCheck;
 use catmodel::node::{
@@ -82,38 +83,7 @@ pub struct LogReport {
     pub inputs: InputCensus,
 }
 
-/// The node's input messages, in [`InputCensus`]'s order.
-pub const INPUT_MESSAGES: [&catmodel::can::spec::MessageSpec; 10] = {
-    use catmodel::can::spec::*;
-    [
-        &STEERING_REPORT,
-        &SPEED_REPORT,
-        &PEDAL_REPORT,
-        &GNSS_POSITION_RAPID,
-        &GNSS_COG_SOG_RAPID,
-        &PATH_HEADER,
-        &PATH_POINT,
-        &PATH_LIMITS,
-        &OBSTACLE,
-        &LOCAL_ORIGIN,
-    ]
-};
-
-/// Index in [`INPUT_MESSAGES`] of the message a frame of `id` is to the node (the GNSS PGNs
-/// from any source and priority, as the acceptance filter takes them).
-pub fn input_index(id: CanId) -> Option<usize> {
-    use catmodel::can::spec::{N2K_PGN_FIELD_MASK, PGN_COG_SOG_RAPID, PGN_POSITION_RAPID};
-    match id {
-        CanId::Standard(_) => INPUT_MESSAGES.iter().position(|m| m.id == id),
-        CanId::Extended(raw) => match (raw & N2K_PGN_FIELD_MASK) >> 8 {
-            PGN_POSITION_RAPID => Some(3),
-            PGN_COG_SOG_RAPID => Some(4),
-            _ => None,
-        },
-    }
-}
-
-/// How the log carries each of the node's input messages ([`INPUT_MESSAGES`], by index):
+/// How the log carries each of the node's input messages ([`NODE_INPUTS`], by index):
 /// frames the node can read, and CAN FD frames of the message's identifier (skipped: the node
 /// reads classic CAN only).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -122,6 +92,11 @@ pub struct InputCensus {
     pub classic: [u64; 10],
     /// CAN FD frames of it (`ID##...`).
     pub fd: [u64; 10],
+    /// Frames with a 29-bit identifier whose value is the message's 11-bit one (`00000100#...`
+    /// for 0x100): a recorder or converter that wrote every identifier with 8 digits. The
+    /// node does not take them (an 11-bit and a 29-bit identifier are different frames on
+    /// the bus).
+    pub as_extended: [u64; 10],
 }
 
 impl InputCensus {
@@ -129,13 +104,30 @@ impl InputCensus {
     /// never had the message).
     pub fn warnings(&self, path: &Path) -> Vec<String> {
         let mut out = Vec::new();
-        for (i, spec) in INPUT_MESSAGES.iter().enumerate() {
+        for (i, spec) in NODE_INPUTS.iter().enumerate() {
             let (fd, classic) = (self.fd[i], self.classic[i]);
+            let name = spec.name;
+            let id = id_text(spec.id);
+            if let (CanId::Standard(raw), n @ 1..) = (spec.id, self.as_extended[i]) {
+                out.push(format!(
+                    "{}: {n} frames with the 29-bit identifier 0x{raw:08X} carry the number of \
+                     {name} ({id}, an 11-bit identifier in catmodel.dbc){}: the node does not \
+                     take a 29-bit frame for an 11-bit one; if the recorder or a converter wrote \
+                     every identifier with 8 hex digits, write the 11-bit ones with 3 \
+                     (`{raw:03X}#...`)",
+                    path.display(),
+                    if classic == 0 {
+                        format!(
+                            ", and no {name} came with the 11-bit one, so the node ran without it"
+                        )
+                    } else {
+                        format!(" (beside {classic} with the 11-bit one)")
+                    }
+                ));
+            }
             if fd == 0 {
                 continue;
             }
-            let name = spec.name;
-            let id = id_text(spec.id);
             out.push(if classic == 0 {
                 format!(
                     "{}: no {name} ({id}) arrived as classic CAN: its {fd} frames came as CAN FD \
@@ -157,7 +149,7 @@ impl InputCensus {
 }
 
 /// An identifier as candump writes it, with `0x`: 3 hex digits standard, 8 extended.
-fn id_text(id: CanId) -> String {
+pub fn id_text(id: CanId) -> String {
     match id {
         CanId::Standard(raw) => format!("0x{raw:03X}"),
         CanId::Extended(raw) => format!("0x{raw:08X}"),
@@ -558,27 +550,10 @@ impl<'a> LineReader<'a> {
     #[inline]
     fn push(&mut self, lineno: usize, line: &str, unterminated_last: bool) -> Result<()> {
         let path = self.path;
-        let mut parsed = candump::parse_line(line);
-        let mut raw_dlc = false;
-        if matches!(
-            parsed,
-            Err(candump::CandumpError::BadHex
-                | candump::CandumpError::OddHex
-                | candump::CandumpError::TooLong
-                | candump::CandumpError::TrailingGarbage)
-        ) {
-            match without_raw_dlc(line) {
-                Some(Ok(plain)) => {
-                    parsed = candump::parse_line(&plain);
-                    raw_dlc = parsed.is_ok();
-                }
-                Some(Err(why)) if !unterminated_last => bail!(
-                    "{}:{lineno}: malformed candump line ({why}): {line:?}",
-                    path.display()
-                ),
-                _ => {}
-            }
-        }
+        let (parsed, raw_dlc) = match candump::parse_line_and_dlc(line) {
+            Ok((frame, dlc)) => (Ok(frame), dlc.is_some()),
+            Err(e) => (Err(e), false),
+        };
         let frame = match parsed {
             Ok(frame) => Some(frame),
             Err(_) if line.trim().is_empty() => return Ok(()),
@@ -612,7 +587,7 @@ impl<'a> LineReader<'a> {
         let Some(frame) = frame else {
             self.log.unsupported += 1;
             if parsed == Err(candump::CandumpError::FdFrame) {
-                if let Some(i) = fd_frame_id(line).and_then(input_index) {
+                if let Some(i) = fd_frame_id(line).and_then(node_input_index) {
                     self.log.report.inputs.fd[i] += 1;
                 }
             }
@@ -631,8 +606,16 @@ impl<'a> LineReader<'a> {
             return Ok(());
         }
         self.last = Some((frame, self.iface));
-        if let Some(i) = input_index(frame.frame.id) {
-            self.log.report.inputs.classic[i] += 1;
+        let inputs = &mut self.log.report.inputs;
+        if let Some(i) = node_input_index(frame.frame.id) {
+            inputs.classic[i] += 1;
+        } else if let CanId::Extended(raw @ 0..=0x7FF) = frame.frame.id {
+            if let Some(i) = u16::try_from(raw)
+                .ok()
+                .and_then(|raw| node_input_index(CanId::Standard(raw)))
+            {
+                inputs.as_extended[i] += 1;
+            }
         }
         // Far beyond any clock (year 292 000); keeps the tick arithmetic from overflowing.
         if frame.t_us > u64::MAX / 2 {
@@ -733,40 +716,6 @@ impl LogReport {
     }
 }
 
-/// A log-format line with can-utils' raw DLC suffix (lib.c's `CC_DLC_DELIM`): `_` and one
-/// hex digit after the data, the DLC field 9..F of a classic frame with 8 data bytes (written
-/// by `candump -l` when the interface reports raw DLCs, `CAN_CTRLMODE_CC_LEN8_DLC`). `None` if
-/// the line has no `_` suffix; the line without it if the suffix is one can-utils writes; the
-/// reason if it is not (a digit below 9, or a frame of other than 8 bytes).
-fn without_raw_dlc(line: &str) -> Option<Result<String, String>> {
-    let t = line.trim_end();
-    // `candump -l -x`: ` R` or ` T` after the frame.
-    let body = t
-        .strip_suffix(" R")
-        .or_else(|| t.strip_suffix(" T"))
-        .unwrap_or(t);
-    let tail = &t[body.len()..];
-    let (frame, dlc) = body.rsplit_once('_')?;
-    let (_, data) = frame.rsplit_once('#')?;
-    let hex = |s: &str| !s.is_empty() && s.bytes().all(|c| c.is_ascii_hexdigit());
-    if !hex(data) || dlc.contains(char::is_whitespace) {
-        return None;
-    }
-    let digit = u8::from_str_radix(dlc, 16).ok().filter(|_| dlc.len() == 1);
-    Some(match digit {
-        Some(9..=15) if data.len() == 16 => Ok(format!("{frame}{tail}")),
-        Some(9..=15) => Err(format!(
-            "raw DLC suffix `_{dlc}` after {} data bytes: can-utils writes it only for a \
-             classic frame of 8",
-            data.len() / 2
-        )),
-        _ => Err(format!(
-            "`_{dlc}` after the data is not a raw DLC suffix: can-utils writes `_` and one hex \
-             digit 9..F, the DLC field of a classic frame of 8 data bytes"
-        )),
-    })
-}
-
 /// Whether the line's timestamp has fewer than the 10 digits of seconds of candump's absolute
 /// time (`%010lu`): `candump -td` and `-tz` write `%03lu`.
 fn short_timestamp(line: &str) -> bool {
@@ -806,6 +755,10 @@ pub fn candump_reason(e: candump::CandumpError) -> &'static str {
         E::OddHex => "odd number of data hex digits",
         E::TooLong => "more than 8 data bytes",
         E::TrailingGarbage => "unexpected text after the data",
+        E::BadRawDlc => {
+            "`_` after the data, but not can-utils' raw DLC suffix (`_` and one hex digit 9..F \
+             after 8 data bytes: a classic frame whose DLC field said 9..15)"
+        }
         E::LengthMismatch => "fewer data bytes than the `[LEN]` field says",
         E::DropCount => "a `candump -d` drop count, not a frame",
     }

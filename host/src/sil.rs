@@ -13,7 +13,9 @@
 //! Remote, CAN FD and error frames are skipped and counted, as the firmware's receive path
 //! skips them; blank lines are skipped (as in `replay`). End of input: success, and a summary
 //! of the frames not given to the node, of the node's rejections and of its planner's
-//! refusals with the first one's reason ([`SilSummary`]). A malformed line (not UTF-8, neither
+//! refusals with the first one's reason, a path it was still receiving, and a last line cut
+//! short without a line end that does not parse (left out, as replay leaves out a log's)
+//! ([`SilSummary`]). A malformed line (not UTF-8, neither
 //! a candump line nor a TICK), or a TICK beyond year 292 000 or off the node's tick schedule
 //! (the first on a whole multiple of 20 ms, each next one 20 ms after the previous:
 //! [`check_tick_schedule`]): an error naming the line number (quoting at most 80 characters of
@@ -137,6 +139,7 @@ pub fn run(
     let mut timestamps = TimestampStats::default();
     let mut tracker = TimestampTracker::default();
     let mut planner = PlannerRefusals::default();
+    let mut cut_line = None;
     for line_no in 1.. {
         bytes.clear();
         let read = (&mut input)
@@ -146,10 +149,14 @@ pub fn run(
         if read == 0 {
             break;
         }
+        // The last line without its line end: the simulator stopped mid-write. Left out
+        // and named if it does not parse (as replay leaves out a log's cut last line).
+        let cut = bytes.last() != Some(&b'\n');
         let malformed = |reason: String| SilError::Malformed {
             line: line_no,
             reason,
         };
+        let cut_or = |e: SilError| if cut { Ok(line_no) } else { Err(e) };
         if bytes.len() > MAX_LINE_BYTES {
             // Refused after the cap, not after the line: a line without an end (a simulator
             // writing binary, a stream cut of its newlines) would otherwise be held in memory
@@ -158,9 +165,16 @@ pub fn run(
                 "longer than {MAX_LINE_BYTES} bytes (a candump line or a TICK is under 200)"
             )));
         }
-        let text = std::str::from_utf8(&bytes)
-            .map_err(|e| malformed(format!("not UTF-8 (byte {})", e.valid_up_to() + 1)))?
-            .trim_end();
+        let text = match std::str::from_utf8(&bytes) {
+            Ok(text) => text.trim_end(),
+            Err(e) => {
+                cut_line = Some(cut_or(malformed(format!(
+                    "not UTF-8 (byte {})",
+                    e.valid_up_to() + 1
+                )))?);
+                break;
+            }
+        };
         if text.trim().is_empty() {
             continue;
         }
@@ -177,10 +191,11 @@ pub fn run(
                     )))
                 }
                 _ => {
-                    return Err(malformed(format!(
+                    cut_line = Some(cut_or(malformed(format!(
                         "expected `TICK SECONDS.UUUUUU` (six decimals), got {}",
                         quoted(text)
-                    )))
+                    )))?);
+                    break;
                 }
             };
             // As replay refuses a frame time beyond it (year 292 000): keeps the node's tick
@@ -234,11 +249,12 @@ pub fn run(
             // What the firmware's receive path does with them: skipped and counted.
             Err(e) if e.is_unsupported_frame() => queue.unsupported += 1,
             Err(e) => {
-                return Err(malformed(format!(
+                cut_line = Some(cut_or(malformed(format!(
                     "neither a candump line nor `TICK SECONDS.UUUUUU` ({}): {}",
                     candump_reason(e),
                     quoted(text)
-                )))
+                )))?);
+                break;
             }
         }
     }
@@ -252,6 +268,8 @@ pub fn run(
         counters: driver.counters(),
         timestamps,
         planner,
+        cut_line,
+        path_unfinished: driver.path_receiving(),
     })
 }
 
@@ -343,6 +361,12 @@ pub struct SilSummary {
     /// The node's planner refusals (on no status page but as the bit
     /// `planner_refused_recently`) and the first one's reason.
     pub planner: PlannerRefusals,
+    /// The last line, cut short without a line end (the simulator stopped mid-write) and not
+    /// a line the session reads: its number; it was left out.
+    pub cut_line: Option<usize>,
+    /// The path the node was receiving when the input ended ([`Driver::path_receiving`]):
+    /// it never loaded.
+    pub path_unfinished: Option<(u8, usize, usize, usize)>,
 }
 
 impl std::fmt::Display for SilSummary {
@@ -369,7 +393,23 @@ impl std::fmt::Display for SilSummary {
             c.unknown_ids,
             c.time_errors,
             self.planner
-        )
+        )?;
+        if let Some((id, points, limits, count)) = self.path_unfinished {
+            write!(
+                f,
+                "; the input ended while the node was receiving path {id}: {points} of its \
+                 {count} points and {limits} of its limits were in (a TICK takes at most \
+                 {MAX_RX_FRAMES_PER_TICK} frames), so it never loaded"
+            )?;
+        }
+        if let Some(line) = self.cut_line {
+            write!(
+                f,
+                "; the last line (line {line}) had no line end and was not a whole candump \
+                 line or TICK: cut short, left out"
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -732,6 +772,8 @@ mod tests {
                 },
                 timestamps: summary.timestamps,
                 planner: summary.planner.clone(),
+                cut_line: None,
+                path_unfinished: None,
             }
         );
         assert_eq!(summary.counters.time_errors, 1);
@@ -742,5 +784,67 @@ mod tests {
             "{summary}"
         );
         assert!(out.ends_with("END 0000000000.020000\n"));
+    }
+
+    #[test]
+    fn a_last_line_cut_short_is_left_out_and_named() {
+        // A simulator that stopped mid-write: the session's frames were lost to an error on
+        // a line the simulator never finished.
+        let tails: [&[u8]; 3] = [
+            b"TICK 0.0400",
+            b"(0.030000) can0 10",
+            b"(0.030000) can0 100#0\xC3",
+        ];
+        for tail in tails {
+            let mut input = b"TICK 0.020000\n".to_vec();
+            input.extend_from_slice(tail);
+            let tail = String::from_utf8_lossy(tail);
+            let (result, out) = session(&input);
+            let summary = result.unwrap_or_else(|e| panic!("{tail}: {e}"));
+            assert_eq!((summary.ticks, summary.cut_line), (1, Some(2)), "{tail}");
+            assert!(
+                summary
+                    .to_string()
+                    .contains("the last line (line 2) had no line end"),
+                "{summary}"
+            );
+            assert!(out.ends_with("END 0000000000.020000\n"));
+        }
+        // With its line end it is an error, as any malformed line.
+        let (line, _) = malformed(b"TICK 0.020000\nTICK 0.0400\n");
+        assert_eq!(line, 2);
+        // A whole last line without an end is read.
+        let (result, _) = session(b"TICK 0.020000\nTICK 0.040000");
+        let summary = result.unwrap();
+        assert_eq!((summary.ticks, summary.cut_line), (2, None));
+        assert!(!summary.to_string().contains("line end"), "{summary}");
+    }
+
+    #[test]
+    fn a_path_still_arriving_when_the_input_ends_is_named() {
+        // 13 frames for 6 points: one TICK takes 12, the path's last frame waits for a TICK
+        // that never comes.
+        let frames = straight_path_frames(6, 5.0);
+        let t0 = 1_000_000;
+        let mut input: String = frames
+            .iter()
+            .map(|f| format!("{}\n", candump_line(t0, f)))
+            .collect();
+        input.push_str("TICK 1.020000\n");
+        let summary = session(input.as_bytes()).0.unwrap();
+        let (id, points, limits, count) = summary.path_unfinished.unwrap();
+        assert_eq!((points.max(limits), count), (6, 6), "{id}");
+        assert!(points < 6 || limits < 6);
+        assert!(
+            summary.to_string().contains(&format!(
+                "the input ended while the node was receiving path {id}"
+            )),
+            "{summary}"
+        );
+        // One more TICK: loaded, no word of it.
+        input.push_str("TICK 1.040000\n");
+        let summary = session(input.as_bytes()).0.unwrap();
+        assert_eq!(summary.path_unfinished, None);
+        assert!(!summary.to_string().contains("receiving path"), "{summary}");
     }
 }

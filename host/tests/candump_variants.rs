@@ -423,22 +423,21 @@ fn a_raw_dlc_suffix_of_can_utils_is_read_and_a_wrong_one_named() {
     let flagged = each_line(&plain, |l| format!("{l}_9 R"));
     let (code, got, stderr) = replay(&dir, "dlcx.log", &flagged, &[]);
     assert_eq!((code, got == want), (0, true), "{stderr}");
-    // A suffix can-utils never writes is refused by name, not as "data is not hex".
-    for (line, why) in [
-        (
-            "(0000000000.003745) can0 100#ECFF0000000000BB_8",
-            "`_8` after the data is not a raw DLC suffix",
-        ),
-        (
-            "(0000000000.003745) can0 100#ECFF_9",
-            "raw DLC suffix `_9` after 2 data bytes: can-utils writes it only for a classic frame of 8",
-        ),
+    // A suffix can-utils never writes is refused by name, not as "data is not hex" (the one
+    // reader of the format, the core's, which the firmware's QEMU replay parses with too).
+    let why = "`_` after the data, but not can-utils' raw DLC suffix";
+    for line in [
+        "(0000000000.003745) can0 100#ECFF0000000000BB_8",
+        "(0000000000.003745) can0 100#ECFF_9",
     ] {
         let (first, rest) = plain.split_once('\n').unwrap();
         let text = format!("{first}\n{line}\n{rest}");
         let (code, _, stderr) = replay(&dir, "bad.log", &text, &[]);
         assert_eq!(code, 1, "{stderr}");
-        assert!(stderr.contains(&format!("bad.log:2: malformed candump line ({why}")), "{stderr}");
+        assert!(
+            stderr.contains(&format!("bad.log:2: malformed candump line ({why}")),
+            "{stderr}"
+        );
     }
 }
 
@@ -523,4 +522,53 @@ fn an_input_that_came_as_can_fd_is_named() {
     // The plain log: no word of CAN FD.
     let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
     assert!(!stderr.contains("CAN FD"), "{stderr}");
+}
+
+#[test]
+fn eleven_bit_identifiers_written_as_29_bit_are_named() {
+    // A converter that writes every identifier with 8 hex digits turns STEERING_REPORT's
+    // 0x100 into the 29-bit 0x00000100, a different frame on the bus: the node ran without
+    // steering and nothing said why.
+    let dir = tmp_dir("as-extended");
+    let plain = smoke();
+    let n = plain.matches(" can0 100#").count();
+    assert!(n > 0);
+    let wide = plain.replace(" can0 100#", " can0 00000100#");
+    let (code, _, stderr) = replay(&dir, "wide.log", &wide, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "wide.log: {n} frames with the 29-bit identifier 0x00000100 carry the number of \
+             STEERING_REPORT (0x100, an 11-bit identifier in catmodel.dbc), and no \
+             STEERING_REPORT came with the 11-bit one, so the node ran without it"
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("write the 11-bit ones with 3 (`100#...`)"),
+        "{stderr}"
+    );
+    // The plain log: no word of it.
+    let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert!(!stderr.contains("29-bit"), "{stderr}");
+}
+
+#[test]
+fn a_log_without_speed_reports_is_not_called_a_parked_car() {
+    // With no SPEED_REPORT the node's speed is 0 throughout and it never has a position; the
+    // replay said "the car never moved", blaming the drive for what the log lacks.
+    let dir = tmp_dir("no-speed");
+    let plain = smoke();
+    let without: String = plain
+        .lines()
+        .filter(|l| !l.contains(" can0 101#"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let (code, _, stderr) = replay(&dir, "nospeed.log", &without, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains("never moved"), "{stderr}");
+    assert!(
+        stderr.contains("the log holds no SPEED_REPORT (0x101) the node could read"),
+        "{stderr}"
+    );
 }

@@ -334,7 +334,7 @@ impl DynamicsSection {
 }
 
 /// `[inputs]`: how the node treats its bus inputs.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct InputsSection {
     /// STEERING_REPORT older than this is stale, s.
@@ -358,6 +358,19 @@ impl InputsSection {
     /// fast receiver is dead-reckoned without a flag), s.
     pub fn gnss_timeout_s(gnss_rate_hz: f64) -> f64 {
         (2.5 / gnss_rate_hz).max(0.2)
+    }
+
+    /// `gnss_lost_s` made to outlast the GNSS timeout at `gnss_rate_hz` when it does not:
+    /// twice the timeout (a slower receiver's car with another car's inputs). Returns the
+    /// change (was, now); `None` when the bound stands.
+    pub fn outlast_gnss_timeout(&mut self, gnss_rate_hz: f64) -> Option<(f64, f64)> {
+        let timeout_s = Self::gnss_timeout_s(gnss_rate_hz);
+        if self.gnss_lost_s > timeout_s {
+            return None;
+        }
+        let was = self.gnss_lost_s;
+        self.gnss_lost_s = 2.0 * timeout_s;
+        Some((was, self.gnss_lost_s))
     }
 
     /// Gate rejections in a row after which the fixes win: `gnss_lost_s` of fixes (at least

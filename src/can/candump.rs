@@ -15,6 +15,12 @@
 //! - Data: 0 to 8 bytes as pairs of hex digits, either case; [`format_line`] writes upper case.
 //! - `candump -l -x` appends ` R` (received) or ` T` (sent by this host) after the data:
 //!   read and ignored.
+//! - can-utils' raw DLC suffix (lib.c's `CC_DLC_DELIM`): `_` and one hex digit 9..F after the
+//!   8 data bytes of a classic frame whose DLC field said 9..15 (written when the interface
+//!   reports raw DLCs, `CAN_CTRLMODE_CC_LEN8_DLC`), `123#1122334455667788_9`: read as the 8
+//!   bytes it carries, as ISO 11898-1 reads such a DLC; [`parse_line_and_dlc`] also returns
+//!   the DLC, so that a reader can say the log had them. Any other `_` suffix is refused
+//!   ([`CandumpError::BadRawDlc`]).
 //! - Leading and trailing whitespace (and CR / LF) are ignored: the screen format starts every
 //!   line with a space.
 //! - Rejected with a reason: anything else after the data.
@@ -75,6 +81,9 @@ pub enum CandumpError {
     TooLong,
     /// Something other than whitespace after the data.
     TrailingGarbage,
+    /// `_` after the data, but not can-utils' raw DLC suffix: one hex digit 9..F after
+    /// exactly 8 data bytes.
+    BadRawDlc,
     /// Screen format: fewer data bytes than its `[LEN]` says.
     LengthMismatch,
     /// A `candump -d` line, `DROPCOUNT: dropped N CAN frames on 'IFACE' socket (total drops
@@ -288,6 +297,12 @@ pub fn interface_of(line: &str) -> Option<&str> {
 
 /// Parses one candump line (leading and trailing whitespace, CR and LF are ignored).
 pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
+    parse_line_and_dlc(line).map(|(frame, _)| frame)
+}
+
+/// [`parse_line`], and the raw DLC (9..15) of a frame written with can-utils' suffix
+/// (`#1122334455667788_9`); `None` for a frame without one.
+pub fn parse_line_and_dlc(line: &str) -> Result<(TimedFrame, Option<u8>), CandumpError> {
     let line = line.trim();
     if line.is_empty() {
         return Err(CandumpError::Empty);
@@ -301,7 +316,7 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
     let (stamp, rest) = rest.split_once(')').ok_or(CandumpError::BadTimestamp)?;
     let t_us = parse_stamp(stamp)?;
     if screen_fields(rest).is_some_and(|(_, _, len, _)| len.starts_with('[')) {
-        return parse_screen(t_us, rest);
+        return parse_screen(t_us, rest).map(|frame| (frame, None));
     }
     // One space, more when candump right-aligned the name to a longer one (`%*s`).
     let rest = rest
@@ -324,11 +339,32 @@ pub fn parse_line(line: &str) -> Result<TimedFrame, CandumpError> {
         .split_once('#')
         .ok_or(CandumpError::MissingSeparator)?;
     let id = parse_id(id_text)?;
+    let (data_text, raw_dlc) = split_raw_dlc(data_text)?;
     let (data, len) = parse_data(data_text)?;
-    Ok(TimedFrame {
+    let frame = TimedFrame {
         t_us,
         frame: CanFrame { id, len, data },
-    })
+    };
+    Ok((frame, raw_dlc))
+}
+
+/// The data of a log-format frame and its raw DLC suffix, if it has one (`_` and one hex
+/// digit 9..F after exactly 16 hex digits).
+fn split_raw_dlc(text: &str) -> Result<(&str, Option<u8>), CandumpError> {
+    let Some((data, dlc)) = text.split_once('_') else {
+        return Ok((text, None));
+    };
+    if text.starts_with(['#', 'R', 'r']) {
+        // A CAN FD or remote frame: parse_data names it.
+        return Ok((text, None));
+    }
+    match dlc.as_bytes() {
+        [digit] if data.len() == 16 => match hex_value(*digit) {
+            Some(raw @ 9..=15) => Ok((data, Some(raw))),
+            _ => Err(CandumpError::BadRawDlc),
+        },
+        _ => Err(CandumpError::BadRawDlc),
+    }
 }
 
 /// The rest of a line in candump's screen format with a timestamp (`candump -ta`, `-td`,
@@ -429,6 +465,32 @@ pub fn format_line<W: Write>(frame: &TimedFrame, iface: &str, out: &mut W) -> co
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reads_the_raw_dlc_suffix_of_a_classic_frame_of_eight() {
+        let (f, dlc) = parse_line_and_dlc("(1.000000) can0 123#1122334455667788_9").unwrap();
+        assert_eq!(dlc, Some(9));
+        assert_eq!(f.frame.len, 8);
+        assert_eq!(
+            f.frame.payload(),
+            &[0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x88]
+        );
+        let (_, dlc) = parse_line_and_dlc("(1.000000) can0 123#1122334455667788_f R").unwrap();
+        assert_eq!(dlc, Some(15));
+        // The same frame without the suffix: no raw DLC, the same bytes.
+        let (g, dlc) = parse_line_and_dlc("(1.000000) can0 123#1122334455667788").unwrap();
+        assert_eq!((g, dlc), (f, None));
+        for bad in [
+            "(1.000000) can0 123#1122334455667788_8",
+            "(1.000000) can0 123#1122334455667788_",
+            "(1.000000) can0 123#1122334455667788_9A",
+            "(1.000000) can0 123#11223344556677_9",
+            "(1.000000) can0 123#_9",
+            "(1.000000) can0 123#1122334455667788_G",
+        ] {
+            assert_eq!(parse_line(bad), Err(CandumpError::BadRawDlc), "{bad}");
+        }
+    }
 
     #[test]
     fn parses_the_documented_example() {

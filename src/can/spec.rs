@@ -1027,8 +1027,8 @@ pub const NODE_STATUS: MessageSpec = MessageSpec {
     integrity: Integrity::CounterCrc(COUNTER_OUT),
 };
 
-/// Every message of `catmodel.dbc`, inputs first, in DBC order.
-pub static MESSAGES: [&MessageSpec; 24] = [
+/// The node's inputs, in DBC order: the first messages of [`MESSAGES`].
+pub const NODE_INPUTS: [&MessageSpec; 10] = [
     &STEERING_REPORT,
     &SPEED_REPORT,
     &PEDAL_REPORT,
@@ -1039,6 +1039,10 @@ pub static MESSAGES: [&MessageSpec; 24] = [
     &PATH_LIMITS,
     &OBSTACLE,
     &LOCAL_ORIGIN,
+];
+
+/// The node's outputs, in DBC order: the messages of [`MESSAGES`] after [`NODE_INPUTS`].
+pub const NODE_OUTPUTS: [&MessageSpec; 14] = [
     &STATE_POSITION,
     &STATE_MOTION,
     &PREDICTIONS[0],
@@ -1054,6 +1058,29 @@ pub static MESSAGES: [&MessageSpec; 24] = [
     &CONTROL_COMMAND,
     &NODE_STATUS,
 ];
+
+/// Every message of `catmodel.dbc`, inputs first, in DBC order.
+pub static MESSAGES: [&MessageSpec; 24] = {
+    let [i0, i1, i2, i3, i4, i5, i6, i7, i8, i9] = NODE_INPUTS;
+    let [o0, o1, o2, o3, o4, o5, o6, o7, o8, o9, o10, o11, o12, o13] = NODE_OUTPUTS;
+    [
+        i0, i1, i2, i3, i4, i5, i6, i7, i8, i9, o0, o1, o2, o3, o4, o5, o6, o7, o8, o9, o10, o11,
+        o12, o13,
+    ]
+};
+
+/// The index in [`NODE_INPUTS`] of the message a frame with `id` is to the node: standard
+/// identifiers exactly, the GNSS PGNs from any source at any priority (the acceptance filter's
+/// rule, [`is_node_input`]); `None` for a frame that is not one of its inputs.
+pub fn node_input_index(id: CanId) -> Option<usize> {
+    NODE_INPUTS.iter().position(|spec| match (spec.id, id) {
+        (CanId::Standard(_), CanId::Standard(_)) => spec.id == id,
+        (CanId::Extended(ours), CanId::Extended(raw)) => {
+            ours & N2K_PGN_FIELD_MASK == raw & N2K_PGN_FIELD_MASK
+        }
+        _ => false,
+    })
+}
 
 /// Worst-case length in bits of a classic CAN data frame with `dlc` data bytes, bit stuffing
 /// included (Davis et al. 2007: `8s + g + 13 + floor((g + 8s - 1) / 4)`, g = 34 for 11-bit and
@@ -1073,6 +1100,32 @@ pub const fn nominal_frame_bits(extended: bool, dlc: u8) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_input_index_agrees_with_the_acceptance_filter() {
+        // Every input by its own identifier; the GNSS PGNs from another source and priority
+        // (the filter's rule); outputs and strangers are no input.
+        for (i, spec) in NODE_INPUTS.iter().enumerate() {
+            assert_eq!(node_input_index(spec.id), Some(i), "{}", spec.name);
+            assert!(is_node_input(spec.id), "{}", spec.name);
+        }
+        let other_source = CanId::Extended(n2k_id(6, PGN_COG_SOG_RAPID, 0x42));
+        assert_eq!(node_input_index(other_source), Some(4));
+        assert!(is_node_input(other_source));
+        for spec in NODE_OUTPUTS {
+            assert_eq!(node_input_index(spec.id), None, "{}", spec.name);
+            assert!(!is_node_input(spec.id), "{}", spec.name);
+        }
+        for id in [
+            CanId::Standard(0x7FF),
+            CanId::Extended(0x100),
+            CanId::Extended(0x1234_5678),
+        ] {
+            assert_eq!(node_input_index(id), None);
+            assert!(!is_node_input(id));
+        }
+        assert_eq!(MESSAGES.len(), NODE_INPUTS.len() + NODE_OUTPUTS.len());
+    }
 
     /// Independent references: the packer bit by bit over the payload's bytes (Intel order:
     /// bit `b` is bit `b % 8` of byte `b / 8`), the rounding in f64 (`f64::round`, halves away

@@ -449,10 +449,12 @@ impl PlannerInputs {
         self.path_id
     }
 
-    /// The id of the path being received, and how many of its points and limits are in.
-    pub fn receiving(&self) -> Option<(u8, usize, usize)> {
+    /// The id of the path being received, how many of its points and limits are in, and how
+    /// many points its header announced.
+    pub fn receiving(&self) -> Option<(u8, usize, usize, usize)> {
         let a = &self.assembly;
-        a.active.then_some((a.path_id, a.next_point, a.next_limits))
+        a.active
+            .then_some((a.path_id, a.next_point, a.next_limits, a.count))
     }
 
     /// The obstacle slots (`None` = cleared).

@@ -383,7 +383,7 @@ impl Drive {
     pub fn receive(&mut self, message: &PlannerMessage, t_us: u64) -> Received {
         // The points of the path being assembled: a frame that completes it has its whole
         // stream in, so this is the path's length.
-        let points = self.planner.receiving().map_or(0, |(_, p, l)| p.max(l));
+        let points = self.planner.receiving().map_or(0, |(_, p, l, _)| p.max(l));
         let completed = |long: &mut bool| {
             *long |= points > SHORT_PATH_POINTS;
             Some(if points > SHORT_PATH_POINTS {

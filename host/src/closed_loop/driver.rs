@@ -49,6 +49,12 @@ pub trait Driver {
     fn path_car(&self) -> PathCar {
         PathCar::default()
     }
+
+    /// The path the node is receiving, if it is mid-way through one: its id, how many of its
+    /// points and limits are in, and how many points its header announced.
+    fn path_receiving(&self) -> Option<(u8, usize, usize, usize)> {
+        None
+    }
 }
 
 /// What a tick did, for the closed loop's records (never on the bus).
@@ -137,6 +143,10 @@ impl Driver for NodeDriver {
 
     fn path_car(&self) -> PathCar {
         *self.node.drive().planner().car()
+    }
+
+    fn path_receiving(&self) -> Option<(u8, usize, usize, usize)> {
+        self.node.drive().planner().receiving()
     }
 
     fn tick(&mut self, tick: &Tick, rx: &[TimedFrame], tx: &mut Vec<CanFrame>) -> TickReport {

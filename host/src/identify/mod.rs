@@ -1313,13 +1313,7 @@ pub fn set_receiver_rate(
     let (lo, hi) = model_file::GNSS_RATE_RANGE_HZ;
     let rate = rate_to_declare_hz(measured_hz).clamp(lo, hi);
     model.vehicle.gnss_rate_hz = rate;
-    let timeout_s = model_file::InputsSection::gnss_timeout_s(rate);
-    let mut lost = None;
-    if model.inputs.gnss_lost_s <= timeout_s {
-        let lost_s = 2.0 * timeout_s;
-        lost = Some((model.inputs.gnss_lost_s, lost_s));
-        model.inputs.gnss_lost_s = lost_s;
-    }
+    let lost = model.inputs.outlast_gnss_timeout(rate);
     Some((rate, lost))
 }
 
@@ -1803,7 +1797,9 @@ mod tests {
         let mut plant = VehicleConfig::load(&dir.join("vw-polo.toml")).unwrap();
         crate::closed_loop::Receiver::Rtk.apply(&mut plant.sensors.gnss);
         plant.sensors.gnss.period_s = 1.0 / hz;
-        let car = car::apply(&model_file::paper(), &dir.join("vw-polo.car.toml")).unwrap();
+        let car = car::apply(&model_file::paper(), &dir.join("vw-polo.car.toml"))
+            .unwrap()
+            .file;
         let drive = sim::scenario::Scenario::builtin(scenario).unwrap();
         let options = SimOptions {
             seed,
