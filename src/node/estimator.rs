@@ -105,6 +105,13 @@ const COG_MEDIAN_STEP: f32 = 0.03;
 /// Courses refused for this many ticks in a row are the heading's error, not the course's:
 /// the next is taken, its difference counted in the heading's variance (0.5 s).
 const COG_REFUSED_TICKS_MAX: u16 = 25;
+/// A chord whose error is further from the heading than this many standard deviations of
+/// their difference (the heading's variance and one chord's own error,
+/// `chord_var_rad2 / CHORD_CORRELATED_TICKS`) counts as beyond it; chords beyond it for longer
+/// than any one fix stays in them ([`chord_persist_ticks`]) are the heading's error, not the
+/// chords': its variance is raised to that error squared
+/// ([`EstimatorState::correct_heading_on_track`]).
+const CHORD_GATE_SIGMAS: f32 = 3.0;
 /// The heading's variance when a first course sets it, rad^2: one course at the lowest speed
 /// a course is read at, 0.5 rad (one sigma).
 const HEADING_INITIAL_VAR_RAD2: f32 = 0.25;
@@ -313,6 +320,16 @@ fn chord_var_rad2(course_gain: f32, chord_sq_m2: f32) -> f32 {
         * rate_scale
 }
 
+/// Ticks in a row the chords' error must stay beyond [`CHORD_GATE_SIGMAS`] before the heading's
+/// variance is raised to it: the time one fix stays in the chords (the chord's span plus the
+/// lowpass's taps and moving-average samples, in fixes; 0.94 s at 100 Hz, 1.3 s at 10 Hz, 3 s
+/// at 1 Hz), so that no single fix's error, a glitch the step gate let through, can hold the
+/// chords there that long.
+fn chord_persist_ticks(cfg: &EstimatorConfig, span_fixes: usize) -> f32 {
+    let fixes = (span_fixes + cfg.fir.len() + cfg.ma.len()) as f32;
+    fixes * cfg.gnss_period_s / crate::SAMPLE_PERIOD_S
+}
+
 /// What the dead reckoning's heading drift adds to its variance over `dt_s` at `speed_mps`,
 /// rad^2. The yaw rate's error goes as the speed (a curvature error times the speed), so the
 /// variance it adds per tick goes as the square of the distance a chord spans at that speed.
@@ -371,6 +388,9 @@ pub struct EstimatorState {
     /// Ticks in a row whose course over ground the gate refused
     /// ([`Self::correct_heading_on_cog`]).
     cog_refused_ticks: u16,
+    /// Ticks in a row whose chords' error was beyond [`CHORD_GATE_SIGMAS`]
+    /// ([`Self::correct_heading_on_track`]).
+    chord_beyond_ticks: u16,
     /// The learnt median of the course's difference from the heading, rad ([`COG_GATE_MEDIANS`]).
     cog_median_rad: f32,
     /// The receiver's courses scatter too much to use ([`COG_SCATTERED_ABOVE_RAD`]).
@@ -400,6 +420,7 @@ impl Default for EstimatorState {
             corrected_rad: 0.0,
             heading_var_rad2: HEADING_INITIAL_VAR_RAD2,
             cog_refused_ticks: 0,
+            chord_beyond_ticks: 0,
             cog_median_rad: COG_MEDIAN_START_RAD,
             // Unproven until its scatter is learnt (0.6 s of a Doppler receiver's courses).
             cog_scattered: true,
@@ -522,6 +543,7 @@ impl EstimatorState {
         self.fixes = 0;
         self.odo_valid = 0;
         self.filtered = None;
+        self.chord_beyond_ticks = 0;
     }
 
     /// [`Self::reset`], and the heading forgotten too: for fixes that were not what the
@@ -979,6 +1001,15 @@ impl EstimatorState {
     /// standard receiver's chords at a crawl no longer pull the heading about (0.1-0.14 rad
     /// off the truth at 2-3 m/s with the full gain; docs/findings.md).
     ///
+    /// A steady state's small variance is only the filter's belief: when the dead reckoning
+    /// turned without the car (a slide at full lock the lateral model did not see), the chords'
+    /// error stays beyond [`CHORD_GATE_SIGMAS`] of what that variance and one chord's own error
+    /// explain, and once it has for longer than one fix stays in the chords
+    /// ([`chord_persist_ticks`]), the variance is raised to the error squared (as for a course
+    /// over ground refused too long, [`Self::correct_heading_on_cog`]): the gain is back at the
+    /// course gain's cap until the heading is. Before, a radian left by a slide at 3 m/s took
+    /// 9 s to come within 0.1 rad (docs/findings.md).
+    ///
     /// `since_fix_s`: time since the latest fix. Does nothing while either chord is shorter than
     /// `course_min_baseline_m` ([`TrackCorrection::ShortChord`]), and until the dead
     /// reckoning has a history with a heading as long as the chord plus the group delay (at the
@@ -1030,7 +1061,21 @@ impl EstimatorState {
         // A scalar Kalman update of the heading's variance with the gain capped at the
         // course gain (Joseph form: right for any gain).
         let chord_var = chord_var_rad2(cfg.course_gain, dx * dx + dy * dy);
-        let var = self.heading_var_rad2;
+        let mut var = self.heading_var_rad2;
+        // The chords' error persistently beyond what the heading's variance and one chord's
+        // own error explain: the heading is that far off (a slide the lateral model did not
+        // see), and the variance says so, as for a course over ground refused too long. (A
+        // NaN error is never beyond.)
+        let spread_var = var + chord_var * (1.0 / CHORD_CORRELATED_TICKS);
+        if error_now * error_now > CHORD_GATE_SIGMAS * CHORD_GATE_SIGMAS * spread_var {
+            self.chord_beyond_ticks = self.chord_beyond_ticks.saturating_add(1);
+            if f32::from(self.chord_beyond_ticks) >= chord_persist_ticks(cfg, span) {
+                var = math::min(math::max(var, error_now * error_now), HEADING_MAX_VAR_RAD2);
+                self.chord_beyond_ticks = 0;
+            }
+        } else {
+            self.chord_beyond_ticks = 0;
+        }
         let gain = math::min(cfg.course_gain, var / (var + chord_var));
         self.heading_var_rad2 = (1.0 - gain) * (1.0 - gain) * var + gain * gain * chord_var;
         self.turn_heading(heading, gain * error_now);
