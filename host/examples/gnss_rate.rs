@@ -63,7 +63,8 @@ fn score(rate_hz: f64, window_exponent: f64, seed: u64) -> Result<Drive> {
     let mut file = identify::car::apply(
         &model_file::paper(),
         &root.join("host/vehicles/vw-polo.car.toml"),
-    )?;
+    )?
+    .file;
     file.vehicle.gnss_rate_hz = rate_hz;
     let car = Car::from_model(&file);
     let scenario = Scenario::builtin("validation").context("built-in scenario")?;
