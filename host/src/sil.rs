@@ -550,6 +550,7 @@ mod tests {
         // Under the cap: quoted in part, with its length.
         let mut long = b"TICK 0.020000\n".to_vec();
         long.extend(std::iter::repeat_n(b'x', 4000));
+        long.push(b'\n');
         let (line, reason) = malformed(&long);
         assert_eq!(line, 2);
         assert!(
