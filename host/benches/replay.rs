@@ -21,7 +21,7 @@ use std::hint::black_box;
 use catmodel::can::{candump, TimedFrame};
 use catmodel::node::{first_tick_us, NodeConfig, PlatformStats, Tick, TxFrames};
 use catmodel::SAMPLE_PERIOD_US;
-use catmodel_host::{csv2can, replay, sim, SIM_ORIGIN_DEG};
+use catmodel_host::{csv2can, replay, sim};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn validation_frames() -> Vec<TimedFrame> {
@@ -34,10 +34,7 @@ fn validation_frames() -> Vec<TimedFrame> {
 
 fn config() -> NodeConfig {
     let mut config = catmodel_host::model_file::paper().node_config();
-    config.origin_e7 = Some((
-        (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
-        (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
-    ));
+    config.origin_e7 = Some(catmodel_host::sim_origin_e7());
     config
 }
 

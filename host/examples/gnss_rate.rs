@@ -83,10 +83,7 @@ fn score(rate_hz: f64, window_exponent: f64, seed: u64) -> Result<Drive> {
     );
     let frames = csv2can::encode_log(&out.log)?.frames;
     let mut config = file.node_config();
-    config.origin_e7 = Some((
-        (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
-        (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
-    ));
+    config.origin_e7 = Some(catmodel_host::sim_origin_e7());
     let e = &config.estimator;
     config.estimator = EstimatorConfig::design_scaled(
         rate_hz,

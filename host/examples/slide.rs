@@ -19,7 +19,7 @@ use anyhow::Result;
 use catmodel_host::sim::config::VehicleConfig;
 use catmodel_host::sim::scenario::{Scenario, Segment, SteerProfile};
 use catmodel_host::sim::{self, SimOptions};
-use catmodel_host::{csv2can, model_file, replay, SIM_ORIGIN_DEG};
+use catmodel_host::{csv2can, model_file, replay};
 
 /// Steering rate of the probe's car, %/s.
 const STEER_RATE_PCT_PER_S: f64 = 400.0;
@@ -94,10 +94,7 @@ fn main() -> Result<()> {
         );
         let frames = csv2can::encode_log(&out.log)?.frames;
         let mut config = file.node_config();
-        config.origin_e7 = Some((
-            (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
-            (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
-        ));
+        config.origin_e7 = Some(catmodel_host::sim_origin_e7());
         let csv = replay::replay(&frames, config).predictions_csv;
         // t,step,horizon_s,x,y,heading,speed,mode: the estimate is the horizon-0 row.
         let mut errors: Vec<(f64, f64)> = Vec::new();

@@ -39,6 +39,14 @@ use evaluate::{BaselineInputs, Evaluation, Prediction, Truth};
 /// Arizona area in Tucson, where the CAT Vehicle drove, degrees.
 pub const SIM_ORIGIN_DEG: (f64, f64) = (32.2319, -110.9501);
 
+/// [`SIM_ORIGIN_DEG`] in the node's units (`NodeConfig::origin_e7`, degrees x 1e7).
+pub fn sim_origin_e7() -> (i32, i32) {
+    (
+        (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
+        (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
+    )
+}
+
 fn column(path: &Path, header: &[String], name: &str) -> Result<usize> {
     header
         .iter()
@@ -860,10 +868,7 @@ mod tests {
         let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
         let can = data.join("smoke.can.log");
         let mut config = node_config(None).unwrap();
-        config.origin_e7 = Some((
-            (SIM_ORIGIN_DEG.0 * 1e7).round() as i32,
-            (SIM_ORIGIN_DEG.1 * 1e7).round() as i32,
-        ));
+        config.origin_e7 = Some(sim_origin_e7());
         let frames = replay::read_candump_reporting(&can, None).unwrap().frames;
         let pred = write(
             "smoke.pred.csv",
