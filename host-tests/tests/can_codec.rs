@@ -274,12 +274,16 @@ fn state_messages_round_trip_at_limits_and_invalid() {
                 } else {
                     ModelMode::Kinematic
                 },
+                heading_uncertain: i == 2,
                 heading_rad: lim(&sig::HEADING_RAD)[i],
                 speed_mps: lim(&sig::STATE_SPEED_MPS)[2 - i],
                 yaw_rate_radps: lim(&sig::YAW_RATE_RADPS)[i],
             };
             let (back, c) = StateMotion::decode(&m.encode(counter)).unwrap();
-            assert_eq!((c, back.mode), (counter, m.mode));
+            assert_eq!(
+                (c, back.mode, back.heading_uncertain),
+                (counter, m.mode, m.heading_uncertain)
+            );
             assert!(close(back.heading_rad, m.heading_rad, 0.001));
             assert!(close(back.speed_mps, m.speed_mps, 0.01));
             assert!(close(back.yaw_rate_radps, m.yaw_rate_radps, 0.001));

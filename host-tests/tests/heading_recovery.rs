@@ -149,3 +149,88 @@ fn one_glitched_fix_does_not_raise_the_headings_variance() {
         );
     }
 }
+
+/// The node says so on the bus: STATE_MOTION's `heading_uncertain` is set while the heading's
+/// own standard deviation is above 0.1 rad. Over a slide at full lock (the CAT Vehicle's plant
+/// and model file with its steering at 400 %/s; 10 m/s, 1.5 s of full lock each way, the car
+/// braking to 3 m/s in the second half) it is set after the slide, while the heading is off,
+/// and clear in the steady drive before it and once the heading is back; and at the start,
+/// after the first course set the heading (0.5 rad), until the courses have settled it.
+#[test]
+fn state_motion_says_when_the_heading_is_uncertain() {
+    use catmodel::can::codec::StateMotion;
+    use catmodel::can::spec::STATE_MOTION;
+    use catmodel_host::sim::config::VehicleConfig;
+    use catmodel_host::sim::scenario::Scenario;
+    use catmodel_host::sim::{self, SimOptions};
+    use catmodel_host::{csv2can, model_file, replay};
+
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut plant = VehicleConfig::load(&root.join("host/vehicles/cat-vehicle.toml")).unwrap();
+    plant.steering.rate_limit_pct_per_s = 400.0;
+    let mut file = model_file::paper();
+    file.vehicle.max_steer_rate_pct_per_s = 400.0;
+    let lock_s = 1.5;
+    let scenario = Scenario::slide(10.0, lock_s, 3.0, 3.0);
+    let out = sim::simulate(
+        &scenario,
+        &plant,
+        &SimOptions {
+            seed: 0,
+            vary_commands: false,
+            ..Default::default()
+        },
+    );
+    let frames = csv2can::encode_log(&out.log).unwrap().frames;
+    let mut config = file.node_config();
+    config.origin_e7 = Some(catmodel_host::sim_origin_e7());
+    let tx = replay::replay(&frames, config).tx_log;
+    // (time, heading_uncertain, heading available) of every STATE_MOTION.
+    let motion: Vec<(f64, bool, bool)> = tx
+        .lines()
+        .filter_map(|l| catmodel::can::candump::parse_line(l).ok())
+        .filter(|f| f.frame.id == STATE_MOTION.id)
+        .map(|f| {
+            let (m, _) = StateMotion::decode(&f.frame).unwrap();
+            (
+                f.t_us as f64 * 1e-6,
+                m.heading_uncertain,
+                m.heading_rad.is_some(),
+            )
+        })
+        .collect();
+    let t0 = motion[0].0;
+    let set_within = |from: f64, to: f64| {
+        motion
+            .iter()
+            .filter(|(t, ..)| *t - t0 >= from && *t - t0 < to)
+            .filter(|(_, set, _)| *set)
+            .count()
+    };
+    // The start: set once the heading exists, until the courses have settled it (1.5 s on
+    // seed 0, the car still accelerating from rest).
+    let first = motion.iter().find(|(_, _, h)| *h).unwrap().0 - t0;
+    assert!(
+        set_within(first, first + 0.2) > 0,
+        "not set at the first heading ({first:.2} s)"
+    );
+    assert_eq!(
+        set_within(first + 3.0, Scenario::SLIDE_START_S),
+        0,
+        "set in the steady drive"
+    );
+    assert!(
+        motion.iter().all(|(_, set, h)| !set || *h),
+        "set without a heading"
+    );
+    // After the slide: set while the chords take the heading back (about a second after the
+    // error is plain), and clear again within 5 s.
+    let end = Scenario::SLIDE_START_S + 2.0 * lock_s;
+    let after = set_within(end, end + 3.0);
+    assert!(after >= 10, "set in {after} ticks after the slide");
+    assert_eq!(
+        set_within(end + 5.0, end + 40.0),
+        0,
+        "still set 5 s after the slide"
+    );
+}

@@ -17,24 +17,14 @@ use std::path::Path;
 
 use anyhow::Result;
 use catmodel_host::sim::config::VehicleConfig;
-use catmodel_host::sim::scenario::{Scenario, Segment, SteerProfile};
+use catmodel_host::sim::scenario::Scenario;
 use catmodel_host::sim::{self, SimOptions};
 use catmodel_host::{csv2can, model_file, replay};
 
 /// Steering rate of the probe's car, %/s.
 const STEER_RATE_PCT_PER_S: f64 = 400.0;
-/// The slide: full lock from this time, s (after the start and 10 s at speed).
-const SLIDE_START_S: f64 = 12.0;
 /// ... for this long, then full lock the other way as long, s.
 const LOCK_S: f64 = 1.0;
-
-fn seg(duration_s: f64, speed_mps: f64, steer_pct: f64) -> Segment {
-    Segment {
-        duration_s,
-        speed_mps,
-        steer: SteerProfile::Hold(steer_pct),
-    }
-}
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -68,18 +58,7 @@ fn main() -> Result<()> {
     // The CAT Vehicle's model file is the published one (models/paper.toml).
     let mut file = model_file::paper();
     file.vehicle.max_steer_rate_pct_per_s = STEER_RATE_PCT_PER_S;
-    let scenario = Scenario {
-        name: "slide".into(),
-        initial_heading_rad: 1.2,
-        segments: vec![
-            seg(2.0, 0.0, 0.0),
-            seg(SLIDE_START_S - 2.0, slide_mps, 0.0),
-            seg(lock_s, slide_mps, 100.0),
-            seg(lock_s, arg("--second", slide_mps), -100.0),
-            seg(40.0, after_mps, 0.0),
-            seg(5.0, 0.0, 0.0),
-        ],
-    };
+    let scenario = Scenario::slide(slide_mps, lock_s, arg("--second", slide_mps), after_mps);
     println!("| seed | largest error in the slide, rad | error 5 s after, rad | 10 s after | error above 0.1 rad until, s after the slide |");
     println!("|---|---|---|---|---|");
     for seed in seeds {
@@ -116,10 +95,10 @@ fn main() -> Result<()> {
                 - std::f64::consts::PI;
             errors.push((t, e));
         }
-        let end_s = SLIDE_START_S + 2.0 * lock_s;
+        let end_s = Scenario::SLIDE_START_S + 2.0 * lock_s;
         let in_slide = errors
             .iter()
-            .filter(|(t, _)| *t >= SLIDE_START_S && *t <= end_s + 1.0)
+            .filter(|(t, _)| *t >= Scenario::SLIDE_START_S && *t <= end_s + 1.0)
             .map(|(_, e)| e.abs())
             .fold(0.0, f64::max);
         let at = |s: f64| {
@@ -139,7 +118,10 @@ fn main() -> Result<()> {
             at(10.0)
         );
         if trace {
-            for (t, e) in errors.iter().filter(|(t, _)| *t >= SLIDE_START_S - 1.0) {
+            for (t, e) in errors
+                .iter()
+                .filter(|(t, _)| *t >= Scenario::SLIDE_START_S - 1.0)
+            {
                 if ((t * 50.0).round() as i64) % 25 == 0 {
                     println!("t {t:.2} error {e:+.3}");
                 }

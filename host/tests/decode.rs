@@ -111,6 +111,7 @@ fn golden_output_decodes_as_the_node_codecs_decode_it() {
                 let (m, c) = StateMotion::decode(f).unwrap();
                 assert_eq!(c, counter);
                 assert_eq!(label(&d, "mode"), Some(mode_label(m.mode)));
+                assert_eq!(flag(&d, "heading_uncertain"), m.heading_uncertain);
                 agree(&d, "heading_rad", m.heading_rad);
                 agree(&d, "speed_mps", m.speed_mps);
                 agree(&d, "yaw_rate_radps", m.yaw_rate_radps);

@@ -928,6 +928,8 @@ impl StatePosition {
 pub struct StateMotion {
     /// Model in use.
     pub mode: ModelMode,
+    /// The heading's standard deviation is above the node's bound (`heading_uncertain`).
+    pub heading_uncertain: bool,
     /// Heading, rad, clockwise from north, [-pi, pi]; `None` = not available.
     pub heading_rad: Option<f32>,
     /// Speed, m/s; `None` = not available.
@@ -951,6 +953,7 @@ impl StateMotion {
     pub fn encode_into(&self, counter: u8, out: &mut CanFrame) -> EncodeReport {
         let mut w = Writer::new(&spec::STATE_MOTION);
         w.raw(&sig::MODE, self.mode.raw());
+        w.flag(&sig::HEADING_UNCERTAIN, self.heading_uncertain);
         w.phys(&sig::HEADING_RAD, self.heading_rad);
         w.phys(&sig::STATE_SPEED_MPS, self.speed_mps);
         w.phys(&sig::YAW_RATE_RADPS, self.yaw_rate_radps);
@@ -961,6 +964,7 @@ impl StateMotion {
         let r = Reader::standard(&spec::STATE_MOTION, frame)?;
         let msg = Self {
             mode: ModelMode::from_raw(sig::MODE.read_raw(&r.data)),
+            heading_uncertain: r.flag(&sig::HEADING_UNCERTAIN),
             heading_rad: r.phys(&sig::HEADING_RAD)?,
             speed_mps: r.phys(&sig::STATE_SPEED_MPS)?,
             yaw_rate_radps: r.phys(&sig::YAW_RATE_RADPS)?,

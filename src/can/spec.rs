@@ -424,6 +424,11 @@ pub mod sig {
 
     /// Model in use: 0 kinematic, 1 dynamic (STATE_MOTION).
     pub const MODE: SignalSpec = SignalSpec::uint("mode", 4, 1);
+    /// 1 while the heading's own standard deviation is above
+    /// [`HEADING_UNCERTAIN_ABOVE_RAD`](crate::node::HEADING_UNCERTAIN_ABOVE_RAD): just after
+    /// the first course set it, or after the track showed it off (a slide the lateral model
+    /// did not see); 0 otherwise and while there is no heading.
+    pub const HEADING_UNCERTAIN: SignalSpec = SignalSpec::uint("heading_uncertain", 5, 1);
     /// Heading, clockwise from north, 0.001 rad, [-pi, pi]; -32768 = not available.
     pub const HEADING_RAD: SignalSpec = SignalSpec::int("heading_rad", 8, 16)
         .scaled(0.001, "rad")
@@ -911,6 +916,7 @@ pub const STATE_MOTION: MessageSpec = MessageSpec {
     signals: &[
         COUNTER_OUT,
         MODE,
+        HEADING_UNCERTAIN,
         HEADING_RAD,
         STATE_SPEED_MPS,
         YAW_RATE_RADPS,

@@ -70,6 +70,11 @@ pub const MAX_TX_FRAMES: usize = 16;
 pub const RX_QUEUE_LEN: usize = 64;
 /// Prediction points on the bus (PREDICTION_1..10, every 0.2 s up to 2.0 s).
 pub const PREDICTION_POINTS: usize = 10;
+/// The heading's standard deviation (the estimate's own, `EstimatorState::heading_var_rad2`)
+/// above which STATE_MOTION's `heading_uncertain` is set, rad: 0.1 rad moves a prediction
+/// 1 s ahead at 10 m/s by 1 m. Set after the first course sets the heading (0.5 rad) until
+/// the courses settle it, and when the track shows the heading off (docs/findings.md: a slide at full lock).
+pub const HEADING_UNCERTAIN_ABOVE_RAD: f32 = 0.1;
 /// Longest velocity-model input delay a model file may have: 64 samples = 1.28 s (eq 5 has
 /// 21; models identified on the simulator's delayed, lagging speed loop reach ~48); the
 /// predictor copies this buffer every tick, so it is not larger.
@@ -830,6 +835,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
     ) {
         let out = publish::Outputs {
             pose: estimate.pose,
+            heading_uncertain: self.gnss.heading_var_rad2()
+                > HEADING_UNCERTAIN_ABOVE_RAD * HEADING_UNCERTAIN_ABOVE_RAD,
             gnss_fresh: estimate.gnss_fresh,
             gnss_rejected_us: self.gnss.last_reject_us(),
             gnss_rate_mismatch: self.gnss.rate_mismatch(),

@@ -31,6 +31,8 @@ fn recent(now_us: u64, t_us: Option<u64>) -> bool {
 pub struct Outputs<'a> {
     /// Filtered rear-axle pose; `None` while invalid.
     pub pose: Option<Pose>,
+    /// The heading's standard deviation is above [`super::HEADING_UNCERTAIN_ABOVE_RAD`].
+    pub heading_uncertain: bool,
     /// GNSS within its timeout.
     pub gnss_fresh: bool,
     /// When a fix was last rejected.
@@ -235,6 +237,7 @@ fn position_frame(out: &Outputs<'_>, gnss_rejected: bool) -> StatePosition {
 fn motion_frame(out: &Outputs<'_>) -> StateMotion {
     StateMotion {
         mode: model_mode(out.mode),
+        heading_uncertain: out.pose.is_some() && out.heading_uncertain,
         heading_rad: out.pose.map(|p| p.heading_rad),
         speed_mps: Some(out.speed_mps),
         yaw_rate_radps: Some(out.yaw_rate_rps),

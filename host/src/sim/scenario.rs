@@ -105,6 +105,29 @@ fn slalom(duration_s: f64, speed_mps: f64, amplitude_pct: f64, period_s: f64) ->
 }
 
 impl Scenario {
+    /// When [`Scenario::slide`]'s full lock starts, s (after 2 s parked and 10 s at speed).
+    pub const SLIDE_START_S: f64 = 12.0;
+
+    /// A slide at full lock (docs/findings.md, "After a slide at full lock"): 2 s parked,
+    /// 10 s at `at_mps`, full lock right for `lock_s`, then full lock left as long with the
+    /// speed command at `second_mps` (a car that brakes in the slide), then 40 s straight at
+    /// `after_mps` and a stop. With steering fast enough to reach the lock at speed the front
+    /// tyres saturate and the car yaws far less than a single-track model says.
+    pub fn slide(at_mps: f64, lock_s: f64, second_mps: f64, after_mps: f64) -> Scenario {
+        Scenario {
+            name: "slide".into(),
+            initial_heading_rad: 1.2,
+            segments: vec![
+                seg(2.0, 0.0, 0.0),
+                seg(Self::SLIDE_START_S - 2.0, at_mps, 0.0),
+                seg(lock_s, at_mps, 100.0),
+                seg(lock_s, second_mps, -100.0),
+                seg(40.0, after_mps, 0.0),
+                seg(5.0, 0.0, 0.0),
+            ],
+        }
+    }
+
     /// A built-in scenario by name (see [`SCENARIO_NAMES`]), without variations.
     pub fn builtin(name: &str) -> Option<Scenario> {
         // Initial heading: the test area's long axis, a little north of east.
