@@ -484,6 +484,16 @@ mod tests {
         assert!(err.to_string().contains("expected `TICK"), "{err}");
     }
 
+    /// `frames` stamped at 1 s, then `TICK 1.020000`.
+    fn path_then_tick(frames: &[CanFrame]) -> String {
+        let mut input: String = frames
+            .iter()
+            .map(|f| format!("{}\n", candump_line(1_000_000, f)))
+            .collect();
+        input.push_str("TICK 1.020000\n");
+        input
+    }
+
     #[test]
     fn a_path_given_in_one_tick_loads_over_two_as_on_the_firmware() {
         // A 6-point path is 13 frames: the node takes 12 in the first tick and the 13th in
@@ -491,12 +501,7 @@ mod tests {
         // the path never loaded in SIL while it did in replay).
         let frames = straight_path_frames(6, 5.0);
         assert_eq!(frames.len(), 13);
-        let t0 = 1_000_000;
-        let mut input: String = frames
-            .iter()
-            .map(|f| format!("{}\n", candump_line(t0, f)))
-            .collect();
-        input.push_str("TICK 1.020000\n");
+        let mut input = path_then_tick(&frames);
         let config = crate::node_config(None).unwrap();
         let mut driver = NodeDriver::new(config.clone(), Controller::FromModel);
         let mut out = Vec::new();
@@ -778,13 +783,16 @@ mod tests {
             }
         );
         assert_eq!(summary.counters.time_errors, 1);
-        assert!(
-            summary
-                .to_string()
-                .contains("stamped after their TICK 1; planner: 0 paths loaded, 0 refused"),
-            "{summary}"
+        says(
+            &summary,
+            "stamped after their TICK 1; planner: 0 paths loaded, 0 refused",
         );
         assert!(out.ends_with("END 0000000000.020000\n"));
+    }
+
+    /// Asserts that the summary's line says `text`.
+    fn says(summary: &SilSummary, text: &str) {
+        assert!(summary.to_string().contains(text), "{summary}");
     }
 
     #[test]
@@ -803,12 +811,7 @@ mod tests {
             let (result, out) = session(&input);
             let summary = result.unwrap_or_else(|e| panic!("{tail}: {e}"));
             assert_eq!((summary.ticks, summary.cut_line), (1, Some(2)), "{tail}");
-            assert!(
-                summary
-                    .to_string()
-                    .contains("the last line (line 2) had no line end"),
-                "{summary}"
-            );
+            says(&summary, "the last line (line 2) had no line end");
             assert!(out.ends_with("END 0000000000.020000\n"));
         }
         // With its line end it is an error, as any malformed line.
@@ -825,22 +828,14 @@ mod tests {
     fn a_path_still_arriving_when_the_input_ends_is_named() {
         // 13 frames for 6 points: one TICK takes 12, the path's last frame waits for a TICK
         // that never comes.
-        let frames = straight_path_frames(6, 5.0);
-        let t0 = 1_000_000;
-        let mut input: String = frames
-            .iter()
-            .map(|f| format!("{}\n", candump_line(t0, f)))
-            .collect();
-        input.push_str("TICK 1.020000\n");
+        let mut input = path_then_tick(&straight_path_frames(6, 5.0));
         let summary = session(input.as_bytes()).0.unwrap();
         let (id, points, limits, count) = summary.path_unfinished.unwrap();
         assert_eq!((points.max(limits), count), (6, 6), "{id}");
         assert!(points < 6 || limits < 6);
-        assert!(
-            summary.to_string().contains(&format!(
-                "the input ended while the node was receiving path {id}"
-            )),
-            "{summary}"
+        says(
+            &summary,
+            &format!("the input ended while the node was receiving path {id}"),
         );
         // One more TICK: loaded, no word of it.
         input.push_str("TICK 1.040000\n");
