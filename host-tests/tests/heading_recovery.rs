@@ -234,3 +234,77 @@ fn state_motion_says_when_the_heading_is_uncertain() {
         "still set 5 s after the slide"
     );
 }
+
+/// Every input silent for a while (a recorder pause, a gateway reset, a stalled simulator
+/// bridge), or the steering report alone: the dead reckoning steered straight on at the last
+/// speed, and a black-box probe's validation drive came back with the heading of before the
+/// hole, 0.31 / 1.0 / 2.28 rad off after 1 / 3 / 10 s, the position valid and
+/// `heading_uncertain` clear; the steering report alone silent for 2 s in a turn, 0.35 rad.
+/// The heading's error bound now grows by the turn the stale steering may have made (at the
+/// actuator's rate), and once it is a radian the heading is taken again from the track: after
+/// each hole no tick has the heading more than 0.1 rad off with the bit clear.
+#[test]
+fn a_heading_through_silent_inputs_is_flagged_or_taken_again() {
+    use catmodel::can::codec::StateMotion;
+    use catmodel::can::spec::{STATE_MOTION, STEERING_REPORT};
+    use catmodel_host::sim::scenario::Scenario;
+    use catmodel_host::sim::{self, SimOptions};
+    use catmodel_host::{csv2can, replay};
+
+    let out = sim::simulate(
+        &Scenario::builtin("validation").unwrap(),
+        &Default::default(),
+        &SimOptions {
+            seed: 0,
+            ..Default::default()
+        },
+    );
+    let frames = csv2can::encode_log(&out.log).unwrap().frames;
+    let mut config = catmodel_host::node_config(None).unwrap();
+    config.origin_e7 = Some(catmodel_host::sim_origin_e7());
+    for (hole_s, steering_only) in [(1.0, false), (3.0, false), (10.0, false), (2.0, true)] {
+        let (from_us, to_us) = (60_000_000, 60_000_000 + (hole_s * 1e6) as u64);
+        let cut: Vec<_> = frames
+            .iter()
+            .filter(|f| {
+                !(f.t_us >= from_us
+                    && f.t_us < to_us
+                    && (!steering_only || f.frame.id == STEERING_REPORT.id))
+            })
+            .copied()
+            .collect();
+        let tx = replay::replay(&cut, config.clone()).tx_log;
+        let mut worst = 0.0f64;
+        let mut headings = 0;
+        for f in tx
+            .lines()
+            .filter_map(|l| catmodel::can::candump::parse_line(l).ok())
+            .filter(|f| f.frame.id == STATE_MOTION.id && f.t_us >= from_us)
+        {
+            let (m, _) = StateMotion::decode(&f.frame).unwrap();
+            let t = f.t_us as f64 * 1e-6;
+            let Some(heading) = m.heading_rad else {
+                continue;
+            };
+            headings += 1;
+            let i = out
+                .truth
+                .partition_point(|r| r.t < t)
+                .min(out.truth.len() - 1);
+            let e = (f64::from(heading) - out.truth[i].heading + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            if !m.heading_uncertain {
+                worst = worst.max(e.abs());
+            }
+        }
+        assert!(
+            headings > 1000,
+            "{hole_s} s: {headings} ticks with a heading after it"
+        );
+        assert!(
+            worst <= 0.1,
+            "{hole_s} s silent (steering only: {steering_only}): heading {worst:.3} rad off with heading_uncertain clear"
+        );
+    }
+}

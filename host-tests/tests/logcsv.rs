@@ -677,7 +677,8 @@ proptest! {
 }
 
 /// A header that lacks a required column is shown, with the likely cause: units in the names,
-/// `;` separators, upper case (review: csv/units.csv, semi.csv, upper.csv).
+/// `;` separators, upper case (review: csv/units.csv, semi.csv, upper.csv), a comment line
+/// above it.
 #[test]
 fn a_missing_column_shows_the_header_found_and_its_likely_cause() {
     for (header, cause) in [
@@ -690,6 +691,8 @@ fn a_missing_column_shows_the_header_found_and_its_likely_cause() {
             "separated by `;`",
         ),
         ("T,VEL,INPUT_VEL,ACCEL,STEER,BRAKE,LAT,LON", "lower case"),
+        // A black-box probe's logger banner above the header.
+        ("# logger v2.1, 2026-12-04", "the first line is a comment"),
     ] {
         let message = error_message(&format!("{header}\n0.02,,,,1,,,\n"));
         assert!(

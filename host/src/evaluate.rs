@@ -56,6 +56,17 @@ pub struct BaselineInputs {
 /// is every 10 ms.)
 pub const TRUTH_GAP_S: f64 = 0.5;
 
+/// [`Truth::track_disagreement`]'s step: the track's direction over at least this distance, m.
+pub const TRACK_STEP_M: f64 = 1.0;
+/// ... made within this time, s (a step across a gap in the truth is not one).
+pub const TRACK_STEP_MAX_S: f64 = 2.0;
+/// ... and at least this many steps for a median.
+pub const TRACK_STEPS_MIN: usize = 10;
+/// A truth whose heading is further than this from its own track's direction (the median) is
+/// in another convention, rad: a car's slip angle is a few hundredths of a radian, a
+/// convention's error a radian and more (half a turn for a reversing car is the other way).
+pub const TRACK_DISAGREEMENT_RAD: f64 = 0.5;
+
 /// Truth interpolated in time, heading unwrapped before interpolation.
 pub struct Truth {
     samples: Vec<TruthSample>,
@@ -86,6 +97,37 @@ impl Truth {
     /// The samples, sorted by time.
     pub fn samples(&self) -> &[TruthSample] {
         &self.samples
+    }
+
+    /// How far the truth's heading is from the direction its own `x`, `y` move: the median,
+    /// rad, over the steps of at least [`TRACK_STEP_M`] it makes within [`TRACK_STEP_MAX_S`],
+    /// with their count; `None` when it makes fewer than [`TRACK_STEPS_MIN`] (a car that
+    /// hardly moved). A car's heading runs along its track to within its slip angle (a few
+    /// hundredths of a radian); a truth whose heading is counter-clockwise from east (ROS,
+    /// ENU) or whose `x` and `y` are swapped (NED) is off by a radian and more
+    /// ([`TRACK_DISAGREEMENT_RAD`]).
+    pub fn track_disagreement(&self) -> Option<(f64, usize)> {
+        let mut diffs = Vec::new();
+        let mut anchor = 0;
+        for j in 1..self.samples.len() {
+            let (a, b) = (&self.samples[anchor], &self.samples[j]);
+            if b.t - a.t > TRACK_STEP_MAX_S {
+                anchor = j;
+                continue;
+            }
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            if dx.hypot(dy) < TRACK_STEP_M {
+                continue;
+            }
+            let heading = 0.5 * (self.unwrapped_heading[anchor] + self.unwrapped_heading[j]);
+            diffs.push(wrap_pi_f64(heading - dx.atan2(dy)).abs());
+            anchor = j;
+        }
+        if diffs.len() < TRACK_STEPS_MIN {
+            return None;
+        }
+        diffs.sort_by(f64::total_cmp);
+        Some((diffs[diffs.len() / 2], diffs.len()))
     }
 
     /// The gaps longer than [`TRUTH_GAP_S`]: their count, total and the longest `(from, to)`.

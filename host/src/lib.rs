@@ -332,7 +332,22 @@ pub fn read_truth(path: &Path) -> Result<Truth> {
             path.display()
         );
     }
-    Ok(Truth::new(rows))
+    let truth = Truth::new(rows);
+    if let Some((median, steps)) = truth
+        .track_disagreement()
+        .filter(|(m, _)| *m > evaluate::TRACK_DISAGREEMENT_RAD)
+    {
+        bail!(
+            "{}: the truth's heading is {median:.2} rad from the direction its own x, y move \
+             (the median over {steps} steps of {} m): a truth has x east and y north of the \
+             origin, m, and the heading clockwise from north, rad, as the simulator writes it \
+             (docs/logs.md); a heading counter-clockwise from east (ROS, ENU) or x and y \
+             swapped (NED) would be scored as if the car drove elsewhere",
+            path.display(),
+            evaluate::TRACK_STEP_M
+        );
+    }
+    Ok(truth)
 }
 
 /// Everything `catmodel evaluate` reads: truth and the baseline's bus inputs, and the

@@ -197,9 +197,12 @@ pub enum LogErrorKind {
 /// minutes on the 20 ms grid of a log a thousand times too long, compare fitted nonsense.
 pub const MAX_MEDIAN_INTERVAL_S: f64 = 1.0;
 
-/// Why a header lacks `column`, when the header shows it: `;` separators, units in the names,
-/// upper case.
+/// Why a header lacks `column`, when the header shows it: a comment line above it, `;`
+/// separators, units in the names, upper case.
 fn header_hint(column: &str, header: &str) -> Option<&'static str> {
+    if header.trim_start().starts_with(['#', '%']) {
+        return Some("the first line is a comment (a logger's banner): the header, `t,vel,...`, must be the file's first line; remove the comment lines above it");
+    }
     let cells: Vec<&str> = header.split(',').map(str::trim).collect();
     if cells.len() == 1 && header.contains(';') {
         return Some("the header is separated by `;`: the schema's separator is `,` (a spreadsheet's export with a `;` list separator)");

@@ -1465,3 +1465,67 @@ fn command_line_values_that_would_mislead_are_refused() {
         );
     }
 }
+
+/// A truth in another convention is refused by name: the heading counter-clockwise from east
+/// (ROS, ENU) with the yaw rate negated, or x and y swapped (NED). A black-box probe's
+/// ENU truth scored the heading 1.65 rad RMS and the filtered position "0.812 x the floor",
+/// its swapped one the position 43 m RMS and "1.005 x the floor", both with exit 0.
+#[test]
+fn evaluate_refuses_a_truth_in_another_convention() {
+    let dir = tmp_dir("evaluate-truth-convention");
+    let can = data("smoke.can.log");
+    let pred = dir.join("pred.csv");
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let truth = std::fs::read_to_string(data("smoke.truth.csv")).unwrap();
+    let (header, rows) = truth.split_once('\n').unwrap();
+    let rewrite = |f: &dyn Fn(&[f64]) -> [f64; 6]| -> String {
+        let mut out = format!("{header}\n");
+        for line in rows.lines() {
+            let v: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+            let w = f(&v).map(|x| x.to_string()).join(",");
+            out.push_str(&w);
+            out.push('\n');
+        }
+        out
+    };
+    let wrap = |a: f64| {
+        (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    };
+    let enu = rewrite(&|v| {
+        [
+            v[0],
+            v[1],
+            v[2],
+            wrap(std::f64::consts::FRAC_PI_2 - v[3]),
+            -v[4],
+            v[5],
+        ]
+    });
+    let ned = rewrite(&|v| [v[0], v[2], v[1], v[3], v[4], v[5]]);
+    for (name, text) in [("enu.truth.csv", enu), ("ned.truth.csv", ned)] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let err = fails(&[
+            "evaluate",
+            s(&pred),
+            "--truth",
+            s(&path),
+            "--inputs",
+            s(&can),
+        ]);
+        assert!(
+            err.contains("the truth's heading is")
+                && err.contains("from the direction its own x, y move"),
+            "{name}: {err}"
+        );
+    }
+    // The truth as written: scored.
+    ok(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&data("smoke.truth.csv")),
+        "--inputs",
+        s(&can),
+    ]);
+}

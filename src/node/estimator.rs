@@ -619,6 +619,29 @@ impl EstimatorState {
         self.turned_len = (self.turned_len + 1).min(TURN_HISTORY_TICKS);
     }
 
+    /// The car may have turned at up to `unseen_yaw_rps` over `dt_s` without the dead
+    /// reckoning seeing it (the steering report stale: the lateral model steers straight on):
+    /// the heading's standard deviation grows by that turn, a bound rather than a random walk
+    /// (a car that yaws so all along is that far off). Once it reaches the largest the filter
+    /// holds (1 rad), the heading is forgotten and taken again from the courses or the track,
+    /// as at the start: a black-box probe's drive with every input silent for 10 s came back
+    /// with the heading of before, 2.28 rad off, the position valid and nothing flagged
+    /// (docs/findings.md). Call after [`Self::propagate`].
+    pub fn turn_unseen(&mut self, unseen_yaw_rps: f32, dt_s: f32) {
+        if self.heading_rad.is_none() {
+            return;
+        }
+        let sigma = math::sqrt(self.heading_var_rad2) + unseen_yaw_rps.abs() * dt_s;
+        // `!(a < b)`: a NaN is the unknown heading too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !(sigma * sigma < HEADING_MAX_VAR_RAD2) {
+            self.heading_rad = None;
+            self.heading_var_rad2 = HEADING_INITIAL_VAR_RAD2;
+            return;
+        }
+        self.heading_var_rad2 = sigma * sigma;
+    }
+
     /// How far the dead reckoning turned (rad, clockwise) and the rear axle slid sideways (m)
     /// over the last `age_s`: the rates of the ticks in between, integrated (interpolated within
     /// a tick; beyond the history, `now_rates` for the rest). A course measured `age_s` ago plus

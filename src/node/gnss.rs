@@ -533,6 +533,12 @@ impl Gnss {
         );
     }
 
+    /// The heading's error bound grown by a yaw rate the dead reckoning did not see
+    /// ([`EstimatorState::turn_unseen`]).
+    pub fn turn_unseen(&mut self, unseen_yaw_rps: f32, dt_s: f32) {
+        self.estimator.turn_unseen(unseen_yaw_rps, dt_s);
+    }
+
     /// A course from the receiver (PGN 129026): kept, with its receive time, while the car
     /// moves (COG is meaningless when standing still); only true north is understood.
     pub fn receive_course(&mut self, config: &NodeConfig, course: &GnssCourse) {

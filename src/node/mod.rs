@@ -369,6 +369,14 @@ struct Models {
     rear_side_mps: f32,
     /// The speed the node uses, m/s (dead reckoning uses last tick's).
     speed_mps: f32,
+    /// The largest yaw rate the car may have that the lateral model does not see, rad/s:
+    /// while the steering report is stale the model steers straight on, and the wheels may
+    /// have turned since the last report at the actuator's rate (dead reckoning uses last
+    /// tick's; 0 with a fresh report).
+    unseen_yaw_rps: f32,
+    /// The centre steering angle of the last fresh steering report, rad (scaled by the
+    /// steering check's gain).
+    last_steer_rad: f32,
 }
 
 impl Models {
@@ -435,6 +443,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
             yaw_rate_rps: 0.0,
             rear_side_mps: 0.0,
             speed_mps: 0.0,
+            unseen_yaw_rps: 0.0,
+            last_steer_rad: 0.0,
         };
         Self {
             config,
@@ -561,6 +571,9 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let rates = self.models.rates();
         self.gnss
             .propagate(&self.config.estimator, self.models.speed_mps, rates, dt_s);
+        if self.models.unseen_yaw_rps > 0.0 {
+            self.gnss.turn_unseen(self.models.unseen_yaw_rps, dt_s);
+        }
         self.steering
             .turned(rates.yaw_rps, self.models.speed_mps, dt_s);
         dt_s
@@ -680,6 +693,26 @@ impl<D: BorrowMut<Drive>> Node<D> {
         );
         m.speed_mps = speed_mps;
 
+        // Stale steering: the model steers straight on, and the wheels may be where the last
+        // report had them or have turned since (at the actuator's rate over the report's age,
+        // at most to the lock): that angle as a yaw rate at this speed on the kinematic
+        // model's curvature without understeer (the most it is).
+        m.unseen_yaw_rps = match inputs.steer_pct {
+            Some(_) => {
+                m.last_steer_rad = center_steer_rad;
+                0.0
+            }
+            None => {
+                let age = inputs.ages_10ms.get(Input::Steer as usize).copied();
+                let age_s = f32::from(age.unwrap_or(crate::can::freshness::AGE_MAX)) * 0.01;
+                let swing_rad = cfg
+                    .vehicle
+                    .steer_pct_to_center_rad(cfg.max_steer_rate_pct_per_s * age_s);
+                let lock_rad = cfg.vehicle.steer_pct_to_center_rad(100.0);
+                let wheels_rad = math::min(m.last_steer_rad.abs() + swing_rad, lock_rad);
+                speed_mps * cfg.vehicle.curvature_per_m(wheels_rad, 0.0)
+            }
+        };
         let yaw_kin = speed_mps * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
         let mode = match cfg.dynamics {
             Some(_) => cfg
