@@ -1482,7 +1482,11 @@ fn lateral_delay_check(model: &Model) -> Result<(), String> {
 /// The `toml` crate's message on one line, with the line and column it points at (the crate's
 /// own rendering spans several lines, with a caret drawing).
 fn toml_message(text: &str, e: &toml::de::Error) -> String {
-    let what = e.message().trim().replace('\n', ", ");
+    let mut what = e.message().trim().replace('\n', ", ");
+    // A count written as a decimal (`min_dwell_ticks = 25.0`): serde's words name the type.
+    if what.starts_with("invalid type: floating point") && what.contains("expected u") {
+        what.push_str(": the key is a whole number, written without a decimal point (25, not 25.0)");
+    }
     match e.span().map(|s| s.start) {
         Some(at) => {
             let before = text.get(..at).unwrap_or(text);
