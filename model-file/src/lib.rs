@@ -1485,7 +1485,9 @@ fn toml_message(text: &str, e: &toml::de::Error) -> String {
     let mut what = e.message().trim().replace('\n', ", ");
     // A count written as a decimal (`min_dwell_ticks = 25.0`): serde's words name the type.
     if what.starts_with("invalid type: floating point") && what.contains("expected u") {
-        what.push_str(": the key is a whole number, written without a decimal point (25, not 25.0)");
+        what.push_str(
+            ": the key is a whole number, written without a decimal point (25, not 25.0)",
+        );
     }
     match e.span().map(|s| s.start) {
         Some(at) => {
