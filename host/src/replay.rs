@@ -81,7 +81,16 @@ pub struct LogReport {
     pub first_duplicate_line: Option<usize>,
     /// The node's input messages as the log carries them ([`InputCensus`]).
     pub inputs: InputCensus,
+    /// Pauses of the log longer than [`PAUSE_NOTE_US`] (no frame at all): how many, and the
+    /// longest's line (the frame after it) and its start and end, us.
+    pub pauses: u64,
+    pub longest_pause: Option<(usize, u64, u64)>,
 }
+
+/// A log with no frame for longer than this has paused, us: every input of the node is
+/// silent (a recorder pause, a gateway reset, a stalled bridge), which the node ticks through
+/// with its inputs timing out (docs/faults.md); `replay` names it.
+pub const PAUSE_NOTE_US: u64 = 1_000_000;
 
 /// How the log carries each of the node's input messages ([`NODE_INPUTS`], by index):
 /// frames the node can read, and CAN FD frames of the message's identifier (skipped: the node
@@ -296,6 +305,22 @@ impl LogReport {
     /// Notes: what the log holds that the user may not expect (frames of several interfaces).
     pub fn notes(&self, path: &Path) -> Vec<String> {
         let mut out = Vec::new();
+        if let Some((line, from_us, to_us)) = self.longest_pause {
+            let s = |us: u64| us as f64 * 1e-6;
+            out.push(format!(
+                "{}:{line}: the log pauses {} time(s) with no frame for more than {} s, the \
+                 longest {:.1} s (from t = {:.3} to {:.3} s): every input was silent (a \
+                 recorder pause, a gateway reset?); the node ticked through it, its inputs \
+                 timing out, the position lost after gnss_lost_s and the heading taken again \
+                 once its error bound reached a radian (docs/faults.md)",
+                path.display(),
+                self.pauses,
+                PAUSE_NOTE_US / 1_000_000,
+                s(to_us - from_us),
+                s(from_us),
+                s(to_us)
+            ));
+        }
         if let Some(line) = self.first_raw_dlc_line {
             out.push(format!(
                 "{}:{line}: {} frame(s) carry can-utils' raw DLC suffix (`#<8 bytes>_9` .. \
@@ -644,6 +669,17 @@ impl<'a> LineReader<'a> {
                         ""
                     }
                 );
+            }
+            let gap_us = frame.t_us - prev;
+            if gap_us > PAUSE_NOTE_US {
+                let report = &mut self.log.report;
+                report.pauses += 1;
+                if report
+                    .longest_pause
+                    .is_none_or(|(_, from, to)| gap_us > to - from)
+                {
+                    report.longest_pause = Some((lineno, prev, frame.t_us));
+                }
             }
             if frame.t_us - prev > MAX_LOG_PAUSE_US {
                 bail!(

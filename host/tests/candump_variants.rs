@@ -572,3 +572,29 @@ fn a_log_without_speed_reports_is_not_called_a_parked_car() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_pause_of_every_input_is_named() {
+    // A black-box probe's log with every frame cut for three minutes replayed without a word
+    // (docs/findings.md, silent inputs): the pause the node's heading came back from wrong.
+    let dir = tmp_dir("pause");
+    let plain = smoke();
+    let stamp_s = |l: &str| -> f64 { l[1..l.find(')').unwrap()].parse().unwrap() };
+    let cut: String = plain
+        .lines()
+        .filter(|l| !(5.0..8.0).contains(&stamp_s(l)))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let line = cut.lines().position(|l| stamp_s(l) >= 8.0).unwrap() + 1;
+    let (code, _, stderr) = replay(&dir, "pause.log", &cut, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "pause.log:{line}: the log pauses 1 time(s) with no frame for more than 1 s, the \
+             longest 3.0 s"
+        )),
+        "{stderr}"
+    );
+    let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert!(!stderr.contains("the log pauses"), "{stderr}");
+}
