@@ -152,10 +152,17 @@ fn continuous(
             sete(&mut e, EPSI, -v * kappa);
             set(&mut f, VY, VY, -(cf + cr) / (m * vx));
             set(&mut f, VY, R, -vx - (cf * lf - cr * lr) / (m * vx));
-            set(&mut f, VY, DELTA, cf / m);
+            // The model's input is the wheel angle's tangent (`DynamicParams::steer_input`),
+            // linearised about `d0` as the kinematic branch's curvature is.
+            let t = DynamicParams::steer_input(d0);
+            let dt = 1.0 + t * t;
+            let u0 = t - dt * d0;
+            set(&mut f, VY, DELTA, cf / m * dt);
+            sete(&mut e, VY, cf / m * u0);
             set(&mut f, R, VY, -(cf * lf - cr * lr) / (iz * vx));
             set(&mut f, R, R, -(cf * lf * lf + cr * lr * lr) / (iz * vx));
-            set(&mut f, R, DELTA, cf * lf / iz);
+            set(&mut f, R, DELTA, cf * lf / iz * dt);
+            sete(&mut e, R, cf * lf / iz * u0);
         }
         None => {
             let veh = setup.vehicle;
