@@ -355,3 +355,90 @@ fn full_lock_circles_keep_the_heading_or_say_so() {
         }
     }
 }
+
+/// A car that reverses: SPEED_REPORT carries the speed's magnitude, so the node dead-reckons
+/// forwards while the GNSS track runs backwards, and the chords turn the heading half round to
+/// the track's direction, where they agree with it again. A black-box probe's car reversing
+/// straight at 3 m/s had the heading 3.13 rad off with `heading_uncertain` clear for 528
+/// ticks. Exact fixes at 100 Hz, the antenna on the rear axle: east at 3 m/s for 20 s, a stop,
+/// 10 s reversing straight, a stop, 16 s forwards (the heading turned back), then a turn of
+/// 1.5 rad forwards. The estimator says its direction is ambiguous from when the track ran
+/// against it until the turn, through which the chords agree, confirms the heading.
+#[test]
+fn a_track_that_runs_against_the_heading_is_flagged_until_a_turn_confirms_it() {
+    let cfg = EstimatorConfig::design(100.0, 0.0, 0.0).unwrap();
+    // (until s, signed speed m/s, path curvature 1/m): the truth's yaw rate is speed x
+    // curvature; the node is told the magnitude and turns at |speed| x curvature.
+    let script = [
+        (20.0f32, 3.0f32, 0.0f32),
+        (22.0, 0.0, 0.0),
+        (32.0, -3.0, 0.0),
+        (34.0, 0.0, 0.0),
+        (50.0, 3.0, 0.0),
+        (60.0, 3.0, 0.05),
+    ];
+    let mut st = EstimatorState::default();
+    let (mut x, mut y, mut heading) = (0.0f64, 0.0f64, core::f64::consts::FRAC_PI_2);
+    st.correct_heading(&cfg, heading as f32, 0.0, 3.0, Rates::default());
+    // (time, ambiguous, |heading error|) each tick.
+    let mut run = Vec::new();
+    for tick in 1..=3000u32 {
+        let t0 = (tick - 1) as f32 * TICK_S;
+        let &(_, v, kappa) = script.iter().find(|(until, ..)| t0 < *until).unwrap();
+        let rates = Rates {
+            yaw_rps: v.abs() * kappa,
+            rear_side_mps: 0.0,
+        };
+        st.propagate(&cfg, v.abs(), rates, TICK_S);
+        // The truth, at 100 Hz: two fixes a tick.
+        for k in 1..=2u64 {
+            let dt = f64::from(TICK_S) * 0.5;
+            heading += f64::from(v * kappa) * dt;
+            x += f64::from(v) * heading.sin() * dt;
+            y += f64::from(v) * heading.cos() * dt;
+            let fix = Xy {
+                x_m: x as f32,
+                y_m: y as f32,
+            };
+            st.add_fix(&cfg, fix, (2 - k) as f32 * 0.01, v.abs());
+        }
+        if st.correct_heading_on_track(&cfg, 0.0) == TrackCorrection::NoHistory {
+            if let Some((course, age_fixes)) = st.track_course(&cfg) {
+                st.correct_heading(&cfg, course, age_fixes * cfg.gnss_period_s, v.abs(), rates);
+            }
+        }
+        let error = math::wrap_pi(st.heading_rad().unwrap() - heading as f32).abs();
+        run.push((tick as f32 * TICK_S, st.direction_ambiguous(), error));
+    }
+    let during = |from: f32, to: f32| run.iter().filter(move |(t, ..)| *t >= from && *t < to);
+    assert!(
+        during(0.0, 22.0).all(|(_, amb, e)| !amb && *e < 0.01),
+        "forwards: ambiguous or off"
+    );
+    // Reversing: the chords turn the heading half round within a few seconds, and the estimator
+    // says so from then until the turn.
+    let flipped = during(22.0, 32.0).find(|(_, _, e)| *e > 3.0).unwrap().0;
+    let set = during(22.0, 32.0).find(|(_, amb, _)| *amb).unwrap().0;
+    assert!(
+        set <= flipped,
+        "ambiguous at {set} s, the heading half round at {flipped} s"
+    );
+    let unflagged_off = during(22.0, 50.0)
+        .filter(|(_, amb, e)| !amb && *e > 0.5)
+        .count();
+    // The chords' error must persist for as long as a fix stays in them before it counts.
+    assert!(
+        unflagged_off <= 60,
+        "{unflagged_off} ticks 0.5 rad off, not ambiguous"
+    );
+    assert!(
+        during(set, 50.0).all(|(_, amb, _)| *amb),
+        "cleared before a turn confirmed the heading"
+    );
+    // The turn confirms the heading (forwards again, taken back by the chords after 34 s):
+    // 0.5 rad of it at 0.15 rad/s, 3.3 s.
+    assert!(
+        during(54.0, 60.0).all(|(_, amb, e)| !amb && *e < 0.05),
+        "not confirmed by the turn"
+    );
+}

@@ -112,6 +112,16 @@ const COG_REFUSED_TICKS_MAX: u16 = 25;
 /// chords': its variance is raised to that error squared
 /// ([`EstimatorState::correct_heading_on_track`]).
 const CHORD_GATE_SIGMAS: f32 = 3.0;
+/// The chords' error, once it persists, beyond which the track runs against the dead reckoning
+/// (rad, 90 degrees): the car reverses (SPEED_REPORT carries the speed's magnitude, and the node
+/// dead-reckons forwards) or the heading is half a turn off, which a straight track cannot tell
+/// apart ([`EstimatorState::direction_ambiguous`]).
+const AGAINST_THE_TRACK_RAD: f32 = core::f32::consts::FRAC_PI_2;
+/// The turn the dead reckoning makes with the chords agreeing, rad, after which a heading the
+/// track ran against is trusted again: in a turn a reversing car's track bends the other way
+/// from the turn the steering makes forwards, so the chords agree through it only when the car
+/// drives forwards on the heading ([`EstimatorState::direction_ambiguous`]).
+const DIRECTION_CONFIRM_TURN_RAD: f32 = 0.5;
 /// The heading's variance when a first course sets it, rad^2: one course at the lowest speed
 /// a course is read at, 0.5 rad (one sigma).
 const HEADING_INITIAL_VAR_RAD2: f32 = 0.25;
@@ -393,6 +403,10 @@ pub struct EstimatorState {
     chord_beyond_ticks: u16,
     /// The learnt median of the course's difference from the heading, rad ([`COG_GATE_MEDIANS`]).
     cog_median_rad: f32,
+    /// The track ran against the dead reckoning ([`Self::direction_ambiguous`]).
+    direction_ambiguous: bool,
+    /// The turn made since, with the chords agreeing, rad ([`DIRECTION_CONFIRM_TURN_RAD`]).
+    confirming_turn_rad: f32,
     /// The receiver's courses scatter too much to use ([`COG_SCATTERED_ABOVE_RAD`]).
     cog_scattered: bool,
 }
@@ -422,6 +436,8 @@ impl Default for EstimatorState {
             cog_refused_ticks: 0,
             chord_beyond_ticks: 0,
             cog_median_rad: COG_MEDIAN_START_RAD,
+            direction_ambiguous: false,
+            confirming_turn_rad: 0.0,
             // Unproven until its scatter is learnt (0.6 s of a Doppler receiver's courses).
             cog_scattered: true,
         }
@@ -551,6 +567,7 @@ impl EstimatorState {
     pub fn forget(&mut self) {
         self.reset();
         self.heading_rad = None;
+        self.direction_ambiguous = false;
     }
 
     /// The antenna's dead-reckoned position, m: continuous (fixes never move it), so its change
@@ -567,6 +584,19 @@ impl EstimatorState {
     /// The heading's error variance as the heading filter reckons it, rad^2.
     pub fn heading_var_rad2(&self) -> f32 {
         self.heading_var_rad2
+    }
+
+    /// The GNSS track ran against the dead reckoning (the chords' error beyond
+    /// [`AGAINST_THE_TRACK_RAD`] for longer than a fix stays in them), and the heading has not
+    /// been confirmed since by a turn of [`DIRECTION_CONFIRM_TURN_RAD`] through which the
+    /// chords agreed. The node's speed has no sign (SPEED_REPORT): a car that reverses is, to
+    /// the node, a car facing the other way, and the chords turn the heading half round to
+    /// the track's direction, where they then agree; the heading is half a turn off, the
+    /// rear axle twice the antenna's lever arm off, and the heading filter sure of both (a
+    /// black-box probe: 3.13 rad off for 528 ticks, `heading_uncertain` clear;
+    /// docs/findings.md). While this holds STATE_MOTION says the heading is uncertain.
+    pub fn direction_ambiguous(&self) -> bool {
+        self.direction_ambiguous
     }
 
     /// Current heading estimate, rad.
@@ -598,6 +628,13 @@ impl EstimatorState {
         self.odo_now.y_m += along_m * c - across_m * s;
         if let Some(h) = self.heading_rad.as_mut() {
             *h = math::wrap_pi(*h + rates.yaw_rps * dt_s);
+        }
+        if self.direction_ambiguous {
+            self.confirming_turn_rad += (rates.yaw_rps * dt_s).abs();
+            // `!(a < b)`: a NaN turn confirms nothing (it is counted where the rates are).
+            if self.confirming_turn_rad >= DIRECTION_CONFIRM_TURN_RAD {
+                self.direction_ambiguous = false;
+            }
         }
         self.heading_var_rad2 = math::min(
             self.heading_var_rad2 + heading_drift_var_rad2(cfg, speed_mps, dt_s),
@@ -636,6 +673,7 @@ impl EstimatorState {
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(sigma * sigma < HEADING_MAX_VAR_RAD2) {
             self.heading_rad = None;
+            self.direction_ambiguous = false;
             self.heading_var_rad2 = HEADING_INITIAL_VAR_RAD2;
             return;
         }
@@ -1095,6 +1133,11 @@ impl EstimatorState {
             if f32::from(self.chord_beyond_ticks) >= chord_persist_ticks(cfg, span) {
                 var = math::min(math::max(var, error_now * error_now), HEADING_MAX_VAR_RAD2);
                 self.chord_beyond_ticks = 0;
+                // Whatever the error, the turn that confirms a heading starts again.
+                self.confirming_turn_rad = 0.0;
+                if error_now.abs() > AGAINST_THE_TRACK_RAD {
+                    self.direction_ambiguous = true;
+                }
             }
         } else {
             self.chord_beyond_ticks = 0;

@@ -505,6 +505,11 @@ impl Gnss {
         self.estimator.heading_var_rad2()
     }
 
+    /// The track ran against the heading ([`EstimatorState::direction_ambiguous`]).
+    pub fn direction_ambiguous(&self) -> bool {
+        self.estimator.direction_ambiguous()
+    }
+
     /// When a fix was last rejected.
     pub fn last_reject_us(&self) -> Option<u64> {
         self.last_reject_us

@@ -74,6 +74,8 @@ pub const PREDICTION_POINTS: usize = 10;
 /// above which STATE_MOTION's `heading_uncertain` is set, rad: 0.1 rad moves a prediction
 /// 1 s ahead at 10 m/s by 1 m. Set after the first course sets the heading (0.5 rad) until
 /// the courses settle it, and when the track shows the heading off (docs/findings.md: a slide at full lock).
+/// The bit is also set while the track has run against the heading and no turn has confirmed
+/// it since (`EstimatorState::direction_ambiguous`: a car that reverses).
 pub const HEADING_UNCERTAIN_ABOVE_RAD: f32 = 0.1;
 /// Longest velocity-model input delay a model file may have: 64 samples = 1.28 s (eq 5 has
 /// 21; models identified on the simulator's delayed, lagging speed loop reach ~48); the
@@ -869,7 +871,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let out = publish::Outputs {
             pose: estimate.pose,
             heading_uncertain: self.gnss.heading_var_rad2()
-                > HEADING_UNCERTAIN_ABOVE_RAD * HEADING_UNCERTAIN_ABOVE_RAD,
+                > HEADING_UNCERTAIN_ABOVE_RAD * HEADING_UNCERTAIN_ABOVE_RAD
+                || self.gnss.direction_ambiguous(),
             gnss_fresh: estimate.gnss_fresh,
             gnss_rejected_us: self.gnss.last_reject_us(),
             gnss_rate_mismatch: self.gnss.rate_mismatch(),

@@ -31,7 +31,8 @@ fn recent(now_us: u64, t_us: Option<u64>) -> bool {
 pub struct Outputs<'a> {
     /// Filtered rear-axle pose; `None` while invalid.
     pub pose: Option<Pose>,
-    /// The heading's standard deviation is above [`super::HEADING_UNCERTAIN_ABOVE_RAD`].
+    /// The heading's standard deviation is above [`super::HEADING_UNCERTAIN_ABOVE_RAD`], or
+    /// the track ran against it and no turn has confirmed it since.
     pub heading_uncertain: bool,
     /// GNSS within its timeout.
     pub gnss_fresh: bool,
