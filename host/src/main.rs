@@ -375,12 +375,25 @@ fn to_e7((lat, lon): (f64, f64)) -> (i32, i32) {
 }
 
 fn main() -> ExitCode {
+    quiet_on_a_closed_pipe();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("catmodel: error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// A reader that stops early (`catmodel identify-steering ... | head -3`) closes the pipe:
+/// the tool then ends on SIGPIPE as any Unix tool does. Rust's runtime ignores the signal, so
+/// the next `println!` met the closed pipe and panicked ("failed printing to stdout").
+fn quiet_on_a_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called first in `main`, before any thread starts; SIG_DFL is a valid disposition
+    // for SIGPIPE, and no handler of this program's is replaced.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

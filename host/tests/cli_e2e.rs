@@ -1529,3 +1529,24 @@ fn evaluate_refuses_a_truth_in_another_convention() {
         s(&can),
     ]);
 }
+
+/// `catmodel ... | head`: a reader that closes the pipe early ends the tool as it ends any Unix
+/// tool. Rust's runtime ignores SIGPIPE, and the next `println!` (most commands' output:
+/// `identify-steering`, `discretize`, `dlc-limits`) panicked with "failed printing to stdout".
+#[test]
+fn a_closed_pipe_ends_the_tool_quietly() {
+    use std::process::Stdio;
+    for args in [&["discretize"][..], &["identify-steering", "--help"][..]] {
+        let mut child = Command::new(BIN)
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The read end closed before the tool writes (it starts, parses, computes first).
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "catmodel {args:?}: {stderr}");
+    }
+}
