@@ -1531,22 +1531,37 @@ fn evaluate_refuses_a_truth_in_another_convention() {
 }
 
 /// `catmodel ... | head`: a reader that closes the pipe early ends the tool as it ends any Unix
-/// tool. Rust's runtime ignores SIGPIPE, and the next `println!` (most commands' output:
-/// `identify-steering`, `discretize`, `dlc-limits`) panicked with "failed printing to stdout".
+/// tool. Rust's runtime ignores SIGPIPE, and the next `println!` (`identify-steering`'s lines,
+/// among others) panicked with "failed printing to stdout" and exit status 101.
 #[test]
 fn a_closed_pipe_ends_the_tool_quietly() {
     use std::process::Stdio;
-    for args in [&["discretize"][..], &["identify-steering", "--help"][..]] {
-        let mut child = Command::new(BIN)
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        // The read end closed before the tool writes (it starts, parses, computes first).
-        drop(child.stdout.take());
-        let out = child.wait_with_output().unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!stderr.contains("panicked"), "catmodel {args:?}: {stderr}");
-    }
+    let dir = tmp_dir("closed_pipe");
+    let d = dir.to_str().unwrap();
+    ok(&[
+        "closed-loop",
+        "--scenario",
+        "dlc",
+        "--speed",
+        "8",
+        "--out",
+        d,
+    ]);
+    let (rx, tx) = (dir.join("session.can.log"), dir.join("session.tx.log"));
+    let mut child = Command::new(BIN)
+        .args([
+            "identify-steering",
+            rx.to_str().unwrap(),
+            tx.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The read end closed before the tool writes (it reads and fits the session first).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
 }
