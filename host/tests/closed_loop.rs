@@ -705,6 +705,57 @@ fn every_fallback_cause_has_its_dbc_name() {
     );
 }
 
+/// A car started beside the loop's start is placed at its start: the loop's end meets its
+/// start, and the rig's truth took the nearest point of the whole path, the end, for a car
+/// started left of the start (a black-box probe's `--start-offset=-0.5`: station 205.64 at the
+/// first tick). That was past the scored range: the run ended at its first tick, the car never
+/// moved, not completed, and the warning blamed the node. From 6 m off the path the tick after
+/// put it at the end again (the search around the previous station, farther than 5 m, looked
+/// over the whole path).
+#[test]
+fn a_car_started_beside_the_loops_start_is_placed_at_its_start() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    let course = scenario::course(Kind::Loop, &vehicle.body, 4.0);
+    for offset in [-0.5, -1.0, -3.0, 0.5] {
+        let mut driver = NodeDriver::new(node.clone(), Controller::Mpc);
+        let options = RunOptions {
+            start_offset_m: offset,
+            ..RunOptions::new(0, Receiver::Rtk)
+        };
+        let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+        let first = out.samples.first().unwrap();
+        assert!(
+            close(first.station_m, 0.0, 0.01) && close(first.lateral_m, offset, 0.01),
+            "offset {offset}: placed at station {:.2}, {:.2} m right",
+            first.station_m,
+            first.lateral_m
+        );
+        let m = &out.metrics;
+        assert!(
+            m.completed && m.driven_time_s > 50.0,
+            "offset {offset}: {m:?}"
+        );
+    }
+    // 8 m inside the loop: the node does not take over a car that far outside its corridor, and
+    // the launch driver's car stays at the start while it sets off.
+    let mut driver = NodeDriver::new(node, Controller::Mpc);
+    let options = RunOptions {
+        start_offset_m: -8.0,
+        max_time_s: 2.0,
+        ..RunOptions::new(0, Receiver::Rtk)
+    };
+    let out = run(&vehicle, &course, &mut driver, "mpc", &options);
+    assert!(out.samples.len() > 50);
+    for s in &out.samples {
+        assert!(
+            s.station_m >= -0.01 && s.station_m < 5.0,
+            "t {}: station {:.2}",
+            s.t_s,
+            s.station_m
+        );
+    }
+}
+
 /// A tuning the controller refuses (a return heading past its 0.5 rad bound) leaves it
 /// unconfigured: it never plans, the car is never engaged, and once the node is ready and its
 /// heading settled every CONTROL_COMMAND says why (`unconfigured`), not merely "fallback".

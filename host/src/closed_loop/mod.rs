@@ -25,7 +25,10 @@ use std::collections::{BTreeMap, VecDeque};
 use catmodel::can::codec::{ControlCommand, ControlStatus, StatePosition};
 use catmodel::can::counter::CounterChecker;
 use catmodel::can::{CanFrame, TimedFrame};
-use catmodel::control::path::{Path, Projection, Waypoint};
+use catmodel::control::path::{
+    Path, Projection, Waypoint, ACQUIRE_TIE_M, PROJECTION_AHEAD_M, PROJECTION_BEHIND_M,
+};
+use catmodel::model::kinematic::Pose;
 use catmodel::node::{NodeConfig, PlatformStats, Tick, MAX_RX_FRAMES_PER_TICK};
 
 use crate::csv2can::LogEncoder;
@@ -631,6 +634,71 @@ fn node_tick(
     (report, tx)
 }
 
+/// The truth's projection onto `path` a tick after `previous`: [`Path::project`]'s, unless it
+/// left the window around `previous` (a car more than
+/// [`catmodel::control::path::PROJECTION_RESEARCH_M`] off the path,
+/// whose search then takes the whole path) for a point no nearer than the window's own by more
+/// than [`ACQUIRE_TIE_M`]: then the window's. Where a path's end meets its start (the loop), a
+/// car started 6 m or more off it is as near the end as the start, and the whole path's search
+/// put it at the end on its second tick; a car that has really come nearer another part of the
+/// path is still taken there.
+fn follow(path: &Path, x: f64, y: f64, previous: &Projection) -> Option<Projection> {
+    let projection = path.project(x as f32, y as f32, Some(previous))?;
+    if (projection.station_m - previous.station_m).abs() <= PROJECTION_AHEAD_M {
+        return Some(projection);
+    }
+    match nearest_in_window(path, x, y, previous) {
+        Some(near) if near.lateral_m.abs() <= projection.lateral_m.abs() + ACQUIRE_TIE_M => {
+            Some(near)
+        }
+        _ => Some(projection),
+    }
+}
+
+/// The nearest point to `(x, y)` of the segments from [`PROJECTION_BEHIND_M`] behind to
+/// [`PROJECTION_AHEAD_M`] ahead of `previous` (the window [`Path::project`] searches first),
+/// in f64: the foot on the nearest segment, or its nearest end (a corner: the distance to it,
+/// with the side of the segment's line). `None` for a path of fewer than two points.
+fn nearest_in_window(path: &Path, x: f64, y: f64, previous: &Projection) -> Option<Projection> {
+    let points = path.points();
+    let last_segment = points.len().checked_sub(2)?;
+    let hint = previous.segment.min(last_segment);
+    let first = path.segment_hint(previous.station_m - PROJECTION_BEHIND_M, hint);
+    let last = path
+        .segment_hint(previous.station_m + PROJECTION_AHEAD_M, hint)
+        .min(last_segment);
+    let mut best: Option<(f64, Projection)> = None;
+    for i in first..=last {
+        let (Some(a), Some(b), Some(s_a)) = (points.get(i), points.get(i + 1), path.station_of(i))
+        else {
+            continue;
+        };
+        let (ax, ay) = (f64::from(a.east_m), f64::from(a.north_m));
+        let (de, dn) = (f64::from(b.east_m) - ax, f64::from(b.north_m) - ay);
+        let length = de.hypot(dn);
+        if length <= 0.0 {
+            continue;
+        }
+        let (ue, un) = (de / length, dn / length);
+        let (px, py) = (x - ax, y - ay);
+        let along = (px * ue + py * un).clamp(0.0, length);
+        // Positive to the right of the segment's direction.
+        let side = px * un - py * ue;
+        let distance = (px - along * ue).hypot(py - along * un);
+        if best.as_ref().is_none_or(|(d, _)| distance < *d) {
+            best = Some((
+                distance,
+                Projection {
+                    segment: i,
+                    station_m: s_a + along as f32,
+                    lateral_m: (distance.copysign(side)) as f32,
+                },
+            ));
+        }
+    }
+    best.map(|(_, p)| p)
+}
+
 /// Records and scores on truth, tick by tick: the samples, and what the metrics take from them.
 struct TruthRecord {
     path: Path,
@@ -679,9 +747,21 @@ impl TruthRecord {
     ) {
         let (scored_from, scored_to) = self.scored_stations_m;
         let truth = rig.truth();
-        self.projection =
-            self.path
-                .project(truth.x as f32, truth.y as f32, self.projection.as_ref());
+        self.projection = match self.projection.as_ref() {
+            Some(previous) => follow(&self.path, truth.x, truth.y, previous),
+            // The car is placed on the path as the node places it (`Path::track` without a
+            // previous projection): at the start of a path whose end meets its start (the
+            // loop), not at the end. The nearest point of the whole path put a car half a
+            // metre left of the loop's start at its end (station 205.64), past the scored
+            // range: the run ended at its first tick.
+            None => self
+                .path
+                .track(
+                    &Pose::new(truth.x as f32, truth.y as f32, truth.heading as f32),
+                    None,
+                )
+                .map(|t| t.projection),
+        };
         let (station, lateral) = self.projection.map_or((f64::NAN, f64::NAN), |p| {
             (f64::from(p.station_m), f64::from(p.lateral_m))
         });
