@@ -252,6 +252,28 @@ impl SpeedIdentification {
     }
 }
 
+/// The ranges of a log of `len` samples outside `skip`'s flagged samples (an empty `skip`:
+/// the whole log).
+fn driven_stretches(
+    skip: &[bool],
+    len: usize,
+) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+    let mut k = 0;
+    std::iter::from_fn(move || {
+        while k < len && skip.get(k).copied().unwrap_or(false) {
+            k += 1;
+        }
+        if k >= len {
+            return None;
+        }
+        let start = k;
+        while k < len && !skip.get(k).copied().unwrap_or(false) {
+            k += 1;
+        }
+        Some(start..k)
+    })
+}
+
 /// Identifies the speed model (eq 5 form) from `input_vel` -> `vel`.
 pub fn identify_speed(
     training: &[Experiment],
@@ -262,13 +284,23 @@ pub fn identify_speed(
     if span(training.iter().flat_map(|e| e.input_vel.iter().copied())) < 0.1 {
         bail!("input_vel (commanded speed) is constant over every training log: nothing excites the speed model; use logs with speed steps");
     }
-    let inputs: Vec<[&[f64]; 1]> = training.iter().map(|e| [&e.input_vel[..]]).collect();
-    let data: Vec<Data> = training
+    // Each log in the stretches where its command drove the car ([`Experiment::speed_skip`]),
+    // each simulated from its own start: a simulation run through a stretch the car did not
+    // follow starts the next one from a state the car was never in.
+    let pieces: Vec<(&Experiment, std::ops::Range<usize>)> = training
+        .iter()
+        .flat_map(|e| driven_stretches(&e.speed_skip, e.len()).map(move |r| (e, r)))
+        .collect();
+    let inputs: Vec<[&[f64]; 1]> = pieces
+        .iter()
+        .map(|(e, r)| [&e.input_vel[r.clone()]])
+        .collect();
+    let data: Vec<Data> = pieces
         .iter()
         .zip(&inputs)
-        .map(|(e, u)| Data {
+        .map(|((e, r), u)| Data {
             inputs: u,
-            output: &e.vel,
+            output: &e.vel[r.clone()],
             weight: experiment_weight(&e.vel),
             skip: &[],
         })
@@ -277,8 +309,10 @@ pub fn identify_speed(
     let arx_sim = |set: &[Experiment]| -> Score {
         let (mut y, mut yh) = (Vec::new(), Vec::new());
         for e in set {
-            y.extend_from_slice(&e.vel);
-            yh.extend(arx.simulate(&[&e.input_vel], &e.vel));
+            let sim = arx.simulate(&[&e.input_vel], &e.vel);
+            let driven = |k: &usize| !e.speed_skip.get(*k).copied().unwrap_or(false);
+            y.extend((0..e.vel.len()).filter(driven).map(|k| e.vel[k]));
+            yh.extend((0..sim.len()).filter(driven).map(|k| sim[k]));
         }
         validate::score(&y, &yh)
     };

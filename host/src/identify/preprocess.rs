@@ -106,6 +106,10 @@ pub struct Experiment {
     /// interpolation across an outage ([`gnss_gaps`]): left out of the fits and scores that
     /// use them. Empty: none.
     pub gnss_gap: Vec<bool>,
+    /// Samples where the commanded speed did not drive the car ([`command_not_followed`]: a
+    /// driver's takeover, the speed control disengaged), with the time the speed loop takes
+    /// to answer after them: left out of the speed model's fit. Empty: none.
+    pub speed_skip: Vec<bool>,
 }
 
 impl Experiment {
@@ -862,6 +866,8 @@ pub fn preprocess_rows(
         taps.len() / 2 + opts.smooth_span + half_width + yaw_half_width,
     );
     notes.extend(outage_note(name, &gnss_gap, outage_s, opts.ts_s));
+    let (speed_skip, not_followed) = command_not_followed(&grid, &vel, &input_vel);
+    notes.extend(not_followed.iter().map(|n| n.note(name)));
     Ok(Experiment {
         name: name.to_string(),
         t: grid,
@@ -886,7 +892,109 @@ pub fn preprocess_rows(
         log_notes: notes,
         log_warnings: Vec::new(),
         gnss_gap,
+        speed_skip,
     })
+}
+
+/// A stretch whose commanded speed stays at least this far from the car's speed, m/s, ...
+const NOT_FOLLOWED_GAP_MPS: f64 = 2.0;
+/// ... for at least this long, s, ...
+const NOT_FOLLOWED_MIN_S: f64 = 3.0;
+/// ... while the speed moves towards it by less than this on average, m/s^2, is a command the
+/// car did not follow: a car's speed loop answers a step of 2 m/s or more within its delay
+/// (1.28 s at the longest the node runs) at a metre per second squared or so, and braking to
+/// a stop from 30 m/s at 0.1 g still moves ten times faster than this.
+const NOT_FOLLOWED_TOWARDS_MPS2: f64 = 0.2;
+/// After such a stretch the speed loop answers the command again: the longest delay the
+/// node runs and the loop's settling, s, left out with the stretch.
+const NOT_FOLLOWED_SETTLE_S: f64 = 5.0;
+
+/// A stretch of a log whose commanded speed the car did not follow ([`command_not_followed`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NotFollowed {
+    /// Start and end of the stretch, s (the log's time).
+    pub from_s: f64,
+    /// End of the stretch, s.
+    pub to_s: f64,
+    /// The command's mean distance from the speed over it, m/s (positive: above).
+    pub gap_mps: f64,
+    /// The car's mean speed over it, m/s.
+    pub speed_mps: f64,
+}
+
+impl NotFollowed {
+    /// The note `identify` prints for log `name`.
+    pub fn note(&self, name: &str) -> String {
+        format!(
+            "{name}: from t = {:.1} to {:.1} s the commanded speed (`input_vel`) stayed {:.1} \
+             m/s {} the speed ({:.1} m/s on average) and the car did not follow it (a driver's \
+             takeover, the speed control disengaged): left out of the speed model's fit and \
+             scores, with the {NOT_FOLLOWED_SETTLE_S:.0} s after it",
+            self.from_s,
+            self.to_s,
+            self.gap_mps.abs(),
+            if self.gap_mps > 0.0 { "above" } else { "below" },
+            self.speed_mps
+        )
+    }
+}
+
+/// The samples of grid `t` whose commanded speed `cmd` did not drive the car (`vel`): at
+/// least [`NOT_FOLLOWED_GAP_MPS`] from the speed on one side for [`NOT_FOLLOWED_MIN_S`] or
+/// longer, the speed moving towards it by less than [`NOT_FOLLOWED_TOWARDS_MPS2`] on average,
+/// flagged with the [`NOT_FOLLOWED_SETTLE_S`] after; and the stretches. A black-box probe's
+/// training log whose `input_vel` read 0 for 5 s while the car cruised at 9.7 m/s (the
+/// interface of a speed control that a driver overrode) took the speed model's delay from
+/// 0.88 to 0.30 s, with right-half-plane zeros in its numerator, and nothing was said.
+pub fn command_not_followed(t: &[f64], vel: &[f64], cmd: &[f64]) -> (Vec<bool>, Vec<NotFollowed>) {
+    let n = t.len().min(vel.len()).min(cmd.len());
+    let mut skip = vec![false; n];
+    let mut found = Vec::new();
+    let side = |k: usize| -> i8 {
+        let d = cmd[k] - vel[k];
+        if d >= NOT_FOLLOWED_GAP_MPS {
+            1
+        } else if d <= -NOT_FOLLOWED_GAP_MPS {
+            -1
+        } else {
+            0
+        }
+    };
+    let mut k = 0;
+    while k < n {
+        let s = side(k);
+        if s == 0 {
+            k += 1;
+            continue;
+        }
+        let a = k;
+        while k < n && side(k) == s {
+            k += 1;
+        }
+        let b = k - 1;
+        let duration = t[b] - t[a];
+        let towards = f64::from(s) * (vel[b] - vel[a]);
+        if duration >= NOT_FOLLOWED_MIN_S && towards < NOT_FOLLOWED_TOWARDS_MPS2 * duration {
+            let count = (b - a + 1) as f64;
+            found.push(NotFollowed {
+                from_s: t[a],
+                to_s: t[b],
+                gap_mps: (a..=b).map(|i| cmd[i] - vel[i]).sum::<f64>() / count,
+                speed_mps: vel[a..=b].iter().sum::<f64>() / count,
+            });
+            let until = t[b] + NOT_FOLLOWED_SETTLE_S;
+            for (i, flag) in skip.iter_mut().enumerate().skip(a) {
+                if t[i] > until {
+                    break;
+                }
+                *flag = true;
+            }
+        }
+    }
+    if found.is_empty() {
+        skip.clear();
+    }
+    (skip, found)
 }
 
 /// A needed sensor's samples of the log `log` (t, value), without its impossible ones

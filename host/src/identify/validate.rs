@@ -152,9 +152,16 @@ pub fn scores(experiments: &[Experiment], sims: &[Simulated]) -> Scores {
             .map(|k| (measured[k], model[k]))
             .unzip()
     };
+    // The speed is scored where the command drove the car ([`Experiment::speed_skip`]).
+    let driven = |e: &Experiment, model: &[f64]| -> (Vec<f64>, Vec<f64>) {
+        (0..e.vel.len().min(model.len()))
+            .filter(|&k| !e.speed_skip.get(k).copied().unwrap_or(false))
+            .map(|k| (e.vel[k], model[k]))
+            .unzip()
+    };
     Scores {
-        vel_model: cat(&|e, s| (e.vel.clone(), s.vel_model.clone())),
-        vel_kinematic: cat(&|e, s| (e.vel.clone(), s.vel_kinematic.clone())),
+        vel_model: cat(&|e, s| driven(e, &s.vel_model)),
+        vel_kinematic: cat(&|e, s| driven(e, &s.vel_kinematic)),
         dx_model: cat(&|e, s| fixed(e, &e.dx, &s.dx_model)),
         dx_kinematic: cat(&|e, s| fixed(e, &e.dx, &s.dx_kinematic)),
         yaw_model: have_yaw.then(|| {
