@@ -425,11 +425,105 @@ fn a_run_the_node_never_drove_is_not_completed() {
         stderr.contains("the node never took the car over from the launch driver"),
         "{stderr}"
     );
+    assert!(
+        stderr.contains(
+            "the session ended not completed: the car passed the course's end (the rear axle \
+             at station "
+        ),
+        "{stderr}"
+    );
     let metrics: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["driven_time_s"], 0.0);
     assert_eq!(metrics["completed"], false);
     assert_eq!(metrics["clean"], false);
+}
+
+/// A car that stopped for the crossing's pedestrian is waited for while the node sets it off
+/// again. A black-box probe's CAT Vehicle with a slower speed loop (its command delayed 0.8 s
+/// instead of 0.4, the powertrain's lag 0.9 s instead of 0.4) stopped for the pedestrian, the
+/// node commanded it to drive again 1.8 s later (tracking, about 6 m/s), and the rig ended the
+/// session 3 s after the car came to rest, before the speed loop answered: not completed, not
+/// clean, on seeds 0, 2, 3 and 4, nothing on stderr said why.
+#[test]
+fn a_car_the_node_sets_off_again_after_a_stop_is_waited_for() {
+    let (mut vehicle, _) = load_setup(None, None).unwrap();
+    vehicle.speed_controller.command_delay_s = 0.8;
+    vehicle.speed_controller.actuator_lag_s = 0.9;
+    let node = catmodel_host::closed_loop::model_file_for(&vehicle)
+        .unwrap()
+        .node_config();
+    let receiver = Receiver::Standard;
+    let course = scenario::course(
+        Kind::Crossing,
+        &vehicle.body,
+        Kind::Crossing.default_speed_mps(),
+    );
+    for seed in [0, 2] {
+        let controller = controller_named("mpc", receiver_rms_m(&vehicle, receiver)).unwrap();
+        let mut driver = NodeDriver::new(node.clone(), controller);
+        let out = run(
+            &vehicle,
+            &course,
+            &mut driver,
+            "mpc",
+            &RunOptions::new(seed, receiver),
+        );
+        // It came to rest under the controller (for the pedestrian) and set off again.
+        let rest = out
+            .samples
+            .iter()
+            .position(|s| s.engaged && s.truth.speed < 0.01)
+            .expect("the car stops for the pedestrian");
+        let rest_s = out.samples[rest].t_s;
+        let moving = out.samples[rest..]
+            .iter()
+            .find(|s| s.truth.speed > 1.0)
+            .map(|s| s.t_s);
+        assert!(
+            moving.is_some_and(|t| t - rest_s > 3.0),
+            "seed {seed}: at rest from {rest_s:.2} s, moving again at {moving:?}"
+        );
+        let m = &out.metrics;
+        assert!(m.completed && m.clean, "seed {seed}: {m:?}");
+        assert!(
+            m.min_obstacle_clearance_m.is_some_and(|d| d > 1.0),
+            "seed {seed}: {m:?}"
+        );
+    }
+}
+
+/// A session that ends without completing the course says why: which of the rig's end
+/// conditions ended it, where the car was and what the node last commanded. Before, the
+/// probe's session ended 3 s after the car came to rest, with nothing on stderr.
+#[test]
+fn a_session_that_ends_not_completed_says_why() {
+    let dir = tmp_dir("ends-why");
+    // Pure pursuit stops short of the obstacle it cannot steer around.
+    let out = cl(&[
+        "--scenario",
+        "obstacle",
+        "--controller",
+        "pure-pursuit",
+        "--speed",
+        "8",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(
+            "warning: the session ended not completed: the car came to rest under the \
+             controller at t = "
+        ) && stderr.contains("and the node did not command it to drive for 3 s"),
+        "{stderr}"
+    );
+    // A completed one says nothing of its end.
+    let out = cl(&["--scenario", "obstacle", "--out", dir.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("the session ended"), "{stderr}");
 }
 
 /// The MPC over `course` with an RTK receiver, seed 0, the planner replanning every `replan_s`

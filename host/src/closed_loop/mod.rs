@@ -11,7 +11,9 @@
 //! The car starts at rest at the path's start; a launch (3 m/s, straight ahead) moves it until
 //! the node has held a valid position for [`ENGAGE_AFTER_VALID_S`] (a single GNSS antenna gives
 //! a heading only in motion) and the controller is tracking: then the drive-by-wire follows
-//! CONTROL_COMMAND, with the usual 100 ms command timeout.
+//! CONTROL_COMMAND, with the usual 100 ms command timeout. A run ends past the scored range,
+//! at rest under the controller ([`STOPPED_END_S`] after the node last asked the car to drive,
+//! [`STOPPED_DRIVING_END_S`] whatever it asks), or at its time limit ([`RunEnd`]).
 pub mod driver;
 pub mod limits;
 pub mod metrics;
@@ -58,8 +60,23 @@ pub const COMMAND_TIMEOUT_US: u64 = 100_000;
 const COMMAND_LATENCY_STEPS: u64 = 1;
 /// Clearance a controller keeps from an obstacle beyond the position estimate's error, m.
 pub const OBSTACLE_MARGIN_M: f64 = 1.0;
-/// A run ends this long after the car came to rest while engaged, s.
-const STOPPED_END_S: f64 = 3.0;
+/// A run ends this long after the car came to rest while engaged, or after the node last
+/// commanded it to drive while at rest, whichever is later, s.
+pub const STOPPED_END_S: f64 = 3.0;
+/// A run ends when the car has been at rest while engaged this long, whatever the node
+/// commands, s: a speed loop that has not answered a command to drive by then will not (the
+/// slowest speed loop a probe drove, 0.8 s of delay and a 0.9 s lag, set its car off 1.6 s
+/// after it was asked).
+pub const STOPPED_DRIVING_END_S: f64 = 20.0;
+/// The car is at rest below this truth speed, m/s.
+const STILL_MPS: f64 = 0.05;
+/// The node commands a car at rest to drive with a speed command above this, m/s: the MPC's
+/// creep to a path's end ([`catmodel::control::mpc::longitudinal::STOP_CREEP_MPS`]), which a
+/// speed loop's standstill hold need not answer, is not a command to drive (a run whose car
+/// stopped short of the end, creeping at 0.1-0.2 m/s, would be held on to for
+/// [`STOPPED_DRIVING_END_S`]; the van's loop 17 s longer); the probe's car, set off again
+/// after its stop for a pedestrian, was asked about 6 m/s.
+const DRIVE_COMMAND_MPS: f64 = catmodel::control::mpc::longitudinal::STOP_CREEP_MPS as f64;
 
 /// The GNSS receiver on the car.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -161,6 +178,27 @@ pub struct Sample {
     pub lateral_m: f64,
 }
 
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RunEnd {
+    /// The car's rear axle passed the scored range's end with room to spare.
+    PastCourse,
+    /// The car came to rest under the controller (at `since_s`, s) and the node did not
+    /// command it to drive for [`STOPPED_END_S`].
+    AtRest {
+        /// When the car came to rest, s.
+        since_s: f64,
+    },
+    /// The car stayed at rest under the controller for [`STOPPED_DRIVING_END_S`] from
+    /// `since_s` (s), the node commanding it to drive within the last [`STOPPED_END_S`].
+    AtRestWhileDriving {
+        /// When the car came to rest, s.
+        since_s: f64,
+    },
+    /// The run's time limit ([`RunOptions::max_time_s`]).
+    TimeLimit,
+}
+
 /// Everything a run produced.
 #[derive(Debug, Clone)]
 pub struct RunOutput {
@@ -174,6 +212,8 @@ pub struct RunOutput {
     pub samples: Vec<Sample>,
     /// The scores.
     pub metrics: Metrics,
+    /// Why it ended.
+    pub end: RunEnd,
 }
 
 /// The published model file (`models/paper.toml`) made to describe the plant `vehicle`, as its
@@ -428,6 +468,7 @@ pub fn run(
     let mut inputs = Vec::new();
     let mut outputs = Vec::new();
     let max_ticks = (options.max_time_s * 1e6 / TICK_US as f64).ceil() as u64;
+    let mut end = RunEnd::TimeLimit;
 
     for n in 1..=max_ticks {
         let t_tick_us = n * TICK_US;
@@ -444,7 +485,8 @@ pub fn run(
             frame,
         }));
         record.tick(t_tick_us, &rig, &report, seen, dbw.engaged);
-        if record.ended(dbw.engaged) {
+        if let Some(ended) = record.ended(dbw.engaged) {
+            end = ended;
             break;
         }
     }
@@ -456,6 +498,7 @@ pub fn run(
         outputs,
         samples: record.samples,
         metrics,
+        end,
     }
 }
 
@@ -699,6 +742,17 @@ fn nearest_in_window(path: &Path, x: f64, y: f64, previous: &Projection) -> Opti
     best.map(|(_, p)| p)
 }
 
+/// Whether `command` has the car drive: the controller tracking or avoiding with a speed
+/// command above [`DRIVE_COMMAND_MPS`].
+fn drives(command: &ControlCommand) -> bool {
+    matches!(
+        command.status,
+        ControlStatus::Tracking | ControlStatus::Avoiding
+    ) && command
+        .speed_cmd_mps
+        .is_some_and(|v| f64::from(v) > DRIVE_COMMAND_MPS)
+}
+
 /// Records and scores on truth, tick by tick: the samples, and what the metrics take from them.
 struct TruthRecord {
     path: Path,
@@ -716,6 +770,8 @@ struct TruthRecord {
     scored_span_s: (Option<f64>, Option<f64>),
     /// Since when the car has been at rest while engaged, s.
     stopped_since_s: Option<f64>,
+    /// The last tick of that rest at which the node commanded the car to drive, s.
+    drive_asked_s: Option<f64>,
     samples: Vec<Sample>,
 }
 
@@ -731,6 +787,7 @@ impl TruthRecord {
             corridor_exit_m: None,
             scored_span_s: (None, None),
             stopped_since_s: None,
+            drive_asked_s: None,
             samples: Vec::new(),
         }
     }
@@ -803,21 +860,32 @@ impl TruthRecord {
         });
     }
 
-    /// Whether the run ends after the last tick recorded: past the scored range with room to
-    /// spare, or at rest while engaged.
-    fn ended(&mut self, engaged: bool) -> bool {
-        let Some(last) = self.samples.last() else {
-            return false;
-        };
-        if engaged && last.truth.speed < 0.05 {
+    /// Whether the run ends after the last tick recorded, and why: past the scored range with
+    /// room to spare, or at rest while engaged for [`STOPPED_END_S`] after the node last
+    /// commanded the car to drive (a car that stopped for a pedestrian is waited for while the
+    /// node sets it off again: a slow speed loop answers seconds later; before, the run ended
+    /// 3 s after the car came to rest whatever the node commanded), or for
+    /// [`STOPPED_DRIVING_END_S`] whatever it commands.
+    fn ended(&mut self, engaged: bool) -> Option<RunEnd> {
+        let last = self.samples.last()?;
+        if engaged && last.truth.speed < STILL_MPS {
             let since = *self.stopped_since_s.get_or_insert(last.t_s);
-            if last.t_s - since >= STOPPED_END_S {
-                return true;
+            if drives(&last.command) {
+                self.drive_asked_s = Some(last.t_s);
+            }
+            let quiet_since = self.drive_asked_s.map_or(since, |t| t.max(since));
+            if last.t_s - quiet_since >= STOPPED_END_S {
+                return Some(RunEnd::AtRest { since_s: since });
+            }
+            if last.t_s - since >= STOPPED_DRIVING_END_S {
+                return Some(RunEnd::AtRestWhileDriving { since_s: since });
             }
         } else {
             self.stopped_since_s = None;
+            self.drive_asked_s = None;
         }
-        last.station_m >= self.scored_stations_m.1 + self.front_ahead_m + 5.0
+        (last.station_m >= self.scored_stations_m.1 + self.front_ahead_m + 5.0)
+            .then_some(RunEnd::PastCourse)
     }
 
     /// The lateral error's RMS and largest magnitude over the scored range, m.
@@ -1034,6 +1102,9 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
     if let Some(note) = slide_note(&args.scenario, &output, &vehicle) {
         eprintln!("closed-loop: warning: {note}");
     }
+    if let Some(note) = end_note(&output, options.max_time_s) {
+        eprintln!("closed-loop: warning: {note}");
+    }
     let mut files = write_session(&args.out, &output)?;
     files.extend(plots::write_plots(&args.out, &output, &vehicle.body)?);
     Ok((output.metrics, files))
@@ -1052,6 +1123,67 @@ pub fn slide_note(scenario: &str, output: &RunOutput, vehicle: &VehicleConfig) -
              limit): the run's figures are those of a car beyond its grip"
         )
     })
+}
+
+/// Why a run that did not complete the course ended ([`RunEnd`]), with where the car was and
+/// what the node last commanded; `None` for a completed run. Before, a session the rig ended
+/// 3 s after the car came to rest, with the node commanding it to drive again, said nothing.
+pub fn end_note(output: &RunOutput, max_time_s: f64) -> Option<String> {
+    if output.metrics.completed {
+        return None;
+    }
+    let last = output.samples.last()?;
+    let length = core_path(&output.course).length_m();
+    let at = format!(
+        "the rear axle at station {:.1} m of the path's {length:.1} m",
+        last.station_m
+    );
+    let command = command_text(&last.command);
+    Some(match output.end {
+        RunEnd::PastCourse => format!(
+            "the session ended not completed: the car passed the course's end ({at}) without \
+             the controller having driven it through the scored range ({})",
+            output.samples.iter().find(|s| s.engaged).map_or(
+                "the node never took it over from the launch driver".to_string(),
+                |s| format!("the node took it over at t = {:.2} s, past it", s.t_s)
+            )
+        ),
+        RunEnd::AtRest { since_s } => format!(
+            "the session ended not completed: the car came to rest under the controller at \
+             t = {since_s:.2} s ({at}) and the node did not command it to drive for \
+             {STOPPED_END_S} s (last command: {command}); the rig ends a session {STOPPED_END_S} \
+             s after the car comes to rest or the node last asks it to drive, whichever is later"
+        ),
+        RunEnd::AtRestWhileDriving { since_s } => format!(
+            "the session ended not completed: the car stayed at rest from t = {since_s:.2} s \
+             ({at}) for {STOPPED_DRIVING_END_S} s while the node commanded it to drive (last \
+             command: {command}): the car's speed loop did not answer, and the rig ends a \
+             session at rest that long whatever the node commands"
+        ),
+        RunEnd::TimeLimit => format!(
+            "the session ended not completed: its time limit of {max_time_s} s passed ({at}, \
+             last command: {command})"
+        ),
+    })
+}
+
+/// A CONTROL_COMMAND as words: its status's DBC name, the speed command, the fallback's reason.
+fn command_text(command: &ControlCommand) -> String {
+    let status = match command.status {
+        ControlStatus::NoPath => "no_path",
+        ControlStatus::Tracking => "tracking",
+        ControlStatus::Avoiding => "avoiding",
+        ControlStatus::Fallback => "fallback",
+    };
+    let speed = command
+        .speed_cmd_mps
+        .map_or("no speed".to_string(), |v| format!("speed {v:.2} m/s"));
+    if command.status == ControlStatus::Fallback {
+        let reason = fallback_name(&fallback_names(), command.fallback as u8);
+        format!("status {status} ({reason}), {speed}")
+    } else {
+        format!("status {status}, {speed}")
+    }
 }
 
 /// The files [`write_session`] writes into its directory, in order.
@@ -1144,4 +1276,136 @@ pub fn samples_csv(samples: &[Sample]) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record of the crossing at its default speed for the CAT Vehicle.
+    fn crossing_record() -> TruthRecord {
+        let vehicle = VehicleConfig::default();
+        let course = scenario::course(
+            scenario::Kind::Crossing,
+            &vehicle.body,
+            scenario::Kind::Crossing.default_speed_mps(),
+        );
+        TruthRecord::new(&course, &vehicle.body)
+    }
+
+    /// The tick of `record` at `t_s`, the car engaged at `speed_mps` on station 100 m and the
+    /// node's `command`; whether the run ends there, and why.
+    fn tick(
+        record: &mut TruthRecord,
+        t_s: f64,
+        speed_mps: f64,
+        command: ControlCommand,
+    ) -> Option<RunEnd> {
+        record.samples.push(Sample {
+            t_s,
+            truth: TruthRow {
+                t: t_s,
+                speed: speed_mps,
+                ..TruthRow::default()
+            },
+            estimate: None,
+            command,
+            engaged: true,
+            steer_pct: 0.0,
+            station_m: 100.0,
+            lateral_m: 0.0,
+        });
+        record.ended(true)
+    }
+
+    /// `status` with the speed command `speed_mps`.
+    fn command(status: ControlStatus, speed_mps: f32) -> ControlCommand {
+        ControlCommand {
+            status,
+            speed_cmd_mps: Some(speed_mps),
+            ..IDLE_COMMAND
+        }
+    }
+
+    /// The run of ticks 20 ms apart from `from_s` on, the car engaged at the speed and the node
+    /// commanding what `at` gives for each tick's time: when it ends, and why (`None` if not
+    /// within 60 s).
+    fn end_of(from_s: f64, at: impl Fn(f64) -> (f64, ControlCommand)) -> Option<(f64, RunEnd)> {
+        let mut record = crossing_record();
+        (0..3000).find_map(|k| {
+            let t = from_s + 0.02 * f64::from(k);
+            let (speed, command) = at(t);
+            tick(&mut record, t, speed, command).map(|end| (t, end))
+        })
+    }
+
+    /// Whether `a` and `b` are the same tick's time.
+    fn same_tick(a: f64, b: f64) -> bool {
+        (a - b).abs() < 0.01
+    }
+
+    /// A car at rest under the controller ends the run 3 s after the node last commanded it to
+    /// drive, not 3 s after it came to rest: a black-box probe's car with a slow speed loop
+    /// stopped for the crossing's pedestrian, the node set it off again 1.8 s later, and the
+    /// rig ended the session 3.0 s after the stop, before the speed loop answered (not
+    /// completed, nothing said why).
+    #[test]
+    fn a_car_at_rest_is_waited_for_while_the_node_sets_it_off() {
+        let hold = command(ControlStatus::Fallback, 0.0);
+        let go = command(ControlStatus::Tracking, 6.0);
+        // At rest from 20 s, asked to drive from 21.8 s to 22.0 s.
+        let ended = end_of(20.0, |t| {
+            (
+                0.0,
+                if (21.79..21.99).contains(&t) {
+                    go
+                } else {
+                    hold
+                },
+            )
+        });
+        assert!(
+            matches!(ended, Some((t, RunEnd::AtRest { since_s })) if same_tick(t, 24.98)
+                && same_tick(since_s, 20.0)),
+            "{ended:?}"
+        );
+        // Asked until the car sets off: not ended.
+        let ended = end_of(20.0, |t| {
+            let speed = if t > 24.0 { 0.5 } else { 0.0 };
+            (speed, if t > 21.79 { go } else { hold })
+        });
+        assert_eq!(ended, None);
+    }
+
+    /// A car at rest with the node holding it ends the run 3 s after it came to rest, as before.
+    #[test]
+    fn a_car_held_at_rest_ends_the_run_after_3_s() {
+        let hold = command(ControlStatus::Tracking, 0.0);
+        let ended = end_of(10.0, |_| (0.0, hold));
+        assert!(
+            matches!(ended, Some((t, RunEnd::AtRest { since_s })) if same_tick(t, 13.0)
+                && same_tick(since_s, 10.0)),
+            "{ended:?}"
+        );
+    }
+
+    /// A car whose speed loop never answers the node's command to drive ends the run after
+    /// [`STOPPED_DRIVING_END_S`] at rest: the run's length stays bounded.
+    #[test]
+    fn a_car_that_never_answers_ends_the_run_after_20_s_at_rest() {
+        let go = command(ControlStatus::Avoiding, 6.0);
+        let ended = end_of(10.0, |_| (0.0, go));
+        assert!(
+            matches!(ended, Some((t, RunEnd::AtRestWhileDriving { since_s }))
+                if same_tick(t, 10.0 + STOPPED_DRIVING_END_S) && same_tick(since_s, 10.0)),
+            "{ended:?}"
+        );
+        // Moving for a tick restarts the count.
+        let ended = end_of(10.0, |t| (if same_tick(t, 25.0) { 0.5 } else { 0.0 }, go));
+        assert!(
+            matches!(ended, Some((t, RunEnd::AtRestWhileDriving { since_s }))
+                if same_tick(t, 25.02 + STOPPED_DRIVING_END_S) && same_tick(since_s, 25.02)),
+            "{ended:?}"
+        );
+    }
 }
