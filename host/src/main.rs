@@ -69,7 +69,7 @@ struct SimulateDriveArgs {
     #[arg(long)]
     out: PathBuf,
     /// Repetition (noise and small command variations).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// Vehicle parameters (TOML); default: the CAT Vehicle.
     #[arg(long)]
@@ -96,8 +96,9 @@ struct Csv2canArgs {
 struct ReplayArgs {
     /// candump log of the node's input frames.
     log: PathBuf,
-    /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
-    #[arg(long, value_parser = parse_origin)]
+    /// Local frame origin `LAT,LON` in degrees, south and west negative (`--origin
+    /// -33.86,151.21`; default: the first GNSS fix).
+    #[arg(long, value_parser = parse_origin, allow_hyphen_values = true)]
     origin: Option<(f64, f64)>,
     /// Predictions CSV to write (`t,step,horizon_s,x,y,heading,speed,mode`).
     #[arg(long)]
@@ -125,8 +126,9 @@ struct EvaluateArgs {
     /// NAME.can.log beside NAME.truth.csv.
     #[arg(long)]
     inputs: Option<PathBuf>,
-    /// Origin of the truth frame `LAT,LON` (default: the simulator's test site).
-    #[arg(long, value_parser = parse_origin)]
+    /// Origin of the truth frame `LAT,LON` in degrees, south and west negative (default: the
+    /// simulator's test site).
+    #[arg(long, value_parser = parse_origin, allow_hyphen_values = true)]
     origin: Option<(f64, f64)>,
     /// The car's model file (its geometry for the kinematic baseline, its GNSS antenna and
     /// receiver address; default: models/paper.toml).
@@ -181,7 +183,7 @@ struct IdentifySteeringArgs {
     model: Option<PathBuf>,
     /// The fit's window starts here, s of the logs' clock (default: a second after the
     /// first tracking command).
-    #[arg(long, value_parser = parse_finite_seconds)]
+    #[arg(long, value_parser = parse_finite_seconds, allow_negative_numbers = true)]
     from: Option<f64>,
     /// Keep only the frames of this interface (candump's name, e.g. `can0`) of a log that
     /// holds several.
@@ -235,14 +237,14 @@ struct ClosedLoopArgs {
     #[arg(long, default_value = "rtk")]
     receiver: String,
     /// Target speed, m/s (default: the scenario's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     speed: Option<f64>,
     /// Sensor noise seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// The planner replans: it sends the path (a new path id) and obstacles again every
     /// SECONDS (default: once).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     replan_every: Option<f64>,
     /// The car starts this far to the right of the path's first point (negative: left), m:
     /// how the controller returns to a path it is not on.
@@ -292,8 +294,9 @@ struct SilArgs {
     /// Model file (default: the published models).
     #[arg(long)]
     model: Option<PathBuf>,
-    /// Local frame origin `LAT,LON` in degrees (default: the first GNSS fix).
-    #[arg(long, value_parser = parse_origin)]
+    /// Local frame origin `LAT,LON` in degrees, south and west negative (`--origin
+    /// -33.86,151.21`; default: the first GNSS fix).
+    #[arg(long, value_parser = parse_origin, allow_hyphen_values = true)]
     origin: Option<(f64, f64)>,
 }
 
@@ -318,7 +321,7 @@ struct DiscretizeArgs {
     /// Model file.
     model: PathBuf,
     /// Sample time, s (default: the file's), 1e-4 to 10.
-    #[arg(long, value_parser = parse_sample_time)]
+    #[arg(long, value_parser = parse_sample_time, allow_negative_numbers = true)]
     ts: Option<f64>,
 }
 
@@ -352,6 +355,10 @@ fn parse_finite_seconds(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// `--origin LAT,LON`, degrees. Its options take a value that starts with a hyphen
+/// (`allow_hyphen_values`): a southern latitude was taken for a flag (as a negative number is
+/// by every numeric option without `allow_negative_numbers`), and clap's tip, `-- -33.86,...`,
+/// did not work either.
 fn parse_origin(s: &str) -> Result<(f64, f64), String> {
     let (lat, lon) = s
         .split_once(',')

@@ -1564,4 +1564,130 @@ fn a_closed_pipe_ends_the_tool_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_ne!(out.status.code(), Some(101), "{stderr}");
+/// A negative number after an option is its value, not a flag: a black-box probe's southern
+/// origin, `--origin -33.86,151.21`, was refused by `replay`, `evaluate` and `sil` ("unexpected
+/// argument '-3' found", and clap's tip, `-- -33.86,151.21`, did not work either); only
+/// `--origin=-33.86,151.21` did. The other numeric options (`--speed`, `--seed`,
+/// `--replan-every`, `--from`, `--ts`) now reach their own checks with a negative value too.
+#[test]
+fn a_negative_number_is_an_options_value() {
+    let dir = tmp_dir("negative-values");
+    let can = data("smoke.can.log");
+    let pred = dir.join("p.csv");
+    let sydney = "-33.86,151.21";
+    // The origin is taken: the drive's fixes lie beyond its 20 km, and replay says so.
+    let err = ok(&["replay", s(&can), "--origin", sydney, "--out", s(&pred)]);
+    assert!(
+        err.contains("from the local frame's origin (now -33.8600000,151.2100000)"),
+        "{err}"
+    );
+    // evaluate parses it and checks the position (a latitude beyond 90 degrees is not one).
+    ok(&["replay", s(&can), "--origin", ORIGIN, "--out", s(&pred)]);
+    let truth = data("smoke.truth.csv");
+    let out = run(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&truth),
+        "--origin",
+        "-91,151.21",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("origin -91,151.21 is not a WGS-84 position"),
+        "{stderr}"
+    );
+    let out = run(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&truth),
+        "--origin",
+        sydney,
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.code() != Some(2) && !stderr.contains("unexpected argument"),
+        "{stderr}"
+    );
+    // sil over one tick.
+    let mut child = Command::new(BIN)
+        .args(["sil", "--stdio", "--origin", sydney])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        use std::io::Write;
+        let mut stdin = child.stdin.take().unwrap();
+        stdin.write_all(b"TICK 0.020000\n").unwrap();
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .any(|l| l.starts_with("END ")));
+    // The numeric options' own checks answer a negative value.
+    let cl_out = dir.join("cl");
+    for (option, why) in [
+        ("--speed", "--speed -3: a target speed is in (0, 40] m/s"),
+        (
+            "--replan-every",
+            "--replan-every -3: a period of at least 0.02 s",
+        ),
+    ] {
+        let err = fails(&[
+            "closed-loop",
+            "--scenario",
+            "loop",
+            option,
+            "-3",
+            "--out",
+            s(&cl_out),
+        ]);
+        assert!(err.contains(why), "{option}: {err}");
+    }
+    for args in [
+        &[
+            "closed-loop",
+            "--scenario",
+            "loop",
+            "--seed",
+            "-3",
+            "--out",
+            s(&cl_out),
+        ][..],
+        &[
+            "simulate-drive",
+            "--scenario",
+            "smoke",
+            "--seed",
+            "-3",
+            "--out",
+            s(&cl_out),
+        ][..],
+    ] {
+        let out = run(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains("invalid value '-3' for '--seed <SEED>'"),
+            "{args:?}: {stderr}"
+        );
+    }
+    let paper = data("../models/paper.toml");
+    let out = run(&["discretize", s(&paper), "--ts", "-0.02"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("-0.02: a sample time from 0.0001 to 10 s"),
+        "{stderr}"
+    );
+    // A negative start of the fit's window is a time like any other: the smoke drive has no
+    // CONTROL_COMMAND to fit.
+    let err = fails(&["identify-steering", s(&can), "--from", "-5"]);
+    assert!(err.contains("no CONTROL_COMMAND"), "{err}");
 }
