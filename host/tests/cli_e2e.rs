@@ -1564,6 +1564,8 @@ fn a_closed_pipe_ends_the_tool_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
+
 /// A negative number after an option is its value, not a flag: a black-box probe's southern
 /// origin, `--origin -33.86,151.21`, was refused by `replay`, `evaluate` and `sil` ("unexpected
 /// argument '-3' found", and clap's tip, `-- -33.86,151.21`, did not work either); only
