@@ -610,6 +610,9 @@ fn print_replay_warnings(
     if let Some(note) = replay::speed_note(result) {
         eprintln!("catmodel: warning: {note}");
     }
+    if let Some(note) = replay::slow_reports_note(result) {
+        eprintln!("catmodel: warning: {note}");
+    }
     // No position at any tick (the rate's mismatch and the frame's reach have their
     // own warnings above): why, as far as the replay can tell.
     let other_sources = replay::other_sources_note(result, gnss_source);

@@ -875,6 +875,102 @@ pub struct ReplayStats {
     /// Speed reports above the model file's `max_speed_mps`, which the node clamps to it
     /// without a counter of its own ([`speed_note`]).
     pub speeds_over_max: SpeedsOverMax,
+    /// The steering and speed reports' intervals against their timeouts ([`slow_reports_note`]).
+    pub report_intervals: [ReportIntervals; 2],
+}
+
+/// One 50 Hz report's intervals over a log (pauses of the whole log, [`PAUSE_NOTE_US`] and
+/// longer, left out), against the model file's timeout for it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReportIntervals {
+    /// The message's name.
+    pub name: &'static str,
+    /// The model file's key for its timeout.
+    pub key: &'static str,
+    /// Its timeout, us.
+    pub timeout_us: u64,
+    /// The last report's time stamp, us.
+    last_us: Option<u64>,
+    /// Every interval, us.
+    intervals_us: Vec<u64>,
+}
+
+impl ReportIntervals {
+    fn new(name: &'static str, key: &'static str, timeout_us: u64) -> Self {
+        Self {
+            name,
+            key,
+            timeout_us,
+            ..Self::default()
+        }
+    }
+
+    /// A report stamped `t_us`.
+    fn observe(&mut self, t_us: u64) {
+        if let Some(last) = self.last_us {
+            let dt = t_us.saturating_sub(last);
+            if dt < PAUSE_NOTE_US {
+                self.intervals_us.push(dt);
+            }
+        }
+        self.last_us = Some(t_us);
+    }
+
+    /// The median interval, us, and the share of the time spent in intervals longer than the
+    /// timeout (the node sees the input stale in them); `None` with fewer than 10 intervals.
+    pub fn median_and_stale_share(&self) -> Option<(u64, f64)> {
+        if self.intervals_us.len() < 10 {
+            return None;
+        }
+        let mut sorted = self.intervals_us.clone();
+        sorted.sort_unstable();
+        let median = sorted[sorted.len() / 2];
+        let total: u64 = sorted.iter().sum();
+        let stale: u64 = sorted
+            .iter()
+            .filter(|&&dt| dt > self.timeout_us)
+            .map(|&dt| dt - self.timeout_us)
+            .sum();
+        Some((median, stale as f64 / total.max(1) as f64))
+    }
+}
+
+/// What a replay should say about steering or speed reports that come further apart than
+/// their timeouts (a sensor logged at 5 Hz by a telemetry logger, not the bus's 50 Hz): the
+/// node takes the input for stale between reports, dead-reckons straight on or on the speed
+/// model while it is, and its predictions and heading suffer (a black-box probe's 5 Hz log:
+/// the current speed 0.74 m/s RMS off, 0.03 at 50 Hz, and a steering check that read the
+/// straight-on ticks as a steering 1.7 times the model file's). `None` while the median
+/// interval is within the timeout.
+pub fn slow_reports_note(stats: &ReplayStats) -> Option<String> {
+    let slow: Vec<String> = stats
+        .report_intervals
+        .iter()
+        .filter_map(|r| {
+            let (median, share) = r.median_and_stale_share()?;
+            (median > r.timeout_us).then(|| {
+                format!(
+                    "{} every {:.3} s (median), longer than its {:.3} s timeout \
+                     (`[inputs] {}`): stale {:.0} % of the time",
+                    r.name,
+                    median as f64 * 1e-6,
+                    r.timeout_us as f64 * 1e-6,
+                    r.key,
+                    100.0 * share
+                )
+            })
+        })
+        .collect();
+    (!slow.is_empty()).then(|| {
+        format!(
+            "the log's reports come further apart than the node's timeouts: {}. Between \
+             reports the node takes the input for stale (NODE_STATUS), steers straight on or \
+             runs the speed model, and its predictions and heading are as much off; a logger \
+             that samples the bus slower than its 50 Hz loses what the node needs: record \
+             every frame (candump -l)",
+            slow.join("; ")
+        )
+    })
 }
 
 /// Measured speeds (SPEED_REPORT frames the node took: CRC and length right) above the model
@@ -1042,6 +1138,7 @@ pub fn replay_with_progress(
         fixes: 0,
         other_gnss_sources: Vec::new(),
         speeds_over_max: SpeedsOverMax::default(),
+        report_intervals: Default::default(),
     });
     ReplayOutput {
         predictions_csv: text::into_string(csv),
@@ -1479,6 +1576,22 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         max_speed_mps: config.max_speed_mps,
         ..SpeedsOverMax::default()
     };
+    let mut report_intervals = [
+        ReportIntervals::new(
+            "STEERING_REPORT",
+            "steer_timeout_s",
+            config
+                .freshness
+                .timeout_us(catmodel::can::freshness::Input::Steer),
+        ),
+        ReportIntervals::new(
+            "SPEED_REPORT",
+            "speed_timeout_s",
+            config
+                .freshness
+                .timeout_us(catmodel::can::freshness::Input::Speed),
+        ),
+    ];
     let mut node = crate::new_node(config);
     // The times of the receiver's position frames, for the rate the whole log shows.
     let mut fix_times_us: Vec<u64> = Vec::new();
@@ -1548,6 +1661,11 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 frames += rx.len() as u64;
                 for f in &rx {
                     speeds_over_max.observe(&f.frame, f.t_us);
+                    if f.frame.id == catmodel::can::spec::STEERING_REPORT.id {
+                        report_intervals[0].observe(f.t_us);
+                    } else if f.frame.id == catmodel::can::spec::SPEED_REPORT.id {
+                        report_intervals[1].observe(f.t_us);
+                    }
                     match GnssPosition::decode(&f.frame, gnss_source) {
                         Ok(_) => fix_times_us.push(f.t_us),
                         Err(catmodel::can::codec::DecodeError::WrongSource { got }) => {
@@ -1638,6 +1756,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         gnss_rate: crate::ReceiverRate::measure(&fix_times_us),
         planner,
         speeds_over_max,
+        report_intervals,
     };
     let error = if input_ok == Some(true) {
         None

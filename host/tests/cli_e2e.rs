@@ -1693,3 +1693,84 @@ fn a_negative_number_is_an_options_value() {
     let err = fails(&["identify-steering", s(&can), "--from", "-5"]);
     assert!(err.contains("no CONTROL_COMMAND"), "{err}");
 }
+
+/// A log whose steering and speed were recorded at 5 Hz (a telemetry logger's rate, not the
+/// bus's 50 Hz): `replay` names the reports' interval against their timeouts, and the node's
+/// steering check does not read the ticks between reports, when the models steer straight on,
+/// as a stronger steering. A black-box probe's 5-minute drive so decimated replayed with "the
+/// car turned 1.733 times the yaw rate the model file's steering gives ... Scale the model
+/// file's steering by it" and no word of the rate.
+#[test]
+fn reports_slower_than_their_timeouts_are_named_not_taken_for_a_steering_gain() {
+    let dir = tmp_dir("slow_reports");
+    let d = dir.to_str().unwrap();
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "validation",
+        "--seed",
+        "3",
+        "--out",
+        d,
+    ]);
+    let csv = std::fs::read_to_string(dir.join("validation.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
+    // Every 10th report of the five bus sensors kept; the fixes as they are.
+    let mut out = format!("{header}\n");
+    let mut reports = 0;
+    for line in lines {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        if cells[1..6].iter().any(|c| !c.is_empty()) {
+            reports += 1;
+            if reports % 10 != 0 {
+                cells[1..6].fill("");
+            }
+        }
+        if cells[1..].iter().any(|c| !c.is_empty()) {
+            out.push_str(&cells.join(","));
+            out.push('\n');
+        }
+    }
+    let slow = dir.join("slow.csv");
+    std::fs::write(&slow, out).unwrap();
+    let log = dir.join("slow.can.log");
+    ok(&[
+        "csv2can",
+        slow.to_str().unwrap(),
+        "--out",
+        log.to_str().unwrap(),
+    ]);
+    let pred = dir.join("pred.csv");
+    let pred = pred.to_str().unwrap();
+    let stderr = ok(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--origin",
+        ORIGIN,
+        "--out",
+        pred,
+    ]);
+    assert!(
+        stderr.contains("STEERING_REPORT every 0.200 s (median), longer than its 0.100 s timeout")
+            && stderr.contains("SPEED_REPORT every 0.200 s"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("times the yaw rate"), "{stderr}");
+    // As recorded: neither.
+    let full = dir.join("validation.can.log");
+    let stderr = ok(&[
+        "replay",
+        full.to_str().unwrap(),
+        "--origin",
+        ORIGIN,
+        "--out",
+        pred,
+    ]);
+    assert!(
+        !stderr.contains("further apart than the node's timeouts")
+            && !stderr.contains("times the yaw rate"),
+        "{stderr}"
+    );
+}
