@@ -1077,19 +1077,50 @@ fn receiver_error(args: ReceiverErrorArgs) -> Result<()> {
         .check()?;
     let file = load_base(model.as_deref())?;
     let source = file.inputs.gnss_source_address;
-    let mut frames = Vec::new();
+    let mut read = Vec::new();
     for log in &logs {
-        frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
+        let at = replay::AtPause::Split(
+            "receiver-error measures the fixes in stretches between such gaps, never across one",
+        );
+        read.push(replay::read_candump_reporting_at(log, interface.as_deref(), at)?.frames);
     }
-    let r = identify::receiver::measure(&frames, source)?;
+    let r =
+        identify::receiver::measure(&read.iter().map(Vec::as_slice).collect::<Vec<_>>(), source)?;
+    if r.stretches > 1 {
+        let gaps = match r.longest_gap {
+            Some((log, from, to)) => format!(
+                "; {} gap(s) between fixes within a log (more than {} of the receiver's \
+                 intervals and {} s), the longest {:.1} s in {} (from t = {from:.3} to \
+                 {to:.3} s)",
+                r.gaps,
+                identify::receiver::GAP_PERIODS,
+                identify::receiver::MIN_GAP_S,
+                to - from,
+                logs[log].display()
+            ),
+            None => String::new(),
+        };
+        eprintln!(
+            "catmodel: note: the fixes were measured in {} stretches, apart: {} log(s){gaps}; \
+             the receiver's rate is counted, the fixes averaged over {AVERAGE_S} s and their \
+             correlation taken within each stretch, pooled over them, each log's fixes about \
+             its own mean; {:.1} s of fixes (pauses and the time between logs not counted)",
+            r.stretches, r.logs, r.duration_s
+        );
+    }
     let parked = match r.speed_reports {
         0 => "no speed reports: the car is taken to be parked".to_string(),
         n => format!("{n} speed reports, all parked"),
     };
     println!(
-        "receiver at source address {source}: {} fixes over {:.1} s (one every {:.3} s); {parked}{}",
+        "receiver at source address {source}: {} fixes over {:.1} s{} (one every {:.3} s); {parked}{}",
         r.fixes,
         r.duration_s,
+        if r.stretches > 1 {
+            format!(" in {} stretches", r.stretches)
+        } else {
+            String::new()
+        },
         r.interval_s,
         if r.rejected > 0 {
             format!("; {} fixes rejected (not available, range)", r.rejected)

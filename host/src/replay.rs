@@ -304,15 +304,26 @@ impl TimestampTracker {
 impl LogReport {
     /// Notes: what the log holds that the user may not expect (frames of several interfaces).
     pub fn notes(&self, path: &Path) -> Vec<String> {
+        self.notes_at(path, AtPause::Ticked)
+    }
+
+    /// [`LogReport::notes`], the pause's note saying what the command did at it.
+    pub fn notes_at(&self, path: &Path, at: AtPause) -> Vec<String> {
         let mut out = Vec::new();
         if let Some((line, from_us, to_us)) = self.longest_pause {
             let s = |us: u64| us as f64 * 1e-6;
+            let done = match at {
+                AtPause::Ticked => {
+                    "the node ticked through it, its inputs timing out, the position lost \
+                     after gnss_lost_s and the heading taken again once its error bound \
+                     reached a radian (docs/faults.md)"
+                }
+                AtPause::Split(what) => what,
+            };
             out.push(format!(
                 "{}:{line}: the log pauses {} time(s) with no frame for more than {} s, the \
                  longest {:.1} s (from t = {:.3} to {:.3} s): every input was silent (a \
-                 recorder pause, a gateway reset?); the node ticked through it, its inputs \
-                 timing out, the position lost after gnss_lost_s and the heading taken again \
-                 once its error bound reached a radian (docs/faults.md)",
+                 recorder pause, a gateway reset?); {done}",
                 path.display(),
                 self.pauses,
                 PAUSE_NOTE_US / 1_000_000,
@@ -398,17 +409,40 @@ impl LogReport {
     }
 }
 
+/// What a command does where a log pauses, for the reader's note: the node ticks through it
+/// (`replay`), or the command measures the stretches on either side apart, never across it
+/// (what it says: `receiver-error`, `identify-steering`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AtPause {
+    Ticked,
+    Split(&'static str),
+}
+
 /// [`read_candump_log_on`] for the CLI: prints the report's notes and warnings on stderr
 /// (`catmodel: note: ...`, `catmodel: warning: ...`).
 pub fn read_candump_reporting(path: &Path, interface: Option<&str>) -> Result<CandumpLog> {
+    read_candump_reporting_at(path, interface, AtPause::Ticked)
+}
+
+/// [`read_candump_reporting`] for a command that does `at` where the log pauses.
+pub fn read_candump_reporting_at(
+    path: &Path,
+    interface: Option<&str>,
+    at: AtPause,
+) -> Result<CandumpLog> {
     let log = read_candump_log_on(path, interface)?;
-    print_report(path, &log.report);
+    print_report_at(path, &log.report, at);
     Ok(log)
 }
 
 /// Prints a [`LogReport`]'s notes and warnings on stderr.
 pub fn print_report(path: &Path, report: &LogReport) {
-    for note in report.notes(path) {
+    print_report_at(path, report, AtPause::Ticked);
+}
+
+/// [`print_report`] for a command that does `at` where the log pauses.
+pub fn print_report_at(path: &Path, report: &LogReport, at: AtPause) {
+    for note in report.notes_at(path, at) {
         eprintln!("catmodel: note: {note}");
     }
     for warning in report.warnings(path) {
@@ -1023,18 +1057,25 @@ pub fn speed_note(stats: &ReplayStats) -> Option<String> {
     ))
 }
 
+/// GNSS positions from other source addresses than the model file's (`(address, count)`), as
+/// `replay` and `receiver-error` name them: the list (`30161 from 128 (0x80), ...`) and the
+/// busiest address. `None` without them.
+pub fn other_sources_list(others: &[(u8, u64)]) -> Option<(String, u8)> {
+    let (busiest, _) = *others.iter().max_by_key(|(_, n)| *n)?;
+    let list = others
+        .iter()
+        .map(|(sa, n)| format!("{n} from {sa} (0x{sa:02X})"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    Some((list, busiest))
+}
+
 /// What a replay should say about GNSS positions of receivers at source addresses other than
 /// the model file's: with none of its own, which address to declare (a black-box probe's
 /// receiver at 0x1D had its 30 161 fixes counted as unknown ids and the model file's
 /// `gnss_rate_hz` blamed); beside its own, that they were refused. `None` without them.
 pub fn other_sources_note(stats: &ReplayStats, declared: u8) -> Option<String> {
-    let (busiest, _) = *stats.other_gnss_sources.iter().max_by_key(|(_, n)| *n)?;
-    let list = stats
-        .other_gnss_sources
-        .iter()
-        .map(|(sa, n)| format!("{n} from {sa} (0x{sa:02X})"))
-        .collect::<Vec<_>>()
-        .join(", ");
+    let (list, busiest) = other_sources_list(&stats.other_gnss_sources)?;
     Some(if stats.fixes == 0 {
         format!(
             "no GNSS position came from source address {declared} (the model file's [inputs] \

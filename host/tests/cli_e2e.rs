@@ -1031,6 +1031,173 @@ fn receiver_error_from_a_parked_car() {
     assert!(e.contains("fixes span 0.000 s"), "{e}");
 }
 
+/// A copy of a candump log with `shift_s` added to the timestamps of the lines from `from`
+/// on (a pause of the recording there, or with `from` 0 the whole log recorded later).
+fn shifted_candump(src: &Path, dst: &Path, from: usize, shift_s: u64) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let out: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let (stamp, rest) = l.split_once(' ').unwrap();
+            let (sec, us) = stamp
+                .trim_start_matches('(')
+                .trim_end_matches(')')
+                .split_once('.')
+                .unwrap();
+            let sec: u64 = sec.parse().unwrap();
+            let sec = if i >= from { sec + shift_s } else { sec };
+            format!("({sec:010}.{us}) {rest}\n")
+        })
+        .collect();
+    std::fs::write(dst, out).unwrap();
+}
+
+/// The east and north deviations averaged over 1 s that `receiver-error` prints.
+fn averaged_deviations(text: &str) -> [f64; 2] {
+    let mut v = text.lines().filter_map(|l| {
+        l.split("averaged over 1 s ")
+            .nth(1)
+            .and_then(|r| r.split(" m").next())
+            .and_then(|x| x.parse().ok())
+    });
+    let (Some(e), Some(n)) = (v.next(), v.next()) else {
+        panic!("{text}");
+    };
+    [e, n]
+}
+
+/// `receiver-error` over several logs, or a log with a pause, measures each log and each
+/// stretch between pauses apart. It took the receiver's rate as the logs' whole span over
+/// their fix count, and averaged over "a second" of that rate: a black-box probe's 20 Hz
+/// receiver with 3 m of white noise (1.7-1.8 m declared from each hour alone) declared 5.4 m
+/// from two hours a day apart, 1.2 m (too small: obstacles are inflated by it) from two logs
+/// both stamped from 0, whose fixes it interleaved, and 2.5 m from one hour with an hour's
+/// pause. Here on such a receiver parked for an hour: the averaged deviations of the log
+/// paused for an hour halfway are those of the log to 2 % (0.96 m for 0.67 m before, two fixes
+/// to a "second"), and those of two logs stamped from 0 or a day apart lie within those of
+/// each alone (0.47 m and 2.1 m before).
+#[test]
+fn receiver_error_measures_each_log_and_each_stretch_between_pauses_apart() {
+    let dir = tmp_dir("receiver-error-stretches");
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let car = String::from_utf8(read(&manifest.join("vehicles/cat-vehicle.toml"))).unwrap();
+    let white = [
+        (
+            "period_s = 0.01             # paper",
+            "period_s = 0.05 # paper",
+        ),
+        ("white_noise_m = 0.3 ", "white_noise_m = 3.0 "),
+        ("bias_sigma_m = 0.8 ", "bias_sigma_m = 0.01 "),
+        ("bias_correlation_s = 60.0", "bias_correlation_s = 10.0"),
+    ]
+    .iter()
+    .fold(car, |c, (from, to)| {
+        assert_eq!(c.matches(from).count(), 1, "{from}");
+        c.replace(from, to)
+    });
+    let vehicle = dir.join("white.toml");
+    std::fs::write(&vehicle, white).unwrap();
+    for seed in ["0", "1"] {
+        let out = dir.join(format!("s{seed}"));
+        ok(&[
+            "simulate-drive",
+            "--scenario",
+            "parked-1h",
+            "--vehicle",
+            s(&vehicle),
+            "--seed",
+            seed,
+            "--out",
+            s(&out),
+        ]);
+    }
+    let (log0, log1) = (
+        dir.join("s0/parked-1h.can.log"),
+        dir.join("s1/parked-1h.can.log"),
+    );
+    let run_ok = |logs: &[&Path]| -> (String, String) {
+        let mut args = vec!["receiver-error"];
+        args.extend(logs.iter().map(|p| s(p)));
+        let out = run(&args);
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        );
+        assert!(out.status.success(), "{args:?}: {stderr}");
+        (stdout, stderr)
+    };
+    let alone0 = averaged_deviations(&run_ok(&[&log0]).0);
+    let alone1 = averaged_deviations(&run_ok(&[&log1]).0);
+    // 3 m of white noise, 20 fixes a second: 0.67 m averaged.
+    for a in alone0.iter().chain(&alone1) {
+        assert!((a / 0.671 - 1.0).abs() < 0.05, "{alone0:?} {alone1:?}");
+    }
+    // The first log paused for an hour halfway.
+    let lines = std::fs::read_to_string(&log0).unwrap().lines().count();
+    let paused = dir.join("paused.can.log");
+    shifted_candump(&log0, &paused, lines / 2, 3600);
+    let (text, notes) = run_ok(&[&paused]);
+    let got = averaged_deviations(&text);
+    for (g, a) in got.iter().zip(&alone0) {
+        assert!(
+            (g / a - 1.0).abs() < 0.02,
+            "{got:?} against {alone0:?}: {text}"
+        );
+    }
+    assert!(
+        text.contains("in 2 stretches (one every 0.050 s)"),
+        "{text}"
+    );
+    assert!(
+        notes.contains("measured in 2 stretches") && notes.contains("longest 3600."),
+        "{notes}"
+    );
+    assert!(!notes.contains("the node ticked"), "{notes}");
+    // Both logs stamped from 0, and the second a day later: the same, between the two alone.
+    let later = dir.join("next-day.can.log");
+    shifted_candump(&log1, &later, 0, 86_400);
+    let (both, _) = run_ok(&[&log0, &log1]);
+    let (apart, _) = run_ok(&[&log0, &later]);
+    assert_eq!(both, apart);
+    let got = averaged_deviations(&both);
+    for ((g, a), b) in got.iter().zip(&alone0).zip(&alone1) {
+        assert!(
+            *g >= a.min(*b) - 1e-3 && *g <= a.max(*b) + 1e-3,
+            "{got:?} against {alone0:?} and {alone1:?}: {both}"
+        );
+    }
+    assert!(
+        both.contains("in 2 stretches (one every 0.050 s)"),
+        "{both}"
+    );
+}
+
+/// `receiver-error` on a receiver at another NMEA 2000 source address names the addresses
+/// that did send PGN 129025 and the key to set, as `replay` does; it said "0 GNSS fixes (PGN
+/// 129025 from source address 28)" alone.
+#[test]
+fn receiver_error_names_the_source_address_the_fixes_came_from() {
+    let dir = tmp_dir("receiver-error-source");
+    ok(&[
+        "simulate-drive",
+        "--scenario",
+        "standstill",
+        "--out",
+        s(&dir),
+    ]);
+    let text = std::fs::read_to_string(dir.join("standstill.can.log")).unwrap();
+    assert!(text.contains(" 09F8011C#"));
+    let moved = dir.join("sa128.can.log");
+    std::fs::write(&moved, text.replace(" 09F8011C#", " 09F80180#")).unwrap();
+    let e = fails(&["receiver-error", s(&moved)]);
+    assert!(
+        e.contains("from 128 (0x80) did send PGN 129025")
+            && e.contains("set gnss_source_address = 128"),
+        "{e}"
+    );
+}
+
 #[test]
 fn replay_says_when_fixes_lie_beyond_the_local_frame() {
     // An origin 20.5 km north of the bundled drive: every fix lies beyond the frame's 20 km
