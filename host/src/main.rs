@@ -968,15 +968,46 @@ fn identify_steering(args: IdentifySteeringArgs) -> Result<()> {
         Some(p) => Some(model_file::load(p)?.vehicle.max_steer_rate_pct_per_s),
         None => None,
     };
-    let mut frames = Vec::new();
+    let mut read = Vec::new();
     for log in &logs {
-        frames.extend(replay::read_candump_reporting(log, interface.as_deref())?.frames);
+        let at = replay::AtPause::Split(
+            "identify-steering fits the stretches between such gaps in the reports and commands, never across one",
+        );
+        let frames = replay::read_candump_reporting_at(log, interface.as_deref(), at)?.frames;
+        read.push((log.display().to_string(), frames));
     }
-    let series = identify::steering::SteeringSeries::from_frames(&frames);
+    let named: Vec<(String, &[catmodel::can::frame::TimedFrame])> = read
+        .iter()
+        .map(|(name, frames)| (name.clone(), frames.as_slice()))
+        .collect();
+    let series = identify::steering::SteeringSeries::from_logs(&named)?;
     let f = identify::steering::fit(&series, file_rate, from)?;
+    if let Some((gap_from, gap_to)) = f.longest_gap {
+        eprintln!(
+            "catmodel: note: the session was fitted in {} stretches, apart, never across a gap: \
+             {} gap(s) in the reports or the commands (more than {} of their median intervals \
+             and {} s), the longest {:.1} s (from t = {gap_from:.3} to {gap_to:.3} s); {:.1} s \
+             of reports fitted",
+            f.stretches,
+            f.gaps,
+            identify::steering::GAP_PERIODS,
+            identify::steering::MIN_GAP_S,
+            gap_to - gap_from,
+            f.fitted_s
+        );
+    }
     println!(
-        "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s (commands over {:.1} %)",
-        f.reports, f.commands, f.from_s, f.to_s, f.span_pct
+        "steering actuator: {} reports and {} commands from {:.2} s to {:.2} s{} (commands over {:.1} %)",
+        f.reports,
+        f.commands,
+        f.from_s,
+        f.to_s,
+        if f.stretches > 1 {
+            format!(" in {} stretches, {:.1} s of them", f.stretches, f.fitted_s)
+        } else {
+            String::new()
+        },
+        f.span_pct
     );
     if series.rejected > 0 {
         println!(

@@ -1144,6 +1144,139 @@ fn identify_steering_finds_the_plants_lag_from_a_session() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("CONTROL_COMMAND"));
 }
 
+/// A copy of a candump log with `shift_s` added to every timestamp at or after `from_s`.
+fn shifted_candump(src: &Path, dst: &Path, from_s: f64, shift_s: u64) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let out: String = text
+        .lines()
+        .map(|l| {
+            let (stamp, rest) = l.split_once(' ').unwrap();
+            let inner = stamp.trim_start_matches('(').trim_end_matches(')');
+            let (sec, us) = inner.split_once('.').unwrap();
+            let sec: u64 = sec.parse().unwrap();
+            let t: f64 = inner.parse().unwrap();
+            let sec = if t >= from_s { sec + shift_s } else { sec };
+            format!("({sec:010}.{us}) {rest}\n")
+        })
+        .collect();
+    std::fs::write(dst, out).unwrap();
+}
+
+/// `identify-steering` fits the stretches of a session between its pauses, at the data's cost,
+/// and refuses two sessions whose times overlap. It stepped its actuator simulation over the
+/// logs' whole span, pauses included (0.3 s of CPU per second of span: a black-box probe's
+/// session with a 600 s pause took 192 s against 3.8 s, two sessions a day apart hours), and
+/// sorted two sessions both stamped from 0 into one (rate limit 35.4 %/s for the plant's 40).
+/// Here: the lane change's session with a 600 s pause in both logs fits as the session does
+/// (the key within 2 ms, the limit within 2 %) in less than three times its time; the session
+/// beside another stamped from 0 is refused by name; beside it a day later, both are fitted.
+#[test]
+fn identify_steering_fits_the_stretches_between_pauses_and_refuses_overlapping_sessions() {
+    let sessions: Vec<PathBuf> = ["0", "1"]
+        .iter()
+        .map(|seed| {
+            let dir = tmp_dir(&format!("steering-stretches-{seed}"));
+            cl_ok(&[
+                "--scenario",
+                "dlc",
+                "--speed",
+                "9",
+                "--receiver",
+                "rtk",
+                "--seed",
+                seed,
+                "--out",
+                dir.to_str().unwrap(),
+            ]);
+            dir
+        })
+        .collect();
+    let identify = |logs: &[PathBuf]| -> (std::process::Output, f64) {
+        let start = std::time::Instant::now();
+        let out = Command::new(BIN)
+            .arg("identify-steering")
+            .args(logs)
+            .output()
+            .unwrap();
+        (out, start.elapsed().as_secs_f64())
+    };
+    let figures = |out: &std::process::Output| -> (f64, f64, String) {
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{text}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let value = |key: &str| -> f64 {
+            text.split(key)
+                .nth(1)
+                .and_then(|s| s.lines().next())
+                .and_then(|s| s.trim().parse().ok())
+                .unwrap_or_else(|| panic!("{key}: {text}"))
+        };
+        (
+            value("steer_lag_s = "),
+            value("max_steer_rate_pct_per_s = "),
+            text,
+        )
+    };
+    let logs = |dir: &Path| vec![dir.join("session.can.log"), dir.join("session.tx.log")];
+    // Two sessions both stamped from 0.
+    let mut both = logs(&sessions[0]);
+    both.extend(logs(&sessions[1]));
+    let (out, _) = identify(&both);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("two sessions whose times overlap"),
+        "{err}{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    // The session alone, and paused for 600 s from 12 s on.
+    let (out, alone_s) = identify(&logs(&sessions[0]));
+    let (key, rate, _) = figures(&out);
+    let paused_dir = tmp_dir("steering-stretches-paused");
+    let paused: Vec<PathBuf> = logs(&sessions[0])
+        .iter()
+        .map(|log| {
+            let dst = paused_dir.join(log.file_name().unwrap());
+            shifted_candump(log, &dst, 12.0, 600);
+            dst
+        })
+        .collect();
+    let (out, paused_s) = identify(&paused);
+    let (paused_key, paused_rate, text) = figures(&out);
+    assert!((paused_key - key).abs() <= 0.002, "{key}: {text}");
+    assert!((paused_rate / rate - 1.0).abs() <= 0.02, "{rate}: {text}");
+    assert!(text.contains("in 2 stretches"), "{text}");
+    assert!(
+        paused_s < 3.0 * alone_s + 1.0,
+        "{paused_s:.1} s paused, {alone_s:.1} s alone"
+    );
+    // The second session a day later: both fitted, as each alone.
+    let later_dir = tmp_dir("steering-stretches-later");
+    let mut apart = logs(&sessions[0]);
+    for log in logs(&sessions[1]) {
+        let dst = later_dir.join(log.file_name().unwrap());
+        shifted_candump(&log, &dst, 0.0, 86_400);
+        apart.push(dst);
+    }
+    let (out, apart_s) = identify(&apart);
+    let (apart_key, apart_rate, text) = figures(&out);
+    let (key1, rate1, _) = figures(&identify(&logs(&sessions[1])).0);
+    assert!(
+        apart_key >= key.min(key1) - 0.002 && apart_key <= key.max(key1) + 0.002,
+        "{key} {key1}: {text}"
+    );
+    assert!(
+        apart_rate >= rate.min(rate1) * 0.98 && apart_rate <= rate.max(rate1) * 1.02,
+        "{rate} {rate1}: {text}"
+    );
+    assert!(
+        apart_s < 6.0 * alone_s + 1.0,
+        "{apart_s:.1} s apart, {alone_s:.1} s alone"
+    );
+}
+
 /// One NODE_STATUS page 0 health bit of a run (`bit` picks it), with each page's time.
 fn health_bits(
     out: &catmodel_host::closed_loop::RunOutput,

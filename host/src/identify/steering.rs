@@ -67,6 +67,14 @@ const COARSE_JOINT_S: f64 = 0.01;
 const JOINT_STEPS: [(f64, f64, usize); 3] =
     [(0.01, 0.005, 4), (0.005, 0.002, 4), (0.0025, 0.001, 8)];
 
+/// Reports (or commands) further apart than this many of their median intervals split the
+/// session into stretches, fitted apart (a recorder paused, logs of two sessions): the
+/// simulation runs within each stretch, from its first report, never across a gap, so the
+/// fit costs the data's time, not the span's ...
+pub const GAP_PERIODS: f64 = 10.0;
+/// ... and further apart than this, s.
+pub const MIN_GAP_S: f64 = 0.2;
+
 /// The session's steering: commands and reports, in time order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SteeringSeries {
@@ -115,6 +123,72 @@ impl SteeringSeries {
     }
 }
 
+impl SteeringSeries {
+    /// The two messages out of several logs' frames (`(name, frames)`), each log read apart:
+    /// logs whose reports (or commands) overlap in time are two sessions on clocks that
+    /// overlap (each recorded from 0), which would be merged into one: refused, naming them.
+    /// A log that repeats another's messages exactly (the same times and values: one
+    /// recording given twice, or a bus log beside the node's own log of its commands) is read
+    /// once.
+    pub fn from_logs(logs: &[(String, &[TimedFrame])]) -> Result<Self> {
+        let series: Vec<Self> = logs.iter().map(|(_, f)| Self::from_frames(f)).collect();
+        let times = |s: &Self, reports: bool| -> Vec<(f64, f64)> {
+            if reports {
+                s.reports.clone()
+            } else {
+                s.commands.iter().map(|c| (c.0, c.1)).collect()
+            }
+        };
+        for (reports, name) in [(true, "STEERING_REPORT"), (false, "CONTROL_COMMAND")] {
+            for i in 0..series.len() {
+                for j in i + 1..series.len() {
+                    let (a, b) = (times(&series[i], reports), times(&series[j], reports));
+                    let (Some(a0), Some(a1), Some(b0), Some(b1)) =
+                        (a.first(), a.last(), b.first(), b.last())
+                    else {
+                        continue;
+                    };
+                    let (from, to) = (a0.0.max(b0.0), a1.0.min(b1.0));
+                    if from > to {
+                        continue;
+                    }
+                    let within = |v: &[(f64, f64)]| -> Vec<(f64, f64)> {
+                        v.iter()
+                            .copied()
+                            .filter(|x| x.0 >= from && x.0 <= to)
+                            .collect()
+                    };
+                    let (wa, wb) = (within(&a), within(&b));
+                    if wa == wb {
+                        continue;
+                    }
+                    bail!(
+                        "{} and {} both hold {name}s from {from:.2} s to {to:.2} s ({} and {} \
+                         of them): two sessions whose times overlap (each recorded from 0?), \
+                         which would be fitted as one: give each session's logs to \
+                         identify-steering on its own",
+                        logs[i].0,
+                        logs[j].0,
+                        wa.len(),
+                        wb.len()
+                    );
+                }
+            }
+        }
+        let mut out = Self::default();
+        for s in series {
+            out.commands.extend(s.commands);
+            out.reports.extend(s.reports);
+            out.rejected += s.rejected;
+        }
+        out.commands.sort_by(|a, b| a.0.total_cmp(&b.0));
+        out.reports.sort_by(|a, b| a.0.total_cmp(&b.0));
+        out.commands.dedup();
+        out.reports.dedup();
+        Ok(out)
+    }
+}
+
 /// The actuator's rate limit, as the session shows it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RateLimit {
@@ -159,6 +233,13 @@ pub struct SteeringFit {
     pub commands: usize,
     /// Largest minus smallest command in the window, %.
     pub span_pct: f64,
+    /// Stretches the window was split into at gaps in the reports or commands
+    /// ([`GAP_PERIODS`], [`MIN_GAP_S`]), fitted apart; their reports' time, s.
+    pub stretches: usize,
+    pub fitted_s: f64,
+    /// The gaps between the stretches: how many, and the longest's start and end, s.
+    pub gaps: usize,
+    pub longest_gap: Option<(f64, f64)>,
 }
 
 impl SteeringFit {
@@ -210,9 +291,13 @@ pub fn fit(
         .copied()
         .filter(|r| r.0 >= from)
         .collect();
-    let (Some(first), Some(last)) = (window.first(), window.last()) else {
+    let (Some(_), Some(last)) = (window.first(), window.last()) else {
         bail!("no STEERING_REPORT after {from:.2} s");
     };
+    let split = stretches(&window, &series.commands);
+    if split.ranges.is_empty() {
+        bail!("no two STEERING_REPORTs after {from:.2} s without a gap between them in the reports or the commands");
+    }
     let in_window = series
         .commands
         .iter()
@@ -230,12 +315,15 @@ pub fn fit(
             last.0
         );
     }
-    let cost = |rate: f64, lag: f64, delay: f64| {
-        simulate_rms(&series.commands, &window, first.1, rate, lag, delay)
-    };
+    let parts: Vec<&[(f64, f64)]> = split.ranges.iter().map(|r| &window[r.clone()]).collect();
+    let cost =
+        |rate: f64, lag: f64, delay: f64| simulate_rms(&series.commands, &parts, rate, lag, delay);
     let lag_and_delay = |rate: f64| lag_and_delay_at(&cost, rate);
     // With no limit; and with a limit, the three fitted jointly.
-    let moved = fastest_movement(&window);
+    let moved = parts
+        .iter()
+        .map(|p| fastest_movement(p))
+        .fold(0.0f64, f64::max);
     let unlimited = lag_and_delay(f64::INFINITY);
     let (limit, at_limit) = if moved > 0.0 {
         rate_lag_and_delay(&cost, moved)
@@ -244,7 +332,7 @@ pub fn fit(
     };
     // The limit shows when it explains more of the reports' mean square error than a share of
     // their noise's: an error that is mostly noise does not tell a limit from none.
-    let noise = report_noise(&window);
+    let noise = report_noise(&parts);
     let explained = unlimited.0 * unlimited.0 - at_limit.0 * at_limit.0;
     let shown = limit.is_finite() && explained > RATE_SHOWN_SHARE * noise * noise;
     let (rate, best) = if shown {
@@ -272,10 +360,83 @@ pub fn fit(
         rms_without_pct: cost(fitted_with, 0.0, 0.0),
         from_s: from,
         to_s: last.0,
-        reports: window.len(),
+        reports: parts.iter().map(|p| p.len()).sum(),
         commands,
         span_pct,
+        stretches: parts.len(),
+        fitted_s: parts
+            .iter()
+            .map(|p| p.last().map_or(0.0, |l| l.0) - p.first().map_or(0.0, |f| f.0))
+            .sum(),
+        gaps: split.gaps,
+        longest_gap: split.longest_gap,
     })
+}
+
+/// The window's stretches: the reports between gaps ([`stretches`]).
+struct Split {
+    /// Each stretch's reports, as a range of the window's (two at least).
+    ranges: Vec<std::ops::Range<usize>>,
+    /// The gaps between stretches, and the longest's start and end, s.
+    gaps: usize,
+    longest_gap: Option<(f64, f64)>,
+}
+
+/// Splits the window's `reports` into stretches wherever two reports are further apart than
+/// [`GAP_PERIODS`] of their median interval and [`MIN_GAP_S`], or the commands are (the
+/// reports from the last command before such a gap to [`MAX_DELAY_S`] after the first one
+/// after it are left out: what the actuator was told there is not known).
+fn stretches(reports: &[(f64, f64)], commands: &[(f64, f64, ControlStatus)]) -> Split {
+    let limit = |t: &[f64]| (GAP_PERIODS * super::stats::median_interval(t)).max(MIN_GAP_S);
+    let report_gap = limit(&reports.iter().map(|r| r.0).collect::<Vec<_>>());
+    let command_times: Vec<f64> = commands.iter().map(|c| c.0).collect();
+    let command_gap = limit(&command_times);
+    let silent: Vec<(f64, f64)> = command_times
+        .windows(2)
+        .filter(|w| w[1] - w[0] > command_gap)
+        .map(|w| (w[0], w[1] + MAX_DELAY_S))
+        .collect();
+    let mut split = Split {
+        ranges: Vec::new(),
+        gaps: 0,
+        longest_gap: None,
+    };
+    let mut start: Option<usize> = None;
+    let mut last_end: Option<f64> = None;
+    let mut close = |split: &mut Split, start: &mut Option<usize>, end: usize| {
+        if let Some(s) = start.take() {
+            if end - s >= 2 {
+                let (t0, t1) = (reports[s].0, reports[end - 1].0);
+                if let Some(previous) = last_end {
+                    split.gaps += 1;
+                    if split.longest_gap.is_none_or(|(a, b)| t0 - previous > b - a) {
+                        split.longest_gap = Some((previous, t0));
+                    }
+                }
+                last_end = Some(t1);
+                split.ranges.push(s..end);
+            }
+        }
+    };
+    let mut k = 0;
+    for (i, r) in reports.iter().enumerate() {
+        while silent.get(k).is_some_and(|g| g.1 <= r.0) {
+            k += 1;
+        }
+        let quiet = silent.get(k).is_some_and(|g| g.0 < r.0);
+        if quiet {
+            close(&mut split, &mut start, i);
+            continue;
+        }
+        if i > 0 && r.0 - reports[i - 1].0 > report_gap {
+            close(&mut split, &mut start, i);
+        }
+        if start.is_none() {
+            start = Some(i);
+        }
+    }
+    close(&mut split, &mut start, reports.len());
+    split
 }
 
 /// `0, step, 2 step, ...` up to `max`.
@@ -384,9 +545,10 @@ fn fastest_movement(reports: &[(f64, f64)]) -> f64 {
 
 /// The reports' noise, %, from their second differences: the steering itself, a lagged and
 /// rate-limited movement, bends only at a ramp's corners, which the median leaves out.
-fn report_noise(reports: &[(f64, f64)]) -> f64 {
-    let mut d2: Vec<f64> = reports
-        .windows(3)
+fn report_noise(stretches: &[&[(f64, f64)]]) -> f64 {
+    let mut d2: Vec<f64> = stretches
+        .iter()
+        .flat_map(|s| s.windows(3))
         .filter_map(|w| match w {
             [a, b, c] => Some((a.1 - 2.0 * b.1 + c.1).abs()),
             _ => None,
@@ -398,23 +560,28 @@ fn report_noise(reports: &[(f64, f64)]) -> f64 {
     super::stats::noise_from_second_differences(&mut d2)
 }
 
-/// RMS error at `reports` of the actuator model started at `start_pct` at the first report:
-/// the built-in plant's actuator (`sim::controller::SteeringActuator`, the same rate-limited
-/// first-order lag) with this rate limit and lag, stepped every millisecond.
+/// RMS error at the reports of each stretch of the actuator model started at the stretch's
+/// first report: the built-in plant's actuator (`sim::controller::SteeringActuator`, the same
+/// rate-limited first-order lag) with this rate limit and lag, stepped every millisecond
+/// within each stretch.
 fn simulate_rms(
     commands: &[(f64, f64, ControlStatus)],
-    reports: &[(f64, f64)],
-    start_pct: f64,
+    stretches: &[&[(f64, f64)]],
     rate_pct_per_s: f64,
     lag_s: f64,
     delay_s: f64,
 ) -> f64 {
-    let positions = simulate(commands, reports, start_pct, rate_pct_per_s, lag_s, delay_s);
     let (mut sum, mut n) = (0.0, 0usize);
-    for (p, r) in positions.iter().zip(reports) {
-        let e = p - r.1;
-        sum += e * e;
-        n += 1;
+    for reports in stretches {
+        let Some(&(_, start_pct)) = reports.first() else {
+            continue;
+        };
+        let positions = simulate(commands, reports, start_pct, rate_pct_per_s, lag_s, delay_s);
+        for (p, r) in positions.iter().zip(reports.iter()) {
+            let e = p - r.1;
+            sum += e * e;
+            n += 1;
+        }
     }
     if n == 0 {
         return f64::INFINITY;
