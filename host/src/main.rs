@@ -392,16 +392,27 @@ fn main() -> ExitCode {
     }
 }
 
-/// A reader that stops early (`catmodel identify-steering ... | head -3`) closes the pipe:
-/// the tool then ends on SIGPIPE as any Unix tool does. Rust's runtime ignores the signal, so
-/// the next `println!` met the closed pipe and panicked ("failed printing to stdout").
+/// A reader that stops early (`catmodel identify-steering ... | head -3`) closes the pipe: the
+/// tool then ends quietly with status 0, as `decode` already did for its own output. Rust's
+/// runtime ignores SIGPIPE, so the next `println!` met the closed pipe and panicked ("failed
+/// printing to stdout: Broken pipe"), exit status 101; restoring SIGPIPE's default instead
+/// ended the tool with status 141, which fails a `set -o pipefail` script such as the
+/// README's blocks.
 fn quiet_on_a_closed_pipe() {
-    #[cfg(unix)]
-    // SAFETY: called first in `main`, before any thread starts; SIG_DFL is a valid disposition
-    // for SIGPIPE, and no handler of this program's is replaced.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
-    }
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        // EPIPE is 32 on Linux and the BSDs (macOS included).
+        if message.starts_with("failed printing to stdout") && message.contains("(os error 32)") {
+            std::process::exit(0);
+        }
+        default(info);
+    }));
 }
 
 /// Runs the subcommand the command line names.
