@@ -1474,9 +1474,12 @@ fn gnss_latency_notes(training: &[Experiment], validation: &[Experiment]) -> Vec
                 notes.push(if lag > 0.0 {
                     format!(
                         "{}: the GNSS fixes are {lag:.2} s +- {se:.2} late behind the wheel \
-                         speed {best_fit}: the lateral model's lag takes it in, and the node, fed \
-                         fixes as late, predicts from positions that old; log the fixes at their \
-                         time of validity, or use a receiver with less latency",
+                         speed {best_fit}: the yaw rate and dx/dt fitted from the track lag the \
+                         steering by as much, which the lateral and dx/dt models cannot follow \
+                         (their fits fall: a fit below the floor may be this, not another car), \
+                         and the node, fed fixes as late, predicts from positions that old; log \
+                         the fixes at their time of validity, or use a receiver with less \
+                         latency",
                         e.name
                     )
                 } else {
