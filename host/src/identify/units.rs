@@ -1014,8 +1014,13 @@ pub fn gnss_latency_named_above_s(gnss_rate_hz: f64) -> f64 {
     };
     GNSS_LATENCY_NOTE_S + GNSS_LATENCY_RESOLUTION_PERIODS * interval_s
 }
-/// Lags searched each way, s.
-const GNSS_LATENCY_SEARCH_S: f64 = 2.5;
+/// Lags searched each way, s; and, when the least residual lies at that search's edge, the
+/// wider search's (fixes stamped 1.2-1.5 s late by a receiver's clock behind the logger's: a
+/// black-box probe). The wider search alone takes fewer moving samples (every lag's
+/// neighbourhood must move), and read a 5 Hz receiver's fixes on time as the wheel speed
+/// 0.23 s late.
+const GNSS_LATENCY_SEARCH_S: f64 = 1.0;
+const GNSS_LATENCY_WIDE_SEARCH_S: f64 = 2.5;
 /// Moving samples needed for a latency estimate (20 s at 50 Hz).
 const GNSS_LATENCY_MIN_SAMPLES: usize = 1000;
 /// The residual's errors are counted as one independent error per this long, s (the
@@ -1026,7 +1031,8 @@ const GNSS_LATENCY_ERROR_S: f64 = 0.5;
 /// the wheel's), with its standard error: the lag `tau` that best fits the speed along the GNSS
 /// track (the filtered track's `hypot(dx, dy)`) with the wheel speed `tau` earlier times a
 /// scale (the antenna's lever arm on turns, a tyre's radius), by least squares over the
-/// samples where the car moves, searched to [`GNSS_LATENCY_SEARCH_S`] each way on the 20 ms
+/// samples where the car moves, searched to [`GNSS_LATENCY_SEARCH_S`] each way (then to
+/// [`GNSS_LATENCY_WIDE_SEARCH_S`] if the least residual is at the edge) on the 20 ms
 /// grid and refined between grid points by a parabola through the least residual. Both went
 /// through the same filter, so it adds no lag of its own. The standard error is the
 /// residual's over the wheel's acceleration, `sqrt(s^2 w / sum a^2)` with the errors
@@ -1035,8 +1041,14 @@ const GNSS_LATENCY_ERROR_S: f64 = 0.5;
 /// timestamped at their arrival, moved the lateral model's time constant from 0.04 to 0.14 s
 /// without a word).
 pub fn gnss_latency(e: &super::preprocess::Experiment) -> Option<(f64, f64)> {
+    gnss_latency_within(e, GNSS_LATENCY_SEARCH_S)
+        .or_else(|| gnss_latency_within(e, GNSS_LATENCY_WIDE_SEARCH_S))
+}
+
+/// [`gnss_latency`] searched to `search_s` each way.
+fn gnss_latency_within(e: &super::preprocess::Experiment, search_s: f64) -> Option<(f64, f64)> {
     let n = e.len().min(e.vel.len()).min(e.dx.len()).min(e.dy.len());
-    let max_lag = (GNSS_LATENCY_SEARCH_S / e.ts_s).round() as usize;
+    let max_lag = (search_s / e.ts_s).round() as usize;
     if n < 2 * max_lag + 3 {
         return None;
     }
