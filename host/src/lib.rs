@@ -430,6 +430,33 @@ impl EvaluationData {
             }
         }
         let e = self.scores.clone();
+        if e.ticks == 0 && !self.predictions.current.is_empty() {
+            // The node had positions; the truth had none to score them on: its samples are
+            // further apart than [`evaluate::TRUTH_GAP_S`] (a 1 Hz reference receiver), and
+            // nothing is scored within a gap.
+            let mut steps: Vec<f64> = self
+                .truth
+                .samples()
+                .windows(2)
+                .map(|w| w[1].t - w[0].t)
+                .collect();
+            steps.sort_by(f64::total_cmp);
+            if let Some(&median) = steps.get(steps.len() / 2) {
+                if median > evaluate::TRUTH_GAP_S {
+                    bail!(
+                        "{}: no prediction to score: the truth's samples are {median:.3} s apart \
+                         (median), more than the {} s across which a truth is interpolated, so \
+                         every prediction falls in a gap of it (the node had positions at {} \
+                         ticks): a truth sampled at {:.0} Hz or faster (the reference \
+                         receiver's rate)",
+                        truth_path.display(),
+                        evaluate::TRUTH_GAP_S,
+                        self.predictions.current.len(),
+                        (1.0 / evaluate::TRUTH_GAP_S).ceil()
+                    );
+                }
+            }
+        }
         if e.ticks == 0 {
             bail!(
                 "{}: no prediction to score: the node had no valid position at any tick \

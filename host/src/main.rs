@@ -506,6 +506,16 @@ fn csv2can(args: Csv2canArgs) -> Result<()> {
     if let Some(note) = encoded.note() {
         print_notes(&[format!("{}: {note}", log.display())]);
     }
+    // Sensors logged slower than the node's input timeouts: named as replay names them.
+    let mut intervals = replay::ReportIntervals::steering_and_speed(
+        &model_file::load(&model_file::paper_path())?.node_config(),
+    );
+    for f in &encoded.frames {
+        replay::ReportIntervals::observe_frame(&mut intervals, &f.frame, f.t_us);
+    }
+    if let Some(note) = replay::slow_log_reports_note(&intervals) {
+        print_notes(&[format!("{}: {note}", log.display())]);
+    }
     replay::write_file(&out, &csv2can::to_candump(&encoded.frames))?;
     eprintln!("wrote {} frames to {}", encoded.frames.len(), out.display());
     Ok(())
@@ -725,6 +735,10 @@ fn evaluate(args: EvaluateArgs) -> Result<()> {
         Ok(e) => e,
         Err(err) => {
             progress.finish();
+            // The gaps first: they may be why nothing could be scored.
+            if let Some(w) = gap_warning {
+                eprintln!("{w}");
+            }
             return Err(err);
         }
     };
@@ -936,11 +950,25 @@ fn check_fit_floor(
         }
     }
     if !violations.is_empty() && !force {
+        let undefined = violations
+            .iter()
+            .filter(|v| v.fit_percent.is_none())
+            .count();
+        let below = violations.len() - undefined;
+        let counted = match (below, undefined) {
+            (_, 0) => format!(
+                "{below} fit(s) below the {} % floor",
+                identify::floor::FIT_FLOOR_PERCENT
+            ),
+            (0, _) => format!("{undefined} fit(s) undefined"),
+            _ => format!(
+                "{below} fit(s) below the {} % floor and {undefined} undefined",
+                identify::floor::FIT_FLOOR_PERCENT
+            ),
+        };
         bail!(
-            "{} not written: {} fit(s) below the {} % floor (see the warnings above; --force writes it anyway, with the warning in the file)",
+            "{} not written: {counted} (see the warnings above; --force writes it anyway, with the warning in the file)",
             out.display(),
-            violations.len(),
-            identify::floor::FIT_FLOOR_PERCENT
         );
     }
     Ok(violations)
@@ -951,8 +979,18 @@ fn write_identified_model(out: &Path, model: &model_file::ModelFile) -> Result<(
     // Only a file every reader loads is written (the firmware build's too): a model
     // the reader refuses (an unstable pole, an absurd gain) is named, not saved.
     model_file::parse(&model_file::to_toml(model), out).map_err(|e| {
+        // A command in km/h or mph is refused by the speed model's gain: named as the unit.
+        let unit = model
+            .speed
+            .blocks
+            .iter()
+            .find(|b| b.input == "input_vel")
+            .and_then(|b| b.tf.dc_gain().ok())
+            .and_then(identify::units::command_unit_problem)
+            .map(|why| format!(": {why}"))
+            .unwrap_or_default();
         anyhow::anyhow!(
-            "{} not written: the identified model is refused: {}",
+            "{} not written: the identified model is refused: {}{unit}",
             out.display(),
             e.message
         )

@@ -939,6 +939,33 @@ impl ReportIntervals {
         }
     }
 
+    /// The steering's and the speed's reports, against `config`'s timeouts for them.
+    pub fn steering_and_speed(config: &NodeConfig) -> [Self; 2] {
+        use catmodel::can::freshness::Input;
+        [
+            Self::new(
+                "STEERING_REPORT",
+                "steer_timeout_s",
+                config.freshness.timeout_us(Input::Steer),
+            ),
+            Self::new(
+                "SPEED_REPORT",
+                "speed_timeout_s",
+                config.freshness.timeout_us(Input::Speed),
+            ),
+        ]
+    }
+
+    /// `frame`, stamped `t_us`, counted in [`Self::steering_and_speed`]'s pair if it is one of
+    /// their reports.
+    pub fn observe_frame(pair: &mut [Self; 2], frame: &CanFrame, t_us: u64) {
+        if frame.id == catmodel::can::spec::STEERING_REPORT.id {
+            pair[0].observe(t_us);
+        } else if frame.id == catmodel::can::spec::SPEED_REPORT.id {
+            pair[1].observe(t_us);
+        }
+    }
+
     /// A report stamped `t_us`.
     fn observe(&mut self, t_us: u64) {
         if let Some(last) = self.last_us {
@@ -977,8 +1004,43 @@ impl ReportIntervals {
 /// straight-on ticks as a steering 1.7 times the model file's). `None` while the median
 /// interval is within the timeout.
 pub fn slow_reports_note(stats: &ReplayStats) -> Option<String> {
-    let slow: Vec<String> = stats
-        .report_intervals
+    let slow = slow_reports(&stats.report_intervals);
+    (!slow.is_empty()).then(|| {
+        format!(
+            "the log's reports come further apart than the node's timeouts: {}. Between \
+             reports the node takes the input for stale (NODE_STATUS), steers straight on or \
+             runs the speed model, and its predictions and heading are as much off; {SLOW_FIX}",
+            slow.join("; ")
+        )
+    })
+}
+
+/// What to do about reports further apart than their timeouts ([`slow_reports_note`],
+/// [`slow_log_reports_note`]).
+const SLOW_FIX: &str = "a logger that samples the bus slower than its 50 Hz loses what the \
+     node needs: record every frame (candump -l)";
+
+/// What `csv2can` should say about the steering and speed reports it wrote from a log whose
+/// sensors were recorded further apart than the node's timeouts (`intervals`: the reports
+/// written, against the timeouts of the model file `replay` uses by default), worded as
+/// [`slow_reports_note`] (a black-box probe's 5 Hz log went through `csv2can` without a word).
+/// `None` while the median interval is within the timeout.
+pub fn slow_log_reports_note(intervals: &[ReportIntervals]) -> Option<String> {
+    let slow = slow_reports(intervals);
+    (!slow.is_empty()).then(|| {
+        format!(
+            "the log's `steer` and `vel` rows come further apart than the node's timeouts (the \
+             default model file's): {}. `replay` of this candump takes the input for stale \
+             between reports, steers straight on or runs the speed model, and its predictions \
+             and heading are as much off; {SLOW_FIX}",
+            slow.join("; ")
+        )
+    })
+}
+
+/// Each report of `intervals` whose median interval is longer than its timeout, in words.
+fn slow_reports(intervals: &[ReportIntervals]) -> Vec<String> {
+    intervals
         .iter()
         .filter_map(|r| {
             let (median, share) = r.median_and_stale_share()?;
@@ -994,17 +1056,7 @@ pub fn slow_reports_note(stats: &ReplayStats) -> Option<String> {
                 )
             })
         })
-        .collect();
-    (!slow.is_empty()).then(|| {
-        format!(
-            "the log's reports come further apart than the node's timeouts: {}. Between \
-             reports the node takes the input for stale (NODE_STATUS), steers straight on or \
-             runs the speed model, and its predictions and heading are as much off; a logger \
-             that samples the bus slower than its 50 Hz loses what the node needs: record \
-             every frame (candump -l)",
-            slow.join("; ")
-        )
-    })
+        .collect()
 }
 
 /// Measured speeds (SPEED_REPORT frames the node took: CRC and length right) above the model
@@ -1617,22 +1669,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         max_speed_mps: config.max_speed_mps,
         ..SpeedsOverMax::default()
     };
-    let mut report_intervals = [
-        ReportIntervals::new(
-            "STEERING_REPORT",
-            "steer_timeout_s",
-            config
-                .freshness
-                .timeout_us(catmodel::can::freshness::Input::Steer),
-        ),
-        ReportIntervals::new(
-            "SPEED_REPORT",
-            "speed_timeout_s",
-            config
-                .freshness
-                .timeout_us(catmodel::can::freshness::Input::Speed),
-        ),
-    ];
+    let mut report_intervals = ReportIntervals::steering_and_speed(&config);
     let mut node = crate::new_node(config);
     // The times of the receiver's position frames, for the rate the whole log shows.
     let mut fix_times_us: Vec<u64> = Vec::new();
@@ -1702,11 +1739,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 frames += rx.len() as u64;
                 for f in &rx {
                     speeds_over_max.observe(&f.frame, f.t_us);
-                    if f.frame.id == catmodel::can::spec::STEERING_REPORT.id {
-                        report_intervals[0].observe(f.t_us);
-                    } else if f.frame.id == catmodel::can::spec::SPEED_REPORT.id {
-                        report_intervals[1].observe(f.t_us);
-                    }
+                    ReportIntervals::observe_frame(&mut report_intervals, &f.frame, f.t_us);
                     match GnssPosition::decode(&f.frame, gnss_source) {
                         Ok(_) => fix_times_us.push(f.t_us),
                         Err(catmodel::can::codec::DecodeError::WrongSource { got }) => {

@@ -438,6 +438,69 @@ fn bad_input_is_reported_with_file_and_line() {
     assert!(err.contains("nope.log"), "{err}");
 }
 
+/// `evaluate` with a truth sampled at 1 Hz (a reference receiver at 1 Hz, a black-box probe)
+/// failed with "the node had no valid position at any tick ... a receiver slower than the
+/// model file's gnss_rate_hz", blaming the node; the truth's samples, 1 s apart, left every
+/// prediction in a gap. Now the gap warning comes first and the error names the truth's
+/// spacing; a 2 Hz truth is still scored.
+#[test]
+fn evaluate_names_a_truth_sampled_too_slowly_not_the_node() {
+    let dir = tmp_dir("slow-truth");
+    let pred = dir.join("pred.csv");
+    ok(&[
+        "replay",
+        s(&data("smoke.can.log")),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&pred),
+    ]);
+    let text = String::from_utf8(read(&data("smoke.truth.csv"))).unwrap();
+    let every = |n: usize, name: &str| {
+        let path = dir.join(name);
+        let rows: Vec<&str> = text
+            .lines()
+            .enumerate()
+            .filter(|(i, _)| *i == 0 || (i - 1) % n == 0)
+            .map(|(_, l)| l)
+            .collect();
+        std::fs::write(&path, rows.join("\n") + "\n").unwrap();
+        path
+    };
+    let (hz1, hz2) = (every(100, "truth-1hz.csv"), every(50, "truth-2hz.csv"));
+    let inputs = data("smoke.can.log");
+    let out = run(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&hz1),
+        "--inputs",
+        s(&inputs),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "refused");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let gap = err
+        .find("gap(s) longer than 0.5 s")
+        .unwrap_or_else(|| panic!("{err}"));
+    let error = err
+        .find("catmodel: error: ")
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(gap < error, "the gap warning first: {err}");
+    assert!(
+        err.contains("the truth's samples are 1.000 s apart"),
+        "{err}"
+    );
+    assert!(!err.contains("a receiver slower than"), "{err}");
+    ok(&[
+        "evaluate",
+        s(&pred),
+        "--truth",
+        s(&hz2),
+        "--inputs",
+        s(&inputs),
+    ]);
+}
+
 /// A log with no rows is not a drive: `csv2can` of a header alone and `replay` of an empty
 /// candump (or one of blank lines only) are errors naming the file, and write nothing (they
 /// used to write an empty candump, and replay 0 ticks, with exit status 0).
@@ -545,6 +608,79 @@ fn identify_refuses_a_wheel_speed_in_another_unit() {
     assert!(model.exists());
     let warning = ok(&["compare", s(&logs[0]), "--model", s(&model)]);
     assert!(warning.contains("looks like km/h"), "{warning}");
+}
+
+/// `identify` with the command `input_vel` in km/h and the wheel speed `vel` in m/s (a
+/// black-box probe): refused only as "DC gain 0.2769 is outside 0.5..2", without the unit the
+/// gain points to (1/3.6 = 0.278), as a wheel speed in km/h is named. Now the refusal names it
+/// and the fix, by the rule that names the wheel speed's.
+#[test]
+fn identify_names_a_command_in_km_h_by_the_speed_models_gain() {
+    let dir = tmp_dir("command-unit");
+    let logs: Vec<PathBuf> = ["straight-5", "straight-10"]
+        .iter()
+        .map(|scenario| simulated_log_with(&dir, scenario, "kmh", &["input_vel"], |v| v * 3.6))
+        .collect();
+    let model = dir.join("model.toml");
+    let mut args = vec!["identify"];
+    args.extend(logs.iter().map(|p| s(p)));
+    args.extend(["--out", s(&model)]);
+    let out = run(&args);
+    assert_eq!(out.status.code(), Some(1), "refused");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let err = stderr.lines().last().unwrap();
+    assert!(err.starts_with("catmodel: error: "), "{stderr}");
+    assert!(err.contains("DC gain 0.2"), "{err}");
+    assert!(
+        err.contains("`input_vel` looks like km/h") && err.contains("divide `input_vel` by 3.6"),
+        "{err}"
+    );
+    assert!(!model.exists(), "not written");
+}
+
+/// `identify --validate` with a log of the car parked (a black-box probe): the undefined speed
+/// fit was counted "below the 50 % floor" and blamed on "another car, another speed-loop
+/// setting, or a validation log with a fault". Now the validation log is named as not moving
+/// (no speed to score), and the refusal counts the fit as undefined.
+#[test]
+fn identify_says_a_parked_validation_log_does_not_move() {
+    let dir = tmp_dir("validate-parked");
+    for scenario in ["straight-5", "standstill"] {
+        ok(&[
+            "simulate-drive",
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--out",
+            s(&dir),
+        ]);
+    }
+    let model = dir.join("model.toml");
+    let out = run(&[
+        "identify",
+        s(&dir.join("straight-5.csv")),
+        "--validate",
+        s(&dir.join("standstill.csv")),
+        "--out",
+        s(&model),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "refused");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let speed = err
+        .lines()
+        .find(|l| l.contains("[speed] validation fit"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(
+        speed.contains("the validation log does not move") && speed.contains("no speed to score"),
+        "{speed}"
+    );
+    assert!(!err.contains("another speed-loop setting"), "{err}");
+    assert!(
+        err.contains("1 undefined") || err.contains("1 fit(s) undefined"),
+        "{err}"
+    );
+    assert!(!model.exists(), "not written");
 }
 
 /// A copy of the log `src` with `vel` and `input_vel` times `unit`, at `dst`.
@@ -1861,6 +1997,51 @@ fn a_negative_number_is_an_options_value() {
     // CONTROL_COMMAND to fit.
     let err = fails(&["identify-steering", s(&can), "--from", "-5"]);
     assert!(err.contains("no CONTROL_COMMAND"), "{err}");
+}
+
+/// `csv2can` of a log whose speed and steering were recorded at 5 Hz (slower than the node's
+/// 0.1 s input timeouts; a black-box probe) said nothing of their rate: only `replay` of its
+/// candump did. Now `csv2can` notes each sensor's median interval against its timeout, worded
+/// as `replay`'s; the log as recorded (50 Hz) gets no such note.
+#[test]
+fn csv2can_names_sensors_logged_slower_than_their_timeouts() {
+    let dir = tmp_dir("csv2can_slow");
+    let csv = std::fs::read_to_string(data("smoke.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
+    let mut out = format!("{header}\n");
+    let mut reports = 0;
+    for line in lines {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        if cells[1..6].iter().any(|c| !c.is_empty()) {
+            reports += 1;
+            if reports % 10 != 0 {
+                cells[1..6].fill("");
+            }
+        }
+        if cells[1..].iter().any(|c| !c.is_empty()) {
+            out.push_str(&cells.join(","));
+            out.push('\n');
+        }
+    }
+    let slow = dir.join("slow.csv");
+    std::fs::write(&slow, out).unwrap();
+    let stderr = ok(&["csv2can", s(&slow), "--out", s(&dir.join("slow.can.log"))]);
+    assert!(
+        stderr.contains("STEERING_REPORT every 0.200 s (median), longer than its 0.100 s timeout")
+            && stderr
+                .contains("SPEED_REPORT every 0.200 s (median), longer than its 0.100 s timeout")
+            && stderr.contains("come further apart than the node's timeouts"),
+        "{stderr}"
+    );
+    let stderr = ok(&[
+        "csv2can",
+        s(&data("smoke.csv")),
+        "--out",
+        s(&dir.join("as.can.log")),
+    ]);
+    assert!(!stderr.contains("further apart"), "{stderr}");
 }
 
 /// A log whose steering and speed were recorded at 5 Hz (a telemetry logger's rate, not the

@@ -2003,6 +2003,20 @@ pub fn save(path: &Path, file: &ModelFile) -> std::io::Result<()> {
 }
 
 /// f64 in TOML: Rust's shortest round-trip form, always with a decimal point or exponent.
+/// `samples` sample periods of `ts_s`, s, as a file should read it: rounded to the microsecond
+/// when that moves it by rounding error only (41 x 0.02 is 0.8200000000000001 in binary; the
+/// file reads `0.82`, which is the same number of samples), unrounded on a grid the microsecond
+/// does not divide (1/30 s). For the delays `catmodel identify` fits in whole samples.
+pub fn whole_samples_s(samples: usize, ts_s: f64) -> f64 {
+    let exact = samples as f64 * ts_s;
+    let rounded = (exact * 1e6).round() / 1e6;
+    if (rounded - exact).abs() <= 1e-12 * exact.abs().max(1.0) {
+        rounded
+    } else {
+        exact
+    }
+}
+
 fn num(v: f64) -> String {
     let s = format!("{v:?}");
     if s.contains('.') || s.contains('e') || s.contains("inf") || s.contains("NaN") {

@@ -248,8 +248,25 @@ fn suspect_cause(s: &Suspect) -> String {
     )
 }
 
+/// A validation set whose speed stays within this, m/s, does not move: a parked car, whose
+/// speed, track and turns are constant (noise at most), gives nothing to score a model on.
+const PARKED_MPS: f64 = 0.2;
+
 /// Why the validation fit is low while training's is not.
 fn validation_cause(model: Which, training: &[Experiment], validation: &[Experiment]) -> String {
+    let top = max_abs(validation, |e| &e.vel);
+    if top < PARKED_MPS {
+        let what = match model {
+            Which::Speed => "speed",
+            Which::DxDt => "motion",
+            Which::Lateral => "turn",
+        };
+        return format!(
+            "the validation log does not move (its speed stays within {top:.2} m/s, a parked \
+             car): there is no {what} to score the model on, which says nothing of the model; \
+             validate with a drive (speed steps, turns)"
+        );
+    }
     let leaves = |what: &str, unit: &str, f: fn(&Experiment) -> &[f64]| {
         let (v, t) = (max_abs(validation, f), max_abs(training, f));
         (v > t * (1.0 + RANGE_MARGIN)).then(|| {

@@ -108,8 +108,12 @@ fn regressors(
         full.extend_from_slice(den);
         let mut num = vec![0.0; spec.order];
         num.push(1.0);
-        let tf = TransferFunction::new(&num, &full, spec.delay_samples as f64 * ts_s)
-            .map_err(|e| anyhow!("{e:?}"))?;
+        let tf = TransferFunction::new(
+            &num,
+            &full,
+            crate::model_file::whole_samples_s(spec.delay_samples, ts_s),
+        )
+        .map_err(|e| anyhow!("{e:?}"))?;
         let dss = discretize(&tf, ts_s)?;
         let mut block_cols = vec![Vec::new(); spec.order + usize::from(spec.proper)];
         for d in data {
@@ -266,8 +270,12 @@ fn to_tfs(
         let mut full = vec![1.0];
         full.extend_from_slice(den);
         out.push(
-            TransferFunction::new(&num, &full, spec.delay_samples as f64 * ts_s)
-                .map_err(|e| anyhow!("{e:?}"))?,
+            TransferFunction::new(
+                &num,
+                &full,
+                crate::model_file::whole_samples_s(spec.delay_samples, ts_s),
+            )
+            .map_err(|e| anyhow!("{e:?}"))?,
         );
     }
     Ok(out)
@@ -426,5 +434,41 @@ pub fn continuous_den_from_discrete(den_z: &[f64], ts_s: f64) -> Option<Vec<f64>
             }
         }
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fitted delay of 41 samples of 0.02 s was written and printed as
+    /// `delay_s = 0.8200000000000001` (41 x 0.02 in binary). It reads 0.82 now, the same 41
+    /// samples; a grid the microsecond does not divide keeps its exact multiple.
+    #[test]
+    fn a_fitted_delay_reads_as_whole_samples_to_the_microsecond() {
+        let spec = BlockSpec {
+            order: 2,
+            proper: false,
+            delay_samples: 41,
+        };
+        let tfs = to_tfs(&[spec], &[vec![3.0, 2.0]], &[1.0, 0.5], 0.02).unwrap();
+        assert_eq!(format!("{:?}", tfs[0].delay_s()), "0.82");
+        assert_eq!(
+            catmodel::model::zoh::delay_samples(tfs[0].delay_s(), 0.02),
+            Ok(41)
+        );
+        for (k, ts) in [(7, 1.0 / 30.0), (44, 0.02), (3, 0.1), (1, 0.001)] {
+            let s = crate::model_file::whole_samples_s(k, ts);
+            assert_eq!(
+                catmodel::model::zoh::delay_samples(s, ts),
+                Ok(k),
+                "{k} x {ts}"
+            );
+            assert!((s - k as f64 * ts).abs() < 1e-12, "{k} x {ts}: {s}");
+        }
+        assert_eq!(
+            format!("{:?}", crate::model_file::whole_samples_s(3, 0.1)),
+            "0.3"
+        );
     }
 }

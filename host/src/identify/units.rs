@@ -162,17 +162,25 @@ pub struct SpeedScale {
 /// off), narrow enough that km/h (3.06..4.14) and mph (1.90..2.57) do not meet.
 const NAMED_UNIT_TOLERANCE: f64 = 0.15;
 
+/// The speed unit a ratio of a speed to the same speed in m/s names, with its factor: km/h
+/// (3.6) or mph (2.237), within [`NAMED_UNIT_TOLERANCE`]; `None` for any other ratio. The one
+/// rule for `vel` (its distance over the GNSS track's) and `input_vel` (the command over the
+/// speed it settles to, [`command_unit_problem`]).
+/// The factor comes with its label as printed (`3.6`, `2.237`).
+fn named_speed_unit(ratio: f64) -> Option<(&'static str, f64, &'static str)> {
+    [("km/h", 3.6, "3.6"), ("mph", 2.236_936, "2.237")]
+        .into_iter()
+        .find(|&(_, factor, _)| (ratio / factor - 1.0).abs() < NAMED_UNIT_TOLERANCE)
+}
+
 /// What a ratio of wheel to track distance most likely means, if it is not m/s.
 fn likely_cause(ratio: f64) -> String {
     let near = |x: f64| (ratio / x - 1.0).abs() < NAMED_UNIT_TOLERANCE;
-    if near(3.6) {
-        "`vel` looks like km/h (3.6 times m/s): the log schema's speeds are m/s; divide `vel` \
-         and `input_vel` by 3.6"
-            .into()
-    } else if near(2.236_936) {
-        "`vel` looks like mph (2.237 times m/s): the log schema's speeds are m/s; divide `vel` \
-         and `input_vel` by 2.237"
-            .into()
+    if let Some((unit, _, factor)) = named_speed_unit(ratio) {
+        format!(
+            "`vel` looks like {unit} ({factor} times m/s): the log schema's speeds are m/s; \
+             divide `vel` and `input_vel` by {factor}"
+        )
     } else if near(180.0 / std::f64::consts::PI) {
         "`lat` and `lon` look like radians (the track is 57.3 times too short): the schema's \
          are degrees"
@@ -186,6 +194,26 @@ fn likely_cause(ratio: f64) -> String {
          `lat`/`lon` (degrees), and that they come from one car"
             .into()
     }
+}
+
+/// Why the speed model's steady-state gain `dc_gain` (m/s of speed per unit of `input_vel`)
+/// says the command `input_vel` is not in m/s, if it does: outside
+/// [`crate::model_file::SPEED_DC_GAIN_RANGE`] and its inverse naming a unit by
+/// [`named_speed_unit`] (km/h settles at 1/3.6 = 0.278, mph at 0.447). The wheel speed `vel`
+/// is judged by the GNSS track before ([`SpeedScale::problem`]); the command has only the
+/// speed it settles to.
+pub fn command_unit_problem(dc_gain: f64) -> Option<String> {
+    let (lo, hi) = crate::model_file::SPEED_DC_GAIN_RANGE;
+    if !dc_gain.is_finite() || dc_gain <= 0.0 || (lo..=hi).contains(&dc_gain) {
+        return None;
+    }
+    let (unit, value, factor) = named_speed_unit(1.0 / dc_gain)?;
+    Some(format!(
+        "the speed settles at {dc_gain:.3} times the command `input_vel` (1/{factor} = {:.3} \
+         if `input_vel` is in {unit} and `vel` in m/s): `input_vel` looks like {unit}; the log \
+         schema's speeds are m/s; divide `input_vel` by {factor}",
+        1.0 / value
+    ))
 }
 
 impl SpeedScale {
@@ -1102,6 +1130,25 @@ fn gnss_latency_within(e: &super::preprocess::Experiment, search_s: f64) -> Opti
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The speed model's gain names a command in km/h (1/3.6) or mph (1/2.237) by the rule that
+    /// names a wheel speed's unit; a gain in range or near no unit names none.
+    #[test]
+    fn a_command_in_another_unit_is_named_by_the_speed_models_gain() {
+        let kmh = command_unit_problem(0.2769).expect("km/h");
+        assert!(
+            kmh.contains("looks like km/h") && kmh.contains("by 3.6"),
+            "{kmh}"
+        );
+        let mph = command_unit_problem(0.447).expect("mph");
+        assert!(
+            mph.contains("looks like mph") && mph.contains("by 2.237"),
+            "{mph}"
+        );
+        for gain in [1.0, 0.6, 0.1, 3.6, f64::NAN] {
+            assert_eq!(command_unit_problem(gain), None, "{gain}");
+        }
+    }
 
     /// A drive at `v` m/s due east for 60 s, wheel speed at 50 Hz scaled by `unit`, fixes at
     /// `rate_hz` with an alternating +-0.4 m error.
