@@ -52,10 +52,8 @@ fn steps(segments: &[(f64, f64)]) -> Vec<f64> {
         .collect()
 }
 
-/// Noise-free data simulated from eq 5: identify recovers every coefficient within 1 % and
-/// the delay exactly (21 samples = 0.42 s).
-#[test]
-fn recovers_the_published_speed_model() {
+/// Three logs of speed steps, their speed simulated noise-free from the published eq 5.
+fn eq5_training() -> Vec<Experiment> {
     let commands = [
         steps(&[(2.0, 0.0), (30.0, 2.5), (20.0, 5.0), (8.0, 0.0)]),
         steps(&[(2.0, 0.0), (25.0, 7.5), (15.0, 3.0), (18.0, 6.0)]),
@@ -67,14 +65,21 @@ fn recovers_the_published_speed_model() {
             (28.0, 0.0),
         ]),
     ];
-    let training: Vec<Experiment> = commands
+    commands
         .iter()
         .enumerate()
         .map(|(i, u)| {
             let y = simulate::simulate(&paper::EQ5_INTERNAL_CONTROLLER, 0.02, u).unwrap();
             experiment(&format!("eq5-{i}"), u.clone(), y)
         })
-        .collect();
+        .collect()
+}
+
+/// Noise-free data simulated from eq 5: identify recovers every coefficient within 1 % and
+/// the delay exactly (21 samples = 0.42 s).
+#[test]
+fn recovers_the_published_speed_model() {
+    let training = eq5_training();
     let id = identify::identify_speed(&training, &[], &IdentifyOptions::default()).unwrap();
     let tf = id.tf;
     assert_eq!(tf.delay_s(), paper::EQ5_DELAY_S, "delay");
@@ -102,25 +107,7 @@ fn recovers_the_published_speed_model() {
 #[test]
 fn a_command_the_car_did_not_follow_is_left_out_of_the_speed_fit() {
     use catmodel_host::identify::preprocess::command_not_followed;
-    let commands = [
-        steps(&[(2.0, 0.0), (30.0, 2.5), (20.0, 5.0), (8.0, 0.0)]),
-        steps(&[(2.0, 0.0), (25.0, 7.5), (15.0, 3.0), (18.0, 6.0)]),
-        steps(&[
-            (2.0, 0.0),
-            (10.0, 10.0),
-            (10.0, 4.0),
-            (10.0, 8.0),
-            (28.0, 0.0),
-        ]),
-    ];
-    let mut training: Vec<Experiment> = commands
-        .iter()
-        .enumerate()
-        .map(|(i, u)| {
-            let y = simulate::simulate(&paper::EQ5_INTERNAL_CONTROLLER, 0.02, u).unwrap();
-            experiment(&format!("eq5-{i}"), u.clone(), y)
-        })
-        .collect();
+    let mut training = eq5_training();
     for e in &training {
         let (_, found) = command_not_followed(&e.t, &e.vel, &e.input_vel);
         assert!(found.is_empty(), "{}: {found:?}", e.name);

@@ -2007,24 +2007,7 @@ fn a_negative_number_is_an_options_value() {
 fn csv2can_names_sensors_logged_slower_than_their_timeouts() {
     let dir = tmp_dir("csv2can_slow");
     let csv = std::fs::read_to_string(data("smoke.csv")).unwrap();
-    let mut lines = csv.lines();
-    let header = lines.next().unwrap();
-    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
-    let mut out = format!("{header}\n");
-    let mut reports = 0;
-    for line in lines {
-        let mut cells: Vec<&str> = line.split(',').collect();
-        if cells[1..6].iter().any(|c| !c.is_empty()) {
-            reports += 1;
-            if reports % 10 != 0 {
-                cells[1..6].fill("");
-            }
-        }
-        if cells[1..].iter().any(|c| !c.is_empty()) {
-            out.push_str(&cells.join(","));
-            out.push('\n');
-        }
-    }
+    let out = every_tenth_report(&csv);
     let slow = dir.join("slow.csv");
     std::fs::write(&slow, out).unwrap();
     let stderr = ok(&["csv2can", s(&slow), "--out", s(&dir.join("slow.can.log"))]);
@@ -2064,25 +2047,7 @@ fn reports_slower_than_their_timeouts_are_named_not_taken_for_a_steering_gain() 
         d,
     ]);
     let csv = std::fs::read_to_string(dir.join("validation.csv")).unwrap();
-    let mut lines = csv.lines();
-    let header = lines.next().unwrap();
-    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
-    // Every 10th report of the five bus sensors kept; the fixes as they are.
-    let mut out = format!("{header}\n");
-    let mut reports = 0;
-    for line in lines {
-        let mut cells: Vec<&str> = line.split(',').collect();
-        if cells[1..6].iter().any(|c| !c.is_empty()) {
-            reports += 1;
-            if reports % 10 != 0 {
-                cells[1..6].fill("");
-            }
-        }
-        if cells[1..].iter().any(|c| !c.is_empty()) {
-            out.push_str(&cells.join(","));
-            out.push('\n');
-        }
-    }
+    let out = every_tenth_report(&csv);
     let slow = dir.join("slow.csv");
     std::fs::write(&slow, out).unwrap();
     let log = dir.join("slow.can.log");
@@ -2123,4 +2088,28 @@ fn reports_slower_than_their_timeouts_are_named_not_taken_for_a_steering_gain() 
             && !stderr.contains("times the yaw rate"),
         "{stderr}"
     );
+}
+
+/// A log CSV (the simulator's schema) with every 10th report of the five bus sensors kept and
+/// the fixes as they are: the bus sampled at 5 Hz by a telemetry logger.
+fn every_tenth_report(csv: &str) -> String {
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
+    let mut out = format!("{header}\n");
+    let mut reports = 0;
+    for line in lines {
+        let mut cells: Vec<&str> = line.split(',').collect();
+        if cells[1..6].iter().any(|c| !c.is_empty()) {
+            reports += 1;
+            if reports % 10 != 0 {
+                cells[1..6].fill("");
+            }
+        }
+        if cells[1..].iter().any(|c| !c.is_empty()) {
+            out.push_str(&cells.join(","));
+            out.push('\n');
+        }
+    }
+    out
 }
