@@ -6,7 +6,7 @@ use catmodel::can::codec::{
     PlannerMessage,
 };
 use catmodel::control::path::{
-    Narrowest, Path, PathCar, PathError, Projection, Waypoint, CORRIDOR_TOLERANCE_M,
+    LateralLimit, Narrowest, Path, PathCar, PathError, Projection, Waypoint, CORRIDOR_TOLERANCE_M,
     MAX_PATH_POINTS, MIN_PLANNED_SPACING_M, MIN_SEGMENT_M, NARROWEST_TIE_M,
 };
 use catmodel::control::planner::{
@@ -224,6 +224,121 @@ fn the_target_speed_meets_every_later_target_and_the_end_at_the_paths_braking() 
     assert_eq!(p.braking_mps2(), 1.5);
     p.load(&stepped(10.0, 10.0, 0)).expect("valid path");
     close(speed(&p, 90.0), 10.0f64.min((3.0f64 * 10.0).sqrt()));
+}
+
+/// 50 m north, a half circle of radius `r` to the right, 50 m south: a point every metre, the
+/// corridor 1.5 m each side, every target 30 m/s. Returns the points and the arc's stations.
+fn hairpin(r: f64) -> (Vec<Waypoint>, (f64, f64)) {
+    let mut points = Vec::new();
+    let mut push = |e: f64, n: f64| {
+        points.push(Waypoint {
+            speed_mps: 30.0,
+            left_m: 1.5,
+            right_m: 1.5,
+            ..wp(e, n)
+        })
+    };
+    for i in 0..50 {
+        push(0.0, f64::from(i));
+    }
+    let arc = PI * r;
+    let steps = arc.round() as usize;
+    for i in 0..steps {
+        let a = PI * i as f64 / steps as f64;
+        push(r - r * a.cos(), 50.0 + r * a.sin());
+    }
+    for i in 0..=50 {
+        push(2.0 * r, 50.0 - f64::from(i));
+    }
+    (points, (50.0, 50.0 + arc))
+}
+
+#[test]
+fn a_turn_is_held_to_the_lateral_limit_cut_through_its_corridor() {
+    // Hand-derived bounds: every window's turn phi over L metres is driven on a radius of
+    // L / phi + w / (1 - cos(phi / 2)) (the racing line through it, w the corridor's room),
+    // which for a window of a circle's arc is at least R + w (half a turn or more), and every
+    // point of the half circle (62.8 m) is an end of a window of 32 m that holds a quarter turn
+    // of it or more: 32 / (pi / 2) + w / (1 - cos(pi / 4)) at most. Between points the
+    // envelope allows the braking from the next point's limit (3 m/s^2 over at most a metre).
+    // So the speed on the arc lies between sqrt(a (R + w)) and that radius's speed.
+    let (r, a, width) = (20.0f64, 6.0f64, 1.8f64);
+    let w = 3.0 - width;
+    let (points, (arc_start, arc_end)) = hairpin(r);
+    let mut p = path_of(&points);
+    let speed = |p: &Path, s: f64| f64::from(p.sample(s as f32, 0).unwrap().speed_mps);
+    let unlimited: Vec<f64> = (0..300).map(|k| speed(&p, f64::from(k))).collect();
+    assert!(p.set_lateral_limit(Some(LateralLimit {
+        accel_mps2: a as f32,
+        width_m: width as f32,
+    })));
+    let low = (a * (r + w)).sqrt();
+    let high = (a * (32.0 / (PI / 2.0) + w / (1.0 - (PI / 4.0).cos())) + 6.0).sqrt();
+    let mut s = arc_start;
+    while s <= arc_end {
+        let v = speed(&p, s);
+        assert!(
+            v >= low * 0.999 && v <= high * 1.001,
+            "{s} m: {v} m/s, not within {low}..{high}"
+        );
+        s += 0.25;
+    }
+    // Before the arc the car brakes for it at the path's 3 m/s^2, and 30 m past it is as
+    // without the limit (the stop at the path's end).
+    let before = speed(&p, arc_start - 20.0);
+    assert!(before <= (high * high + 6.0 * 20.0).sqrt(), "{before}");
+    let past = (arc_end + 30.0).round();
+    assert_eq!(speed(&p, past), unlimited[past as usize]);
+    // Refused: a limit or width that is not finite and positive (the limit stays); lifted:
+    // the envelope as before, to the bit.
+    for (accel, width) in [(f32::NAN, 1.8), (0.0, 1.8), (-1.0, 1.8), (6.0, 0.0)] {
+        assert!(!p.set_lateral_limit(Some(LateralLimit {
+            accel_mps2: accel,
+            width_m: width
+        })));
+    }
+    assert!(speed(&p, arc_start + 30.0) <= high * 1.001);
+    assert!(p.set_lateral_limit(None));
+    let lifted: Vec<f64> = (0..300).map(|k| speed(&p, f64::from(k))).collect();
+    assert_eq!(lifted, unlimited);
+}
+
+#[test]
+fn a_straight_path_or_a_turn_within_the_limit_is_not_slowed() {
+    // No turn: the targets as they were, to the bit. A wide arc (R = 200 m) at 25 m/s asks
+    // 3.1 m/s^2, under a limit of 6.
+    let limit = Some(LateralLimit {
+        accel_mps2: 6.0,
+        width_m: 1.8,
+    });
+    let straight_path = stepped(20.0, 5.0, 60);
+    let mut p = path_of(&straight_path);
+    let before: Vec<f32> = (0..101)
+        .map(|k| p.sample(k as f32, 0).unwrap().speed_mps)
+        .collect();
+    assert!(p.set_lateral_limit(limit));
+    let after: Vec<f32> = (0..101)
+        .map(|k| p.sample(k as f32, 0).unwrap().speed_mps)
+        .collect();
+    assert_eq!(before, after);
+    let wide: Vec<Waypoint> = (0..200)
+        .map(|i| {
+            let a = f64::from(i) * 0.5 / 200.0;
+            Waypoint {
+                speed_mps: 25.0,
+                ..wp(200.0 - 200.0 * a.cos(), 200.0 * a.sin())
+            }
+        })
+        .collect();
+    let mut p = path_of(&wide);
+    let speeds = |p: &Path| -> Vec<f32> {
+        (0..100)
+            .map(|k| p.sample(k as f32, 0).unwrap().speed_mps)
+            .collect()
+    };
+    let before = speeds(&p);
+    assert!(p.set_lateral_limit(limit));
+    assert_eq!(speeds(&p), before);
 }
 
 #[test]

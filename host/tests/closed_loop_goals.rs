@@ -870,3 +870,55 @@ fn random_plants() {
         println!("{line}");
     }
 }
+
+/// A planner that asks for more than the tyres give: the loop's 20 m arcs at 14 and 20 m/s ask
+/// 9.8 and 20 m/s^2, past the CAT Vehicle's grip (friction 0.9). With the lateral limit its
+/// model file declares (`[control] max_lateral_accel_mps2 = 5.9`) the speed envelope slows the
+/// car for the arcs and it keeps its corridor (measured: 0.16-0.19 m of lateral RMS, 0.41 m at
+/// most, completed); without it, the car spins off the first arc (5.5 m of lateral RMS, 10 m out
+/// of its corridor, not completed). docs/controller.md, "A turn faster than the tyres".
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (see the module doc)")]
+fn a_loop_faster_than_the_tyres_is_slowed_to_their_limit() {
+    let (vehicle, node) = load_setup(None, None).unwrap();
+    assert_eq!(node.max_lateral_accel_mps2, Some(5.9));
+    for speed in [14.0, 20.0] {
+        let m = drive_with(
+            &vehicle,
+            &node,
+            Controller::Mpc,
+            Receiver::Rtk,
+            Kind::Loop,
+            speed,
+            0,
+        )
+        .metrics;
+        let (rms, exit) = (m.lateral_rms_m.unwrap(), m.corridor_exit_m.unwrap_or(0.0));
+        assert!(
+            m.completed && rms <= 0.25 && exit <= 0.0,
+            "{speed} m/s: completed {}, lateral RMS {rms} m, out of the corridor by {exit} m",
+            m.completed
+        );
+    }
+    // The same car without the limit: the test can tell.
+    let unlimited = NodeConfig {
+        max_lateral_accel_mps2: None,
+        ..node
+    };
+    let m = drive_with(
+        &vehicle,
+        &unlimited,
+        Controller::Mpc,
+        Receiver::Rtk,
+        Kind::Loop,
+        14.0,
+        0,
+    )
+    .metrics;
+    assert!(
+        !m.completed || m.corridor_exit_m.unwrap_or(0.0) > 1.0,
+        "without the limit at 14 m/s: completed {}, out of the corridor by {:?} m",
+        m.completed,
+        m.corridor_exit_m
+    );
+}

@@ -31,7 +31,7 @@
 //! - `[inputs]`: `steer_timeout_s`, `speed_timeout_s`, `pedal_timeout_s`,
 //!   `gnss_source_address`, `gnss_gate_m`, `gnss_lost_s`;
 //! - `[control]`: `controller` (`"mpc"` or `"pure-pursuit"`), `position_uncertainty_m`,
-//!   `mpc_lateral_weight_per_m2` (optional);
+//!   `mpc_lateral_weight_per_m2` (optional), `max_lateral_accel_mps2` (optional);
 //! - `[hybrid]`: `enter_dynamic_speed_mps`, `enter_dynamic_lat_accel_mps2`,
 //!   `exit_dynamic_speed_mps`, `exit_dynamic_lat_accel_mps2`, `min_dwell_ticks`;
 //! - `[speed]` (eq 5: `input_vel` -> `vel`) and `[dx_dt]` (eq 7: `v_m`, `x`, `y`, `phi` ->
@@ -399,6 +399,11 @@ pub struct ControlSection {
     /// for most of the car's lock: `MpcTuning::line_rule`, docs/controller.md).
     #[serde(default)]
     pub mpc_lateral_weight_per_m2: Option<f64>,
+    /// The car's lateral acceleration at most, m/s^2 (absent: no limit): the controllers slow
+    /// for a path's turns that would ask more (docs/controller.md, "A turn faster than the
+    /// tyres").
+    #[serde(default)]
+    pub max_lateral_accel_mps2: Option<f64>,
 }
 
 /// The controller's name in the file.
@@ -599,7 +604,7 @@ const HYBRID_ACCEL_WHY: &str =
 /// ([`CORNERING_STIFFNESS_PER_LOAD_PER_RAD`]) and below the critical speed
 /// ([`critical_speed_mps`]), `gnss_lost_s` beyond the GNSS timeout, the lock with
 /// `lateral.steer_gain` ([`MAX_LOCK_DEG`]).
-pub const KEY_RANGES: [KeyRange; 24] = [
+pub const KEY_RANGES: [KeyRange; 25] = [
     KeyRange {
         key: "vehicle.wheelbase_m",
         unit: "m",
@@ -730,6 +735,14 @@ pub const KEY_RANGES: [KeyRange; 24] = [
         min: 0.0,
         max: 20.0,
         why: "RTK's centimetres to a single-point receiver's few metres; no receiver a car drives by is worse",
+    },
+    KeyRange {
+        key: "control.max_lateral_accel_mps2",
+        unit: "m/s^2",
+        min: 1.0,
+        max: 15.0,
+        why: "a car's tyres give about their friction coefficient times g: 0.1 g on ice to 1.5 g on \
+              racing tyres",
     },
     KeyRange {
         key: "control.mpc_lateral_weight_per_m2",
@@ -1398,6 +1411,9 @@ fn control_check(c: &ControlSection) -> Result<(), String> {
     if let Some(w) = c.mpc_lateral_weight_per_m2 {
         range("control.mpc_lateral_weight_per_m2", w)?;
     }
+    if let Some(a) = c.max_lateral_accel_mps2 {
+        range("control.max_lateral_accel_mps2", a)?;
+    }
     Ok(())
 }
 
@@ -1605,6 +1621,7 @@ impl ModelFile {
             },
             position_uncertainty_m: self.control.position_uncertainty_m as f32,
             mpc_lateral_weight_per_m2: self.control.mpc_lateral_weight_per_m2.map(|w| w as f32),
+            max_lateral_accel_mps2: self.control.max_lateral_accel_mps2.map(|a| a as f32),
         })
         .and_then(|config| {
             // The controller must be buildable for this car, or the node could not drive it.
@@ -2250,6 +2267,13 @@ fn write_control(out: &mut String, c: &ControlSection) {
             out,
             "mpc_lateral_weight_per_m2 = {}  # the MPC's weight on the offset from the planner's line (built-in: 10)",
             num(w)
+        );
+    }
+    if let Some(a) = c.max_lateral_accel_mps2 {
+        let _ = writeln!(
+            out,
+            "max_lateral_accel_mps2 = {}  # the car's lateral acceleration at most: the controllers slow for turns that ask more",
+            num(a)
         );
     }
 }

@@ -184,6 +184,14 @@ BAD = {
         lambda t: replace(t, "position_uncertainty_m = 2.0", "position_uncertainty_m = 2.0\nmpc_lateral_weight_per_m2 = nan"),
         "control.mpc_lateral_weight_per_m2 = NaN: must be within 0.1..100",
     ),
+    "lateral-accel-in-g": (
+        lambda t: replace(t, "max_lateral_accel_mps2 = 5.9", "max_lateral_accel_mps2 = 0.6"),
+        "control.max_lateral_accel_mps2 = 0.6: must be within 1..15 m/s^2",
+    ),
+    "lateral-accel-nan": (
+        lambda t: replace(t, "max_lateral_accel_mps2 = 5.9", "max_lateral_accel_mps2 = nan"),
+        "control.max_lateral_accel_mps2 = NaN: must be within 1..15 m/s^2",
+    ),
     "steer-lag-negative": (
         lambda t: replace(t, "\n\n[dynamics]", "\nsteer_lag_s = -0.05\n\n[dynamics]"),
         "vehicle.steer_lag_s = -0.05: must be within 0..0.25 s",

@@ -37,6 +37,21 @@
 //! cancellation of kilometres of station enters it); between points `sqrt(R_{i+1} + 2 a
 //! (s_{i+1} - s))`.
 //!
+//! A car's tyres give it a lateral acceleration of at most about its friction coefficient times
+//! g, and a planner's speeds may ask for more: the loop's 20 m arcs at 14 m/s ask 9.8 m/s^2,
+//! past the CAT Vehicle's grip, and every car of the closed-loop rig spun off them
+//! (docs/controller.md, "A turn faster than the tyres"). With a lateral limit `a`
+//! ([`Path::set_lateral_limit`], the model file's `[control] max_lateral_accel_mps2`), each
+//! point's own limit is also the speed at which its turns ask no more than `a`: over each
+//! window of [`TURN_WINDOWS_M`] ahead of the point and behind it, the path turns by `phi`
+//! over `L` metres, and a car that cuts that turn from the corridor's outer edge to its inner
+//! and out again (the room `w` is the corridor's width less the body's, the least of the
+//! window's ends and the point) drives it on a radius of `L / phi + w / (1 - cos(phi / 2))`
+//! (the racing line's through a corner of constant radius); the limit is `a` times that
+//! radius. The windows measure a sustained turn, not the path's line: the lane change's
+//! quintic transitions swing the heading back within metres, and the corridor lets the car
+//! cut them (at 16 m/s there they ask less than the CAT Vehicle's limit).
+//!
 //! Never allocates, never panics; every loop runs at most [`MAX_PATH_POINTS`] times.
 use core::ptr::addr_of_mut;
 
@@ -87,6 +102,47 @@ const VERTEX_TIE: f32 = 2e-3;
 /// The braking deceleration of a path's speed envelope until a controller sets its own
 /// ([`Path::set_braking`]), m/s^2: the model-predictive controller's (`SpeedTuning::decel_mps2`).
 pub const DEFAULT_BRAKING_MPS2: f32 = 3.0;
+
+/// Lengths of path over which [`Path::set_lateral_limit`]'s envelope measures a turn, m, ahead
+/// of each point and behind it: a turn is cut through the corridor over its own length, which
+/// one of these spans within a factor of two (from a bend of a few metres to a long arc).
+pub const TURN_WINDOWS_M: [f32; 6] = [4.0, 8.0, 16.0, 32.0, 64.0, 128.0];
+
+/// The speed squared at which a car drives a turn of `turn_rad` (either sign) over `length_m`
+/// of path at the lateral acceleration `accel_mps2`, cut from the corridor's outer edge to its
+/// inner and out again with the room `room_m` (none if negative): `accel` times
+/// `length / turn + room / (1 - cos(turn / 2))`, the cut growing no further past half a turn
+/// ([`Path::set_lateral_limit`]); infinite for no turn or no length. `1 - cos(x)` by its series
+/// to `x^8` (on `[0, pi/2]` within 3e-5 of it, relative): + - * / only.
+fn cut_turn_m2ps2(accel_mps2: f32, turn_rad: f32, length_m: f32, room_m: f32) -> f32 {
+    let turn = if turn_rad < 0.0 { -turn_rad } else { turn_rad };
+    let x = math::min(turn, core::f32::consts::PI) * 0.5;
+    let x2 = x * x;
+    let g = x2 * (0.5 - x2 * (1.0 / 24.0 - x2 * (1.0 / 720.0 - x2 * (1.0 / 40320.0))));
+    if !(g > 0.0 && length_m > 0.0) {
+        // No turn (or one too small for f32 to square), or no length.
+        return f32::INFINITY;
+    }
+    accel_mps2 * (length_m / turn + math::max(room_m, 0.0) / g)
+}
+
+/// A path of at most this many points is not held to [`Path::set_lateral_limit`]'s limit: its
+/// completion shares a tick with a solve (`catmodel::node::stage::SHORT_PATH_POINTS`, which is
+/// not more than this), and the windows' cost there measured up to 7 600 instructions a path
+/// on a random model file's drives, three paths to a tick. Its targets and the stop at its end
+/// still hold (a planner describes a turn with more points than five).
+pub const TURN_FEW_POINTS: usize = 5;
+
+/// The lateral acceleration a path's speed envelope holds its turns to
+/// ([`Path::set_lateral_limit`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LateralLimit {
+    /// The car's lateral acceleration at most, m/s^2.
+    pub accel_mps2: f32,
+    /// The body's width, m: the corridor's room to cut a turn is its width less this.
+    pub width_m: f32,
+}
 
 /// One point of a path as the planner sends it: PATH_POINT and PATH_LIMITS of one index.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -384,6 +440,9 @@ pub struct Path {
     max_curvature_per_m: f32,
     /// Deceleration of the speed envelope, m/s^2 ([`Path::set_braking`]).
     braking_mps2: f32,
+    /// The lateral acceleration the speed envelope holds the path's turns to, m/s^2, and the
+    /// body's width, m ([`Path::set_lateral_limit`]); `None`: no such limit.
+    lateral_limit: Option<LateralLimit>,
     /// The speed envelope at point `i`: the most speed squared that still meets every later
     /// point's target and stops at the end at `braking_mps2`, m^2/s^2 (see the module doc).
     reach_m2ps2: [f32; MAX_PATH_POINTS],
@@ -410,6 +469,7 @@ impl Path {
             curvature_per_m: [0.0; MAX_PATH_POINTS],
             max_curvature_per_m: 0.0,
             braking_mps2: DEFAULT_BRAKING_MPS2,
+            lateral_limit: None,
             reach_m2ps2: [0.0; MAX_PATH_POINTS],
             corridor_block_min_m: [(0.0, 0.0); CORRIDOR_BLOCKS],
         }
@@ -431,6 +491,7 @@ impl Path {
             fill(addr_of_mut!((*slot).curvature_per_m), 0.0);
             addr_of_mut!((*slot).max_curvature_per_m).write(0.0);
             addr_of_mut!((*slot).braking_mps2).write(DEFAULT_BRAKING_MPS2);
+            addr_of_mut!((*slot).lateral_limit).write(None);
             fill(addr_of_mut!((*slot).reach_m2ps2), 0.0);
             fill(addr_of_mut!((*slot).corridor_block_min_m), (0.0, 0.0));
         }
@@ -451,6 +512,27 @@ impl Path {
     /// The deceleration of the speed envelope, m/s^2.
     pub const fn braking_mps2(&self) -> f32 {
         self.braking_mps2
+    }
+
+    /// Sets the lateral acceleration to which the speed envelope holds the path's turns (see
+    /// the module doc), m/s^2, for a body `width_m` wide; `None` lifts the limit. Kept for every
+    /// later path; the path loaded now (if any) is enveloped again. A limit or width that is
+    /// not finite and positive is refused, `false`, and the limit stays as it was.
+    pub fn set_lateral_limit(&mut self, limit: Option<LateralLimit>) -> bool {
+        if let Some(l) = limit {
+            let ok = |v: f32| v.is_finite() && v > 0.0;
+            if !(ok(l.accel_mps2) && ok(l.width_m)) {
+                return false;
+            }
+        }
+        self.lateral_limit = limit;
+        self.speed_envelope();
+        true
+    }
+
+    /// The lateral acceleration limit of the speed envelope ([`Path::set_lateral_limit`]).
+    pub const fn lateral_limit(&self) -> Option<LateralLimit> {
+        self.lateral_limit
     }
 
     /// Checks `waypoints` without changing anything: the rules a path must follow.
@@ -526,6 +608,7 @@ impl Path {
     }
 
     /// Loads waypoints that passed [`Path::validate`].
+    #[inline(never)]
     fn load_valid(&mut self, waypoints: &[Waypoint]) {
         let n = waypoints.len();
         let mut station = 0.0;
@@ -578,25 +661,120 @@ impl Path {
     }
 
     /// The speed envelope of every point, from the end back (see the module doc).
+    #[inline(never)]
     fn speed_envelope(&mut self) {
+        // Each point's own limit: its target's square, and its turns' where a lateral limit is
+        // set; then the braking from every later point's.
+        for (r, p) in self
+            .reach_m2ps2
+            .iter_mut()
+            .zip(self.points.iter())
+            .take(self.len)
+        {
+            *r = p.speed_mps * p.speed_mps;
+        }
+        if let Some(limit) = self.lateral_limit {
+            self.turn_limits(limit);
+        }
         let two_a = 2.0 * self.braking_mps2;
         let mut later: Option<(f32, f32)> = None;
         for i in (0..self.len).rev() {
-            let (Some(p), Some(&s), Some(r)) = (
-                self.points.get(i),
-                self.station_m.get(i),
-                self.reach_m2ps2.get_mut(i),
-            ) else {
+            let (Some(&s), Some(r)) = (self.station_m.get(i), self.reach_m2ps2.get_mut(i)) else {
                 continue;
             };
             *r = match later {
                 // The end is a stop.
                 None => 0.0,
-                Some((s_next, r_next)) => {
-                    math::min(p.speed_mps * p.speed_mps, r_next + two_a * (s_next - s))
-                }
+                Some((s_next, r_next)) => math::min(*r, r_next + two_a * (s_next - s)),
             };
             later = Some((s, *r));
+        }
+    }
+
+    /// Lowers the own limits in `reach_m2ps2` of both ends of every window of [`TURN_WINDOWS_M`]
+    /// that starts at a point to the speed squared at which the window's turn, cut through the
+    /// corridor's room, asks `limit`'s lateral acceleration (see the module doc), at an end
+    /// that turns with the window (its curvature at least half the window's mean): each point
+    /// is the start of a window of each length, and the end of those that reach it. The heading
+    /// is unwrapped along the path once; each window's end is a pointer that only moves on:
+    /// O(points x windows), no transcendental call, the same work for any path of as many
+    /// points (no shortcut for a path the limit cannot bind: the tick's bound counts it once).
+    #[inline(never)]
+    fn turn_limits(&mut self, limit: LateralLimit) {
+        let n = self.len;
+        // The reference heading's step from point k to k + 1, and a point's station and room
+        // to cut a turn.
+        let step = |k: usize| match (
+            self.reference_heading_rad.get(k),
+            self.reference_heading_rad.get(k + 1),
+        ) {
+            (Some(&a), Some(&b)) => math::wrap_pi(b - a),
+            _ => 0.0,
+        };
+        let at = |k: usize| -> Option<(f32, f32)> {
+            let p = self.points.get(..n)?.get(k)?;
+            Some((
+                *self.station_m.get(k)?,
+                p.left_m + p.right_m - limit.width_m,
+            ))
+        };
+        if n <= TURN_FEW_POINTS {
+            return;
+        }
+        // The heading unwrapped from the first point's, step by step: at point i, and per
+        // window at its end (no array to clear).
+        let mut theta_i = 0.0f32;
+        let mut ends = [(0usize, 0.0f32); TURN_WINDOWS_M.len()];
+        for i in 0..n {
+            let Some((s_i, room_i)) = at(i) else {
+                break;
+            };
+            if i > 0 {
+                theta_i += step(i - 1);
+            }
+            let mut last = usize::MAX;
+            for (&window_m, (j, theta_j)) in TURN_WINDOWS_M.iter().zip(ends.iter_mut()) {
+                if *j < i {
+                    (*j, *theta_j) = (i, theta_i);
+                }
+                while at(*j + 1).is_some_and(|(s, _)| s - s_i <= window_m) {
+                    *theta_j += step(*j);
+                    *j += 1;
+                }
+                // A window that ends where a shorter one did cuts the same turn.
+                if *j != last {
+                    last = *j;
+                    if let Some((s_j, room_j)) = at(*j) {
+                        let (turn, length) = (*theta_j - theta_i, s_j - s_i);
+                        let cap = cut_turn_m2ps2(
+                            limit.accel_mps2,
+                            turn,
+                            length,
+                            math::min(room_i, room_j),
+                        );
+                        // An end that turns with the window (at half its mean curvature or
+                        // more) drives it: not a straight before or after it, which the
+                        // braking reaches, or leaves.
+                        let mean = if turn < 0.0 { -turn } else { turn };
+                        for k in [i, *j] {
+                            let (Some(&c), Some(r)) =
+                                (self.curvature_per_m.get(k), self.reach_m2ps2.get_mut(k))
+                            else {
+                                continue;
+                            };
+                            let c = if c < 0.0 { -c } else { c };
+                            if 2.0 * c * length >= mean {
+                                *r = math::min(*r, cap);
+                            }
+                        }
+                    }
+                }
+                // Every longer window ends at the path's end too (its end catches up when a
+                // later point needs it).
+                if *j + 1 >= n {
+                    break;
+                }
+            }
         }
     }
 

@@ -23,7 +23,7 @@ use crate::can::spec::OBSTACLE_SLOTS;
 use crate::in_place::fill;
 use crate::math::{self, max, min};
 
-use super::path::{Path, PathCar, PathError, Waypoint, MAX_PATH_POINTS};
+use super::path::{LateralLimit, Path, PathCar, PathError, Waypoint, MAX_PATH_POINTS};
 
 /// Rejection and event counters since start (saturating).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -489,6 +489,12 @@ impl PlannerInputs {
     /// and positive).
     pub fn set_braking(&mut self, decel_mps2: f32) -> bool {
         self.path.set_braking(decel_mps2)
+    }
+
+    /// Sets the lateral acceleration to which the paths' speed envelope holds their turns
+    /// ([`Path::set_lateral_limit`]); `false` if refused.
+    pub fn set_lateral_limit(&mut self, limit: Option<LateralLimit>) -> bool {
+        self.path.set_lateral_limit(limit)
     }
 
     /// Sets the car that every path completed from now on must fit ([`Path::validate_for`]:

@@ -47,7 +47,7 @@ use crate::control::mpc::{
     self, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint,
     Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
 };
-use crate::control::path::{Path, PathCar, PathSample, Projection, Tracking};
+use crate::control::path::{LateralLimit, Path, PathCar, PathSample, Projection, Tracking};
 use crate::control::planner::{ObstacleMotion, PlannerEvent, PlannerInputs};
 use crate::control::pure_pursuit::{
     self, CarState as PursuitCar, PurePursuitConfig, PurePursuitState, PurePursuitTuning,
@@ -344,6 +344,12 @@ impl Drive {
         };
         // A refused value (not finite and positive) leaves the path's braking as it was.
         self.planner.set_braking(decel);
+        // The model file's reader takes only a positive, finite limit.
+        self.planner
+            .set_lateral_limit(config.max_lateral_accel_mps2.map(|a| LateralLimit {
+                accel_mps2: a,
+                width_m: config.body.width_m,
+            }));
     }
 
     /// What the planner sent so far.

@@ -193,6 +193,9 @@ pub struct NodeConfig {
     /// The MPC's lateral-offset weight for this car, per m^2 (`None`: the tuning's,
     /// [`crate::control::mpc::DEFAULT_TUNING`]); see [`drive::mpc_tuning`].
     pub mpc_lateral_weight_per_m2: Option<f32>,
+    /// The car's lateral acceleration at most, m/s^2 (`None`: not given, no limit): the
+    /// controllers' paths hold their turns to it ([`crate::control::path::Path::set_lateral_limit`]).
+    pub max_lateral_accel_mps2: Option<f32>,
 }
 
 impl Image for FreshnessConfig {
@@ -229,6 +232,7 @@ impl Image for NodeConfig {
             controller,
             position_uncertainty_m,
             mpc_lateral_weight_per_m2,
+            max_lateral_accel_mps2,
         } = self;
         vehicle.write(w);
         body.write(w);
@@ -250,6 +254,7 @@ impl Image for NodeConfig {
         controller.write(w);
         position_uncertainty_m.write(w);
         mpc_lateral_weight_per_m2.write(w);
+        max_lateral_accel_mps2.write(w);
     }
     fn read(r: &mut ImageReader<'_>) -> Result<Self, ImageError> {
         Ok(Self {
@@ -273,6 +278,7 @@ impl Image for NodeConfig {
             controller: Image::read(r)?,
             position_uncertainty_m: Image::read(r)?,
             mpc_lateral_weight_per_m2: Image::read(r)?,
+            max_lateral_accel_mps2: Image::read(r)?,
         })
     }
 }

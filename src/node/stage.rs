@@ -47,6 +47,9 @@ pub const PLANNER_FRAMES_PER_TICK: usize = 4;
 /// three short ones ([`Stage::PathCompleteShort`]: the one carried over, and two more of at
 /// least 5 frames each in the remaining 11).
 pub const SHORT_PATH_POINTS: usize = (MAX_RX_FRAMES_PER_TICK - 1) / 2;
+// A short path is not held to the lateral limit (`Path::set_lateral_limit`): its windows are
+// not counted in a tick that also solves.
+const _: () = assert!(SHORT_PATH_POINTS <= crate::control::path::TURN_FEW_POINTS);
 /// GNSS fixes one tick filters at most: 3, one more than a 100 Hz receiver (the fastest the
 /// node is designed for, the paper's) delivers per 20 ms, for timing jitter. Further fixes in
 /// the same tick are rejected and counted (`gnss_gate_rejects`).

@@ -246,10 +246,23 @@ pub fn model_file_for(vehicle: &VehicleConfig) -> anyhow::Result<crate::model_fi
         cornering_rear_n_per_rad: vehicle.tyre_rear.cornering_stiffness_n_per_rad,
     });
     crate::identify::set_receiver_rate(&mut file, 1.0 / vehicle.sensors.gnss.period_s);
+    file.control.max_lateral_accel_mps2 = Some(lateral_limit_mps2(vehicle));
     // Through the reader, as any model file: validated, and built as the firmware would.
     let text = crate::model_file::to_toml(&file);
     crate::model_file::parse(&text, std::path::Path::new("<the plant's description>"))
         .map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The lateral acceleration a model file declares for the plant `vehicle`, m/s^2: two thirds of
+/// what its tyres give (the lower axle's friction coefficient times g), to 0.1 m/s^2, as
+/// `models/paper.toml` declares for the CAT Vehicle (docs/controller.md, "A turn faster than
+/// the tyres").
+pub fn lateral_limit_mps2(vehicle: &VehicleConfig) -> f64 {
+    let mu = vehicle
+        .tyre_front
+        .friction_mu
+        .min(vehicle.tyre_rear.friction_mu);
+    (2.0 / 3.0 * mu * 9.81 * 10.0).round() / 10.0
 }
 
 /// The planner's path as the core's `Path` (for scoring lateral error on truth).
