@@ -68,6 +68,39 @@ fn reads_columns_in_any_order_ignores_extras_and_empty_cells_are_missing() {
     );
 }
 
+/// A `steer` a few tenths of a per cent past full lock is a sensor calibrated a little past
+/// it (a black-box probe's 100.9 % refused the whole log): read as the lock, what the steering
+/// report on the bus carries, and counted in a note naming the largest and its line; past
+/// 105 % it is still refused, naming the line.
+#[test]
+fn a_steer_a_little_past_the_lock_is_read_as_the_lock_and_counted() {
+    let text =
+        format!("{HEADER}\n0.1,,,,100.9,,,\n0.2,,,,-100.4,,,\n0.3,,,,-101.2,,,\n0.4,,,,99.5,,,\n");
+    let steer: Vec<Option<f64>> = parse(&text)
+        .expect("read")
+        .iter()
+        .map(|r| r.steer)
+        .collect();
+    assert_eq!(steer, [Some(100.0), Some(-100.0), Some(-100.0), Some(99.5)]);
+    assert_eq!(
+        notes(&text),
+        ["drive.csv:4: column `steer`: 3 sample(s) past full lock, the largest -101.2 % on this \
+          line: a steering sensor calibrated a little past its lock (up to 105 % is taken so); \
+          read as the lock, -100 % (the steering report on the bus carries no more, so the node \
+          reads the lock there too)"]
+    );
+    assert_eq!(
+        notes(&format!("{HEADER}\n0.1,,,,100,,,\n0.2,,,,-100,,,\n")),
+        [] as [String; 0]
+    );
+    let e = parse(&format!("{HEADER}\n0.1,,,,100.9,,,\n0.2,,,,105.01,,,\n")).expect_err("refused");
+    assert_eq!(e.line, 3, "{e}");
+    assert!(
+        matches!(e.kind, LogErrorKind::OutOfRange { value, .. } if value == 105.01),
+        "{e}"
+    );
+}
+
 #[test]
 fn every_malformed_file_is_rejected_with_file_line_and_column() {
     let cases: &[(&str, &str)] = &[
@@ -117,8 +150,9 @@ fn every_malformed_file_is_rejected_with_file_line_and_column() {
             "drive.csv:3: blank line inside the data",
         ),
         (
-            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,-100.5,,,\n",
-            "drive.csv:2:8: column `steer`: -100.5 % is outside -100..100 % (100 % is full lock)",
+            "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,,-105.5,,,\n",
+            "drive.csv:2:8: column `steer`: -105.5 % is outside -105..105 % (100 % is full \
+             lock; up to 105 % is a sensor calibrated a little past it, read as the lock)",
         ),
         (
             "t,vel,input_vel,accel,steer,brake,lat,lon\n0.1,,,101,,,,\n",

@@ -31,7 +31,7 @@ pub struct LogRow {
     pub input_vel: Option<f64>,
     /// Accelerator pedal, % 0..100.
     pub accel: Option<f64>,
-    /// Measured steering, % -100..100, positive = right.
+    /// Measured steering, % -100..100, positive = right (up to [`STEER_PAST_LOCK_PCT`] read as the lock).
     pub steer: Option<f64>,
     /// Brake pedal, % 0..100.
     pub brake: Option<f64>,
@@ -431,6 +431,18 @@ const SPEED_WHY: &str = "no car drives this: 80 m/s = 288 km/h is above the 250 
 /// Pedal range shared by `accel` and `brake`.
 const PEDAL_WHY: &str = "a pedal travels 0..100 %";
 
+/// Full lock, `steer`'s 100 %: the most the steering report on the bus carries
+/// (`catmodel::can::spec` STEER_PCT, -100..100 %).
+pub const STEER_LOCK_PCT: f64 = 100.0;
+
+/// The largest `steer` magnitude read, %: a sensor calibrated a few tenths of a per cent past
+/// the lock (a black-box probe's 100.9 % refused the whole log) is a real car's, and read as
+/// the lock ([`STEER_LOCK_PCT`], what the node reads on the bus), counted in a note
+/// ([`LogNotes::steer_past_lock`]); 5 % past it, the steering zero's tolerance of a whole
+/// sensor's noise in `identify` (its outlier check's 5 %), is the most a calibration is off by,
+/// and beyond it no car's steering reads.
+pub const STEER_PAST_LOCK_PCT: f64 = 105.0;
+
 /// Ranges of the log columns, in the order of [`LOG_COLUMNS`] (docs/logs.md). Deliberately
 /// wide: they catch values no car can have, not unusual driving.
 pub const LOG_RANGES: [ColumnRange; 8] = [
@@ -465,9 +477,9 @@ pub const LOG_RANGES: [ColumnRange; 8] = [
     ColumnRange {
         column: "steer",
         unit: "%",
-        min: -100.0,
-        max: 100.0,
-        why: "100 % is full lock",
+        min: -STEER_PAST_LOCK_PCT,
+        max: STEER_PAST_LOCK_PCT,
+        why: "100 % is full lock; up to 105 % is a sensor calibrated a little past it, read as the lock",
     },
     ColumnRange {
         column: "brake",
@@ -541,6 +553,7 @@ pub const TRUTH_RANGES: [ColumnRange; 6] = [
 
 /// Index of `t`, `lat` and `lon` in [`LOG_COLUMNS`].
 const T: usize = 0;
+const STEER: usize = 4;
 const LAT: usize = 6;
 const LON: usize = 7;
 
@@ -586,6 +599,45 @@ pub struct LogNotes {
     /// The last line, when the file ends without a line end after it (a recorder that lost
     /// power mid-line): its number, and whether it was left out (it did not read as a row).
     pub cut_last_line: Option<CutLine>,
+    /// `steer` samples past full lock (within [`STEER_PAST_LOCK_PCT`]), read as the lock.
+    pub steer_past_lock: Option<PastLock>,
+}
+
+/// `steer` samples past full lock read as the lock ([`LogNotes::steer_past_lock`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PastLock {
+    /// How many.
+    pub samples: usize,
+    /// The one furthest past it, % (as written, signed).
+    pub largest_pct: f64,
+    /// Its line (1-based).
+    pub line: usize,
+}
+
+impl PastLock {
+    /// `steer = value` of line `line`, read as the lock when past it (counted in `past`).
+    fn clamp(past: &mut Option<Self>, value: f64, line: usize) -> f64 {
+        if value.abs() <= STEER_LOCK_PCT {
+            return value;
+        }
+        match past {
+            Some(p) => {
+                p.samples += 1;
+                if value.abs() > p.largest_pct.abs() {
+                    p.largest_pct = value;
+                    p.line = line;
+                }
+            }
+            None => {
+                *past = Some(Self {
+                    samples: 1,
+                    largest_pct: value,
+                    line,
+                })
+            }
+        }
+        value.clamp(-STEER_LOCK_PCT, STEER_LOCK_PCT)
+    }
 }
 
 /// The last line of a file that ends without a line end ([`LogNotes::cut_last_line`]).
@@ -638,6 +690,18 @@ impl LogNotes {
             out.push(format!(
                 "{file}: {} {verb} not in the log schema: ignored",
                 parts.join(" and ")
+            ));
+        }
+        if let Some(p) = &self.steer_past_lock {
+            out.push(format!(
+                "{file}:{}: column `steer`: {} sample(s) past full lock, the largest {} % on \
+                 this line: a steering sensor calibrated a little past its lock (up to \
+                 {STEER_PAST_LOCK_PCT} % is taken so); read as the lock, {} % (the steering \
+                 report on the bus carries no more, so the node reads the lock there too)",
+                p.line,
+                p.samples,
+                Readable(p.largest_pct),
+                Readable(p.largest_pct.signum() * STEER_LOCK_PCT)
             ));
         }
         if let Some(c) = &self.first_conflict {
@@ -751,13 +815,16 @@ fn parse_log_text(text: &str, path: &Path, lossy: bool) -> Result<Log, LogError>
             }
         };
         let previous = pending.as_ref().map(|p| p.row.t);
-        let (values, t) = match line_values(&line, previous) {
+        let (mut values, t) = match line_values(&line, previous) {
             Ok(v) => v,
             Err(e) => {
                 leave_out_cut(&mut notes, cut, e, line.number)?;
                 break;
             }
         };
+        if let Some(steer) = values[STEER].as_mut() {
+            *steer = PastLock::clamp(&mut notes.steer_past_lock, *steer, line.number);
+        }
         if cut == Some(line.number) {
             notes.cut_last_line = Some(CutLine {
                 line: line.number,
