@@ -822,6 +822,7 @@ fn identify(args: IdentifyArgs) -> Result<()> {
         eprintln!("wrote {}", index.display());
     }
     refuse_steering_problem(&id, &out, force)?;
+    refuse_slow_speed_sensor(&id, &out, force)?;
     let violations = check_fit_floor(&id, &logs, &out, force)?;
     identify::floor::mark_forced(&mut id.model, &violations);
     write_identified_model(&out, &id.model)
@@ -926,6 +927,22 @@ fn refuse_steering_problem(id: &identify::Identification, out: &Path, force: boo
             );
         }
         eprintln!("catmodel: warning: {why} (identified anyway, without [lateral]: --force)");
+    }
+    Ok(())
+}
+
+/// Refuses a speed model whose delay the logs' speed rate cannot time
+/// ([`identify::Identification::slow_sensor_problem`]); with `--force`, warns and goes on.
+fn refuse_slow_speed_sensor(id: &identify::Identification, out: &Path, force: bool) -> Result<()> {
+    if let Some(why) = &id.slow_sensor_problem {
+        if !force {
+            bail!(
+                "{why}\n{} not written: the training logs' speed is logged too slowly for its \
+                 delay (--force writes it anyway)",
+                out.display()
+            );
+        }
+        eprintln!("catmodel: warning: {why} (identified anyway: --force)");
     }
     Ok(())
 }

@@ -23,6 +23,7 @@ use catmodel::can::candump;
 use catmodel::can::codec::{
     GnssPosition, ModelMode, Prediction, SpeedReport, StateMotion, StatePosition,
 };
+use catmodel::can::freshness::{FreshnessConfig, Input};
 use catmodel::can::spec::{node_input_index, NODE_INPUTS};
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::steering::SteeringCheck;
@@ -927,6 +928,8 @@ pub struct ReportIntervals {
     last_us: Option<u64>,
     /// Every interval, us.
     intervals_us: Vec<u64>,
+    /// Intervals this long or longer are the log's pauses, left out, us.
+    pause_us: u64,
 }
 
 impl ReportIntervals {
@@ -935,25 +938,77 @@ impl ReportIntervals {
             name,
             key,
             timeout_us,
+            pause_us: PAUSE_NOTE_US,
             ..Self::default()
         }
     }
 
     /// The steering's and the speed's reports, against `config`'s timeouts for them.
     pub fn steering_and_speed(config: &NodeConfig) -> [Self; 2] {
-        use catmodel::can::freshness::Input;
+        Self::steering_and_speed_of(&config.freshness)
+    }
+
+    /// The steering's and the speed's reports, against `freshness`'s timeouts for them.
+    pub fn steering_and_speed_of(freshness: &FreshnessConfig) -> [Self; 2] {
         [
             Self::new(
                 "STEERING_REPORT",
                 "steer_timeout_s",
-                config.freshness.timeout_us(Input::Steer),
+                freshness.timeout_us(Input::Steer),
             ),
             Self::new(
                 "SPEED_REPORT",
                 "speed_timeout_s",
-                config.freshness.timeout_us(Input::Speed),
+                freshness.timeout_us(Input::Speed),
             ),
         ]
+    }
+
+    /// The steering's and the speed's reports as a log's sensor columns would give them,
+    /// stamped at their samples' times, s: `steer`'s, and `vel`'s or `input_vel`'s, whichever
+    /// come further apart (both ride SPEED_REPORT), against `freshness`'s timeouts. Every
+    /// interval counts: a log's pauses are refused before `identify` fits it
+    /// (`identify::preprocess::MAX_PAUSE_S`), and a sensor logged every second or slower is
+    /// what is to be named.
+    pub fn of_log_columns(
+        freshness: &FreshnessConfig,
+        steer_t_s: &[f64],
+        speed_t_s: [&[f64]; 2],
+    ) -> [Self; 2] {
+        let [mut steer, speed] = Self::steering_and_speed_of(freshness);
+        let of = |mut r: Self, times: &[f64]| {
+            r.pause_us = u64::MAX;
+            for t in times {
+                // Note: a log's times are finite (the reader refuses others); a time before 0
+                // saturates to 0, and only intervals are used.
+                r.observe((t * 1e6).round().max(0.0) as u64);
+            }
+            r
+        };
+        steer = of(steer, steer_t_s);
+        let [vel, cmd] = speed_t_s.map(|t| of(speed.clone(), t));
+        let median = |r: &Self| r.median_and_stale_share().map_or(0, |m| m.0);
+        let speed = if median(&cmd) > median(&vel) {
+            cmd
+        } else {
+            vel
+        };
+        [steer, speed]
+    }
+
+    /// The pairs of [`Self::steering_and_speed`] of several logs (each [`Self::of_log_columns`])
+    /// pooled into one, against `freshness`'s timeouts.
+    pub fn pooled<'a>(
+        freshness: &FreshnessConfig,
+        logs: impl IntoIterator<Item = &'a [Self; 2]>,
+    ) -> [Self; 2] {
+        let mut pair = Self::steering_and_speed_of(freshness);
+        for log in logs {
+            for (all, one) in pair.iter_mut().zip(log) {
+                all.intervals_us.extend_from_slice(&one.intervals_us);
+            }
+        }
+        pair
     }
 
     /// `frame`, stamped `t_us`, counted in [`Self::steering_and_speed`]'s pair if it is one of
@@ -970,7 +1025,7 @@ impl ReportIntervals {
     fn observe(&mut self, t_us: u64) {
         if let Some(last) = self.last_us {
             let dt = t_us.saturating_sub(last);
-            if dt < PAUSE_NOTE_US {
+            if dt < self.pause_us {
                 self.intervals_us.push(dt);
             }
         }
@@ -1039,17 +1094,24 @@ pub fn slow_log_reports_note(intervals: &[ReportIntervals]) -> Option<String> {
 }
 
 /// Each report of `intervals` whose median interval is longer than its timeout, in words.
-fn slow_reports(intervals: &[ReportIntervals]) -> Vec<String> {
+pub fn slow_reports(intervals: &[ReportIntervals]) -> Vec<String> {
     intervals
         .iter()
         .filter_map(|r| {
             let (median, share) = r.median_and_stale_share()?;
             (median > r.timeout_us).then(|| {
+                // To the microsecond where the millisecond would read as the timeout (a 10 Hz
+                // logger's 0.100001 s against 0.100 s).
+                let every = match format!("{:.3}", median as f64 * 1e-6) {
+                    ms if ms == format!("{:.3}", r.timeout_us as f64 * 1e-6) => {
+                        format!("{:.6}", median as f64 * 1e-6)
+                    }
+                    ms => ms,
+                };
                 format!(
-                    "{} every {:.3} s (median), longer than its {:.3} s timeout \
+                    "{} every {every} s (median), longer than its {:.3} s timeout \
                      (`[inputs] {}`): stale {:.0} % of the time",
                     r.name,
-                    median as f64 * 1e-6,
                     r.timeout_us as f64 * 1e-6,
                     r.key,
                     100.0 * share

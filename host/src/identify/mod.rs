@@ -22,6 +22,7 @@ pub mod oe;
 pub mod preprocess;
 pub mod receiver;
 pub mod report;
+pub mod sensor_rates;
 pub mod simulate;
 pub mod stats;
 pub mod steering;
@@ -115,6 +116,10 @@ pub struct Identification {
     /// `catmodel identify` refuses to write the file unless `--force`, which writes it without
     /// `[lateral]`.
     pub steering_problem: Option<String>,
+    /// Why the speed model's delay means nothing: a speed logged too slowly to time it
+    /// ([`sensor_rates::SlowSensors::problem`]); `catmodel identify` refuses to write the file
+    /// unless `--force`.
+    pub slow_sensor_problem: Option<String>,
     /// Things the user should know (skipped models, weak excitation, transfer caveats).
     pub notes: Vec<String>,
     /// Wall time of the identification (without reading files), s.
@@ -1502,6 +1507,13 @@ pub fn identify(
     let (steering_problem, lateral) =
         lateral_unless_steering_problem(&training, &vehicle, opts, &mut notes)?;
     let identified_dynamics = cornering_stiffnesses(&training, base, lateral.as_ref(), &mut notes);
+    let slow = sensor_rates::slow_sensors(
+        &training,
+        &base.node_config().freshness,
+        speed.tf.delay_s(),
+        lateral.as_ref().map(|l| l.tf.delay_s()),
+    );
+    notes.extend(slow.note);
 
     let fitted = Fitted {
         speed: speed.tf,
@@ -1536,6 +1548,7 @@ pub fn identify(
         dx_dt_identified: dx_dt_tfs.is_some(),
         dynamics: identified_dynamics,
         steering_problem,
+        slow_sensor_problem: slow.problem,
         notes,
         seconds: started.elapsed().as_secs_f64(),
     })

@@ -110,6 +110,11 @@ pub struct Experiment {
     /// driver's takeover, the speed control disengaged), with the time the speed loop takes
     /// to answer after them: left out of the speed model's fit. Empty: none.
     pub speed_skip: Vec<bool>,
+    /// The intervals between the log's `steer` samples and between its `vel` or `input_vel`
+    /// samples (the further apart), as the steering and speed reports on the bus would come
+    /// ([`crate::replay::ReportIntervals::of_log_columns`], against the default timeouts;
+    /// `identify` pools them against its base file's: [`super::sensor_rates`]).
+    pub report_intervals: [crate::replay::ReportIntervals; 2],
 }
 
 impl Experiment {
@@ -807,6 +812,11 @@ pub fn preprocess_rows(
         ("lat/lon", &tg),
     ])?;
     let grid = overlap_grid([&tv, &tc, &ts_, &tg], opts)?;
+    let report_intervals = crate::replay::ReportIntervals::of_log_columns(
+        &catmodel::can::freshness::FreshnessConfig::DEFAULT,
+        &ts_,
+        [&tv, &tc],
+    );
 
     let origin = latlon[0];
     let (xe, yn): (Vec<f64>, Vec<f64>) = local_metres(origin, &latlon)
@@ -893,6 +903,7 @@ pub fn preprocess_rows(
         log_warnings: Vec::new(),
         gnss_gap,
         speed_skip,
+        report_intervals,
     })
 }
 
