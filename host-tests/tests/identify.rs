@@ -42,6 +42,7 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         gnss_gap: Vec::new(),
         speed_skip: Vec::new(),
         report_intervals: Default::default(),
+        command_unit: None,
     }
 }
 
@@ -139,6 +140,77 @@ fn a_command_the_car_did_not_follow_is_left_out_of_the_speed_fit() {
             ((got - want) / want).abs() < 0.01,
             "den[{i}] {got} vs {want}"
         );
+    }
+}
+
+/// A truck-like speed loop's launches are no command the car did not follow (a black-box
+/// probe's car with 0.6 s of command delay, a 1.2 s actuator lag and 0.8 m/s^2 at most: the
+/// command 2.3 m/s above the speed for about 4 s at the start of six of the paper-sized set's
+/// logs was named as not followed and left out of the speed fit): the speed closes on the
+/// command at the stretch's end. A command in km/h or mph is named as its unit by the speed
+/// it settles to, before any fit, and not as a command not followed (the probe's km/h set had
+/// every log named so before the unit's refusal). The simulator's drives in m/s, on the CAT
+/// Vehicle and the truck-like car, name no unit.
+#[test]
+fn a_slow_launch_is_followed_and_a_command_in_km_h_is_named_as_its_unit() {
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let cat = VehicleConfig::load(&vehicles_dir().join("cat-vehicle.toml")).unwrap();
+    let mut truck = cat.clone();
+    truck.speed_controller.command_delay_s = 0.6;
+    truck.speed_controller.actuator_lag_s = 1.2;
+    truck.speed_controller.max_accel_mps2 = 0.8;
+    let launches = [
+        ("straight-2.5", 1),
+        ("straight-2.5", 2),
+        ("turn-left", 1),
+        ("turn-right", 1),
+        ("circle-left", 1),
+        ("circle-right", 1),
+    ];
+    for (scenario, seed) in launches {
+        for plant in [&cat, &truck] {
+            let e = sim_experiment_of(scenario, seed, plant, &base.vehicle);
+            assert!(
+                e.speed_skip.is_empty() && e.command_unit.is_none(),
+                "{}: {:?} {:?}",
+                e.name,
+                e.log_notes,
+                e.command_unit
+            );
+        }
+    }
+    for (scenario, seed) in [("straight-5", 1), ("straight-10", 2), ("circle-left", 1)] {
+        let options = catmodel_host::sim::SimOptions {
+            seed,
+            ..Default::default()
+        };
+        let rows = catmodel_host::sim::run_named(scenario, None, &options)
+            .unwrap()
+            .log;
+        for (factor, unit) in [(3.6, "km/h"), (2.237, "mph")] {
+            let mut rows = rows.clone();
+            for r in &mut rows {
+                r.input_vel = r.input_vel.map(|v| v * factor);
+            }
+            let e = preprocess_rows(
+                scenario,
+                &rows,
+                &base.vehicle,
+                &PreprocessOptions::default(),
+            )
+            .unwrap();
+            let why = e.command_unit.as_deref().unwrap_or_default();
+            assert!(
+                why.contains(&format!("`input_vel` looks like {unit}")),
+                "{scenario} {unit}: {why:?}"
+            );
+            assert!(
+                e.speed_skip.is_empty()
+                    && !e.log_notes.iter().any(|n| n.contains("did not follow")),
+                "{scenario} {unit}: {:?}",
+                e.log_notes
+            );
+        }
     }
 }
 

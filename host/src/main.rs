@@ -886,8 +886,8 @@ fn refuse_speed_units(units: &[String], out: &Path, force: bool) -> Result<()> {
         if !force {
             bail!(
                 "{}\n{} not written: the wheel speed is not the log schema's (m/s by \
-                 the GNSS track, negative in reverse) or does not follow the track in {} \
-                 case(s) (--force identifies anyway)",
+                 the GNSS track, negative in reverse) or does not follow the track, or the \
+                 command is not in m/s, in {} case(s) (--force identifies anyway)",
                 units.join("\n"),
                 out.display(),
                 units.len()
@@ -1474,7 +1474,7 @@ fn speed_unit_problems<'a>(
                 .filter(|_| unit.is_none() && identify::slow_receiver(e).is_none())
                 .map(|d| d.problem());
             let sign = identify::units::unsigned_reverse(e);
-            [unit, stuck, sign]
+            [unit, stuck, sign, e.command_unit.clone()]
                 .into_iter()
                 .flatten()
                 .map(move |problem| format!("{}: {problem}", p.display()))

@@ -613,7 +613,9 @@ fn identify_refuses_a_wheel_speed_in_another_unit() {
 /// `identify` with the command `input_vel` in km/h and the wheel speed `vel` in m/s (a
 /// black-box probe): refused only as "DC gain 0.2769 is outside 0.5..2", without the unit the
 /// gain points to (1/3.6 = 0.278), as a wheel speed in km/h is named. Now the refusal names it
-/// and the fix, by the rule that names the wheel speed's.
+/// and the fix, by the rule that names the wheel speed's: before any fit, by the speed the car
+/// settles to (and nothing else: every log's command was also named as not followed before),
+/// and with `--force` after it, by the speed model's gain.
 #[test]
 fn identify_names_a_command_in_km_h_by_the_speed_models_gain() {
     let dir = tmp_dir("command-unit");
@@ -625,6 +627,20 @@ fn identify_names_a_command_in_km_h_by_the_speed_models_gain() {
     let mut args = vec!["identify"];
     args.extend(logs.iter().map(|p| s(p)));
     args.extend(["--out", s(&model)]);
+    let out = run(&args);
+    assert_eq!(out.status.code(), Some(1), "refused");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.starts_with("catmodel: error: ")
+            && stderr.contains("the speed settles at 0.2")
+            && stderr.matches("`input_vel` looks like km/h").count() == 2
+            && stderr.contains("divide `input_vel` by 3.6")
+            && stderr.contains("the command is not in m/s")
+            && !stderr.contains("did not follow"),
+        "{stderr}"
+    );
+    assert!(!model.exists(), "not written");
+    args.push("--force");
     let out = run(&args);
     assert_eq!(out.status.code(), Some(1), "refused");
     let stderr = String::from_utf8_lossy(&out.stderr);

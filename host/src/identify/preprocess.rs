@@ -115,6 +115,10 @@ pub struct Experiment {
     /// ([`crate::replay::ReportIntervals::of_log_columns`], against the default timeouts;
     /// `identify` pools them against its base file's: [`super::sensor_rates`]).
     pub report_intervals: [crate::replay::ReportIntervals; 2],
+    /// Why `input_vel` is not in m/s by the speed it settles to, before any fit
+    /// ([`super::units::settled_command_problem`]: km/h, mph); `catmodel identify` refuses it
+    /// with the wheel speed's unit, and [`command_not_followed`] is not run on such a log.
+    pub command_unit: Option<String>,
 }
 
 impl Experiment {
@@ -876,7 +880,13 @@ pub fn preprocess_rows(
         taps.len() / 2 + opts.smooth_span + half_width + yaw_half_width,
     );
     notes.extend(outage_note(name, &gnss_gap, outage_s, opts.ts_s));
-    let (speed_skip, not_followed) = command_not_followed(&grid, &vel, &input_vel);
+    // A command in another unit stays off the speed everywhere: named as the unit
+    // ([`Experiment::command_unit`]), not as a command the car did not follow.
+    let command_unit = super::units::settled_command_problem(&grid, &vel, &input_vel);
+    let (speed_skip, not_followed) = match command_unit {
+        Some(_) => (Vec::new(), Vec::new()),
+        None => command_not_followed(&grid, &vel, &input_vel),
+    };
     notes.extend(not_followed.iter().map(|n| n.note(name)));
     Ok(Experiment {
         name: name.to_string(),
@@ -904,6 +914,7 @@ pub fn preprocess_rows(
         gnss_gap,
         speed_skip,
         report_intervals,
+        command_unit,
     })
 }
 
@@ -916,6 +927,14 @@ const NOT_FOLLOWED_MIN_S: f64 = 3.0;
 /// (1.28 s at the longest the node runs) at a metre per second squared or so, and braking to
 /// a stop from 30 m/s at 0.1 g still moves ten times faster than this.
 const NOT_FOLLOWED_TOWARDS_MPS2: f64 = 0.2;
+/// A stretch that ends with the speed closing on the command is a slow speed loop's late
+/// answer, not a command it did not follow: over its last this many seconds the speed moved
+/// towards the command at [`NOT_FOLLOWED_TOWARDS_MPS2`] or faster, and further than the
+/// command moved towards the speed. A black-box probe's truck-like car (0.6 s of command delay,
+/// a 1.2 s actuator lag, 0.8 m/s^2 at most) launched to 2.5 m/s after 2.3 s and had six logs'
+/// launches left out as "not followed"; a takeover's command that comes back to the speed
+/// ends the other way.
+const NOT_FOLLOWED_ANSWER_S: f64 = 1.0;
 /// After such a stretch the speed loop answers the command again: the longest delay the
 /// node runs and the loop's settling, s, left out with the stretch.
 const NOT_FOLLOWED_SETTLE_S: f64 = 5.0;
@@ -953,10 +972,12 @@ impl NotFollowed {
 /// The samples of grid `t` whose commanded speed `cmd` did not drive the car (`vel`): at
 /// least [`NOT_FOLLOWED_GAP_MPS`] from the speed on one side for [`NOT_FOLLOWED_MIN_S`] or
 /// longer, the speed moving towards it by less than [`NOT_FOLLOWED_TOWARDS_MPS2`] on average,
-/// flagged with the [`NOT_FOLLOWED_SETTLE_S`] after; and the stretches. A black-box probe's
-/// training log whose `input_vel` read 0 for 5 s while the car cruised at 9.7 m/s (the
-/// interface of a speed control that a driver overrode) took the speed model's delay from
-/// 0.88 to 0.30 s, with right-half-plane zeros in its numerator, and nothing was said.
+/// flagged with the [`NOT_FOLLOWED_SETTLE_S`] after, unless the speed closes on the command
+/// at the stretch's end ([`NOT_FOLLOWED_ANSWER_S`]: a slow loop's launch); and the stretches.
+/// A black-box probe's training log whose `input_vel` read 0 for 5 s while the car cruised at
+/// 9.7 m/s (the interface of a speed control that a driver overrode) took the speed model's
+/// delay from 0.88 to 0.30 s, with right-half-plane zeros in its numerator, and nothing was
+/// said.
 pub fn command_not_followed(t: &[f64], vel: &[f64], cmd: &[f64]) -> (Vec<bool>, Vec<NotFollowed>) {
     let n = t.len().min(vel.len()).min(cmd.len());
     let mut skip = vec![false; n];
@@ -985,7 +1006,10 @@ pub fn command_not_followed(t: &[f64], vel: &[f64], cmd: &[f64]) -> (Vec<bool>, 
         let b = k - 1;
         let duration = t[b] - t[a];
         let towards = f64::from(s) * (vel[b] - vel[a]);
-        if duration >= NOT_FOLLOWED_MIN_S && towards < NOT_FOLLOWED_TOWARDS_MPS2 * duration {
+        if duration >= NOT_FOLLOWED_MIN_S
+            && towards < NOT_FOLLOWED_TOWARDS_MPS2 * duration
+            && !answered(t, vel, cmd, (a, b), s)
+        {
             let count = (b - a + 1) as f64;
             found.push(NotFollowed {
                 from_s: t[a],
@@ -1006,6 +1030,24 @@ pub fn command_not_followed(t: &[f64], vel: &[f64], cmd: &[f64]) -> (Vec<bool>, 
         skip.clear();
     }
     (skip, found)
+}
+
+/// Whether the stretch `a..=b` of grid `t` where the command `cmd` stayed on side `side` of
+/// the speed `vel` (1: above) ends with the speed closing on it ([`NOT_FOLLOWED_ANSWER_S`]):
+/// the stretch ends before the log does, and over its last second the speed moved towards the
+/// command at [`NOT_FOLLOWED_TOWARDS_MPS2`] or faster, and further than the command moved
+/// towards the speed.
+fn answered(t: &[f64], vel: &[f64], cmd: &[f64], (a, b): (usize, usize), side: i8) -> bool {
+    if b + 1 >= t.len().min(vel.len()).min(cmd.len()) {
+        return false;
+    }
+    let from = a + t[a..=b].partition_point(|x| *x < t[b] - NOT_FOLLOWED_ANSWER_S);
+    let span = t[b + 1] - t[from];
+    let speed_towards = f64::from(side) * (vel[b + 1] - vel[from]);
+    let command_towards = -f64::from(side) * (cmd[b + 1] - cmd[from]);
+    span > 0.0
+        && speed_towards >= NOT_FOLLOWED_TOWARDS_MPS2 * span
+        && speed_towards > command_towards
 }
 
 /// A needed sensor's samples of the log `log` (t, value), without its impossible ones

@@ -216,6 +216,55 @@ pub fn command_unit_problem(dc_gain: f64) -> Option<String> {
     ))
 }
 
+/// The command must have held its value this long, s, ...
+const SETTLED_COMMAND_HELD_S: f64 = 5.0;
+/// ... within this, m/s, ...
+const SETTLED_COMMAND_BAND_MPS: f64 = 0.05;
+/// ... and the speed must have moved less than this over the last [`SETTLED_SPEED_S`], m/s,
+/// for a sample to show where the speed settles for the command: a slow speed loop still
+/// rising after the hold (a truck-like car's 0.6 m/s^2 from 0 to 10 m/s takes 17 s) is not
+/// settled, and would read as a gain near km/h's.
+const SETTLED_SPEED_CHANGE_MPS: f64 = 0.1;
+/// See [`SETTLED_SPEED_CHANGE_MPS`], s.
+const SETTLED_SPEED_S: f64 = 2.0;
+/// Settled samples needed to judge the command's unit (2 s on the 20 ms grid).
+const SETTLED_MIN_SAMPLES: usize = 100;
+
+/// The speed the car settles to over its command, before any fit: the median of `vel /
+/// input_vel` over the samples of the grid `t` where the command (at least 1 m/s) has held
+/// within [`SETTLED_COMMAND_BAND_MPS`] for [`SETTLED_COMMAND_HELD_S`] and the speed (moving)
+/// has settled ([`SETTLED_SPEED_CHANGE_MPS`]); `None` with fewer than
+/// [`SETTLED_MIN_SAMPLES`] such samples.
+pub fn settled_command_gain(t: &[f64], vel: &[f64], cmd: &[f64]) -> Option<f64> {
+    let n = t.len().min(vel.len()).min(cmd.len());
+    let mut gains = Vec::new();
+    let mut held_from = 0;
+    let mut speed_from = 0;
+    for k in 0..n {
+        if (cmd[k] - cmd[held_from]).abs() > SETTLED_COMMAND_BAND_MPS {
+            held_from = k;
+        }
+        while t[k] - t[speed_from] > SETTLED_SPEED_S {
+            speed_from += 1;
+        }
+        let held = t[k] - t[held_from] >= SETTLED_COMMAND_HELD_S;
+        let settled = t[k] - t[speed_from] >= 0.9 * SETTLED_SPEED_S
+            && (vel[k] - vel[speed_from]).abs() < SETTLED_SPEED_CHANGE_MPS;
+        if held && settled && cmd[k] >= 1.0 && vel[k] > MOVING {
+            gains.push(vel[k] / cmd[k]);
+        }
+    }
+    (gains.len() >= SETTLED_MIN_SAMPLES).then(|| median(&mut gains))
+}
+
+/// Why `input_vel` is not in m/s by the speed it settles to, before any fit
+/// ([`settled_command_gain`] named by [`command_unit_problem`]): a black-box probe's command in
+/// km/h was also taken for a command the car did not follow, in every log, before the speed
+/// model's gain named its unit after the fit.
+pub fn settled_command_problem(t: &[f64], vel: &[f64], cmd: &[f64]) -> Option<String> {
+    command_unit_problem(settled_command_gain(t, vel, cmd)?)
+}
+
 impl SpeedScale {
     /// Why the log's wheel speed cannot be m/s, or `None` when the ratio is within
     /// [`ACCEPTED_RATIO`].
