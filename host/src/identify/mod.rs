@@ -18,6 +18,7 @@ pub mod delay;
 pub mod discretize;
 pub mod dynamics;
 pub mod floor;
+pub mod gnss_clock;
 pub mod oe;
 pub mod preprocess;
 pub mod receiver;

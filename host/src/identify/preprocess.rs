@@ -793,13 +793,39 @@ pub fn load_named(
     Ok(e)
 }
 
-/// Preprocesses log rows (see the module doc).
+/// Preprocesses log rows (see the module doc). Fixes stamped on another clock than the wheel
+/// speed's ([`super::gnss_clock`]) are moved onto it, by the offset that matches the speeds and
+/// then by what the fine latency search ([`super::units::gnss_latency`]) finds left where its
+/// standard error is under the match's [`super::gnss_clock::STEP_S`] (on a turn it read
+/// 0.15 s +- 0.14 left, and moved the fixes too far), and named.
 pub fn preprocess_rows(
     name: &str,
     rows: &[LogRow],
     vehicle: &VehicleSection,
     opts: &PreprocessOptions,
 ) -> Result<Experiment> {
+    let (mut e, found) = preprocess_on_clock(name, rows, vehicle, opts, None)?;
+    if let Some(mut offset) = found {
+        // What the fine search finds left, where it times it finer than the match's steps.
+        let left = super::units::gnss_latency(&e).filter(|(_, se)| *se < super::gnss_clock::STEP_S);
+        if let Some((left, _)) = left {
+            offset.behind_s += left;
+            e = preprocess_on_clock(name, rows, vehicle, opts, Some(offset.behind_s))?.0;
+        }
+        e.log_notes.insert(0, offset.note(name));
+    }
+    Ok(e)
+}
+
+/// [`preprocess_rows`] with the fixes moved `clock_shift_s` earlier, or by the clock offset
+/// found ([`super::gnss_clock::clock_offset`], returned) when `None`.
+fn preprocess_on_clock(
+    name: &str,
+    rows: &[LogRow],
+    vehicle: &VehicleSection,
+    opts: &PreprocessOptions,
+    clock_shift_s: Option<f64>,
+) -> Result<(Experiment, Option<super::gnss_clock::ClockOffset>)> {
     let mut notes = Vec::new();
     let mut needed = |column: &str, get: fn(&LogRow) -> Option<f64>, p: Plausible| {
         plausible_column(name, rows, column, get, p, &mut notes)
@@ -808,7 +834,14 @@ pub fn preprocess_rows(
     let (tc, cmd) = needed("input_vel", |r| r.input_vel, SPEED_PLAUSIBLE);
     let (ts_, steer) = needed("steer", |r| r.steer, STEER_PLAUSIBLE);
     let (mut tg, mut latlon) = gnss_fixes(rows);
-    clean_fixes(name, &mut tg, &mut latlon, (&tv, &vel), &mut notes)?;
+    let clock = clean_fixes(
+        name,
+        &mut tg,
+        &mut latlon,
+        (&tv, &vel),
+        clock_shift_s,
+        &mut notes,
+    )?;
     check_needed([
         ("vel", &tv),
         ("input_vel", &tc),
@@ -916,6 +949,7 @@ pub fn preprocess_rows(
         report_intervals,
         command_unit,
     })
+    .map(|e| (e, clock))
 }
 
 /// A stretch whose commanded speed stays at least this far from the car's speed, m/s, ...
@@ -1138,10 +1172,11 @@ fn clean_fixes(
     tg: &mut Vec<f64>,
     latlon: &mut Vec<(f64, f64)>,
     wheel: (&[f64], &[f64]),
+    clock_shift_s: Option<f64>,
     notes: &mut Vec<String>,
-) -> Result<()> {
+) -> Result<Option<super::gnss_clock::ClockOffset>> {
     if latlon.is_empty() {
-        return Ok(());
+        return Ok(None);
     }
     if let Some((decimals, metres)) = coarse_resolution(latlon) {
         let what = format!(
@@ -1180,8 +1215,20 @@ fn clean_fixes(
     if let Some(step) = gnss_discontinuity(tg, &metres) {
         return Err(step.into());
     }
+    // Fixes stamped on another clock, seconds off the wheel speed's: moved onto it before the
+    // wheel speed judges them (a black-box probe's fixes 3-18 s late were refused as a wheel
+    // speed that sticks, or fixes of another receiver).
+    let found = match clock_shift_s {
+        Some(_) => None,
+        None => super::gnss_clock::clock_offset(tg, &metres, wheel),
+    };
+    if let Some(shift) = clock_shift_s.or(found.map(|o| o.behind_s)) {
+        for t in tg.iter_mut() {
+            *t -= shift;
+        }
+    }
     drop_bursts(name, tg, latlon, &metres, wheel, notes);
-    Ok(())
+    Ok(found)
 }
 
 /// Leaves the bursts of [`gnss_bursts`] out of the fixes `tg`, `latlon` (`metres`: the same

@@ -1097,7 +1097,7 @@ pub fn gnss_latency_named_above_s(gnss_rate_hz: f64) -> f64 {
 /// neighbourhood must move), and read a 5 Hz receiver's fixes on time as the wheel speed
 /// 0.23 s late.
 const GNSS_LATENCY_SEARCH_S: f64 = 1.0;
-const GNSS_LATENCY_WIDE_SEARCH_S: f64 = 2.5;
+pub const GNSS_LATENCY_WIDE_SEARCH_S: f64 = 2.5;
 /// Moving samples needed for a latency estimate (20 s at 50 Hz).
 const GNSS_LATENCY_MIN_SAMPLES: usize = 1000;
 /// The residual's errors are counted as one independent error per this long, s (the
