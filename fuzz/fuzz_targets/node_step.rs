@@ -9,7 +9,7 @@
 #![no_main]
 use arbitrary::Arbitrary;
 use catmodel::can::codec::{
-    GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport, StateMotion,
+    Direction, GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport, StateMotion,
     StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
@@ -30,6 +30,8 @@ enum Input {
     Speed {
         v: f32,
         cmd: Option<f32>,
+        /// SPEED_REPORT `direction`, raw (any of its four values).
+        direction: u8,
         counter: u8,
     },
     Pedal {
@@ -76,9 +78,20 @@ fn encode(input: &Input) -> CanFrame {
             steer_pct: Some(pct),
         }
         .encode(counter),
-        Input::Speed { v, cmd, counter } => SpeedReport {
+        Input::Speed {
+            v,
+            cmd,
+            direction,
+            counter,
+        } => SpeedReport {
             speed_mps: Some(v),
             speed_cmd_mps: cmd,
+            direction: [
+                Direction::NotReported,
+                Direction::Forward,
+                Direction::Reverse,
+                Direction::Invalid,
+            ][usize::from(direction % 4)],
         }
         .encode(counter),
         Input::Pedal {

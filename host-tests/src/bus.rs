@@ -5,7 +5,7 @@
 //! follows eq 8 in closed form; GNSS (100 Hz) measures the antenna, 1.478 m ahead; steering and
 //! speed reports come at 50 Hz with rolling counters.
 use catmodel::can::codec::{
-    GnssPosition, NodeStatus, Prediction, SpeedReport, StatePosition, SteeringReport,
+    Direction, GnssPosition, NodeStatus, Prediction, SpeedReport, StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
@@ -98,6 +98,7 @@ pub fn drive(v: f32, steer_pct: f32, seconds: f32) -> Vec<Labelled> {
             let speed = SpeedReport {
                 speed_mps: Some(v),
                 speed_cmd_mps: Some(v),
+                direction: Direction::NotReported,
             }
             .encode(counter);
             for (kind, frame) in [(Kind::Steering, steering), (Kind::Speed, speed)] {
@@ -112,6 +113,107 @@ pub fn drive(v: f32, steer_pct: f32, seconds: f32) -> Vec<Labelled> {
         }
     }
     out
+}
+
+/// One leg of a scripted drive ([`drive_legs`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Leg {
+    /// How long, s.
+    pub seconds: f64,
+    /// Speed along the heading, m/s: negative = reversing.
+    pub speed_mps: f32,
+    /// Steering, % (positive right).
+    pub steer_pct: f32,
+}
+
+/// The truth of a scripted drive: the rear axle every millisecond from [`START_US`].
+#[derive(Clone, Debug, Default)]
+pub struct Truth {
+    /// `(east, north, heading)` of the rear axle, m and rad (heading clockwise from north,
+    /// unwrapped), one per millisecond.
+    pub rear_axle_ms: Vec<(f64, f64, f64)>,
+}
+
+impl Truth {
+    /// The rear axle at `t_us` (on the drive's time base; clamped to the drive).
+    pub fn at(&self, t_us: u64) -> (f64, f64, f64) {
+        let ms = (t_us.saturating_sub(START_US) / 1_000) as usize;
+        self.rear_axle_ms[ms.min(self.rear_axle_ms.len() - 1)]
+    }
+}
+
+/// A drive of `legs` one after the other, starting at the origin heading east: the rear axle
+/// follows eq 8 (integrated every millisecond, yaw rate = speed x curvature, so a reversing
+/// car turns the other way for the same steering), GNSS at 100 Hz measures the antenna,
+/// steering and speed reports at 50 Hz. SPEED_REPORT carries the speed's magnitude, and, with
+/// `report_direction`, `direction` forward or reverse (else not reported, as every kit without
+/// the signal).
+pub fn drive_legs(legs: &[Leg], report_direction: bool) -> (Vec<Labelled>, Truth) {
+    let lever = f64::from(config().estimator.antenna_ahead_m);
+    let frame = LocalFrame::new(ORIGIN.0, ORIGIN.1).expect("origin");
+    let total_ms: f64 = legs.iter().map(|l| l.seconds * 1_000.0).sum();
+    let (mut east, mut north, mut h) = (0.0f64, 0.0f64, std::f64::consts::FRAC_PI_2);
+    let mut truth = Truth::default();
+    let mut out = Vec::new();
+    let (mut leg_index, mut leg_end_ms) = (0usize, legs[0].seconds * 1_000.0);
+    for ms in 0..total_ms.round() as u64 {
+        while ms as f64 >= leg_end_ms && leg_index + 1 < legs.len() {
+            leg_index += 1;
+            leg_end_ms += legs[leg_index].seconds * 1_000.0;
+        }
+        let leg = legs[leg_index];
+        truth.rear_axle_ms.push((east, north, h));
+        let t_us = START_US + ms * 1_000;
+        if ms % 10 == 0 {
+            let (lat, lon) = frame.from_local(Enu {
+                east_m: (east + lever * h.sin()) as f32,
+                north_m: (north + lever * h.cos()) as f32,
+            });
+            let fix = GnssPosition {
+                lat_e7: (lat * 1e7).round() as i32,
+                lon_e7: (lon * 1e7).round() as i32,
+            };
+            out.push(Labelled {
+                kind: Kind::Gnss,
+                frame: TimedFrame {
+                    t_us,
+                    frame: fix.encode(N2K_DEFAULT_SOURCE),
+                },
+            });
+        }
+        if ms % 20 == 1 {
+            let counter = ((ms / 20) % 16) as u8;
+            let steering = SteeringReport {
+                steer_pct: Some(leg.steer_pct),
+            }
+            .encode(counter);
+            let direction = match (report_direction, leg.speed_mps < 0.0) {
+                (false, _) => Direction::NotReported,
+                (true, false) => Direction::Forward,
+                (true, true) => Direction::Reverse,
+            };
+            let speed = SpeedReport {
+                speed_mps: Some(leg.speed_mps.abs()),
+                speed_cmd_mps: Some(leg.speed_mps.abs()),
+                direction,
+            }
+            .encode(counter);
+            for (kind, frame) in [(Kind::Steering, steering), (Kind::Speed, speed)] {
+                out.push(Labelled {
+                    kind,
+                    frame: TimedFrame { t_us, frame },
+                });
+            }
+        }
+        // One millisecond of eq 8, at the step's middle heading.
+        let v = f64::from(leg.speed_mps);
+        let yaw = v * curvature(leg.speed_mps.abs(), leg.steer_pct);
+        let mid = h + 0.5 * yaw * 1e-3;
+        east += v * mid.sin() * 1e-3;
+        north += v * mid.cos() * 1e-3;
+        h += yaw * 1e-3;
+    }
+    (out, truth)
 }
 
 /// What one tick produced.

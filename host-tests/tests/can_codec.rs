@@ -171,6 +171,49 @@ fn phys_max(s: &spec::SignalSpec) -> f32 {
     s.to_physical(s.raw_max)
 }
 
+/// SPEED_REPORT `direction` (bits 32..33, byte 4): each of its four values packed by hand and
+/// round-tripped; "not reported" (0) leaves the frame as it was before the signal existed, so
+/// every recorded log decodes as it did.
+#[test]
+fn speed_report_direction_round_trips_and_zero_is_the_old_frame() {
+    let old = |speed: f32, counter: u8| {
+        // speed 1.00 m/s = raw 100 (0..15), command the same (16..31), counter in 52..55.
+        let mut data = [100, 0, 100, 0, 0, 0, counter << 4, 0];
+        data[7] = frame_crc(CanId::Standard(0x101), &data);
+        assert_eq!(speed, 1.0);
+        CanFrame::new(CanId::Standard(0x101), &data).unwrap()
+    };
+    let not_reported = SpeedReport {
+        speed_mps: Some(1.0),
+        speed_cmd_mps: Some(1.0),
+        direction: Direction::NotReported,
+    };
+    assert_eq!(not_reported.encode(5), old(1.0, 5));
+    assert_eq!(
+        SpeedReport::decode(&old(1.0, 5)).unwrap(),
+        (not_reported, 5)
+    );
+    for (raw, direction) in [
+        (0u8, Direction::NotReported),
+        (1, Direction::Forward),
+        (2, Direction::Reverse),
+        (3, Direction::Invalid),
+    ] {
+        let m = SpeedReport {
+            direction,
+            ..not_reported
+        };
+        let frame = m.encode(9);
+        assert_eq!(frame.data[4], raw, "{direction:?}");
+        assert_eq!(sig::DIRECTION.read_raw(&frame.data), i64::from(raw));
+        let mut by_hand = old(1.0, 9);
+        by_hand.data[4] = raw;
+        by_hand.data[7] = frame_crc(by_hand.id, &by_hand.data);
+        assert_eq!(frame, by_hand, "{direction:?}");
+        assert_eq!(SpeedReport::decode(&frame).unwrap(), (m, 9));
+    }
+}
+
 #[test]
 fn inputs_round_trip_at_limits_and_invalid() {
     for counter in [0u8, 7, 15] {
@@ -185,18 +228,28 @@ fn inputs_round_trip_at_limits_and_invalid() {
             assert_eq!(c, counter);
             assert!(close(back.steer_pct, v, 0.01), "{v:?} -> {back:?}");
         }
-        for (a, b) in [
+        for (i, (a, b)) in [
             (Some(0.0), Some(655.34)),
             (Some(655.34), None),
             (None, Some(0.0)),
-        ] {
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let direction = [
+                Direction::Reverse,
+                Direction::NotReported,
+                Direction::Forward,
+            ][i];
             let m = SpeedReport {
                 speed_mps: a,
                 speed_cmd_mps: b,
+                direction,
             };
             let (back, c) = SpeedReport::decode(&m.encode(counter)).unwrap();
             assert_eq!(c, counter);
             assert!(close(back.speed_mps, a, 0.01) && close(back.speed_cmd_mps, b, 0.01));
+            assert_eq!(back.direction, direction);
         }
         for (a, b) in [
             (Some(0.0), Some(100.0)),
@@ -913,6 +966,7 @@ fn decode_error_kinds() {
     let mut f = SpeedReport {
         speed_mps: Some(1.0),
         speed_cmd_mps: Some(1.0),
+        direction: Direction::NotReported,
     }
     .encode(0);
     f.id = CanId::Standard(0x102);
@@ -1010,6 +1064,7 @@ fn decode_input_dispatch() {
     let v = SpeedReport {
         speed_mps: Some(3.0),
         speed_cmd_mps: None,
+        direction: Direction::Reverse,
     };
     assert_eq!(
         decode_input(&v.encode(3), src),

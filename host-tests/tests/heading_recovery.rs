@@ -442,3 +442,179 @@ fn a_track_that_runs_against_the_heading_is_flagged_until_a_turn_confirms_it() {
         "not confirmed by the turn"
     );
 }
+
+/// Each tick of a scripted drive through the node: `(t since the first fix s, heading error
+/// rad, heading_uncertain, PREDICTION_10's displacement along the estimated heading m,
+/// CONTROL_COMMAND)`.
+fn node_over_legs(
+    legs: &[catmodel_host_tests::bus::Leg],
+    report_direction: bool,
+    path_at_s: Option<f64>,
+) -> Vec<(
+    f64,
+    f32,
+    bool,
+    Option<f32>,
+    catmodel::can::codec::ControlCommand,
+)> {
+    use catmodel::can::codec::{ControlCommand, StateMotion};
+    use catmodel::can::TimedFrame;
+    use catmodel_host::closed_loop::planner::{PlannedPoint, Planner};
+    use catmodel_host_tests::bus;
+
+    let (drive, truth) = bus::drive_legs(legs, report_direction);
+    let mut frames = bus::frames(&drive);
+    if let Some(at_s) = path_at_s {
+        // A straight path east from the start, where the car drives forwards (0.5 m apart,
+        // 3 m/s): the planner's frames over the ticks from `at_s`, as it sends them.
+        let mut planner = Planner::new();
+        let points: Vec<PlannedPoint> = (0..256)
+            .map(|i| PlannedPoint {
+                east_m: -20.0 + 0.5 * f64::from(i),
+                north_m: 0.0,
+                speed_mps: 3.0,
+                left_m: 3.0,
+                right_m: 3.0,
+            })
+            .collect();
+        planner.send_path(&points).unwrap();
+        let mut t_us = bus::START_US + (at_s * 1e6) as u64;
+        while planner.pending() > 0 {
+            for frame in planner.take_tick_frames() {
+                frames.push(TimedFrame { t_us, frame });
+            }
+            t_us += 20_000;
+        }
+        frames.sort_by_key(|f| f.t_us);
+    }
+    bus::run(&frames)
+        .iter()
+        .filter_map(|tick| {
+            let (motion, _) = tick.tx.iter().find_map(|f| StateMotion::decode(f).ok())?;
+            let heading = motion.heading_rad?;
+            let (_, _, truth_heading) = truth.at(tick.now_us);
+            let error = math::wrap_pi(heading - math::wrap_pi(truth_heading as f32));
+            let along = tick
+                .predictions()
+                .last()
+                .and_then(|p| Some(p.dx_m? * math::sin(heading) + p.dy_m? * math::cos(heading)));
+            let command = tick
+                .tx
+                .iter()
+                .find_map(|f| ControlCommand::decode(f).ok())?
+                .0;
+            Some((tick.t_s(), error, motion.heading_uncertain, along, command))
+        })
+        .collect()
+}
+
+/// The black-box probe's manoeuvre (docs/findings.md, "Reversing at a crawl"): 10 s forwards
+/// at 3 m/s to settle the heading, a second at rest, then 15 s reversing at 1 m/s with 30 %
+/// steering (the CAT Vehicle turns 1.1 rad through it).
+fn crawl_in_reverse() -> [catmodel_host_tests::bus::Leg; 3] {
+    use catmodel_host_tests::bus::Leg;
+    [
+        Leg {
+            seconds: 10.0,
+            speed_mps: 3.0,
+            steer_pct: 0.0,
+        },
+        Leg {
+            seconds: 1.0,
+            speed_mps: 0.0,
+            steer_pct: 30.0,
+        },
+        Leg {
+            seconds: 15.0,
+            speed_mps: -1.0,
+            steer_pct: 30.0,
+        },
+    ]
+}
+
+/// SPEED_REPORT has no sign: a black-box probe's car reversing at 1 m/s with 30 % steering
+/// for 15 s came out 2.0 rad off with `heading_uncertain` clear, the dead reckoning turning it
+/// the way the steering turns a car going forwards, and the chords (0.63 s of track) too short
+/// to correct or flag it. With the direction reported (SPEED_REPORT `direction` = reverse) the
+/// dead reckoning moves it backwards, the yaw rate takes the motion's sign, and the heading
+/// stays within 0.05 rad of the truth through the whole reverse; the predictions roll it
+/// backwards (PREDICTION_10, 2 s ahead: 2 m behind). A kit that reports no direction keeps
+/// today's behaviour, the probe's: more than 1.5 rad off at the end, unflagged, predicted
+/// forwards ("Not fixed yet" keeps it).
+#[test]
+fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
+    let legs = crawl_in_reverse();
+    let reversing = |run: &[(f64, f32, bool, Option<f32>, _)]| {
+        run.iter()
+            .filter(|(t, ..)| *t >= 11.5 && *t < 26.0)
+            .map(|&(t, e, u, a, _)| (t, e, u, a))
+            .collect::<Vec<_>>()
+    };
+    let reported = node_over_legs(&legs, true, None);
+    let worst = reversing(&reported)
+        .iter()
+        .map(|(_, e, ..)| e.abs())
+        .fold(0.0f32, f32::max);
+    let (_, end, ..) = *reversing(&reported).last().unwrap();
+    println!("reported: worst {worst:.4} rad, at the end {end:.4} rad");
+    assert!(worst < 0.05, "reported reverse: {worst} rad off");
+    // Forwards before: flagged at no tick after the heading settled.
+    assert!(
+        reported
+            .iter()
+            .filter(|(t, ..)| *t >= 5.0 && *t < 26.0)
+            .all(|(_, e, u, ..)| !u && e.abs() < 0.05),
+        "flagged or off"
+    );
+    // Backwards from the first tick (the speed model's launch, as forwards), then 2 m.
+    for (t, _, _, along) in reversing(&reported) {
+        let along = along.expect("predictions while reversing");
+        let within = if t >= 16.0 { 0.05 } else { 1.5 };
+        assert!((along + 2.0).abs() < within, "{t:.2} s: {along} m along");
+    }
+    let forwards = reported
+        .iter()
+        .filter(|(t, ..)| *t >= 5.0 && *t < 10.0)
+        .filter_map(|(_, _, _, a, _)| *a);
+    assert!(forwards.clone().count() > 200);
+    assert!(forwards.clone().all(|a| (a - 6.0).abs() < 0.1), "forwards");
+
+    let unreported = node_over_legs(&legs, false, None);
+    let (_, end, flagged, along) = *reversing(&unreported).last().unwrap();
+    println!("unreported: at the end {end:.4} rad, flagged {flagged}, {along:?} m along");
+    assert!(
+        end.abs() > 1.5 && !flagged,
+        "no longer the probe's: {end} rad"
+    );
+    assert!(along.unwrap() > 1.9, "{along:?}");
+}
+
+/// The controllers do not drive backwards: with a path, a car that reports reverse is held
+/// (CONTROL_COMMAND status 3, `fallback_reason` 13 `reversing`, speed 0) on every tick it does,
+/// and no tick forwards says so.
+#[test]
+fn the_controller_holds_a_car_that_reports_reverse() {
+    use catmodel::can::codec::{ControlStatus, FallbackCause};
+    let run = node_over_legs(&crawl_in_reverse(), true, Some(1.0));
+    let reverse: Vec<_> = run.iter().filter(|(t, ..)| *t >= 11.05).collect();
+    assert!(reverse.len() > 700);
+    for (t, _, _, _, c) in &reverse {
+        assert_eq!(
+            (c.status, c.fallback, c.speed_cmd_mps),
+            (ControlStatus::Fallback, FallbackCause::Reversing, Some(0.0)),
+            "{t:.2} s"
+        );
+    }
+    // Forwards it tracks the path once the path is in and the heading settled (4.8 s).
+    let forwards: Vec<_> = run.iter().filter(|(t, ..)| *t < 11.0).collect();
+    assert!(forwards
+        .iter()
+        .all(|(.., c)| c.fallback != FallbackCause::Reversing));
+    assert!(
+        forwards
+            .iter()
+            .filter(|(.., c)| c.status == ControlStatus::Tracking)
+            .count()
+            > 250
+    );
+}

@@ -4,11 +4,15 @@
 //! 129025 from the default source address.
 //!
 //! What the bus cannot carry is never dropped silently: a negative time is an error (candump
-//! timestamps count up from 0), and a negative speed (a signed sensor's noise around standstill,
-//! or reversing: the log schema allows down to -10 m/s, the bus speed is unsigned) goes out as
-//! 0 m/s and is counted in [`Encoded::negative_speeds`].
+//! timestamps count up from 0). A negative measured speed `vel` (the log schema allows down to
+//! -10 m/s: a car reversing, or a signed sensor's noise around standstill) goes out as its
+//! magnitude with SPEED_REPORT `direction` = reverse, counted in [`Encoded::reverse_speeds`]
+//! and noted; every other row's report says no direction (0, as every log before the signal:
+//! the node takes it as forward), so a log without a negative speed gives the frames it always
+//! gave. A negative commanded speed `input_vel` (the bus field is a magnitude, and the node's
+//! speed model knows no reverse) goes out as 0 m/s, counted in [`Encoded::negative_speeds`].
 use anyhow::{bail, Result};
-use catmodel::can::codec::{GnssPosition, PedalReport, SpeedReport, SteeringReport};
+use catmodel::can::codec::{Direction, GnssPosition, PedalReport, SpeedReport, SteeringReport};
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::TimedFrame;
 
@@ -19,19 +23,32 @@ use crate::logcsv::LogRow;
 pub struct Encoded {
     /// The frames, in time order.
     pub frames: Vec<TimedFrame>,
-    /// Speed values (measured or commanded) below 0 m/s, sent as 0 m/s.
+    /// Commanded speeds below 0 m/s, sent as 0 m/s.
     pub negative_speeds: usize,
+    /// Measured speeds below 0 m/s, sent as their magnitude with the direction "reverse".
+    pub reverse_speeds: usize,
 }
 
 impl Encoded {
     /// A note for stderr when something was adapted.
     pub fn note(&self) -> Option<String> {
-        (self.negative_speeds > 0).then(|| {
-            format!(
-                "{} speed value(s) below 0 m/s sent as 0 m/s (the bus speed is unsigned)",
+        let mut notes = Vec::new();
+        if self.reverse_speeds > 0 {
+            notes.push(format!(
+                "{} measured speed(s) `vel` below 0 m/s sent as reversing: SPEED_REPORT carries \
+                 the magnitude with direction = 2 (reverse); the other rows' reports say no \
+                 direction (0), which the node takes as forward",
+                self.reverse_speeds
+            ));
+        }
+        if self.negative_speeds > 0 {
+            notes.push(format!(
+                "{} commanded speed(s) `input_vel` below 0 m/s sent as 0 m/s (the bus's commanded \
+                 speed is unsigned)",
                 self.negative_speeds
-            )
-        })
+            ));
+        }
+        (!notes.is_empty()).then(|| notes.join("; "))
     }
 }
 
@@ -54,6 +71,7 @@ pub struct LogEncoder {
     accel: Option<f64>,
     brake: Option<f64>,
     negative_speeds: usize,
+    reverse_speeds: usize,
 }
 
 impl LogEncoder {
@@ -78,9 +96,14 @@ impl LogEncoder {
         }
     }
 
-    /// Speed values below 0 m/s sent as 0 m/s so far.
+    /// Commanded speeds below 0 m/s sent as 0 m/s so far.
     pub fn negative_speeds(&self) -> usize {
         self.negative_speeds
+    }
+
+    /// Measured speeds below 0 m/s sent as reversing so far.
+    pub fn reverse_speeds(&self) -> usize {
+        self.reverse_speeds
     }
 
     /// Appends the frames of one row, stamped with its `t`. A speed report needs the measured
@@ -99,11 +122,17 @@ impl LogEncoder {
             out.push(TimedFrame { t_us: t, frame });
         }
         if let Some(vel) = r.vel {
-            let speed = self.unsigned(vel);
+            let direction = if vel < 0.0 {
+                self.reverse_speeds += 1;
+                Direction::Reverse
+            } else {
+                Direction::NotReported
+            };
             let c = self.next_counter(1);
             let frame = SpeedReport {
-                speed_mps: Some(speed),
+                speed_mps: Some(vel.abs() as f32),
                 speed_cmd_mps: self.input_vel,
+                direction,
             }
             .encode(c);
             out.push(TimedFrame { t_us: t, frame });
@@ -142,6 +171,7 @@ pub fn encode_log(rows: &[LogRow]) -> Result<Encoded> {
     Ok(Encoded {
         frames,
         negative_speeds: encoder.negative_speeds(),
+        reverse_speeds: encoder.reverse_speeds(),
     })
 }
 

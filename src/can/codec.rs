@@ -373,13 +373,48 @@ impl SteeringReport {
     }
 }
 
-/// SPEED_REPORT (0x101): measured and commanded speed.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// SPEED_REPORT `direction`: which way the car moves, as its drive-by-wire kit reports it
+/// (its gear). The speed itself has no sign. The discriminant is the raw value; `catmodel.dbc`
+/// names each (`VAL_ 257 direction`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Direction {
+    /// The kit does not report it (every log from before the signal): the node takes the
+    /// car as moving forwards, as it always did.
+    #[default]
+    NotReported = 0,
+    /// Forward gear.
+    Forward = 1,
+    /// Reverse gear: the car moves backwards at the reported speed.
+    Reverse = 2,
+    /// The kit reports that it does not know: taken as [`Direction::NotReported`], and
+    /// counted as an input that carried its invalid value.
+    Invalid = 3,
+}
+
+impl Direction {
+    /// `raw` (two bits: every value is one).
+    const fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Direction::Forward,
+            2 => Direction::Reverse,
+            3 => Direction::Invalid,
+            _ => Direction::NotReported,
+        }
+    }
+}
+
+/// SPEED_REPORT (0x101): measured and commanded speed, and the direction of motion.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SpeedReport {
-    /// Measured speed, m/s; `None` = invalid.
+    /// Measured speed, m/s (its magnitude: forwards or backwards as `direction` says);
+    /// `None` = invalid.
     pub speed_mps: Option<f32>,
     /// Commanded speed, m/s; `None` = invalid.
     pub speed_cmd_mps: Option<f32>,
+    /// Which way the car moves ([`Direction::NotReported`] from a kit that does not say).
+    pub direction: Direction,
 }
 
 impl SpeedReport {
@@ -392,6 +427,7 @@ impl SpeedReport {
         let mut w = Writer::new(&spec::SPEED_REPORT);
         w.phys(&sig::SPEED_MPS, self.speed_mps);
         w.phys(&sig::SPEED_CMD_MPS, self.speed_cmd_mps);
+        w.raw(&sig::DIRECTION, self.direction as i64);
         w.finish(spec::SPEED_REPORT.id, counter)
     }
     /// The message and its rolling counter.
@@ -400,6 +436,7 @@ impl SpeedReport {
         let msg = Self {
             speed_mps: r.phys(&sig::SPEED_MPS)?,
             speed_cmd_mps: r.phys(&sig::SPEED_CMD_MPS)?,
+            direction: Direction::from_raw(r.required(&sig::DIRECTION)?),
         };
         Ok((msg, r.counter))
     }
@@ -1155,11 +1192,15 @@ pub enum FallbackCause {
     /// the last tick to move on: the whole path was searched for it this tick, and the
     /// controller plans from there next tick.
     PositionJumped = 12,
+    /// The car reports reverse gear (SPEED_REPORT `direction`): the controllers do not drive
+    /// backwards, so the car is held (speed 0, steering where it was last commanded) until it
+    /// reports forward, or no direction, again.
+    Reversing = 13,
 }
 
 impl FallbackCause {
     /// Every cause, by raw value.
-    pub const ALL: [FallbackCause; 13] = [
+    pub const ALL: [FallbackCause; 14] = [
         FallbackCause::None,
         FallbackCause::NotReady,
         FallbackCause::HeadingSettling,
@@ -1173,9 +1214,10 @@ impl FallbackCause {
         FallbackCause::NonFiniteCommand,
         FallbackCause::SteeringReversed,
         FallbackCause::PositionJumped,
+        FallbackCause::Reversing,
     ];
 
-    /// `raw` within the signal's range (0..=12, checked by the reader).
+    /// `raw` within the signal's range (0..=13, checked by the reader).
     fn from_raw(raw: i64) -> Self {
         usize::try_from(raw)
             .ok()

@@ -24,10 +24,10 @@ pub mod freshness;
 pub mod spec;
 
 pub use codec::{
-    decode_input, decode_planner, ControlCommand, ControlStatus, DecodeError, EncodeReport,
-    FallbackCause, GnssCogSog, GnssPosition, HealthFlags, InputMessage, LocalOrigin, ModelMode,
-    ModelOutputs, NodeStatus, Obstacle, ObstacleCircle, PathHeader, PathLimits, PathPoint,
-    PedalReport, PlannerMessage, Prediction, PredictionPoint, SpeedReport, StateMotion,
+    decode_input, decode_planner, ControlCommand, ControlStatus, DecodeError, Direction,
+    EncodeReport, FallbackCause, GnssCogSog, GnssPosition, HealthFlags, InputMessage, LocalOrigin,
+    ModelMode, ModelOutputs, NodeStatus, Obstacle, ObstacleCircle, PathHeader, PathLimits,
+    PathPoint, PedalReport, PlannerMessage, Prediction, PredictionPoint, SpeedReport, StateMotion,
     StatePosition, SteeringReport,
 };
 pub use crc::crc8_sae_j1850;

@@ -369,6 +369,9 @@ pub mod sig {
         .scaled(0.01, "m/s")
         .raw_range(0, 65_534)
         .na(0xFFFF);
+    /// SPEED_REPORT: which way the car moves (its gear), `codec::Direction`: 0 not reported,
+    /// 1 forward, 2 reverse, 3 invalid. Every log before the signal has 0 in these bits.
+    pub const DIRECTION: SignalSpec = SignalSpec::uint("direction", 32, 2);
     /// Accelerator pedal; 0xFFFF = invalid.
     pub const ACCEL_PCT: SignalSpec = SignalSpec::uint("accel_pct", 0, 16)
         .scaled(0.01, "%")
@@ -550,7 +553,7 @@ pub mod sig {
         .na(0xFFFF);
     /// CONTROL_COMMAND: why the status is the fallback (0 when it is not; `FallbackCause`).
     pub const FALLBACK_REASON: SignalSpec =
-        SignalSpec::uint("fallback_reason", 40, 4).raw_range(0, 12);
+        SignalSpec::uint("fallback_reason", 40, 4).raw_range(0, 13);
 
     /// NODE_STATUS page number (multiplexer switch).
     pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 5).switch();
@@ -765,7 +768,7 @@ pub const SPEED_REPORT: MessageSpec = MessageSpec {
     cycle_ms: 20,
     transmitter: NODE_DBW,
     receivers: TO_NODE,
-    signals: &[SPEED_MPS, SPEED_CMD_MPS, COUNTER_IN, CRC],
+    signals: &[SPEED_MPS, SPEED_CMD_MPS, DIRECTION, COUNTER_IN, CRC],
     integrity: Integrity::CounterCrc(COUNTER_IN),
 };
 /// Input 0x102, 50 Hz.

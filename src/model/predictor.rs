@@ -80,6 +80,10 @@ pub struct PredictorStart {
     pub lateral: LateralState,
     /// Lateral model for this roll-out.
     pub mode: Mode,
+    /// The car reverses (SPEED_REPORT `direction`): it rolls backwards along the held
+    /// curvature, on the kinematic model whatever `mode` says (the dynamic model's tyres are a
+    /// car's moving forwards).
+    pub reversing: bool,
 }
 
 /// One predicted point.
@@ -116,7 +120,7 @@ pub fn rollout(
     out: &mut [PredictedPoint],
 ) -> usize {
     match (start.mode, dynamics) {
-        (Mode::Dynamic, Some(dynamics)) => {
+        (Mode::Dynamic, Some(dynamics)) if !start.reversing => {
             let lateral_dt_s = LATERAL_GROUP as f32 * SAMPLE_PERIOD_S;
             let segment = SlipSegment {
                 stepper: dynamics.stepper(start.center_steer_rad, lateral_dt_s),
@@ -132,6 +136,7 @@ pub fn rollout(
             let segment = ArcSegment {
                 curvature_per_m: vehicle.curvature_per_m(start.center_steer_rad, start.speed_mps),
                 arc_m: 0.0,
+                direction: if start.reversing { -1.0 } else { 1.0 },
             };
             roll(horizon, start, segment, speed_model, out)
         }
@@ -167,6 +172,8 @@ trait Segment {
 struct ArcSegment {
     curvature_per_m: f32,
     arc_m: f32,
+    /// 1 forwards, -1 reversing: the distance driven is along the heading or against it.
+    direction: f32,
 }
 
 impl Segment for ArcSegment {
@@ -182,7 +189,7 @@ impl Segment for ArcSegment {
 
     #[inline(always)]
     fn apply(&mut self, pose: &mut Pose) {
-        pose.advance_arc(self.arc_m, self.curvature_per_m);
+        pose.advance_arc(self.direction * self.arc_m, self.curvature_per_m);
         self.arc_m = 0.0;
     }
 }
@@ -345,6 +352,49 @@ mod tests {
             center_steer_rad: steer_rad,
             lateral: CAT_VEHICLE_DYNAMICS.steady_state(speed, steer_rad),
             mode,
+            reversing: false,
+        }
+    }
+
+    /// A reversing car rolls backwards along the same circle: each point is the forward
+    /// roll-out's mirrored across the heading's normal (the same distance behind instead of
+    /// ahead, the heading turned the other way), to 1e-4 m and 1e-5 rad; the dynamic mode asked
+    /// for gives the kinematic roll-out (its tyres are a forward car's).
+    #[test]
+    fn a_reversing_car_rolls_backwards() {
+        let roll = |s: &PredictorStart| {
+            let mut out = [PredictedPoint::default(); 10];
+            let n = rollout(
+                &DEFAULT_HORIZON,
+                &CAT_VEHICLE,
+                Some(&CAT_VEHICLE_DYNAMICS),
+                s,
+                |v: &mut [f32; STEPS_PER_POINT]| v.fill(1.0),
+                &mut out,
+            );
+            assert_eq!(n, 10);
+            out
+        };
+        // 30 % of the CAT Vehicle's lock, to the right, at 1 m/s (a black-box probe's manoeuvre).
+        let steer_rad = CAT_VEHICLE.steer_pct_to_center_rad(30.0);
+        let forward = roll(&start(Mode::Kinematic, steer_rad, 1.0));
+        for mode in [Mode::Kinematic, Mode::Dynamic] {
+            let back = roll(&PredictorStart {
+                reversing: true,
+                ..start(mode, steer_rad, 1.0)
+            });
+            for (f, b) in forward.iter().zip(&back) {
+                assert!(f.y_m > 0.0 && f.x_m > 0.0 && f.heading_rad > 0.0, "{f:?}");
+                assert!((b.y_m + f.y_m).abs() < 1e-4, "{mode:?}: {b:?} vs {f:?}");
+                assert!((b.x_m - f.x_m).abs() < 1e-4, "{mode:?}: {b:?} vs {f:?}");
+                assert!(
+                    (b.heading_rad + f.heading_rad).abs() < 1e-5,
+                    "{b:?} vs {f:?}"
+                );
+                assert_eq!(b.speed_mps, f.speed_mps);
+            }
+            // 2 s at 1 m/s: 2 m behind, along the arc.
+            assert!(back[9].y_m < -1.9, "{:?}", back[9]);
         }
     }
 

@@ -27,7 +27,8 @@
 //! own fallback: speed 0, steering along the last feasible plan; or the car
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
 //! sends a new path; latched, so that a noisy estimate straying back into the corridor does
-//! not hand the car back to a controller). Never a NaN: every command is checked finite, else
+//! not hand the car back to a controller; or the car reports reverse gear: speed 0, steering
+//! held, while it does). Never a NaN: every command is checked finite, else
 //! the fallback. Its `fallback_reason` says which of these fallbacks it is ([`FallbackCause`];
 //! 0 when the status is not the fallback).
 //!
@@ -109,8 +110,10 @@ pub struct DriveInputs<'a> {
     pub dead_reckoned: Xy,
     /// The heading's error variance as the estimator reckons it, rad^2.
     pub heading_var_rad2: f32,
-    /// Speed, m/s.
+    /// Speed, m/s (its magnitude).
     pub speed_mps: f32,
+    /// The car reports reverse gear (SPEED_REPORT `direction`): no controller drives it.
+    pub reversing: bool,
     /// The active lateral model's state.
     pub lateral: LateralState,
     /// The rear axle's sideways velocity (tyre slip), m/s: its course is the heading turned by
@@ -474,6 +477,13 @@ impl Drive {
             self.smoothing.forget();
             return self.hold(ControlStatus::NoPath, FallbackCause::None);
         };
+        if inputs.reversing {
+            // The controllers and their models drive forwards only: a car in reverse gear is
+            // held (speed 0, steering where it was last commanded) until it reports forward,
+            // or no direction, again; the heading's settling starts afresh then.
+            self.smoothing.forget();
+            return self.hold(ControlStatus::Fallback, FallbackCause::Reversing);
+        }
         // Counted with a path only: the ticks without one are the estimating ticks, whose
         // bound has no room for it (docs/firmware.md, "Worst-case tick").
         let settled =

@@ -936,7 +936,11 @@ impl EstimatorState {
         let (yaw_then_rps, side_then_mps) =
             (window.turned_rad / window_s, window.slid_m / window_s);
         let antenna_along_mps = speed_mps + cfg.antenna_left_m * yaw_then_rps;
-        let lead_rad = if speed_mps > 0.0 && antenna_along_mps > 0.0 {
+        // Reversing (a negative speed): the course is the antenna's motion backwards, turned
+        // half round by the caller, and the same lead (along and across both change sign).
+        let ahead = speed_mps > 0.0 && antenna_along_mps > 0.0;
+        let behind = speed_mps < 0.0 && antenna_along_mps < 0.0;
+        let lead_rad = if ahead || behind {
             math::atan((cfg.antenna_ahead_m * yaw_then_rps + side_then_mps) / antenna_along_mps)
         } else {
             0.0
@@ -975,7 +979,7 @@ impl EstimatorState {
         }
         let course_now = self.course_now(cfg, course_rad, age_s, speed_mps, rates);
         let ticks = math::max(cfg.gnss_period_s / crate::SAMPLE_PERIOD_S, 1.0);
-        let sigma = COG_NOISE_MPS / math::max(speed_mps, cfg.course_min_speed_mps);
+        let sigma = COG_NOISE_MPS / math::max(speed_mps.abs(), cfg.course_min_speed_mps);
         let cog_var = sigma * sigma * ticks;
         let innovation = math::wrap_pi(course_now - heading);
         let mut var = self.heading_var_rad2;

@@ -418,7 +418,7 @@ impl StepGate {
         yaw_rps: f32,
     ) {
         self.per_m = STEP_SLIDE_PER_M + STEP_HEADING_SIGMAS * math::sqrt(heading_var_rad2);
-        let curvature = yaw_rps.abs() / math::max(speed_mps, cfg.course_min_speed_mps);
+        let curvature = yaw_rps.abs() / math::max(speed_mps.abs(), cfg.course_min_speed_mps);
         self.per_m2 = STEP_TURN_SHARE * 0.5 * curvature;
         if self.persist == 0 {
             self.persist = math::max(STEP_PERSIST_S / cfg.gnss_period_s + 0.5, 2.0) as u16;
@@ -454,6 +454,17 @@ impl StepGate {
         }
         self.rejects_in_row = 0;
         StepVerdict::Accept
+    }
+}
+
+/// A course (rad) as the heading it measures: turned half round when the car reverses (the
+/// antenna moves backwards).
+#[inline(always)]
+fn along_heading(course_rad: f32, reversing: bool) -> f32 {
+    if reversing {
+        math::wrap_pi(course_rad + core::f32::consts::PI)
+    } else {
+        course_rad
     }
 }
 
@@ -764,6 +775,11 @@ impl Gnss {
     /// (`None` while invalid), whether GNSS is fresh, and the heading the course measured this
     /// tick (`None` when none was). A receiver silent for longer than `gnss_lost_us` restarts
     /// the filters.
+    ///
+    /// `speed_mps` is the speed along the heading: negative while the car reverses (SPEED_REPORT
+    /// `direction`), when the receiver's course and the track's run half a turn from the
+    /// heading and are turned round before they correct it (the chords compare the track with
+    /// a dead reckoning that moved backwards too, and need no turn).
     pub fn estimate(
         &mut self,
         config: &NodeConfig,
@@ -774,16 +790,20 @@ impl Gnss {
     ) -> (Option<Pose>, bool, Option<f32>) {
         let cfg = &config.estimator;
         let gnss_timeout_us = config.freshness.timeout_us(Input::Gnss);
-        let moving = speed_mps >= cfg.course_min_speed_mps;
+        let moving = speed_mps.abs() >= cfg.course_min_speed_mps;
+        let reversing = speed_mps < 0.0;
         // The receiver's course while it is fresh; the chords of the filtered track when there
         // is none, or its courses scatter too much to steer the heading.
         let from_cog = match self.cog {
             Some((cog, t)) if moving && now_us.saturating_sub(t) <= gnss_timeout_us => {
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
-                Some(
-                    self.estimator
-                        .correct_heading_on_cog(cfg, cog, age_s, speed_mps, rates),
-                )
+                Some(self.estimator.correct_heading_on_cog(
+                    cfg,
+                    along_heading(cog, reversing),
+                    age_s,
+                    speed_mps,
+                    rates,
+                ))
             }
             _ => None,
         };
@@ -807,10 +827,13 @@ impl Gnss {
             Some(CogCorrection::NoHeading) if self.cog_agreeing >= COG_AGREEING => {
                 let (cog, t) = self.cog.unwrap_or_default();
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
-                Some(
-                    self.estimator
-                        .correct_heading(cfg, cog, age_s, speed_mps, rates),
-                )
+                Some(self.estimator.correct_heading(
+                    cfg,
+                    along_heading(cog, reversing),
+                    age_s,
+                    speed_mps,
+                    rates,
+                ))
             }
             Some(CogCorrection::Refused) => None,
             Some(CogCorrection::Scattered | CogCorrection::NoHeading) | None if moving => {
@@ -827,6 +850,7 @@ impl Gnss {
                     TrackCorrection::NoHistory => {
                         self.estimator.track_course(cfg).map(|(course, age_fixes)| {
                             let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;
+                            let course = along_heading(course, reversing);
                             self.estimator
                                 .correct_heading(cfg, course, age_s, speed_mps, rates)
                         })

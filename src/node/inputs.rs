@@ -4,7 +4,9 @@
 //! Every rejection is counted in [`Counters`]; nothing is dropped silently. GNSS messages are
 //! handed on to the GNSS stage ([`super::gnss`]), the planner's to the drive stage
 //! ([`super::drive`]).
-use crate::can::codec::{decode_input, decode_planner, DecodeError, InputMessage, PlannerMessage};
+use crate::can::codec::{
+    decode_input, decode_planner, DecodeError, Direction, InputMessage, PlannerMessage,
+};
 use crate::can::counter::CounterChecker;
 use crate::can::freshness::{Freshness, Input, INPUT_COUNT};
 use crate::can::TimedFrame;
@@ -65,6 +67,8 @@ pub struct Inputs {
     steer_pct: Option<f32>,
     /// (measured, commanded) speed, m/s.
     speeds: Option<(f32, f32)>,
+    /// The speed report with those speeds said the car reverses (SPEED_REPORT `direction`).
+    reverse: bool,
     /// (accelerator, brake), %.
     pedals: Option<(f32, f32)>,
 }
@@ -74,8 +78,12 @@ pub struct Inputs {
 pub struct Snapshot {
     /// Steering, %, positive right.
     pub steer_pct: Option<f32>,
-    /// (measured, commanded) speed, m/s.
+    /// (measured, commanded) speed, m/s: magnitudes.
     pub speeds: Option<(f32, f32)>,
+    /// The fresh speed report says the car reverses: it moves backwards at `speeds.0`. A
+    /// report that says forward, nothing (a kit without the signal) or invalid, or no fresh
+    /// report: forwards, as the node always took it.
+    pub reversing: bool,
     /// The pedal report is fresh.
     pub pedal_fresh: bool,
     /// Ages for NODE_STATUS page 4, 10 ms units.
@@ -127,6 +135,13 @@ impl Inputs {
                 Some(v) => {
                     if self.accept(Input::Speed, counter, f.t_us) {
                         self.speeds = Some((v, m.speed_cmd_mps.unwrap_or(v)));
+                        self.reverse = m.direction == Direction::Reverse;
+                    }
+                    // The kit says it does not know the direction: the speed is used, taken as
+                    // forward (as from a kit that does not report it), and the invalid value
+                    // counted (`input_invalid`).
+                    if m.direction == Direction::Invalid {
+                        bump(&mut self.counters.range_errors);
                     }
                 }
                 None => bump(&mut self.counters.range_errors),
@@ -184,6 +199,7 @@ impl Inputs {
             speeds: self
                 .speeds
                 .filter(|_| fresh(config, f, Input::Speed, now_us)),
+            reversing: self.reverse && fresh(config, f, Input::Speed, now_us),
             pedal_fresh: self.pedals.is_some() && fresh(config, f, Input::Pedal, now_us),
             ages_10ms: f.ages_10ms(now_us),
         }

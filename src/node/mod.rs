@@ -375,8 +375,11 @@ struct Models {
     /// The rear axle's sideways velocity in the lateral model (tyre slip; 0 without a dynamic
     /// model), m/s (dead reckoning uses last tick's).
     rear_side_mps: f32,
-    /// The speed the node uses, m/s (dead reckoning uses last tick's).
+    /// The speed the node uses, m/s: its magnitude (dead reckoning uses last tick's).
     speed_mps: f32,
+    /// The car reverses (SPEED_REPORT `direction`): it moves backwards at `speed_mps` (dead
+    /// reckoning uses last tick's).
+    reversing: bool,
     /// The largest yaw rate the car may have that the lateral model does not see, rad/s:
     /// while the steering report is stale the model steers straight on, and the wheels may
     /// have turned since the last report at the actuator's rate (dead reckoning uses last
@@ -388,6 +391,11 @@ struct Models {
 }
 
 impl Models {
+    /// The speed along the heading, m/s: negative while the car reverses.
+    fn velocity_mps(&self) -> f32 {
+        signed(self.speed_mps, self.reversing)
+    }
+
     /// The rates the dead reckoning integrates.
     fn rates(&self) -> Rates {
         Rates {
@@ -397,10 +405,24 @@ impl Models {
     }
 }
 
+/// `speed_mps` (a magnitude) along the heading: negative when `reversing`.
+#[inline(always)]
+fn signed(speed_mps: f32, reversing: bool) -> f32 {
+    if reversing {
+        -speed_mps
+    } else {
+        speed_mps
+    }
+}
+
 /// What stage 2 produced this tick.
 #[derive(Clone, Copy, Debug)]
 struct Motion {
+    /// The speed's magnitude, m/s.
     speed_mps: f32,
+    /// The car reverses (SPEED_REPORT `direction`): the kinematic model, with the yaw rate of
+    /// a car moving backwards.
+    reversing: bool,
     /// Eq 5's output, m/s.
     speed_model_mps: Option<f32>,
     /// The speed command the roll-out holds, m/s.
@@ -453,6 +475,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             yaw_rate_rps: 0.0,
             rear_side_mps: 0.0,
             speed_mps: 0.0,
+            reversing: false,
             unseen_yaw_rps: 0.0,
             last_steer_rad: 0.0,
         };
@@ -579,13 +602,13 @@ impl<D: BorrowMut<Drive>> Node<D> {
         };
         self.last_tick_us = Some(now_us);
         let rates = self.models.rates();
+        let velocity_mps = self.models.velocity_mps();
         self.gnss
-            .propagate(&self.config.estimator, self.models.speed_mps, rates, dt_s);
+            .propagate(&self.config.estimator, velocity_mps, rates, dt_s);
         if self.models.unseen_yaw_rps > 0.0 {
             self.gnss.turn_unseen(self.models.unseen_yaw_rps, dt_s);
         }
-        self.steering
-            .turned(rates.yaw_rps, self.models.speed_mps, dt_s);
+        self.steering.turned(rates.yaw_rps, velocity_mps, dt_s);
         dt_s
     }
 
@@ -652,7 +675,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             &self.config,
             now_us,
             &fixes,
-            self.models.speed_mps,
+            self.models.velocity_mps(),
             &mut self.inputs,
             probe,
         );
@@ -702,6 +725,11 @@ impl<D: BorrowMut<Drive>> Node<D> {
             cfg.max_speed_mps,
         );
         m.speed_mps = speed_mps;
+        // Reversing: the car moves backwards, and the kinematic model's yaw rate takes the
+        // motion's sign; the dynamic model (tyre slip angles of a car moving forwards) does
+        // not hold, so the kinematic model runs whatever the hybrid switch would pick.
+        let reversing = inputs.reversing;
+        m.reversing = reversing;
 
         // Stale steering: the model steers straight on, and the wheels may be where the last
         // report had them or have turned since (at the actuator's rate over the report's age,
@@ -723,12 +751,14 @@ impl<D: BorrowMut<Drive>> Node<D> {
                 speed_mps * cfg.vehicle.curvature_per_m(wheels_rad, 0.0)
             }
         };
-        let yaw_kin = speed_mps * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
+        let yaw_kin =
+            signed(speed_mps, reversing) * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
         let mode = match cfg.dynamics {
-            Some(_) => cfg
-                .hybrid
-                .update(&mut m.hybrid, speed_mps, speed_mps * m.yaw_rate_rps),
-            None => Mode::Kinematic,
+            Some(_) if !reversing => {
+                cfg.hybrid
+                    .update(&mut m.hybrid, speed_mps, speed_mps * m.yaw_rate_rps)
+            }
+            _ => Mode::Kinematic,
         };
         match (mode, &cfg.dynamics) {
             (Mode::Dynamic, Some(dynamics)) => {
@@ -737,8 +767,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
             }
             (_, dynamics) => {
                 m.lateral = match dynamics {
-                    Some(d) => d.steady_state(speed_mps, center_steer_rad),
-                    None => LateralState {
+                    Some(d) if !reversing => d.steady_state(speed_mps, center_steer_rad),
+                    _ => LateralState {
                         vy_mps: 0.0,
                         yaw_rate_rps: yaw_kin,
                     },
@@ -753,7 +783,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         // Either mode's lateral state is the dynamic model's when the car has one (its steady
         // state in the kinematic mode), so the rear axle's slip is there in both.
         m.rear_side_mps = match &cfg.dynamics {
-            Some(d) => {
+            Some(d) if !reversing => {
                 let side = d.rear_side_mps(&m.lateral);
                 let most = MAX_REAR_SLIP_RAD * speed_mps;
                 if side.is_finite() {
@@ -762,10 +792,11 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     0.0
                 }
             }
-            None => 0.0,
+            _ => 0.0,
         };
         Motion {
             speed_mps,
+            reversing,
             speed_model_mps,
             speed_cmd_mps,
             center_steer_rad,
@@ -779,20 +810,17 @@ impl<D: BorrowMut<Drive>> Node<D> {
     /// Stage 3: heading, filtered rear-axle position, and eq 7 on it.
     fn estimate(&mut self, now_us: u64, motion: &Motion) -> Estimate {
         let cfg = &self.config;
-        let (pose, gnss_fresh, measured_heading) = self.gnss.estimate(
-            cfg,
-            now_us,
-            motion.speed_mps,
-            self.models.rates(),
-            &self.inputs,
-        );
+        let velocity_mps = signed(motion.speed_mps, motion.reversing);
+        let (pose, gnss_fresh, measured_heading) =
+            self.gnss
+                .estimate(cfg, now_us, velocity_mps, self.models.rates(), &self.inputs);
         // The check compares the measured turn with the one the steering gave the models: a
         // tick without a steering report gave them none (a sensor logged at 5 Hz, stale
         // between its reports, read as a steering 1.7 times the model file's: a black-box
         // probe, docs/findings.md), and restarts the check's block.
         self.steering.observe(
             measured_heading.filter(|_| motion.steer_fresh),
-            motion.speed_mps,
+            velocity_mps,
         );
         // Eq 7: inputs [v_m, x, y, phi] with phi the steering angle, rad.
         let dxdt_mps = pose.map(|p| {
@@ -821,6 +849,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             dead_reckoned: self.gnss.dead_reckoned(),
             heading_var_rad2: self.gnss.heading_var_rad2(),
             speed_mps: motion.speed_mps,
+            reversing: motion.reversing,
             lateral: self.models.lateral,
             rear_side_mps: self.models.rear_side_mps,
             steer_rad: motion.center_steer_rad,
@@ -858,6 +887,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             center_steer_rad: motion.center_steer_rad,
             lateral: self.models.lateral,
             mode: motion.mode,
+            reversing: motion.reversing,
         };
         // Eq 5 along the horizon: the commands in its delay line, then the latest one held.
         let u_hold = motion.speed_cmd_mps.unwrap_or(motion.speed_mps);

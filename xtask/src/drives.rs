@@ -14,8 +14,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use catmodel::can::codec::{
-    GnssCogSog, GnssPosition, LocalOrigin, Obstacle, ObstacleCircle, PathHeader, PathLimits,
-    PathPoint, PedalReport, SpeedReport, SteeringReport,
+    Direction, GnssCogSog, GnssPosition, LocalOrigin, Obstacle, ObstacleCircle, PathHeader,
+    PathLimits, PathPoint, PedalReport, SpeedReport, SteeringReport,
 };
 use catmodel::can::spec::MAX_PATH_POINTS;
 use catmodel::can::{candump, CanFrame, CanId, TimedFrame};
@@ -586,6 +586,7 @@ pub fn generate(spec: &Spec, car: &NodeConfig) -> Vec<TimedFrame> {
             SpeedReport {
                 speed_mps: Some(spec.speed.at(t).clamp(0.0, 655.0) as f32),
                 speed_cmd_mps: Some(v_cmd.max(v * 0.0) as f32),
+                direction: Direction::NotReported,
             }
             .encode(counter),
         );
@@ -686,6 +687,7 @@ fn corrupt_frame(rng: &mut Rng, source: u8) -> CanFrame {
         1 => SpeedReport {
             speed_mps: Some(rng.range(0.0, 60.0) as f32),
             speed_cmd_mps: Some(rng.range(0.0, 60.0) as f32),
+            direction: Direction::NotReported,
         }
         .encode(counter),
         _ => PedalReport {
