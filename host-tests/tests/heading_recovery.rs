@@ -509,9 +509,9 @@ fn node_over_legs(
 }
 
 /// The black-box probe's manoeuvre (docs/findings.md, "Reversing at a crawl"): 10 s forwards
-/// at 3 m/s to settle the heading, a second at rest, then 15 s reversing at 1 m/s with 30 %
-/// steering (the CAT Vehicle turns 1.1 rad through it).
-fn crawl_in_reverse() -> [catmodel_host_tests::bus::Leg; 3] {
+/// at 3 m/s to settle the heading, a second at rest, then 15 s reversing at `reverse_mps` with
+/// 30 % steering (the CAT Vehicle turns 1.1 rad through it at 1 m/s).
+fn crawl_in_reverse(reverse_mps: f32) -> [catmodel_host_tests::bus::Leg; 3] {
     use catmodel_host_tests::bus::Leg;
     [
         Leg {
@@ -526,7 +526,7 @@ fn crawl_in_reverse() -> [catmodel_host_tests::bus::Leg; 3] {
         },
         Leg {
             seconds: 15.0,
-            speed_mps: -1.0,
+            speed_mps: -reverse_mps,
             steer_pct: 30.0,
         },
     ]
@@ -538,12 +538,14 @@ fn crawl_in_reverse() -> [catmodel_host_tests::bus::Leg; 3] {
 /// to correct or flag it. With the direction reported (SPEED_REPORT `direction` = reverse) the
 /// dead reckoning moves it backwards, the yaw rate takes the motion's sign, and the heading
 /// stays within 0.05 rad of the truth through the whole reverse; the predictions roll it
-/// backwards (PREDICTION_10, 2 s ahead: 2 m behind). A kit that reports no direction keeps
-/// today's behaviour, the probe's: more than 1.5 rad off at the end, unflagged, predicted
-/// forwards ("Not fixed yet" keeps it).
+/// backwards (PREDICTION_10, 2 s ahead: 2 m behind); at 1.5 m/s too, where the chords run, and
+/// for a car that reverses from the start (its first heading from the track turned round). A
+/// kit that reports no direction keeps today's behaviour, the probe's: more than 1.5 rad off
+/// at the end, unflagged, predicted forwards ("Not fixed yet" keeps it).
 #[test]
 fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
-    let legs = crawl_in_reverse();
+    use catmodel_host_tests::bus::Leg;
+    let legs = crawl_in_reverse(1.0);
     let reversing = |run: &[(f64, f32, bool, Option<f32>, _)]| {
         run.iter()
             .filter(|(t, ..)| *t >= 11.5 && *t < 26.0)
@@ -587,6 +589,55 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
         "no longer the probe's: {end} rad"
     );
     assert!(along.unwrap() > 1.9, "{along:?}");
+
+    // At 1.5 m/s the chords correct the heading while the car reverses (the course speed):
+    // with the direction reported they compare the track with a dead reckoning that moved
+    // backwards too, and agree.
+    let legs = crawl_in_reverse(1.5);
+    let reported = node_over_legs(&legs, true, None);
+    let worst = reversing(&reported)
+        .iter()
+        .map(|(_, e, ..)| e.abs())
+        .fold(0.0f32, f32::max);
+    let flagged = reversing(&reported)
+        .iter()
+        .filter(|(_, _, u, _)| *u)
+        .count();
+    println!("1.5 m/s reported: worst {worst:.4} rad, {flagged} ticks flagged");
+    assert!(
+        worst < 0.05 && flagged == 0,
+        "{worst} rad, {flagged} flagged"
+    );
+    let unreported = node_over_legs(&legs, false, None);
+    let (_, end, flagged, _) = *reversing(&unreported).last().unwrap();
+    println!("1.5 m/s unreported: at the end {end:.4} rad, flagged {flagged}");
+
+    // A car that reverses from the start (3 m/s, straight, then 30 % at 1 m/s): its first
+    // heading comes from the track turned half round, not half a turn off.
+    let legs = [
+        Leg {
+            seconds: 8.0,
+            speed_mps: -3.0,
+            steer_pct: 0.0,
+        },
+        Leg {
+            seconds: 10.0,
+            speed_mps: -1.0,
+            steer_pct: 30.0,
+        },
+    ];
+    let run = node_over_legs(&legs, true, None);
+    let settled: Vec<_> = run.iter().filter(|(t, ..)| *t >= 4.0).collect();
+    let worst = settled
+        .iter()
+        .map(|(_, e, ..)| e.abs())
+        .fold(0.0f32, f32::max);
+    let first = run.first().map(|(t, e, ..)| (*t, *e));
+    println!("reversing from the start: first heading {first:?}, worst after 4 s {worst:.4} rad");
+    assert!(
+        worst < 0.05 && settled.iter().all(|(_, _, u, ..)| !u),
+        "{worst} rad"
+    );
 }
 
 /// The controllers do not drive backwards: with a path, a car that reports reverse is held
@@ -595,7 +646,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
 #[test]
 fn the_controller_holds_a_car_that_reports_reverse() {
     use catmodel::can::codec::{ControlStatus, FallbackCause};
-    let run = node_over_legs(&crawl_in_reverse(), true, Some(1.0));
+    let run = node_over_legs(&crawl_in_reverse(1.0), true, Some(1.0));
     let reverse: Vec<_> = run.iter().filter(|(t, ..)| *t >= 11.05).collect();
     assert!(reverse.len() > 700);
     for (t, _, _, _, c) in &reverse {

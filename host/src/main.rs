@@ -631,6 +631,9 @@ fn print_replay_warnings(
     if let Some(note) = replay::speed_note(result) {
         eprintln!("catmodel: warning: {note}");
     }
+    if let Some(note) = replay::direction_note(result) {
+        eprintln!("catmodel: note: {note}");
+    }
     if let Some(note) = replay::slow_reports_note(result) {
         eprintln!("catmodel: warning: {note}");
     }

@@ -21,7 +21,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use catmodel::can::candump;
 use catmodel::can::codec::{
-    GnssPosition, ModelMode, Prediction, SpeedReport, StateMotion, StatePosition,
+    Direction, GnssPosition, ModelMode, Prediction, SpeedReport, StateMotion, StatePosition,
 };
 use catmodel::can::freshness::{FreshnessConfig, Input};
 use catmodel::can::spec::{node_input_index, NODE_INPUTS};
@@ -910,6 +910,8 @@ pub struct ReplayStats {
     /// Speed reports above the model file's `max_speed_mps`, which the node clamps to it
     /// without a counter of its own ([`speed_note`]).
     pub speeds_over_max: SpeedsOverMax,
+    /// SPEED_REPORT's `direction` over the log ([`direction_note`]).
+    pub directions: DirectionReports,
     /// The steering and speed reports' intervals against their timeouts ([`slow_reports_note`]).
     pub report_intervals: [ReportIntervals; 2],
 }
@@ -1171,6 +1173,71 @@ pub fn speed_note(stats: &ReplayStats) -> Option<String> {
     ))
 }
 
+/// SPEED_REPORT `direction` in the reports the node took (CRC and length right): how many
+/// said forward, reverse and invalid (the rest said nothing: a kit without the signal).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DirectionReports {
+    /// Reports that said forward.
+    pub forward: u64,
+    /// Reports that said reverse.
+    pub reverse: u64,
+    /// Reports that said invalid (taken as not reported, counted as an invalid input).
+    pub invalid: u64,
+    /// The first reverse report's time stamp, us.
+    pub first_reverse_t_us: Option<u64>,
+}
+
+impl DirectionReports {
+    /// Counts `frame` (stamped `t_us`) if it is a speed report with a direction.
+    fn observe(&mut self, frame: &CanFrame, t_us: u64) {
+        if frame.id != catmodel::can::spec::SPEED_REPORT.id {
+            return;
+        }
+        let Ok((report, _)) = SpeedReport::decode(frame) else {
+            return;
+        };
+        match report.direction {
+            Direction::NotReported => {}
+            Direction::Forward => self.forward += 1,
+            Direction::Reverse => {
+                self.reverse += 1;
+                self.first_reverse_t_us.get_or_insert(t_us);
+            }
+            Direction::Invalid => self.invalid += 1,
+        }
+    }
+}
+
+/// What a replay says about SPEED_REPORT's `direction`, when any report carried one: how many
+/// said reverse (the node moved the car backwards there and its controller held it) and how
+/// many said invalid. `None` for a log whose reports say no direction (every log before the
+/// signal).
+pub fn direction_note(stats: &ReplayStats) -> Option<String> {
+    let d = &stats.directions;
+    if d.forward + d.reverse + d.invalid == 0 {
+        return None;
+    }
+    let mut note = format!(
+        "SPEED_REPORT direction: {} report(s) forward, {} reverse",
+        d.forward, d.reverse
+    );
+    if let Some(t) = d.first_reverse_t_us {
+        note.push_str(&format!(
+            " (the first at t = {:.6} s: the node dead-reckoned and predicted the car \
+             backwards there, and a controller with a path held it, `fallback_reason` \
+             reversing)",
+            t as f64 * 1e-6
+        ));
+    }
+    if d.invalid > 0 {
+        note.push_str(&format!(
+            ", {} invalid (taken as not reported, counted as invalid inputs)",
+            d.invalid
+        ));
+    }
+    Some(note)
+}
+
 /// GNSS positions from other source addresses than the model file's (`(address, count)`), as
 /// `replay` and `receiver-error` name them: the list (`30161 from 128 (0x80), ...`) and the
 /// busiest address. `None` without them.
@@ -1293,6 +1360,7 @@ pub fn replay_with_progress(
         fixes: 0,
         other_gnss_sources: Vec::new(),
         speeds_over_max: SpeedsOverMax::default(),
+        directions: DirectionReports::default(),
         report_intervals: Default::default(),
     });
     ReplayOutput {
@@ -1732,6 +1800,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         ..SpeedsOverMax::default()
     };
     let mut report_intervals = ReportIntervals::steering_and_speed(&config);
+    let mut directions = DirectionReports::default();
     let mut node = crate::new_node(config);
     // The times of the receiver's position frames, for the rate the whole log shows.
     let mut fix_times_us: Vec<u64> = Vec::new();
@@ -1801,6 +1870,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
                 frames += rx.len() as u64;
                 for f in &rx {
                     speeds_over_max.observe(&f.frame, f.t_us);
+                    directions.observe(&f.frame, f.t_us);
                     ReportIntervals::observe_frame(&mut report_intervals, &f.frame, f.t_us);
                     match GnssPosition::decode(&f.frame, gnss_source) {
                         Ok(_) => fix_times_us.push(f.t_us),
@@ -1892,6 +1962,7 @@ fn run<S: FrameSource, C: Write + Send, T: Write + Send>(
         gnss_rate: crate::ReceiverRate::measure(&fix_times_us),
         planner,
         speeds_over_max,
+        directions,
         report_intervals,
     };
     let error = if input_ok == Some(true) {

@@ -2043,6 +2043,82 @@ fn csv2can_names_sensors_logged_slower_than_their_timeouts() {
     assert!(!stderr.contains("further apart"), "{stderr}");
 }
 
+/// A log whose `vel` is negative (a signed wheel speed: the car reversing) goes on the bus as
+/// its magnitude with SPEED_REPORT `direction` = reverse, and says so: `csv2can` counts and
+/// notes them, `decode` names the direction, `replay` counts the reports that carried one.
+/// Before, they went out as 0 m/s (a documented note). A log without a negative speed gives
+/// the same frames as before (`bundled_smoke_drive_is_reproducible`) and no note.
+#[test]
+fn csv2can_sends_a_negative_speed_as_reversing_and_decode_and_replay_show_it() {
+    let dir = tmp_dir("csv2can_reverse");
+    let csv = std::fs::read_to_string(data("smoke.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, "t,vel,input_vel,accel,steer,brake,lat,lon");
+    let mut out = format!("{header}\n");
+    let mut reversed = 0;
+    for line in lines {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        let t: f64 = cells[0].parse().unwrap();
+        if (8.0..9.0).contains(&t) && !cells[1].is_empty() {
+            let v: f64 = cells[1].parse().unwrap();
+            if v > 0.0 {
+                cells[1] = format!("{}", -v);
+                reversed += 1;
+            }
+        }
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    assert!(reversed > 40, "{reversed}");
+    let log_csv = dir.join("reverse.csv");
+    std::fs::write(&log_csv, out).unwrap();
+    let log = dir.join("reverse.can.log");
+    let stderr = ok(&["csv2can", s(&log_csv), "--out", s(&log)]);
+    assert!(
+        stderr.contains(&format!(
+            "{reversed} measured speed(s) `vel` below 0 m/s sent as reversing: SPEED_REPORT \
+             carries the magnitude with direction = 2 (reverse)"
+        )),
+        "{stderr}"
+    );
+    let decoded = run(&["decode", s(&log), "--csv", "--messages", "SPEED_REPORT"]);
+    let text = String::from_utf8(decoded.stdout).unwrap();
+    let direction_rows: Vec<&str> = text.lines().filter(|l| l.contains(",direction,")).collect();
+    let reverse_rows = direction_rows
+        .iter()
+        .filter(|l| l.contains(",direction,2,2,,reverse,"))
+        .count();
+    assert_eq!(reverse_rows, reversed, "{:?}", &direction_rows[..3]);
+    let stderr = ok(&[
+        "replay",
+        s(&log),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&dir.join("pred.csv")),
+    ]);
+    assert!(
+        stderr.contains(&format!(
+            "SPEED_REPORT direction: 0 report(s) forward, {reversed} reverse (the first at t = 8."
+        )),
+        "{stderr}"
+    );
+    // The drive as recorded: no note from either.
+    let plain = dir.join("plain.can.log");
+    let stderr = ok(&["csv2can", s(&data("smoke.csv")), "--out", s(&plain)]);
+    assert!(!stderr.contains("reversing"), "{stderr}");
+    let stderr = ok(&[
+        "replay",
+        s(&plain),
+        "--origin",
+        ORIGIN,
+        "--out",
+        s(&dir.join("plain.csv")),
+    ]);
+    assert!(!stderr.contains("direction"), "{stderr}");
+}
+
 /// A log whose steering and speed were recorded at 5 Hz (a telemetry logger's rate, not the
 /// bus's 50 Hz): `replay` names the reports' interval against their timeouts, and the node's
 /// steering check does not read the ticks between reports, when the models steer straight on,

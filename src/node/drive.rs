@@ -480,7 +480,7 @@ impl Drive {
         if inputs.reversing {
             // The controllers and their models drive forwards only: a car in reverse gear is
             // held (speed 0, steering where it was last commanded) until it reports forward,
-            // or no direction, again; the heading's settling starts afresh then.
+            // or no direction, again (the control pose's smoothing starts afresh then).
             self.smoothing.forget();
             return self.hold(ControlStatus::Fallback, FallbackCause::Reversing);
         }
