@@ -113,9 +113,11 @@ const COG_REFUSED_TICKS_MAX: u16 = 25;
 /// ([`EstimatorState::correct_heading_on_track`]).
 const CHORD_GATE_SIGMAS: f32 = 3.0;
 /// The chords' error, once it persists, beyond which the track runs against the dead reckoning
-/// (rad, 90 degrees): the car reverses (SPEED_REPORT carries the speed's magnitude, and the node
-/// dead-reckons forwards) or the heading is half a turn off, which a straight track cannot tell
-/// apart ([`EstimatorState::direction_ambiguous`]).
+/// (rad, 90 degrees): the car reverses without saying so (SPEED_REPORT's speed is a magnitude,
+/// and without its `direction` the node dead-reckons forwards) or the heading is half a turn
+/// off, which a straight track cannot tell apart ([`EstimatorState::direction_ambiguous`]). A
+/// car that reports reverse is dead-reckoned backwards (a negative speed), and its track runs
+/// with the dead reckoning.
 const AGAINST_THE_TRACK_RAD: f32 = core::f32::consts::FRAC_PI_2;
 /// The turn the dead reckoning makes with the chords agreeing, rad, after which a heading the
 /// track ran against is trusted again: in a turn a reversing car's track bends the other way
@@ -589,8 +591,8 @@ impl EstimatorState {
     /// The GNSS track ran against the dead reckoning (the chords' error beyond
     /// [`AGAINST_THE_TRACK_RAD`] for longer than a fix stays in them), and the heading has not
     /// been confirmed since by a turn of [`DIRECTION_CONFIRM_TURN_RAD`] through which the
-    /// chords agreed. The node's speed has no sign (SPEED_REPORT): a car that reverses is, to
-    /// the node, a car facing the other way, and the chords turn the heading half round to
+    /// chords agreed. Without SPEED_REPORT's `direction` the node's speed has no sign: a car
+    /// that reverses is, to the node, a car facing the other way, and the chords turn the heading half round to
     /// the track's direction, where they then agree; the heading is half a turn off, the
     /// rear axle twice the antenna's lever arm off, and the heading filter sure of both (a
     /// black-box probe: 3.13 rad off for 528 ticks, `heading_uncertain` clear;
@@ -610,9 +612,10 @@ impl EstimatorState {
     }
 
     /// Dead reckoning of the antenna: the car moved `dt_s` at `speed_mps` (rear axle, along the
-    /// heading) while turning at `rates.yaw_rps` and sliding sideways at `rates.rear_side_mps`;
-    /// the antenna also swings sideways by `antenna_ahead * yaw_rate` and, off the centre line,
-    /// moves `antenna_left * yaw_rate` faster along (the outside of a turn travels farther).
+    /// heading; negative reversing) while turning at `rates.yaw_rps` and sliding sideways at
+    /// `rates.rear_side_mps`; the antenna also swings sideways by `antenna_ahead * yaw_rate`
+    /// and, off the centre line, moves `antenna_left * yaw_rate` faster along (the outside of a
+    /// turn travels farther).
     /// Call once per tick, before the tick's fixes are applied with their time offsets.
     pub fn propagate(&mut self, cfg: &EstimatorConfig, speed_mps: f32, rates: Rates, dt_s: f32) {
         let heading = self.heading_rad.unwrap_or(0.0);

@@ -75,7 +75,8 @@ pub const PREDICTION_POINTS: usize = 10;
 /// 1 s ahead at 10 m/s by 1 m. Set after the first course sets the heading (0.5 rad) until
 /// the courses settle it, and when the track shows the heading off (docs/findings.md: a slide at full lock).
 /// The bit is also set while the track has run against the heading and no turn has confirmed
-/// it since (`EstimatorState::direction_ambiguous`: a car that reverses).
+/// it since (`EstimatorState::direction_ambiguous`: a car that reverses without SPEED_REPORT's
+/// `direction` saying so).
 pub const HEADING_UNCERTAIN_ABOVE_RAD: f32 = 0.1;
 /// Longest velocity-model input delay a model file may have: 64 samples = 1.28 s (eq 5 has
 /// 21; models identified on the simulator's delayed, lagging speed loop reach ~48); the
@@ -727,9 +728,10 @@ impl<D: BorrowMut<Drive>> Node<D> {
         m.speed_mps = speed_mps;
         // Reversing: the car moves backwards, and the kinematic model's yaw rate takes the
         // motion's sign; the dynamic model (tyre slip angles of a car moving forwards) does
-        // not hold, so the kinematic model runs whatever the hybrid switch would pick.
+        // not hold, so the car is taken as one without it: the kinematic model, no slip.
         let reversing = inputs.reversing;
         m.reversing = reversing;
+        let dynamics = cfg.dynamics.as_ref().filter(|_| !reversing);
 
         // Stale steering: the model steers straight on, and the wheels may be where the last
         // report had them or have turned since (at the actuator's rate over the report's age,
@@ -753,22 +755,21 @@ impl<D: BorrowMut<Drive>> Node<D> {
         };
         let yaw_kin =
             signed(speed_mps, reversing) * cfg.vehicle.curvature_per_m(center_steer_rad, speed_mps);
-        let mode = match cfg.dynamics {
-            Some(_) if !reversing => {
-                cfg.hybrid
-                    .update(&mut m.hybrid, speed_mps, speed_mps * m.yaw_rate_rps)
-            }
-            _ => Mode::Kinematic,
+        let mode = match dynamics {
+            Some(_) => cfg
+                .hybrid
+                .update(&mut m.hybrid, speed_mps, speed_mps * m.yaw_rate_rps),
+            None => Mode::Kinematic,
         };
-        match (mode, &cfg.dynamics) {
+        match (mode, dynamics) {
             (Mode::Dynamic, Some(dynamics)) => {
                 dynamics.step(&mut m.lateral, speed_mps, center_steer_rad, dt_s);
                 m.yaw_rate_rps = m.lateral.yaw_rate_rps;
             }
             (_, dynamics) => {
                 m.lateral = match dynamics {
-                    Some(d) if !reversing => d.steady_state(speed_mps, center_steer_rad),
-                    _ => LateralState {
+                    Some(d) => d.steady_state(speed_mps, center_steer_rad),
+                    None => LateralState {
                         vy_mps: 0.0,
                         yaw_rate_rps: yaw_kin,
                     },
@@ -782,8 +783,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
         }
         // Either mode's lateral state is the dynamic model's when the car has one (its steady
         // state in the kinematic mode), so the rear axle's slip is there in both.
-        m.rear_side_mps = match &cfg.dynamics {
-            Some(d) if !reversing => {
+        m.rear_side_mps = match dynamics {
+            Some(d) => {
                 let side = d.rear_side_mps(&m.lateral);
                 let most = MAX_REAR_SLIP_RAD * speed_mps;
                 if side.is_finite() {
@@ -792,7 +793,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     0.0
                 }
             }
-            _ => 0.0,
+            None => 0.0,
         };
         Motion {
             speed_mps,
@@ -817,7 +818,8 @@ impl<D: BorrowMut<Drive>> Node<D> {
         // The check compares the measured turn with the one the steering gave the models: a
         // tick without a steering report gave them none (a sensor logged at 5 Hz, stale
         // between its reports, read as a steering 1.7 times the model file's: a black-box
-        // probe, docs/findings.md), and restarts the check's block.
+        // probe, docs/findings.md), and restarts the check's block; so does a negative speed
+        // (reversing): the check learns from driving forwards.
         self.steering.observe(
             measured_heading.filter(|_| motion.steer_fresh),
             velocity_mps,

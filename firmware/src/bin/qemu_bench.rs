@@ -480,6 +480,7 @@ fn bench_rollouts() {
                     Mode::Dynamic => lateral,
                 },
                 mode,
+                reversing: false,
             };
             let mut points = [PredictedPoint::default(); PREDICTION_POINTS];
             let vel_state = *state;
