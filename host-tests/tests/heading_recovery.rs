@@ -445,11 +445,13 @@ fn a_track_that_runs_against_the_heading_is_flagged_until_a_turn_confirms_it() {
 
 /// Each tick of a scripted drive through the node: `(t since the first fix s, heading error
 /// rad, heading_uncertain, PREDICTION_10's displacement along the estimated heading m,
-/// CONTROL_COMMAND)`.
+/// CONTROL_COMMAND)`. With `receiver_course`, the receiver sends its course over ground too
+/// (PGN 129026 at 10 Hz: the antenna's direction of motion, backwards when reversing).
 fn node_over_legs(
     legs: &[catmodel_host_tests::bus::Leg],
     report_direction: bool,
     path_at_s: Option<f64>,
+    receiver_course: bool,
 ) -> Vec<(
     f64,
     f32,
@@ -464,6 +466,31 @@ fn node_over_legs(
 
     let (drive, truth) = bus::drive_legs(legs, report_direction);
     let mut frames = bus::frames(&drive);
+    if receiver_course {
+        use catmodel::can::codec::GnssCogSog;
+        use catmodel::can::spec::N2K_DEFAULT_SOURCE;
+        let lever = f64::from(bus::config().estimator.antenna_ahead_m);
+        let antenna = |ms: usize| {
+            let (e, n, h) = truth.rear_axle_ms[ms];
+            (e + lever * h.sin(), n + lever * h.cos())
+        };
+        for ms in (100..truth.rear_axle_ms.len()).step_by(100) {
+            let ((e0, n0), (e1, n1)) = (antenna(ms - 1), antenna(ms));
+            let (de, dn) = (e1 - e0, n1 - n0);
+            let sog = (de * de + dn * dn).sqrt() * 1e3;
+            let cog = de.atan2(dn).rem_euclid(std::f64::consts::TAU);
+            let frame = GnssCogSog {
+                sid: 0,
+                cog_reference: 0,
+                cog_rad: Some(cog as f32),
+                sog_mps: Some(sog as f32),
+            }
+            .encode(N2K_DEFAULT_SOURCE);
+            let t_us = bus::START_US + ms as u64 * 1_000 + 500;
+            frames.push(TimedFrame { t_us, frame });
+        }
+        frames.sort_by_key(|f| f.t_us);
+    }
     if let Some(at_s) = path_at_s {
         // A straight path east from the start, where the car drives forwards (0.5 m apart,
         // 3 m/s): the planner's frames over the ticks from `at_s`, as it sends them.
@@ -539,7 +566,8 @@ fn crawl_in_reverse(reverse_mps: f32) -> [catmodel_host_tests::bus::Leg; 3] {
 /// dead reckoning moves it backwards, the yaw rate takes the motion's sign, and the heading
 /// stays within 0.05 rad of the truth through the whole reverse; the predictions roll it
 /// backwards (PREDICTION_10, 2 s ahead: 2 m behind); at 1.5 m/s too, where the chords run, and
-/// for a car that reverses from the start (its first heading from the track turned round). A
+/// for a car that reverses from the start (its first heading from the track, or from the
+/// receiver's course over ground, turned round). A
 /// kit that reports no direction keeps today's behaviour, the probe's: more than 1.5 rad off
 /// at the end, unflagged, predicted forwards ("Not fixed yet" keeps it).
 #[test]
@@ -552,7 +580,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
             .map(|&(t, e, u, a, _)| (t, e, u, a))
             .collect::<Vec<_>>()
     };
-    let reported = node_over_legs(&legs, true, None);
+    let reported = node_over_legs(&legs, true, None, false);
     let worst = reversing(&reported)
         .iter()
         .map(|(_, e, ..)| e.abs())
@@ -581,7 +609,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
     assert!(forwards.clone().count() > 200);
     assert!(forwards.clone().all(|a| (a - 6.0).abs() < 0.1), "forwards");
 
-    let unreported = node_over_legs(&legs, false, None);
+    let unreported = node_over_legs(&legs, false, None, false);
     let (_, end, flagged, along) = *reversing(&unreported).last().unwrap();
     println!("unreported: at the end {end:.4} rad, flagged {flagged}, {along:?} m along");
     assert!(
@@ -594,7 +622,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
     // with the direction reported they compare the track with a dead reckoning that moved
     // backwards too, and agree.
     let legs = crawl_in_reverse(1.5);
-    let reported = node_over_legs(&legs, true, None);
+    let reported = node_over_legs(&legs, true, None, false);
     let worst = reversing(&reported)
         .iter()
         .map(|(_, e, ..)| e.abs())
@@ -608,7 +636,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
         worst < 0.05 && flagged == 0,
         "{worst} rad, {flagged} flagged"
     );
-    let unreported = node_over_legs(&legs, false, None);
+    let unreported = node_over_legs(&legs, false, None, false);
     let (_, end, flagged, _) = *reversing(&unreported).last().unwrap();
     println!("1.5 m/s unreported: at the end {end:.4} rad, flagged {flagged}");
 
@@ -626,18 +654,24 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
             steer_pct: 30.0,
         },
     ];
-    let run = node_over_legs(&legs, true, None);
-    let settled: Vec<_> = run.iter().filter(|(t, ..)| *t >= 4.0).collect();
-    let worst = settled
-        .iter()
-        .map(|(_, e, ..)| e.abs())
-        .fold(0.0f32, f32::max);
-    let first = run.first().map(|(t, e, ..)| (*t, *e));
-    println!("reversing from the start: first heading {first:?}, worst after 4 s {worst:.4} rad");
-    assert!(
-        worst < 0.05 && settled.iter().all(|(_, _, u, ..)| !u),
-        "{worst} rad"
-    );
+    // From the track's chords, and from a receiver's course over ground (backwards).
+    for receiver_course in [false, true] {
+        let run = node_over_legs(&legs, true, None, receiver_course);
+        let settled: Vec<_> = run.iter().filter(|(t, ..)| *t >= 4.0).collect();
+        let worst = settled
+            .iter()
+            .map(|(_, e, ..)| e.abs())
+            .fold(0.0f32, f32::max);
+        let first = run.first().map(|(t, e, ..)| (*t, *e));
+        println!(
+            "reversing from the start, course over ground {receiver_course}: first heading \
+             {first:?}, worst after 4 s {worst:.4} rad"
+        );
+        assert!(
+            worst < 0.05 && settled.iter().all(|(_, _, u, ..)| !u),
+            "{worst} rad"
+        );
+    }
 }
 
 /// The controllers do not drive backwards: with a path, a car that reports reverse is held
@@ -646,7 +680,7 @@ fn a_car_that_reports_reverse_keeps_its_heading_at_a_crawl() {
 #[test]
 fn the_controller_holds_a_car_that_reports_reverse() {
     use catmodel::can::codec::{ControlStatus, FallbackCause};
-    let run = node_over_legs(&crawl_in_reverse(1.0), true, Some(1.0));
+    let run = node_over_legs(&crawl_in_reverse(1.0), true, Some(1.0), false);
     let reverse: Vec<_> = run.iter().filter(|(t, ..)| *t >= 11.05).collect();
     assert!(reverse.len() > 700);
     for (t, _, _, _, c) in &reverse {

@@ -1,7 +1,7 @@
 //! The fault matrix (docs/faults.md), one test per row: what the node does with each fault,
 //! which counter or health bit shows it, and that it recovers. Traffic comes from
 //! `catmodel_host_tests::bus` (a known drive), with the fault injected.
-use catmodel::can::codec::{NodeStatus, SpeedReport, SteeringReport};
+use catmodel::can::codec::{Direction, NodeStatus, SpeedReport, SteeringReport};
 use catmodel::can::spec::is_node_input;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
 use catmodel::node::{PlatformStats, MAX_RX_FRAMES_PER_TICK};
@@ -144,6 +144,43 @@ fn out_of_range_and_invalid_sentinel_are_rejected_counted_and_flagged() {
     }
     let ticks = run(&frames(&d));
     assert_eq!(ticks.last().unwrap().counters.range_errors, n);
+    let recent = window(&ticks, 1.0, 2.9);
+    assert!(recent
+        .iter()
+        .any(|t| matches!(t.status(), NodeStatus::Health { health, .. } if health.input_invalid)));
+}
+
+/// SPEED_REPORT `direction` 3 (the kit says it does not know): the speed is used, the car
+/// taken as driving forwards (as from a kit without the signal: the node's frames are those of
+/// the same drive without it), and each such report counted as an invalid input.
+#[test]
+fn a_speed_report_whose_direction_is_invalid_is_taken_as_forward_and_counted() {
+    let clean = drive(10.0, 5.0, 3.0);
+    let mut d = clean.clone();
+    let mut n = 0;
+    for l in d
+        .iter_mut()
+        .filter(|l| l.kind == Kind::Speed)
+        .skip(40)
+        .step_by(10)
+    {
+        // direction: bits 32..33 (byte 4), 3 = invalid.
+        l.frame.frame.data[4] = 3;
+        l.frame.frame = reseal(l.frame.frame);
+        let (report, _) = SpeedReport::decode(&l.frame.frame).unwrap();
+        assert_eq!(report.direction, Direction::Invalid);
+        n += 1;
+    }
+    assert!(n > 5);
+    let ticks = run(&frames(&d));
+    let as_recorded = run(&frames(&clean));
+    assert_eq!(ticks.last().unwrap().counters.range_errors, n);
+    for (t, c) in ticks.iter().zip(&as_recorded) {
+        assert_eq!(
+            (t.position(), t.predictions()),
+            (c.position(), c.predictions())
+        );
+    }
     let recent = window(&ticks, 1.0, 2.9);
     assert!(recent
         .iter()
