@@ -99,12 +99,13 @@ impl RxQueue {
 
     /// Appends `frame`; gives it back when the queue is full.
     pub fn try_push(&self, frame: TimedFrame) -> Result<(), TimedFrame> {
-        self.frames.lock(|q| q.borrow_mut().push_back(frame))
+        self.frames
+            .lock(|q| with(q, |q| q.push_back(frame)).unwrap_or(Err(frame)))
     }
 
     /// Frames waiting.
     pub fn len(&self) -> usize {
-        self.frames.lock(|q| q.borrow().len())
+        self.frames.lock(|q| with(q, |q| q.len()).unwrap_or(0))
     }
 
     /// Whether no frame is waiting.
@@ -118,16 +119,24 @@ impl RxQueue {
     pub fn drain_due(&self, tick_us: u64, batch: &mut heapless::Vec<TimedFrame, RX_BATCH_LEN>) {
         batch.clear();
         self.frames.lock(|q| {
-            let mut q = q.borrow_mut();
-            while !batch.is_full() && q.front().is_some_and(|f| f.t_us <= tick_us) {
-                if let Some(frame) = q.pop_front() {
-                    // Note: cannot fail, the batch is not full (checked by the loop).
-                    let _ = batch.push(frame);
+            with(q, |q| {
+                while !batch.is_full() && q.front().is_some_and(|f| f.t_us <= tick_us) {
+                    if let Some(frame) = q.pop_front() {
+                        // Note: cannot fail, the batch is not full (checked by the loop).
+                        let _ = batch.push(frame);
+                    }
                 }
-            }
+            })
         });
     }
 }
+/// `f` on the contents of `cell`, borrowed inside a lock's critical section, which holds no
+/// other borrow of it (so `None` is never returned there): `RefCell::borrow_mut` would panic
+/// on a second borrow, and that panic's code and message cost the board 150 B of flash.
+fn with<T, R>(cell: &RefCell<T>, f: impl FnOnce(&mut T) -> R) -> Option<R> {
+    cell.try_borrow_mut().ok().map(|mut v| f(&mut v))
+}
+
 /// Frames to send, one batch per tick: a ring of [`TX_QUEUE_LEN`] batches that the tick fills
 /// in place ([`TxQueue::reserve`]: `Node::step` writes its frames straight into the batch the
 /// transmit loop will read, [`TxSlot::commit`] queues it) and the transmit loop empties
@@ -183,12 +192,14 @@ impl TxQueue {
     /// back unsent.
     pub fn reserve(&self) -> Option<TxSlot<'_>> {
         let index = self.ring.lock(|ring| {
-            let mut ring = ring.borrow_mut();
-            if ring.reserved || ring.len >= TX_QUEUE_LEN {
-                return None;
-            }
-            ring.reserved = true;
-            Some((ring.front + ring.len) % TX_QUEUE_LEN)
+            with(ring, |ring| {
+                if ring.reserved || ring.len >= TX_QUEUE_LEN {
+                    return None;
+                }
+                ring.reserved = true;
+                Some((ring.front + ring.len) % TX_QUEUE_LEN)
+            })
+            .flatten()
         })?;
         match self.slots.get(index) {
             // SAFETY: `reserved` was clear and is now set: this slot (the one after the queued
@@ -208,29 +219,28 @@ impl TxQueue {
     }
 
     fn release(&self) {
-        self.ring.lock(|ring| ring.borrow_mut().reserved = false);
+        self.ring
+            .lock(|ring| with(ring, |ring| ring.reserved = false));
     }
 
     /// The oldest queued batch, copied out and its slot freed; `None` when none is queued.
     pub fn try_receive(&self) -> Option<TxBatch> {
-        self.ring.lock(|ring| {
-            let mut ring = ring.borrow_mut();
-            self.pop(&mut ring)
-        })
+        self.ring
+            .lock(|ring| with(ring, |ring| self.pop(ring)).flatten())
     }
 
     /// Waits for the oldest queued batch ([`TxQueue::try_receive`]).
     pub async fn receive(&self) -> TxBatch {
         poll_fn(|cx| {
             self.ring.lock(|ring| {
-                let mut ring = ring.borrow_mut();
-                match self.pop(&mut ring) {
+                with(ring, |ring| match self.pop(ring) {
                     Some(batch) => Poll::Ready(batch),
                     None => {
                         ring.receiver.register(cx.waker());
                         Poll::Pending
                     }
-                }
+                })
+                .unwrap_or(Poll::Pending)
             })
         })
         .await
@@ -251,7 +261,8 @@ impl TxQueue {
 
     /// Whether no batch is queued.
     pub fn is_empty(&self) -> bool {
-        self.ring.lock(|ring| ring.borrow().len == 0)
+        self.ring
+            .lock(|ring| with(ring, |ring| ring.len == 0).unwrap_or(true))
     }
 }
 
@@ -267,10 +278,11 @@ impl TxSlot<'_> {
     pub fn commit(mut self) {
         self.committed = true;
         self.queue.ring.lock(|ring| {
-            let mut ring = ring.borrow_mut();
-            ring.len += 1;
-            ring.reserved = false;
-            ring.receiver.wake();
+            with(ring, |ring| {
+                ring.len += 1;
+                ring.reserved = false;
+                ring.receiver.wake();
+            })
         });
     }
 }

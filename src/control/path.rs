@@ -732,7 +732,6 @@ impl Path {
             if i > 0 {
                 theta_i += step(i - 1);
             }
-            let mut last = usize::MAX;
             for (&window_m, (j, theta_j)) in TURN_WINDOWS_M.iter().zip(ends.iter_mut()) {
                 if *j < i {
                     (*j, *theta_j) = (i, theta_i);
@@ -741,9 +740,7 @@ impl Path {
                     *theta_j += step(*j);
                     *j += 1;
                 }
-                // A window that ends where a shorter one did cuts the same turn.
-                if *j != last {
-                    last = *j;
+                {
                     if let Some((s_j, room_j)) = at(*j) {
                         let (turn, length) = (*theta_j - theta_i, s_j - s_i);
                         let cap = cut_turn_m2ps2(
