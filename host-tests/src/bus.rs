@@ -74,21 +74,7 @@ pub fn drive(v: f32, steer_pct: f32, seconds: f32) -> Vec<Labelled> {
     for i in 0..n {
         let t_us = START_US + i * 10_000;
         let (east, north, h) = rear_axle(f64::from(v), k, i as f64 * 0.01);
-        let (lat, lon) = frame.from_local(Enu {
-            east_m: (east + lever * h.sin()) as f32,
-            north_m: (north + lever * h.cos()) as f32,
-        });
-        let fix = GnssPosition {
-            lat_e7: (lat * 1e7).round() as i32,
-            lon_e7: (lon * 1e7).round() as i32,
-        };
-        out.push(Labelled {
-            kind: Kind::Gnss,
-            frame: TimedFrame {
-                t_us,
-                frame: fix.encode(N2K_DEFAULT_SOURCE),
-            },
-        });
+        out.push(fix_at(&frame, lever, (east, north, h), t_us));
         if i % 2 == 0 {
             let counter = ((i / 2) % 16) as u8;
             let steering = SteeringReport {
@@ -165,21 +151,7 @@ pub fn drive_legs(legs: &[Leg], report_direction: bool) -> (Vec<Labelled>, Truth
         truth.rear_axle_ms.push((east, north, h));
         let t_us = START_US + ms * 1_000;
         if ms % 10 == 0 {
-            let (lat, lon) = frame.from_local(Enu {
-                east_m: (east + lever * h.sin()) as f32,
-                north_m: (north + lever * h.cos()) as f32,
-            });
-            let fix = GnssPosition {
-                lat_e7: (lat * 1e7).round() as i32,
-                lon_e7: (lon * 1e7).round() as i32,
-            };
-            out.push(Labelled {
-                kind: Kind::Gnss,
-                frame: TimedFrame {
-                    t_us,
-                    frame: fix.encode(N2K_DEFAULT_SOURCE),
-                },
-            });
+            out.push(fix_at(&frame, lever, (east, north, h), t_us));
         }
         if ms % 20 == 1 {
             let counter = ((ms / 20) % 16) as u8;
@@ -353,4 +325,29 @@ pub fn frames(drive: &[Labelled]) -> Vec<TimedFrame> {
 pub fn reseal(mut frame: CanFrame) -> CanFrame {
     frame.data[7] = catmodel::can::crc::frame_crc(frame.id, &frame.data);
     frame
+}
+
+/// The receiver's fix at `t_us` of a car whose rear axle is at `(east, north)` with heading `h`
+/// (rad, clockwise from north) in `frame`, its antenna `lever` metres ahead of the axle.
+fn fix_at(
+    frame: &LocalFrame,
+    lever: f64,
+    (east, north, h): (f64, f64, f64),
+    t_us: u64,
+) -> Labelled {
+    let (lat, lon) = frame.from_local(Enu {
+        east_m: (east + lever * h.sin()) as f32,
+        north_m: (north + lever * h.cos()) as f32,
+    });
+    let fix = GnssPosition {
+        lat_e7: (lat * 1e7).round() as i32,
+        lon_e7: (lon * 1e7).round() as i32,
+    };
+    Labelled {
+        kind: Kind::Gnss,
+        frame: TimedFrame {
+            t_us,
+            frame: fix.encode(N2K_DEFAULT_SOURCE),
+        },
+    }
 }

@@ -180,13 +180,7 @@ fn a_slow_launch_is_followed_and_a_command_in_km_h_is_named_as_its_unit() {
         }
     }
     for (scenario, seed) in [("straight-5", 1), ("straight-10", 2), ("circle-left", 1)] {
-        let options = catmodel_host::sim::SimOptions {
-            seed,
-            ..Default::default()
-        };
-        let rows = catmodel_host::sim::run_named(scenario, None, &options)
-            .unwrap()
-            .log;
+        let rows = simulated(scenario, seed);
         for (factor, unit) in [(3.6, "km/h"), (2.237, "mph")] {
             let mut rows = rows.clone();
             for r in &mut rows {
@@ -236,13 +230,7 @@ fn paper_sized_set_with_sensors_every(nth: usize) -> Vec<Experiment> {
     PAPER_SIZED_TRAINING
         .iter()
         .map(|&(scenario, seed)| {
-            let options = catmodel_host::sim::SimOptions {
-                seed,
-                ..Default::default()
-            };
-            let mut rows = catmodel_host::sim::run_named(scenario, None, &options)
-                .unwrap_or_else(|e| panic!("simulating {scenario}: {e}"))
-                .log;
+            let mut rows = simulated(scenario, seed);
             let mut seen = [0usize; 5];
             for r in &mut rows {
                 let cells = [
@@ -1599,13 +1587,7 @@ fn fixes_that_reach_the_log_late_are_timed_and_named() {
 /// own rows, as a recorder that stamps them with another clock writes them), preprocessed.
 fn with_fixes_late(scenario: &str, seed: u64, late_s: f64) -> Experiment {
     let base = model_file::load(&model_file::paper_path()).unwrap();
-    let options = catmodel_host::sim::SimOptions {
-        seed,
-        ..Default::default()
-    };
-    let rows = catmodel_host::sim::run_named(scenario, None, &options)
-        .unwrap()
-        .log;
+    let rows = simulated(scenario, seed);
     let mut moved: Vec<LogRow> = Vec::new();
     for r in rows {
         if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
@@ -2418,4 +2400,15 @@ fn a_wheel_speed_that_sticks_is_named() {
             assert!(held.is_none_or(|d| d.repeated_fixes), "{name}: {held:?}");
         }
     }
+}
+
+/// The built-in scenario `scenario`'s log with sensor seed `seed`.
+fn simulated(scenario: &str, seed: u64) -> Vec<LogRow> {
+    let options = catmodel_host::sim::SimOptions {
+        seed,
+        ..Default::default()
+    };
+    catmodel_host::sim::run_named(scenario, None, &options)
+        .unwrap_or_else(|e| panic!("simulating {scenario}: {e}"))
+        .log
 }
