@@ -9,8 +9,8 @@
 #![no_main]
 use arbitrary::Arbitrary;
 use catmodel::can::codec::{
-    Direction, GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport, StateMotion,
-    StatePosition, SteeringReport,
+    Direction, GnssCogSog, GnssPosition, NodeStatus, PedalReport, Prediction, SpeedReport,
+    StateMotion, StatePosition, SteeringReport,
 };
 use catmodel::can::spec::N2K_DEFAULT_SOURCE;
 use catmodel::can::{CanFrame, CanId, TimedFrame};
