@@ -48,6 +48,11 @@ fn fails(args: &[&str]) -> String {
     stderr
 }
 
+/// `catmodel replay LOG --origin ORIGIN --out OUT`, which must succeed; its stderr.
+fn replay_at_origin(log: &Path, out: &Path) -> String {
+    ok(&["replay", s(log), "--origin", ORIGIN, "--out", s(out)])
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -269,14 +274,7 @@ fn smoke_drive_through_every_command() {
 
     // Replaying again gives the same bytes.
     let pred2 = dir.join("pred2.csv");
-    ok(&[
-        "replay",
-        s(&sim_a.join("smoke.can.log")),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&pred2),
-    ]);
+    replay_at_origin(&sim_a.join("smoke.can.log"), &pred2);
     assert_eq!(read(&pred), read(&pred2));
 }
 
@@ -356,14 +354,7 @@ fn bad_input_is_reported_with_file_and_line() {
     // evaluate reads the same candump (for the baseline) and says the same.
     let truth = dir.join("x.truth.csv");
     std::fs::copy(data("smoke.truth.csv"), &truth).unwrap();
-    ok(&[
-        "replay",
-        s(&data("smoke.can.log")),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&pred),
-    ]);
+    replay_at_origin(&data("smoke.can.log"), &pred);
     let err = fails(&[
         "evaluate",
         s(&pred),
@@ -447,14 +438,7 @@ fn bad_input_is_reported_with_file_and_line() {
 fn evaluate_names_a_truth_sampled_too_slowly_not_the_node() {
     let dir = tmp_dir("slow-truth");
     let pred = dir.join("pred.csv");
-    ok(&[
-        "replay",
-        s(&data("smoke.can.log")),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&pred),
-    ]);
+    replay_at_origin(&data("smoke.can.log"), &pred);
     let text = String::from_utf8(read(&data("smoke.truth.csv"))).unwrap();
     let every = |n: usize, name: &str| {
         let path = dir.join(name);
@@ -864,14 +848,7 @@ fn evaluate_refuses_what_would_mislead() {
     let epoch_can = dir.join("epoch.can.log");
     ok(&["csv2can", s(&epoch_csv), "--out", s(&epoch_can)]);
     let epoch_pred = dir.join("epoch_pred.csv");
-    ok(&[
-        "replay",
-        s(&epoch_can),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&epoch_pred),
-    ]);
+    replay_at_origin(&epoch_can, &epoch_pred);
     let err = fails(&[
         "evaluate",
         s(&epoch_pred),
@@ -2090,14 +2067,7 @@ fn csv2can_sends_a_negative_speed_as_reversing_and_decode_and_replay_show_it() {
         .filter(|l| l.contains(",direction,2,2,,reverse,"))
         .count();
     assert_eq!(reverse_rows, reversed, "{:?}", &direction_rows[..3]);
-    let stderr = ok(&[
-        "replay",
-        s(&log),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&dir.join("pred.csv")),
-    ]);
+    let stderr = replay_at_origin(&log, &dir.join("pred.csv"));
     assert!(
         stderr.contains(&format!(
             "SPEED_REPORT direction: 0 report(s) forward, {reversed} reverse (the first at t = 8."
@@ -2108,14 +2078,7 @@ fn csv2can_sends_a_negative_speed_as_reversing_and_decode_and_replay_show_it() {
     let plain = dir.join("plain.can.log");
     let stderr = ok(&["csv2can", s(&data("smoke.csv")), "--out", s(&plain)]);
     assert!(!stderr.contains("reversing"), "{stderr}");
-    let stderr = ok(&[
-        "replay",
-        s(&plain),
-        "--origin",
-        ORIGIN,
-        "--out",
-        s(&dir.join("plain.csv")),
-    ]);
+    let stderr = replay_at_origin(&plain, &dir.join("plain.csv"));
     assert!(!stderr.contains("direction"), "{stderr}");
 }
 
@@ -2150,15 +2113,7 @@ fn reports_slower_than_their_timeouts_are_named_not_taken_for_a_steering_gain() 
         log.to_str().unwrap(),
     ]);
     let pred = dir.join("pred.csv");
-    let pred = pred.to_str().unwrap();
-    let stderr = ok(&[
-        "replay",
-        log.to_str().unwrap(),
-        "--origin",
-        ORIGIN,
-        "--out",
-        pred,
-    ]);
+    let stderr = replay_at_origin(&log, &pred);
     assert!(
         stderr.contains("STEERING_REPORT every 0.200 s (median), longer than its 0.100 s timeout")
             && stderr.contains("SPEED_REPORT every 0.200 s"),
@@ -2167,14 +2122,7 @@ fn reports_slower_than_their_timeouts_are_named_not_taken_for_a_steering_gain() 
     assert!(!stderr.contains("times the yaw rate"), "{stderr}");
     // As recorded: neither.
     let full = dir.join("validation.can.log");
-    let stderr = ok(&[
-        "replay",
-        full.to_str().unwrap(),
-        "--origin",
-        ORIGIN,
-        "--out",
-        pred,
-    ]);
+    let stderr = replay_at_origin(&full, &pred);
     assert!(
         !stderr.contains("further apart than the node's timeouts")
             && !stderr.contains("times the yaw rate"),
