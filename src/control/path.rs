@@ -552,7 +552,7 @@ impl Path {
         // also loads it): squared lengths against the squared limits, and a turn beyond
         // MAX_TURN_RAD as `dot < cos(MAX_TURN_RAD) |a| |b|`, i.e. a non-positive dot or
         // `dot^2 < cos^2 |a|^2 |b|^2`.
-        let cos_max_turn = math::cos(MAX_TURN_RAD);
+        let cos_max_turn = math::sin_cos_inlined(MAX_TURN_RAD).1;
         let mut previous: Option<(f32, f32, f32)> = None;
         for (i, w) in waypoints.iter().enumerate() {
             let Some(next) = waypoints.get(i + 1) else {
@@ -625,7 +625,7 @@ impl Path {
             *s = station;
             if let Some(next) = waypoints.get(i + 1) {
                 let (dx, dy) = (next.east_m - w.east_m, next.north_m - w.north_m);
-                *d = math::sin_cos(math::atan2(dx, dy));
+                *d = math::sin_cos_inlined(math::atan2(dx, dy));
                 station += math::sqrt(dx * dx + dy * dy);
             }
         }

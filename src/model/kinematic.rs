@@ -166,7 +166,7 @@ pub fn any_turn(d: f32) -> (f32, f32, f32) {
         return half_turn(d);
     }
     let a = 0.5 * d;
-    let (s, c) = math::sin_cos(a);
+    let (s, c) = math::sin_cos_inlined(a);
     (s / a, s, c)
 }
 

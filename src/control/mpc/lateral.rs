@@ -120,7 +120,7 @@ fn continuous(
     e0: f32,
     d0: f32,
 ) -> (SMatrix<f32, NX, NX>, SVector<f32, NX>) {
-    let (s0, c0) = math::sin_cos(e0);
+    let (s0, c0) = math::sin_cos_inlined(e0);
     let mut f = SMatrix::<f32, NX, NX>::zeros();
     let mut e = SVector::<f32, NX>::zeros();
     let set = |m: &mut SMatrix<f32, NX, NX>, i: usize, j: usize, v: f32| {
@@ -167,7 +167,7 @@ fn continuous(
         None => {
             let veh = setup.vehicle;
             let scale = 1.0 / (1.0 + veh.understeer_s2_per_m2 * v * v);
-            let t = math::tan(d0 * scale);
+            let t = math::tan_inlined(d0 * scale);
             let c = t / veh.wheelbase_m;
             let dc = scale * (1.0 + t * t) / veh.wheelbase_m;
             set(&mut f, EPSI, DELTA, v * dc);
@@ -876,7 +876,7 @@ pub fn build(
         st.u_lower = -setup.max_steer_rate_rad_per_s;
         st.u_upper = setup.max_steer_rate_rad_per_s;
         // Rows of x_{k+1}.
-        let (s0, c0) = math::sin_cos(e_b);
+        let (s0, c0) = math::sin_cos_inlined(e_b);
         let lin_b = (s0, c0, e_b);
         st.rows = [Row::INACTIVE; ROWS];
         st.box_lower = -setup.max_steer_rad;
