@@ -775,6 +775,7 @@ impl Loop {
                 .fold(0.0, f32::max),
             // The bench drives its paths at speed to a station short of their end: no stop.
             to_end_m: f32::INFINITY,
+            in_held_turn: false,
         };
         let out = self.mpc.solve(&mut self.mpc_state, &input);
         for (p, pt) in self.planned_speeds.iter_mut().zip(&out.plan) {

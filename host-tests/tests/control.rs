@@ -2021,3 +2021,53 @@ fn pure_pursuit_stops_with_the_wheels_straight_when_it_has_lost_the_path() {
     assert_eq!(out.status, ControlStatus::Fallback);
     assert_eq!((out.speed_cmd_mps, out.steer_cmd_pct), (0.0, 0.0));
 }
+
+/// The segments whose speed the lateral limit holds (`Path::in_held_turn`), hand-checked on an
+/// 8 m hairpin in a corridor 0.6 m wider than the body, at 5.9 m/s^2 (every arc point's own
+/// limit is at most sqrt(5.9 x 16) = 9.7 m/s, the 16 m window's, against a target of 15): the
+/// arc's segments are held, the straights 10 m before and after it are not, and nothing is
+/// without the limit.
+#[test]
+fn the_turns_the_lateral_limit_holds_are_marked() {
+    let r = 8.0f64;
+    let mut points = Vec::new();
+    let mut push = |e: f64, n: f64| {
+        points.push(Waypoint {
+            speed_mps: 15.0,
+            left_m: 1.2,
+            right_m: 1.2,
+            ..wp(e, n)
+        })
+    };
+    for i in 0..41 {
+        push(0.0, f64::from(i));
+    }
+    let n = (PI * r) as usize;
+    for i in 1..=n {
+        let a = PI * i as f64 / n as f64;
+        push(r - r * a.cos(), 40.0 + r * a.sin());
+    }
+    for i in (0..40).rev() {
+        push(2.0 * r, f64::from(i));
+    }
+    let mut p = path_of(&points);
+    let segments = p.len() - 1;
+    assert!((0..segments).all(|k| !p.in_held_turn(k)));
+    assert!(p.set_lateral_limit(Some(LateralLimit {
+        accel_mps2: 5.9,
+        width_m: 1.806,
+    })));
+    let arc = 41..41 + n - 1;
+    for k in 0..segments {
+        let held = p.in_held_turn(k);
+        if arc.contains(&k) {
+            assert!(held, "segment {k} in the arc");
+        }
+        if k < 30 || k > 40 + n + 10 {
+            assert!(!held, "segment {k} on a straight");
+        }
+    }
+    assert!(!p.in_held_turn(segments + 5));
+    assert!(p.set_lateral_limit(None));
+    assert!((0..segments).all(|k| !p.in_held_turn(k)));
+}

@@ -165,6 +165,7 @@ proptest! {
                     .map(|r| r.curvature_per_m.abs())
                     .fold(0.0, f32::max),
                 to_end_m: f32::INFINITY,
+                in_held_turn: false,
             };
             let out = mpc.solve(&mut state, &input);
             prop_assert!(out.steer_cmd_pct.is_finite() && out.steer_cmd_pct.abs() <= 100.0);
@@ -299,6 +300,7 @@ fn solve_on(
         position_uncertainty_m: 0.1,
         path_max_curvature_per_m,
         to_end_m: f32::INFINITY,
+        in_held_turn: false,
     };
     mpc.solve(&mut state, &input)
 }
@@ -613,6 +615,7 @@ fn the_speed_plan_does_not_predict_a_car_reversing() {
         planning_bias_mps: 0.5 - modelled,
         speed_mps: 0.5,
         last_command_mps: 0.0,
+        in_held_turn: false,
     };
     assert!(start.bias_mps < -2.4);
     let free = planner.free_response(&start, 0.0);
@@ -727,6 +730,7 @@ fn the_speed_plan_in_the_stop_does_not_rise() {
         planning_bias_mps: -0.8,
         speed_mps: 0.19,
         last_command_mps: 0.19,
+        in_held_turn: false,
     };
     let mut state = SpeedState::new();
     let plan = planner.plan(&mut state, &past, &[0.0; PLAN_STEPS + 1], -1.5);
@@ -740,6 +744,7 @@ fn the_speed_plan_in_the_stop_does_not_rise() {
         planning_bias_mps: -1.5,
         speed_mps: 1.4,
         last_command_mps: 0.5,
+        in_held_turn: false,
     };
     // The rig's taper (2 m/s^2) 3 m before the end, where the car is expected over the plan.
     let taper: [f32; PLAN_STEPS + 1] =
@@ -795,6 +800,7 @@ fn the_speed_commands_stay_in_a_band_about_the_steady_state() {
             planning_bias_mps: planning,
             speed_mps: speed,
             last_command_mps: (speed - bias) / g,
+            in_held_turn: false,
         };
         let mut state = SpeedState::new();
         let mut plan = planner.plan(&mut state, &start, &targets, f32::INFINITY);
@@ -825,6 +831,43 @@ fn the_speed_commands_stay_in_a_band_about_the_steady_state() {
     assert!(lowest(over) >= steady - 1.5 - 1e-4, "{over:?}");
     let over_free = commands(no_band, 11.0, -1.5, 0.0, 1);
     assert!(lowest(over_free) < steady - 2.0, "{over_free:?}");
+}
+
+/// In a turn the path's lateral limit holds (`SpeedStart::in_held_turn`) the commands do not
+/// lead: a car at 7 m/s held to 7 m/s where it is, 15 m/s ahead (the turn's exit within the
+/// plan), is commanded at most the steady state of 7 m/s plus the 0.5 m/s band, where out of
+/// the turn the plan leads towards 15 (up to its steady state plus the 2 m/s lead); a car below
+/// the held speed is still led up to it within the band.
+#[test]
+fn the_speed_commands_do_not_lead_in_a_held_turn() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, SpeedState};
+    let block = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    let g = block.dc_gain().unwrap();
+    let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+    let mut targets = [15.0f32; PLAN_STEPS + 1];
+    for t in targets.iter_mut().take(8) {
+        *t = 7.0;
+    }
+    let highest = |speed: f32, held: bool| {
+        let model_state = block.steady_state_for_output(speed).unwrap();
+        let start = SpeedStart {
+            model_state: &model_state,
+            bias_mps: 0.0,
+            planning_bias_mps: 0.0,
+            speed_mps: speed,
+            last_command_mps: speed / g,
+            in_held_turn: held,
+        };
+        let plan = planner.plan(&mut SpeedState::new(), &start, &targets, f32::INFINITY);
+        plan.commands_mps.iter().copied().fold(f32::MIN, f32::max)
+    };
+    let held = highest(7.0, true);
+    assert!(held <= 7.0 / g + 0.5 + 1e-4, "{held}");
+    let free = highest(7.0, false);
+    assert!(free > 7.0 / g + 2.0, "{free}");
+    assert!(free <= 15.0 / g + 2.0 + 1e-4, "{free}");
+    let below = highest(5.0, true);
+    assert!(below > 5.0 / g && below <= 7.0 / g + 0.5 + 1e-4, "{below}");
 }
 
 /// How well the speed model describes the car (`SpeedState::track_fit`), by hand: the gap
@@ -948,6 +991,7 @@ fn a_car_that_is_its_speed_model_stops_at_the_path_end() {
             planning_bias_mps: v - modelled,
             speed_mps: v,
             last_command_mps: last,
+            in_held_turn: false,
         };
         let plan = planner.plan(&mut state, &start, &targets, length - s);
         speeds = plan.speeds_mps;

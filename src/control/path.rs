@@ -233,6 +233,8 @@ pub const NARROWEST_TIE_M: f32 = 0.01;
 const CORRIDOR_BLOCK: usize = 8;
 /// Blocks of [`CORRIDOR_BLOCK`] points a path of [`MAX_PATH_POINTS`] has.
 const CORRIDOR_BLOCKS: usize = MAX_PATH_POINTS.div_ceil(CORRIDOR_BLOCK);
+/// Words of one bit per point ([`Path::in_held_turn`]).
+const HELD_WORDS: usize = MAX_PATH_POINTS.div_ceil(32);
 
 /// Where the corridor binds a body's side ([`Path::narrowest_corridor`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -446,6 +448,9 @@ pub struct Path {
     /// The speed envelope at point `i`: the most speed squared that still meets every later
     /// point's target and stops at the end at `braking_mps2`, m^2/s^2 (see the module doc).
     reach_m2ps2: [f32; MAX_PATH_POINTS],
+    /// Bit `i % 32` of word `i / 32`: point `i`'s own limit is a turn's, below its target
+    /// ([`Path::in_held_turn`]).
+    held: [u32; HELD_WORDS],
     /// The narrowest corridor `(left, right)` over each block of [`CORRIDOR_BLOCK`] points,
     /// m, taken at load.
     corridor_block_min_m: [(f32, f32); CORRIDOR_BLOCKS],
@@ -471,6 +476,7 @@ impl Path {
             braking_mps2: DEFAULT_BRAKING_MPS2,
             lateral_limit: None,
             reach_m2ps2: [0.0; MAX_PATH_POINTS],
+            held: [0; HELD_WORDS],
             corridor_block_min_m: [(0.0, 0.0); CORRIDOR_BLOCKS],
         }
     }
@@ -493,6 +499,7 @@ impl Path {
             addr_of_mut!((*slot).braking_mps2).write(DEFAULT_BRAKING_MPS2);
             addr_of_mut!((*slot).lateral_limit).write(None);
             fill(addr_of_mut!((*slot).reach_m2ps2), 0.0);
+            fill(addr_of_mut!((*slot).held), 0);
             fill(addr_of_mut!((*slot).corridor_block_min_m), (0.0, 0.0));
         }
     }
@@ -512,6 +519,22 @@ impl Path {
     /// The deceleration of the speed envelope, m/s^2.
     pub const fn braking_mps2(&self) -> f32 {
         self.braking_mps2
+    }
+
+    /// Whether segment `segment` is in a turn that [`Path::set_lateral_limit`]'s limit holds
+    /// the speed in: the own limit of either of its points is a turn's, below the point's
+    /// target. A controller does not speed up there: a car at its lateral limit has no grip
+    /// left to accelerate with (its tyres' friction circle), and the limit of the turn's last
+    /// point is the one it may leave the turn at. `false` without a limit or past the end.
+    pub fn in_held_turn(&self, segment: usize) -> bool {
+        let bit = |k: usize| {
+            k < self.len
+                && self
+                    .held
+                    .get(k / 32)
+                    .is_some_and(|word| word & (1 << (k % 32)) != 0)
+        };
+        bit(segment) || bit(segment.saturating_add(1))
     }
 
     /// Sets the lateral acceleration to which the speed envelope holds the path's turns (see
@@ -673,6 +696,7 @@ impl Path {
         {
             *r = p.speed_mps * p.speed_mps;
         }
+        self.held = [0; HELD_WORDS];
         if let Some(limit) = self.lateral_limit {
             self.turn_limits(limit);
         }
@@ -760,8 +784,11 @@ impl Path {
                                 continue;
                             };
                             let c = if c < 0.0 { -c } else { c };
-                            if 2.0 * c * length >= mean {
-                                *r = math::min(*r, cap);
+                            if 2.0 * c * length >= mean && cap < *r {
+                                *r = cap;
+                                if let Some(word) = self.held.get_mut(k / 32) {
+                                    *word |= 1 << (k % 32);
+                                }
                             }
                         }
                     }

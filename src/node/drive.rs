@@ -1087,6 +1087,7 @@ fn mpc_tick<P: StageProbe>(
         position_uncertainty_m: config.position_uncertainty_m,
         path_max_curvature_per_m: path.max_curvature_per_m(),
         to_end_m: path.stop_ahead_m(s0, hint),
+        in_held_turn: path.in_held_turn(hint),
     };
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);

@@ -398,6 +398,7 @@ impl Bench<'_> {
             path_max_curvature_per_m: 0.0,
             // The stand-in car drives on: no path end within its horizon.
             to_end_m: f32::INFINITY,
+            in_held_turn: false,
         }
     }
 
@@ -638,6 +639,7 @@ fn run_parts(b: &Bench, st: &mut Statics) {
         planning_bias_mps: 0.0,
         speed_mps: v,
         last_command_mps: car.last_cmd,
+        in_held_turn: false,
     };
     let mut speed_state = SpeedState::new();
     let (_, speed) = timed(|| {

@@ -224,6 +224,10 @@ pub struct SpeedStart<'a> {
     pub speed_mps: f32,
     /// The command sent last, m/s.
     pub last_command_mps: f32,
+    /// The car is in a turn whose speed the path's lateral limit holds
+    /// (`crate::control::path::Path::in_held_turn`): the commands do not lead it faster
+    /// ([`SpeedPlanner::command_band`]).
+    pub in_held_turn: bool,
 }
 
 impl SpeedPlanner {
@@ -378,7 +382,7 @@ impl SpeedPlanner {
             t.max_speed_mps
         };
         let fit = state.track_fit(start.bias_mps, start.planning_bias_mps);
-        let (floor, ceiling) = self.command_band(targets_mps, &fit, v0);
+        let (floor, ceiling) = self.command_band(targets_mps, &fit, v0, start.in_held_turn);
         // The stop by the model: no command the model's car could not stop from at the end
         // with every later command 0 (as far as the model is trusted). The reference's taper
         // alone asks for the deceleration of `decel_mps2` to the end, which eq 5's car cannot
@@ -461,6 +465,14 @@ impl SpeedPlanner {
     ///   car's distance from that target (`v0_mps` is its speed), at most the lead, as its
     ///   predictions miss by up to [`MISMATCH_NO_TRUST_MPS`] ([`ModelFit::mismatch_mps`]).
     ///
+    /// In a turn the path's lateral limit holds the speed in (`in_held_turn`) the top is the
+    /// steady-state command of the target where the car is, plus at most
+    /// [`SpeedTuning::command_band_mps`]: no lead towards a faster target ahead, whose command
+    /// would take effect, on a car faster than its model, while the tyres are still at the
+    /// limit (a probe's kinematic car with a 0.4 s dead time, eq 5's file: commanded up to
+    /// 12.2 m/s at 120-150 degrees round an 8 m hairpin held to 7.8 m/s; docs/controller.md,
+    /// "A turn faster than the tyres").
+    ///
     /// A plan with a target of 0 (a stop) has its floor at 0; without a finite positive DC gain
     /// (an integrator) the band is from 0 to the maximum speed; an infinite
     /// [`SpeedTuning::command_band_mps`] leaves the floor at 0 and the top at the full lead.
@@ -480,9 +492,10 @@ impl SpeedPlanner {
         targets_mps: &[f32; PLAN_STEPS + 1],
         fit: &ModelFit,
         v0_mps: f32,
+        in_held_turn: bool,
     ) -> (f32, f32) {
         let t = &self.tuning;
-        let (low, high) = targets_mps
+        let (low, highest) = targets_mps
             .iter()
             .fold((t.max_speed_mps, 0.0f32), |(lo, hi), v| {
                 let v = clamp(finite_or(*v, 0.0), 0.0, t.max_speed_mps);
@@ -507,11 +520,14 @@ impl SpeedPlanner {
             };
             max(narrow, trusted)
         };
-        let top = clamp(
-            (high - offset) / g + width(libm::fabsf(high - v0)),
-            0.0,
-            t.max_speed_mps,
-        );
+        let (high, lead) = if in_held_turn {
+            let here = targets_mps.first().copied().unwrap_or(0.0);
+            let here = clamp(finite_or(here, 0.0), 0.0, t.max_speed_mps);
+            (here, min(width(libm::fabsf(here - v0)), t.command_band_mps))
+        } else {
+            (highest, width(libm::fabsf(highest - v0)))
+        };
+        let top = clamp((high - offset) / g + lead, 0.0, t.max_speed_mps);
         // A stop is held by no command at all, whatever the offset.
         if !t.command_band_mps.is_finite() || low <= 0.0 {
             return (0.0, top);

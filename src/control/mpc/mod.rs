@@ -257,6 +257,10 @@ pub struct MpcInput<'a> {
     /// Distance along the path from the rear axle's projection to the path's end, m (infinite:
     /// a path without an end): the speed plan stops there ([`SpeedPlanner::reference`]).
     pub to_end_m: f32,
+    /// The rear axle is in a turn whose speed the path's lateral limit holds
+    /// ([`crate::control::path::Path::in_held_turn`]): the speed commands do not lead
+    /// ([`SpeedPlanner::command_band`]).
+    pub in_held_turn: bool,
 }
 
 /// Cost weights and ADMM penalties of the lateral problem.
@@ -1011,6 +1015,7 @@ impl MpcConfig {
             planning_bias_mps,
             speed_mps: car.speed_mps,
             last_command_mps: car.last_speed_cmd_mps,
+            in_held_turn: input.in_held_turn,
         };
         if !input_ok(input) {
             return self.fallback(state, input, &speed_start, FallbackReason::BadInput);
