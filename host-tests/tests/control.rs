@@ -2022,11 +2022,17 @@ fn pure_pursuit_stops_with_the_wheels_straight_when_it_has_lost_the_path() {
     assert_eq!((out.speed_cmd_mps, out.steer_cmd_pct), (0.0, 0.0));
 }
 
-/// The segments whose speed the lateral limit holds (`Path::in_held_turn`), hand-checked on an
-/// 8 m hairpin in a corridor 0.6 m wider than the body, at 5.9 m/s^2 (every arc point's own
-/// limit is at most sqrt(5.9 x 16) = 9.7 m/s, the 16 m window's, against a target of 15): the
-/// arc's segments are held, the straights 10 m before and after it are not, and nothing is
-/// without the limit.
+/// A whole turn is held to its racing line's speed at every point, and the segments whose
+/// speed the lateral limit holds are marked (`Path::in_held_turn`), hand-checked on an 8 m
+/// hairpin (points 1.005 m apart) in a corridor 0.594 m wider than the body at 5.9 m/s^2: the
+/// half turn cut through that room is driven on a radius of 8 + 0.594 / (1 - cos(pi / 2)) =
+/// 8.594 m, so each arc point's own limit is 5.9 x 8.594 m^2/s^2 (7.12 m/s), up to 3 % more
+/// where the reference's 2 m chords round the arc's ends into the turn's measure (2 %
+/// measured), and the envelope sampled at a point allows the braking from the next one,
+/// 2 x 3 m/s^2 x 1.005 m more (7.65 m/s at most). The windows alone (their lengths a factor
+/// of two apart, each credited with a cut inside the turn) held it to 7.86 m/s, a radius 10 %
+/// above the racing line's. The arc's segments are held, the straights 10 m before and after
+/// it are not, and nothing is without the limit.
 #[test]
 fn the_turns_the_lateral_limit_holds_are_marked() {
     let r = 8.0f64;
@@ -2058,6 +2064,19 @@ fn the_turns_the_lateral_limit_holds_are_marked() {
         width_m: 1.806,
     })));
     let arc = 41..41 + n - 1;
+    let spacing = PI * r / n as f64;
+    let (low, high) = (
+        (5.9f64 * 8.594).sqrt(),
+        (5.9f64 * 8.594 * 1.03 + 6.0 * spacing).sqrt(),
+    );
+    for k in arc.clone() {
+        let s = p.station_of(k).unwrap();
+        let v = f64::from(p.sample(s, k).unwrap().speed_mps);
+        assert!(
+            v >= low * 0.999 && v <= high * 1.001,
+            "point {k}: {v} m/s, not in {low}..{high}"
+        );
+    }
     for k in 0..segments {
         let held = p.in_held_turn(k);
         if arc.contains(&k) {

@@ -48,7 +48,10 @@
 //! and out again (the room `w` is the corridor's width less the body's, the least of the
 //! window's ends and the point) drives it on a radius of `L / phi + w / (1 - cos(phi / 2))`
 //! (the racing line's through a corner of constant radius); the limit is `a` times that
-//! radius. The windows measure a sustained turn, not the path's line: the lane change's
+//! radius. Each whole turn (a run of one sign of curvature, over its core) is one window too:
+//! the racing line drives it at one radius, and a window inside a longer turn credits that
+//! part of it with the whole room's cut ([`Path::set_lateral_limit`]'s `whole_turn_limits`).
+//! The windows measure a sustained turn, not the path's line: the lane change's
 //! quintic transitions swing the heading back within metres, and the corridor lets the car
 //! cut them (at 16 m/s there they ask less than the CAT Vehicle's limit).
 //!
@@ -125,6 +128,11 @@ fn cut_turn_m2ps2(accel_mps2: f32, turn_rad: f32, length_m: f32, room_m: f32) ->
     }
     accel_mps2 * (length_m / turn + math::max(room_m, 0.0) / g)
 }
+
+/// Least curvature of a whole turn's points ([`Path::set_lateral_limit`]), 1/m (either sign): a
+/// radius of 1 km; straighter points end a turn. A run of the reference curvature's noise on a
+/// straight is a turn of next to nothing, whose limit is far above any speed.
+pub const TURN_RUN_CURVATURE_PER_M: f32 = 1e-3;
 
 /// A path of at most this many points is not held to [`Path::set_lateral_limit`]'s limit: its
 /// completion shares a tick with a solve (`catmodel::node::stage::SHORT_PATH_POINTS`, which is
@@ -699,6 +707,7 @@ impl Path {
         self.held = [0; HELD_WORDS];
         if let Some(limit) = self.lateral_limit {
             self.turn_limits(limit);
+            self.whole_turn_limits(limit);
         }
         let two_a = 2.0 * self.braking_mps2;
         let mut later: Option<(f32, f32)> = None;
@@ -726,22 +735,6 @@ impl Path {
     #[inline(never)]
     fn turn_limits(&mut self, limit: LateralLimit) {
         let n = self.len;
-        // The reference heading's step from point k to k + 1, and a point's station and room
-        // to cut a turn.
-        let step = |k: usize| match (
-            self.reference_heading_rad.get(k),
-            self.reference_heading_rad.get(k + 1),
-        ) {
-            (Some(&a), Some(&b)) => math::wrap_pi(b - a),
-            _ => 0.0,
-        };
-        let at = |k: usize| -> Option<(f32, f32)> {
-            let p = self.points.get(..n)?.get(k)?;
-            Some((
-                *self.station_m.get(k)?,
-                p.left_m + p.right_m - limit.width_m,
-            ))
-        };
         if n <= TURN_FEW_POINTS {
             return;
         }
@@ -750,22 +743,25 @@ impl Path {
         let mut theta_i = 0.0f32;
         let mut ends = [(0usize, 0.0f32); TURN_WINDOWS_M.len()];
         for i in 0..n {
-            let Some((s_i, room_i)) = at(i) else {
+            let Some((s_i, room_i)) = self.turn_room(i, limit.width_m) else {
                 break;
             };
             if i > 0 {
-                theta_i += step(i - 1);
+                theta_i += self.heading_step(i - 1);
             }
             for (&window_m, (j, theta_j)) in TURN_WINDOWS_M.iter().zip(ends.iter_mut()) {
                 if *j < i {
                     (*j, *theta_j) = (i, theta_i);
                 }
-                while at(*j + 1).is_some_and(|(s, _)| s - s_i <= window_m) {
-                    *theta_j += step(*j);
+                while self
+                    .turn_room(*j + 1, limit.width_m)
+                    .is_some_and(|(s, _)| s - s_i <= window_m)
+                {
+                    *theta_j += self.heading_step(*j);
                     *j += 1;
                 }
                 {
-                    if let Some((s_j, room_j)) = at(*j) {
+                    if let Some((s_j, room_j)) = self.turn_room(*j, limit.width_m) {
                         let (turn, length) = (*theta_j - theta_i, s_j - s_i);
                         let cap = cut_turn_m2ps2(
                             limit.accel_mps2,
@@ -797,6 +793,114 @@ impl Path {
                 // later point needs it).
                 if *j + 1 >= n {
                     break;
+                }
+            }
+        }
+    }
+
+    /// The reference heading's step from point `k` to `k + 1`, rad (0 past the end).
+    fn heading_step(&self, k: usize) -> f32 {
+        match (
+            self.reference_heading_rad.get(k),
+            self.reference_heading_rad.get(k + 1),
+        ) {
+            (Some(&a), Some(&b)) => math::wrap_pi(b - a),
+            _ => 0.0,
+        }
+    }
+
+    /// Point `k`'s station, m, and the room a body `width_m` wide has there to cut a turn, m
+    /// (the corridor's width less the body's); `None` past the path's end.
+    fn turn_room(&self, k: usize, width_m: f32) -> Option<(f32, f32)> {
+        let p = self.points.get(..self.len)?.get(k)?;
+        Some((*self.station_m.get(k)?, p.left_m + p.right_m - width_m))
+    }
+
+    /// Lowers the own limits in `reach_m2ps2` of the points of each whole turn to the speed
+    /// squared at which the turn, cut through the corridor's least room along it, asks
+    /// `limit`'s lateral acceleration (see the module doc). A whole turn is a run of points
+    /// whose curvature keeps one sign beyond [`TURN_RUN_CURVATURE_PER_M`], measured over its
+    /// core, the points curving at least half as much as its tightest (the reference's
+    /// smoothing spreads a turn's curvature a metre or two onto the straights around it): the
+    /// racing line drives the turn at one radius, which no window of [`TURN_WINDOWS_M`]
+    /// measures unless its length is the turn's (a window inside it credits that part with
+    /// the whole room's cut). One pass and a second over each run when it ends, O(points).
+    #[inline(never)]
+    fn whole_turn_limits(&mut self, limit: LateralLimit) {
+        let n = self.len;
+        if n <= TURN_FEW_POINTS {
+            return;
+        }
+        // The open run: its first point, sign and tightest curvature.
+        let mut run: Option<(usize, f32, f32)> = None;
+        for k in 0..=n {
+            let c = match self.turn_room(k, limit.width_m) {
+                Some(_) => self.curvature_per_m.get(k).copied().unwrap_or(0.0),
+                None => 0.0,
+            };
+            let sign = if c > TURN_RUN_CURVATURE_PER_M {
+                1.0
+            } else if c < -TURN_RUN_CURVATURE_PER_M {
+                -1.0
+            } else {
+                0.0
+            };
+            if let Some((first, run_sign, most)) = run {
+                if sign == run_sign {
+                    run = Some((first, run_sign, math::max(most, libm::fabsf(c))));
+                    continue;
+                }
+                self.hold_whole_turn(limit, first, k, most);
+                run = None;
+            }
+            if sign != 0.0 {
+                run = Some((k, sign, libm::fabsf(c)));
+            }
+        }
+    }
+
+    /// [`Path::whole_turn_limits`] for the run of points `first..end` whose tightest
+    /// curvature is `most`: its core's turn over the core's length, cut through the core's
+    /// least room, lowers the core's own limits.
+    fn hold_whole_turn(&mut self, limit: LateralLimit, first: usize, end: usize, most: f32) {
+        // The core's first point and heading there, its last and heading there, its least
+        // room; the heading unwrapped from the run's first point.
+        let mut core: Option<(usize, f32, usize, f32, f32)> = None;
+        let mut theta = 0.0f32;
+        for m in first..end {
+            if m > first {
+                theta += self.heading_step(m - 1);
+            }
+            let c = libm::fabsf(self.curvature_per_m.get(m).copied().unwrap_or(0.0));
+            let Some((_, room)) = self.turn_room(m, limit.width_m) else {
+                break;
+            };
+            if c >= 0.5 * most {
+                core = Some(match core {
+                    None => (m, theta, m, theta, room),
+                    Some((a, theta_a, _, _, least)) => {
+                        (a, theta_a, m, theta, math::min(least, room))
+                    }
+                });
+            }
+        }
+        let Some((a, theta_a, b, theta_b, room)) = core else {
+            return;
+        };
+        let (Some((s_a, _)), Some((s_b, _))) = (
+            self.turn_room(a, limit.width_m),
+            self.turn_room(b, limit.width_m),
+        ) else {
+            return;
+        };
+        let cap = cut_turn_m2ps2(limit.accel_mps2, theta_b - theta_a, s_b - s_a, room);
+        for m in a..=b {
+            if let Some(r) = self.reach_m2ps2.get_mut(m) {
+                if cap < *r {
+                    *r = cap;
+                    if let Some(word) = self.held.get_mut(m / 32) {
+                        *word |= 1 << (m % 32);
+                    }
                 }
             }
         }
