@@ -459,6 +459,24 @@ fn node_over_legs(
     Option<f32>,
     catmodel::can::codec::ControlCommand,
 )> {
+    node_over_legs_silent(legs, report_direction, path_at_s, receiver_course, None)
+}
+
+/// [`node_over_legs`] with no STEERING_REPORT from `steer_silent_s.0` to `steer_silent_s.1`
+/// (s since the drive's start): the actuator keeps the legs' steering, its report is lost.
+fn node_over_legs_silent(
+    legs: &[catmodel_host_tests::bus::Leg],
+    report_direction: bool,
+    path_at_s: Option<f64>,
+    receiver_course: bool,
+    steer_silent_s: Option<(f64, f64)>,
+) -> Vec<(
+    f64,
+    f32,
+    bool,
+    Option<f32>,
+    catmodel::can::codec::ControlCommand,
+)> {
     use catmodel::can::codec::{ControlCommand, StateMotion};
     use catmodel::can::TimedFrame;
     use catmodel_host::closed_loop::planner::{PlannedPoint, Planner};
@@ -466,6 +484,13 @@ fn node_over_legs(
 
     let (drive, truth) = bus::drive_legs(legs, report_direction);
     let mut frames = bus::frames(&drive);
+    if let Some((from_s, to_s)) = steer_silent_s {
+        use catmodel::can::spec::STEERING_REPORT;
+        let at = |s: f64| bus::START_US + (s * 1e6) as u64;
+        frames.retain(|f| {
+            !(f.frame.id == STEERING_REPORT.id && f.t_us >= at(from_s) && f.t_us < at(to_s))
+        });
+    }
     if receiver_course {
         use catmodel::can::codec::GnssCogSog;
         use catmodel::can::spec::N2K_DEFAULT_SOURCE;
@@ -702,4 +727,87 @@ fn the_controller_holds_a_car_that_reports_reverse() {
             .count()
             > 250
     );
+}
+
+/// A car held on a right-hand arc (14 % of lock, a 30 m radius) at 10 m/s, exact 100 Hz fixes,
+/// whose STEERING_REPORT is lost for 3 s while the actuator holds the wheels (a black-box
+/// probe's case, docs/findings.md): the models steered straight on while the report was
+/// stale, the dead reckoning turned 0.33 rad/s less than the car, and the heading ran up to
+/// 0.21 rad behind the truth, the chords and the antenna's course pulling it back at their
+/// gain (and the course's lead taken off with the dead reckoning's yaw rate, none). The
+/// models now steer with the last report's angle: the heading stays within 0.03 rad through
+/// the silence and after it, with the receiver's course and from the track's chords alone.
+#[test]
+fn a_stale_steering_report_in_a_bend_keeps_the_heading() {
+    use catmodel_host_tests::bus::Leg;
+    let legs = [
+        Leg {
+            seconds: 6.0,
+            speed_mps: 10.0,
+            steer_pct: 0.0,
+        },
+        Leg {
+            seconds: 12.0,
+            speed_mps: 10.0,
+            steer_pct: 14.0,
+        },
+    ];
+    for receiver_course in [false, true] {
+        let run = node_over_legs_silent(&legs, true, None, receiver_course, Some((9.0, 12.0)));
+        let worst = run
+            .iter()
+            .filter(|(t, ..)| *t >= 9.0 && *t < 14.0)
+            .map(|(_, e, ..)| e.abs())
+            .fold(0.0f32, f32::max);
+        println!("course over ground {receiver_course}: worst {worst:.4} rad");
+        assert!(
+            worst < 0.03,
+            "course over ground {receiver_course}: {worst} rad off"
+        );
+    }
+}
+
+/// While STEERING_REPORT is stale a controller does not drive on: CONTROL_COMMAND holds the car
+/// (status 3, `fallback_reason` 14 `steering_stale`, speed 0, steering as last commanded) from
+/// the tick the report times out (0.1 s) to the first fresh one, and tracks again after it (not
+/// latched). Before, the status stayed "tracking" on a heading the node flagged uncertain.
+#[test]
+fn the_controller_holds_the_car_while_the_steering_report_is_stale() {
+    use catmodel::can::codec::{ControlStatus, FallbackCause};
+    use catmodel_host_tests::bus::Leg;
+    let legs = [Leg {
+        seconds: 14.0,
+        speed_mps: 3.0,
+        steer_pct: 0.0,
+    }];
+    let run = node_over_legs_silent(&legs, true, Some(1.0), false, Some((8.0, 10.0)));
+    let tracking_before = run
+        .iter()
+        .filter(|(t, ..)| *t >= 6.0 && *t < 8.0)
+        .filter(|(.., c)| c.status == ControlStatus::Tracking)
+        .count();
+    assert!(
+        tracking_before > 90,
+        "{tracking_before} ticks tracking before"
+    );
+    let stale: Vec<_> = run
+        .iter()
+        .filter(|(t, ..)| *t >= 8.15 && *t < 10.0)
+        .collect();
+    assert!(stale.len() > 90);
+    for (t, _, _, _, c) in &stale {
+        assert_eq!(
+            (c.status, c.fallback, c.speed_cmd_mps),
+            (
+                ControlStatus::Fallback,
+                FallbackCause::SteeringStale,
+                Some(0.0)
+            ),
+            "{t:.2} s"
+        );
+    }
+    assert!(run
+        .iter()
+        .filter(|(t, ..)| *t >= 10.05)
+        .all(|(.., c)| c.status == ControlStatus::Tracking));
 }

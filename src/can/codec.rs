@@ -1203,11 +1203,17 @@ pub enum FallbackCause {
     /// backwards, so the car is held (speed 0, steering where it was last commanded) until it
     /// reports forward, or no direction, again.
     Reversing = 13,
+    /// STEERING_REPORT is stale (no valid report for longer than its timeout) while a
+    /// controller would drive: without the wheels' angle the controllers cannot steer, and the
+    /// heading is dead-reckoned on the last report's, so the car is held (speed 0, steering
+    /// where it was last commanded, as the actuator holds it) until a report comes again. Not
+    /// latched: the first fresh report hands the car back to the controller.
+    SteeringStale = 14,
 }
 
 impl FallbackCause {
     /// Every cause, by raw value.
-    pub const ALL: [FallbackCause; 14] = [
+    pub const ALL: [FallbackCause; 15] = [
         FallbackCause::None,
         FallbackCause::NotReady,
         FallbackCause::HeadingSettling,
@@ -1222,9 +1228,10 @@ impl FallbackCause {
         FallbackCause::SteeringReversed,
         FallbackCause::PositionJumped,
         FallbackCause::Reversing,
+        FallbackCause::SteeringStale,
     ];
 
-    /// `raw` within the signal's range (0..=13, checked by the reader).
+    /// `raw` within the signal's range (0..=14, checked by the reader).
     fn from_raw(raw: i64) -> Self {
         usize::try_from(raw)
             .ok()

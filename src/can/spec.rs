@@ -553,7 +553,7 @@ pub mod sig {
         .na(0xFFFF);
     /// CONTROL_COMMAND: why the status is the fallback (0 when it is not; `FallbackCause`).
     pub const FALLBACK_REASON: SignalSpec =
-        SignalSpec::uint("fallback_reason", 40, 4).raw_range(0, 13);
+        SignalSpec::uint("fallback_reason", 40, 4).raw_range(0, 14);
 
     /// NODE_STATUS page number (multiplexer switch).
     pub const PAGE: SignalSpec = SignalSpec::uint("page", 4, 4).raw_range(0, 5).switch();

@@ -532,6 +532,16 @@ impl Drive {
             let steer = lost_steer_pct(path, &mut self.lost_along, config, &pose, inputs);
             return self.stop_lost(steer);
         }
+        if inputs.steer_report_pct.is_none() {
+            // No steering report: the controllers cannot see the wheels, and the heading is
+            // dead-reckoned on the last report's angle with a growing bound. The car is held,
+            // steering where it was last commanded (the actuator holds it, and the models
+            // assume it), until a report comes again; not latched. Tracking on instead, a
+            // black-box probe's car came back from 2 s of silence in a 30 m arc 1.1 m outside
+            // its corridor (docs/findings.md). The control pose starts afresh on the estimate.
+            self.smoothing.forget();
+            return self.hold(ControlStatus::Fallback, FallbackCause::SteeringStale);
+        }
         // Here, with a path only: the estimating ticks' bound has no room for it.
         if let Some(mpc) = self.mpc_config.as_mut() {
             mpc.set_steer_scale(inputs.steer_scale);

@@ -386,9 +386,10 @@ struct Models {
     /// have turned since the last report at the actuator's rate (dead reckoning uses last
     /// tick's; 0 with a fresh report).
     unseen_yaw_rps: f32,
-    /// The centre steering angle of the last fresh steering report, rad (scaled by the
-    /// steering check's gain).
-    last_steer_rad: f32,
+    /// The last fresh steering report, %: while the report is stale the models steer with it
+    /// (the actuator holds its last command, and a controller holds its command while the
+    /// report is stale: `FallbackCause::SteeringStale`).
+    last_steer_pct: f32,
 }
 
 impl Models {
@@ -478,7 +479,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             speed_mps: 0.0,
             reversing: false,
             unseen_yaw_rps: 0.0,
-            last_steer_rad: 0.0,
+            last_steer_pct: 0.0,
         };
         Self {
             config,
@@ -697,9 +698,10 @@ impl<D: BorrowMut<Drive>> Node<D> {
         let cfg = &self.config;
         let m = &mut self.models;
         let steer_scale = self.steering.scale();
-        let measured_steer_rad = cfg
-            .vehicle
-            .steer_pct_to_center_rad(inputs.steer_pct.unwrap_or(0.0));
+        // Stale steering: the wheels where the last report had them (see `unseen_yaw_rps`).
+        let steer_pct = inputs.steer_pct.unwrap_or(m.last_steer_pct);
+        m.last_steer_pct = steer_pct;
+        let measured_steer_rad = cfg.vehicle.steer_pct_to_center_rad(steer_pct);
         let center_steer_rad = steer_scale * measured_steer_rad;
 
         // Eq 5: started at equilibrium on the first measured speed, then driven by the
@@ -733,15 +735,16 @@ impl<D: BorrowMut<Drive>> Node<D> {
         m.reversing = reversing;
         let dynamics = cfg.dynamics.as_ref().filter(|_| !reversing);
 
-        // Stale steering: the model steers straight on, and the wheels may be where the last
-        // report had them or have turned since (at the actuator's rate over the report's age,
-        // at most to the lock): that angle as a yaw rate at this speed on the kinematic
-        // model's curvature without understeer (the most it is).
+        // Stale steering: the models steer with the last report's angle (an actuator holds its
+        // last command, and the controllers hold theirs while the report is stale), and the
+        // wheels may have turned since, either way, at the actuator's rate over the report's
+        // age, at most to the lock: the most the kinematic curvature (without understeer, the
+        // most it is) can differ from the one the models use, as a yaw rate at this speed.
+        // Steering straight on instead, a car held on a 30 m arc at 10 m/s was dead-reckoned
+        // 0.33 rad/s off its turn, and the heading ran 0.21 rad behind exact courses
+        // (docs/findings.md).
         m.unseen_yaw_rps = match inputs.steer_pct {
-            Some(_) => {
-                m.last_steer_rad = center_steer_rad;
-                0.0
-            }
+            Some(_) => 0.0,
             None => {
                 let age = inputs.ages_10ms.get(Input::Steer as usize).copied();
                 let age_s = f32::from(age.unwrap_or(crate::can::freshness::AGE_MAX)) * 0.01;
@@ -749,8 +752,12 @@ impl<D: BorrowMut<Drive>> Node<D> {
                     .vehicle
                     .steer_pct_to_center_rad(cfg.max_steer_rate_pct_per_s * age_s);
                 let lock_rad = cfg.vehicle.steer_pct_to_center_rad(100.0);
-                let wheels_rad = math::min(m.last_steer_rad.abs() + swing_rad, lock_rad);
-                speed_mps * cfg.vehicle.curvature_per_m(wheels_rad, 0.0)
+                let held_rad = center_steer_rad.abs();
+                let k = |rad: f32| cfg.vehicle.curvature_per_m(rad, 0.0);
+                let held = k(held_rad);
+                let further = k(math::min(held_rad + swing_rad, lock_rad)) - held;
+                let back = held - k(math::max(held_rad - swing_rad, -lock_rad));
+                speed_mps * math::max(math::max(further, back), 0.0)
             }
         };
         let yaw_kin =
