@@ -776,6 +776,21 @@ pub fn gnss_rate_note(
         rate.fixes,
         rate.interval_s * 1e3
     );
+    if counters.time_errors > 0 && ((hz * 10.0).round() / 10.0 - declared).abs() < 0.05 {
+        // The receiver runs at the declared rate: the fixes the rate check judged were the
+        // ones left after the node refused those stamped after their TICK (a black-box
+        // probe's fixes 1.5 and 6 ms late: every second one refused, the rest 20 ms apart,
+        // and the note told it to declare the 100 Hz it declared). The timestamps are wrong.
+        return Some(format!(
+            "{came}, the rate the model file declares (gnss_rate_hz = {declared}), but {} GNSS \
+             fixes were not used by the node's rate check: {} frames were stamped after the \
+             TICK that delivered them, which the node refuses (`time_errors`), and the fixes \
+             left came at intervals off the period. Stamp every frame at or before the TICK \
+             that delivers it (the sender's clock runs ahead of the TICKs); the model file's \
+             rate is right",
+            counters.gnss_rate_mismatch, counters.time_errors
+        ));
+    }
     let (lo, hi) = model_file::GNSS_RATE_RANGE_HZ;
     let advice = if hz > hi {
         format!(
@@ -984,5 +999,42 @@ mod tests {
         }
         let quiet = catmodel::node::Counters::default();
         assert_eq!(gnss_rate_note(&quiet, Some(rate), 10.0), None);
+    }
+
+    /// A black-box probe's fixes stamped 1.5 or 6 ms after the TICK that delivered them
+    /// (`scen3.py future_gnss_1s`): the node refused those (`time_errors` 100), the fixes left
+    /// came 20 ms apart and the rate check did not use 50 of them, and the note told the user
+    /// to set gnss_rate_hz = 100, which the file declared. A receiver measured at the declared
+    /// rate with frames stamped after their TICK is now told of its timestamps.
+    #[test]
+    fn fixes_at_the_declared_rate_refused_for_their_stamps_are_named_for_the_stamps() {
+        let t: Vec<u64> = (0..4000u64).map(|k| k * 10_000).collect();
+        let rate = ReceiverRate::measure(&t).unwrap();
+        let counters = catmodel::node::Counters {
+            gnss_rate_mismatch: 50,
+            time_errors: 100,
+            ..Default::default()
+        };
+        let note = gnss_rate_note(&counters, Some(rate), 100.0).unwrap();
+        assert!(
+            note.contains("came at 100.0 Hz")
+                && note.contains("100 frames were stamped after the TICK that delivered them")
+                && note.contains("50 GNSS fixes were not used")
+                && note.contains("Stamp every frame at or before the TICK")
+                && !note.contains("set [vehicle] gnss_rate_hz ="),
+            "{note}"
+        );
+        // Without frames stamped late, a receiver at another rate is told its rate, as before.
+        let other = catmodel::node::Counters {
+            time_errors: 0,
+            ..counters
+        };
+        let note = gnss_rate_note(&other, Some(rate), 10.0).unwrap();
+        assert!(
+            note.ends_with(
+                "set [vehicle] gnss_rate_hz = 100 (`catmodel identify` writes it from the logs)"
+            ),
+            "{note}"
+        );
     }
 }

@@ -28,7 +28,8 @@
 //! has lost the path, [`Tracking::has_lost_path`]: speed 0, wheels straight, until the planner
 //! sends a new path; latched, so that a noisy estimate straying back into the corridor does
 //! not hand the car back to a controller; or the car reports reverse gear: speed 0, steering
-//! held, while it does). Never a NaN: every command is checked finite, else
+//! held, while it does; or the steering report is stale: speed 0, steering held, until a
+//! report comes again). Never a NaN: every command is checked finite, else
 //! the fallback. Its `fallback_reason` says which of these fallbacks it is ([`FallbackCause`];
 //! 0 when the status is not the fallback).
 //!
