@@ -229,12 +229,19 @@ fn the_target_speed_meets_every_later_target_and_the_end_at_the_paths_braking() 
 /// 50 m north, a half circle of radius `r` to the right, 50 m south: a point every metre, the
 /// corridor 1.5 m each side, every target 30 m/s. Returns the points and the arc's stations.
 fn hairpin(r: f64) -> (Vec<Waypoint>, (f64, f64)) {
+    hairpin_in(r, 1.5)
+}
+
+/// [`hairpin`]'s path in a corridor `half_m` to either side: 50 m north, a right half circle
+/// of radius `r` (points about a metre apart, the first at its start), 50 m back south; the
+/// arc's stations.
+fn hairpin_in(r: f64, half_m: f32) -> (Vec<Waypoint>, (f64, f64)) {
     let mut points = Vec::new();
     let mut push = |e: f64, n: f64| {
         points.push(Waypoint {
             speed_mps: 30.0,
-            left_m: 1.5,
-            right_m: 1.5,
+            left_m: half_m,
+            right_m: half_m,
             ..wp(e, n)
         })
     };
@@ -2035,27 +2042,10 @@ fn pure_pursuit_stops_with_the_wheels_straight_when_it_has_lost_the_path() {
 /// it are not, and nothing is without the limit.
 #[test]
 fn the_turns_the_lateral_limit_holds_are_marked() {
+    // The arc: points 50 (its start) to 75 (its end), 25 steps of pi x 8 / 25 m.
     let r = 8.0f64;
-    let mut points = Vec::new();
-    let mut push = |e: f64, n: f64| {
-        points.push(Waypoint {
-            speed_mps: 15.0,
-            left_m: 1.2,
-            right_m: 1.2,
-            ..wp(e, n)
-        })
-    };
-    for i in 0..41 {
-        push(0.0, f64::from(i));
-    }
-    let n = (PI * r) as usize;
-    for i in 1..=n {
-        let a = PI * i as f64 / n as f64;
-        push(r - r * a.cos(), 40.0 + r * a.sin());
-    }
-    for i in (0..40).rev() {
-        push(2.0 * r, f64::from(i));
-    }
+    let (points, _) = hairpin_in(r, 1.2);
+    let n = 25;
     let mut p = path_of(&points);
     let segments = p.len() - 1;
     assert!((0..segments).all(|k| !p.in_held_turn(k)));
@@ -2063,7 +2053,7 @@ fn the_turns_the_lateral_limit_holds_are_marked() {
         accel_mps2: 5.9,
         width_m: 1.806,
     })));
-    let arc = 41..41 + n - 1;
+    let arc = 51..75;
     let spacing = PI * r / n as f64;
     let (low, high) = (
         (5.9f64 * 8.594).sqrt(),
@@ -2082,7 +2072,7 @@ fn the_turns_the_lateral_limit_holds_are_marked() {
         if arc.contains(&k) {
             assert!(held, "segment {k} in the arc");
         }
-        if k < 30 || k > 40 + n + 10 {
+        if k < 40 || k > 50 + n + 10 {
             assert!(!held, "segment {k} on a straight");
         }
     }
