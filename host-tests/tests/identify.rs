@@ -2412,3 +2412,126 @@ fn simulated(scenario: &str, seed: u64) -> Vec<LogRow> {
         .unwrap_or_else(|e| panic!("simulating {scenario}: {e}"))
         .log
 }
+
+/// A logger that writes every column every 10 ms and repeats (samples and holds) a 10 Hz
+/// receiver's last fix (black-box probe): the median interval between rows with a fix read
+/// 100 Hz, `identify` wrote `gnss_rate_hz = 100` without a note, the node built from that
+/// file refused 2836 of the validation drive's 2856 fixes, and `csv2can` sent every repeat as
+/// a fix. Now the repeats are named and left out, the rate is the fixes that change (10 Hz),
+/// the track is the unheld log's, and `csv2can` sends each fix once. A track written with 5 or
+/// 6 decimals, whose fixes repeat while the car crosses a cell, is not taken for held fixes.
+#[test]
+fn fixes_a_logger_holds_are_no_fixes() {
+    use catmodel_host::sim::{self, SimOptions};
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let scenario = sim::scenario::Scenario::builtin("validation").unwrap();
+    let options = SimOptions {
+        seed: 2,
+        ..SimOptions::default()
+    };
+    let mut ten_hz = VehicleConfig::default();
+    ten_hz.sensors.gnss.period_s = 0.1;
+    let rows = sim::simulate(&scenario, &ten_hz, &options).log;
+    // The logger: every 10 ms, the last value of every column.
+    let mut held: Vec<LogRow> = Vec::new();
+    let mut last = LogRow::default();
+    let mut next = rows.iter().peekable();
+    let mut k = 0;
+    while let Some(t) = Some(rows[0].t + 0.01 * k as f64).filter(|t| *t <= rows[rows.len() - 1].t) {
+        while let Some(r) = next.next_if(|r| r.t <= t + 1e-9) {
+            last = LogRow {
+                t,
+                vel: r.vel.or(last.vel),
+                input_vel: r.input_vel.or(last.input_vel),
+                accel: r.accel.or(last.accel),
+                steer: r.steer.or(last.steer),
+                brake: r.brake.or(last.brake),
+                lat: r.lat.or(last.lat),
+                lon: r.lon.or(last.lon),
+            };
+        }
+        if last.vel.is_some()
+            && last.input_vel.is_some()
+            && last.steer.is_some()
+            && last.lat.is_some()
+        {
+            held.push(LogRow { t, ..last });
+        }
+        k += 1;
+    }
+    let preprocess = |rows: &[LogRow]| {
+        preprocess_rows(
+            "validation",
+            rows,
+            &base.vehicle,
+            &PreprocessOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("{e:#}"))
+    };
+    let (unheld, e) = (preprocess(&rows), preprocess(&held));
+    assert!(
+        (e.gnss_rate_hz - 10.0).abs() < 0.2,
+        "measured {} Hz",
+        e.gnss_rate_hz
+    );
+    assert!(
+        e.log_notes
+            .iter()
+            .any(|n| n.contains("repeat the fix before them exactly")
+                && n.contains("10.0 Hz")
+                && n.contains("left out")),
+        "{:?}",
+        e.log_notes
+    );
+    // The track: the unheld log's, but for the logger's 0-10 ms of latency.
+    let rms = |a: &[f64], b: &[f64]| {
+        let n = a.len().min(b.len());
+        (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / n as f64).sqrt()
+    };
+    let off = (unheld.t[0] - e.t[0]).abs();
+    assert!(off < 0.03, "the grids start {off} s apart");
+    let dx = rms(&unheld.dx, &e.dx);
+    assert!(dx < 0.05, "dx/dt {dx} m/s RMS from the unheld log's");
+    // csv2can: each fix once.
+    let gnss_frames = |rows: &[LogRow]| {
+        let encoded = catmodel_host::csv2can::encode_log(rows).unwrap();
+        let n = encoded
+            .frames
+            .iter()
+            .filter(|f| f.frame.id == catmodel::can::spec::GNSS_POSITION_RAPID.id)
+            .count();
+        (n, encoded.note())
+    };
+    let (sent, note) = gnss_frames(&held);
+    let fixes = rows.iter().filter(|r| r.lat.is_some()).count();
+    assert!(
+        sent.abs_diff(fixes) <= 2,
+        "{sent} fixes sent of the receiver's {fixes}"
+    );
+    assert!(note.is_some_and(|n| n.contains("not sent as GNSS frames")));
+    assert_eq!(gnss_frames(&rows), (fixes, None));
+    // Few decimals repeat fixes at 100 Hz: the resolution's, not a logger's.
+    let rows100 = sim::simulate(&scenario, &VehicleConfig::default(), &options).log;
+    for decimals in [5, 6] {
+        let scale = 10f64.powi(decimals);
+        let coarse: Vec<LogRow> = rows100
+            .iter()
+            .map(|r| LogRow {
+                lat: r.lat.map(|v| (v * scale).round() / scale),
+                lon: r.lon.map(|v| (v * scale).round() / scale),
+                ..*r
+            })
+            .collect();
+        let e = preprocess(&coarse);
+        assert!(
+            !e.log_notes.iter().any(|n| n.contains("repeat the fix")),
+            "{decimals} decimals: {:?}",
+            e.log_notes
+        );
+        assert!(
+            e.gnss_rate_hz > 90.0,
+            "{decimals} decimals: {}",
+            e.gnss_rate_hz
+        );
+    }
+}

@@ -27,6 +27,9 @@ pub struct Encoded {
     pub negative_speeds: usize,
     /// Measured speeds below 0 m/s, sent as their magnitude with the direction "reverse".
     pub reverse_speeds: usize,
+    /// Fixes a logger repeated ([`crate::logcsv::held_fix_repeats`]), not sent: a receiver
+    /// sends each fix once.
+    pub held_fixes: Option<crate::logcsv::HeldFixes>,
 }
 
 impl Encoded {
@@ -46,6 +49,15 @@ impl Encoded {
                 "{} commanded speed(s) `input_vel` below 0 m/s sent as 0 m/s (the bus's commanded \
                  speed is unsigned)",
                 self.negative_speeds
+            ));
+        }
+        if let Some(held) = &self.held_fixes {
+            notes.push(format!(
+                "{}: not sent as GNSS frames (a receiver sends each fix once, and the node \
+                 takes a fix that comes faster than its model file's `gnss_rate_hz` for another \
+                 receiver's); the fixes that change go out at the receiver's {:.1} Hz",
+                held.describe(),
+                1.0 / held.receiver_period_s
             ));
         }
         (!notes.is_empty()).then(|| notes.join("; "))
@@ -162,16 +174,44 @@ impl LogEncoder {
 
 /// Encodes the rows (sorted by time, one row per instant as [`crate::logcsv::read_log`]
 /// returns them), as [`LogEncoder::encode_row`] one after the other.
+///
+/// Fixes a logger repeated (sample and hold, [`crate::logcsv::held_fix_repeats`]) are not
+/// sent: the row goes out without its GNSS frame. Before, a 10 Hz receiver held at 100 Hz went
+/// out as 100 fixes a second, which no receiver sends, and a node declared for 10 Hz took
+/// nine in ten for another receiver's.
 pub fn encode_log(rows: &[LogRow]) -> Result<Encoded> {
     let mut frames = Vec::with_capacity(rows.len() * 2);
     let mut encoder = LogEncoder::new();
-    for r in rows {
-        encoder.encode_row(r, &mut frames)?;
+    let fix_rows: Vec<usize> = (0..rows.len())
+        .filter(|&i| rows[i].lat.is_some() && rows[i].lon.is_some())
+        .collect();
+    let t: Vec<f64> = fix_rows.iter().map(|&i| rows[i].t).collect();
+    let fixes: Vec<(f64, f64)> = fix_rows
+        .iter()
+        .map(|&i| (rows[i].lat.unwrap_or(0.0), rows[i].lon.unwrap_or(0.0)))
+        .collect();
+    let held_fixes = crate::logcsv::held_fix_repeats(&t, &fixes);
+    let mut held_row = vec![false; rows.len()];
+    for &k in held_fixes.iter().flat_map(|h| &h.repeats) {
+        held_row[fix_rows[k]] = true;
+    }
+    for (r, held) in rows.iter().zip(held_row) {
+        if held {
+            let r = LogRow {
+                lat: None,
+                lon: None,
+                ..*r
+            };
+            encoder.encode_row(&r, &mut frames)?;
+        } else {
+            encoder.encode_row(r, &mut frames)?;
+        }
     }
     Ok(Encoded {
         frames,
         negative_speeds: encoder.negative_speeds(),
         reverse_speeds: encoder.reverse_speeds(),
+        held_fixes,
     })
 }
 

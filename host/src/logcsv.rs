@@ -1552,3 +1552,127 @@ impl Line<'_> {
         Ok(Some(v))
     }
 }
+
+/// Fixes a logger repeated ([`held_fix_repeats`]): a logger that samples every column at its
+/// own rate and writes the last value it has (sample and hold) repeats a slower receiver's fix
+/// on every row until the next one comes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldFixes {
+    /// The repeats' indices in the fixes given, increasing.
+    pub repeats: Vec<usize>,
+    /// The fixes given (repeats included).
+    pub fixes: usize,
+    /// The median interval between the fixes that change, s: the receiver's period.
+    pub receiver_period_s: f64,
+    /// The median interval between the rows that carry a fix, s: the logger's period.
+    pub logger_period_s: f64,
+}
+
+impl HeldFixes {
+    /// What was found, for a note: "N of M fixes (P %) repeat ..., a logger that holds ...".
+    pub fn describe(&self) -> String {
+        format!(
+            "{} of {} fixes ({:.0} %) repeat the fix before them exactly, and the fixes that \
+             change come every {:.1} ms ({:.1} Hz, the median), regularly: a logger that writes \
+             every {:.1} ms and repeats (samples and holds) the receiver's last fix; the \
+             repeats are no fixes",
+            self.repeats.len(),
+            self.fixes,
+            100.0 * self.repeats.len() as f64 / self.fixes.max(1) as f64,
+            1e3 * self.receiver_period_s,
+            1.0 / self.receiver_period_s,
+            1e3 * self.logger_period_s,
+        )
+    }
+}
+
+/// A repeated fix is a held one only when at least this share of the fixes repeat ...
+const HELD_MIN_SHARE: f64 = 1.0 / 3.0;
+/// ... the fixes that change come at least this many times further apart than the rows ...
+const HELD_MIN_PERIOD_RATIO: f64 = 1.5;
+/// ... at least this share of them within a quarter of their median interval (or one logger
+/// period) of it ...
+const HELD_MIN_REGULAR: f64 = 0.5;
+/// ... and they step by at least this many times the resolution `lat`/`lon` are written with,
+/// in the median (a track written with few decimals repeats its fixes while the car crosses a
+/// cell of that grid: those repeats are the resolution's, and are kept).
+const HELD_MIN_STEP_CELLS: f64 = 3.0;
+
+/// The fixes (times `t`, s, increasing; `fixes` lat, lon, degrees) that repeat the one before
+/// them exactly because a logger held them, or `None`. Held repeats are told from a receiver
+/// whose fixes stand still (a car at rest, a receiver's static hold) and from a track written
+/// with too few decimals by their pattern: a third of the fixes or more repeat, the fixes that
+/// change come regularly (half of their intervals within a quarter of the median, or within
+/// one logger period) and at least 1.5 times further apart than the rows, and they step by three
+/// times the decimals' resolution or more. A black-box probe's 10 Hz receiver held at 100 Hz:
+/// 90 % repeats, the changes every 100 ms; the simulator's receivers at 1-100 Hz, RTK included,
+/// repeat none.
+pub fn held_fix_repeats(t: &[f64], fixes: &[(f64, f64)]) -> Option<HeldFixes> {
+    let n = fixes.len().min(t.len());
+    if n < 20 {
+        return None;
+    }
+    let repeats: Vec<usize> = (1..n).filter(|&i| fixes[i] == fixes[i - 1]).collect();
+    if (repeats.len() as f64) < HELD_MIN_SHARE * n as f64 {
+        return None;
+    }
+    let median = |mut v: Vec<f64>| -> Option<f64> {
+        if v.is_empty() {
+            return None;
+        }
+        let mid = v.len() / 2;
+        Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
+    };
+    let logger_period_s = median(t[..n].windows(2).map(|w| w[1] - w[0]).collect())?;
+    let changes: Vec<usize> = (0..n)
+        .filter(|&i| i == 0 || fixes[i] != fixes[i - 1])
+        .collect();
+    let intervals: Vec<f64> = changes.windows(2).map(|w| t[w[1]] - t[w[0]]).collect();
+    if intervals.len() < 10 {
+        return None;
+    }
+    let receiver_period_s = median(intervals.clone())?;
+    if !(receiver_period_s >= HELD_MIN_PERIOD_RATIO * logger_period_s) {
+        return None;
+    }
+    let tolerance = (0.25 * receiver_period_s).max(logger_period_s) * (1.0 + 1e-6);
+    let regular = intervals
+        .iter()
+        .filter(|d| (*d - receiver_period_s).abs() <= tolerance)
+        .count();
+    if (regular as f64) < HELD_MIN_REGULAR * intervals.len() as f64 {
+        return None;
+    }
+    // The decimals the fixes are written with (the finest grid up to 1e-9 deg they all lie
+    // on), and the median step between the fixes that change against it, in degrees.
+    let on_grid = |v: f64, scale: f64| ((v * scale).round() - v * scale).abs() < 1e-3;
+    let cell_deg = (0..=9)
+        .map(|d| 10f64.powi(-d))
+        .rev()
+        .filter(|cell| {
+            changes
+                .iter()
+                .all(|&i| on_grid(fixes[i].0, 1.0 / cell) && on_grid(fixes[i].1, 1.0 / cell))
+        })
+        .last()
+        .unwrap_or(0.0);
+    let cos_lat = fixes[0].0.to_radians().cos().abs().max(1e-3);
+    let step_deg = median(
+        changes
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (fixes[w[0]], fixes[w[1]]);
+                ((b.0 - a.0).powi(2) + ((b.1 - a.1) * cos_lat).powi(2)).sqrt()
+            })
+            .collect(),
+    )?;
+    if step_deg < HELD_MIN_STEP_CELLS * cell_deg {
+        return None;
+    }
+    Some(HeldFixes {
+        repeats,
+        fixes: n,
+        receiver_period_s,
+        logger_period_s,
+    })
+}

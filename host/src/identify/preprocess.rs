@@ -834,6 +834,7 @@ fn preprocess_on_clock(
     let (tc, cmd) = needed("input_vel", |r| r.input_vel, SPEED_PLAUSIBLE);
     let (ts_, steer) = needed("steer", |r| r.steer, STEER_PLAUSIBLE);
     let (mut tg, mut latlon) = gnss_fixes(rows);
+    drop_held_repeats(name, &mut tg, &mut latlon, &mut notes);
     let clock = clean_fixes(
         name,
         &mut tg,
@@ -1108,6 +1109,36 @@ fn gnss_fixes(rows: &[LogRow]) -> (Vec<f64>, Vec<(f64, f64)>) {
             _ => None,
         })
         .unzip()
+}
+
+/// Leaves out of the fixes `tg`, `latlon` of the log `name` the repeats a logger held
+/// ([`logcsv::held_fix_repeats`]), with a note: they are no fixes. Before, a 10 Hz receiver
+/// held at 100 Hz measured 100 Hz (the median interval between rows with a fix), the file was
+/// written with `gnss_rate_hz = 100` and no note, and the node built from it refused almost
+/// every fix; the track was a staircase.
+fn drop_held_repeats(
+    name: &str,
+    tg: &mut Vec<f64>,
+    latlon: &mut Vec<(f64, f64)>,
+    notes: &mut Vec<String>,
+) {
+    let Some(held) = logcsv::held_fix_repeats(tg, latlon) else {
+        return;
+    };
+    notes.push(format!(
+        "{name}: {}: left out; the receiver's rate ({:.1} Hz) and its track are measured from \
+         the fixes that change",
+        held.describe(),
+        1.0 / held.receiver_period_s
+    ));
+    let mut keep = vec![true; tg.len()];
+    for &i in &held.repeats {
+        keep[i] = false;
+    }
+    let mut k = keep.iter();
+    tg.retain(|_| *k.next().unwrap_or(&true));
+    let mut k = keep.iter();
+    latlon.retain(|_| *k.next().unwrap_or(&true));
 }
 
 /// Fixes (lat, lon) in metres east and north of `origin` (lat, lon), degrees.
