@@ -1694,3 +1694,62 @@ proptest! {
         }
     }
 }
+
+/// The screen format's length field as can-utils' lib.c writes it: `[%d]` classic, `[%02d]`
+/// CAN FD (skipped, as `##` is), `candump -8`'s `{%X}` raw DLC (9..F: 8 bytes), and `-a`'s
+/// ASCII column after the data; `-e`'s explanation lines start with a tab.
+#[test]
+fn candump_screen_lengths_raw_dlcs_and_ascii() {
+    use catmodel::can::candump::{is_error_detail, parse_line_and_dlc};
+    let classic = parse_line("(1.000000)  can0  100   [2]  0A FF").unwrap();
+    assert_eq!(classic, parse_line("(1.000000) can0 100#0AFF").unwrap());
+    for fd in [
+        "(1.000000)  can0  100  [02]  0A FF",
+        "(1.000000)  can0  100  [08]  01 02 03 04 05 06 07 08",
+        "(1.000000)  can0  100  [12]  01 02 03 04 05 06 07 08 09 0A 0B 0C",
+        "(1.000000)  can0  RX B -  100  [00]",
+    ] {
+        assert_eq!(parse_line(fd), Err(CandumpError::FdFrame), "{fd}");
+    }
+    let (f, dlc) = parse_line_and_dlc("(1.000000)  can0  100   {2}  0A FF").unwrap();
+    assert_eq!((f, dlc), (classic, None));
+    let (f, dlc) =
+        parse_line_and_dlc("(1.000000)  can0  100   {B}  01 02 03 04 05 06 07 08").unwrap();
+    assert_eq!(dlc, Some(11));
+    assert_eq!(f.frame.len, 8);
+    for bad in ["{}", "{10}", "{G}"] {
+        let line = format!("(1.000000)  can0  100   {bad}  0A FF");
+        assert_eq!(parse_line(&line), Err(CandumpError::BadRawDlc), "{line}");
+    }
+    for ascii in [
+        "(1.000000)  can0  100   [2]  0A FF   '..'",
+        "(1.000000)  can0  100   [2]  20 41   ' A'",
+        "(1.000000)  can0  100   [2]  41 20   'A '",
+    ] {
+        assert_eq!(
+            parse_line(ascii).map(|f| f.frame.id),
+            Ok(classic.frame.id),
+            "{ascii}"
+        );
+    }
+    for bad in [
+        "(1.000000)  can0  100   [2]  0A FF   '..",
+        "(1.000000)  can0  100   [2]  0A FF   '",
+        "(1.000000)  can0  100   [2]  0A FF   x",
+    ] {
+        assert_eq!(parse_line(bad), Err(CandumpError::TrailingGarbage), "{bad}");
+    }
+    assert!(is_error_detail("\tbus-error"));
+    assert!(is_error_detail(
+        "\tcontroller-problem{rx-error-warning}\r\n"
+    ));
+    for not in [
+        "",
+        "\t",
+        "bus-error",
+        "\t(1.000000) can0 100#00",
+        " (1.000000)  can0  100   [0]",
+    ] {
+        assert!(!is_error_detail(not), "{not:?}");
+    }
+}

@@ -86,7 +86,33 @@ pub struct LogReport {
     /// longest's line (the frame after it) and its start and end, us.
     pub pauses: u64,
     pub longest_pause: Option<(usize, u64, u64)>,
+    /// Frames of one interface stamped before a frame of another written above them, by up to
+    /// [`CROSS_INTERFACE_REORDER_US`] (`candump -l can0 can1` reads its sockets in turn): put
+    /// in time order. How many, the first one's line, the largest step back, us.
+    pub reordered: u64,
+    pub first_reordered_line: Option<usize>,
+    pub largest_reorder_us: u64,
+    /// Frames that repeat a frame of another interface (the same identifier, length and data)
+    /// within [`MIRROR_WINDOW_US`] after it: one bus logged on two interfaces (a gateway that
+    /// mirrors it). Their count, the interfaces (index of the first's, the copy's) of the
+    /// first, and each copy's delay, us.
+    pub mirrored: u64,
+    pub mirror_pair: Option<(usize, usize)>,
+    pub mirror_delays_us: Vec<u64>,
 }
+
+/// Frames of two interfaces may come out of time order by this much, us: `candump` of several
+/// interfaces reads its sockets in turn, so a frame of `can1` can be written after a later
+/// frame of `can0` (a black-box probe's log: 428 us). Within one interface the time must not go
+/// back at all; across interfaces up to one node tick (20 ms) is a reader's order and the
+/// frames are put in time order; more is another clock.
+pub const CROSS_INTERFACE_REORDER_US: u64 = 20_000;
+
+/// A frame that repeats a frame of another interface within this time is its copy, us: a
+/// gateway or bridge forwards a frame within a few hundred microseconds (a black-box probe's:
+/// 200 us), and no two interfaces carry the same frame, rolling counter and CRC included, by
+/// chance within 10 ms.
+pub const MIRROR_WINDOW_US: u64 = 10_000;
 
 /// A log with no frame for longer than this has paused, us: every input of the node is
 /// silent (a recorder pause, a gateway reset, a stalled bridge), which the node ticks through
@@ -141,13 +167,13 @@ impl InputCensus {
             out.push(if classic == 0 {
                 format!(
                     "{}: no {name} ({id}) arrived as classic CAN: its {fd} frames came as CAN FD \
-                     frames (`##` in the log), which the node does not read (it reads classic \
+                     frames (`##` in the log format, a two-digit `[LEN]` in the screen format), which the node does not read (it reads classic \
                      CAN only; they were skipped), so it ran without {name}",
                     path.display()
                 )
             } else {
                 format!(
-                    "{}: {fd} {name} frames ({id}) came as CAN FD frames (`##` in the log), \
+                    "{}: {fd} {name} frames ({id}) came as CAN FD frames (`##` in the log format, a two-digit `[LEN]` in the screen format), \
                      beside {classic} as classic CAN: the node reads classic CAN only, and the \
                      CAN FD ones were skipped",
                     path.display()
@@ -342,6 +368,16 @@ impl LogReport {
                 self.raw_dlc_frames
             ));
         }
+        if let Some(line) = self.first_reordered_line {
+            out.push(format!(
+                "{}:{line}: {} frame(s) were written after a later frame of another interface, \
+                 up to {:.3} ms (candump reads its sockets in turn; within one interface the \
+                 time never goes back): put in time order",
+                path.display(),
+                self.reordered,
+                self.largest_reorder_us as f64 * 1e-3
+            ));
+        }
         if self.interfaces.len() < 2 {
             return out;
         }
@@ -375,6 +411,20 @@ impl LogReport {
             out.push(w);
         }
         out.extend(self.inputs.warnings(path));
+        if self.mirrored > 0 && self.kept.is_none() {
+            if let Some((from, to)) = self.mirror_pair {
+                let name = |i: usize| self.interfaces.get(i).map_or("?", |(n, _)| n.as_str());
+                out.push(format!(
+                    "{}: {} frame(s) of `{}` repeat a frame of `{}` within {} ms (a gateway that \
+                     forwards some messages?): the node receives those twice",
+                    path.display(),
+                    self.mirrored,
+                    name(to),
+                    name(from),
+                    MIRROR_WINDOW_US / 1000
+                ));
+            }
+        }
         if let Some(line) = self.first_drop_line {
             out.push(format!(
                 "{}:{line}: the recording lost {} frame(s): candump -d reported drops on {} line(s) (`DROPCOUNT: ...`, skipped); the node saw gaps there",
@@ -507,8 +557,8 @@ pub fn read_candump_selected(
             .map_err(|e| anyhow::anyhow!("{}:{lineno}: reading: {e}", path.display()))?;
         let kept = reader.log.frames.len();
         reader.push(lineno, text, unterminated)?;
-        if reader.log.frames.len() > kept && !select(&reader.log.frames[kept].frame) {
-            reader.log.frames.truncate(kept);
+        if reader.log.frames.len() > kept && !select(&reader.log.frames[reader.inserted_at].frame) {
+            reader.log.frames.remove(reader.inserted_at);
         }
     }
     reader.finish()
@@ -587,6 +637,13 @@ struct LineReader<'a> {
     iface: usize,
     /// The last frame kept and its interface, to tell a line written twice.
     last: Option<(TimedFrame, usize)>,
+    /// The latest timestamp of each interface (by index), us.
+    iface_last_t: Vec<Option<u64>>,
+    /// The frames kept within [`MIRROR_WINDOW_US`] of the latest, with their interface.
+    recent: std::collections::VecDeque<(TimedFrame, usize)>,
+    /// Where the last frame kept went in the frames (the end, unless it was put in time
+    /// order before frames of another interface).
+    inserted_at: usize,
 }
 
 impl<'a> LineReader<'a> {
@@ -601,6 +658,34 @@ impl<'a> LineReader<'a> {
             log,
             iface: 0,
             last: None,
+            iface_last_t: Vec::new(),
+            recent: std::collections::VecDeque::new(),
+            inserted_at: 0,
+        }
+    }
+
+    /// Counts `frame` (of interface `self.iface`) as a copy when it repeats a recent frame of
+    /// another interface ([`MIRROR_WINDOW_US`]), and keeps it among the recent ones.
+    fn observe_mirror(&mut self, frame: TimedFrame) {
+        while self
+            .recent
+            .front()
+            .is_some_and(|(f, _)| f.t_us + MIRROR_WINDOW_US < frame.t_us)
+        {
+            self.recent.pop_front();
+        }
+        let original = self
+            .recent
+            .iter()
+            .find(|(f, i)| *i != self.iface && f.frame == frame.frame && f.t_us <= frame.t_us);
+        if let Some(&(f, i)) = original {
+            let report = &mut self.log.report;
+            report.mirrored += 1;
+            report.mirror_pair.get_or_insert((i, self.iface));
+            report.mirror_delays_us.push(frame.t_us - f.t_us);
+        }
+        if self.recent.len() < 256 {
+            self.recent.push_back((frame, self.iface));
         }
     }
 
@@ -610,6 +695,10 @@ impl<'a> LineReader<'a> {
     #[inline]
     fn push(&mut self, lineno: usize, line: &str, unterminated_last: bool) -> Result<()> {
         let path = self.path;
+        if candump::is_error_detail(line) {
+            // `candump -e`'s explanation of the error frame before, which is skipped.
+            return Ok(());
+        }
         let (parsed, raw_dlc) = match candump::parse_line_and_dlc(line) {
             Ok((frame, dlc)) => (Ok(frame), dlc.is_some()),
             Err(e) => (Err(e), false),
@@ -635,6 +724,12 @@ impl<'a> LineReader<'a> {
                 self.log.report.truncated_last_line = Some(lineno);
                 return Ok(());
             }
+            Err(candump::CandumpError::MissingTimestamp) if untimed_screen_line(line) => bail!(
+                "{}:{lineno}: a candump line without a timestamp (candump's screen format \
+                 without `-t`): a replay needs each frame's time: record with `candump -ta` \
+                 (screen format, absolute time) or `candump -l` (log file): {line:?}",
+                path.display()
+            ),
             Err(e) => bail!(
                 "{}:{lineno}: malformed candump line ({}): {line:?}",
                 path.display(),
@@ -685,8 +780,37 @@ impl<'a> LineReader<'a> {
                 frame.t_us
             );
         }
+        let iface_prev = self.iface_last_t.get(self.iface).copied().flatten();
+        let behind_other = self.last_t.is_some_and(|prev| {
+            frame.t_us < prev
+                && prev - frame.t_us <= CROSS_INTERFACE_REORDER_US
+                && iface_prev.is_none_or(|p| frame.t_us >= p)
+        });
+        if self.iface_last_t.len() <= self.iface {
+            self.iface_last_t.resize(self.iface + 1, None);
+        }
+        if behind_other {
+            // A frame of this interface written after a later one of another: candump reads
+            // its sockets in turn. Put in time order at the end.
+            let report = &mut self.log.report;
+            report.reordered += 1;
+            report.first_reordered_line.get_or_insert(lineno);
+            let back = self.last_t.unwrap_or(frame.t_us) - frame.t_us;
+            report.largest_reorder_us = report.largest_reorder_us.max(back);
+            self.iface_last_t[self.iface] = Some(frame.t_us);
+            self.observe_mirror(frame);
+            self.timestamps
+                .observe(&mut self.log.report.timestamps, frame.t_us, frame.frame.id);
+            // In time order, after the frames of its instant: near the end.
+            let frames = &mut self.log.frames;
+            let at = frames.partition_point(|f| f.t_us <= frame.t_us);
+            frames.insert(at, frame);
+            self.inserted_at = at;
+            return Ok(());
+        }
         if let Some(prev) = self.last_t {
             if frame.t_us < prev {
+                let other = iface_prev.is_none_or(|p| frame.t_us >= p);
                 bail!(
                     "{}:{lineno}: time goes backwards ({} us after {} us){}",
                     path.display(),
@@ -700,6 +824,11 @@ impl<'a> LineReader<'a> {
                         ": `candump -t A` writes the recorder's local time, which goes back an \
                          hour where daylight saving time ends: record with `-ta` (seconds \
                          since 1970, UTC)"
+                    } else if other {
+                        ": a frame of another interface than the frame before, more than the \
+                         20 ms two interfaces' frames may come out of order (candump reads its \
+                         sockets in turn): the interfaces' clocks differ; replay one with \
+                         `--interface NAME`"
                     } else {
                         ""
                     }
@@ -727,8 +856,11 @@ impl<'a> LineReader<'a> {
             }
         }
         self.last_t = Some(frame.t_us);
+        self.iface_last_t[self.iface] = Some(frame.t_us);
+        self.observe_mirror(frame);
         self.timestamps
             .observe(&mut self.log.report.timestamps, frame.t_us, frame.frame.id);
+        self.inserted_at = self.log.frames.len();
         self.log.frames.push(frame);
         Ok(())
     }
@@ -758,11 +890,45 @@ impl<'a> LineReader<'a> {
     /// The log; an error if `--interface` named an interface the log does not have.
     fn finish(self) -> Result<CandumpLog> {
         self.log.report.check_interface(self.path)?;
+        self.log.report.check_mirrored(self.path)?;
         Ok(self.log)
     }
 }
 
 impl LogReport {
+    /// An error if most frames of one interface are copies of another's ([`Self::mirrored`]):
+    /// read as one bus, every frame would reach the node twice.
+    fn check_mirrored(&self, path: &Path) -> Result<()> {
+        let Some((from, to)) = self.mirror_pair else {
+            return Ok(());
+        };
+        let name = |i: usize| self.interfaces.get(i).map_or("?", |(n, _)| n.as_str());
+        let lines = |i: usize| self.interfaces.get(i).map_or(0, |(_, n)| *n);
+        let mut delays = self.mirror_delays_us.clone();
+        let mid = delays.len() / 2;
+        let median_us = delays.select_nth_unstable(mid).1.to_owned();
+        let fewer = lines(from).min(lines(to));
+        let what = format!(
+            "{} frames of `{}` repeat a frame of `{}` {:.3} ms later (the median; the same \
+             identifier and data, rolling counter and CRC included)",
+            self.mirrored,
+            name(to),
+            name(from),
+            median_us as f64 * 1e-3
+        );
+        if self.kept.is_none() && self.mirrored >= 50 && 2 * self.mirrored >= fewer {
+            bail!(
+                "{}: {what}: one bus logged on two interfaces (a gateway or bridge that \
+                 mirrors it); read as one bus, every frame would reach the node twice (the \
+                 copies' rolling counters refused, the GNSS fixes taken for a receiver \
+                 twice as fast, or faster): replay one interface with `--interface {}`",
+                path.display(),
+                name(from)
+            );
+        }
+        Ok(())
+    }
+
     /// An error if the interface kept is not among the log's.
     fn check_interface(&self, path: &Path) -> Result<()> {
         if let Some(kept) = &self.kept {
@@ -785,6 +951,28 @@ impl LogReport {
         }
         Ok(())
     }
+}
+
+/// Whether `line` is candump's screen format without a timestamp (`candump can0`): an
+/// interface, an identifier and `[LEN]` (or `-8`'s `{DLC}`), each in its place.
+fn untimed_screen_line(line: &str) -> bool {
+    let mut tokens = line.split_ascii_whitespace();
+    let (Some(_iface), Some(mut id)) = (tokens.next(), tokens.next()) else {
+        return false;
+    };
+    if matches!(id, "RX" | "TX") {
+        tokens.next();
+        tokens.next();
+        match tokens.next() {
+            Some(t) => id = t,
+            None => return false,
+        }
+    }
+    let len = tokens.next().unwrap_or_default();
+    matches!(id.len(), 3 | 8)
+        && id.bytes().all(|c| c.is_ascii_hexdigit())
+        && (len.starts_with('[') && len.ends_with(']')
+            || len.starts_with('{') && len.ends_with('}'))
 }
 
 /// Whether the line's timestamp has fewer than the 10 digits of seconds of candump's absolute
@@ -820,7 +1008,7 @@ pub fn candump_reason(e: candump::CandumpError) -> &'static str {
         E::BadId => "identifier is not 3 or 8 hex digits",
         E::IdOutOfRange => "identifier above 0x7FF (3 digits) or 0x1FFFFFFF (8 digits)",
         E::RemoteFrame => "remote frame (`#R`), not supported",
-        E::FdFrame => "CAN FD frame (`##`), not supported",
+        E::FdFrame => "CAN FD frame (`##`, or a two-digit `[LEN]`), not supported",
         E::ErrorFrame => "error frame (CAN_ERR_FLAG in the identifier), not a bus frame",
         E::BadHex => "data is not hex",
         E::OddHex => "odd number of data hex digits",
@@ -1439,18 +1627,28 @@ fn replay_text<C: Write + Send, T: Write + Send>(
                     let _ = to_node.send(Err(e));
                     return reader.log;
                 }
-                if reader.log.frames.len() == PARSE_CHUNK_FRAMES {
-                    let full = std::mem::replace(
-                        &mut reader.log.frames,
-                        Vec::with_capacity(PARSE_CHUNK_FRAMES),
-                    );
-                    if to_node.send(Ok(full)).is_err() {
-                        return reader.log;
+                if reader.log.frames.len() >= PARSE_CHUNK_FRAMES {
+                    // The frames within the reorder window of the latest stay: a frame of
+                    // another interface may still go before them.
+                    let frames = &mut reader.log.frames;
+                    let latest = frames.last().map_or(0, |f| f.t_us);
+                    let hold =
+                        frames.partition_point(|f| f.t_us + CROSS_INTERFACE_REORDER_US < latest);
+                    if hold > 0 {
+                        let mut full = std::mem::replace(
+                            frames,
+                            Vec::with_capacity(PARSE_CHUNK_FRAMES + PARSE_CHUNK_FRAMES / 4),
+                        );
+                        frames.extend(full.drain(hold..));
+                        if to_node.send(Ok(full)).is_err() {
+                            return reader.log;
+                        }
                     }
                 }
             }
             let last = std::mem::take(&mut reader.log.frames);
-            let _ = match reader.log.report.check_interface(path) {
+            let checked = reader.log.report.check_interface(path);
+            let _ = match checked.and_then(|()| reader.log.report.check_mirrored(path)) {
                 Ok(()) => to_node.send(Ok(last)),
                 Err(e) => to_node.send(Err(e)),
             };

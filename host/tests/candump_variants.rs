@@ -494,7 +494,7 @@ fn an_input_that_came_as_can_fd_is_named() {
     assert!(
         stderr.contains(
             "fd.log: no STEERING_REPORT (0x100) arrived as classic CAN: its 748 frames came as \
-             CAN FD frames (`##` in the log), which the node does not read"
+             CAN FD frames (`##` in the log format, a two-digit `[LEN]` in the screen format), which the node does not read"
         ),
         "{stderr}"
     );
@@ -513,7 +513,7 @@ fn an_input_that_came_as_can_fd_is_named() {
     assert!(n > 0);
     assert!(
         stderr.contains(&format!(
-            "some.log: {n} SPEED_REPORT frames (0x101) came as CAN FD frames (`##` in the log), \
+            "some.log: {n} SPEED_REPORT frames (0x101) came as CAN FD frames (`##` in the log format, a two-digit `[LEN]` in the screen format), \
              beside {} as classic CAN",
             748 - n
         )),
@@ -597,4 +597,157 @@ fn a_pause_of_every_input_is_named() {
     );
     let (_, _, stderr) = replay(&dir, "plain.log", &plain, &[]);
     assert!(!stderr.contains("the log pauses"), "{stderr}");
+}
+
+/// candump's screen format as its options change it (a black-box probe): a CAN FD frame's
+/// two-digit `[08]` was read as classic CAN (the node took a CAN FD steering report), and
+/// `-e`'s tab-indented explanation of an error frame, `-8`'s `{8}`, `-a`'s ASCII column and a
+/// screen log without timestamps were refused as malformed lines, for the wrong reason. Now the
+/// CAN FD frames are skipped and named, `-e`, `-8` and `-a` replay like the plain log, and a
+/// log without timestamps is refused with how to record one.
+#[test]
+fn screen_format_options_are_read_or_named() {
+    let dir = tmp_dir("screen-options");
+    let plain = smoke();
+    let (code, want, stderr) = replay(&dir, "plain.log", &plain, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let ta = each_line(&plain, screen);
+    // CAN FD: lib.c writes `[%02d]`.
+    let fd = ta.replace("  100   [8]", "  100  [08]");
+    assert_ne!(fd, ta);
+    let (code, _, stderr) = replay(&dir, "fd.log", &fd, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("no STEERING_REPORT (0x100) arrived as classic CAN: its 748 frames"),
+        "{stderr}"
+    );
+    // `-e`: an error frame and its explanation, on lines that start with a tab.
+    let mut lines: Vec<String> = ta.lines().map(str::to_string).collect();
+    let t = &lines[100][..21];
+    lines.insert(
+        101,
+        format!("{t}  can0  20000080   [8]  00 00 00 00 00 00 00 00   ERRORFRAME"),
+    );
+    lines.insert(102, "\tbus-error".to_string());
+    lines.insert(103, "\tcontroller-problem{rx-error-warning}".to_string());
+    let e = lines.join("\n") + "\n";
+    let (code, got, stderr) = replay(&dir, "e.log", &e, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains("skipped: 1 remote/FD/error frames"),
+        "{stderr}"
+    );
+    // `-8`: the raw DLC in braces.
+    let dlc = ta.replace("   [8]  ", "   {8}  ");
+    let (code, got, stderr) = replay(&dir, "dlc.log", &dlc, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    // `-a`: the data as ASCII in quotes (a space among them splits the column).
+    let ascii = each_line(&ta, |l| format!("{l}   '.3 6..[..'"));
+    let (code, got, stderr) = replay(&dir, "ascii.log", &ascii, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    // No `-t`: no timestamp to replay by.
+    let untimed = each_line(&ta, |l| l[21..].to_string());
+    let (code, _, stderr) = replay(&dir, "untimed.log", &untimed, &[]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("untimed.log:1: a candump line without a timestamp")
+            && stderr.contains("record with `candump -ta`"),
+        "{stderr}"
+    );
+}
+
+/// `candump -l can0 can1` reads its sockets in turn, so a frame of `can1` can be written
+/// after a later frame of `can0` (a black-box probe's log: 428 us back, refused as "time goes
+/// backwards"). Now frames of another interface up to 20 ms back are put in time order and
+/// counted in a note; within one interface the time is checked as before, and more than 20 ms
+/// across interfaces is refused naming `--interface`.
+#[test]
+fn frames_of_two_interfaces_slightly_out_of_order_are_put_in_order() {
+    let dir = tmp_dir("reorder");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    // STEERING_REPORT on can1, each written after the frame that follows it.
+    let swap = |text: &str, from: &str, to: &str| {
+        let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+        let mut i = 0;
+        let mut swapped = 0;
+        while i + 1 < lines.len() {
+            if lines[i].contains(from) && stamp(&lines[i]).1 != stamp(&lines[i + 1]).1 {
+                lines[i] = lines[i].replace(from, to);
+                lines.swap(i, i + 1);
+                swapped += 1;
+                i += 2;
+            } else {
+                i += 1;
+            }
+        }
+        (lines.join("\n") + "\n", swapped)
+    };
+    let (two, swapped) = swap(&plain, " can0 100#", " can1 100#");
+    assert!(swapped > 500);
+    let (code, got, stderr) = replay(&dir, "two.log", &two, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
+    assert!(
+        stderr.contains(&format!(
+            "{swapped} frame(s) were written after a later frame of another interface"
+        )) && stderr.contains("put in time order"),
+        "{stderr}"
+    );
+    // One interface: still refused.
+    let (one, _) = swap(&plain, " can0 100#", " can0 100#");
+    let (code, _, stderr) = replay(&dir, "one.log", &one, &[]);
+    assert_eq!(code, 1);
+    assert!(stderr.contains("time goes backwards"), "{stderr}");
+    // Across interfaces by more than 20 ms: another clock.
+    let late = each_line(&plain, |l| match l.split_once(" can0 100#") {
+        Some((head, data)) => {
+            let (s, us, _) = stamp(head);
+            let t = s * 1_000_000 + us.parse::<u64>().unwrap() + 30_000;
+            format!(
+                "({:010}.{:06}) can1 100#{data}",
+                t / 1_000_000,
+                t % 1_000_000
+            )
+        }
+        None => l.to_string(),
+    });
+    let (code, _, stderr) = replay(&dir, "late.log", &late, &[]);
+    assert_eq!(code, 1);
+    assert!(
+        stderr.contains("time goes backwards") && stderr.contains("`--interface NAME`"),
+        "{stderr}"
+    );
+}
+
+/// One bus logged on two interfaces (a gateway mirrors every frame onto `can1` 200 us later):
+/// a black-box probe's log replayed with exit 0 and no prediction, the copies refused by their
+/// counters and the fixes blamed on a "5000 Hz" receiver. Now refused naming `--interface`;
+/// with it, the plain log's predictions.
+#[test]
+fn one_bus_logged_on_two_interfaces_is_refused_naming_interface() {
+    let dir = tmp_dir("mirror");
+    let plain = smoke();
+    let (_, want, _) = replay(&dir, "plain.log", &plain, &[]);
+    let mirrored = each_line(&plain, |l| {
+        let (s, us, rest) = stamp(l);
+        let t = s * 1_000_000 + us.parse::<u64>().unwrap() + 200;
+        let copy = rest.replacen(" can0 ", " can1 ", 1);
+        format!("{l}\n({:010}.{:06}){copy}", t / 1_000_000, t % 1_000_000)
+    });
+    let (code, _, stderr) = replay(&dir, "gw.log", &mirrored, &[]);
+    assert_eq!(code, 1, "{stderr}");
+    let n = plain.lines().count();
+    assert!(
+        stderr.contains(&format!(
+            "gw.log: {n} frames of `can1` repeat a frame of `can0` 0.200 ms later"
+        )) && stderr.contains("replay one interface with `--interface can0`"),
+        "{stderr}"
+    );
+    let (code, got, stderr) = replay(&dir, "gw.log", &mirrored, &["--interface", "can0"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(got, want);
 }

@@ -33,10 +33,18 @@
 //!   any whitespace between the fields ([`parse_line`] tells the two apart by the `[LEN]`
 //!   field); with `-x`, `RX` or `TX` and two flag columns after the name (`can0  RX - -  123`),
 //!   read and ignored. [`format_line`] writes the log format only.
+//!   In the screen format the length tells classic CAN from CAN FD as can-utils' lib.c writes
+//!   it: `[%d]` (one digit) for a classic frame, `[%02d]` (two digits, `[08]`) for a CAN FD
+//!   frame of any length; `candump -8` writes a classic frame's raw DLC as `{%X}` (`{8}`, `{9}`
+//!   for 8 bytes whose DLC field said 9), read as `[LEN]` with the DLC returned as the log
+//!   format's `_9` is; `candump -a` appends the data as ASCII in quotes (`'.36..[..'`) after
+//!   the bytes: read and ignored.
 //! - Frames the node does not use, well-formed lines that readers skip and count
 //!   ([`CandumpError::is_unsupported_frame`]): remote frames (`123#R`), CAN FD frames
-//!   (`123##1...`) and error frames (`candump -e`: an 8-digit identifier with the kernel's
-//!   `CAN_ERR_FLAG` 0x20000000 set, `20000080#...`).
+//!   (`123##1...`, or `[08]` in the screen format) and error frames (`candump -e`: an 8-digit
+//!   identifier with the kernel's `CAN_ERR_FLAG` 0x20000000 set, `20000080#...`). `candump -e`
+//!   explains an error frame in the screen format on lines of their own that start with a tab
+//!   (`\tbus-error`): [`is_error_detail`] tells them, and readers skip them with their frame.
 //!
 //! No allocation, no panic: this is what the QEMU replay bus parses on the target.
 use core::fmt::Write;
@@ -287,6 +295,18 @@ pub fn dropped_frames(line: &str) -> Option<u32> {
     parse_decimal(count).and_then(|n| u32::try_from(n).ok())
 }
 
+/// Whether `line` is one of the lines `candump -e` writes after an error frame in the screen
+/// format to explain it (lib.c's `snprintf_can_error_frame`, with `\n\t` between the items:
+/// `\tbus-error`, `\tcontroller-problem{rx-error-warning}`): it starts with a tab and is not a
+/// frame. Readers skip it, as they skip its error frame.
+pub fn is_error_detail(line: &str) -> bool {
+    let rest = line.trim_start_matches(['\r', '\n']);
+    rest.starts_with('\t') && {
+        let text = rest.trim();
+        !text.is_empty() && !text.starts_with('(') && !text.starts_with(DROPCOUNT_PREFIX)
+    }
+}
+
 /// The interface name of a candump line (log or screen format), or `None` if the line has no
 /// `(timestamp)` followed by a name. Does not check the rest of the line: [`parse_line`] does.
 pub fn interface_of(line: &str) -> Option<&str> {
@@ -315,8 +335,8 @@ pub fn parse_line_and_dlc(line: &str) -> Result<(TimedFrame, Option<u8>), Candum
         .ok_or(CandumpError::MissingTimestamp)?;
     let (stamp, rest) = rest.split_once(')').ok_or(CandumpError::BadTimestamp)?;
     let t_us = parse_stamp(stamp)?;
-    if screen_fields(rest).is_some_and(|(_, _, len, _)| len.starts_with('[')) {
-        return parse_screen(t_us, rest).map(|frame| (frame, None));
+    if screen_fields(rest).is_some_and(|(_, _, len, _)| len.starts_with(['[', '{'])) {
+        return parse_screen(t_us, rest);
     }
     // One space, more when candump right-aligned the name to a longer one (`%*s`).
     let rest = rest
@@ -370,29 +390,57 @@ fn split_raw_dlc(text: &str) -> Result<(&str, Option<u8>), CandumpError> {
 /// The rest of a line in candump's screen format with a timestamp (`candump -ta`, `-td`,
 /// `-tz`: what `candump -t a can0 > file` records): `  IFACE  ID   [LEN]  B0 B1 ...`, any
 /// whitespace between the fields; `remote request` in place of the data for a remote frame, a
-/// length above 8 for a CAN FD frame.
-fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
+/// two-digit length (`[%02d]`) for a CAN FD frame, `{DLC}` for `candump -8`'s raw DLC of a
+/// classic frame (returned when 9..15), `'ASCII'` after the data for `candump -a`.
+fn parse_screen(t_us: u64, rest: &str) -> Result<(TimedFrame, Option<u8>), CandumpError> {
     let (iface, id, len_text, mut tokens) =
         screen_fields(rest).ok_or(CandumpError::MissingSeparator)?;
     if iface.len() > MAX_IFACE_LEN || !iface.bytes().all(|c| c.is_ascii_graphic()) {
         return Err(CandumpError::BadInterface);
     }
     let id = parse_id(id)?;
-    let len_text = Some(len_text)
-        .and_then(|t| t.strip_prefix('['))
-        .and_then(|t| t.strip_suffix(']'))
-        .ok_or(CandumpError::MissingSeparator)?;
-    let len = parse_decimal(len_text)
-        .filter(|n| *n <= 64)
-        .ok_or(CandumpError::BadHex)?;
+    let (len, raw_dlc) =
+        if let Some(dlc) = len_text.strip_prefix('{').and_then(|t| t.strip_suffix('}')) {
+            // `candump -8`: a classic frame's DLC field, one hex digit; 9..15 mean 8 bytes.
+            let dlc = match dlc.as_bytes() {
+                &[digit] => hex_value(digit).ok_or(CandumpError::BadRawDlc)?,
+                _ => return Err(CandumpError::BadRawDlc),
+            };
+            (u64::from(dlc.min(8)), (dlc > 8).then_some(dlc))
+        } else {
+            let len_text = Some(len_text)
+                .and_then(|t| t.strip_prefix('['))
+                .and_then(|t| t.strip_suffix(']'))
+                .ok_or(CandumpError::MissingSeparator)?;
+            let len = parse_decimal(len_text)
+                .filter(|n| *n <= 64)
+                .ok_or(CandumpError::BadHex)?;
+            // lib.c writes a CAN FD frame's length with two digits (`[%02d]`), a classic one's
+            // with one (`[%d]`, at most 8).
+            if len_text.len() == 2 {
+                return Err(CandumpError::FdFrame);
+            }
+            (len, None)
+        };
     let mut data = [0u8; 8];
     let mut n = 0u64;
-    for token in tokens.by_ref() {
+    while let Some(token) = tokens.next() {
         if token == "remote" {
             return Err(CandumpError::RemoteFrame);
         }
         if len > 8 {
             return Err(CandumpError::FdFrame);
+        }
+        if n == len && token.starts_with('\'') {
+            // `candump -a`: the data as ASCII in quotes (a space in the data splits it).
+            let closed = match tokens.last() {
+                Some(last) => last.ends_with('\''),
+                None => token.len() >= 2 && token.ends_with('\''),
+            };
+            if closed {
+                break;
+            }
+            return Err(CandumpError::TrailingGarbage);
         }
         let byte = match token.as_bytes() {
             &[hi, lo] => hex_value(hi).zip(hex_value(lo)).map(|(h, l)| (h << 4) | l),
@@ -417,14 +465,17 @@ fn parse_screen(t_us: u64, rest: &str) -> Result<TimedFrame, CandumpError> {
     if n != len {
         return Err(CandumpError::LengthMismatch);
     }
-    Ok(TimedFrame {
-        t_us,
-        frame: CanFrame {
-            id,
-            len: len as u8,
-            data,
+    Ok((
+        TimedFrame {
+            t_us,
+            frame: CanFrame {
+                id,
+                len: len as u8,
+                data,
+            },
         },
-    })
+        raw_dlc,
+    ))
 }
 
 /// The interface, identifier and `[LEN]` tokens of a screen-format line's rest (after the

@@ -152,12 +152,16 @@ impl LineReader {
     }
 }
 
-/// One parsed line: `Ok(None)` for a blank line or a `candump -d` drop count (not a frame: the
-/// recording lost frames there, which host replay reports), `Err(Unsupported)` for a frame the
-/// node does not use (remote, CAN FD).
+/// One parsed line: `Ok(None)` for a blank line, a `candump -d` drop count (not a frame: the
+/// recording lost frames there, which host replay reports) or `candump -e`'s explanation of an
+/// error frame (a line that starts with a tab), `Err(Unsupported)` for a frame the node does
+/// not use (remote, CAN FD, error).
 fn parse_line(text: &[u8]) -> Result<Option<TimedFrame>, LineError> {
     let text = core::str::from_utf8(text).map_err(|_| LineError::Syntax(CandumpError::BadHex))?;
-    if text.trim().is_empty() || catmodel::can::candump::dropped_frames(text).is_some() {
+    if text.trim().is_empty()
+        || catmodel::can::candump::dropped_frames(text).is_some()
+        || catmodel::can::candump::is_error_detail(text)
+    {
         return Ok(None);
     }
     candump::parse(text).map(Some)
