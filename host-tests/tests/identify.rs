@@ -40,6 +40,7 @@ fn experiment(name: &str, input_vel: Vec<f64>, vel: Vec<f64>) -> Experiment {
         speed_scale: None,
         speed_disagreement: None,
         gnss_gap: Vec::new(),
+        track_from: 0,
         speed_skip: Vec::new(),
         report_intervals: Default::default(),
         command_unit: None,
@@ -2534,4 +2535,64 @@ fn fixes_a_logger_holds_are_no_fixes() {
             e.gnss_rate_hz
         );
     }
+}
+
+/// A receiver that starts 20 s after the bus sensors (a cold start; black-box probe): the grid
+/// started at the first fix, so those 20 s of speed data were cut from the speed model without
+/// a word (the probe's set: 29 speed steps -> 21, the speed delay 0.88 s -> 0.68 s). Now the
+/// grid spans the bus sensors, the speed model uses it all, the track's samples before the
+/// first fix are left out like an outage's, and a note says so; a receiver on time changes
+/// nothing.
+#[test]
+fn a_receiver_that_starts_late_does_not_cut_the_speed_data() {
+    use catmodel_host::sim::{self, SimOptions};
+    let base = model_file::load(&model_file::paper_path()).unwrap();
+    let scenario = sim::scenario::Scenario::builtin("validation").unwrap();
+    let options = SimOptions {
+        seed: 2,
+        ..SimOptions::default()
+    };
+    let rows = sim::simulate(&scenario, &VehicleConfig::default(), &options).log;
+    let late: Vec<LogRow> = rows
+        .iter()
+        .map(|r| match r.t < 20.0 {
+            true => LogRow {
+                lat: None,
+                lon: None,
+                ..*r
+            },
+            false => *r,
+        })
+        .collect();
+    let preprocess = |rows: &[LogRow]| {
+        preprocess_rows(
+            "validation",
+            rows,
+            &base.vehicle,
+            &PreprocessOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("{e:#}"))
+    };
+    let (full, e) = (preprocess(&rows), preprocess(&late));
+    assert_eq!(full.track_from, 0);
+    assert!(
+        !full.log_notes.iter().any(|n| n.contains("without a fix")),
+        "{:?}",
+        full.log_notes
+    );
+    // The bus sensors' span: the full log's (which starts at its first fix, a few
+    // milliseconds after them) and no shorter.
+    assert!(e.t[0] <= full.t[0], "the grid starts at {} s", e.t[0]);
+    assert!(e.t.len() >= full.t.len());
+    assert!((e.t[e.t.len() - 1] - full.t[full.t.len() - 1]).abs() < 0.03);
+    assert!((e.t[e.track_from] - 20.0).abs() < 0.03);
+    assert!(e.gnss_gap[..e.track_from].iter().all(|g| *g));
+    assert!(!e.gnss_gap[e.track_from + 500]);
+    assert!(
+        e.log_notes
+            .iter()
+            .any(|n| n.contains("the 20.0 s without a fix are used by the speed model")),
+        "{:?}",
+        e.log_notes
+    );
 }

@@ -420,9 +420,15 @@ pub fn identify_dx_dt(
 ) -> Result<std::result::Result<Vec<TransferFunction>, String>> {
     let ts = opts.preprocess.ts_s;
     let names = model_file::DX_DT_INPUTS;
+    // From the first fix ([`Experiment::track_from`]): before it the fixes are held, and a
+    // simulation through it would start the track's blocks from inputs the car never had.
+    let from = |e: &Experiment| e.track_from.min(e.len());
     let inputs: Vec<[&[f64]; 4]> = training
         .iter()
-        .map(|e| [&e.vel[..], &e.x[..], &e.y[..], &e.delta_rad[..]])
+        .map(|e| {
+            let k = from(e);
+            [&e.vel[k..], &e.x[k..], &e.y[k..], &e.delta_rad[k..]]
+        })
         .collect();
     for (j, name) in names.iter().enumerate() {
         if span(inputs.iter().flat_map(|u| u[j].iter().copied())) < 1e-3 {
@@ -436,9 +442,9 @@ pub fn identify_dx_dt(
         .zip(&inputs)
         .map(|(e, u)| Data {
             inputs: u,
-            output: &e.dx,
+            output: &e.dx[from(e)..],
             weight: 1.0,
-            skip: &e.gnss_gap,
+            skip: e.gnss_gap.get(from(e)..).unwrap_or_default(),
         })
         .collect();
     let arx = arx::estimate(&data, 2, &[3; 4], &[0; 4]).ok();

@@ -81,11 +81,13 @@ pub fn kinematic_yaw(
 }
 
 /// dx/dt of the kinematic model (eq 8) with the commanded speed (see the module doc).
+/// Integrated from the first sample the track covers ([`Experiment::track_from`]); 0 before.
 pub fn kinematic_dx(e: &Experiment, v: &VehicleSection) -> Vec<f64> {
     let yaw = kinematic_yaw(v, 1.0, v.understeer_s2_per_m2, &e.input_vel, &e.delta_rad);
-    let mut theta = e.heading.first().copied().unwrap_or(0.0);
-    let mut out = Vec::with_capacity(e.len());
-    for (s, r) in e.input_vel.iter().zip(&yaw) {
+    let k0 = e.track_from;
+    let mut theta = e.heading.get(k0).copied().unwrap_or(0.0);
+    let mut out = vec![0.0; k0.min(e.input_vel.len())];
+    for (s, r) in e.input_vel.iter().zip(&yaw).skip(k0) {
         out.push(s * theta.sin());
         theta += r * e.ts_s;
     }
@@ -96,7 +98,16 @@ pub fn kinematic_dx(e: &Experiment, v: &VehicleSection) -> Vec<f64> {
 pub fn simulate_all(file: &ModelFile, e: &Experiment) -> Result<Simulated> {
     let ts = e.ts_s;
     let vel_model = simulate(&file.speed.blocks[0].tf, ts, &e.input_vel)?;
-    let dx_model = simulate_miso(&file.dx_dt.tfs(), ts, &[&e.vel, &e.x, &e.y, &e.delta_rad])?;
+    // From the first sample the track covers: before it the fixes are held (a receiver that
+    // started late), and the model's state would start from inputs the car never had.
+    let k0 = e.track_from;
+    let from = |v: &[f64]| v.get(k0..).unwrap_or_default().to_vec();
+    let mut dx_model = vec![0.0; k0.min(e.len())];
+    dx_model.extend(simulate_miso(
+        &file.dx_dt.tfs(),
+        ts,
+        &[&from(&e.vel), &from(&e.x), &from(&e.y), &from(&e.delta_rad)],
+    )?);
     let yaw_model = match &file.lateral {
         Some(l) => Some(lateral_yaw(l, &file.vehicle, e)?),
         None => None,
