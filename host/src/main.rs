@@ -828,8 +828,25 @@ fn identify(args: IdentifyArgs) -> Result<()> {
     refuse_slow_speed_sensor(&id, &out, force)?;
     let violations = check_fit_floor(&id, &logs, &out, force)?;
     identify::floor::mark_forced(&mut id.model, &violations);
-    write_identified_model(&out, &id.model)
+    // A refusal on logs this short names how little they hold (a black-box probe's 15 s
+    // smoke drive was refused for a DC gain of 0.23, nothing said of its length).
+    let seconds: f64 = id.training.iter().map(|e| e.len() as f64 * e.ts_s).sum();
+    let little = (seconds < SHORT_TRAINING_S).then(|| {
+        format!(
+            " (the training logs hold {seconds:.0} s and {} speed step(s): too little to \
+             determine the models? The paper-sized training set is seven logs of a minute, \
+             29 speed steps)",
+            id.steps
+                .iter()
+                .filter(|s| id.training.iter().any(|e| e.name == s.experiment))
+                .count()
+        )
+    });
+    write_identified_model(&out, &id.model, little.as_deref().unwrap_or_default())
 }
+
+/// Training logs shorter than this in all, s, are named with a refused model's reason.
+const SHORT_TRAINING_S: f64 = 120.0;
 
 /// Reads and preprocesses the training and validation logs under a progress bar.
 fn read_identify_logs(
@@ -995,7 +1012,7 @@ fn check_fit_floor(
 }
 
 /// Writes the identified model file, if the model file's reader accepts it.
-fn write_identified_model(out: &Path, model: &model_file::ModelFile) -> Result<()> {
+fn write_identified_model(out: &Path, model: &model_file::ModelFile, hint: &str) -> Result<()> {
     // Only a file every reader loads is written (the firmware build's too): a model
     // the reader refuses (an unstable pole, an absurd gain) is named, not saved.
     model_file::parse(&model_file::to_toml(model), out).map_err(|e| {
@@ -1010,7 +1027,7 @@ fn write_identified_model(out: &Path, model: &model_file::ModelFile) -> Result<(
             .map(|why| format!(": {why}"))
             .unwrap_or_default();
         anyhow::anyhow!(
-            "{} not written: the identified model is refused: {}{unit}",
+            "{} not written: the identified model is refused: {}{unit}{hint}",
             out.display(),
             e.message
         )

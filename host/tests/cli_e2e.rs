@@ -2153,3 +2153,18 @@ fn every_tenth_report(csv: &str) -> String {
     }
     out
 }
+
+/// `identify` on the 15 s smoke drive alone (a black-box probe): refused by the model file's
+/// reader for the speed model's DC gain (0.23), nothing said of how little the log holds. The
+/// refusal now names the training logs' length and speed steps.
+#[test]
+fn identify_on_too_little_data_says_how_little() {
+    let dir = tmp_dir("too-little");
+    let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/smoke.csv");
+    let err = fails(&["identify", s(&smoke), "--out", s(&dir.join("m.toml"))]);
+    assert!(
+        err.contains("the training logs hold 15 s and")
+            && err.contains("too little to determine the models?"),
+        "{err}"
+    );
+}

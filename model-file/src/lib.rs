@@ -1992,8 +1992,9 @@ pub fn steer_gain_problem(max_steer_deg: f64, steer_gain: f64) -> Option<String>
         None
     } else {
         Some(format!(
-            "lateral.steer_gain = {steer_gain}: the lock would be max_steer_deg {max_steer_deg} x {} = {} deg; \
+            "lateral.steer_gain = {}: the lock would be max_steer_deg {max_steer_deg} x {} = {} deg; \
              the gain (measured over nominal steering angle) must be within {lo}..{hi} and the lock below {MAX_LOCK_DEG} deg",
+            sig(steer_gain),
             sig(steer_gain),
             sig(lock)
         ))

@@ -710,6 +710,16 @@ pub fn steer_gain_cause(g: f64, std_error: f64, max_steer_deg: f64) -> Option<St
     ))
 }
 
+/// Three decimals, without a sign on a zero (`-0.000`) and in exponent form below them (a
+/// gain of -9.4e-38 from a frozen receiver's course read `-0.000`).
+fn dec3(x: f64) -> String {
+    if x != 0.0 && x.abs() < 5e-4 {
+        format!("{x:.1e}")
+    } else {
+        format!("{:.3}", x + 0.0)
+    }
+}
+
 /// Three significant figures.
 fn sig3(x: f64) -> String {
     format!("{}", format!("{x:.2e}").parse::<f64>().unwrap_or(x))
@@ -757,12 +767,19 @@ pub fn steering_gain_problem(logs: &[Experiment], vehicle: &VehicleSection) -> O
     let each: Vec<String> = per_log
         .iter()
         .filter(|p| p.1.len() >= MIN_STEADY_TURN_SAMPLES / 5)
-        .map(|(name, pts, hw)| format!("{name} {:.3}", steer_gain_from(pts, vehicle, *hw, start).0))
+        .map(|(name, pts, hw)| {
+            format!(
+                "{name} {}",
+                dec3(steer_gain_from(pts, vehicle, *hw, start).0)
+            )
+        })
         .collect();
     Some(format!(
         "the steering gain (the centre-tyre angle the GNSS course shows over the nominal one \
-         from `steer`) is {g:.3} +- {se:.3} over {} samples of steady turning (per log: {}): \
+         from `steer`) is {} +- {} over {} samples of steady turning (per log: {}): \
          {cause}",
+        dec3(g),
+        dec3(se),
         all.len(),
         if each.is_empty() {
             "none has enough alone".into()
@@ -1996,6 +2013,19 @@ mod tests {
         assert!(
             notes.len() == 1 && notes[0].contains("the GNSS fixes are 0.3"),
             "{lag} +- {se}: {notes:?}"
+        );
+    }
+
+    #[test]
+    fn tiny_gains_are_not_printed_as_minus_zero_or_fifty_decimals() {
+        assert_eq!(dec3(-9.404e-38), "-9.4e-38");
+        assert_eq!(dec3(-0.0), "0.000");
+        assert_eq!(dec3(0.0), "0.000");
+        assert_eq!(dec3(0.98765), "0.988");
+        let problem = model_file::steer_gain_problem(35.5, -9.404_e-38).unwrap();
+        assert!(
+            problem.starts_with("lateral.steer_gain = -9.404e-38: the lock"),
+            "{problem}"
         );
     }
 

@@ -863,7 +863,9 @@ fn preprocess_on_clock(
     let last = |g: &[f64]| g.last().copied().unwrap_or(0.0);
     let fixes_late_s = lead(&with_fixes, &bus, first);
     let fixes_early_s = lead(&with_fixes, &bus, last);
-    let grid = if fixes_late_s > GNSS_LEAD_S || fixes_early_s > GNSS_LEAD_S {
+    // A slow receiver's first and last fix lie up to a period inside the bus sensors' span.
+    let lead_s = GNSS_LEAD_S.max(2.0 * median_interval(&tg));
+    let grid = if fixes_late_s > lead_s || fixes_early_s > lead_s {
         bus
     } else {
         with_fixes
@@ -888,6 +890,9 @@ fn preprocess_on_clock(
     let speed_scale = wheel_track.as_ref().and_then(super::units::speed_scale);
     let speed_disagreement = wheel_track.as_ref().and_then(|wt| {
         let mut d = super::units::disagreement(wt).or_else(|| super::units::held_speed(wt))?;
+        // The log's first fixes (after the bus sensors start, whatever clock offset moved them).
+        let first_fix = tg.first().zip(tv.first()).map(|(g, v)| g.max(*v));
+        d.from_first_fix = first_fix.is_some_and(|t0| d.from_s - t0 <= 2.0 * d.window_s);
         d.car_stood = d.track_m > d.wheel_m
             && super::units::stood_by_its_sensors(
                 (&tv, &vel),
@@ -931,7 +936,11 @@ fn preprocess_on_clock(
         .iter()
         .map(|p| vehicle.steer_pct_to_rad(*p))
         .collect();
-    let half_width = diff_half_width(opts, vehicle.gnss_rate_hz);
+    // The log's own receiver, not the model file's declared rate: the measured signals are
+    // the log's, whatever file they are compared with (before, `compare` measured a 100 Hz log
+    // with the windows of the file's `gnss_rate_hz`, and identify's validation figures, taken
+    // with its base file's rate, were not what `compare` gave with the file it wrote).
+    let half_width = diff_half_width(opts, 1.0 / median_interval(&tg));
     let dx = derivative(&x, opts.ts_s, half_width);
     let dy = derivative(&y, opts.ts_s, half_width);
     // Whether the car moves is the wheel speed's to say: the speed of differentiated GNSS
@@ -1191,7 +1200,8 @@ fn drop_held_repeats(
     latlon.retain(|_| *k.next().unwrap_or(&true));
 }
 
-/// A receiver that starts or stops more than this after or before the bus sensors, s, leaves
+/// A receiver that starts or stops more than this (or two of its periods) after or before the
+/// bus sensors, s, leaves
 /// the grid on the bus sensors' span: before, a receiver that started 20 s late cut those
 /// 20 s out of the speed model's data without a word (a black-box probe: 29 speed steps ->
 /// 21, the speed delay 0.88 s -> 0.68 s, its validation fit 92.3 % -> 90.6 %). A second or

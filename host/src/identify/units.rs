@@ -632,6 +632,9 @@ pub struct Disagreement {
     /// stood, from a second before the span to its end ([`stood_by_its_sensors`]): the
     /// receiver's, not the wheel speed's.
     pub car_stood: bool,
+    /// The span starts within two windows of the log's first fix: the receiver may still have
+    /// been converging after a cold start (its first fixes tens of metres off).
+    pub from_first_fix: bool,
 }
 
 /// Whether every wheel speed `(tv, vel)` and speed command `(tc, cmd)` sample from `a` to `b`
@@ -695,7 +698,7 @@ impl Disagreement {
         format!(
             "the wheel speed `vel` disagrees with the GNSS track from t = {:.1} to {:.1} s: \
              {:.1} m by the wheel speed, {:.1} m along the track (every {:.1} s of the \
-             span differs by more than {DISAGREE_MIN_M} m and {:.0} %); {what}, or fixes of \
+             span differs by more than {DISAGREE_MIN_M} m and {:.0} %); {}{what}, or fixes of \
              another receiver. The speed model would be fitted to it: split the log there (the \
              parts before and after are logs of their own), or fix the sensor",
             self.from_s,
@@ -703,7 +706,14 @@ impl Disagreement {
             self.wheel_m,
             self.track_m,
             self.window_s,
-            DISAGREE_SHARE * 100.0
+            DISAGREE_SHARE * 100.0,
+            if self.from_first_fix {
+                "the span starts at the log's first fixes: most likely a receiver still \
+                 converging after a cold start (its first fixes tens of metres off, moving \
+                 towards the track): cut the log's first seconds until its fixes settle; else "
+            } else {
+                ""
+            }
         )
     }
 }
@@ -764,6 +774,7 @@ pub fn disagreement(wt: &WheelTrack) -> Option<Disagreement> {
                     repeated_fixes: false,
                     held: None,
                     car_stood: false,
+                    from_first_fix: false,
                 },
                 a,
             )),
@@ -857,6 +868,7 @@ pub fn held_speed(wt: &WheelTrack) -> Option<Disagreement> {
                     repeated_fixes: false,
                     held: Some((v, per_s(slow_m, slow), per_s(fast_m, fast))),
                     car_stood: false,
+                    from_first_fix: false,
                 },
             ));
         }
