@@ -2618,7 +2618,7 @@ fn the_measured_signals_do_not_depend_on_the_files_receiver_rate() {
     )
     .unwrap();
     let at = |hz: f64| {
-        let mut v = base.vehicle.clone();
+        let mut v = base.vehicle;
         v.gnss_rate_hz = hz;
         preprocess_rows("turn-left", &out.log, &v, &PreprocessOptions::default()).unwrap()
     };

@@ -1632,7 +1632,7 @@ pub fn held_fix_repeats(t: &[f64], fixes: &[(f64, f64)]) -> Option<HeldFixes> {
         return None;
     }
     let receiver_period_s = median(intervals.clone())?;
-    if !(receiver_period_s >= HELD_MIN_PERIOD_RATIO * logger_period_s) {
+    if receiver_period_s.is_nan() || receiver_period_s < HELD_MIN_PERIOD_RATIO * logger_period_s {
         return None;
     }
     let tolerance = (0.25 * receiver_period_s).max(logger_period_s) * (1.0 + 1e-6);
@@ -1643,18 +1643,16 @@ pub fn held_fix_repeats(t: &[f64], fixes: &[(f64, f64)]) -> Option<HeldFixes> {
     if (regular as f64) < HELD_MIN_REGULAR * intervals.len() as f64 {
         return None;
     }
-    // The decimals the fixes are written with (the finest grid up to 1e-9 deg they all lie
+    // The decimals the fixes are written with (the coarsest grid, 1 to 1e-9 deg, they all lie
     // on), and the median step between the fixes that change against it, in degrees.
     let on_grid = |v: f64, scale: f64| ((v * scale).round() - v * scale).abs() < 1e-3;
     let cell_deg = (0..=9)
         .map(|d| 10f64.powi(-d))
-        .rev()
-        .filter(|cell| {
+        .find(|cell| {
             changes
                 .iter()
                 .all(|&i| on_grid(fixes[i].0, 1.0 / cell) && on_grid(fixes[i].1, 1.0 / cell))
         })
-        .last()
         .unwrap_or(0.0);
     let cos_lat = fixes[0].0.to_radians().cos().abs().max(1e-3);
     let step_deg = median(
