@@ -2608,19 +2608,11 @@ fn a_receiver_that_starts_late_does_not_cut_the_speed_data() {
 #[test]
 fn the_measured_signals_do_not_depend_on_the_files_receiver_rate() {
     let base = model_file::load(&model_file::paper_path()).unwrap();
-    let out = catmodel_host::sim::run_named(
-        "turn-left",
-        None,
-        &catmodel_host::sim::SimOptions {
-            seed: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let log = simulated("turn-left", 1);
     let at = |hz: f64| {
         let mut v = base.vehicle;
         v.gnss_rate_hz = hz;
-        preprocess_rows("turn-left", &out.log, &v, &PreprocessOptions::default()).unwrap()
+        preprocess_rows("turn-left", &log, &v, &PreprocessOptions::default()).unwrap()
     };
     let reference = at(100.0);
     for hz in [20.0, 5.0, 1.0] {
@@ -2640,22 +2632,9 @@ fn the_measured_signals_do_not_depend_on_the_files_receiver_rate() {
 fn a_held_steering_is_no_corrupt_sample() {
     use catmodel_host::identify::floor::check;
     let base = model_file::load(&model_file::paper_path()).unwrap();
-    let out = catmodel_host::sim::run_named(
-        "turn-left",
-        None,
-        &catmodel_host::sim::SimOptions {
-            seed: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let t0 = out.log[0].t;
-    let rows: Vec<LogRow> = out
-        .log
-        .iter()
-        .copied()
-        .filter(|r| r.t - t0 <= 12.0)
-        .collect();
+    let log = simulated("turn-left", 1);
+    let t0 = log[0].t;
+    let rows: Vec<LogRow> = log.iter().copied().filter(|r| r.t - t0 <= 12.0).collect();
     let e = preprocess_rows(
         "turn12",
         &rows,
@@ -2680,17 +2659,8 @@ fn a_held_steering_is_no_corrupt_sample() {
 #[test]
 fn a_receiver_converging_after_a_cold_start_is_named() {
     let base = model_file::load(&model_file::paper_path()).unwrap();
-    let out = catmodel_host::sim::run_named(
-        "straight-5",
-        None,
-        &catmodel_host::sim::SimOptions {
-            seed: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let rows: Vec<LogRow> = out
-        .log
+    let log = simulated("straight-5", 1);
+    let rows: Vec<LogRow> = log
         .iter()
         .map(|r| {
             let k = ((20.0 - r.t) / 20.0 * 60.0).max(0.0);
