@@ -937,6 +937,58 @@ fn side_points(
     Some((left, right))
 }
 
+/// The reference at the steering plan's stages from the rear axle's station and segment `at`
+/// (see [`ReferencePoint`]): the expected stations from the last plan's speeds (the current
+/// speed before there is one). `None` when the path cannot be sampled there. Out of line: it
+/// keeps the searches' registers and locals out of the solve's caller, whose frame is on the
+/// stack through the solve, and costs the same in or out of it.
+#[inline(never)]
+fn fill_reference(
+    mpc: &MpcConfig,
+    path: &Path,
+    (s0, hint): (f32, usize),
+    planned_speeds: Option<[f32; PLAN_STEPS + 1]>,
+    inputs: &DriveInputs<'_>,
+    reference: &mut [ReferencePoint; STEPS + 1],
+) -> Option<()> {
+    let body = mpc.body();
+    let front = body.length_m - body.rear_overhang_m;
+    let rear = body.rear_overhang_m;
+    // Expected stations: the last plan's speeds (the current speed before there is one) at
+    // the steering plan's stages.
+    let stage = mpc.stage();
+    let speeds =
+        stage.stage_speeds(&planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]));
+    // Every point is written below before the solve reads it (or the tick returns early).
+    // The stations ascend: each one's segment is the next one's search start, so the searches
+    // walk the path once however far the horizon reaches (the side points' searches from
+    // there walk the body's length).
+    let mut s = s0;
+    let mut seg = hint;
+    // The body's ends' segments, each the next station's hint: the ends move on as the
+    // stations do, a step or two of the search rather than a body's length from the axle.
+    let (mut front_seg, mut rear_seg) = (hint, hint);
+    for (k, r) in reference.iter_mut().enumerate() {
+        if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
+            s += 0.5 * (v0 + v1) * stage.stage_s(k - 1);
+        }
+        seg = path.segment_hint(s, seg);
+        let at = path.sample(s, seg)?;
+        let (front_left, front_right) = side_points(path, s, s + front, seg, &mut front_seg)?;
+        let (rear_left, rear_right) = side_points(path, s, s - rear, seg, &mut rear_seg)?;
+        *r = ReferencePoint {
+            at: sample(&at, (at.left_m, at.right_m)),
+            curvature_per_m: at.curvature_per_m,
+            speed_mps: at.speed_mps,
+            front_left,
+            front_right,
+            rear_left,
+            rear_right,
+        };
+    }
+    Some(())
+}
+
 /// The obstacles as the solve takes them: each projected onto the path (all in one pass over
 /// it, an absent slot taking a present one's place, unused; no pass without one), `ahead_m` from
 /// the car's station `s0`. `None` if the path cannot be sampled where one projects. Out of
@@ -1010,8 +1062,12 @@ enum Unplanned {
 }
 
 /// One model-predictive solve; `None` when the path cannot be sampled, `Err` when the tick
-/// does not solve ([`Unplanned`]).
+/// does not solve ([`Unplanned`]). Inlined into its one caller: out of line (as the compiler
+/// chose once a stale steering report held the car) its frame stacked on the tick's instead of
+/// sharing it, 1.2 KiB deeper (`cargo qemu` over a closed-loop session: 11 304 -> 12 496 B,
+/// over the 75 % limit of the stack region); its reference is [`fill_reference`]'s.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn mpc_tick<P: StageProbe>(
     mpc: &MpcConfig,
     state: &mut MpcState,
@@ -1043,45 +1099,14 @@ fn mpc_tick<P: StageProbe>(
     }
     let s0 = tracking.projection.station_m;
     let hint = tracking.projection.segment;
-    let body = mpc.body();
-    let front = body.length_m - body.rear_overhang_m;
-    let rear = body.rear_overhang_m;
-    // Expected stations: the last plan's speeds (the current speed before there is one) at
-    // the steering plan's stages.
-    let stage = mpc.stage();
-    let speeds =
-        stage.stage_speeds(&planned_speeds.unwrap_or([inputs.speed_mps.max(0.0); PLAN_STEPS + 1]));
-    // Every point is written below before the solve reads it (or the tick returns early).
-    // The stations ascend: each one's segment is the next one's search start, so the searches
-    // walk the path once however far the horizon reaches (the side points' searches from
-    // there walk the body's length).
-    let mut s = s0;
-    let mut seg = hint;
-    // The body's ends' segments, each the next station's hint: the ends move on as the
-    // stations do, a step or two of the search rather than a body's length from the axle.
-    let (mut front_seg, mut rear_seg) = (hint, hint);
-    for (k, r) in reference.iter_mut().enumerate() {
-        if let (Some(v0), Some(v1)) = (speeds.get(k.wrapping_sub(1)), speeds.get(k)) {
-            s += 0.5 * (v0 + v1) * stage.stage_s(k - 1);
-        }
-        seg = path.segment_hint(s, seg);
-        let at = path.sample(s, seg)?;
-        let (front_left, front_right) = side_points(path, s, s + front, seg, &mut front_seg)?;
-        let (rear_left, rear_right) = side_points(path, s, s - rear, seg, &mut rear_seg)?;
-        *r = ReferencePoint {
-            at: sample(&at, (at.left_m, at.right_m)),
-            curvature_per_m: at.curvature_per_m,
-            speed_mps: at.speed_mps,
-            front_left,
-            front_right,
-            rear_left,
-            rear_right,
-        };
-    }
+    fill_reference(mpc, path, (s0, hint), *planned_speeds, inputs, reference)?;
     let placed = place_obstacles(path, obstacles, motion, s0)?;
-    // Eq 5's output now: what its next step returns before the command sent now takes effect.
-    let mut peek = *speed_model;
-    let modelled_mps = config.velocity.step(&mut peek, 0.0);
+    // Eq 5's output now: what its next step returns before the command sent now takes effect
+    // (its forecast's first output, the same bits as a step of a copy of the state, without
+    // the copy of the delay line on the stack).
+    let mut now = [0.0f32; 1];
+    config.velocity.forecast(speed_model, 0.0).fill(&mut now);
+    let [modelled_mps] = now;
     let input = MpcInput {
         reference,
         obstacles: &placed,
@@ -1103,11 +1128,11 @@ fn mpc_tick<P: StageProbe>(
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);
     probe.lap(Stage::MpcSolve);
-    let mut next = [0.0; PLAN_STEPS + 1];
+    // Written in place: an array of its own here was one more on the controller's stack.
+    let next = planned_speeds.insert([0.0; PLAN_STEPS + 1]);
     for (v, p) in next.iter_mut().zip(&out.plan) {
         *v = p.speed_mps;
     }
-    *planned_speeds = Some(next);
     Some(Ok((out, tracking)))
 }
 
