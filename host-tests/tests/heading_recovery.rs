@@ -443,6 +443,17 @@ fn a_track_that_runs_against_the_heading_is_flagged_until_a_turn_confirms_it() {
     );
 }
 
+/// One tick of [`node_over_legs`]: `(t since the first fix s, heading error rad,
+/// heading_uncertain, PREDICTION_10's displacement along the estimated heading m,
+/// CONTROL_COMMAND)`.
+type LegTick = (
+    f64,
+    f32,
+    bool,
+    Option<f32>,
+    catmodel::can::codec::ControlCommand,
+);
+
 /// Each tick of a scripted drive through the node: `(t since the first fix s, heading error
 /// rad, heading_uncertain, PREDICTION_10's displacement along the estimated heading m,
 /// CONTROL_COMMAND)`. With `receiver_course`, the receiver sends its course over ground too
@@ -452,13 +463,7 @@ fn node_over_legs(
     report_direction: bool,
     path_at_s: Option<f64>,
     receiver_course: bool,
-) -> Vec<(
-    f64,
-    f32,
-    bool,
-    Option<f32>,
-    catmodel::can::codec::ControlCommand,
-)> {
+) -> Vec<LegTick> {
     node_over_legs_silent(legs, report_direction, path_at_s, receiver_course, None)
 }
 
@@ -470,13 +475,7 @@ fn node_over_legs_silent(
     path_at_s: Option<f64>,
     receiver_course: bool,
     steer_silent_s: Option<(f64, f64)>,
-) -> Vec<(
-    f64,
-    f32,
-    bool,
-    Option<f32>,
-    catmodel::can::codec::ControlCommand,
-)> {
+) -> Vec<LegTick> {
     use catmodel::can::codec::{ControlCommand, StateMotion};
     use catmodel::can::TimedFrame;
     use catmodel_host::closed_loop::planner::{PlannedPoint, Planner};
