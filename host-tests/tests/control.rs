@@ -983,6 +983,40 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1024))]
+    /// The stop ahead (read off the bits marked at load, a word per 32 points) is the brute
+    /// force's: the first point from the station's segment on with a target of 0 after one
+    /// with a speed, else the end; over paths up to the longest, stops anywhere (a path loaded
+    /// over a longer one with stops beyond its end too).
+    #[test]
+    fn the_stop_ahead_is_the_brute_forces(
+        speeds in prop::collection::vec(prop_oneof![Just(0.0f32), 0.5f32..10.0], 2..=MAX_PATH_POINTS),
+        f in -0.1f32..1.1,
+        hint in 0usize..MAX_PATH_POINTS,
+    ) {
+        let mut pts = straight(0.0, 0.0, 0.0, speeds.len(), 0.3);
+        for (w, &v) in pts.iter_mut().zip(&speeds) {
+            w.speed_mps = v;
+        }
+        let mut over = straight(0.0, 0.0, 0.0, MAX_PATH_POINTS, 0.3);
+        for (k, w) in over.iter_mut().enumerate() {
+            w.speed_mps = if k % 3 == 0 { 0.0 } else { 5.0 };
+        }
+        let mut p = path_of(&over);
+        p.load(&pts).unwrap();
+        let station = f * p.length_m();
+        let first = (0..p.len() - 1)
+            .rev()
+            .find(|&i| p.station_of(i).unwrap() <= station.clamp(0.0, p.length_m()))
+            .unwrap_or(0);
+        let stop = (first.max(1)..p.len())
+            .find(|&k| speeds[k] <= 0.0 && speeds[k - 1] > 0.0)
+            .map_or(p.length_m(), |k| p.station_of(k).unwrap());
+        prop_assert_eq!(p.stop_ahead_m(station, hint), stop - station);
+    }
+}
+
 #[test]
 fn a_loop_is_followed_in_order_where_it_meets_itself() {
     // A full circle whose last point is next to its first: without history the start is

@@ -459,6 +459,9 @@ pub struct Path {
     /// Bit `i % 32` of word `i / 32`: point `i`'s own limit is a turn's, below its target
     /// ([`Path::in_held_turn`]).
     held: [u32; HELD_WORDS],
+    /// Bit `i % 32` of word `i / 32`: point `i` is a stop, a target of 0 after one with a
+    /// speed ([`Path::stop_ahead_m`]), marked at load.
+    stops: [u32; HELD_WORDS],
     /// The narrowest corridor `(left, right)` over each block of [`CORRIDOR_BLOCK`] points,
     /// m, taken at load.
     corridor_block_min_m: [(f32, f32); CORRIDOR_BLOCKS],
@@ -485,6 +488,7 @@ impl Path {
             lateral_limit: None,
             reach_m2ps2: [0.0; MAX_PATH_POINTS],
             held: [0; HELD_WORDS],
+            stops: [0; HELD_WORDS],
             corridor_block_min_m: [(0.0, 0.0); CORRIDOR_BLOCKS],
         }
     }
@@ -508,6 +512,7 @@ impl Path {
             addr_of_mut!((*slot).lateral_limit).write(None);
             fill(addr_of_mut!((*slot).reach_m2ps2), 0.0);
             fill(addr_of_mut!((*slot).held), 0);
+            fill(addr_of_mut!((*slot).stops), 0);
             fill(addr_of_mut!((*slot).corridor_block_min_m), (0.0, 0.0));
         }
     }
@@ -669,6 +674,32 @@ impl Path {
         self.reference_geometry();
         self.speed_envelope();
         self.corridor_blocks();
+        self.mark_stops();
+    }
+
+    /// The stops' bits (see [`Path::stop_ahead_m`]): a tick's search for the next one reads
+    /// a word per 32 points rather than every point's target.
+    fn mark_stops(&mut self) {
+        self.stops = [0; HELD_WORDS];
+        let targets = self.points.get(..self.len).unwrap_or(&[]);
+        for (k, pair) in targets.windows(2).enumerate() {
+            if let ([before, p], Some(word)) = (pair, self.stops.get_mut((k + 1) / 32)) {
+                if p.speed_mps <= 0.0 && before.speed_mps > 0.0 {
+                    *word |= 1 << ((k + 1) % 32);
+                }
+            }
+        }
+    }
+
+    /// The first stop at point `from` or after it ([`Path::mark_stops`]).
+    fn next_stop(&self, from: usize) -> Option<usize> {
+        let mut w = from / 32;
+        let mut word = self.stops.get(w)? & (u32::MAX << (from % 32));
+        while word == 0 {
+            w += 1;
+            word = *self.stops.get(w)?;
+        }
+        Some(w * 32 + word.trailing_zeros() as usize)
     }
 
     /// The corridor's block minima (see [`Path::narrowest_corridor`]).
@@ -1021,17 +1052,9 @@ impl Path {
             return end - station_m;
         }
         let first = self.segment_at(math::clamp(station_m, 0.0, end), hint);
-        let mut before = first
-            .checked_sub(1)
-            .and_then(|b| self.points.get(b))
-            .map_or(0.0, |p| p.speed_mps);
-        for (p, &s) in self.points().iter().zip(self.station_m.iter()).skip(first) {
-            if p.speed_mps <= 0.0 && before > 0.0 {
-                return s - station_m;
-            }
-            before = p.speed_mps;
-        }
-        end - station_m
+        self.next_stop(first)
+            .and_then(|k| self.station_of(k))
+            .map_or(end - station_m, |s| s - station_m)
     }
 
     /// Length along the path, m.
@@ -1659,8 +1682,9 @@ impl Path {
 
     /// The points of `i..=j` (`i <= j < len`) farthest along (`ahead`) or farthest back whose
     /// corridor is at most `within_m` `(left, right)`, both sides in one pass (a side whose
-    /// bound is `-inf` is not searched): blocks whose minimum is wider are skipped, and a block
-    /// is read point by point from its far end only while a side it may hold is unfound.
+    /// bound is `-inf` is not searched): the block minima are scanned in a tight loop for the
+    /// next block that may hold a side still unfound, and such a block is read point by point
+    /// from its far end only while a side it may hold is unfound.
     fn farthest_within(
         &self,
         i: usize,
@@ -1669,54 +1693,52 @@ impl Path {
         ahead: bool,
     ) -> (Option<usize>, Option<usize>) {
         let (mut left, mut right) = (None, None);
-        let (mut want_left, mut want_right) = (
-            within_m.0 > f32::NEG_INFINITY,
-            within_m.1 > f32::NEG_INFINITY,
-        );
+        // A side's bound while it is unfound, `-inf` once found (no width is below it).
+        let mut bound = within_m;
         let (first_block, last_block) = (i / CORRIDOR_BLOCK, j / CORRIDOR_BLOCK);
-        let blocks = last_block - first_block + 1;
-        for n in 0..blocks {
-            if !(want_left || want_right) {
-                break;
-            }
-            let b = if ahead {
-                last_block - n
+        let Some(minima) = self.corridor_block_min_m.get(first_block..=last_block) else {
+            return (left, right);
+        };
+        // The blocks not yet scanned are `minima[..rest]` (ahead) or `minima[rest..]`.
+        let mut rest = if ahead { minima.len() } else { 0 };
+        while bound.0 > f32::NEG_INFINITY || bound.1 > f32::NEG_INFINITY {
+            let may = |&(l, r): &(f32, f32)| l <= bound.0 || r <= bound.1;
+            let found = if ahead {
+                minima.get(..rest).and_then(|m| m.iter().rposition(may))
             } else {
-                first_block + n
+                minima
+                    .get(rest..)
+                    .and_then(|m| m.iter().position(may))
+                    .map(|n| rest + n)
             };
-            let Some(&(min_l, min_r)) = self.corridor_block_min_m.get(b) else {
+            let Some(n) = found else {
                 break;
             };
+            rest = if ahead { n } else { n + 1 };
             // A partial block's minimum may be outside the stretch: its points decide.
-            let (may_l, may_r) = (
-                want_left && min_l <= within_m.0,
-                want_right && min_r <= within_m.1,
-            );
-            if !(may_l || may_r) {
-                continue;
-            }
+            let b = first_block + n;
             let from = (b * CORRIDOR_BLOCK).max(i);
             let to = ((b + 1) * CORRIDOR_BLOCK - 1).min(j);
             let Some(points) = self.points.get(from..=to) else {
                 break;
             };
-            let (mut look_l, mut look_r) = (may_l, may_r);
-            for m in 0..points.len() {
-                let k = if ahead { points.len() - 1 - m } else { m };
-                let Some(w) = points.get(k) else {
-                    break;
-                };
-                if look_l && w.left_m <= within_m.0 {
+            let mut read = |k: usize, w: &Waypoint| {
+                if w.left_m <= bound.0 {
                     left = Some(from + k);
-                    (look_l, want_left) = (false, false);
+                    bound.0 = f32::NEG_INFINITY;
                 }
-                if look_r && w.right_m <= within_m.1 {
+                if w.right_m <= bound.1 {
                     right = Some(from + k);
-                    (look_r, want_right) = (false, false);
+                    bound.1 = f32::NEG_INFINITY;
                 }
-                if !(look_l || look_r) {
-                    break;
-                }
+                // Both found: the rest of the block is not read.
+                bound.0 == f32::NEG_INFINITY && bound.1 == f32::NEG_INFINITY
+            };
+            let mut indexed = points.iter().enumerate();
+            if ahead {
+                indexed.rev().any(|(k, w)| read(k, w));
+            } else {
+                indexed.any(|(k, w)| read(k, w));
             }
         }
         (left, right)
