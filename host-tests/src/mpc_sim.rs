@@ -776,6 +776,7 @@ impl Loop {
             // The bench drives its paths at speed to a station short of their end: no stop.
             to_end_m: f32::INFINITY,
             in_held_turn: false,
+            slow_ahead: None,
         };
         let out = self.mpc.solve(&mut self.mpc_state, &input);
         for (p, pt) in self.planned_speeds.iter_mut().zip(&out.plan) {

@@ -983,6 +983,43 @@ proptest! {
     }
 }
 
+/// The lower target ahead a speed plan slows for (`Path::slow_ahead`), by hand: a straight
+/// 1 m between points, targets 12 m/s to 50 m, 4 to 60 m, 8 to 70 m, 1 to 80 m, then a stop.
+/// The least room, distance plus the coasted sum times the target, decides between the 4 and
+/// the 1; the stop is not one (it is `Path::stop_ahead_m`'s); from within the 4's stretch only
+/// what is below half of 4 counts; nothing below the car's speed bound, nothing.
+#[test]
+fn the_lower_target_ahead_leaves_the_least_room() {
+    let mut pts = straight(0.0, 0.0, 0.0, 100, 1.0);
+    for (k, p) in pts.iter_mut().enumerate() {
+        p.speed_mps = match k {
+            0..50 => 12.0,
+            50..60 => 4.0,
+            60..70 => 8.0,
+            70..80 => 1.0,
+            _ => 0.0,
+        };
+    }
+    let path = path_of(&pts);
+    // 50 + 2 x 4 = 58 against 70 + 2 x 1 = 72; with 10 s: 90 against 80.
+    assert_eq!(path.slow_ahead(0.0, 0, 2.0, (20.0, 0.5)), Some((50.0, 4.0)));
+    assert_eq!(
+        path.slow_ahead(0.0, 0, 10.0, (20.0, 0.5)),
+        Some((70.0, 1.0))
+    );
+    // From 0.5 m the 4's distance is 49.5 m; from within its stretch only the 1 (below 2).
+    assert_eq!(path.slow_ahead(0.5, 0, 2.0, (20.0, 0.5)), Some((49.5, 4.0)));
+    assert_eq!(
+        path.slow_ahead(55.0, 0, 2.0, (20.0, 0.5)),
+        Some((15.0, 1.0))
+    );
+    // Below the car's bound (0.5 m/s) only the stop is, and it is not a lower target.
+    assert_eq!(path.slow_ahead(0.0, 0, 2.0, (0.5, 0.5)), None);
+    // A share of 0.3 of 12 is 3.6: the 4 no longer counts.
+    assert_eq!(path.slow_ahead(0.0, 0, 2.0, (20.0, 0.3)), Some((70.0, 1.0)));
+    assert_eq!(Path::new().slow_ahead(0.0, 0, 2.0, (20.0, 0.5)), None);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(1024))]
     /// The stop ahead (read off the bits marked at load, a word per 32 points) is the brute

@@ -351,6 +351,7 @@ fn speed_plan_matches_the_qp_solution() {
             speed_mps: v0,
             last_command_mps: f(&case["last_command"]) as f32,
             in_held_turn: false,
+            slow_ahead: None,
         };
         let targets: [f32; PLAN_STEPS + 1] = vec_f32(&case["targets"]).try_into().unwrap();
         let plan = planner.plan(&mut SpeedState::default(), &start, &targets, f32::INFINITY);

@@ -1057,6 +1057,46 @@ impl Path {
             .map_or(end - station_m, |s| s - station_m)
     }
 
+    /// The point ahead of `station_m` (from the segment it is on, searched from `hint`) whose
+    /// target is below `share` of that segment's first point's and below `below_mps` but not
+    /// 0 (a stop is [`Path::stop_ahead_m`]'s), and which
+    /// leaves the least room to slow to it: the least of its distance ahead plus
+    /// `settled_coast_s` times its target (a car that coasts to a speed `w` needs its coast-out
+    /// less `w` times that, `crate::control::mpc::longitudinal::SlowAhead`); as (distance
+    /// ahead, m; target, m/s). `None` without such a point or a path.
+    pub fn slow_ahead(
+        &self,
+        station_m: f32,
+        hint: usize,
+        settled_coast_s: f32,
+        (below_mps, share): (f32, f32),
+    ) -> Option<(f32, f32)> {
+        if self.len < 2 || !station_m.is_finite() {
+            return None;
+        }
+        let first = self.segment_at(math::clamp(station_m, 0.0, self.length_m()), hint);
+        let below = math::min(share * self.points.get(first)?.speed_mps, below_mps);
+        let ahead = self.points.get(first + 1..self.len)?;
+        let stations = self.station_m.get(first + 1..self.len)?;
+        // Every point but a new least does the same work, a candidate or not (the tick's
+        // bound needs no drive that makes every point one; a new least at every point, targets
+        // that fall all along, costs two moves a point more).
+        let (mut least_room, mut least) = (f32::INFINITY, 0usize);
+        for (k, (p, &s)) in ahead.iter().zip(stations).enumerate() {
+            let v = p.speed_mps;
+            let room = if v < below && v > 0.0 {
+                s + settled_coast_s * v
+            } else {
+                f32::INFINITY
+            };
+            if room < least_room {
+                (least_room, least) = (room, k);
+            }
+        }
+        let (p, s) = (ahead.get(least)?, stations.get(least)?);
+        (least_room < f32::INFINITY).then_some((s - station_m, p.speed_mps))
+    }
+
     /// Length along the path, m.
     pub fn length_m(&self) -> f32 {
         self.station_of(self.len.saturating_sub(1)).unwrap_or(0.0)

@@ -45,6 +45,9 @@ use super::follow::SteerFollow;
 use crate::can::codec::{
     ControlCommand, ControlStatus, FallbackCause, ObstacleCircle, PlannerMessage,
 };
+use crate::control::mpc::longitudinal::{
+    SLOW_AHEAD_EXCESS_MPS, SLOW_AHEAD_SHARE, SPEED_LIMIT_SLACK_MPS,
+};
 use crate::control::mpc::{
     self, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, ReferencePoint,
     Sample, SidePoint, DEFAULT_TUNING, MAX_OBSTACLES, PLAN_STEPS, STEPS,
@@ -1052,6 +1055,26 @@ fn place_one(
     })
 }
 
+/// The path's lower target ahead that the speed plan slows for ([`mpc::SlowAhead`]): among
+/// the points ahead of the rear axle's station `s0` (on segment `hint`) whose targets are below
+/// [`SLOW_AHEAD_SHARE`] of the target where the car is and below its speed `speed_mps` by more
+/// than [`SPEED_LIMIT_SLACK_MPS`] and [`SLOW_AHEAD_EXCESS_MPS`], the one that leaves the least room
+/// to slow by the speed model's coast-out. `None` without one or without a coast-out.
+fn slow_ahead(
+    mpc: &MpcConfig,
+    path: &Path,
+    (s0, hint): (f32, usize),
+    speed_mps: f32,
+) -> Option<mpc::SlowAhead> {
+    let settled = mpc.speed_planner().settled_coast_s()?;
+    let below = speed_mps - SPEED_LIMIT_SLACK_MPS - SLOW_AHEAD_EXCESS_MPS;
+    path.slow_ahead(s0, hint, settled, (below, SLOW_AHEAD_SHARE))
+        .map(|(ahead_m, target_mps)| mpc::SlowAhead {
+            ahead_m,
+            target_mps,
+        })
+}
+
 /// Why a tick of the model-predictive controller did not solve, with the car's tracking.
 enum Unplanned {
     /// The car has lost the path ([`Tracking::has_lost_path`]).
@@ -1124,6 +1147,7 @@ fn mpc_tick<P: StageProbe>(
         path_max_curvature_per_m: path.max_curvature_per_m(),
         to_end_m: path.stop_ahead_m(s0, hint),
         in_held_turn: path.in_held_turn(hint),
+        slow_ahead: slow_ahead(mpc, path, (s0, hint), inputs.speed_mps),
     };
     probe.lap(Stage::DriveReference);
     let out = mpc.solve(state, &input);

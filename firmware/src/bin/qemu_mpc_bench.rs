@@ -399,6 +399,7 @@ impl Bench<'_> {
             // The stand-in car drives on: no path end within its horizon.
             to_end_m: f32::INFINITY,
             in_held_turn: false,
+            slow_ahead: None,
         }
     }
 
@@ -640,6 +641,7 @@ fn run_parts(b: &Bench, st: &mut Statics) {
         speed_mps: v,
         last_command_mps: car.last_cmd,
         in_held_turn: false,
+        slow_ahead: None,
     };
     let mut speed_state = SpeedState::new();
     let (_, speed) = timed(|| {

@@ -71,6 +71,19 @@ const SPEED_BOUND_WEIGHT: f32 = 100.0;
 /// How far a predicted speed may exceed the path's target before the exact penalty of
 /// [`SPEED_BOUND_WEIGHT`] holds it, m/s.
 pub const SPEED_LIMIT_SLACK_MPS: f32 = 0.2;
+/// How far above a lower target ahead (its [`SPEED_LIMIT_SLACK_MPS`] included) the car must be
+/// for the speed plan to slow for it beyond its horizon ([`SlowAhead`]), m/s: closer to it,
+/// the plan's limit rows within the horizon take the rest, so that a car a few hundredths over
+/// a target a few metres ahead is not commanded to a standstill.
+pub const SLOW_AHEAD_EXCESS_MPS: f32 = 0.3;
+/// The share of the target where the car is that a lower target ahead must be below for the
+/// speed plan to slow for it beyond its horizon ([`SlowAhead`]): a half. The bound asks the
+/// model's car to reach the target with every later command 0, and eq 5's car, slowed that
+/// way to a target not far below its speed, goes on slowing well below it (from 12 to 8 m/s:
+/// down to 5.0-6.1 m/s, against 7.4-7.6 without the bound); a step to less than half the
+/// speed is where the plan's horizon and the path's envelope miss most
+/// (`mpc_properties::the_speed_plan_slows_for_a_lower_target_beyond_its_horizon`).
+pub const SLOW_AHEAD_SHARE: f32 = 0.5;
 
 /// How far the model's predictions may miss before the commands' lead is no longer trusted,
 /// m/s: the largest recent gap between the speed bias and its low-passed value
@@ -228,6 +241,24 @@ pub struct SpeedStart<'a> {
     /// (`crate::control::path::Path::in_held_turn`): the commands do not lead it faster
     /// ([`SpeedPlanner::command_band`]).
     pub in_held_turn: bool,
+    /// The lower target ahead the plan slows for, beyond its horizon too; `None`: none.
+    pub slow_ahead: Option<SlowAhead>,
+}
+
+/// A lower target ahead of the car, which the speed plan's first command is bounded by as
+/// the stop's is ([`SpeedPlanner::settled_coast_s`]): the command from which the model's car
+/// can still slow to it with every later command 0 until there. The caller picks it among the
+/// path's points ahead whose targets are below [`SLOW_AHEAD_SHARE`] of the target where the
+/// car is and below its speed by more than
+/// [`SPEED_LIMIT_SLACK_MPS`] and [`SLOW_AHEAD_EXCESS_MPS`]: the one that
+/// leaves the least room, `ahead_m` plus the settled coast of `target_mps`
+/// (`crate::control::path::Path::slow_ahead`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlowAhead {
+    /// Its distance along the path from the car, m.
+    pub ahead_m: f32,
+    /// Its target, m/s.
+    pub target_mps: f32,
 }
 
 impl SpeedPlanner {
@@ -299,6 +330,44 @@ impl SpeedPlanner {
         let in_flight: f32 = first.iter().chain(then).sum();
         let sum = c.row.dot(&state.x) + c.gain * in_flight;
         sum.is_finite().then_some(sum * crate::SAMPLE_PERIOD_S)
+    }
+
+    /// How far the model's car coasts, with every input 0, from having reached a speed by
+    /// coasting to a standstill, per m/s of that speed, s: the distance it takes to slow from
+    /// `v` to `w` is its [`Self::coast_m`] less `w` times this ([`SlowAhead`]). `None` without
+    /// a coast-out.
+    pub fn settled_coast_s(&self) -> Option<f32> {
+        self.coast.map(|c| c.coasted_s(0.0))
+    }
+
+    /// The highest command for the plan's first knot that leaves the car able to slow to
+    /// `slow`'s target (and its [`SPEED_LIMIT_SLACK_MPS`]) by where it starts with every later
+    /// command 0 until then, m/s; not below 0; infinite without a lower target ahead or a
+    /// coast-out. The distance to slow is the model's [`Self::coast_m`] less the target's
+    /// coasted sum ([`Coast`]'s `coasted`, at the target's share of the car's speed
+    /// `speed_mps`), and the car's speed above the model's (`bias_mps`, measured minus
+    /// modelled) taken to fade as a coasted speed does: a car that lags its model while
+    /// it slows is slowed earlier, not later (unlike the stop's cap it is not weighed by the
+    /// model's trust: a car faster than its model then reaches the lower target early, which
+    /// the plan's limit rows allow, where one slower than its model would be over it).
+    fn slow_cap_mps(
+        &self,
+        state: &SsBlockState<2>,
+        slow: Option<SlowAhead>,
+        (speed_mps, bias_mps): (f32, f32),
+    ) -> f32 {
+        let (Some(slow), Some(coast), Some(c)) = (slow, self.coast_m(state), self.coast) else {
+            return f32::INFINITY;
+        };
+        let bias = finite_or(bias_mps, 0.0);
+        let goal = slow.target_mps + SPEED_LIMIT_SLACK_MPS;
+        let k = c.coasted_s(goal / speed_mps);
+        let to_target = coast + k * (bias - goal);
+        let cap = (slow.ahead_m - to_target) / (c.gain * KNOT_S);
+        if cap.is_nan() {
+            return 0.0;
+        }
+        max(cap, 0.0)
     }
 
     /// The highest command for the plan's first knot that leaves the model's car able to stop
@@ -390,9 +459,16 @@ impl SpeedPlanner {
         // horizon is shorter than its mean response (2.84 s), so it saw that too late (a car
         // exactly eq 5, stopped 0.74-0.87 m past the end; docs/controller.md, "The stop at
         // the path's end").
+        // And the same for a lower target ahead, beyond the horizon too ([`SlowAhead`]): the
+        // path's envelope asks for `decel_mps2` down to it, which eq 5's car, whose response
+        // to a 0 fades as its speed does, does not follow at low speeds (a probe's car exactly
+        // eq 5 reached a step from 12 to 1 m/s at 2.94 m/s).
         let top = min(
             min(top, ceiling),
-            self.stop_cap_mps(start.model_state, to_end_m, fit.trust()),
+            min(
+                self.stop_cap_mps(start.model_state, to_end_m, fit.trust()),
+                self.slow_cap_mps(start.model_state, start.slow_ahead, (v0, start.bias_mps)),
+            ),
         );
         let floor = if stopping { 0.0 } else { min(floor, top) };
         let lo = floor - last;
@@ -785,6 +861,33 @@ struct Coast {
     row: SVector<f32, 2>,
     /// The DC gain: what each input in flight adds to the sum per unit.
     gain: f32,
+    /// The sum from a car that reached a speed coasting, per m/s of that speed: `r . x` over
+    /// the output `y`, `x` the model's state where, coasting (every input 0) from settled at
+    /// 1 m/s, it first fell to each of [`COASTED_FRACTIONS`] of it. For a first-order model
+    /// that is its time constant at every fraction; for one of higher order it falls with the
+    /// fraction (a car that is slowing stops sooner than one that holds its speed), so the
+    /// distance to slow from `v` to `w`, the coast-out less `w` times the sum at `w / v`, is
+    /// not taken short.
+    coasted: [f32; COASTED_FRACTIONS.len()],
+}
+
+impl Coast {
+    /// The sum from a car that coasted to `fraction` of its speed, per m/s of it, s: `coasted`
+    /// interpolated at `fraction` (the nearest beyond [`COASTED_FRACTIONS`]; a fraction above
+    /// them, or not finite, is the first's).
+    fn coasted_s(&self, fraction: f32) -> f32 {
+        let f = finite_or(fraction, 1.0);
+        let mut above = (1.0f32, self.coasted.first().copied().unwrap_or(0.0));
+        for (&at, &k) in COASTED_FRACTIONS.iter().zip(&self.coasted) {
+            if f >= at {
+                let (fa, ka) = above;
+                let share = if fa > at { (f - at) / (fa - at) } else { 0.0 };
+                return (k + (ka - k) * clamp(share, 0.0, 1.0)) * crate::SAMPLE_PERIOD_S;
+            }
+            above = (at, k);
+        }
+        above.1 * crate::SAMPLE_PERIOD_S
+    }
 }
 
 /// The model's [`Coast`]; `None` without a finite, positive DC gain or with `I - A` singular.
@@ -802,7 +905,35 @@ fn coast_row(model: &SsBlock<2>) -> Option<Coast> {
         return None;
     }
     let row = SVector::<f32, 2>::new((c.x * m22 - m12 * c.y) / det, (m11 * c.y - m21 * c.x) / det);
-    (row.x.is_finite() && row.y.is_finite()).then_some(Coast { row, gain })
+    let coasted = coasted_sums(model, &row);
+    (row.x.is_finite() && row.y.is_finite() && coasted.iter().all(|k| k.is_finite() && *k >= 0.0))
+        .then_some(Coast { row, gain, coasted })
+}
+
+/// The fractions of a settled speed at which [`Coast`]'s `coasted` sums are taken,
+/// descending; between them the sum is interpolated, beyond them the nearest is taken.
+pub const COASTED_FRACTIONS: [f32; 4] = [0.9, 0.75, 0.5, 0.25];
+
+/// [`Coast`]'s `coasted`, from the model stepped with every input 0 from its state settled at
+/// 1 m/s until its output first falls to each of [`COASTED_FRACTIONS`] (at most a minute of
+/// steps; NaN where it does not, or without a settled state).
+fn coasted_sums(model: &SsBlock<2>, row: &SVector<f32, 2>) -> [f32; COASTED_FRACTIONS.len()] {
+    let mut sums = [f32::NAN; COASTED_FRACTIONS.len()];
+    let Ok(mut st) = model.steady_state_for_output(1.0) else {
+        return sums;
+    };
+    let mut next = COASTED_FRACTIONS.iter().zip(sums.iter_mut()).peekable();
+    for _ in 0..(60.0 / crate::SAMPLE_PERIOD_S) as usize {
+        let y = model.step(&mut st, 0.0);
+        // The inputs in flight are all 0 once it falls (they were 1 only for the delay).
+        while let Some((_, sum)) = next.next_if(|(f, _)| y <= **f && y > 0.0) {
+            *sum = row.dot(&st.x) / y;
+        }
+        if next.peek().is_none() {
+            break;
+        }
+    }
+    sums
 }
 
 /// The model's output at the start of each MPC step (calls 0, 5, 10, ... of `step`, the call

@@ -33,6 +33,7 @@ use nalgebra::SVector;
 
 use self::admm::{AdmmSettings, Problem, SolveError, Workspace};
 use self::lateral::{BuildError, InflatedObstacle, LateralSetup, Linearisation};
+pub use self::longitudinal::SlowAhead;
 use self::longitudinal::{SpeedPlanError, SpeedPlanner, SpeedStart, SpeedState, SpeedTuning};
 use crate::math::{self, clamp, finite_or, max, min};
 use crate::model::dynamic::{DynamicParams, LateralState};
@@ -261,6 +262,9 @@ pub struct MpcInput<'a> {
     /// ([`crate::control::path::Path::in_held_turn`]): the speed commands do not lead
     /// ([`SpeedPlanner::command_band`]).
     pub in_held_turn: bool,
+    /// The path's lower target ahead the speed plan slows for beyond its horizon too
+    /// ([`SlowAhead`]); `None`: none.
+    pub slow_ahead: Option<SlowAhead>,
 }
 
 /// Cost weights and ADMM penalties of the lateral problem.
@@ -1016,6 +1020,7 @@ impl MpcConfig {
             speed_mps: car.speed_mps,
             last_command_mps: car.last_speed_cmd_mps,
             in_held_turn: input.in_held_turn,
+            slow_ahead: input.slow_ahead,
         };
         if !input_ok(input) {
             return self.fallback(state, input, &speed_start, FallbackReason::BadInput);
