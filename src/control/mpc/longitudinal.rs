@@ -916,18 +916,21 @@ pub const COASTED_FRACTIONS: [f32; 4] = [0.9, 0.75, 0.5, 0.25];
 
 /// [`Coast`]'s `coasted`, from the model stepped with every input 0 from its state settled at
 /// 1 m/s until its output first falls to each of [`COASTED_FRACTIONS`] (at most a minute of
-/// steps; NaN where it does not, or without a settled state).
+/// steps; NaN where it does not, or without a settled state). The inputs in flight hold the
+/// settled state where it is until they are through, so the steps are `x <- A x` from it.
 fn coasted_sums(model: &SsBlock<2>, row: &SVector<f32, 2>) -> [f32; COASTED_FRACTIONS.len()] {
     let mut sums = [f32::NAN; COASTED_FRACTIONS.len()];
-    let Ok(mut st) = model.steady_state_for_output(1.0) else {
+    let Ok(settled) = model.steady_state_for_output(1.0) else {
         return sums;
     };
+    let (a, c) = (model.a(), model.c());
+    let mut x = settled.x;
     let mut next = COASTED_FRACTIONS.iter().zip(sums.iter_mut()).peekable();
     for _ in 0..(60.0 / crate::SAMPLE_PERIOD_S) as usize {
-        let y = model.step(&mut st, 0.0);
-        // The inputs in flight are all 0 once it falls (they were 1 only for the delay).
+        x = a * x;
+        let y = c.dot(&x);
         while let Some((_, sum)) = next.next_if(|(f, _)| y <= **f && y > 0.0) {
-            *sum = row.dot(&st.x) / y;
+            *sum = row.dot(&x) / y;
         }
         if next.peek().is_none() {
             break;
