@@ -1061,14 +1061,14 @@ impl Path {
     /// target is below `share` of that segment's first point's and below `below_mps` but not
     /// 0 (a stop is [`Path::stop_ahead_m`]'s), and which
     /// leaves the least room to slow to it: the least of its distance ahead plus
-    /// `settled_coast_s` times its target (a car that coasts to a speed `w` needs its coast-out
+    /// `coasted_s` times its target (a car that coasts to a speed `w` needs its coast-out
     /// less `w` times that, `crate::control::mpc::longitudinal::SlowAhead`); as (distance
     /// ahead, m; target, m/s). `None` without such a point or a path.
     pub fn slow_ahead(
         &self,
         station_m: f32,
         hint: usize,
-        settled_coast_s: f32,
+        coasted_s: f32,
         (below_mps, share): (f32, f32),
     ) -> Option<(f32, f32)> {
         if self.len < 2 || !station_m.is_finite() {
@@ -1085,7 +1085,7 @@ impl Path {
         for (k, (p, &s)) in ahead.iter().zip(stations).enumerate() {
             let v = p.speed_mps;
             let room = if v < below && v > 0.0 {
-                s + settled_coast_s * v
+                s + coasted_s * v
             } else {
                 f32::INFINITY
             };

@@ -1066,9 +1066,9 @@ fn slow_ahead(
     (s0, hint): (f32, usize),
     speed_mps: f32,
 ) -> Option<mpc::SlowAhead> {
-    let settled = mpc.speed_planner().settled_coast_s()?;
+    let coasted = mpc.speed_planner().coasted_s()?;
     let below = speed_mps - SPEED_LIMIT_SLACK_MPS - SLOW_AHEAD_EXCESS_MPS;
-    path.slow_ahead(s0, hint, settled, (below, SLOW_AHEAD_SHARE))
+    path.slow_ahead(s0, hint, coasted, (below, SLOW_AHEAD_SHARE))
         .map(|(ahead_m, target_mps)| mpc::SlowAhead {
             ahead_m,
             target_mps,

@@ -246,12 +246,12 @@ pub struct SpeedStart<'a> {
 }
 
 /// A lower target ahead of the car, which the speed plan's first command is bounded by as
-/// the stop's is ([`SpeedPlanner::settled_coast_s`]): the command from which the model's car
+/// the stop's is (`SpeedPlanner::slow_cap_mps`): the command from which the model's car
 /// can still slow to it with every later command 0 until there. The caller picks it among the
 /// path's points ahead whose targets are below [`SLOW_AHEAD_SHARE`] of the target where the
 /// car is and below its speed by more than
 /// [`SPEED_LIMIT_SLACK_MPS`] and [`SLOW_AHEAD_EXCESS_MPS`]: the one that
-/// leaves the least room, `ahead_m` plus the settled coast of `target_mps`
+/// leaves the least room, `ahead_m` plus [`SpeedPlanner::coasted_s`] times `target_mps`
 /// (`crate::control::path::Path::slow_ahead`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SlowAhead {
@@ -332,11 +332,11 @@ impl SpeedPlanner {
         sum.is_finite().then_some(sum * crate::SAMPLE_PERIOD_S)
     }
 
-    /// How far the model's car coasts, with every input 0, from having reached a speed by
-    /// coasting to a standstill, per m/s of that speed, s: the distance it takes to slow from
-    /// `v` to `w` is its [`Self::coast_m`] less `w` times this ([`SlowAhead`]). `None` without
-    /// a coast-out.
-    pub fn settled_coast_s(&self) -> Option<f32> {
+    /// How far the model's car coasts, every input 0, to a standstill from a speed it reached
+    /// by coasting from four times that speed, per m/s of it, s (the least of `Coast`'s
+    /// coasted sums): what a lower target's speed is weighed by when the one that leaves the
+    /// least room to slow is picked ([`SlowAhead`]). `None` without a coast-out.
+    pub fn coasted_s(&self) -> Option<f32> {
         self.coast.map(|c| c.coasted_s(0.0))
     }
 
@@ -910,7 +910,7 @@ fn coast_row(model: &SsBlock<2>) -> Option<Coast> {
         .then_some(Coast { row, gain, coasted })
 }
 
-/// The fractions of a settled speed at which [`Coast`]'s `coasted` sums are taken,
+/// The fractions of a settled speed at which `Coast`'s `coasted` sums are taken,
 /// descending; between them the sum is interpolated, beyond them the nearest is taken.
 pub const COASTED_FRACTIONS: [f32; 4] = [0.9, 0.75, 0.5, 0.25];
 
