@@ -1127,3 +1127,91 @@ fn follows_a_motorway_path_at_its_speed() {
         .iter()
         .all(|t| t.out.status == ControlStatus::Tracking));
 }
+
+/// A slalom of four standing circles of 0.5 m, 1.5 m right and left of a straight road's centre
+/// line in turn, `gap` m apart from 60 m on, corridor 5 m each side, at 8 m/s, the controller
+/// told a 2 m position uncertainty (the published model file's receiver); the car's position
+/// exact. Returns the loop and the least body clearance of any circle.
+fn slalom(gap: f64) -> (Loop, f64) {
+    let path = straight(260.0, 5.0, 8.0);
+    let mut l = cat_loop(&path, 8.0, 0.0);
+    l.position_error = PositionError {
+        uncertainty_m: 2.0,
+        ..PositionError::NONE
+    };
+    let circles: Vec<_> = (0..4)
+        .map(|i| {
+            let side = if i % 2 == 0 { 1.5 } else { -1.5 };
+            circle(side, (60.0 + gap * f64::from(i)) as f32, 0.5)
+        })
+        .collect();
+    for (slot, c) in l.obstacles.iter_mut().zip(&circles) {
+        *slot = Some(*c);
+    }
+    let mut clearance = f64::INFINITY;
+    let mut t = 0.0;
+    while l.log.last().is_none_or(|x| x.station_m < 250.0) && t < 80.0 {
+        let out = l.tick(&path, t);
+        assert!(out.steer_cmd_pct.is_finite() && out.speed_cmd_mps.is_finite());
+        t += 0.02;
+        for c in &circles {
+            clearance = clearance.min(l.clearance(c));
+        }
+    }
+    (l, clearance)
+}
+
+/// The fastest the car went while its body was beside circles 2 to 4 of [`slalom`]'s.
+fn speed_beside_later_circles(l: &Loop, gap: f64) -> f64 {
+    let front = f64::from(ESCAPE_BODY.length_m - ESCAPE_BODY.rear_overhang_m);
+    let rear = f64::from(ESCAPE_BODY.rear_overhang_m);
+    l.log
+        .iter()
+        .filter(|x| {
+            (1..4).any(|i| {
+                let c = 60.0 + gap * f64::from(i);
+                (c - front..=c + rear).contains(&x.station_m)
+            })
+        })
+        .fold(0.0f64, |m, x| m.max(x.speed_mps))
+}
+
+/// Circles in a row passed on opposite sides leave the car the run between them to shift
+/// across by what both ask (5 m here: the inflated circles' 3.1 m, the body's width, less the
+/// plan's tolerance). 15 m apart no speed makes it by the check's measure (the run past the
+/// body, 10.6 m, is within the lock's small-angle 2 sqrt(shift R), 8.4 m, only at a crawl, and
+/// from where the first leaves it the car cannot get beside the second): the car stops short
+/// of the second, at rest with no passage. A black-box probe's car, its speed loop the model
+/// file's, was told of the four circles 12 s ahead, found the pair only when the second came
+/// within the 2 s horizon, and hit it at 3.6-4.2 m/s on 4 seeds of 6 (docs/findings.md); this
+/// loop's car, whose steering answers at once, had passed it at 8 m/s. 20 m apart the
+/// steering's rate makes the shift at 3.2 m/s at most (`MpcConfig::shift_speed_mps`): the car
+/// slows for each pair and keeps clear of every circle (here its plans fall back beside the
+/// last one and it stays at rest there). 40 m apart it is not slowed and passes all four.
+#[test]
+fn a_slalom_the_car_cannot_shift_through_stops_it_short_and_one_it_can_slows_it() {
+    let (tight, clearance) = slalom(15.0);
+    let last = tight.log.last().unwrap();
+    println!(
+        "15 m apart: least body clearance {clearance:.2} m, at rest at station {:.1} m, {:?}",
+        last.station_m, last.out.fallback
+    );
+    assert!(clearance > 1.5, "{clearance}");
+    assert!(last.speed_mps < 0.05, "{}", last.speed_mps);
+    assert!(last.station_m < 75.0, "{}", last.station_m);
+    assert_eq!(last.out.fallback, Some(FallbackReason::NoPassage));
+    for (gap, slowest, fastest) in [(20.0, 2.5, 4.0), (40.0, 7.0, 8.5)] {
+        let (l, clearance) = slalom(gap);
+        let beside = speed_beside_later_circles(&l, gap);
+        println!(
+            "{gap} m apart: least body clearance {clearance:.2} m, fastest beside circles 2-4 \
+             {beside:.2} m/s, reached station {:.1} m",
+            l.log.last().unwrap().station_m
+        );
+        assert!(clearance > 1.5, "{clearance}");
+        assert!((slowest..fastest).contains(&beside), "{beside}");
+        if gap >= 40.0 {
+            assert!(l.log.last().unwrap().station_m >= 250.0, "passed");
+        }
+    }
+}
