@@ -659,7 +659,8 @@ pub fn unreachable(car: &NodeConfig) -> Vec<&'static str> {
 
 /// The model-predictive controller's solve on its most expensive path: every row of every
 /// stage active and every ADMM iteration run (no early exit), in both lateral modes, on the
-/// baked car (`catmodel-qemu-mpc-bench`, rows `mpc_worst_dynamic` and `mpc_worst_kinematic`;
+/// baked car (`catmodel-qemu-mpc-bench`, rows `mpc_worst_dynamic`, `mpc_worst_kinematic` and
+/// `mpc_worst_standing`;
 /// docs/mpc.md). The solve's iterations are capped, so this is its cost for any input.
 fn mpc_worst_solve() -> Result<(u32, String)> {
     let (features, bin) = MPC_BENCH;

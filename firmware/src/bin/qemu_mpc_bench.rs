@@ -13,7 +13,8 @@
 //! - `mpc_dlc`: ISO 3888-2 double lane change at 13.5 m/s (tracking, corridor constraints);
 //! - `mpc_obstacle`: straight road, one obstacle passed at 10 m/s (avoiding);
 //! - `mpc_blocked`: an obstacle that leaves no room (status 3, the fallback);
-//! - `mpc_worst_dynamic`, `mpc_worst_kinematic`: four large obstacles beside the road so that
+//! - `mpc_worst_dynamic`, `mpc_worst_kinematic`, `mpc_worst_standing` (the obstacles stand,
+//!   in a row passed on alternate sides): four large obstacles beside the road so that
 //!   every stage has all its rows, a corridor narrower than the car so that every corridor row
 //!   gives way from the start, the car 1.5 m off its path so that the tracking targets taper,
 //!   and no early exit: the worst case.
@@ -479,6 +480,25 @@ fn worst_obstacles(car: &Car) -> [Option<Obstacle>; MAX_OBSTACLES] {
     })
 }
 
+/// Four large standing obstacles beside the road, left and right in turn, 12 m apart: every
+/// stage has every row, and each passed on the other side from the one before asks the car to
+/// shift across between them by 1 m, a shift made only slower than it goes
+/// (`MpcConfig::decide_sides`, docs/mpc.md "Obstacles in a row"): every pair's check and
+/// every slowing's cap of the speed targets run. Standing, their rows are the cheaper.
+fn standing_worst_obstacles(car: &Car) -> [Option<Obstacle>; MAX_OBSTACLES] {
+    let y0 = car.pose.y_m;
+    core::array::from_fn(|i| {
+        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
+        Some(on_straight(
+            side * 31.0,
+            y0 + 8.0 + 12.0 * i as f32,
+            30.0,
+            car,
+            25.0,
+        ))
+    })
+}
+
 #[inline(never)]
 fn run_scenarios(b: &Bench, st: &mut Statics) {
     let none = [None; MAX_OBSTACLES];
@@ -538,20 +558,34 @@ fn run_worst(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
     // The node refuses such a path from the planner (`PathError::Corridor`); the solver is
     // given it here directly, a case beyond the worst the node can meet.
     let road = Straight { half_width: 0.25 };
-    for (v, key, name) in [
-        (15.0, "mpc_worst_dynamic", "MPC solve, worst case (dynamic)"),
+    type Placing = fn(&Car) -> [Option<Obstacle>; MAX_OBSTACLES];
+    let cases: [(f32, &str, &str, Placing); 3] = [
+        (
+            15.0,
+            "mpc_worst_dynamic",
+            "MPC solve, worst case (dynamic)",
+            worst_obstacles,
+        ),
         (
             4.0,
             "mpc_worst_kinematic",
             "MPC solve, worst case (kinematic)",
+            worst_obstacles,
         ),
-    ] {
+        (
+            4.0,
+            "mpc_worst_standing",
+            "MPC solve, worst case (kinematic, standing obstacles in a row)",
+            standing_worst_obstacles,
+        ),
+    ];
+    for (v, key, name, placing) in cases {
         // 1.5 m off the path: beyond `return_from_m`, so the tracking cost's targets taper too
         // (`lateral::taper_reference`).
         let mut car = b.car(Pose::new(1.5, 0.0, 0.05), v);
         st.state.reset();
         for _ in 0..100 {
-            let obstacles = worst_obstacles(&car);
+            let obstacles = placing(&car);
             b.tick(worst, &road, &mut car, &obstacles, v, st);
         }
         st.stats.report(
