@@ -1186,8 +1186,9 @@ fn speed_beside_later_circles(l: &Loop, gap: f64) -> f64 {
 /// within the 2 s horizon, and hit it at 3.6-4.2 m/s on 4 seeds of 6 (docs/findings.md); this
 /// loop's car, whose steering answers at once, had passed it at 8 m/s. 20 m apart the
 /// steering's rate makes the shift at 3.2 m/s at most (`MpcConfig::shift_speed_mps`): the car
-/// slows for each pair and keeps clear of every circle (here its plans fall back beside the
-/// last one and it stays at rest there). 40 m apart it is not slowed and passes all four.
+/// slows for each pair and keeps clear of every circle (this loop's car passes all four; that
+/// is not asserted: at that speed a plan may still fall back beside a circle, which leaves the
+/// car at rest there). 40 m apart it is not slowed and passes all four.
 #[test]
 fn a_slalom_the_car_cannot_shift_through_stops_it_short_and_one_it_can_slows_it() {
     let (tight, clearance) = slalom(15.0);

@@ -50,8 +50,10 @@ use crate::vehicle::{Body, VehicleParams, STEER_PCT_LIMIT};
 pub const STEPS: usize = 20;
 /// Steps of the plan the node sends: 20 x 0.1 s = 2 s, the PREDICTION frames' horizon. The
 /// speed plan covers it all; beyond [`STEPS`] (none now) the steering plan would hold its last
-/// value.
+/// value, and the speed plan's caps would need the reference's last distance along it held
+/// (`MpcConfig::solve`: a compile-time check asks for the two to be equal).
 pub const PLAN_STEPS: usize = 20;
+const _: () = assert!(PLAN_STEPS == STEPS);
 /// MPC step, s (every 5th node tick: the PREDICTION frames are every 0.2 s = 2 steps).
 pub const STEP_S: f32 = 0.1;
 /// The fallback for an obstacle the plans do not clear brakes along the lane: it steers
@@ -804,8 +806,8 @@ pub struct MpcState {
     /// to pass it from then on: see `decide_sides`).
     blocked: [bool; MAX_OBSTACLES],
     /// Per obstacle slot: the speed the car shifts across to it at from a nearer one passed on
-    /// the other side, m/s, held until it is passed; 0: no speed does, held until the car is at
-    /// a crawl; infinite: none (see `decide_sides`).
+    /// the other side, m/s, held until it is passed; 0 or below: no speed does, held until the
+    /// car is at a crawl; infinite: none (see `decide_sides`).
     pair_mps: [f32; MAX_OBSTACLES],
     /// Steering of the last accepted plan, and ticks since it was made.
     last_steer_plan: Option<([f32; STEPS + 1], u32)>,
@@ -1079,8 +1081,21 @@ impl MpcConfig {
         for (t, r) in targets.iter_mut().zip(input.reference.iter()) {
             *t = r.speed_mps;
         }
+        // Each stage's distance along the reference from its first point, once for every cap
+        // (beyond the reference, its last point's).
+        let mut along = [0.0f32; PLAN_STEPS + 1];
+        let mut along_m = 0.0;
+        for (d, (p, r)) in along
+            .iter_mut()
+            .skip(1)
+            .zip(input.reference.iter().zip(input.reference.iter().skip(1)))
+        {
+            let (dx, dy) = (r.at.pose.x_m - p.at.pose.x_m, r.at.pose.y_m - p.at.pose.y_m);
+            along_m += math::sqrt(dx * dx + dy * dy);
+            *d = along_m;
+        }
         for zone in slow.iter().flatten() {
-            self.cap_to_stop(&mut targets, input, *zone);
+            self.cap_to_stop(&mut targets, &along, *zone);
         }
         let speed_plan = self
             .speed
@@ -1629,7 +1644,7 @@ impl MpcConfig {
         // alone, was hit at 3.6-4.2 m/s on the model's own car: the pair was found only when
         // the second came within the horizon (docs/findings.md).
         for (j, (held, slow_j)) in state.pair_mps.iter_mut().zip(slow.iter_mut()).enumerate() {
-            if crawl && *held == 0.0 {
+            if crawl && *held <= 0.0 {
                 *held = f32::INFINITY;
             }
             let Some(Some((far, far_side))) = out.get(j).copied() else {
@@ -1698,7 +1713,8 @@ impl MpcConfig {
     /// the curvature ramped at the steering rate the plan may use and held within the lock
     /// (the sideways jerk `v^2 c` bang-bang: `shift = v^2 c T^3 / 32` over `run = v T`; at
     /// the lock `run = v p + sqrt(v^2 p^2 + 4 shift R)`, `p` the time from straight to the
-    /// lock, `R` its radius). 0: not at any speed (`run < 2 sqrt(shift R)`).
+    /// lock, `R` its radius). 0 or below: not at any speed (`run < 2 sqrt(shift R)`; a run of 0
+    /// or less is none: NaN or negative).
     fn shift_speed_mps(&self, shift_m: f32, run_m: f32) -> f32 {
         let wheelbase = self.vehicle.wheelbase_m;
         let lock_per_m = math::tan(self.vehicle.max_steer_rad) / wheelbase;
@@ -1708,9 +1724,7 @@ impl MpcConfig {
         if shift_m <= 2.0 * to_lock * to_lock * lock_per_m {
             return cubic;
         }
-        let at_lock = (run_m * run_m - 4.0 * shift_m / lock_per_m) * rate_per_m_s
-            / (2.0 * run_m * lock_per_m);
-        max(at_lock, 0.0)
+        (run_m * run_m - 4.0 * shift_m / lock_per_m) * rate_per_m_s / (2.0 * run_m * lock_per_m)
     }
 
     /// Whether the car is alongside obstacle `ob` (its circle, not inflated, reaches back past
@@ -1744,37 +1758,24 @@ impl MpcConfig {
     }
 
     /// Caps each stage's speed target at the speed from which the car slows to `floor_mps`
-    /// (0: stops) by `at_m` ahead (the stage's distance along the reference from its first
-    /// point): after the `stop_delay_s` the speed loop takes to take hold, at the speed plan's
-    /// deceleration, `v t + (v^2 - floor^2) / 2a = d`; `floor_mps` at least.
+    /// (0: stops) by `at_m` ahead (`along_m`: the stage's distance along the reference from
+    /// its first point): after the `stop_delay_s` the speed loop takes to take hold, at the
+    /// speed plan's deceleration, `v t + (v^2 - floor^2) / 2a = d`; `floor_mps` at least.
     fn cap_to_stop(
         &self,
         targets: &mut [f32; PLAN_STEPS + 1],
-        input: &MpcInput,
+        along_m: &[f32; PLAN_STEPS + 1],
         (at_m, floor_mps): (f32, f32),
     ) {
         let a = self.tuning.speed.decel_mps2;
         let t = self.tuning.stop_delay_s;
-        let mut along_m = 0.0;
-        let mut previous: Option<&ReferencePoint> = None;
-        for (target, r) in targets.iter_mut().zip(input.reference.iter()) {
-            if let Some(p) = previous {
-                let (dx, dy) = (r.at.pose.x_m - p.at.pose.x_m, r.at.pose.y_m - p.at.pose.y_m);
-                along_m += math::sqrt(dx * dx + dy * dy);
-            }
-            previous = Some(r);
-            let d = max(at_m - along_m, 0.0);
-            let cap = max(
-                a * (math::sqrt(t * t + (floor_mps * floor_mps / a + 2.0 * d) / a) - t),
-                floor_mps,
+        let base = t * t + floor_mps * floor_mps / (a * a);
+        for (target, along) in targets.iter_mut().zip(along_m) {
+            let d = max(at_m - along, 0.0);
+            *target = min(
+                *target,
+                max(a * (math::sqrt(base + 2.0 * d / a) - t), floor_mps),
             );
-            *target = min(*target, cap);
-        }
-        // Beyond the reference, its last point's cap.
-        let last = input.reference.len().min(targets.len());
-        let held = targets.get(last.saturating_sub(1)).copied().unwrap_or(0.0);
-        for target in targets.iter_mut().skip(last) {
-            *target = min(*target, held);
         }
     }
 
