@@ -1198,3 +1198,79 @@ fn the_speed_plan_slows_for_a_lower_target_beyond_its_horizon() {
         assert_eq!(run(8.0, lag_ticks, true), run(8.0, lag_ticks, false));
     }
 }
+
+/// `MpcConfig::shift_speed_mps` against the manoeuvre it stands for, flown step by step: at the
+/// speed it gives, the car's curvature ramped at the plan's steering rate (the actuator's rate
+/// limit times `steer_rate_share`, over the wheelbase), held at the lock when the ramp would
+/// pass it, in the jerk's bang-bang pattern (up, down twice as long, up, with holds at the lock
+/// between), shifts the car sideways by the shift over the run and leaves it straight, to first
+/// order in the heading (`y'' = v^2 k`); the pattern is the fastest there is for a limited
+/// jerk and acceleration (the time-optimal rest-to-rest triple integrator), so no faster speed
+/// makes the shift. A run shorter than the lock's `2 sqrt(shift R)` has no speed.
+#[test]
+fn the_speed_of_a_shift_is_the_one_at_which_the_fastest_manoeuvre_makes_it() {
+    let cfg = VehicleConfig::default();
+    let mpc = mpc_for(&cfg, ESCAPE_BODY, DEFAULT_TUNING);
+    let c = &cfg.chassis;
+    let lock = c.max_steer_deg.to_radians().tan() / c.wheelbase_m;
+    let rate = cfg.steering.rate_limit_pct_per_s / 100.0
+        * c.max_steer_deg.to_radians()
+        * f64::from(DEFAULT_TUNING.steer_rate_share)
+        / c.wheelbase_m;
+    let mut lock_limited = 0;
+    for (shift, run) in [
+        (4.756, 15.56),
+        (4.756, 20.56),
+        (1.0, 7.56),
+        (4.756, 10.56),
+        (2.76, 10.56),
+        (2.0, 6.0),
+        (0.5, 30.0),
+    ] {
+        let v = f64::from(mpc.shift_speed_mps(shift as f32, run as f32));
+        assert!(v > 0.0, "{shift} m over {run} m");
+        let t_total = run / v;
+        // Time to ramp from straight to the lock; the bang-bang's quarter when it stays below.
+        let ramp = (lock / rate).min(t_total / 4.0);
+        let hold = 0.5 * (t_total - 4.0 * ramp);
+        if hold > 1e-9 {
+            lock_limited += 1;
+        }
+        let phases = [
+            (ramp, rate),
+            (hold, 0.0),
+            (2.0 * ramp, -rate),
+            (hold, 0.0),
+            (ramp, rate),
+        ];
+        let (mut k, mut heading, mut y, mut peak) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let steps = 20_000;
+        for (duration, dk) in phases {
+            let h = duration / f64::from(steps);
+            for _ in 0..steps {
+                // Exact over a step for a linear ramp of the curvature.
+                y += v * heading * h + 0.5 * v * v * k * h * h + v * v * dk * h * h * h / 6.0;
+                heading += v * k * h + 0.5 * v * dk * h * h;
+                k += dk * h;
+                peak = peak.max(k.abs());
+            }
+        }
+        println!(
+            "{shift} m over {run} m: {v:.3} m/s, {t_total:.2} s, shifted {y:.4} m, heading \
+             {heading:.2e} rad, curvature {k:.2e} 1/m, peak {peak:.4} of the lock's {lock:.4}"
+        );
+        assert!((y - shift).abs() < 1e-3 * shift, "shifted {y}");
+        assert!(heading.abs() < 1e-6 && k.abs() < 1e-9, "{heading} {k}");
+        assert!(peak <= lock * (1.0 + 1e-6), "{peak}");
+    }
+    assert!(
+        lock_limited >= 2,
+        "both regimes: {lock_limited} at the lock"
+    );
+    // The lock's 2 sqrt(shift R) for 4.756 m is 8.37 m on the CAT Vehicle: no speed below it.
+    let radius = 1.0 / lock;
+    let least = 2.0 * (4.756 * radius).sqrt();
+    assert!(mpc.shift_speed_mps(4.756, (least - 0.05) as f32) <= 0.0);
+    assert!(mpc.shift_speed_mps(4.756, (least + 0.05) as f32) > 0.0);
+    assert!(mpc.shift_speed_mps(4.756, -1.0) <= 0.0);
+}

@@ -692,7 +692,9 @@ fn stop_short(
     stopping_m: f32,
     reach_m: f32,
 ) -> Result<Option<(f32, f32)>, FallbackReason> {
-    if stopping_m > clear_m || clear_m.is_nan() {
+    // Not nearer than it can stop, or NaN: braking at once.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    if !(stopping_m <= clear_m) {
         return Err(FallbackReason::NoPassage);
     }
     let at_m = clear_m - NO_PASSAGE_STANDOFF_M;
@@ -1713,9 +1715,10 @@ impl MpcConfig {
     /// the curvature ramped at the steering rate the plan may use and held within the lock
     /// (the sideways jerk `v^2 c` bang-bang: `shift = v^2 c T^3 / 32` over `run = v T`; at
     /// the lock `run = v p + sqrt(v^2 p^2 + 4 shift R)`, `p` the time from straight to the
-    /// lock, `R` its radius). 0 or below: not at any speed (`run < 2 sqrt(shift R)`; a run of 0
-    /// or less is none: NaN or negative).
-    fn shift_speed_mps(&self, shift_m: f32, run_m: f32) -> f32 {
+    /// lock, `R` its radius). 0 or below: not at any speed (`run < 2 sqrt(shift R)`, or no run
+    /// at all: `mpc_properties::the_speed_of_a_shift_is_the_one_at_which_the_fastest_manoeuvre_makes_it`
+    /// flies the manoeuvre at the speed given).
+    pub fn shift_speed_mps(&self, shift_m: f32, run_m: f32) -> f32 {
         let wheelbase = self.vehicle.wheelbase_m;
         let lock_per_m = math::tan(self.vehicle.max_steer_rad) / wheelbase;
         let rate_per_m_s = self.max_steer_rate_rad_per_s * self.tuning.steer_rate_share / wheelbase;
@@ -1724,7 +1727,14 @@ impl MpcConfig {
         if shift_m <= 2.0 * to_lock * to_lock * lock_per_m {
             return cubic;
         }
-        (run_m * run_m - 4.0 * shift_m / lock_per_m) * rate_per_m_s / (2.0 * run_m * lock_per_m)
+        let at_lock = (run_m * run_m - 4.0 * shift_m / lock_per_m) * rate_per_m_s
+            / (2.0 * run_m * lock_per_m);
+        // No run (the two within the body's length of each other): no speed.
+        if run_m > 0.0 {
+            at_lock
+        } else {
+            0.0
+        }
     }
 
     /// Whether the car is alongside obstacle `ob` (its circle, not inflated, reaches back past
