@@ -1077,14 +1077,15 @@ impl MpcConfig {
         };
         // 2. Speed plan.
         // Speed targets over the plan; beyond the reference, its last point's; short of an
-        // obstacle that leaves no passage, no faster than stops before it.
+        // obstacle that leaves no passage, no faster than stops before it; short of a shift
+        // across between obstacles in a row, no faster than slows to the shift's speed.
         let last_target = input.reference.last().map_or(0.0, |r| r.speed_mps);
         let mut targets = [last_target; PLAN_STEPS + 1];
         for (t, r) in targets.iter_mut().zip(input.reference.iter()) {
             *t = r.speed_mps;
         }
-        // Each stage's distance along the reference from its first point, once for every cap
-        // (beyond the reference, its last point's).
+        // Each stage's distance along the reference from its first point, measured once for
+        // every cap (the plan's stages are the reference's: `PLAN_STEPS == STEPS`).
         let mut along = [0.0f32; PLAN_STEPS + 1];
         let mut along_m = 0.0;
         for (d, (p, r)) in along
