@@ -442,7 +442,7 @@ def main():
     M = dict(lat=[], corr_excess=0.0, corr_excess_t=None, obs_clear=1e9, obs_clear_t=None,
              over_limit=0.0, over_t=None, statuses={}, reasons={}, bad_frames=0, crc_err=0,
              na_cmd=0, frame_counts={}, counter_err=0, end_missing=0, max_speed=0.0,
-             steer_abs_mean=0.0, steer_changes=0.0, status_log=[], max_lat=0.0, max_lat_t=None,
+             steer_abs_mean=0.0, steer_changes=0.0, steer_step_max=0.0, steer_step_t=None, status_log=[], max_lat=0.0, max_lat_t=None,
              pred_bad=0)
     rows = []
     replaced = False
@@ -583,6 +583,9 @@ def main():
                 else:
                     ns = vals["steer_cmd_pct"]
                     M["steer_changes"] += abs(ns - steer_cmd)
+                    if engaged is not None and abs(ns - steer_cmd) > M["steer_step_max"]:
+                        M["steer_step_max"] = abs(ns - steer_cmd)
+                        M["steer_step_t"] = round(tt - engaged, 2)
                     steer_cmd = ns; speed_cmd = vals["speed_cmd_mps"]
                 # metrics
                 pr = active.project(P.x, P.y)

@@ -1274,3 +1274,65 @@ fn the_speed_of_a_shift_is_the_one_at_which_the_fastest_manoeuvre_makes_it() {
     assert!(mpc.shift_speed_mps(4.756, (least + 0.05) as f32) > 0.0);
     assert!(mpc.shift_speed_mps(4.756, -1.0) <= 0.0);
 }
+
+/// The fallback's braking plan (`SpeedPlanner::stop`: the model rolled under command 0) is the
+/// plan's own prediction of zero commands (`SpeedPlanner::predict` over the free response with
+/// the last command held, the pulse matrix's product), to f32 rounding: for eq 5 and a slower
+/// loop with a longer delay, at speeds from a crawl to 30 m/s, with last commands above, at and
+/// below the steady state and speed biases either way. A roll-out under another command, or a
+/// product that dropped a knot, is metres per second off.
+#[test]
+fn the_fallbacks_stop_is_the_plans_prediction_of_zero_commands() {
+    use catmodel::control::mpc::longitudinal::{SpeedPlanner, SpeedStart, KNOTS};
+    let eq5 = SsBlock::from_tf(&paper::EQ5_INTERNAL_CONTROLLER, paper::PAPER_TS_S).unwrap();
+    // A slower loop (poles at -0.7 and -2 1/s, gain 0.9) with a 0.6 s delay.
+    let slow = catmodel::model::tf::TransferFunction::new(&[0.0, 0.0, 1.26], &[1.0, 2.7, 1.4], 0.6)
+        .and_then(|tf| SsBlock::from_tf(&tf, paper::PAPER_TS_S));
+    let mut checked = 0;
+    for block in [Some(eq5), slow.ok()].into_iter().flatten() {
+        let planner = SpeedPlanner::new(&block, DEFAULT_TUNING.speed).unwrap();
+        let g = block.dc_gain().unwrap();
+        for speed in [0.5f32, 4.0, 12.0, 30.0] {
+            for last_factor in [0.0f32, 0.6, 1.0, 1.3] {
+                for bias in [-0.8f32, 0.0, 0.8] {
+                    let state = block.steady_state_for_output(speed).unwrap();
+                    let last = speed / g * last_factor;
+                    let start = SpeedStart {
+                        model_state: &state,
+                        bias_mps: bias,
+                        planning_bias_mps: bias,
+                        speed_mps: speed + bias,
+                        last_command_mps: last,
+                        in_held_turn: false,
+                        slow_ahead: None,
+                    };
+                    let stop = planner.stop(&start);
+                    let free = nalgebra::SVector::<f32, PLAN_STEPS>::from(
+                        planner.free_response(&start, last),
+                    );
+                    let predicted = planner.predict(&free, last, &[0.0; KNOTS], speed + bias);
+                    assert_eq!(stop.command_mps, 0.0);
+                    assert!(stop.commands_mps.iter().all(|c| *c == 0.0));
+                    for (k, (s, p)) in stop.speeds_mps.iter().zip(&predicted).enumerate() {
+                        // The prediction clamps the free response at 0 before the product;
+                        // where the held command's response stays above 0 the two agree.
+                        if free.iter().all(|f| *f > 0.0) {
+                            assert!(
+                                (s - p).abs() < 2e-3,
+                                "speed {speed}, last {last}, bias {bias}: step {k} {s} vs {p}"
+                            );
+                            checked += 1;
+                        }
+                        assert!(s.is_finite() && *s >= 0.0);
+                    }
+                    // Braking from a speed: the plan's last speed is below its first.
+                    if speed + bias > 1.0 {
+                        let end = stop.speeds_mps[PLAN_STEPS];
+                        assert!(end < speed + bias, "{end} vs {}", speed + bias);
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 500, "{checked} steps compared");
+}

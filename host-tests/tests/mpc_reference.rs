@@ -261,13 +261,28 @@ fn a_forgotten_solve_is_a_reset_one() {
             used.cold_start(&q);
             used.factor(&q).unwrap();
             used.iterate(&q, &y0, &settings(50)).unwrap();
+            // A solve that failed (the controller's `Solver` fallback forgets the workspace
+            // too): the non-finite copies, duals and iterates it left reach nothing of the
+            // next solve (what the cold start and the factorisation overwrite before reading).
+            let mut failed = used.clone();
+            for it in failed.stages.iter_mut() {
+                it.u = f32::NAN;
+                it.x = SVector::repeat(f32::NAN);
+                it.z = [f32::NAN; ROWS];
+                it.w = [f32::INFINITY; ROWS];
+                (it.zb, it.wb, it.zu, it.wu) = (f32::NAN, f32::NAN, f32::NAN, f32::NAN);
+            }
             let (mut forgot, mut reset) = (used.clone(), used);
             forgot.forget();
             reset.reset();
-            for ws in [&mut forgot, &mut reset] {
+            failed.forget();
+            for ws in [&mut forgot, &mut reset, &mut failed] {
                 ws.cold_start(&p);
                 ws.factor(&p).unwrap();
                 ws.iterate(&p, &x0, &settings(12)).unwrap();
+            }
+            for (a, b) in failed.stages.iter().zip(&reset.stages) {
+                assert_eq!(a.u.to_bits(), b.u.to_bits(), "case {n} after {m}, failed");
             }
             for (k, (a, b)) in forgot.stages.iter().zip(&reset.stages).enumerate() {
                 assert_eq!(

@@ -660,8 +660,9 @@ pub fn unreachable(car: &NodeConfig) -> Vec<&'static str> {
 /// The model-predictive controller's solve on its most expensive path: every row of every
 /// stage active and every ADMM iteration run (no early exit), in both lateral modes, on the
 /// baked car (`catmodel-qemu-mpc-bench`, rows `mpc_worst_dynamic`, `mpc_worst_kinematic` and
-/// `mpc_worst_standing`;
-/// docs/mpc.md). The solve's iterations are capped, so this is its cost for any input.
+/// `mpc_worst_standing`), ended in the dearer fallback (`mpc_part_fallback_end`: a whole solve
+/// whose plans did not clear an obstacle, or were not finite; docs/mpc.md). The solve's
+/// iterations are capped, so this is its cost for any input.
 fn mpc_worst_solve() -> Result<(u32, String)> {
     let (features, bin) = MPC_BENCH;
     let stderr = bench::run_bench(features, bin)?;
@@ -669,13 +670,28 @@ fn mpc_worst_solve() -> Result<(u32, String)> {
     worst_solve(&rows, bin)
 }
 
-/// The largest `mpc_worst_*` row of the controller's benchmark.
+/// The benchmark's row of a solve's end in the fallback, beyond the end a plan takes.
+const FALLBACK_END_ROW: &str = "mpc_part_fallback_end";
+
+/// The largest `mpc_worst_*` row of the controller's benchmark plus its fallback's end
+/// ([`FALLBACK_END_ROW`]): a worst-case row may end either way, so the sum covers both.
 pub fn worst_solve(rows: &[bench::Row], bin: &str) -> Result<(u32, String)> {
-    rows.iter()
+    let worst = rows
+        .iter()
         .filter(|r| r.key.starts_with("mpc_worst_"))
         .max_by_key(|r| r.max)
-        .map(|r| (r.max, format!("{bin} {}", r.key)))
-        .ok_or_else(|| anyhow!("{bin} printed no mpc_worst_* row"))
+        .ok_or_else(|| anyhow!("{bin} printed no mpc_worst_* row"))?;
+    let end = rows
+        .iter()
+        .find(|r| r.key == FALLBACK_END_ROW)
+        .ok_or_else(|| anyhow!("{bin} printed no {FALLBACK_END_ROW} row"))?;
+    Ok((
+        worst.max.saturating_add(end.max),
+        format!(
+            "{bin} {} {} + {FALLBACK_END_ROW} {}",
+            worst.key, worst.max, end.max
+        ),
+    ))
 }
 
 #[cfg(test)]
@@ -803,5 +819,23 @@ mod tests {
         // A drive that showed more than the bench keeps its figure.
         b.compose_solve(100_000, "smaller");
         assert_eq!(b.total_control(), 203_000);
+    }
+
+    #[test]
+    fn the_solve_worst_case_is_the_dearest_row_ended_in_the_fallback() {
+        let line = |key: &str, max: u32| format!("bench\t{key}\tname\t1\t1\t1\t{max}\twhat\n");
+        let mut text = line("mpc_worst_dynamic", 420_000)
+            + &line("mpc_worst_kinematic", 425_000)
+            + &line("mpc_dlc", 500_000)
+            + "bench-overhead\t4\nbench-done\n";
+        let (rows, _) = bench::parse(&text).unwrap();
+        // Without the fallback's end the bound would miss a path: refused.
+        assert!(worst_solve(&rows, "b").is_err());
+        text = line("mpc_part_fallback_end", 5_000) + &text;
+        let (rows, _) = bench::parse(&text).unwrap();
+        let (worst, which) = worst_solve(&rows, "b").unwrap();
+        // The dearest worst-case row, not another scenario's, plus the end.
+        assert_eq!(worst, 430_000);
+        assert!(which.contains("mpc_worst_kinematic 425000"), "{which}");
     }
 }

@@ -36,9 +36,9 @@ use catmodel::control::mpc::admm::{AdmmSettings, Problem, Workspace};
 use catmodel::control::mpc::lateral::{self, InflatedObstacle, LateralSetup, Linearisation};
 use catmodel::control::mpc::longitudinal::{SpeedStart, SpeedState};
 use catmodel::control::mpc::{
-    CarState, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle, ObstacleSide,
-    ObstacleVelocity, ReferencePoint, Sample, SidePoint, StageClock, DEFAULT_TUNING, MAX_OBSTACLES,
-    NX, PLAN_STEPS, ROWS, STEPS, STEP_S,
+    CarState, FallbackReason, MpcConfig, MpcInput, MpcOutput, MpcState, MpcTuning, Obstacle,
+    ObstacleSide, ObstacleVelocity, ReferencePoint, Sample, SidePoint, StageClock, DEFAULT_TUNING,
+    MAX_OBSTACLES, NX, PLAN_STEPS, ROWS, STEPS, STEP_S,
 };
 use catmodel::math;
 use catmodel::model::dynamic::{DynamicParams, LateralState};
@@ -600,6 +600,67 @@ fn run_worst(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
     }
 }
 
+/// A solve's end when it runs every iteration and then falls back (`mpc_part_fallback_end`):
+/// the plans did not clear an obstacle (`FallbackReason::ObstacleNotCleared`: the steering
+/// ramped to the lane's, the braking speed plan, its roll-out), or their states were not
+/// finite (`FallbackReason::Solver`: the workspace forgotten, the last plan's steering, the braking
+/// speed plan, its roll-out), against the end a solve takes otherwise (the roll-out of its
+/// plan). The difference, the dearer fallback's, in the dearer mode, is added to the worst-case
+/// solve (`xtask/src/bound.rs`): the worst-case rows end either way, and a whole solve on a
+/// long car that ends in the fallback is reached by no row (docs/findings.md).
+#[inline(never)]
+fn run_fallback_end(b: &Bench, worst: &MpcConfig, st: &mut Statics) {
+    let road = Straight { half_width: 0.25 };
+    let mut extra = 0u32;
+    for v in [15.0f32, 4.0] {
+        let mut car = b.car(Pose::new(1.5, 0.0, 0.05), v);
+        st.state.reset();
+        // A few solves first, so that the last plan the Solver fallback reads is a plan.
+        for _ in 0..5 {
+            let obstacles = worst_obstacles(&car);
+            b.tick(worst, &road, &mut car, &obstacles, v, st);
+        }
+        let obstacles = worst_obstacles(&car);
+        let reference = road.reference(&b.node.body, 0.0, &car.planned, v);
+        let input = b.input(&car, &reference, &obstacles);
+        let start = SpeedStart {
+            model_state: &car.speed_model_state,
+            bias_mps: 0.0,
+            planning_bias_mps: 0.0,
+            speed_mps: car.v,
+            last_command_mps: car.last_cmd,
+            in_held_turn: false,
+            slow_ahead: None,
+        };
+        let steer = [car.steer; STEPS + 1];
+        let (_, normal) = timed(|| worst.rollout(black_box(&input), &steer, &car.planned));
+        // The Solver fallback first: it reads the last plan, which the other one forgets.
+        let ws = &mut st.workspace;
+        let (_, forget) = timed(|| ws.forget());
+        let (_, solver) = timed(|| {
+            worst.fallback(
+                &mut st.state,
+                black_box(&input),
+                &start,
+                FallbackReason::Solver,
+            )
+        });
+        let (_, not_cleared) = timed(|| {
+            worst.fallback(
+                &mut st.state,
+                black_box(&input),
+                &start,
+                FallbackReason::ObstacleNotCleared,
+            )
+        });
+        let solver = solver.saturating_add(forget);
+        extra = extra.max(not_cleared.max(solver).saturating_sub(normal));
+    }
+    semihosting::eprintln!(
+        "bench\tmpc_part_fallback_end\tMPC part: a solve's end in the fallback\t1\t{extra}\t{extra}\t{extra}\tthe dearer fallback after a whole solve, less the roll-out of a plan"
+    );
+}
+
 /// The parts of a worst-case solve (every row active), each timed alone.
 #[inline(never)]
 fn run_parts(b: &Bench, st: &mut Statics) {
@@ -946,6 +1007,7 @@ fn main() -> ! {
     let st = statics();
     run_scenarios(&bench, st);
     run_worst(&bench, worst, st);
+    run_fallback_end(&bench, worst, st);
     run_parts(&bench, st);
     run_stack(&bench, worst, st);
     #[cfg(feature = "tinympc")]

@@ -503,6 +503,7 @@ impl<const NX: usize, const N: usize, const NR: usize> Workspace<NX, N, NR> {
     /// the factorisation's; the inputs and states the iterations'. A warm start
     /// ([`Workspace::shift`]) after it would move stale values: the caller cold-starts next
     /// (the controller's `lin` is `None`).
+    #[inline(never)]
     pub fn forget(&mut self) {
         self.rho_scale = 1.0;
         self.factorisations = 0;

@@ -1171,7 +1171,11 @@ impl MpcConfig {
         {
             Ok(r) => r,
             Err(SolveError::BadPivot | SolveError::NonFinite) => {
-                state.workspace.reset();
+                // The fallback forgets the linearisation, so the next solve cold-starts: what
+                // the workspace keeps is then overwritten before it is read
+                // (`Workspace::forget`; a reset costs 4 400 instructions more at the end of a
+                // whole solve, which the bound counts).
+                state.workspace.forget();
                 return self.fallback(state, input, &speed_start, FallbackReason::Solver);
             }
         };
@@ -1182,7 +1186,7 @@ impl MpcConfig {
         }
         let (states, rates) = self.clamped_rollout(&state.problem, &x0, &planned_rates);
         if states.iter().any(|x| x.iter().any(|v| !v.is_finite())) {
-            state.workspace.reset();
+            state.workspace.forget();
             return self.fallback(state, input, &speed_start, FallbackReason::Solver);
         }
         // The plan may still enter an obstacle after the iteration cap: at once within the time
@@ -1824,7 +1828,8 @@ impl MpcConfig {
     /// The planned trajectory: the lateral model of this solve's mode rolled forward from the
     /// car's pose under the planned steering (at its stages, read at the speed plan's steps: a
     /// stage is at least a step, so the steering plan covers the speed plan) and speeds.
-    fn rollout(
+    /// Public for the controller's benchmark, which times a solve's end (`qemu_mpc_bench`).
+    pub fn rollout(
         &self,
         input: &MpcInput,
         steer: &[f32; STEPS + 1],
@@ -1875,8 +1880,11 @@ impl MpcConfig {
     }
 
     /// Status 3: speed command 0; steering along the last accepted plan while it lasts, else
-    /// the measured steering held (0 if that is not finite).
-    fn fallback(
+    /// the measured steering held (0 if that is not finite). Public for the controller's
+    /// benchmark: a solve can run every iteration and then end here instead of in
+    /// [`Self::rollout`], and the bound adds the difference (`qemu_mpc_bench`,
+    /// `mpc_part_fallback_end`).
+    pub fn fallback(
         &self,
         state: &mut MpcState,
         input: &MpcInput,
