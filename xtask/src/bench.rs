@@ -60,7 +60,7 @@ const BUDGETS: &[(&str, u32)] = &[
     ("mpc_part_iteration_checked", 28_000),
     ("mpc_part_speed", 60_000),
     // A whole solve's end in the fallback beyond the roll-out of a plan: the braking speed
-    // plan, the lane's steering ramp or the workspace's reset (bound.rs adds it to the solve).
+    // plan, the lane's steering ramp or the workspace forgotten (bound.rs adds it to the solve).
     ("mpc_part_fallback_end", 15_000),
     ("tinympc_solve", u32::MAX),
     ("tinympc_cache", u32::MAX),
