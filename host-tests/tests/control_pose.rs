@@ -455,20 +455,19 @@ fn the_heading_settles_after_three_time_constants_of_its_correction() {
         let cfg = config(rate);
         let needed = (HEADING_SETTLE_TIME_CONSTANTS / cfg.course_gain).ceil() as u32;
         let mut settle = HeadingSettle::new();
-        let moving = cfg.course_min_speed_mps + 1.0;
-        // Standing, or moving without a heading: the heading is not corrected, nothing counts.
+        // A pose whose heading the estimator did not correct (standing, or a chord too short
+        // to correct it), or a correction without a pose: nothing counts.
         for _ in 0..10 * needed {
-            assert!(!settle.update(&cfg, true, 0.0));
-            assert!(!settle.update(&cfg, false, moving));
+            assert!(!settle.update(&cfg, true, false));
+            assert!(!settle.update(&cfg, false, true));
         }
         for k in 1..needed {
-            assert!(!settle.update(&cfg, true, moving), "{rate} Hz after {k}");
+            assert!(!settle.update(&cfg, true, true), "{rate} Hz after {k}");
+            // Ticks without a correction between the corrections do not count either.
+            assert!(!settle.update(&cfg, true, false), "{rate} Hz after {k}");
         }
-        assert!(
-            settle.update(&cfg, true, moving),
-            "{rate} Hz after {needed}"
-        );
-        // Once settled it stays so: stopped, the pose lost.
-        assert!(settle.update(&cfg, false, 0.0));
+        assert!(settle.update(&cfg, true, true), "{rate} Hz after {needed}");
+        // Once settled it stays so: nothing corrected, the pose lost.
+        assert!(settle.update(&cfg, false, false));
     }
 }

@@ -14,6 +14,7 @@ use catmodel_host::closed_loop::scenario::{
 };
 use catmodel_host::closed_loop::{
     controller_named, core_path, load_setup, receiver_rms_m, run, Receiver, RunOptions,
+    LAUNCH_SPEED_MPS,
 };
 use catmodel_host::sim::config::{Body, VehicleConfig};
 
@@ -215,6 +216,7 @@ fn run_pp(
         start_offset_m: 0.0,
         faults: false,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     run(&vehicle, &course, &mut driver, "pure-pursuit", &options)
 }
@@ -543,6 +545,7 @@ fn mpc_run(
         start_offset_m: 0.0,
         faults: false,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     run(vehicle, course, &mut driver, "mpc", &options)
 }
@@ -732,6 +735,7 @@ fn a_car_that_has_lost_its_path_stops_instead_of_driving_on() {
         start_offset_m: 3.9,
         faults: false,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     let out = run(&vehicle, &course, &mut driver, "mpc", &options);
     let path_heading = course.frame.heading_rad;
@@ -868,6 +872,7 @@ fn a_refused_tuning_is_named_on_the_bus() {
         start_offset_m: 0.0,
         faults: false,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     let out = run(&vehicle, &course, &mut driver, "mpc", &options);
     assert!(out.samples.iter().all(|s| !s.engaged));
@@ -930,6 +935,7 @@ fn a_car_started_outside_its_corridor_returns_without_swinging_through() {
                 start_offset_m: offset,
                 faults: false,
                 reversed_steering_report: false,
+                launch_mps: LAUNCH_SPEED_MPS,
             };
             let out = run(&vehicle, &course, &mut driver, "mpc", &options);
             let first = out.samples.iter().find(|s| s.engaged).unwrap();
@@ -1010,6 +1016,7 @@ fn a_receiver_at_another_rate_than_declared_is_named() {
         start_offset_m: 0.0,
         faults: false,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     let (vehicle, declared) =
         load_setup(Some(&plant), Some(&root.join("models/paper.toml"))).unwrap();

@@ -114,6 +114,9 @@ pub struct DriveInputs<'a> {
     pub dead_reckoned: Xy,
     /// The heading's error variance as the estimator reckons it, rad^2.
     pub heading_var_rad2: f32,
+    /// The estimator corrected the heading towards a course this tick (the receiver's or the
+    /// track's): what the heading's settling counts ([`HeadingSettle`]).
+    pub heading_corrected: bool,
     /// Speed, m/s (its magnitude).
     pub speed_mps: f32,
     /// The car reports reverse gear (SPEED_REPORT `direction`): no controller drives it.
@@ -490,9 +493,11 @@ impl Drive {
         }
         // Counted with a path only: the ticks without one are the estimating ticks, whose
         // bound has no room for it (docs/firmware.md, "Worst-case tick").
-        let settled =
-            self.heading
-                .update(&config.estimator, inputs.pose.is_some(), inputs.speed_mps);
+        let settled = self.heading.update(
+            &config.estimator,
+            inputs.pose.is_some(),
+            inputs.heading_corrected,
+        );
         let (Some(pose), Some(speed_model), true) = (inputs.pose, inputs.speed_model, settled)
         else {
             self.smoothing.forget();

@@ -254,6 +254,8 @@ pub struct Gnss {
     /// and the last one seen.
     cog_agreeing: u8,
     cog_seen: Option<(f32, u64)>,
+    /// Courses seen before there was a heading ([`COG_AWAITED`]).
+    cogs_before_heading: u8,
     /// Consecutive fixes the gate rejected.
     rejects_in_row: u16,
     /// When the gate last rejected a fix.
@@ -393,8 +395,16 @@ pub const STEP_PERSIST_S: f32 = 0.15;
 /// Before the node has a heading, a course sets it only when this many courses in a row each
 /// agreed with the one before within [`COG_AGREE_RAD`]: a course from the carrier's Doppler
 /// does at once, one differenced from noisy fixes at walking pace never
-/// ([`super::estimator::CogCorrection::NoHeading`]); else the filtered track sets it.
+/// ([`super::estimator::CogCorrection::NoHeading`]); else the filtered track sets it, once
+/// [`COG_AWAITED`] courses have come without agreeing.
 pub const COG_AGREEING: u8 = 3;
+/// Courses a receiver that sends them is given to agree ([`COG_AGREEING`]) before the
+/// filtered track's chord may set the first heading instead. A chord only just long enough at
+/// a crawl is mostly the fixes' noise: a random SIL sweep's truck at 1.7 m/s, with exact
+/// courses and a 5 Hz receiver of 0.3 m noise, took its first heading 0.61 rad off from a
+/// chord one course before its courses had agreed, and then judged its exact courses
+/// scattered against that heading (docs/findings.md, "A heading settled by time alone").
+pub const COG_AWAITED: u8 = 2 * COG_AGREEING;
 /// See [`COG_AGREEING`], rad.
 pub const COG_AGREE_RAD: f32 = 0.05;
 
@@ -821,6 +831,7 @@ impl Gnss {
                 0
             };
             self.cog_seen = self.cog;
+            self.cogs_before_heading = self.cogs_before_heading.saturating_add(1);
         }
         let measured = match from_cog {
             Some(CogCorrection::Applied { measured_rad }) => Some(measured_rad),
@@ -847,6 +858,13 @@ impl Gnss {
                 match self.estimator.correct_heading_on_track(cfg, since_fix_s) {
                     TrackCorrection::Applied { measured_rad } => Some(measured_rad),
                     TrackCorrection::ShortChord => None,
+                    // The receiver's courses have not agreed yet: they set the first heading.
+                    TrackCorrection::NoHistory
+                        if matches!(from_cog, Some(CogCorrection::NoHeading))
+                            && self.cogs_before_heading < COG_AWAITED =>
+                    {
+                        None
+                    }
                     TrackCorrection::NoHistory => {
                         self.estimator.track_course(cfg).map(|(course, age_fixes)| {
                             let age_s = age_fixes * cfg.gnss_period_s + since_fix_s;

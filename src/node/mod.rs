@@ -445,6 +445,8 @@ struct Motion {
 struct Estimate {
     pose: Option<Pose>,
     gnss_fresh: bool,
+    /// The heading was corrected towards a course this tick.
+    heading_corrected: bool,
     /// Eq 7's output, m/s.
     dxdt_mps: Option<f32>,
 }
@@ -841,6 +843,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
         Estimate {
             pose,
             gnss_fresh,
+            heading_corrected: measured_heading.is_some(),
             dxdt_mps,
         }
     }
@@ -857,6 +860,7 @@ impl<D: BorrowMut<Drive>> Node<D> {
             pose: estimate.pose,
             dead_reckoned: self.gnss.dead_reckoned(),
             heading_var_rad2: self.gnss.heading_var_rad2(),
+            heading_corrected: estimate.heading_corrected,
             speed_mps: motion.speed_mps,
             reversing: motion.reversing,
             lateral: self.models.lateral,

@@ -371,21 +371,27 @@ pub const HEADING_SETTLE_TIME_CONSTANTS: f32 = 3.0;
 /// Whether the heading has settled, for the controllers to start. The first course comes from
 /// a short chord of fixes; with a slow receiver it can be tenths of a radian out (0.36 rad at
 /// 1 Hz), and a controller that drives on it steers at an error of its own making. The
-/// estimator corrects the heading towards the course on every tick the car moves at
-/// `course_min_speed_mps` or faster with a heading; after [`HEADING_SETTLE_TIME_CONSTANTS`]
-/// of its complementary filter's time constant (`1 / course_gain` such ticks: 6 s at 1 Hz,
-/// 1.2 s at 100 Hz) the first heading's error is gone (the chords' gain is the course gain
+/// estimator corrects the heading towards the course on the ticks the car moves at
+/// `course_min_speed_mps` or faster with a heading and a course to correct it by (the
+/// receiver's, or a chord of the track at least `course_min_baseline_m` long); after
+/// [`HEADING_SETTLE_TIME_CONSTANTS`] of its complementary filter's time constant
+/// (`1 / course_gain` such ticks: 6 s at 1 Hz, 1.2 s at 100 Hz) the first heading's error is
+/// gone (the chords' gain is the course gain
 /// while the heading's variance is large and falls with the chord's length after: from a
 /// 0.5 rad start at 3 m/s with a standard receiver, 0.02-0.07 rad are left 1.2 s after the
-/// corrections begin, `estimator::tests::heading_at_a_crawl_with_a_noisy_receiver`). Once settled it stays so (the heading
+/// corrections begin, `estimator::tests::heading_at_a_crawl_with_a_noisy_receiver`). Only the
+/// ticks that corrected the heading count: a car held at 1.9 m/s with a 5 Hz receiver and no
+/// course of its own draws chords of 1.2 m, which correct nothing, and counting its ticks by
+/// the speed alone settled a first heading 0.53 rad off (docs/findings.md, "A heading settled
+/// by time alone"). Once settled it stays so (the heading
 /// is never forgotten; dead reckoning carries it through GNSS gaps). Counted in the drive stage
-/// from the tick's pose and speed, and only while there is a path: the estimator's stages and
+/// from the tick's pose and the estimator's word, and only while there is a path: the estimator's stages and
 /// the ticks without a path make up the estimating tick's bound, which has no room for it
 /// (docs/firmware.md, "Worst-case tick"). So a car driven before the planner's first path
 /// waits the settling time again once the path is in.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HeadingSettle {
-    /// Ticks with a pose while moving at the course speed, until settled.
+    /// Ticks with a pose on which the estimator corrected the heading, until settled.
     ticks: u32,
     settled: bool,
 }
@@ -399,10 +405,11 @@ impl HeadingSettle {
         }
     }
 
-    /// This tick: a pose (`has_pose`: position and heading) at `speed_mps`; returns whether
-    /// the heading has settled.
-    pub fn update(&mut self, cfg: &EstimatorConfig, has_pose: bool, speed_mps: f32) -> bool {
-        if !self.settled && has_pose && speed_mps >= cfg.course_min_speed_mps {
+    /// This tick: a pose (`has_pose`: position and heading), and whether the estimator
+    /// corrected the heading towards a course (`corrected`); returns whether the heading has
+    /// settled.
+    pub fn update(&mut self, cfg: &EstimatorConfig, has_pose: bool, corrected: bool) -> bool {
+        if !self.settled && has_pose && corrected {
             self.ticks = self.ticks.saturating_add(1);
             // A filter that never corrects (gain 0) is as settled as it will be.
             self.settled = cfg.course_gain <= 0.0

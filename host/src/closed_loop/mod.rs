@@ -140,6 +140,9 @@ pub struct RunOptions {
     /// wiring or convention fault the node's steering check must find (the commands keep
     /// STEERING_REPORT's sign, as the DBW's interface documents it).
     pub reversed_steering_report: bool,
+    /// The speed the launch driver holds until the node takes the car over, m/s
+    /// ([`LAUNCH_SPEED_MPS`] unless a test asks for a crawl).
+    pub launch_mps: f64,
 }
 
 impl RunOptions {
@@ -153,6 +156,7 @@ impl RunOptions {
             start_offset_m: 0.0,
             faults: false,
             reversed_steering_report: false,
+            launch_mps: LAUNCH_SPEED_MPS,
         }
     }
 }
@@ -286,6 +290,8 @@ pub fn core_path(course: &Course) -> Path {
 
 /// The drive-by-wire kit's command side: what the car does with CONTROL_COMMAND.
 struct DriveByWire {
+    /// The launch driver's speed until engaged, m/s.
+    launch_mps: f64,
     engaged: bool,
     valid_since_us: Option<u64>,
     counter: CounterChecker,
@@ -300,8 +306,9 @@ struct DriveByWire {
 }
 
 impl DriveByWire {
-    fn new() -> Self {
+    fn new(launch_mps: f64) -> Self {
         Self {
+            launch_mps,
             engaged: false,
             valid_since_us: None,
             counter: CounterChecker::new(),
@@ -383,7 +390,7 @@ impl DriveByWire {
         }
         if !self.engaged {
             return Command {
-                speed_mps: LAUNCH_SPEED_MPS,
+                speed_mps: self.launch_mps,
                 steer_pct: 0.0,
             };
         }
@@ -475,7 +482,7 @@ pub fn run(
     );
     let mut sensors = SensorFrames::new(options.reversed_steering_report);
     let mut receive_queue = VecDeque::new();
-    let mut dbw = DriveByWire::new();
+    let mut dbw = DriveByWire::new(options.launch_mps);
     let mut scorer = Scorer::new(&vehicle.body, course);
     let mut record = TruthRecord::new(course, &vehicle.body);
     let mut inputs = Vec::new();
@@ -1104,6 +1111,7 @@ pub fn command(args: &ClosedLoopArgs) -> anyhow::Result<(Metrics, Vec<std::path:
         start_offset_m: args.start_offset_m,
         faults: args.faults,
         reversed_steering_report: false,
+        launch_mps: LAUNCH_SPEED_MPS,
     };
     let output = run(&vehicle, &course, &mut driver, &args.controller, &options);
     if let Some(note) = driver::Driver::gnss_rate_note(&driver) {
