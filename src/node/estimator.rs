@@ -1013,6 +1013,19 @@ impl EstimatorState {
         }
     }
 
+    /// Courses that agreed with each other set the first heading (`super::gnss::COG_AGREEING`):
+    /// they start as usable, their learnt median half the [`COG_USABLE_BELOW_RAD`] it would
+    /// otherwise have to fall below (from [`COG_MEDIAN_START_RAD`], about 0.6 s of courses),
+    /// and it rises from there with their differences from the heading. While they had to
+    /// prove themselves, the chords alone corrected the heading, and at a crawl a chord that
+    /// passed its baseline on the fixes' noise pulled it off by more than the courses then
+    /// counted as usable: a SIL sweep's car at 2.1 m/s with exact courses judged them
+    /// scattered against it for good (docs/findings.md, "Exact courses over ground").
+    pub fn courses_agreed(&mut self) {
+        self.cog_median_rad = 0.5 * COG_USABLE_BELOW_RAD;
+        self.cog_scattered = false;
+    }
+
     /// A course's difference from the heading, into the learnt median and the scattered
     /// state ([`COG_SCATTERED_ABOVE_RAD`], [`COG_USABLE_BELOW_RAD`]).
     fn learn_cog_scatter(&mut self, innovation_rad: f32) {
@@ -1578,6 +1591,42 @@ mod tests {
             crossed |= now < 0.0;
         }
         assert!(crossed, "the integral wrapped");
+    }
+
+    /// Courses that agreed set the first heading and are used from the next tick on (a fresh
+    /// state leaves them to the chords until their scatter is learnt, about 0.6 s); courses
+    /// that scatter by half a radian after agreeing are left to the chords within a second.
+    #[test]
+    fn agreeing_courses_are_used_at_once_and_dropped_once_they_scatter() {
+        let cfg = EstimatorConfig::design(5.0, 0.0, 0.0).unwrap();
+        let v = 2.1f32;
+        let straight = Rates::default();
+        for agreed in [false, true] {
+            let mut st = EstimatorState::default();
+            if agreed {
+                st.courses_agreed();
+            }
+            st.correct_heading(&cfg, 1.0, 0.0, v, straight);
+            st.propagate(&cfg, v, straight, 0.02);
+            let taken = st.correct_heading_on_cog(&cfg, 1.01, 0.0, v, straight);
+            assert_eq!(
+                matches!(taken, CogCorrection::Applied { .. }),
+                agreed,
+                "agreed {agreed}: {taken:?}"
+            );
+        }
+        let mut st = EstimatorState::default();
+        st.courses_agreed();
+        st.correct_heading(&cfg, 1.0, 0.0, v, straight);
+        let used_late = (0..150u32)
+            .filter(|&tick| {
+                st.propagate(&cfg, v, straight, 0.02);
+                let wild = 1.0 + 0.5 * libm::sinf(tick as f32 * 2.3);
+                let taken = st.correct_heading_on_cog(&cfg, wild, 0.0, v, straight);
+                tick >= 50 && matches!(taken, CogCorrection::Applied { .. })
+            })
+            .count();
+        assert_eq!(used_late, 0);
     }
 
     /// A receiver's course over ground: used once its scatter about the heading is learnt to

@@ -838,6 +838,7 @@ impl Gnss {
             Some(CogCorrection::NoHeading) if self.cog_agreeing >= COG_AGREEING => {
                 let (cog, t) = self.cog.unwrap_or_default();
                 let age_s = math::u64_to_f32(now_us.saturating_sub(t)) * 1e-6;
+                self.estimator.courses_agreed();
                 Some(self.estimator.correct_heading(
                     cfg,
                     along_heading(cog, reversing),
