@@ -563,6 +563,8 @@ def main():
                 valid_since = tt
             if engaged is None and st in (1, 2) and valid_since is not None and tt - valid_since >= 1.0:
                 engaged = tt
+                # The node's heading when it takes the car over, against the truth.
+                M["takeover_heading_err"] = abs((est_h - P.h + math.pi) % (2 * math.pi) - math.pi)
             if engaged is None:
                 # safety driver: straight at launch speed (after 0.5 s)
                 steer_cmd = 0.0

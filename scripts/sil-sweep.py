@@ -7,7 +7,8 @@ workers, prints one JSON line per drive, then the drives that look wrong:
 
 - a fault: the node's exit status, an error, a CRC or counter error, a missing or bad frame, a
   "not available" command while engaged, a prediction out of range;
-- never engaged (no status 1 or 2 after the position has been valid for 1 s);
+- never engaged (no status 1 or 2 after the position has been valid for 1 s), or taken over
+  with the heading more than 0.1 rad off the truth;
 - the body over an obstacle's circle, outside the corridor by more than 0.3 m, over the path's
   speed by more than 1 m/s, lost path, bad input, solver or non-finite fallbacks, or a stop
   more than 1.5 m past or 3 m short of the path's end.
@@ -103,6 +104,8 @@ def flags(d):
             f.append(f"{k} {d[k]}")
     if "error" not in d and d.get("engaged_s") is None:
         f.append("never engaged")
+    if (d.get("takeover_heading_err") or 0) > 0.1:
+        f.append(f"taken over with the heading {d['takeover_heading_err']} rad off")
     if (d.get("obs_clear") or 1e9) < 0.2:
         f.append(f"obstacle clearance {d['obs_clear']} m at {d.get('obs_clear_t')} s")
     if (d.get("corr_excess") or 0) > 0.3:
