@@ -368,6 +368,8 @@ def main():
     ap.add_argument("--glitch-fixes", type=int, default=2, help="how many fixes the glitch moves")
     ap.add_argument("--cog-from-fixes", action="store_true",
                     help="COG and SOG differenced from the reported fixes (as some receivers do), not Doppler")
+    ap.add_argument("--no-cog", action="store_true",
+                    help="the receiver sends no COG and SOG at all: positions only")
     ap.add_argument("--steer-gain", type=float, default=1.0)
     ap.add_argument("--rate-factor", type=float, default=1.0)
     ap.add_argument("--steer-lag", type=float, default=0.06)
@@ -480,8 +482,9 @@ def main():
                     prev_fix = (fe, fn)
                     cog = math.atan2(ve, vn) % (2 * math.pi)
                     sog = math.hypot(ve, vn)
-                    lines.append(line(t, msgs["GNSS_COG_SOG_RAPID"], enc(msgs["GNSS_COG_SOG_RAPID"],
-                                 {"sid": tick % 250, "cog_reference": 0, "cog_rad": min(cog, 6.2831), "sog_mps": sog}, fill=0xFF)))
+                    if not a.no_cog:
+                        lines.append(line(t, msgs["GNSS_COG_SOG_RAPID"], enc(msgs["GNSS_COG_SOG_RAPID"],
+                                     {"sid": tick % 250, "cog_reference": 0, "cog_rad": min(cog, 6.2831), "sog_mps": sog}, fill=0xFF)))
             tr = round(tt - 0.004, 6)
             for nm, vals in (("STEERING_REPORT", {"steer_pct": max(-100, min(100, P.steer))}),
                              ("SPEED_REPORT", {"speed_mps": P.v, "speed_cmd_mps": speed_cmd}),

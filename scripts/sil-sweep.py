@@ -7,8 +7,10 @@ workers, prints one JSON line per drive, then the drives that look wrong:
 
 - a fault: the node's exit status, an error, a CRC or counter error, a missing or bad frame, a
   "not available" command while engaged, a prediction out of range;
-- never engaged (no status 1 or 2 after the position has been valid for 1 s), or taken over
-  with the heading more than 0.1 rad off the truth;
+- never engaged (no status 1 or 2 after the position has been valid for 1 s; not flagged for
+  a receiver whose courses the drive does not use, launched slower than the track's chords
+  correct the heading at: the node waits there by design), or taken over with the heading
+  more than 0.1 rad off the truth;
 - the body over an obstacle's circle, outside the corridor by more than 0.3 m, over the path's
   speed by more than 1 m/s, lost path, bad input, solver or non-finite fallbacks, or a stop
   more than 1.5 m past or 3 m short of the path's end.
@@ -16,7 +18,8 @@ workers, prints one JSON line per drive, then the drives that look wrong:
 A flag is a lead to read, not a verdict: a planner's path that the car cannot follow (a
 replacement shifted sideways a few metres ahead) leaves the corridor by design.
 
-    python3 scripts/sil-sweep.py --seed 1 --count 120 [--catmodel target/release/catmodel]
+    python3 scripts/sil-sweep.py --seed 1 --count 120 [--cog-modes exact,fixes,none]
+        [--catmodel target/release/catmodel]
 
 Used for docs/findings.md (a sweep of 120 drives: no fault; the speed commands' swings while
 slowing for a lower target, and a slow speed loop's stop beside an obstacle, under "Not fixed
@@ -34,8 +37,11 @@ DRIVE = Path(__file__).resolve().parent / "sil-drive.py"
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def draw(rng):
-    """One drive's sil-drive.py arguments."""
+def draw(rng, cog_modes):
+    """One drive's sil-drive.py arguments. The receiver's course over ground is drawn from
+    `cog_modes` ("exact": the carrier's Doppler, "fixes": differenced from its own fixes,
+    "none": positions only) by a generator of the drive's own, so that the other draws of a
+    seed are the same whatever the modes."""
     car = rng.choice(["default", "small", "truck"])
     scenario = rng.choice(
         ["scurve", "uturn", "straight", "speedstep", "curve", "replace", "obstacle", "obstacle"])
@@ -78,7 +84,17 @@ def draw(rng):
           "--max-accel", f"{rng.uniform(1.5, 3.5):.1f}",
           "--max-decel", f"{rng.uniform(3, 8):.1f}",
           "--launch", f"{rng.uniform(1.6, 4):.1f}"]
+    mode = random.Random(" ".join(a)).choice(cog_modes)
+    a += {"exact": [], "fixes": ["--cog-from-fixes"], "none": ["--no-cog"]}[mode]
     return a
+
+
+def chord_speed_mps(hz):
+    """The speed below which the track's chords (the last 0.63 s of fixes, at least one) are
+    shorter than the 1.5 m the node corrects its heading by (`course_min_baseline_m`): a car
+    whose receiver's courses are not used waits there for its heading (`heading_settling`,
+    docs/bus.md)."""
+    return 1.5 / (max(1, round(0.63 * hz)) / hz)
 
 
 def run(args, catmodel):
@@ -102,7 +118,17 @@ def flags(d):
     for k in ("crc_err", "bad_frames", "counter_err", "end_missing", "pred_bad", "na_cmd"):
         if d.get(k):
             f.append(f"{k} {d[k]}")
+    argv = d.get("argv", "").split()
+    courses = "--no-cog" not in argv and "--cog-from-fixes" not in argv
+    waits = False
+    if not courses and "--launch" in argv and "--gnss-hz" in argv:
+        launch = float(argv[argv.index("--launch") + 1])
+        waits = launch < 1.05 * chord_speed_mps(float(argv[argv.index("--gnss-hz") + 1]))
     if "error" not in d and d.get("engaged_s") is None:
+        if waits:
+            # The safety driver holds the car where the node waits for its heading, by
+            # design: what it does then is the driver's.
+            return f
         f.append("never engaged")
     if (d.get("takeover_heading_err") or 0) > 0.1:
         f.append(f"taken over with the heading {d['takeover_heading_err']} rad off")
@@ -128,11 +154,17 @@ def main():
     ap.add_argument("--count", type=int, default=40)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--catmodel", default=str(ROOT / "target" / "release" / "catmodel"))
+    ap.add_argument("--cog-modes", default="exact",
+                    help="the receivers' courses to draw from, comma-separated: exact, fixes, "
+                         "none (default exact)")
     a = ap.parse_args()
     if not Path(a.catmodel).exists():
         sys.exit(f"no {a.catmodel}: build it with `cargo build --release -p catmodel-host`")
     rng = random.Random(a.seed)
-    drives = [draw(rng) for _ in range(a.count)]
+    modes = a.cog_modes.split(",")
+    if not modes or any(m not in ("exact", "fixes", "none") for m in modes):
+        sys.exit(f"--cog-modes: exact, fixes or none, not {a.cog_modes}")
+    drives = [draw(rng, modes) for _ in range(a.count)]
     results = []
     with cf.ThreadPoolExecutor(a.workers) as ex:
         for d in ex.map(lambda args: run(args, a.catmodel), drives):
